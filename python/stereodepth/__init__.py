@@ -1,0 +1,35 @@
+"""stereodepth: stereo camera geometry and image pairs to depth, fast.
+
+- :class:`StereoRig`: the depth calculator (depth, resolution, field of view, tables).
+- :func:`disparity_to_depth`: native, threaded disparity-map to depth-map conversion.
+- :mod:`stereodepth.reference`: the pure-numpy oracle of every native kernel.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from . import _core
+from .depth import disparity_to_depth
+from .rig import DepthTable, StereoRig
+
+__version__: str = _core.__version__
+
+__all__ = [
+    "DepthTable",
+    "StereoRig",
+    "__version__",
+    "build_info",
+    "disparity_to_depth",
+]
+
+
+def build_info() -> dict[str, Any]:
+    """How the native core was built and what it runs on this machine.
+
+    Keys: ``version``, ``compiler``, ``isa`` (the instruction set chosen at run time:
+    ``baseline``, ``avx2`` or ``avx512``; the environment variable STEREODEPTH_ISA caps it),
+    ``supported_isas``, ``default_threads`` (the cores this process may use), ``eigen``,
+    ``pybind11`` and ``sanitizers``.
+    """
+    return dict(_core.build_info())

@@ -1,0 +1,78 @@
+"""Argument checks shared by the public functions.
+
+Every check raises TypeError for a wrong type and ValueError for a wrong value, with a message
+that names the parameter, states the rule and shows what was received.
+"""
+
+from __future__ import annotations
+
+import math
+import numbers
+from typing import Any
+
+import numpy as np
+
+
+def _is_real(value: Any) -> bool:
+    return isinstance(value, numbers.Real) and not isinstance(value, (bool, np.bool_))
+
+
+def real(name: str, value: Any) -> float:
+    """A real scalar (int or float, not bool) as float; may be NaN or infinite."""
+    if not _is_real(value):
+        raise TypeError(f"{name} must be a real number, got {type(value).__name__} {value!r}")
+    return float(value)
+
+
+def finite(name: str, value: Any) -> float:
+    v = real(name, value)
+    if not math.isfinite(v):
+        raise ValueError(f"{name} must be finite, got {value!r}")
+    return v
+
+
+def positive(name: str, value: Any) -> float:
+    """A finite real > 0."""
+    v = real(name, value)
+    if not (math.isfinite(v) and v > 0):
+        raise ValueError(f"{name} must be a finite number > 0, got {value!r}")
+    return v
+
+
+def non_negative(name: str, value: Any) -> float:
+    v = real(name, value)
+    if not (math.isfinite(v) and v >= 0):
+        raise ValueError(f"{name} must be a finite number >= 0, got {value!r}")
+    return v
+
+
+def integer(name: str, value: Any, *, minimum: int | None = None) -> int:
+    if not isinstance(value, (numbers.Integral, np.integer)) or isinstance(value, (bool, np.bool_)):
+        raise TypeError(f"{name} must be an integer, got {type(value).__name__} {value!r}")
+    v = int(value)
+    if minimum is not None and v < minimum:
+        raise ValueError(f"{name} must be an integer >= {minimum}, got {v}")
+    return v
+
+
+def threads(value: Any) -> int:
+    """None or 0 means every core this process may use."""
+    if value is None:
+        return 0
+    return integer("threads", value, minimum=0)
+
+
+def real_array(name: str, value: Any) -> np.ndarray:
+    """A scalar or array of real numbers as a float64 array (NaN and inf allowed)."""
+    if isinstance(value, (bool, np.bool_)):
+        raise TypeError(f"{name} must be a real number or array, got bool {value!r}")
+    try:
+        arr = np.asarray(value)
+    except Exception as exc:  # ragged lists and the like
+        raise TypeError(f"{name} must be a real number or array, got {value!r}") from exc
+    if arr.dtype.kind not in "iuf":
+        raise TypeError(
+            f"{name} must be a real number or array, got {type(value).__name__} "
+            f"with dtype {arr.dtype}"
+        )
+    return arr.astype(np.float64, copy=False)

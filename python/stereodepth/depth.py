@@ -1,0 +1,184 @@
+"""Disparity maps to depth maps, natively: numpy in, numpy out."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from . import _core
+from . import _validate as check
+
+__all__ = ["FLOAT32_MAX", "disparity_to_depth"]
+
+#: The default upper depth limit: the largest finite float32, so infinite depth is invalid.
+FLOAT32_MAX = float(np.finfo(np.float32).max)
+
+_DISPARITY_DTYPES = (np.float16, np.float32, np.float64, np.int16, np.uint16)
+
+
+class DepthOptions:
+    """The checked, resolved options shared by the native kernel and the numpy oracle."""
+
+    __slots__ = (
+        "baseline_m", "doffs_px", "dtype", "focal_px", "invalid_value", "max_depth_m",
+        "min_depth_m", "negative_invalid", "scale",
+    )
+
+    def __init__(
+        self,
+        disparity: np.ndarray,
+        *,
+        focal_px: Any,
+        baseline_m: Any,
+        doffs_px: Any,
+        scale: Any,
+        dtype: Any,
+        min_depth_m: Any,
+        max_depth_m: Any,
+        invalid_value: Any,
+    ) -> None:
+        self.focal_px = check.positive("focal_px", focal_px)
+        self.baseline_m = check.positive("baseline_m", baseline_m)
+        self.doffs_px = check.finite("doffs_px", doffs_px)
+        kind = disparity.dtype
+        if scale is None:
+            if kind == np.uint16:
+                raise ValueError(
+                    "scale is required for uint16 disparity (KITTI stores disparity * 256: "
+                    "pass scale=1/256), got None"
+                )
+            scale = 1.0 / 16.0 if kind == np.int16 else 1.0
+        self.scale = check.positive("scale", scale)
+        try:
+            out_dtype = np.dtype(dtype)
+        except TypeError as exc:
+            raise TypeError(f"dtype must be numpy.float32 or numpy.uint16, got {dtype!r}") from exc
+        if out_dtype not in (np.dtype(np.float32), np.dtype(np.uint16)):
+            raise TypeError(f"dtype must be numpy.float32 or numpy.uint16, got {out_dtype}")
+        self.dtype = out_dtype
+        self.min_depth_m = 0.0 if min_depth_m is None else check.non_negative(
+            "min_depth_m", min_depth_m)
+        if max_depth_m is None:
+            self.max_depth_m = FLOAT32_MAX
+        else:
+            self.max_depth_m = check.positive("max_depth_m", max_depth_m)
+            if self.max_depth_m < self.min_depth_m:
+                raise ValueError(
+                    f"max_depth_m must be >= min_depth_m ({self.min_depth_m!r}), "
+                    f"got {max_depth_m!r}"
+                )
+        # Which raw values mean "no disparity": OpenCV's int16 output marks holes with
+        # (min_disparity - 1) * 16, negative for min_disparity <= 0; KITTI's uint16 uses 0.
+        self.negative_invalid = False
+        if invalid_value is None:
+            self.invalid_value: float | None = 0.0 if kind == np.uint16 else None
+            self.negative_invalid = kind == np.int16
+        else:
+            self.invalid_value = check.real("invalid_value", invalid_value)
+
+
+def as_disparity(disparity: Any, name: str = "disparity") -> np.ndarray:
+    """Checks dtype and shape; never copies a numpy array."""
+    arr = disparity if isinstance(disparity, np.ndarray) else np.asarray(disparity)
+    if arr.dtype not in _DISPARITY_DTYPES:
+        raise TypeError(
+            f"{name} must have dtype float16, float32, float64, int16 (OpenCV, x16) or uint16 "
+            f"(KITTI, x256), got {arr.dtype}"
+        )
+    if arr.ndim not in (2, 3):
+        raise ValueError(f"{name} must have shape (H, W) or (N, H, W), got {arr.shape}")
+    return arr
+
+
+def prepare_out(out: Any, disparity: np.ndarray, dtype: np.dtype) -> np.ndarray:
+    """Allocates `out`, or checks a caller's array: shape, dtype, C order, writeable, overlap."""
+    if out is None:
+        return np.empty(disparity.shape, dtype=dtype)
+    if not isinstance(out, np.ndarray):
+        raise TypeError(f"out must be a numpy.ndarray, got {type(out).__name__}")
+    if out.dtype != dtype:
+        raise TypeError(f"out must have dtype {dtype} (the dtype argument), got {out.dtype}")
+    if out.shape != disparity.shape:
+        raise ValueError(
+            f"out must have the shape of disparity {disparity.shape}, got {out.shape}"
+        )
+    if not out.flags.c_contiguous:
+        raise TypeError("out must be C-contiguous")
+    if not out.flags.writeable:
+        raise ValueError("out must be writeable")
+    same_layout = (
+        out.__array_interface__["data"][0] == disparity.__array_interface__["data"][0]
+        and out.itemsize == disparity.itemsize
+        and out.strides == disparity.strides
+    )
+    if not same_layout and np.shares_memory(out, disparity):
+        raise ValueError("out overlaps disparity; pass a separate array or the same array")
+    return out
+
+
+def disparity_to_depth(
+    disparity: Any,
+    *,
+    focal_px: float,
+    baseline_m: float,
+    doffs_px: float = 0.0,
+    scale: float | None = None,
+    dtype: Any = np.float32,
+    min_depth_m: float | None = None,
+    max_depth_m: float | None = None,
+    invalid_value: float | None = None,
+    out: np.ndarray | None = None,
+    threads: int | None = None,
+) -> np.ndarray:
+    """Converts disparity maps to depth maps: Z = focal_px * baseline_m / (d * scale + doffs_px).
+
+    Parameters
+    ----------
+    disparity
+        (H, W) or (N, H, W) array of float16, float32, float64, int16 or uint16.
+        int16 is read as OpenCV's fixed point (``scale`` defaults to 1/16, negative raw values
+        are holes); uint16 needs ``scale`` (1/256 for KITTI) and 0 is a hole.
+    focal_px, baseline_m, doffs_px
+        The rig: focal length in pixels, baseline in metres, and the difference of the two
+        cameras' principal points in pixels (Middlebury's ``doffs``; 0 for most rigs).
+    scale
+        Disparity in pixels per raw unit. Default 1 for float input, 1/16 for int16.
+    dtype
+        ``numpy.float32``: metres with NaN where invalid. ``numpy.uint16``: millimetres, rounded
+        half to even, 0 where invalid and 65535 for anything farther (the depth-camera / ROS
+        format).
+    min_depth_m, max_depth_m
+        Depths outside this range are invalid. By default only non-finite depths are.
+    invalid_value
+        A raw value that marks holes, replacing the per-dtype default above.
+    out
+        A preallocated C-contiguous array of ``dtype`` and the input's shape to write into.
+        It may be the input itself when the item sizes match (float32 in place).
+    threads
+        Threads to split the rows over; None or 0 for every core available.
+
+    A pixel is invalid where its value is NaN or a hole, where ``d * scale + doffs_px <= 0``
+    (zero disparity is infinitely far), or where its depth leaves the range. Float32 results
+    are computed in float32 arithmetic (float64 for float64 input); uint16 in float64.
+
+    A C-contiguous input is never copied; an input whose rows are not contiguous is copied
+    once. The GIL is released while the kernel runs.
+    """
+    arr = as_disparity(disparity)
+    opts = DepthOptions(
+        arr, focal_px=focal_px, baseline_m=baseline_m, doffs_px=doffs_px, scale=scale,
+        dtype=dtype, min_depth_m=min_depth_m, max_depth_m=max_depth_m,
+        invalid_value=invalid_value,
+    )
+    nthreads = check.threads(threads)
+    result = prepare_out(out, arr, opts.dtype)
+    if (arr.shape[-1] > 1 and arr.strides[-1] != arr.itemsize) or any(
+        stride % arr.itemsize for stride in arr.strides
+    ):
+        arr = np.ascontiguousarray(arr)
+    _core.disparity_to_depth(
+        arr, result, opts.focal_px, opts.baseline_m, opts.doffs_px, opts.scale,
+        opts.min_depth_m, opts.max_depth_m, opts.invalid_value, opts.negative_invalid, nthreads,
+    )
+    return result

@@ -1,0 +1,365 @@
+"""The stereo depth calculator: what a rig of given baseline, lens and sensor can measure.
+
+Units are in the names: ``_mm`` millimetres, ``_um`` micrometres, ``_px`` pixels, ``_m``
+metres, ``_deg`` degrees. Every method takes a scalar or a numpy array and answers in kind.
+
+The model is the rectified pinhole pair: a point at depth Z appears in the two images with a
+disparity d (pixels) such that ``Z = B * f_px / (d + doffs)``, where B is the baseline,
+``f_px = focal_mm / pixel_mm`` is the focal length in pixels and doffs the difference of the
+principal points (0 for most rigs). A disparity of 0 means a point at infinity: depth inf.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from collections.abc import Iterator, Sequence
+from dataclasses import dataclass
+from typing import Any, overload
+
+import numpy as np
+
+from . import _validate as check
+
+__all__ = ["DepthTable", "StereoRig"]
+
+ArrayLike = Any
+#: The default disparities of StereoRig.table(): a 1-1.5-2 series from 1 to 256 px.
+DEFAULT_TABLE_DISPARITIES_PX: tuple[float, ...] = (
+    1, 2, 3, 4, 6, 8, 12, 16, 24, 32, 48, 64, 96, 128, 192, 256,
+)
+
+
+@overload
+def _answer(x: float, like: float) -> float: ...
+@overload
+def _answer(x: np.ndarray, like: np.ndarray) -> np.ndarray: ...
+def _answer(x: Any, like: Any) -> Any:
+    """A Python float for scalar input, an array for array input."""
+    return float(x) if np.ndim(like) == 0 else np.asarray(x, dtype=np.float64)
+
+
+@dataclass(frozen=True)
+class DepthTable:
+    """Rows of disparity, depth and depth resolution. Iterate for dicts, or render as text."""
+
+    columns: tuple[str, ...]
+    rows: tuple[tuple[float, ...], ...]
+
+    def to_records(self) -> list[dict[str, float]]:
+        return [dict(zip(self.columns, r)) for r in self.rows]
+
+    def __iter__(self) -> Iterator[dict[str, float]]:
+        return iter(self.to_records())
+
+    def __len__(self) -> int:
+        return len(self.rows)
+
+    def _cells(self) -> list[list[str]]:
+        return [[_fmt(v) for v in r] for r in self.rows]
+
+    def to_text(self) -> str:
+        """A plain-text table, columns right-aligned."""
+        cells = self._cells()
+        widths = [max(len(c), *(len(r[i]) for r in cells)) for i, c in enumerate(self.columns)]
+        lines = ["  ".join(c.rjust(w) for c, w in zip(self.columns, widths))]
+        lines.append("  ".join("-" * w for w in widths))
+        lines += ["  ".join(v.rjust(w) for v, w in zip(r, widths)) for r in cells]
+        return "\n".join(lines)
+
+    def to_markdown(self) -> str:
+        lines = ["| " + " | ".join(self.columns) + " |"]
+        lines.append("|" + "|".join("---:" for _ in self.columns) + "|")
+        lines += ["| " + " | ".join(r) + " |" for r in self._cells()]
+        return "\n".join(lines)
+
+    def __str__(self) -> str:
+        return self.to_text()
+
+
+def _fmt(v: float) -> str:
+    if math.isinf(v):
+        return "inf"
+    if math.isnan(v):
+        return "nan"
+    if v == 0 or 1e-3 <= abs(v) < 1e6:
+        return f"{v:.6g}" if abs(v) >= 1 or v == 0 else f"{v:.4g}"
+    return f"{v:.4e}"
+
+
+class StereoRig:
+    """A rectified stereo pair: baseline, focal length, pixel size and image size.
+
+    >>> rig = StereoRig(baseline_mm=150, focal_mm=6, pixel_um=2.8, width_px=1280)
+    >>> round(rig.depth_m(250), 4), round(rig.disparity_mm(250), 4)
+    (1.2857, 0.7)
+    """
+
+    __slots__ = ("_baseline_mm", "_doffs_px", "_focal_mm", "_focal_px", "_height_px",
+                 "_pixel_um", "_width_px")
+
+    def __init__(
+        self,
+        baseline_mm: float,
+        focal_mm: float,
+        pixel_um: float,
+        width_px: int | None = None,
+        height_px: int | None = None,
+    ) -> None:
+        self._baseline_mm = check.positive("baseline_mm", baseline_mm)
+        self._focal_mm: float | None = check.positive("focal_mm", focal_mm)
+        self._pixel_um: float | None = check.positive("pixel_um", pixel_um)
+        self._focal_px = self._focal_mm / (self._pixel_um / 1000.0)
+        self._width_px = None if width_px is None else check.integer("width_px", width_px, minimum=1)
+        self._height_px = (
+            None if height_px is None else check.integer("height_px", height_px, minimum=1)
+        )
+        self._doffs_px = 0.0
+
+    @classmethod
+    def from_pixels(
+        cls,
+        baseline_mm: float,
+        focal_px: float,
+        width_px: int | None = None,
+        doffs_px: float = 0.0,
+        height_px: int | None = None,
+    ) -> StereoRig:
+        """A rig from a calibration in pixels (focal length in pixels, principal point offset).
+
+        The sensor's pixel size is unknown then, so :meth:`disparity_mm` is unavailable."""
+        rig = cls.__new__(cls)
+        rig._baseline_mm = check.positive("baseline_mm", baseline_mm)
+        rig._focal_px = check.positive("focal_px", focal_px)
+        rig._focal_mm = None
+        rig._pixel_um = None
+        rig._width_px = None if width_px is None else check.integer("width_px", width_px, minimum=1)
+        rig._height_px = (
+            None if height_px is None else check.integer("height_px", height_px, minimum=1)
+        )
+        rig._doffs_px = check.finite("doffs_px", doffs_px)
+        return rig
+
+    @classmethod
+    def from_middlebury_calib(cls, path: str | os.PathLike[str]) -> StereoRig:
+        """A rig from a Middlebury ``calib.txt`` (cam0, baseline, doffs, width, height)."""
+        from .calib import read_middlebury_calib
+
+        c = read_middlebury_calib(path)
+        return cls.from_pixels(
+            baseline_mm=c.baseline_mm, focal_px=c.focal_px, width_px=c.width_px,
+            doffs_px=c.doffs_px, height_px=c.height_px,
+        )
+
+    # --- the rig's numbers -----------------------------------------------------------------
+    @property
+    def baseline_mm(self) -> float:
+        return self._baseline_mm
+
+    @property
+    def focal_mm(self) -> float | None:
+        return self._focal_mm
+
+    @property
+    def pixel_um(self) -> float | None:
+        return self._pixel_um
+
+    @property
+    def focal_px(self) -> float:
+        """The focal length in pixels: focal_mm / pixel size in mm."""
+        return self._focal_px
+
+    @property
+    def width_px(self) -> int | None:
+        return self._width_px
+
+    @property
+    def height_px(self) -> int | None:
+        return self._height_px
+
+    @property
+    def doffs_px(self) -> float:
+        return self._doffs_px
+
+    def __repr__(self) -> str:
+        if self._focal_mm is not None:
+            core = (f"baseline_mm={self._baseline_mm!r}, focal_mm={self._focal_mm!r}, "
+                    f"pixel_um={self._pixel_um!r}")
+        else:
+            core = f"baseline_mm={self._baseline_mm!r}, focal_px={self._focal_px!r}"
+            if self._doffs_px:
+                core += f", doffs_px={self._doffs_px!r}"
+        if self._width_px is not None:
+            core += f", width_px={self._width_px!r}"
+        if self._height_px is not None:
+            core += f", height_px={self._height_px!r}"
+        return f"StereoRig({core})"
+
+    @property
+    def _bf_m_px(self) -> float:
+        """Baseline (m) times focal length (px): depth (m) times disparity (px)."""
+        return self._baseline_mm / 1000.0 * self._focal_px
+
+    # --- disparity and depth ---------------------------------------------------------------
+    def _disparity(self, name: str, disparity_px: ArrayLike) -> np.ndarray:
+        d = check.real_array(name, disparity_px)
+        den = d + self._doffs_px
+        bad = ~np.isfinite(d) | (d < 0) | (den < 0)
+        if np.any(bad):
+            first = d[bad].flat[0] if d.ndim else d
+            rule = f"finite and >= {max(0.0, -self._doffs_px):g}"
+            raise ValueError(f"{name} must be {rule}, got {float(first)!r}")
+        return d
+
+    @overload
+    def depth_m(self, disparity_px: float) -> float: ...
+    @overload
+    def depth_m(self, disparity_px: np.ndarray) -> np.ndarray: ...
+    def depth_m(self, disparity_px: ArrayLike) -> Any:
+        """Depth in metres of a disparity in pixels: B * f_px / (d + doffs).
+
+        A disparity of 0 (with doffs 0) is a point at infinity: ``inf``. Negative, NaN or
+        infinite disparities raise ValueError."""
+        d = self._disparity("disparity_px", disparity_px)
+        with np.errstate(divide="ignore"):
+            z = self._bf_m_px / (d + self._doffs_px)
+        return _answer(z, d)
+
+    @overload
+    def disparity_px(self, depth_m: float) -> float: ...
+    @overload
+    def disparity_px(self, depth_m: np.ndarray) -> np.ndarray: ...
+    def disparity_px(self, depth_m: ArrayLike) -> Any:
+        """The disparity in pixels of a point at ``depth_m`` metres (> 0; inf gives -doffs)."""
+        z = self._depth("depth_m", depth_m)
+        return _answer(self._bf_m_px / z - self._doffs_px, z)
+
+    def _depth(self, name: str, depth_m: ArrayLike) -> np.ndarray:
+        z = check.real_array(name, depth_m)
+        bad = np.isnan(z) | (z <= 0)
+        if np.any(bad):
+            first = z[bad].flat[0] if z.ndim else z
+            raise ValueError(f"{name} must be > 0, got {float(first)!r}")
+        return z
+
+    def disparity_mm(self, disparity_px: ArrayLike) -> Any:
+        """The disparity on the sensor in millimetres: d * pixel size."""
+        if self._pixel_um is None:
+            raise ValueError(
+                "disparity_mm needs the pixel size: build the rig with StereoRig(baseline_mm, "
+                "focal_mm, pixel_um) rather than from_pixels"
+            )
+        d = self._disparity("disparity_px", disparity_px)
+        return _answer(d * (self._pixel_um / 1000.0), d)
+
+    @property
+    def max_depth_m(self) -> float:
+        """The depth at a disparity of 1 px: the farthest a whole-pixel matcher can tell from
+        infinity."""
+        return float(self.depth_m(1.0))
+
+    def min_depth_m(self, max_disparity_px: float) -> float:
+        """The nearest depth a matcher searching disparities up to ``max_disparity_px`` sees."""
+        d = check.positive("max_disparity_px", max_disparity_px)
+        return float(self.depth_m(d))
+
+    def depth_resolution_m(
+        self, depth_m: ArrayLike, disparity_step_px: float = 1.0, *, exact: bool = False
+    ) -> Any:
+        """The depth error of a disparity error of ``disparity_step_px`` at ``depth_m``.
+
+        By default the first-order estimate ``dZ = Z**2 * dd / (B * f_px)`` (equivalently
+        Z²·p·Δd/(B·f) with the focal length and pixel size in the same unit), which grows with
+        the square of the depth. With ``exact=True``, the exact difference ``Z(d) - Z(d + dd)``
+        between the depth at the target's disparity d and the depth one step nearer; it is a
+        little smaller than the estimate and the two agree as dd / d goes to 0."""
+        z = self._depth("depth_m", depth_m)
+        step = check.positive("disparity_step_px", disparity_step_px)
+        if not isinstance(exact, bool):
+            raise TypeError(f"exact must be a bool, got {type(exact).__name__} {exact!r}")
+        if exact:
+            den = self._bf_m_px / z  # d + doffs
+            dz = z - self._bf_m_px / (den + step)
+        else:
+            dz = z * z * step / self._bf_m_px
+        return _answer(dz, z)
+
+    def required_baseline_mm(
+        self, depth_m: float, depth_resolution_m: float, disparity_step_px: float = 1.0
+    ) -> float:
+        """The baseline that gives a depth error of ``depth_resolution_m`` at ``depth_m``, with
+        this rig's focal length and a matcher accurate to ``disparity_step_px``:
+        ``B = Z**2 * dd / (dZ * f_px)`` (first order, as :meth:`depth_resolution_m`)."""
+        z = check.positive("depth_m", depth_m)
+        dz = check.positive("depth_resolution_m", depth_resolution_m)
+        step = check.positive("disparity_step_px", disparity_step_px)
+        return z * z * step / (dz * self._focal_px) * 1000.0
+
+    # --- field of view ---------------------------------------------------------------------
+    @property
+    def hfov_deg(self) -> float:
+        """The horizontal field of view, 2 atan(W / 2 f_px), in degrees (needs width_px)."""
+        if self._width_px is None:
+            raise ValueError("hfov_deg needs width_px, got None")
+        return math.degrees(2.0 * math.atan(self._width_px / (2.0 * self._focal_px)))
+
+    @property
+    def vfov_deg(self) -> float:
+        """The vertical field of view in degrees (needs height_px)."""
+        if self._height_px is None:
+            raise ValueError("vfov_deg needs height_px, got None")
+        return math.degrees(2.0 * math.atan(self._height_px / (2.0 * self._focal_px)))
+
+    # --- the table -------------------------------------------------------------------------
+    def table(
+        self,
+        disparities_px: Sequence[float] | np.ndarray | None = None,
+        *,
+        disparity_step_px: float = 1.0,
+    ) -> DepthTable:
+        """Disparity, depth and depth resolution over ``disparities_px`` (default: a 1-1.5-2
+        series from 1 to 256 px, capped below the image width when it is known).
+
+        Columns: ``disparity_px``, ``disparity_mm`` (when the pixel size is known),
+        ``depth_m``, ``depth_resolution_m`` (for a 1 px step) and, for another
+        ``disparity_step_px``, ``depth_resolution_subpx_m``."""
+        if disparities_px is None:
+            limit = self._width_px - 1 if self._width_px is not None else math.inf
+            ds = [float(d) for d in DEFAULT_TABLE_DISPARITIES_PX if d <= limit] or [1.0]
+        else:
+            arr = check.real_array("disparities_px", disparities_px)
+            if arr.ndim != 1 or arr.size == 0:
+                raise ValueError(
+                    f"disparities_px must be a non-empty 1-D sequence, got shape {arr.shape}"
+                )
+            ds = [float(v) for v in arr]
+        d = self._disparity("disparities_px", np.asarray(ds))
+        step = check.positive("disparity_step_px", disparity_step_px)
+        z = self.depth_m(d)
+        finite_z = np.where(np.isfinite(z), z, np.nan)
+        with np.errstate(invalid="ignore"):
+            res1 = finite_z**2 / self._bf_m_px
+        columns: list[str] = ["disparity_px"]
+        cols: list[np.ndarray] = [d]
+        if self._pixel_um is not None:
+            columns.append("disparity_mm")
+            cols.append(d * (self._pixel_um / 1000.0))
+        columns += ["depth_m", "depth_resolution_m"]
+        cols += [z, np.where(np.isfinite(z), res1, np.inf)]
+        if step != 1.0:
+            columns.append("depth_resolution_subpx_m")
+            cols.append(np.where(np.isfinite(z), res1 * step, np.inf))
+        rows = tuple(tuple(float(c[i]) for c in cols) for i in range(len(ds)))
+        return DepthTable(columns=tuple(columns), rows=rows)
+
+    # --- maps ------------------------------------------------------------------------------
+    def depth_map(self, disparity: Any, **options: Any) -> np.ndarray:
+        """Converts a disparity map with this rig's numbers; see
+        :func:`stereodepth.disparity_to_depth` for ``options`` (scale, dtype, limits, out,
+        threads)."""
+        from .depth import disparity_to_depth
+
+        return disparity_to_depth(
+            disparity, focal_px=self._focal_px, baseline_m=self._baseline_mm / 1000.0,
+            doffs_px=self._doffs_px, **options,
+        )
