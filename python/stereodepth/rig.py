@@ -352,6 +352,62 @@ class StereoRig:
         rows = tuple(tuple(float(c[i]) for c in cols) for i in range(len(ds)))
         return DepthTable(columns=tuple(columns), rows=rows)
 
+    # --- everything at once ---------------------------------------------------------------
+    def summary(
+        self,
+        disparity_px: float | None = None,
+        *,
+        disparity_step_px: float = 1.0,
+        max_disparity_px: float | None = None,
+        table_disparities_px: Sequence[float] | np.ndarray | None = None,
+    ) -> dict[str, Any]:
+        """Every result of the calculator as one JSON-ready dict: what the CLI prints and the
+        web page shows. Values that need something the rig lacks (the pixel size, the image
+        width, a disparity) and non-finite values are None.
+
+        Keys: ``focal_px``, ``max_depth_m``, ``hfov_deg``, ``vfov_deg``, ``disparity_px``,
+        ``depth_m``, ``disparity_mm``, ``depth_resolution_m`` (1 px step, first order),
+        ``depth_resolution_exact_m``, ``disparity_step_px``, ``depth_resolution_subpx_m``,
+        ``max_disparity_px``, ``min_depth_m``, ``table`` (records as :meth:`table`)."""
+        step = check.positive("disparity_step_px", disparity_step_px)
+        out: dict[str, Any] = {
+            "focal_px": self._focal_px,
+            "max_depth_m": self.max_depth_m,
+            "hfov_deg": self.hfov_deg if self._width_px is not None else None,
+            "vfov_deg": self.vfov_deg if self._height_px is not None else None,
+            "disparity_px": None,
+            "depth_m": None,
+            "disparity_mm": None,
+            "depth_resolution_m": None,
+            "depth_resolution_exact_m": None,
+            "disparity_step_px": step,
+            "depth_resolution_subpx_m": None,
+            "max_disparity_px": None,
+            "min_depth_m": None,
+        }
+        if disparity_px is not None:
+            d = float(self._disparity("disparity_px", check.real("disparity_px", disparity_px)))
+            z = float(self.depth_m(d))
+            out["disparity_px"] = d
+            out["depth_m"] = z
+            if self._pixel_um is not None:
+                out["disparity_mm"] = float(self.disparity_mm(d))
+            if math.isfinite(z):
+                out["depth_resolution_m"] = float(self.depth_resolution_m(z))
+                out["depth_resolution_exact_m"] = float(self.depth_resolution_m(z, exact=True))
+                out["depth_resolution_subpx_m"] = float(self.depth_resolution_m(z, step))
+        if max_disparity_px is not None:
+            out["max_disparity_px"] = check.positive("max_disparity_px", max_disparity_px)
+            out["min_depth_m"] = self.min_depth_m(max_disparity_px)
+        table = self.table(table_disparities_px, disparity_step_px=step)
+        out["table"] = [
+            {k: (v if math.isfinite(v) else None) for k, v in row.items()} for row in table
+        ]
+        for key, value in out.items():
+            if isinstance(value, float) and not math.isfinite(value):
+                out[key] = None
+        return out
+
     # --- maps ------------------------------------------------------------------------------
     def depth_map(self, disparity: Any, **options: Any) -> np.ndarray:
         """Converts a disparity map with this rig's numbers; see

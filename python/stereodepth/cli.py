@@ -1,0 +1,163 @@
+"""The ``stereodepth`` command: ``calc`` here; other subcommands register from their modules.
+
+Bad input prints one line, ``stereodepth <command>: error: ...``, and exits with status 2.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import json
+import math
+import sys
+from collections.abc import Sequence
+from typing import Any
+
+from .rig import StereoRig
+
+# Modules that add a subcommand: each has register(subparsers) that adds its parser with
+# set_defaults(func=run), where run(args) -> int. They import heavy dependencies inside run.
+_SUBCOMMAND_MODULES: tuple[str, ...] = ()
+
+
+class UsageError(Exception):
+    """Bad input on the command line: reported in one line, exit status 2."""
+
+
+def _rig_from_args(args: argparse.Namespace) -> StereoRig:
+    if args.focal_px is not None:
+        if args.focal_mm is not None or args.pixel_um is not None:
+            raise UsageError("give either --focal-px, or --focal-mm and --pixel-um, not both")
+        return StereoRig.from_pixels(
+            args.baseline_mm, args.focal_px, width_px=args.width_px, doffs_px=args.doffs_px,
+            height_px=args.height_px,
+        )
+    if args.focal_mm is None or args.pixel_um is None:
+        raise UsageError("give --focal-mm and --pixel-um (or --focal-px)")
+    if args.doffs_px:
+        raise UsageError("--doffs-px goes with --focal-px (a calibration in pixels)")
+    return StereoRig(
+        args.baseline_mm, args.focal_mm, args.pixel_um, width_px=args.width_px,
+        height_px=args.height_px,
+    )
+
+
+def _fmt(value: Any, unit: str = "", digits: int = 6) -> str:
+    if value is None:
+        return "-"
+    if isinstance(value, float):
+        if math.isinf(value):
+            return "inf"
+        text = f"{value:.{digits}g}"
+    else:
+        text = str(value)
+    return f"{text} {unit}".rstrip()
+
+
+def _print_summary(rig: StereoRig, s: dict[str, Any]) -> None:
+    lines = [("rig", repr(rig)), ("focal length", _fmt(s["focal_px"], "px"))]
+    if s["hfov_deg"] is not None:
+        lines.append(("horizontal field of view", _fmt(s["hfov_deg"], "deg", 4)))
+    if s["vfov_deg"] is not None:
+        lines.append(("vertical field of view", _fmt(s["vfov_deg"], "deg", 4)))
+    lines.append(("max depth (1 px disparity)", _fmt(s["max_depth_m"], "m")))
+    if s["disparity_px"] is not None:
+        lines.append(("disparity", _fmt(s["disparity_px"], "px")))
+        lines.append(("disparity on the sensor", _fmt(s["disparity_mm"], "mm")))
+        lines.append(("depth", _fmt(s["depth_m"], "m")))
+        lines.append(("depth resolution (1 px)", _fmt(s["depth_resolution_m"], "m")))
+        lines.append(("  exact, Z(d) - Z(d+1)", _fmt(s["depth_resolution_exact_m"], "m")))
+        if s["disparity_step_px"] != 1.0:
+            lines.append((f"depth resolution ({_fmt(s['disparity_step_px'])} px)",
+                          _fmt(s["depth_resolution_subpx_m"], "m")))
+    if s["min_depth_m"] is not None:
+        lines.append((f"min depth (search to {_fmt(s['max_disparity_px'])} px)",
+                      _fmt(s["min_depth_m"], "m")))
+    width = max(len(k) for k, _ in lines)
+    for key, value in lines:
+        print(f"{key.ljust(width)}  {value}")
+
+
+def _add_calc(sub: Any) -> None:
+    p = sub.add_parser(
+        "calc",
+        help="depth, depth resolution and field of view of a stereo rig",
+        description="The stereo depth calculator: Z = B*f / (d*p).",
+    )
+    g = p.add_argument_group("the rig")
+    g.add_argument("--baseline-mm", type=float, required=True, help="baseline B in mm")
+    g.add_argument("--focal-mm", type=float, help="focal length f in mm")
+    g.add_argument("--pixel-um", type=float, help="pixel size p in micrometres")
+    g.add_argument("--focal-px", type=float, help="focal length in pixels (replaces the two above)")
+    g.add_argument("--doffs-px", type=float, default=0.0,
+                   help="principal point offset in px, with --focal-px (Middlebury doffs)")
+    g.add_argument("--width-px", type=int, help="image width in px (for the field of view)")
+    g.add_argument("--height-px", type=int, help="image height in px")
+    q = p.add_argument_group("the question")
+    q.add_argument("--disparity-px", type=float, help="disparity d of the target in px")
+    q.add_argument("--subpixel-px", type=float, default=1.0,
+                   help="the matcher's disparity step in px (default 1)")
+    q.add_argument("--max-disparity-px", type=float,
+                   help="top of the disparity search range, for the min depth")
+    q.add_argument("--table-disparities-px", type=float, nargs="+", metavar="D",
+                   help="disparities for the table (default: 1 to 256 px)")
+    o = p.add_argument_group("output")
+    o.add_argument("--json", action="store_true", help="print one JSON object")
+    o.add_argument("--markdown", action="store_true", help="print the table as Markdown")
+    o.add_argument("--plot", metavar="PNG",
+                   help="write the two charts to this image (needs the 'plot' extra)")
+    p.set_defaults(func=_run_calc)
+
+
+def _run_calc(args: argparse.Namespace) -> int:
+    rig = _rig_from_args(args)
+    summary = rig.summary(
+        args.disparity_px, disparity_step_px=args.subpixel_px,
+        max_disparity_px=args.max_disparity_px, table_disparities_px=args.table_disparities_px,
+    )
+    if args.plot:
+        from .plotting import save_charts
+
+        save_charts(rig, args.plot, disparity_px=args.disparity_px,
+                    disparity_step_px=args.subpixel_px)
+    if args.json:
+        print(json.dumps(summary, indent=2, allow_nan=False))
+        return 0
+    _print_summary(rig, summary)
+    table = rig.table(args.table_disparities_px, disparity_step_px=args.subpixel_px)
+    print()
+    print(table.to_markdown() if args.markdown else table.to_text())
+    if args.plot:
+        print(f"\ncharts written to {args.plot}")
+    return 0
+
+
+def build_parser() -> argparse.ArgumentParser:
+    from . import __version__
+
+    parser = argparse.ArgumentParser(
+        prog="stereodepth", description="Stereo depth, fast: calculator and tools."
+    )
+    parser.add_argument("--version", action="version", version=f"stereodepth {__version__}")
+    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    _add_calc(sub)
+    for name in _SUBCOMMAND_MODULES:
+        importlib.import_module(name).register(sub)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    try:
+        return int(args.func(args))
+    except (UsageError, ValueError, TypeError) as exc:
+        print(f"stereodepth {args.command}: error: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print(f"stereodepth {args.command}: interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())
