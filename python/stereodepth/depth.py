@@ -173,6 +173,8 @@ def disparity_to_depth(
     )
     nthreads = check.threads(threads)
     result = prepare_out(out, arr, opts.dtype)
+    if arr.size == 0:
+        return result
     if (arr.shape[-1] > 1 and arr.strides[-1] != arr.itemsize) or any(
         stride % arr.itemsize for stride in arr.strides
     ):

@@ -221,7 +221,7 @@ class StereoRig:
         A disparity of 0 (with doffs 0) is a point at infinity: ``inf``. Negative, NaN or
         infinite disparities raise ValueError."""
         d = self._disparity("disparity_px", disparity_px)
-        with np.errstate(divide="ignore"):
+        with np.errstate(divide="ignore", over="ignore"):
             z = self._bf_m_px / (d + self._doffs_px)
         return _answer(z, d)
 

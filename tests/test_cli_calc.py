@@ -1,0 +1,81 @@
+"""The calc subcommand, run as a user runs it: the installed console script."""
+
+from __future__ import annotations
+
+import json
+import shutil
+import subprocess
+import sys
+
+import pytest
+
+from stereodepth import StereoRig
+from stereodepth.cli import main
+
+ARM = ["--baseline-mm", "150", "--focal-mm", "6", "--pixel-um", "2.8", "--width-px", "1280"]
+
+
+def run(*args: str) -> subprocess.CompletedProcess[str]:
+    exe = shutil.which("stereodepth")
+    cmd = [exe] if exe else [sys.executable, "-m", "stereodepth.cli"]
+    return subprocess.run([*cmd, *args], capture_output=True, text=True, timeout=60)
+
+
+def test_console_script_prints_results_and_table() -> None:
+    r = run("calc", *ARM, "--disparity-px", "250")
+    assert r.returncode == 0, r.stderr
+    assert "1.28571 m" in r.stdout and "0.7 mm" in r.stdout
+    assert "disparity_px" in r.stdout and "depth_resolution_m" in r.stdout
+
+
+def test_json_output_equals_the_library(capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["calc", *ARM, "--disparity-px", "250", "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    for key in ("depth_m", "disparity_mm", "max_depth_m", "depth_resolution_m", "focal_px",
+                "hfov_deg", "table"):
+        assert key in out
+    rig = StereoRig(150, 6, 2.8, width_px=1280)
+    assert out == json.loads(json.dumps(rig.summary(250)))
+    assert out["depth_m"] == rig.depth_m(250)
+
+
+def test_focal_px_replaces_focal_mm_and_pixel_um(capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["calc", "--baseline-mm", "537.166", "--focal-px", "718.856",
+                 "--disparity-px", "40", "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["depth_m"] == pytest.approx(0.537166 * 718.856 / 40)
+    assert out["disparity_mm"] is None and out["hfov_deg"] is None
+
+
+def test_markdown_table(capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["calc", *ARM, "--markdown", "--table-disparities-px", "10", "20"]) == 0
+    out = capsys.readouterr().out
+    assert "| disparity_px | disparity_mm | depth_m |" in out
+
+
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [
+        (["--baseline-mm", "-150", "--focal-mm", "6", "--pixel-um", "2.8"],
+         "baseline_mm must be a finite number > 0, got -150.0"),
+        (["--baseline-mm", "150", "--focal-mm", "6", "--pixel-um", "0"],
+         "pixel_um must be a finite number > 0, got 0.0"),
+        (["--baseline-mm", "150", "--focal-mm", "6"], "give --focal-mm and --pixel-um"),
+        (["--baseline-mm", "150", "--focal-mm", "6", "--pixel-um", "2", "--focal-px", "9"],
+         "not both"),
+        ([*ARM, "--disparity-px", "nan"], "disparity_px must be finite and >= 0, got nan"),
+        ([*ARM, "--subpixel-px", "-0.1"], "disparity_step_px must be a finite number > 0"),
+    ],
+)
+def test_bad_input_is_one_line_and_status_2(args: list[str], message: str) -> None:
+    r = run("calc", *args)
+    assert r.returncode == 2
+    lines = r.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("stereodepth calc: error: ")
+    assert message in lines[0]
+    assert r.stdout == ""
+
+
+def test_unparseable_number_is_status_2() -> None:
+    r = run("calc", "--baseline-mm", "abc", "--focal-mm", "6", "--pixel-um", "2")
+    assert r.returncode == 2 and "invalid float value: 'abc'" in r.stderr

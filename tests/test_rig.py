@@ -1,0 +1,219 @@
+"""The stereo depth calculator: worked examples, identities, and rejected input."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from stereodepth import StereoRig
+
+ARM = dict(baseline_mm=150, focal_mm=6, pixel_um=2.8, width_px=1280)
+CAR = dict(baseline_mm=250, focal_mm=12, pixel_um=4.2, width_px=2048)
+
+
+def test_worked_example_bin_picking_arm() -> None:
+    rig = StereoRig(**ARM)
+    assert rig.disparity_mm(250) == pytest.approx(0.7, rel=1e-12)
+    assert rig.depth_m(250) == pytest.approx(1.2857, abs=5e-5)
+    assert rig.focal_px == pytest.approx(6 / 0.0028)
+
+
+def test_worked_example_car() -> None:
+    rig = StereoRig(**CAR)
+    assert rig.disparity_mm(35) == pytest.approx(0.147, rel=1e-12)
+    assert rig.depth_m(35) == pytest.approx(20.408, abs=5e-4)
+
+
+def test_depth_formula_in_sensor_units() -> None:
+    # Z = B * f / (d * p), all lengths in mm.
+    rig = StereoRig(**CAR)
+    for d in (1.0, 7.5, 35.0, 400.0):
+        assert rig.depth_m(d) == pytest.approx(250 * 12 / (d * 4.2e-3) / 1000, rel=1e-12)
+
+
+def test_max_depth_is_depth_at_one_pixel() -> None:
+    rig = StereoRig(**ARM)
+    assert rig.max_depth_m == pytest.approx(0.150 * 6 / 0.0028, rel=1e-12)
+
+
+def test_zero_disparity_is_infinitely_far() -> None:
+    rig = StereoRig(**ARM)
+    assert rig.depth_m(0) == math.inf
+    z = rig.depth_m(np.array([0.0, 1.0]))
+    assert z[0] == math.inf and np.isfinite(z[1])
+
+
+def test_vectorised_and_scalar_agree() -> None:
+    rig = StereoRig(**ARM)
+    d = np.array([[1.0, 2.0], [250.0, 1000.0]])
+    z = rig.depth_m(d)
+    assert isinstance(z, np.ndarray) and z.shape == (2, 2)
+    assert isinstance(rig.depth_m(2.0), float)
+    for (i, j), v in np.ndenumerate(d):
+        assert z[i, j] == rig.depth_m(float(v))
+
+
+def test_depth_resolution_first_order_and_exact() -> None:
+    rig = StereoRig(**ARM)
+    z = rig.depth_m(250)
+    # dZ = Z^2 * p * dd / (B * f), lengths in metres.
+    expected = z**2 * 2.8e-6 * 1.0 / (0.150 * 0.006)
+    assert rig.depth_resolution_m(z) == pytest.approx(expected, rel=1e-12)
+    assert rig.depth_resolution_m(z, 0.25) == pytest.approx(expected / 4, rel=1e-12)
+    exact = rig.depth_resolution_m(z, exact=True)
+    assert exact == pytest.approx(rig.depth_m(250) - rig.depth_m(251), rel=1e-12)
+    assert exact < expected  # the first-order estimate is an upper bound here
+    assert exact == pytest.approx(expected, rel=1 / 250 * 1.01)
+
+
+def test_min_depth_from_search_range_and_fov() -> None:
+    rig = StereoRig(**ARM)
+    assert rig.min_depth_m(256) == pytest.approx(rig.depth_m(256), rel=1e-12)
+    assert rig.hfov_deg == pytest.approx(2 * math.degrees(math.atan(640 / (6 / 0.0028))))
+    with pytest.raises(ValueError, match="vfov_deg needs height_px"):
+        _ = rig.vfov_deg
+
+
+def test_required_baseline_inverts_depth_resolution() -> None:
+    rig = StereoRig(**CAR)
+    b = rig.required_baseline_mm(depth_m=20.0, depth_resolution_m=0.5, disparity_step_px=0.25)
+    other = StereoRig(baseline_mm=b, focal_mm=12, pixel_um=4.2)
+    assert other.depth_resolution_m(20.0, 0.25) == pytest.approx(0.5, rel=1e-12)
+
+
+def test_from_pixels_with_doffs() -> None:
+    rig = StereoRig.from_pixels(baseline_mm=176.252, focal_px=1038.018, doffs_px=53.271)
+    assert rig.depth_m(10.0) == pytest.approx(176.252 * 1038.018 / 63.271 / 1000, rel=1e-12)
+    assert rig.disparity_px(rig.depth_m(10.0)) == pytest.approx(10.0, rel=1e-12)
+    with pytest.raises(ValueError, match="disparity_mm needs the pixel size"):
+        rig.disparity_mm(10)
+
+
+def test_from_middlebury_calib(tmp_path) -> None:
+    p = tmp_path / "calib.txt"
+    p.write_text(
+        "cam0=[1038.018 0 322.037; 0 1038.018 243.393; 0 0 1]\n"
+        "cam1=[1038.018 0 375.308; 0 1038.018 243.393; 0 0 1]\n"
+        "doffs=53.271\nbaseline=176.252\nwidth=718\nheight=496\nndisp=73\n"
+        "isint=0\nvmin=8\nvmax=65\ndyavg=0\ndymax=0\n"
+    )
+    rig = StereoRig.from_middlebury_calib(p)
+    assert rig.focal_px == 1038.018 and rig.doffs_px == 53.271
+    assert rig.baseline_mm == 176.252 and rig.width_px == 718 and rig.height_px == 496
+
+
+def test_middlebury_calib_errors_name_the_file_and_field(tmp_path) -> None:
+    p = tmp_path / "calib.txt"
+    p.write_text("cam0=[1 0 0; 0 1 0]\nbaseline=10\n")
+    with pytest.raises(ValueError, match=r"calib.txt: cam0 must be a 3x3 matrix"):
+        StereoRig.from_middlebury_calib(p)
+    p.write_text("cam0=[1 0 0; 0 1 0; 0 0 1]\n")
+    with pytest.raises(ValueError, match="missing field 'baseline'"):
+        StereoRig.from_middlebury_calib(p)
+
+
+def test_table_default_and_renderings() -> None:
+    rig = StereoRig(**ARM)
+    t = rig.table()
+    rows = t.to_records()
+    assert [r["disparity_px"] for r in rows][:4] == [1, 2, 3, 4]
+    assert rows[-1]["disparity_px"] == 256
+    for r in rows:
+        assert r["depth_m"] == rig.depth_m(r["disparity_px"])
+        assert r["depth_resolution_m"] == pytest.approx(rig.depth_resolution_m(r["depth_m"]))
+        assert r["disparity_mm"] == pytest.approx(rig.disparity_mm(r["disparity_px"]))
+    text = t.to_text().splitlines()
+    assert text[0].split() == list(t.columns) and len(text) == len(rows) + 2
+    md = t.to_markdown().splitlines()
+    assert md[0].startswith("| disparity_px |") and md[1].startswith("|---:")
+    small = StereoRig(baseline_mm=100, focal_mm=4, pixel_um=3, width_px=40).table()
+    assert max(r["disparity_px"] for r in small) <= 39
+
+
+def test_table_subpixel_column_and_custom_disparities() -> None:
+    rig = StereoRig(**ARM)
+    t = rig.table([0, 10, 250], disparity_step_px=0.25)
+    assert "depth_resolution_subpx_m" in t.columns
+    r0, r1, _ = t.to_records()
+    assert r0["depth_m"] == math.inf and r0["depth_resolution_m"] == math.inf
+    assert r1["depth_resolution_subpx_m"] == pytest.approx(r1["depth_resolution_m"] / 4)
+
+
+def test_summary_has_every_result_and_is_json_ready() -> None:
+    import json
+
+    rig = StereoRig(**ARM)
+    s = rig.summary(250, disparity_step_px=0.1, max_disparity_px=256)
+    for key in ("depth_m", "disparity_mm", "max_depth_m", "depth_resolution_m", "focal_px",
+                "hfov_deg", "table", "min_depth_m", "depth_resolution_subpx_m"):
+        assert s[key] is not None, key
+    assert s["depth_m"] == rig.depth_m(250)
+    json.dumps(s, allow_nan=False)
+    s0 = rig.summary(0)
+    assert s0["depth_m"] is None and s0["depth_resolution_m"] is None  # infinite -> None
+
+
+@settings(max_examples=80, deadline=None)
+@given(st.floats(1e-3, 1e4), st.floats(0.1, 5000), st.floats(0.1, 100), st.floats(0.5, 20))
+def test_depth_disparity_round_trip(d: float, b: float, f: float, p: float) -> None:
+    rig = StereoRig(baseline_mm=b, focal_mm=f, pixel_um=p)
+    assert rig.disparity_px(rig.depth_m(d)) == pytest.approx(d, rel=1e-9)
+
+
+@settings(max_examples=80, deadline=None)
+@given(st.lists(st.floats(0, 1e5), min_size=2, max_size=30))
+def test_depth_decreases_with_disparity(ds: list[float]) -> None:
+    rig = StereoRig(**CAR)
+    z = rig.depth_m(np.sort(np.array(ds)))
+    assert np.all(np.diff(z[np.isfinite(z)]) <= 0)
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "exc", "match"),
+    [
+        ({**ARM, "baseline_mm": 0}, ValueError, "baseline_mm must be a finite number > 0, got 0"),
+        ({**ARM, "baseline_mm": -150}, ValueError, "baseline_mm .* got -150"),
+        ({**ARM, "focal_mm": float("nan")}, ValueError, "focal_mm .* got nan"),
+        ({**ARM, "pixel_um": float("inf")}, ValueError, "pixel_um .* got inf"),
+        ({**ARM, "pixel_um": "2.8"}, TypeError, "pixel_um must be a real number, got str"),
+        ({**ARM, "width_px": 0}, ValueError, "width_px must be an integer >= 1, got 0"),
+        ({**ARM, "width_px": 12.5}, TypeError, "width_px must be an integer, got float"),
+        ({**ARM, "height_px": -3}, ValueError, "height_px must be an integer >= 1, got -3"),
+    ],
+)
+def test_rejected_rig(kwargs, exc, match) -> None:
+    with pytest.raises(exc, match=match):
+        StereoRig(**kwargs)
+
+
+@pytest.mark.parametrize(
+    ("call", "exc", "match"),
+    [
+        (lambda r: r.depth_m(-1), ValueError, "disparity_px must be finite and >= 0, got -1.0"),
+        (lambda r: r.depth_m(float("nan")), ValueError, "disparity_px .* got nan"),
+        (lambda r: r.depth_m(np.array([1.0, -2.0])), ValueError, "got -2.0"),
+        (lambda r: r.depth_m("1"), TypeError, "disparity_px must be a real number or array"),
+        (lambda r: r.depth_m(None), TypeError, "disparity_px must be a real number or array"),
+        (lambda r: r.disparity_px(0), ValueError, "depth_m must be > 0, got 0.0"),
+        (lambda r: r.depth_resolution_m(1.0, 0), ValueError, "disparity_step_px .* got 0"),
+        (lambda r: r.depth_resolution_m(-1.0), ValueError, "depth_m must be > 0, got -1.0"),
+        (lambda r: r.depth_resolution_m(1.0, exact=1), TypeError, "exact must be a bool"),
+        (lambda r: r.min_depth_m(0), ValueError, "max_disparity_px must be a finite number > 0"),
+        (lambda r: r.required_baseline_mm(10, 0), ValueError, "depth_resolution_m .* got 0"),
+        (lambda r: r.table([]), ValueError, "disparities_px must be a non-empty 1-D sequence"),
+        (lambda r: r.table([1, -1]), ValueError, "disparities_px must be finite and >= 0"),
+        (lambda r: r.summary("x"), TypeError, "disparity_px must be a real number, got str"),
+    ],
+)
+def test_rejected_questions(call, exc, match) -> None:
+    with pytest.raises(exc, match=match):
+        call(StereoRig(**ARM))
+
+
+def test_hfov_needs_width() -> None:
+    with pytest.raises(ValueError, match="hfov_deg needs width_px, got None"):
+        _ = StereoRig(baseline_mm=1, focal_mm=1, pixel_um=1).hfov_deg
