@@ -84,8 +84,8 @@ def test_oracle(benchmark: Any, impl: Any, case: Any) -> None:
     group(benchmark, case)
     impl("oracle (stereodepth.reference)")
     got = benchmark.pedantic(reference.disparity_to_depth, args=(d,),
-                             kwargs=dict(focal_px=FOCAL_PX, baseline_m=BASELINE_M,
-                                         dtype=out_dtype), rounds=3, iterations=1)
+                             kwargs={"focal_px": FOCAL_PX, "baseline_m": BASELINE_M,
+                                         "dtype": out_dtype}, rounds=3, iterations=1)
     np.testing.assert_array_equal(got, want)
 
 

@@ -62,8 +62,8 @@ def assert_same(a: np.ndarray, b: np.ndarray) -> None:
 def test_native_matches_oracle(in_dtype: type, out_dtype: type, shape: tuple[int, ...]) -> None:
     rng = np.random.default_rng(abs(hash((np.dtype(in_dtype).name, shape))) % 2**32)
     d = random_disparity(rng, in_dtype, shape)
-    kw = dict(focal_px=FOCAL_PX, baseline_m=BASELINE_M, dtype=out_dtype,
-              scale=default_scale(in_dtype))
+    kw = {"focal_px": FOCAL_PX, "baseline_m": BASELINE_M, "dtype": out_dtype,
+              "scale": default_scale(in_dtype)}
     assert_same(stereodepth.disparity_to_depth(d, **kw), reference.disparity_to_depth(d, **kw))
 
 
@@ -72,8 +72,8 @@ def test_native_matches_oracle(in_dtype: type, out_dtype: type, shape: tuple[int
 def test_every_special_value_matches_oracle(in_dtype: type, out_dtype: type) -> None:
     d = special_values(in_dtype).reshape(1, -1)
     for doffs in (0.0, 31.34, -2.5):
-        kw = dict(focal_px=FOCAL_PX, baseline_m=BASELINE_M, dtype=out_dtype, doffs_px=doffs,
-                  scale=default_scale(in_dtype) or 1.0)
+        kw = {"focal_px": FOCAL_PX, "baseline_m": BASELINE_M, "dtype": out_dtype, "doffs_px": doffs,
+                  "scale": default_scale(in_dtype) or 1.0}
         assert_same(stereodepth.disparity_to_depth(d, **kw), reference.disparity_to_depth(d, **kw))
 
 
@@ -83,10 +83,10 @@ def test_options_match_oracle(in_dtype: type, out_dtype: type) -> None:
     rng = np.random.default_rng(7)
     d = random_disparity(rng, in_dtype, (3, 17, 29))
     for opts in (
-        dict(min_depth_m=2.0, max_depth_m=30.0),
-        dict(doffs_px=53.271, scale=0.5),
-        dict(invalid_value=0),
-        dict(min_depth_m=0.0, max_depth_m=5.0, invalid_value=1),
+        {"min_depth_m": 2.0, "max_depth_m": 30.0},
+        {"doffs_px": 53.271, "scale": 0.5},
+        {"invalid_value": 0},
+        {"min_depth_m": 0.0, "max_depth_m": 5.0, "invalid_value": 1},
     ):
         kw = dict(focal_px=1038.018, baseline_m=0.176252, dtype=out_dtype, **opts)
         kw.setdefault("scale", default_scale(in_dtype))
@@ -248,7 +248,7 @@ def test_real_kitti_ground_truth_matches_oracle_and_calibration(stereo_scenes) -
     gt = scene.gt()
     m = scene.meta
     raw = np.where(np.isfinite(gt), np.round(gt * 256), 0).astype(np.uint16)  # KITTI's encoding
-    kw = dict(focal_px=m["focal_px"], baseline_m=m["baseline_mm"] / 1000, scale=1 / 256)
+    kw = {"focal_px": m["focal_px"], "baseline_m": m["baseline_mm"] / 1000, "scale": 1 / 256}
     for dtype in OUT_DTYPES:
         assert_same(stereodepth.disparity_to_depth(raw, dtype=dtype, **kw),
                     reference.disparity_to_depth(raw, dtype=dtype, **kw))
@@ -261,7 +261,7 @@ def test_real_kitti_ground_truth_matches_oracle_and_calibration(stereo_scenes) -
 
 
 # --- rejected input: one test per case, type and message checked ---------------------------
-GOOD = dict(focal_px=700.0, baseline_m=0.1)
+GOOD = {"focal_px": 700.0, "baseline_m": 0.1}
 D = np.ones((2, 3), np.float32)
 
 

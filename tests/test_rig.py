@@ -11,8 +11,8 @@ from hypothesis import strategies as st
 
 from stereodepth import StereoRig
 
-ARM = dict(baseline_mm=150, focal_mm=6, pixel_um=2.8, width_px=1280)
-CAR = dict(baseline_mm=250, focal_mm=12, pixel_um=4.2, width_px=2048)
+ARM = {"baseline_mm": 150, "focal_mm": 6, "pixel_um": 2.8, "width_px": 1280}
+CAR = {"baseline_mm": 250, "focal_mm": 12, "pixel_um": 4.2, "width_px": 2048}
 
 
 def test_worked_example_bin_picking_arm() -> None:

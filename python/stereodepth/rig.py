@@ -47,7 +47,7 @@ class DepthTable:
     rows: tuple[tuple[float, ...], ...]
 
     def to_records(self) -> list[dict[str, float]]:
-        return [dict(zip(self.columns, r)) for r in self.rows]
+        return [dict(zip(self.columns, r, strict=False)) for r in self.rows]
 
     def __iter__(self) -> Iterator[dict[str, float]]:
         return iter(self.to_records())
@@ -62,9 +62,9 @@ class DepthTable:
         """A plain-text table, columns right-aligned."""
         cells = self._cells()
         widths = [max(len(c), *(len(r[i]) for r in cells)) for i, c in enumerate(self.columns)]
-        lines = ["  ".join(c.rjust(w) for c, w in zip(self.columns, widths))]
+        lines = ["  ".join(c.rjust(w) for c, w in zip(self.columns, widths, strict=False))]
         lines.append("  ".join("-" * w for w in widths))
-        lines += ["  ".join(v.rjust(w) for v, w in zip(r, widths)) for r in cells]
+        lines += ["  ".join(v.rjust(w) for v, w in zip(r, widths, strict=False)) for r in cells]
         return "\n".join(lines)
 
     def to_markdown(self) -> str:
@@ -110,7 +110,9 @@ class StereoRig:
         self._focal_mm: float | None = check.positive("focal_mm", focal_mm)
         self._pixel_um: float | None = check.positive("pixel_um", pixel_um)
         self._focal_px = self._focal_mm / (self._pixel_um / 1000.0)
-        self._width_px = None if width_px is None else check.integer("width_px", width_px, minimum=1)
+        self._width_px = (
+            None if width_px is None else check.integer("width_px", width_px, minimum=1)
+        )
         self._height_px = (
             None if height_px is None else check.integer("height_px", height_px, minimum=1)
         )
