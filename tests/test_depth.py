@@ -343,3 +343,15 @@ def test_build_info_reports_compiler_isa_and_threads() -> None:
     assert info["supported_isas"][0] == "baseline"
     assert info["default_threads"] >= 1
     assert info["compiler"] and info["version"] == stereodepth.__version__
+
+
+def test_arrays_that_went_through_pickle_are_accepted() -> None:
+    """Arrays from other processes (multiprocessing, Dask) carry equal but distinct dtypes."""
+    import pickle
+
+    d = pickle.loads(pickle.dumps(np.full((3, 4), 8.0, np.float32)))
+    out = pickle.loads(pickle.dumps(np.empty((3, 4), np.uint16)))
+    for dtype in IN_DTYPES:
+        raw = pickle.loads(pickle.dumps(d.astype(dtype)))
+        got = stereodepth.disparity_to_depth(raw, scale=1.0, dtype=np.uint16, out=out, **GOOD)
+        assert_same(got, reference.disparity_to_depth(raw, scale=1.0, dtype=np.uint16, **GOOD))

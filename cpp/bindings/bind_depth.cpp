@@ -15,11 +15,11 @@ namespace {
 
 DisparityType disparity_type(const py::array& a) {
   const auto dt = a.dtype();
-  if (dt.is(py::dtype::of<float>())) return DisparityType::kFloat32;
-  if (dt.is(py::dtype::of<double>())) return DisparityType::kFloat64;
-  if (dt.is(py::dtype::of<std::int16_t>())) return DisparityType::kInt16;
-  if (dt.is(py::dtype::of<std::uint16_t>())) return DisparityType::kUint16;
-  if (dt.is(py::dtype("float16"))) return DisparityType::kFloat16;
+  if (dt.equal(py::dtype::of<float>())) return DisparityType::kFloat32;
+  if (dt.equal(py::dtype::of<double>())) return DisparityType::kFloat64;
+  if (dt.equal(py::dtype::of<std::int16_t>())) return DisparityType::kInt16;
+  if (dt.equal(py::dtype::of<std::uint16_t>())) return DisparityType::kUint16;
+  if (dt.equal(py::dtype("float16"))) return DisparityType::kFloat16;
   throw py::type_error(
       "disparity must have dtype float16, float32, float64, int16 or uint16, got " +
       dtype_str(a));
@@ -50,11 +50,11 @@ void disparity_to_depth_py(const py::array& disparity, py::array& out, double fo
   }
   const Isa chosen = resolve_isa(isa);
   const int nthreads = resolve_threads(threads);
-  if (out.dtype().is(py::dtype::of<float>())) {
+  if (out.dtype().equal(py::dtype::of<float>())) {
     auto view = writable_stack<float>(out, "out");
     py::gil_scoped_release release;
     disparity_to_depth(in, view, p, nthreads, chosen);
-  } else if (out.dtype().is(py::dtype::of<std::uint16_t>())) {
+  } else if (out.dtype().equal(py::dtype::of<std::uint16_t>())) {
     auto view = writable_stack<std::uint16_t>(out, "out");
     py::gil_scoped_release release;
     disparity_to_depth(in, view, p, nthreads, chosen);

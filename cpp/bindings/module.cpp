@@ -15,6 +15,8 @@
 
 namespace stereodepth::bindings {
 void bind_depth(py::module_& m);
+void bind_block_match(py::module_& m);
+void bind_reproject(py::module_& m);
 }  // namespace stereodepth::bindings
 
 namespace {
@@ -71,4 +73,6 @@ PYBIND11_MODULE(_core, m) {
   });
 
   bindings::bind_depth(m);
+  bindings::bind_block_match(m);
+  bindings::bind_reproject(m);
 }

@@ -2,6 +2,9 @@
 
 - :class:`StereoRig`: the depth calculator (depth, resolution, field of view, tables).
 - :func:`disparity_to_depth`: native, threaded disparity-map to depth-map conversion.
+- :func:`block_match`, :class:`StereoMatcher`: native block-matching disparity (census or SAD,
+  sub-pixel, validity checks); :func:`to_opencv_disparity` for OpenCV's int16 x16 format.
+- :func:`reproject`, :func:`write_ply`: disparity maps to XYZ point clouds and PLY files.
 - :mod:`stereodepth.reference`: the pure-numpy oracle of every native kernel.
 """
 
@@ -11,16 +14,23 @@ from typing import Any
 
 from . import _core
 from .depth import disparity_to_depth
+from .matching import StereoMatcher, block_match, to_opencv_disparity
+from .pointcloud import reproject, write_ply
 from .rig import DepthTable, StereoRig
 
 __version__: str = _core.__version__
 
 __all__ = [
     "DepthTable",
+    "StereoMatcher",
     "StereoRig",
     "__version__",
+    "block_match",
     "build_info",
     "disparity_to_depth",
+    "reproject",
+    "to_opencv_disparity",
+    "write_ply",
 ]
 
 

@@ -17,7 +17,9 @@ from .rig import StereoRig
 
 # Modules that add a subcommand: each has register(subparsers) that adds its parser with
 # set_defaults(func=run), where run(args) -> int. They import heavy dependencies inside run.
-_SUBCOMMAND_MODULES: tuple[str, ...] = ()
+_SUBCOMMAND_MODULES: tuple[str, ...] = (
+    "stereodepth.evaluation", "stereodepth.web.serve", "stereodepth.batch",
+)
 
 
 class UsageError(Exception):
@@ -119,7 +121,7 @@ def _run_calc(args: argparse.Namespace) -> int:
         from .plotting import save_charts
 
         save_charts(rig, args.plot, disparity_px=args.disparity_px,
-                    disparity_step_px=args.subpixel_px)
+                    disparity_step_px=args.subpixel_px, max_disparity_px=args.max_disparity_px)
     if args.json:
         print(json.dumps(summary, indent=2, allow_nan=False))
         return 0

@@ -12,9 +12,10 @@ from typing import Any
 import numpy as np
 
 from . import _validate as check
+from ._reference_block_match import block_match  # the oracle's body lives there
 from .depth import DepthOptions, as_disparity, prepare_out
 
-__all__ = ["disparity_to_depth"]
+__all__ = ["block_match", "disparity_to_depth", "reproject"]
 
 
 def disparity_to_depth(
@@ -75,4 +76,61 @@ def disparity_to_depth(
                 mm = np.minimum(np.rint(np.where(ok, z, 0.0) * 1000.0), 65535.0)
                 depth = np.where(ok, mm, 0).astype(np.uint16)
     result[...] = depth
+    return result
+
+
+def reproject(
+    disparity: Any,
+    *,
+    Q: Any = None,
+    focal_px: float | None = None,
+    baseline_m: float | None = None,
+    cx_px: float | None = None,
+    cy_px: float | None = None,
+    doffs_px: float | None = None,
+    scale: float | None = None,
+    min_depth_m: float | None = None,
+    max_depth_m: float | None = None,
+    invalid_value: float | None = None,
+    out: np.ndarray | None = None,
+    threads: int | None = None,
+) -> np.ndarray:
+    """Oracle of :func:`stereodepth.reproject` (``threads`` is checked, then unused)."""
+    from .pointcloud import ReprojectOptions, prepare_points_out
+
+    arr = as_disparity(disparity)
+    o = ReprojectOptions(
+        arr, Q=Q, focal_px=focal_px, baseline_m=baseline_m, cx_px=cx_px, cy_px=cy_px,
+        doffs_px=doffs_px, scale=scale, min_depth_m=min_depth_m, max_depth_m=max_depth_m,
+        invalid_value=invalid_value,
+    )
+    check.threads(threads)
+    result = prepare_points_out(out, arr)
+    q = o.Q
+    rows, cols = arr.shape[-2:]
+    raw = arr.astype(np.float64)  # exact for every accepted dtype
+    x = np.arange(cols, dtype=np.float64)
+    y = np.arange(rows, dtype=np.float64)[:, None]
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        d = raw * o.scale
+        # Float64, one rounding per operation, in the kernel's order.
+        w = (q[3, 0] * x + q[3, 2] * d) + (q[3, 1] * y + q[3, 3])
+        iw = 1.0 / w
+        xyz = [
+            (((q[i, 0] * x + q[i, 2] * d) + (q[i, 1] * y + q[i, 3])) * iw).astype(np.float32)
+            for i in range(3)
+        ]
+        px, py, pz = xyz
+        ok = (np.isfinite(px) & np.isfinite(py) & (pz > 0)
+              & (pz >= np.float32(o.min_depth_m)) & (pz <= np.float32(o.max_depth_m)))
+    if o.invalid_value is not None:
+        # compared in float32, or float64 for float64 input, as disparity_to_depth does
+        if arr.dtype == np.float64:
+            ok &= raw != o.invalid_value
+        else:
+            ok &= arr.astype(np.float32) != np.float32(o.invalid_value)
+    if o.negative_invalid:
+        ok &= raw >= 0
+    for i, c in enumerate(xyz):
+        result[..., i] = np.where(ok, c, np.float32(np.nan))
     return result

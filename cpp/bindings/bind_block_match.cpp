@@ -1,0 +1,117 @@
+// Binds stereodepth/block_match.hpp: check and convert with the GIL held, then release it.
+#include <memory>
+#include <string>
+
+#include "bind_common.hpp"
+#include "stereodepth/block_match.hpp"
+
+namespace stereodepth::bindings {
+
+namespace {
+
+MatchCost parse_cost(const std::string& name) {
+  if (name == "census") return MatchCost::kCensus;
+  if (name == "sad") return MatchCost::kSad;
+  throw py::value_error("cost must be 'census' or 'sad', got '" + name + "'");
+}
+
+SubpixelFit parse_subpixel(const std::string& name) {
+  if (name == "none") return SubpixelFit::kNone;
+  if (name == "parabola") return SubpixelFit::kParabola;
+  if (name == "equiangular") return SubpixelFit::kEquiangular;
+  throw py::value_error("subpixel must be 'none', 'parabola' or 'equiangular', got '" + name +
+                        "'");
+}
+
+StereoImage image_view(const py::array& a, const char* name) {
+  StereoImage im;
+  const bool u8 = a.dtype().equal(py::dtype::of<std::uint8_t>());
+  const bool u16 = a.dtype().equal(py::dtype::of<std::uint16_t>());
+  if (!u8 && !u16) {
+    throw py::type_error(std::string(name) + " must have dtype uint8 or uint16, got " +
+                         dtype_str(a));
+  }
+  if (a.ndim() == 2) {
+    im.format = u8 ? PixelFormat::kGrey8 : PixelFormat::kGrey16;
+  } else if (a.ndim() == 3 && a.shape(2) == 3 && u8) {
+    im.format = PixelFormat::kRgb8;
+  } else {
+    throw py::value_error(std::string(name) +
+                          " must be (H, W) uint8/uint16 or (H, W, 3) uint8, got shape " +
+                          shape_str(a) + " " + dtype_str(a));
+  }
+  if (!(a.flags() & py::array::c_style)) {
+    throw py::type_error(std::string(name) + " must be C-contiguous");
+  }
+  im.data = a.data();
+  im.rows = a.shape(0);
+  im.cols = a.shape(1);
+  im.row_stride = a.strides(0);
+  return im;
+}
+
+ImageView<float> output_view(py::array& a, const char* name) {
+  if (!a.dtype().equal(py::dtype::of<float>())) {
+    throw py::type_error(std::string(name) + " must have dtype float32, got " + dtype_str(a));
+  }
+  if (a.ndim() != 2) {
+    throw py::value_error(std::string(name) + " must be 2-D, got shape " + shape_str(a));
+  }
+  if (!a.writeable()) throw py::value_error(std::string(name) + " must be writeable");
+  if (!(a.flags() & py::array::c_style)) {
+    throw py::type_error(std::string(name) + " must be C-contiguous");
+  }
+  return ImageView<float>{static_cast<float*>(a.mutable_data()), a.shape(0), a.shape(1),
+                          a.shape(1)};
+}
+
+void compute_py(BlockMatcher& self, const py::array& left, const py::array& right,
+                py::array& disparity, const py::object& confidence) {
+  const StereoImage l = image_view(left, "left");
+  const StereoImage r = image_view(right, "right");
+  const ImageView<float> d = output_view(disparity, "disparity");
+  ImageView<float> c{};
+  py::array conf_arr;
+  if (!confidence.is_none()) {
+    conf_arr = py::reinterpret_borrow<py::array>(confidence);
+    c = output_view(conf_arr, "confidence");
+  }
+  py::gil_scoped_release release;
+  self.compute(l, r, d, c);
+}
+
+}  // namespace
+
+void bind_block_match(py::module_& m) {
+  py::class_<BlockMatcher>(m, "BlockMatcher",
+                           "Low-level matcher behind stereodepth.StereoMatcher.")
+      .def(py::init([](int num_disparities, int min_disparity, int block_size,
+                       const std::string& cost, const std::string& subpixel,
+                       double uniqueness_ratio, double texture_threshold, double lr_max_diff,
+                       int speckle_window, double speckle_range, int threads,
+                       const std::string& isa) {
+             BlockMatchParams p;
+             p.num_disparities = num_disparities;
+             p.min_disparity = min_disparity;
+             p.block_size = block_size;
+             p.cost = parse_cost(cost);
+             p.subpixel = parse_subpixel(subpixel);
+             p.uniqueness_ratio = uniqueness_ratio;
+             p.texture_threshold = texture_threshold;
+             p.lr_max_diff = lr_max_diff;
+             p.speckle_window = speckle_window;
+             p.speckle_range = speckle_range;
+             return std::make_unique<BlockMatcher>(p, threads, resolve_isa(isa));
+           }),
+           py::arg("num_disparities"), py::arg("min_disparity"), py::arg("block_size"),
+           py::arg("cost"), py::arg("subpixel"), py::arg("uniqueness_ratio"),
+           py::arg("texture_threshold"), py::arg("lr_max_diff"), py::arg("speckle_window"),
+           py::arg("speckle_range"), py::arg("threads"), py::arg("isa") = "auto")
+      .def("compute", &compute_py, py::arg("left"), py::arg("right"), py::arg("disparity"),
+           py::arg("confidence") = py::none(),
+           "Writes the disparity (and the confidence, unless None) of left.")
+      .def_property_readonly("threads", &BlockMatcher::threads)
+      .def_property_readonly("isa", [](const BlockMatcher& self) { return isa_name(self.isa()); });
+}
+
+}  // namespace stereodepth::bindings

@@ -1,0 +1,976 @@
+// Block-matching kernels. Compiled once per instruction set (STEREODEPTH_ISA_NS); everything
+// here stays inside that namespace (see dispatch.hpp). The baseline build runs the plain loops,
+// the reference every SIMD variant is tested against; the AVX2 and AVX-512 builds replace the
+// hot loops with intrinsics that compute the same integers.
+//
+// One row of a band: (1) the block-column sums colsum[x][q] gain the pixel costs of the row
+// entering the block and lose those of the row leaving it; (2) a running sum along the row
+// gives each pixel's block costs acc[q]; the pixel's winner, second-best cost and sub-pixel
+// step follow, and acc also updates the right image's running winners (the other diagonal of
+// the same costs); (3) the left-right check reads those winners.
+#include "block_match_kernels.hpp"
+
+#include <cmath>
+#include <cstdint>
+#include <cstdlib>
+#include <cstring>
+#include <limits>
+
+#if defined(__AVX2__) || defined(__AVX512F__)
+#include <immintrin.h>
+#endif
+
+#ifndef STEREODEPTH_ISA_NS
+#error "STEREODEPTH_ISA_NS must name the instruction set this file is compiled for"
+#endif
+
+#if defined(__AVX512BW__) && defined(__AVX512VPOPCNTDQ__) && defined(__AVX512VL__)
+#define STEREODEPTH_BM_AVX512 1
+#elif defined(__AVX2__)
+#define STEREODEPTH_BM_AVX2 1
+#endif
+
+namespace stereodepth::detail::STEREODEPTH_ISA_NS {
+namespace {
+
+#if defined(STEREODEPTH_BM_AVX512)
+constexpr int kLanes = 32;  // 16-bit costs per zmm register
+#elif defined(STEREODEPTH_BM_AVX2)
+constexpr int kLanes = 16;  // per ymm register
+#else
+constexpr int kLanes = 8;
+#endif
+
+using std::ptrdiff_t;
+using std::uint16_t;
+using std::uint32_t;
+using std::uint8_t;
+
+inline ptrdiff_t clamp_index(ptrdiff_t v, ptrdiff_t lo, ptrdiff_t hi) {
+  return v < lo ? lo : (v > hi ? hi : v);
+}
+
+// ------------------------------------------------------------------------------------------
+// Grey, census and Sobel rows.
+
+// OpenCV's COLOR_RGB2GRAY for 8-bit images, bit for bit (checked on all 2^24 colours).
+void rgb_to_grey(const uint8_t* rgb, uint8_t* grey, ptrdiff_t cols) {
+  for (ptrdiff_t x = 0; x < cols; ++x) {
+    const uint32_t r = rgb[3 * x], g = rgb[3 * x + 1], b = rgb[3 * x + 2];
+    grey[x] = static_cast<uint8_t>((r * 9798u + g * 19235u + b * 3735u + 16384u) >> 15);
+  }
+}
+
+// The 5x5 census code at column x: one bit per neighbour, row-major, the first neighbour in
+// bit 23, set where the neighbour (clamped to the image) is darker than the centre.
+template <typename T>
+uint32_t census_at(const T* const* rows, ptrdiff_t x, ptrdiff_t cols) {
+  const T c = rows[2][x];
+  uint32_t code = 0;
+  for (int dy = 0; dy < 5; ++dy) {
+    for (int dx = -2; dx <= 2; ++dx) {
+      if (dy == 2 && dx == 0) continue;
+      const T v = rows[dy][clamp_index(x + dx, 0, cols - 1)];
+      code = (code << 1) | static_cast<uint32_t>(v < c);
+    }
+  }
+  return code;
+}
+
+#if defined(STEREODEPTH_BM_AVX512)
+template <typename T>
+inline __m512i load16_epi32(const T* p) {
+  if constexpr (sizeof(T) == 1) {
+    return _mm512_cvtepu8_epi32(_mm_loadu_si128(reinterpret_cast<const __m128i*>(p)));
+  } else {
+    return _mm512_cvtepu16_epi32(_mm256_loadu_si256(reinterpret_cast<const __m256i*>(p)));
+  }
+}
+#endif
+
+template <typename T>
+void census_row(const T* const* rows, uint32_t* out, ptrdiff_t cols) {
+  ptrdiff_t x = 0;
+  for (; x < cols && x < 2; ++x) out[x] = census_at(rows, x, cols);
+#if defined(STEREODEPTH_BM_AVX512)
+  for (; x + 16 <= cols - 2; x += 16) {
+    const __m512i c = load16_epi32(rows[2] + x);
+    __m512i code = _mm512_setzero_si512();
+    int bit = 23;
+    for (int dy = 0; dy < 5; ++dy) {
+      for (int dx = -2; dx <= 2; ++dx) {
+        if (dy == 2 && dx == 0) continue;
+        const __mmask16 m = _mm512_cmplt_epu32_mask(load16_epi32(rows[dy] + x + dx), c);
+        code = _mm512_mask_or_epi32(code, m, code, _mm512_set1_epi32(1 << bit));
+        --bit;
+      }
+    }
+    _mm512_storeu_si512(out + x, code);
+  }
+#endif
+  for (; x < cols - 2; ++x) {
+    // Interior columns: no clamping (the compiler vectorises this loop).
+    const T c = rows[2][x];
+    uint32_t code = 0;
+    for (int dy = 0; dy < 5; ++dy) {
+      const T* p = rows[dy];
+      for (int dx = -2; dx <= 2; ++dx) {
+        if (dy == 2 && dx == 0) continue;
+        code = (code << 1) | static_cast<uint32_t>(p[x + dx] < c);
+      }
+    }
+    out[x] = code;
+  }
+  for (; x < cols; ++x) out[x] = census_at(rows, x, cols);
+}
+
+// The x-Sobel response of rows y-1..y+1 at column x (neighbour columns xm, xp), shifted right
+// by 8 bits (toward -inf) for 16-bit images.
+template <typename T>
+inline int32_t sobel_at(const T* const* rows, ptrdiff_t xm, ptrdiff_t xp) {
+  const int32_t s = (static_cast<int32_t>(rows[0][xp]) - static_cast<int32_t>(rows[0][xm])) +
+                    2 * (static_cast<int32_t>(rows[1][xp]) - static_cast<int32_t>(rows[1][xm])) +
+                    (static_cast<int32_t>(rows[2][xp]) - static_cast<int32_t>(rows[2][xm]));
+  return sizeof(T) == 2 ? (s >> 8) : s;
+}
+
+// prefiltered = clip(s, -31, 31) + 31 (SAD), texture = min(|s|, 31); either may be null.
+template <typename T>
+void sobel_row(const T* const* rows, uint8_t* pre, uint8_t* tex, ptrdiff_t cols) {
+  constexpr int32_t cap = kPrefilterCap;
+  auto put = [&](ptrdiff_t x, int32_t s) {
+    const int32_t c = s < -cap ? -cap : (s > cap ? cap : s);
+    if (pre) pre[x] = static_cast<uint8_t>(c + cap);
+    if (tex) tex[x] = static_cast<uint8_t>(c < 0 ? -c : c);
+  };
+  for (ptrdiff_t x = 0; x < cols; ++x) {
+    put(x, sobel_at(rows, clamp_index(x - 1, 0, cols - 1), clamp_index(x + 1, 0, cols - 1)));
+  }
+}
+
+// ------------------------------------------------------------------------------------------
+// Pixel costs into the block-column sums.
+
+struct CensusCost {
+  using Feature = uint32_t;
+  static inline uint32_t cost(uint32_t a, uint32_t b) {
+    return static_cast<uint32_t>(__builtin_popcount(a ^ b));
+  }
+};
+
+struct SadCost {
+  using Feature = uint8_t;
+  static inline uint32_t cost(uint8_t a, uint8_t b) {
+    return static_cast<uint32_t>(a > b ? a - b : b - a);
+  }
+};
+
+#if defined(STEREODEPTH_BM_AVX2)
+// Set bits of each 32-bit lane (nibble lookup, then byte sums).
+inline __m256i popcnt_epi32(__m256i v) {
+  const __m256i lut = _mm256_setr_epi8(0, 1, 1, 2, 1, 2, 2, 3, 1, 2, 2, 3, 2, 3, 3, 4, 0, 1, 1, 2,
+                                       1, 2, 2, 3, 1, 2, 2, 3, 2, 3, 3, 4);
+  const __m256i low = _mm256_set1_epi8(0x0f);
+  const __m256i lo = _mm256_shuffle_epi8(lut, _mm256_and_si256(v, low));
+  const __m256i hi = _mm256_shuffle_epi8(lut, _mm256_and_si256(_mm256_srli_epi16(v, 4), low));
+  const __m256i bytes = _mm256_add_epi8(lo, hi);
+  const __m256i pairs = _mm256_maddubs_epi16(bytes, _mm256_set1_epi8(1));
+  return _mm256_madd_epi16(pairs, _mm256_set1_epi16(1));
+}
+
+// 16 lanes of 32-bit values (two vectors, in order) to 16-bit lanes, in order.
+inline __m256i narrow_epi32(__m256i a, __m256i b) {
+  return _mm256_permute4x64_epi64(_mm256_packs_epi32(a, b), 0xD8);
+}
+
+inline __m256i census_cost16(__m256i l, const uint32_t* r) {
+  return narrow_epi32(
+      popcnt_epi32(_mm256_xor_si256(l, _mm256_loadu_si256(reinterpret_cast<const __m256i*>(r)))),
+      popcnt_epi32(
+          _mm256_xor_si256(l, _mm256_loadu_si256(reinterpret_cast<const __m256i*>(r + 8)))));
+}
+
+inline __m256i sad_cost16(__m256i l, const uint8_t* r) {
+  const __m256i rv = _mm256_cvtepu8_epi16(_mm_loadu_si128(reinterpret_cast<const __m128i*>(r)));
+  return _mm256_abs_epi16(_mm256_sub_epi16(l, rv));
+}
+#endif
+
+#if defined(STEREODEPTH_BM_AVX512)
+inline __m512i census_cost32(__m512i l, const uint32_t* r) {
+  const __m512i p0 = _mm512_popcnt_epi32(_mm512_xor_si512(l, _mm512_loadu_si512(r)));
+  const __m512i p1 = _mm512_popcnt_epi32(_mm512_xor_si512(l, _mm512_loadu_si512(r + 16)));
+  return _mm512_inserti64x4(_mm512_castsi256_si512(_mm512_cvtepi32_epi16(p0)),
+                            _mm512_cvtepi32_epi16(p1), 1);
+}
+
+inline __m512i sad_cost32(__m512i l, const uint8_t* r) {
+  const __m512i rv =
+      _mm512_cvtepu8_epi16(_mm256_loadu_si256(reinterpret_cast<const __m256i*>(r)));
+  return _mm512_abs_epi16(_mm512_sub_epi16(l, rv));
+}
+#endif
+
+// colsum[x][q] += cost(left[x], rpad[x + q]) for every lane (the padding lanes too: their sums
+// are never read as costs).
+template <typename Cost>
+void add_cost_row(const typename Cost::Feature* left, const typename Cost::Feature* rpad,
+                  uint16_t* colsum, ptrdiff_t cols, int dp) {
+  constexpr bool kCensus = sizeof(typename Cost::Feature) == 4;
+  for (ptrdiff_t x = 0; x < cols; ++x) {
+    uint16_t* s = colsum + x * dp;
+    const auto l = left[x];
+    const auto* r = rpad + x;
+#if defined(STEREODEPTH_BM_AVX512)
+    const __m512i lv = kCensus ? _mm512_set1_epi32(static_cast<int>(l))
+                               : _mm512_set1_epi16(static_cast<short>(l));
+    for (int q = 0; q < dp; q += 32) {
+      __m512i c;
+      if constexpr (kCensus) {
+        c = census_cost32(lv, r + q);
+      } else {
+        c = sad_cost32(lv, r + q);
+      }
+      _mm512_storeu_si512(s + q, _mm512_add_epi16(_mm512_loadu_si512(s + q), c));
+    }
+#elif defined(STEREODEPTH_BM_AVX2)
+    const __m256i lv = kCensus ? _mm256_set1_epi32(static_cast<int>(l))
+                               : _mm256_set1_epi16(static_cast<short>(l));
+    for (int q = 0; q < dp; q += 16) {
+      __m256i c;
+      if constexpr (kCensus) {
+        c = census_cost16(lv, r + q);
+      } else {
+        c = sad_cost16(lv, r + q);
+      }
+      auto* sp = reinterpret_cast<__m256i*>(s + q);
+      _mm256_storeu_si256(sp, _mm256_add_epi16(_mm256_loadu_si256(sp), c));
+    }
+#else
+    (void)kCensus;
+    for (int q = 0; q < dp; ++q) s[q] = static_cast<uint16_t>(s[q] + Cost::cost(l, r[q]));
+#endif
+  }
+}
+
+// colsum[x][q] += cost(entering) - cost(leaving), modulo 2^16 (exact: the sums stay < 2^16).
+template <typename Cost>
+void update_cost_rows(const typename Cost::Feature* left_in, const typename Cost::Feature* rpad_in,
+                      const typename Cost::Feature* left_out,
+                      const typename Cost::Feature* rpad_out, uint16_t* colsum, ptrdiff_t cols,
+                      int dp) {
+  constexpr bool kCensus = sizeof(typename Cost::Feature) == 4;
+  for (ptrdiff_t x = 0; x < cols; ++x) {
+    uint16_t* s = colsum + x * dp;
+    const auto li = left_in[x];
+    const auto lo = left_out[x];
+    const auto* ri = rpad_in + x;
+    const auto* ro = rpad_out + x;
+#if defined(STEREODEPTH_BM_AVX512)
+    if constexpr (kCensus) {
+      // The difference in 32-bit lanes, narrowed once.
+      const __m512i liv = _mm512_set1_epi32(static_cast<int>(li));
+      const __m512i lov = _mm512_set1_epi32(static_cast<int>(lo));
+      for (int q = 0; q < dp; q += 32) {
+        const __m512i d0 = _mm512_sub_epi32(
+            _mm512_popcnt_epi32(_mm512_xor_si512(liv, _mm512_loadu_si512(ri + q))),
+            _mm512_popcnt_epi32(_mm512_xor_si512(lov, _mm512_loadu_si512(ro + q))));
+        const __m512i d1 = _mm512_sub_epi32(
+            _mm512_popcnt_epi32(_mm512_xor_si512(liv, _mm512_loadu_si512(ri + q + 16))),
+            _mm512_popcnt_epi32(_mm512_xor_si512(lov, _mm512_loadu_si512(ro + q + 16))));
+        const __m512i c = _mm512_inserti64x4(_mm512_castsi256_si512(_mm512_cvtepi32_epi16(d0)),
+                                             _mm512_cvtepi32_epi16(d1), 1);
+        _mm512_storeu_si512(s + q, _mm512_add_epi16(_mm512_loadu_si512(s + q), c));
+      }
+    } else {
+      const __m512i liv = _mm512_set1_epi16(static_cast<short>(li));
+      const __m512i lov = _mm512_set1_epi16(static_cast<short>(lo));
+      for (int q = 0; q < dp; q += 32) {
+        const __m512i c = _mm512_sub_epi16(sad_cost32(liv, ri + q), sad_cost32(lov, ro + q));
+        _mm512_storeu_si512(s + q, _mm512_add_epi16(_mm512_loadu_si512(s + q), c));
+      }
+    }
+#elif defined(STEREODEPTH_BM_AVX2)
+    const __m256i liv = kCensus ? _mm256_set1_epi32(static_cast<int>(li))
+                                : _mm256_set1_epi16(static_cast<short>(li));
+    const __m256i lov = kCensus ? _mm256_set1_epi32(static_cast<int>(lo))
+                                : _mm256_set1_epi16(static_cast<short>(lo));
+    for (int q = 0; q < dp; q += 16) {
+      __m256i c;
+      if constexpr (kCensus) {
+        c = _mm256_sub_epi16(census_cost16(liv, ri + q), census_cost16(lov, ro + q));
+      } else {
+        c = _mm256_sub_epi16(sad_cost16(liv, ri + q), sad_cost16(lov, ro + q));
+      }
+      auto* sp = reinterpret_cast<__m256i*>(s + q);
+      _mm256_storeu_si256(sp, _mm256_add_epi16(_mm256_loadu_si256(sp), c));
+    }
+#else
+    (void)kCensus;
+    for (int q = 0; q < dp; ++q) {
+      s[q] = static_cast<uint16_t>(s[q] + Cost::cost(li, ri[q]) - Cost::cost(lo, ro[q]));
+    }
+#endif
+  }
+}
+
+// ------------------------------------------------------------------------------------------
+// One row, in two passes. The first runs along the row with the block sums of one pixel at a
+// time: it keeps the right image's running winners and writes each pixel's winner record
+// (integers only). The second turns the records into the checks, the sub-pixel step and the
+// outputs, many pixels at a time.
+
+struct RowCtx {
+  const uint16_t* colsum;
+  const uint32_t* texcol;  // null when the texture check is off
+  ptrdiff_t cols, xlo, xhi;  // columns xlo..xhi have their whole search range in the image
+  int dp, nd, qpad, radius, min_d;
+  SubpixelFit subpixel;
+  bool lr_on, need_second;
+  double texture_sum_min, uniqueness_factor, lr_max_diff;
+  uint16_t* acc;   // dp lanes of scratch (generic pass)
+  uint16_t* rmin;  // generic pass
+  // Right winners: rarg[i] is the left column (mod 2^16) whose block won right column
+  // i + jmin; its disparity index is (rarg[i] - i + dp - 1) mod 2^16.
+  uint16_t* rarg;
+  // Winner records (see BandScratch).
+  uint16_t* best;
+  int32_t* kbest;
+  uint16_t* second;
+  uint32_t* tsum;
+  uint16_t* arow;  // every pixel's costs, when the sub-pixel step needs its neighbours
+  const uint32_t* unique_min;  // null when off
+  float* drow;
+  float* crow;  // null when no confidence is wanted
+};
+
+constexpr uint32_t kNone = 0xFFFFu;  // no search (best) / no second-best (second)
+
+// The record of a pixel with no search: its block leaves the right image.
+inline void record_none(const RowCtx& c, ptrdiff_t x) {
+  c.best[x] = kNone;
+  c.kbest[x] = 0;
+  c.second[x] = kNone;
+  c.tsum[x] = 0;
+}
+
+struct Winner {
+  uint32_t best;  // least cost
+  int q;          // its lane: the highest lane among equal costs (the lowest disparity)
+};
+
+#if defined(STEREODEPTH_BM_AVX512)
+
+inline __m512i lane_iota() {
+  return _mm512_set_epi16(31, 30, 29, 28, 27, 26, 25, 24, 23, 22, 21, 20, 19, 18, 17, 16, 15, 14,
+                          13, 12, 11, 10, 9, 8, 7, 6, 5, 4, 3, 2, 1, 0);
+}
+
+// Padding lanes (q < qpad < 32) all lie in the first vector.
+inline __mmask32 pad_mask(int qpad) {
+  return qpad > 0 ? static_cast<__mmask32>((1u << qpad) - 1u) : static_cast<__mmask32>(0);
+}
+
+inline uint32_t hmin_epu16(__m512i v) {
+  const __m256i a = _mm256_min_epu16(_mm512_castsi512_si256(v), _mm512_extracti64x4_epi64(v, 1));
+  const __m128i b = _mm_min_epu16(_mm256_castsi256_si128(a), _mm256_extracti128_si256(a, 1));
+  return static_cast<uint32_t>(_mm_cvtsi128_si32(_mm_minpos_epu16(b))) & 0xFFFFu;
+}
+
+// Lanes qb - 1 .. qb + 1 of the vector holding lanes q0 .. q0 + 31.
+inline __mmask32 near_mask(__m512i iota, int q0, int qb) {
+  const __m512i rel = _mm512_sub_epi16(iota, _mm512_set1_epi16(static_cast<short>(qb - 1 - q0)));
+  return _mm512_cmple_epu16_mask(rel, _mm512_set1_epi16(2));
+}
+
+// The generic pass's helpers (dp > 32 * kMaxChunks).
+inline Winner find_winner(const uint16_t* acc, int qpad, int dp) {
+  const __m512i ones = _mm512_set1_epi16(-1);
+  __m512i mn = _mm512_mask_mov_epi16(_mm512_loadu_si512(acc), pad_mask(qpad), ones);
+  for (int q = 32; q < dp; q += 32) mn = _mm512_min_epu16(mn, _mm512_loadu_si512(acc + q));
+  const uint32_t best = hmin_epu16(mn);
+  const __m512i bv = _mm512_set1_epi16(static_cast<short>(best));
+  int qb = -1;
+  for (int q = 0; q < dp; q += 32) {
+    __mmask32 m = _mm512_cmpeq_epi16_mask(_mm512_loadu_si512(acc + q), bv);
+    if (q == 0) m &= static_cast<__mmask32>(~pad_mask(qpad));
+    if (m) qb = q + 31 - __builtin_clz(static_cast<unsigned>(m));
+  }
+  return {best, qb};
+}
+
+inline uint32_t second_cost(const uint16_t* acc, int qpad, int dp, int qb) {
+  const __m512i ones = _mm512_set1_epi16(-1);
+  const __m512i iota = lane_iota();
+  __m512i mn = ones;
+  for (int q = 0; q < dp; q += 32) {
+    __mmask32 ex = near_mask(iota, q, qb);
+    if (q == 0) ex |= pad_mask(qpad);
+    mn = _mm512_min_epu16(mn, _mm512_mask_mov_epi16(_mm512_loadu_si512(acc + q), ex, ones));
+  }
+  return hmin_epu16(mn);
+}
+
+inline void right_update(const uint16_t* acc, uint16_t* rmin, uint16_t* rarg, ptrdiff_t x,
+                         int qpad, int dp) {
+  const __m512i xv = _mm512_set1_epi16(static_cast<short>(x));
+  for (int q = 0; q < dp; q += 32) {
+    __m512i a = _mm512_loadu_si512(acc + q);
+    if (q == 0) a = _mm512_mask_mov_epi16(a, pad_mask(qpad), _mm512_set1_epi16(-1));
+    const __m512i rm = _mm512_loadu_si512(rmin + x + q);
+    const __mmask32 lt = _mm512_cmplt_epu16_mask(a, rm);
+    _mm512_mask_storeu_epi16(rmin + x + q, lt, a);
+    _mm512_mask_storeu_epi16(rarg + x + q, lt, xv);
+  }
+}
+
+#elif defined(STEREODEPTH_BM_AVX2)
+
+inline __m256i lane_iota16() {
+  return _mm256_setr_epi16(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15);
+}
+
+// All-ones on the padding lanes (q < qpad < 16, in the first vector).
+inline __m256i pad_vector(int qpad) {
+  return _mm256_cmpgt_epi16(_mm256_set1_epi16(static_cast<short>(qpad)), lane_iota16());
+}
+
+inline uint32_t hmin_epu16(__m256i v) {
+  const __m128i b = _mm_min_epu16(_mm256_castsi256_si128(v), _mm256_extracti128_si256(v, 1));
+  return static_cast<uint32_t>(_mm_cvtsi128_si32(_mm_minpos_epu16(b))) & 0xFFFFu;
+}
+
+inline Winner find_winner(const uint16_t* acc, int qpad, int dp) {
+  const __m256i padv = pad_vector(qpad);
+  auto load = [&](int q) {
+    const __m256i v = _mm256_loadu_si256(reinterpret_cast<const __m256i*>(acc + q));
+    return q == 0 ? _mm256_or_si256(v, padv) : v;
+  };
+  __m256i mn = load(0);
+  for (int q = 16; q < dp; q += 16) mn = _mm256_min_epu16(mn, load(q));
+  const uint32_t best = hmin_epu16(mn);
+  const __m256i bv = _mm256_set1_epi16(static_cast<short>(best));
+  int qb = -1;
+  for (int q = 0; q < dp; q += 16) {
+    const unsigned m = static_cast<unsigned>(_mm256_movemask_epi8(_mm256_cmpeq_epi16(load(q), bv)));
+    if (m) qb = q + (31 - __builtin_clz(m)) / 2;
+  }
+  return {best, qb};
+}
+
+inline uint32_t second_cost(const uint16_t* acc, int qpad, int dp, int qb) {
+  const __m256i padv = pad_vector(qpad);
+  const __m256i iota = lane_iota16();
+  const __m256i two = _mm256_set1_epi16(2);
+  __m256i mn = _mm256_set1_epi16(-1);
+  for (int q = 0; q < dp; q += 16) {
+    // Lanes with (lane - (qb - 1 - q)) <= 2, unsigned, are qb - 1 .. qb + 1.
+    const __m256i rel =
+        _mm256_sub_epi16(iota, _mm256_set1_epi16(static_cast<short>(qb - 1 - q)));
+    __m256i ex = _mm256_cmpeq_epi16(_mm256_min_epu16(rel, two), rel);
+    if (q == 0) ex = _mm256_or_si256(ex, padv);
+    const __m256i v = _mm256_loadu_si256(reinterpret_cast<const __m256i*>(acc + q));
+    mn = _mm256_min_epu16(mn, _mm256_or_si256(v, ex));
+  }
+  return hmin_epu16(mn);
+}
+
+inline void right_update(const uint16_t* acc, uint16_t* rmin, uint16_t* rarg, ptrdiff_t x,
+                         int qpad, int dp) {
+  const __m256i padv = pad_vector(qpad);
+  const __m256i xv = _mm256_set1_epi16(static_cast<short>(x));
+  for (int q = 0; q < dp; q += 16) {
+    __m256i a = _mm256_loadu_si256(reinterpret_cast<const __m256i*>(acc + q));
+    if (q == 0) a = _mm256_or_si256(a, padv);
+    auto* pm = reinterpret_cast<__m256i*>(rmin + x + q);
+    auto* pa = reinterpret_cast<__m256i*>(rarg + x + q);
+    const __m256i rm = _mm256_loadu_si256(pm);
+    const __m256i mn = _mm256_min_epu16(a, rm);
+    // a < rm: min(a, rm) == a and a != rm.
+    const __m256i lt = _mm256_andnot_si256(_mm256_cmpeq_epi16(a, rm), _mm256_cmpeq_epi16(mn, a));
+    _mm256_storeu_si256(pm, mn);
+    _mm256_storeu_si256(pa, _mm256_blendv_epi8(_mm256_loadu_si256(pa), xv, lt));
+  }
+}
+
+#else
+
+inline Winner find_winner(const uint16_t* acc, int qpad, int dp) {
+  Winner w{0x10000u, -1};
+  for (int q = dp - 1; q >= qpad; --q) {
+    if (acc[q] < w.best) {
+      w.best = acc[q];
+      w.q = q;
+    }
+  }
+  return w;
+}
+
+// The least cost more than one lane away from lane qb; kNone when there is none.
+inline uint32_t second_cost(const uint16_t* acc, int qpad, int dp, int qb) {
+  uint32_t s = kNone;
+  for (int q = qpad; q < dp; ++q) {
+    if ((q < qb - 1 || q > qb + 1) && acc[q] < s) s = acc[q];
+  }
+  return s;
+}
+
+// The right image's running winners: column i = x + q (right column i + jmin) keeps its least
+// cost and the left column x that gave it. Candidates arrive in increasing disparity, so a
+// strict < keeps the lowest.
+inline void right_update(const uint16_t* acc, uint16_t* rmin, uint16_t* rarg, ptrdiff_t x,
+                         int qpad, int dp) {
+  for (int q = qpad; q < dp; ++q) {
+    if (acc[q] < rmin[x + q]) {
+      rmin[x + q] = acc[q];
+      rarg[x + q] = static_cast<uint16_t>(x);
+    }
+  }
+}
+
+#endif
+
+// First pass, with the costs in memory (any dp).
+void winners_generic(const RowCtx& c) {
+  const ptrdiff_t cols = c.cols;
+  const int dp = c.dp, r = c.radius;
+  uint16_t* acc = c.acc;
+  if (c.lr_on) {
+    for (ptrdiff_t i = 0; i < cols + dp + 32; ++i) c.rmin[i] = 0xFFFF;
+  }
+  std::memset(acc, 0, sizeof(uint16_t) * static_cast<size_t>(dp));
+  uint32_t tsum = 0;
+  for (ptrdiff_t dx = -r; dx <= r; ++dx) {
+    const ptrdiff_t xx = clamp_index(dx, 0, cols - 1);
+    const uint16_t* col = c.colsum + xx * dp;
+    for (int q = 0; q < dp; ++q) acc[q] = static_cast<uint16_t>(acc[q] + col[q]);
+    if (c.texcol) tsum += c.texcol[xx];
+  }
+  for (ptrdiff_t x = 0; x < cols; ++x) {
+    if (x > 0) {
+      const ptrdiff_t xp = clamp_index(x + r, 0, cols - 1);
+      const ptrdiff_t xm = clamp_index(x - r - 1, 0, cols - 1);
+      const uint16_t* plus = c.colsum + xp * dp;
+      const uint16_t* minus = c.colsum + xm * dp;
+      for (int q = 0; q < dp; ++q) acc[q] = static_cast<uint16_t>(acc[q] + plus[q] - minus[q]);
+      if (c.texcol) tsum += c.texcol[xp] - c.texcol[xm];
+    }
+    if (c.lr_on) right_update(acc, c.rmin, c.rarg, x, c.qpad, dp);
+    if (x < c.xlo || x > c.xhi) {
+      record_none(c, x);
+      continue;
+    }
+    const Winner w = find_winner(acc, c.qpad, dp);
+    c.best[x] = static_cast<uint16_t>(w.best);
+    c.kbest[x] = dp - 1 - w.q;
+    c.second[x] = static_cast<uint16_t>(c.need_second ? second_cost(acc, c.qpad, dp, w.q) : kNone);
+    c.tsum[x] = tsum;
+    if (c.subpixel != SubpixelFit::kNone) {
+      std::memcpy(c.arow + x * dp, acc, sizeof(uint16_t) * static_cast<size_t>(dp));
+    }
+  }
+}
+
+#if defined(STEREODEPTH_BM_AVX512)
+
+constexpr int kMaxChunks = 8;
+
+// First pass with the NC vectors of costs in registers. The right winners stay in registers
+// too, for the NC + 1 aligned blocks of 32 right columns that the current group of 32 left
+// columns reaches: each pixel's costs are rotated by x mod 32 lanes into place.
+template <int NC>
+void winners_avx512(const RowCtx& c) {
+  const ptrdiff_t cols = c.cols;
+  const int dp = c.dp, r = c.radius;
+  const __m512i ones = _mm512_set1_epi16(-1);
+  const __m512i padv = _mm512_maskz_mov_epi16(pad_mask(c.qpad), ones);
+  const __m512i iota = lane_iota();
+  const uint16_t* S = c.colsum;
+
+  __m512i A[NC];
+  for (int i = 0; i < NC; ++i) A[i] = _mm512_setzero_si512();
+  uint32_t tsum = 0;
+  for (ptrdiff_t dx = -r; dx <= r; ++dx) {
+    const ptrdiff_t xx = clamp_index(dx, 0, cols - 1);
+    for (int i = 0; i < NC; ++i) {
+      A[i] = _mm512_add_epi16(A[i], _mm512_loadu_si512(S + xx * dp + 32 * i));
+    }
+    if (c.texcol) tsum += c.texcol[xx];
+  }
+  A[0] = _mm512_or_si512(A[0], padv);  // padding lanes: 0xFFFF, never a winner
+
+  __m512i B[NC + 1], K[NC + 1];  // right winners: least cost, left column
+  for (int i = 0; i <= NC; ++i) {
+    B[i] = ones;
+    K[i] = _mm512_setzero_si512();
+  }
+
+  for (ptrdiff_t x = 0; x < cols; ++x) {
+    if (x > 0) {
+      const ptrdiff_t xp = clamp_index(x + r, 0, cols - 1);
+      const ptrdiff_t xm = clamp_index(x - r - 1, 0, cols - 1);
+      const uint16_t* plus = S + xp * dp;
+      const uint16_t* minus = S + xm * dp;
+      for (int i = 0; i < NC; ++i) {
+        A[i] = _mm512_sub_epi16(_mm512_add_epi16(A[i], _mm512_loadu_si512(plus + 32 * i)),
+                                _mm512_loadu_si512(minus + 32 * i));
+      }
+      A[0] = _mm512_or_si512(A[0], padv);
+      if (c.texcol) tsum += c.texcol[xp] - c.texcol[xm];
+    }
+    if (c.lr_on) {
+      const int s = static_cast<int>(x & 31);
+      if (s == 0 && x > 0) {
+        _mm512_store_si512(c.rarg + (x - 32), K[0]);
+        for (int i = 0; i < NC; ++i) {
+          B[i] = B[i + 1];
+          K[i] = K[i + 1];
+        }
+        B[NC] = ones;
+        K[NC] = _mm512_setzero_si512();
+      }
+      const __m512i idx =
+          _mm512_and_si512(_mm512_sub_epi16(iota, _mm512_set1_epi16(static_cast<short>(s))),
+                           _mm512_set1_epi16(31));
+      const __mmask32 from_prev = static_cast<__mmask32>((std::uint64_t{1} << s) - 1u);
+      const __m512i xv = _mm512_set1_epi16(static_cast<short>(x));
+      __m512i prev = ones;
+      for (int i = 0; i <= NC; ++i) {
+        const __m512i cur = i < NC ? _mm512_permutexvar_epi16(idx, A[i]) : ones;
+        const __m512i v = _mm512_mask_blend_epi16(from_prev, cur, prev);
+        const __mmask32 lt = _mm512_cmplt_epu16_mask(v, B[i]);
+        B[i] = _mm512_mask_mov_epi16(B[i], lt, v);
+        K[i] = _mm512_mask_mov_epi16(K[i], lt, xv);
+        prev = cur;
+      }
+    }
+    if (x < c.xlo || x > c.xhi) {
+      record_none(c, x);
+      continue;
+    }
+    __m512i mn = A[0];
+    for (int i = 1; i < NC; ++i) mn = _mm512_min_epu16(mn, A[i]);
+    const uint32_t best = hmin_epu16(mn);
+    const __m512i bv = _mm512_set1_epi16(static_cast<short>(best));
+    int qb = 0;
+    for (int i = 0; i < NC; ++i) {
+      const unsigned m = static_cast<unsigned>(_mm512_cmpeq_epi16_mask(A[i], bv));
+      qb = m ? 32 * i + 31 - __builtin_clz(m) : qb;
+    }
+    uint32_t second = kNone;
+    if (c.crow) {
+      // The exact second-best cost, for the confidence.
+      __m512i m2 = ones;
+      for (int i = 0; i < NC; ++i) {
+        m2 = _mm512_min_epu16(m2, _mm512_mask_mov_epi16(A[i], near_mask(iota, 32 * i, qb), ones));
+      }
+      second = hmin_epu16(m2);
+    } else if (c.unique_min) {
+      // Only the uniqueness verdict: does any cost away from the winner fall below the
+      // threshold? (0: fails, kNone: passes; see BandScratch.)
+      const __m512i thr = _mm512_set1_epi16(static_cast<short>(c.unique_min[best]));
+      __mmask32 low = 0;
+      for (int i = 0; i < NC; ++i) {
+        low |= _mm512_mask_cmplt_epu16_mask(static_cast<__mmask32>(~near_mask(iota, 32 * i, qb)),
+                                            A[i], thr);
+      }
+      second = low ? 0u : kNone;
+    }
+    c.best[x] = static_cast<uint16_t>(best);
+    c.kbest[x] = dp - 1 - qb;
+    c.second[x] = static_cast<uint16_t>(second);
+    c.tsum[x] = tsum;
+    if (c.subpixel != SubpixelFit::kNone) {
+      uint16_t* dst = c.arow + x * dp;
+      for (int i = 0; i < NC; ++i) _mm512_store_si512(dst + 32 * i, A[i]);
+    }
+  }
+  if (c.lr_on) {
+    const ptrdiff_t base = (cols - 1) & ~ptrdiff_t{31};
+    for (int i = 0; i <= NC; ++i) _mm512_store_si512(c.rarg + base + 32 * i, K[i]);
+  }
+}
+
+template <int NC>
+bool winners_fixed(const RowCtx& c) {
+  if constexpr (NC > kMaxChunks) {
+    (void)c;
+    return false;
+  } else {
+    if (c.dp == 32 * NC) {
+      winners_avx512<NC>(c);
+      return true;
+    }
+    return winners_fixed<NC + 1>(c);
+  }
+}
+
+// Second pass, 16 pixels at a time; the same IEEE operations as decide_generic.
+void decide_avx512(const RowCtx& c) {
+  const ptrdiff_t cols = c.cols;
+  const int dp = c.dp;
+  const bool sub = c.subpixel != SubpixelFit::kNone;
+  const bool parabola = c.subpixel == SubpixelFit::kParabola;
+  const __m512i none = _mm512_set1_epi32(static_cast<int>(kNone));
+  const __m512i iota = _mm512_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15);
+  const __m512 nan = _mm512_set1_ps(std::numeric_limits<float>::quiet_NaN());
+  const __m512i zero = _mm512_setzero_si512();
+  // An integer disparity difference d passes the left-right check when d <= lr_max_diff,
+  // that is d <= floor(lr_max_diff).
+  const int lr_int = c.lr_max_diff >= 65536.0 ? 65536 : static_cast<int>(std::floor(c.lr_max_diff));
+  auto u16 = [](const uint16_t* p) {
+    return _mm512_cvtepu16_epi32(_mm256_loadu_si256(reinterpret_cast<const __m256i*>(p)));
+  };
+  auto to_pd_lo = [](__m512i v) { return _mm512_cvtepu32_pd(_mm512_castsi512_si256(v)); };
+  auto to_pd_hi = [](__m512i v) { return _mm512_cvtepu32_pd(_mm512_extracti64x4_epi64(v, 1)); };
+  for (ptrdiff_t x = 0; x < cols; x += 16) {
+    const __mmask16 lanes =
+        cols - x >= 16 ? static_cast<__mmask16>(0xFFFF)
+                       : static_cast<__mmask16>((1u << (cols - x)) - 1u);
+    const __m512i b = u16(c.best + x);
+    const __m512i s2 = u16(c.second + x);
+    const __m512i kb = _mm512_loadu_si512(c.kbest + x);
+    __mmask16 ok = lanes & _mm512_cmpneq_epi32_mask(b, none);
+    if (c.texcol) {
+      const __m512i t = _mm512_loadu_si512(c.tsum + x);
+      const __m512d tmin = _mm512_set1_pd(c.texture_sum_min);
+      const __mmask8 lo = _mm512_cmp_pd_mask(to_pd_lo(t), tmin, _CMP_NLT_UQ);
+      const __mmask8 hi = _mm512_cmp_pd_mask(to_pd_hi(t), tmin, _CMP_NLT_UQ);
+      ok &= static_cast<__mmask16>(lo | (static_cast<unsigned>(hi) << 8));
+    }
+    const __mmask16 has2 = _mm512_cmpneq_epi32_mask(s2, none);
+    if (c.uniqueness_factor > 0) {
+      const __m512d hundred = _mm512_set1_pd(100.0);
+      const __m512d f = _mm512_set1_pd(c.uniqueness_factor);
+      const __mmask8 lo = _mm512_cmp_pd_mask(_mm512_mul_pd(to_pd_lo(s2), hundred),
+                                             _mm512_mul_pd(to_pd_lo(b), f), _CMP_GT_OQ);
+      const __mmask8 hi = _mm512_cmp_pd_mask(_mm512_mul_pd(to_pd_hi(s2), hundred),
+                                             _mm512_mul_pd(to_pd_hi(b), f), _CMP_GT_OQ);
+      ok &= static_cast<__mmask16>(~has2 | lo | (static_cast<unsigned>(hi) << 8));
+    }
+    if (c.lr_on) {
+      // i = x + dp - 1 - kb; the right winner's index is (rarg[i] - i + dp - 1) mod 2^16.
+      const __m512i xs = _mm512_add_epi32(_mm512_set1_epi32(static_cast<int>(x)), iota);
+      const __m512i i = _mm512_sub_epi32(_mm512_add_epi32(xs, _mm512_set1_epi32(dp - 1)), kb);
+      const __m512i g = _mm512_mask_i32gather_epi32(zero, ok, i, c.rarg, 2);
+      const __m512i kr = _mm512_and_si512(
+          _mm512_add_epi32(_mm512_sub_epi32(g, i), _mm512_set1_epi32(dp - 1)),
+          _mm512_set1_epi32(0xFFFF));
+      const __m512i diff = _mm512_abs_epi32(_mm512_sub_epi32(kb, kr));
+      ok &= _mm512_cmple_epi32_mask(diff, _mm512_set1_epi32(lr_int));
+    }
+    __m512 d = _mm512_cvtepi32_ps(_mm512_add_epi32(kb, _mm512_set1_epi32(c.min_d)));
+    if (sub) {
+      const __mmask16 interior = ok & _mm512_cmpge_epi32_mask(kb, _mm512_set1_epi32(1)) &
+                                 _mm512_cmple_epi32_mask(kb, _mm512_set1_epi32(c.nd - 2));
+      // The costs at disparity index kb - 1 and kb + 1: lanes q + 1 and q - 1 of the pixel's
+      // costs in arow (q = dp - 1 - kb), gathered as the low halves of 32-bit reads.
+      const __m512i xs = _mm512_add_epi32(_mm512_set1_epi32(static_cast<int>(x)), iota);
+      const __m512i at = _mm512_add_epi32(_mm512_mullo_epi32(xs, _mm512_set1_epi32(dp)),
+                                          _mm512_sub_epi32(_mm512_set1_epi32(dp - 1), kb));
+      const __m512i low16 = _mm512_set1_epi32(0xFFFF);
+      const __m512i c0 = _mm512_and_si512(
+          _mm512_mask_i32gather_epi32(zero, interior, _mm512_add_epi32(at, _mm512_set1_epi32(1)),
+                                      c.arow, 2),
+          low16);
+      const __m512i c2 = _mm512_and_si512(
+          _mm512_mask_i32gather_epi32(zero, interior, _mm512_sub_epi32(at, _mm512_set1_epi32(1)),
+                                      c.arow, 2),
+          low16);
+      const __m512 num = _mm512_cvtepi32_ps(_mm512_sub_epi32(c0, c2));
+      __m512i den_i;
+      if (parabola) {
+        den_i = _mm512_sub_epi32(_mm512_add_epi32(c0, c2), _mm512_add_epi32(b, b));
+      } else {
+        den_i = _mm512_max_epi32(_mm512_sub_epi32(c0, b), _mm512_sub_epi32(c2, b));
+      }
+      const __m512 den = _mm512_cvtepi32_ps(_mm512_add_epi32(den_i, den_i));
+      const __mmask16 use = interior & _mm512_cmp_ps_mask(den, _mm512_setzero_ps(), _CMP_GT_OQ);
+      d = _mm512_mask_add_ps(d, use, d, _mm512_maskz_div_ps(use, num, den));
+    }
+    _mm512_mask_storeu_ps(c.drow + x, lanes, _mm512_mask_blend_ps(ok, nan, d));
+    if (c.crow) {
+      const __mmask16 pos = has2 & _mm512_cmpgt_epi32_mask(s2, zero);
+      const __m512 ratio = _mm512_maskz_div_ps(pos, _mm512_cvtepi32_ps(_mm512_sub_epi32(s2, b)),
+                                               _mm512_cvtepi32_ps(s2));
+      const __m512 conf = _mm512_mask_blend_ps(has2, _mm512_set1_ps(1.0f), ratio);
+      _mm512_mask_storeu_ps(c.crow + x, lanes, _mm512_maskz_mov_ps(ok, conf));
+    }
+  }
+}
+
+#endif
+
+// Second pass, one pixel at a time: the checks, the sub-pixel step and the outputs.
+void decide_generic(const RowCtx& c) {
+  const float nan = std::numeric_limits<float>::quiet_NaN();
+  for (ptrdiff_t x = 0; x < c.cols; ++x) {
+    const uint32_t b = c.best[x];
+    const uint32_t s2 = c.second[x];
+    const int kb = c.kbest[x];
+    const bool has2 = s2 != kNone;
+    bool ok = b != kNone;
+    if (ok && c.texcol) ok = !(static_cast<double>(c.tsum[x]) < c.texture_sum_min);
+    if (ok && c.uniqueness_factor > 0 && has2) {
+      ok = static_cast<double>(s2) * 100.0 > static_cast<double>(b) * c.uniqueness_factor;
+    }
+    if (ok && c.lr_on) {
+      const ptrdiff_t i = x + (c.dp - 1 - kb);
+      const int kr = static_cast<uint16_t>(c.rarg[i] - i + c.dp - 1);
+      const int diff = kb > kr ? kb - kr : kr - kb;
+      ok = static_cast<double>(diff) <= c.lr_max_diff;
+    }
+    if (!ok) {
+      c.drow[x] = nan;
+      if (c.crow) c.crow[x] = 0.0f;
+      continue;
+    }
+    float d = static_cast<float>(c.min_d + kb);
+    if (c.subpixel != SubpixelFit::kNone && kb >= 1 && kb <= c.nd - 2) {
+      const uint16_t* costs = c.arow + x * c.dp;
+      const int q = c.dp - 1 - kb;
+      const int32_t c0 = costs[q + 1], c1 = static_cast<int32_t>(b), c2 = costs[q - 1];
+      const float num = static_cast<float>(c0 - c2);
+      float den;
+      if (c.subpixel == SubpixelFit::kParabola) {
+        den = static_cast<float>(2 * (c0 + c2 - 2 * c1));
+      } else {
+        den = static_cast<float>(2 * (c0 - c1 > c2 - c1 ? c0 - c1 : c2 - c1));
+      }
+      if (den > 0.0f) d = d + num / den;
+    }
+    c.drow[x] = d;
+    if (c.crow) {
+      c.crow[x] = !has2 ? 1.0f
+                  : s2 > 0 ? static_cast<float>(s2 - b) / static_cast<float>(s2)
+                           : 0.0f;
+    }
+  }
+}
+
+void row_pass(const RowCtx& c) {
+#if defined(STEREODEPTH_BM_AVX512)
+  if (!winners_fixed<1>(c)) winners_generic(c);
+  decide_avx512(c);
+#else
+  winners_generic(c);
+  decide_generic(c);
+#endif
+}
+
+// ------------------------------------------------------------------------------------------
+// One band of rows.
+
+// pad[i] = row[clamp(i + jmin, 0, cols - 1)] for i in [0, n).
+template <typename F>
+void pad_right_row(const F* row, F* pad, ptrdiff_t cols, ptrdiff_t n, ptrdiff_t jmin) {
+  const ptrdiff_t lo = clamp_index(-jmin, 0, n);         // first i with i + jmin >= 0
+  const ptrdiff_t hi = clamp_index(cols - jmin, lo, n);  // first i with i + jmin >= cols
+  for (ptrdiff_t i = 0; i < lo; ++i) pad[i] = row[0];
+  if (hi > lo) std::memcpy(pad + lo, row + (lo + jmin), sizeof(F) * static_cast<size_t>(hi - lo));
+  for (ptrdiff_t i = hi; i < n; ++i) pad[i] = row[cols - 1];
+}
+
+template <typename Cost>
+void match_band_impl(const MatchArgs& a, const BandScratch& s, ptrdiff_t y0, ptrdiff_t y1) {
+  using F = typename Cost::Feature;
+  const ptrdiff_t cols = a.cols, rows = a.rows;
+  const int dp = a.dp, r = a.radius;
+  // Right column of lane q at left column x: x + q + jmin.
+  const ptrdiff_t jmin = -static_cast<ptrdiff_t>(a.min_d) - dp + 1;
+  const ptrdiff_t npad = cols + dp + kRowPad;
+  const F* lfeat = static_cast<const F*>(a.left_feat);
+  const F* rfeat = static_cast<const F*>(a.right_feat);
+  auto lrow = [&](ptrdiff_t y) { return lfeat + clamp_index(y, 0, rows - 1) * a.feat_stride; };
+  auto rrow = [&](ptrdiff_t y) { return rfeat + clamp_index(y, 0, rows - 1) * a.feat_stride; };
+  auto trow = [&](ptrdiff_t y) {
+    return a.texture + clamp_index(y, 0, rows - 1) * a.texture_stride;
+  };
+  F* rpad_in = static_cast<F*>(s.rpad_in);
+  F* rpad_out = static_cast<F*>(s.rpad_out);
+  const bool tex_on = a.texture != nullptr && a.texture_sum_min > 0;
+
+  RowCtx c{};
+  c.colsum = s.colsum;
+  c.texcol = tex_on ? s.texcol : nullptr;
+  c.cols = cols;
+  c.xlo = static_cast<ptrdiff_t>(a.min_d) + a.num_d - 1;
+  c.xhi = cols - 1 + a.min_d;
+  c.dp = dp;
+  c.nd = a.num_d;
+  c.qpad = dp - a.num_d;
+  c.radius = r;
+  c.min_d = a.min_d;
+  c.subpixel = a.subpixel;
+  c.lr_on = a.lr_max_diff >= 0;
+  c.need_second = a.uniqueness_factor > 0 || a.conf != nullptr;
+  c.texture_sum_min = a.texture_sum_min;
+  c.uniqueness_factor = a.uniqueness_factor;
+  c.lr_max_diff = a.lr_max_diff;
+  c.acc = s.acc;
+  c.rmin = s.rmin;
+  c.rarg = s.rarg;
+  c.best = s.best;
+  c.kbest = s.kbest;
+  c.second = s.second;
+  c.tsum = s.tsum;
+  c.arow = s.arow;
+  c.unique_min = a.unique_min;
+
+  for (ptrdiff_t y = y0; y < y1; ++y) {
+    if (y == y0) {
+      std::memset(s.colsum, 0, sizeof(uint16_t) * static_cast<size_t>(cols) * dp);
+      if (tex_on) std::memset(s.texcol, 0, sizeof(uint32_t) * static_cast<size_t>(cols));
+      for (ptrdiff_t dy = -r; dy <= r; ++dy) {
+        pad_right_row(rrow(y + dy), rpad_in, cols, npad, jmin);
+        add_cost_row<Cost>(lrow(y + dy), rpad_in, s.colsum, cols, dp);
+        if (tex_on) {
+          const uint8_t* t = trow(y + dy);
+          for (ptrdiff_t x = 0; x < cols; ++x) s.texcol[x] += t[x];
+        }
+      }
+    } else {
+      const ptrdiff_t yin = clamp_index(y + r, 0, rows - 1);
+      const ptrdiff_t yout = clamp_index(y - r - 1, 0, rows - 1);
+      if (yin != yout) {
+        pad_right_row(rrow(yin), rpad_in, cols, npad, jmin);
+        pad_right_row(rrow(yout), rpad_out, cols, npad, jmin);
+        update_cost_rows<Cost>(lrow(yin), rpad_in, lrow(yout), rpad_out, s.colsum, cols, dp);
+        if (tex_on) {
+          const uint8_t* ti = trow(yin);
+          const uint8_t* to = trow(yout);
+          for (ptrdiff_t x = 0; x < cols; ++x) s.texcol[x] += static_cast<uint32_t>(ti[x]) - to[x];
+        }
+      }
+    }
+
+    c.drow = a.disp + y * a.disp_stride;
+    c.crow = a.conf ? a.conf + y * a.conf_stride : nullptr;
+    row_pass(c);
+  }
+}
+
+void match_band(const MatchArgs& a, const BandScratch& s, ptrdiff_t y0, ptrdiff_t y1) {
+  if (a.cost == MatchCost::kCensus) {
+    match_band_impl<CensusCost>(a, s, y0, y1);
+  } else {
+    match_band_impl<SadCost>(a, s, y0, y1);
+  }
+}
+
+}  // namespace
+
+const BlockMatchKernels& block_match_kernels() {
+  static const BlockMatchKernels kernels = {
+      kLanes,
+      &rgb_to_grey,
+      &census_row<uint8_t>,
+      &census_row<uint16_t>,
+      &sobel_row<uint8_t>,
+      &sobel_row<uint16_t>,
+      &match_band,
+  };
+  return kernels;
+}
+
+}  // namespace stereodepth::detail::STEREODEPTH_ISA_NS

@@ -1,0 +1,97 @@
+// Internal: the block-matching kernels, compiled once per instruction set.
+//
+// Layout of the costs of one pixel: `dp` lanes (num_disparities rounded up to the kernel's
+// lane multiple), lane q holding disparity index k = dp - 1 - q, i.e. disparity
+// min_disparity + dp - 1 - q. In this reversed order the right-image column x - d of lane q is
+// x + q + jmin (jmin = -min_disparity - dp + 1), which rises with q: one contiguous load per
+// vector. Lanes q < dp - num_disparities are padding and never win.
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+
+#include "stereodepth/block_match.hpp"
+
+namespace stereodepth::detail {
+
+// Everything the band kernel reads and writes.
+struct MatchArgs {
+  MatchCost cost;
+  // Feature images (rows x cols): census codes (uint32) or prefiltered pixels (uint8).
+  const void* left_feat;
+  const void* right_feat;
+  std::ptrdiff_t feat_stride;  // elements
+  // min(|sobel_x|, 31) of the left image, or null when the texture check is off.
+  const std::uint8_t* texture;
+  std::ptrdiff_t texture_stride;
+  std::ptrdiff_t rows, cols;
+  int min_d, num_d, dp, radius;
+  SubpixelFit subpixel;
+  double uniqueness_factor;  // 100 + uniqueness_ratio, or 0 when the check is off
+  // The same check as a table: a winner of cost b passes when every cost more than one
+  // disparity away is >= unique_min[b] (values capped at 0xFFFF). Null when off.
+  const std::uint32_t* unique_min;
+  double texture_sum_min;    // texture_threshold * block_size^2, or 0 when off
+  double lr_max_diff;        // negative when off
+  float* disp;
+  std::ptrdiff_t disp_stride;
+  float* conf;  // may be null
+  std::ptrdiff_t conf_stride;
+};
+
+// Per-band scratch memory, allocated by the caller (band_scratch_layout gives the sizes).
+struct BandScratch {
+  std::uint16_t* colsum;   // cols * dp: block-column sums of the pixel costs
+  std::uint16_t* acc;      // dp: block sums of the current pixel
+  void* rpad_in;           // cols + dp + kRowPad features: the padded right row entering
+  void* rpad_out;          // the same for the leaving row
+  std::uint16_t* rmin;     // cols + dp + kRowPad: least cost per right column
+  std::uint16_t* rarg;     // cols + dp + kRowPad: the left column (mod 2^16) that gave it
+  std::uint32_t* texcol;   // cols: block-column sums of the texture
+  // The row's winner records, one per column (written by the first pass of a row, read by the
+  // second): least cost (0xFFFF: no search), its disparity index, the second-best cost more
+  // than one disparity away (0xFFFF: none; 0: fails the uniqueness check), the block texture.
+  std::uint16_t* best;     // cols + 16
+  std::int32_t* kbest;     // cols + 16
+  std::uint16_t* second;   // cols + 16
+  std::uint32_t* tsum;     // cols + 16
+  std::uint16_t* arow;     // cols * dp + 32: every pixel's costs (for the sub-pixel step)
+};
+
+// Elements of slack after each padded row, so vector loops may overrun.
+inline constexpr std::ptrdiff_t kRowPad = 64;
+
+using RgbToGreyFn = void (*)(const std::uint8_t* rgb, std::uint8_t* grey, std::ptrdiff_t cols);
+// rows: the 5 rows y-2 .. y+2 (clamped to the image), each `cols` long.
+using CensusRow8Fn = void (*)(const std::uint8_t* const* rows, std::uint32_t* out,
+                              std::ptrdiff_t cols);
+using CensusRow16Fn = void (*)(const std::uint16_t* const* rows, std::uint32_t* out,
+                               std::ptrdiff_t cols);
+// rows: y-1 .. y+1 (clamped). prefiltered or texture may be null.
+using SobelRow8Fn = void (*)(const std::uint8_t* const* rows, std::uint8_t* prefiltered,
+                             std::uint8_t* texture, std::ptrdiff_t cols);
+using SobelRow16Fn = void (*)(const std::uint16_t* const* rows, std::uint8_t* prefiltered,
+                              std::uint8_t* texture, std::ptrdiff_t cols);
+using MatchBandFn = void (*)(const MatchArgs& args, const BandScratch& scratch,
+                             std::ptrdiff_t y0, std::ptrdiff_t y1);
+
+struct BlockMatchKernels {
+  int lanes;  // dp is a multiple of this
+  RgbToGreyFn rgb_to_grey;
+  CensusRow8Fn census_row8;
+  CensusRow16Fn census_row16;
+  SobelRow8Fn sobel_row8;
+  SobelRow16Fn sobel_row16;
+  MatchBandFn match_band;
+};
+
+#define STEREODEPTH_DECLARE_BLOCK_MATCH_KERNELS(ns) \
+  namespace ns {                                    \
+  const BlockMatchKernels& block_match_kernels();   \
+  }
+STEREODEPTH_DECLARE_BLOCK_MATCH_KERNELS(baseline)
+STEREODEPTH_DECLARE_BLOCK_MATCH_KERNELS(avx2)
+STEREODEPTH_DECLARE_BLOCK_MATCH_KERNELS(avx512)
+#undef STEREODEPTH_DECLARE_BLOCK_MATCH_KERNELS
+
+}  // namespace stereodepth::detail

@@ -1,0 +1,157 @@
+"""stereodepth over dask arrays: stacks of frames larger than memory (a zarr store, a memory
+mapped .npy, a folder of images through ``dask.array``), one frame per chunk.
+
+Each function returns a lazy dask array whose chunks call the native kernels, so the work runs
+on whatever scheduler computes it (threads, processes or a dask.distributed cluster) and the
+result equals the numpy function's, frame by frame, bit for bit::
+
+    import dask.array as da
+    import stereodepth.dask as sdd
+
+    left = da.from_zarr("left.zarr")           # (N, H, W) uint8, any chunking
+    right = da.from_zarr("right.zarr")
+    disparity = sdd.block_match(left, right, num_disparities=128)
+    depth = sdd.disparity_to_depth(disparity, focal_px=718.9, baseline_m=0.537)
+    depth.to_zarr("depth.zarr")
+
+Needs dask (the ``batch`` extra): ``pip install "stereodepth[batch]"``.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+__all__ = ["block_match", "disparity_to_depth", "reproject"]
+
+
+def _da() -> Any:
+    try:
+        import dask.array as da
+    except ImportError as exc:  # pragma: no cover - depends on the environment
+        raise ImportError(
+            'stereodepth.dask needs dask: pip install "stereodepth[batch]"') from exc
+    return da
+
+
+def _as_dask(name: str, value: Any) -> Any:
+    da = _da()
+    if not isinstance(value, da.Array):
+        raise TypeError(
+            f"{name} must be a dask.array.Array (wrap numpy arrays with dask.array.from_array), "
+            f"got {type(value).__name__}"
+        )
+    return value
+
+
+def _frames_per_chunk(arr: Any, frame_axes: int) -> Any:
+    """``arr`` rechunked so that each chunk holds whole frames: the last ``frame_axes`` axes
+    in one chunk (the leading axes keep their chunking)."""
+    whole = {arr.ndim - k: -1 for k in range(1, frame_axes + 1)}
+    if all(len(arr.chunks[ax]) == 1 for ax in whole):
+        return arr
+    return arr.rechunk(whole)
+
+
+def disparity_to_depth(disparity: Any, **options: Any) -> Any:
+    """:func:`stereodepth.disparity_to_depth` on a dask array of disparity maps, (H, W) or
+    (N, H, W) (any chunking: the conversion is per pixel). ``options`` are those of the numpy
+    function (``focal_px``, ``baseline_m``, ``doffs_px``, ``scale``, ``dtype``, limits,
+    ``invalid_value``, ``threads``), checked now; ``out`` is not accepted."""
+    import stereodepth
+
+    d = _as_dask("disparity", disparity)
+    if "out" in options:
+        raise TypeError("out is not accepted for dask arrays (store the result instead)")
+    # Every check of the numpy function, now rather than at compute time, on a tiny stand-in.
+    probe = np.zeros((1,) * d.ndim, dtype=d.dtype)
+    out_dtype = stereodepth.disparity_to_depth(probe, **options).dtype
+    return d.map_blocks(_depth_block, dtype=out_dtype, options=options,
+                        meta=np.empty((0,) * d.ndim, dtype=out_dtype))
+
+
+def _depth_block(block: np.ndarray, *, options: dict[str, Any]) -> np.ndarray:
+    import stereodepth
+
+    return stereodepth.disparity_to_depth(block, **options)
+
+
+def block_match(left: Any, right: Any, **params: Any) -> Any:
+    """:func:`stereodepth.block_match` on dask arrays of image pairs: (H, W) or (N, H, W) grey,
+    or (H, W, 3) / (N, H, W, 3) RGB. Returns the float32 disparity, (H, W) or (N, H, W), NaN
+    where invalid. Chunks are first made to hold whole frames (``left`` and ``right`` are
+    rechunked alike); ``params`` are those of the numpy function, checked now
+    (``return_confidence`` is not accepted)."""
+    from stereodepth.matching import BlockMatchOptions
+
+    la, ra = _as_dask("left", left), _as_dask("right", right)
+    if params.get("return_confidence"):
+        raise TypeError("return_confidence is not accepted for dask arrays")
+    if "num_disparities" not in params:
+        raise TypeError("block_match() missing required keyword argument: 'num_disparities'")
+    BlockMatchOptions(**params)
+    if la.shape != ra.shape:
+        raise ValueError(
+            f"left and right must have the same shape, got {la.shape} and {ra.shape}")
+    if la.dtype != ra.dtype:
+        raise TypeError(
+            f"left and right must have the same dtype, got {la.dtype} and {ra.dtype}")
+    if la.dtype not in (np.uint8, np.uint16):
+        raise TypeError(f"left must be uint8 or uint16 images, got dtype {la.dtype}")
+    # (N, H, W, 3) and (H, W, 3) uint8 are RGB; (N, H, W) and (H, W) grey.
+    rgb = la.ndim == 4 or (la.ndim == 3 and la.shape[-1] == 3 and la.dtype == np.uint8)
+    frame_axes = 3 if rgb else 2
+    if la.ndim not in (2, 3, 4) or (rgb and (la.shape[-1] != 3 or la.dtype != np.uint8)):
+        raise ValueError(
+            "left must have shape (H, W) or (N, H, W) grey, or (H, W, 3) or (N, H, W, 3) uint8 "
+            f"RGB, got {la.shape} {la.dtype}")
+    la = _frames_per_chunk(la, frame_axes)
+    ra = ra.rechunk(la.chunks)
+    drop = [la.ndim - 1] if rgb else []
+    stacked = la.ndim == frame_axes + 1
+    meta = np.empty((0,) * (la.ndim - len(drop)), dtype=np.float32)
+    return la.map_blocks(_match_block, ra, dtype=np.float32, drop_axis=drop, params=params,
+                         stacked=stacked, meta=meta)
+
+
+def _match_block(left: np.ndarray, right: np.ndarray, *, params: dict[str, Any],
+                 stacked: bool) -> np.ndarray:
+    from stereodepth import matching
+
+    if not stacked:
+        disparity = matching.block_match(left, right, **params)
+        assert isinstance(disparity, np.ndarray)  # no confidence was asked for
+        return disparity
+    out = np.empty(left.shape[:3], dtype=np.float32)
+    matcher = matching.StereoMatcher(**params)
+    for i in range(left.shape[0]):
+        out[i] = matcher.compute(left[i], right[i])
+    return out
+
+
+def reproject(disparity: Any, **options: Any) -> Any:
+    """:func:`stereodepth.reproject` on a dask array of disparity maps: (H, W) -> (H, W, 3) or
+    (N, H, W) -> (N, H, W, 3) float32, NaN where invalid. Chunks are first made to hold whole
+    frames (the pixel coordinates are those of the frame); ``options`` as for the numpy
+    function (``Q`` or the rig, ``scale``, limits, ``threads``), checked now."""
+    import stereodepth
+
+    d = _as_dask("disparity", disparity)
+    if "out" in options:
+        raise TypeError("out is not accepted for dask arrays (store the result instead)")
+    if d.ndim not in (2, 3):
+        raise ValueError(f"disparity must have shape (H, W) or (N, H, W), got {d.shape}")
+    # the checks of the numpy function, on a frame-shaped (for the default cx, cy) stand-in
+    probe = np.zeros((1, *d.shape[-2:]) if d.ndim == 3 else d.shape[-2:], dtype=d.dtype)
+    stereodepth.reproject(probe, **options)
+    d = _frames_per_chunk(d, 2)
+    return d.map_blocks(_reproject_block, dtype=np.float32, new_axis=d.ndim,
+                        chunks=(*d.chunks, (3,)), options=options,
+                        meta=np.empty((0,) * (d.ndim + 1), dtype=np.float32))
+
+
+def _reproject_block(block: np.ndarray, *, options: dict[str, Any]) -> np.ndarray:
+    import stereodepth
+
+    return stereodepth.reproject(block, **options)

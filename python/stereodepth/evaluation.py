@@ -1,0 +1,818 @@
+"""The ``stereodepth eval`` command: stereo matchers on scenes with ground truth, scored and timed.
+
+Scenes
+    Every sub-folder of DIR that holds a scene (or DIR itself, when it is one), in name order.
+    Two layouts are read:
+
+    - ours (``shared/data/stereo``): ``left.png``, ``right.png``, ``disp_gt.npy`` (float
+      disparity, NaN where unknown), optional ``mask_nonocc.npy`` (bool) and ``meta.json``
+      (``max_disp``);
+    - Middlebury 2014 / MiddEval3: ``im0.png``, ``im1.png``, ``disp0GT.pfm`` or ``disp0.pfm``
+      (inf where unknown), optional ``mask0nocc.png`` (255 = non-occluded) and ``calib.txt``
+      (``ndisp``).
+
+Disparity range
+    Every method searches the same range, from 0 to ``num_disparities - 1`` with
+    ``num_disparities = 16 * ceil((D + 1) / 16)`` (OpenCV needs a multiple of 16), where D, the
+    largest ground-truth disparity, is ``max_disp`` from ``meta.json``, else ``ndisp - 1`` from
+    ``calib.txt``, else the ceiling of the largest finite ground-truth value.
+    ``--num-disparities`` overrides it for every scene.
+
+Methods
+    ``stereodepth``: :func:`stereodepth.block_match` on the images as read (RGB or grey; the
+    matcher converts), with its own defaults unless ``--block-size`` / ``--option`` say
+    otherwise.
+    ``opencv-bm``: ``cv2.StereoBM_create(numDisparities, blockSize)`` (other parameters at
+    OpenCV's defaults) on grey uint8 images (``cv2.COLOR_RGB2GRAY``); default block size 9.
+    ``opencv-sgbm``: ``cv2.StereoSGBM_create(minDisparity=0, numDisparities, blockSize,
+    P1=8*bs*bs, P2=32*bs*bs)`` (the usual penalties for one channel; mode ``MODE_SGBM`` and the
+    other parameters at OpenCV's defaults) on the same grey images; default block size 5.
+    OpenCV's int16 output (disparity x 16) becomes float32 / 16 with its negative values
+    (no match) as NaN. OpenCV runs only when ``cv2`` imports; otherwise its methods are skipped
+    with a note. ``METHOD:9,15`` (or ``--block-size 9 15``) runs a method with each block size
+    and adds a ``best=`` row per scene: the block size with the lowest ``--best-by`` metric
+    (bad-2 by default).
+
+Timing
+    Each method is run once to warm up, then ``--repeat`` times (default 3); the time is the
+    median. It covers the whole conversion from the images as read to a float disparity map
+    with NaN holes (for OpenCV: grey conversion, matching and the x16 decoding).
+    ``ns/(px·d)`` is that time divided by width x height x num_disparities. Threads: ``--threads``
+    (default: every core this process may use) for both the stereodepth matcher and OpenCV
+    (``cv2.setNumThreads``; restored afterwards).
+
+Scores
+    :func:`stereodepth.metrics.evaluate` over the non-occluded pixels with ground truth where the
+    scene has a mask (``region`` nonocc), else over all pixels with ground truth (``all``);
+    ``--no-mask`` always uses all. Percentages in the tables, fractions in ``--json``. The
+    ``mean`` rows average each score over the scenes (every scene weighs the same) and the
+    times; their ``ns/(px·d)`` is the total time over the total work.
+"""
+
+from __future__ import annotations
+
+import argparse
+import fnmatch
+import json
+import math
+import os
+import re
+import statistics
+import sys
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from .metrics import DisparityMetrics, evaluate
+
+__all__ = [
+    "METHODS",
+    "EvalResult",
+    "Scene",
+    "Variant",
+    "find_scenes",
+    "format_table",
+    "num_disparities_for",
+    "register",
+    "run",
+]
+
+#: The matchers ``stereodepth eval`` knows, and the block size each uses when none is given
+#: (None: the matcher's own default).
+METHODS: dict[str, int | None] = {"stereodepth": None, "opencv-bm": 9, "opencv-sgbm": 5}
+_OPENCV_METHODS = ("opencv-bm", "opencv-sgbm")
+#: Options of stereodepth.block_match that eval sets itself.
+_RESERVED_OPTIONS = {
+    "num_disparities": "set per scene from the ground truth; use --num-disparities",
+    "min_disparity": "eval searches from 0",
+    "block_size": "use --block-size or METHOD:SIZE",
+    "threads": "use --threads",
+    "return_confidence": "eval scores the disparity only",
+}
+_BEST_BY = ("bad_0_5", "bad_1", "bad_2", "bad_4", "bad_0_5_est", "bad_1_est", "bad_2_est",
+            "bad_4_est", "avgerr", "rms")
+
+
+def _usage_error(message: str) -> Exception:
+    """stereodepth.cli.UsageError (imported late: cli imports this module)."""
+    from .cli import UsageError
+
+    return UsageError(message)
+
+
+# --------------------------------------------------------------------------------------------
+# Scenes
+
+
+@dataclass(frozen=True)
+class Scene:
+    """A stereo pair with ground truth on disk.
+
+    ``max_disparity_px`` is the largest ground-truth disparity as declared by the scene's
+    ``meta.json`` (``max_disp``) or ``calib.txt`` (``ndisp - 1``); None when neither gives it.
+    """
+
+    name: str
+    path: Path
+    left_path: Path
+    right_path: Path
+    gt_path: Path
+    mask_path: Path | None
+    max_disparity_px: float | None
+
+    def load(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray | None]:
+        """(left, right, gt, mask): the images as read by :func:`stereodepth.io.read_image`,
+        the float ground truth (NaN or inf where unknown) and the bool mask or None. Raises
+        ValueError naming the file when a part is malformed or the shapes disagree."""
+        from .io import read_image, read_pfm
+
+        left = read_image(self.left_path)
+        right = read_image(self.right_path)
+        if left.shape != right.shape:
+            raise ValueError(
+                f"scene {self.name}: left and right images must have the same shape, "
+                f"got {left.shape} and {right.shape}"
+            )
+        if self.gt_path.suffix == ".pfm":
+            gt = read_pfm(self.gt_path)
+        else:
+            gt = np.load(self.gt_path, allow_pickle=False)
+        if gt.dtype.kind != "f" or gt.shape != left.shape[:2]:
+            raise ValueError(
+                f"{self.gt_path}: ground truth must be a float array of the image's shape "
+                f"{left.shape[:2]}, got {gt.dtype} {gt.shape}"
+            )
+        mask = None
+        if self.mask_path is not None:
+            if self.mask_path.suffix == ".png":
+                mask = read_image(self.mask_path) == 255
+            else:
+                mask = np.load(self.mask_path, allow_pickle=False)
+            if mask.dtype != np.bool_ or mask.shape != left.shape[:2]:
+                raise ValueError(
+                    f"{self.mask_path}: mask must be a bool array of the image's shape "
+                    f"{left.shape[:2]}, got {mask.dtype} {mask.shape}"
+                )
+        return left, right, gt, mask
+
+
+def _meta_max_disparity(path: Path) -> float | None:
+    try:
+        meta = json.loads(path.read_text())
+    except (OSError, ValueError) as exc:
+        raise ValueError(f"{path}: cannot read JSON: {exc}") from exc
+    value = meta.get("max_disp") if isinstance(meta, dict) else None
+    if value is None:
+        return None
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not value >= 0:
+        raise ValueError(f"{path}: max_disp must be a number >= 0, got {value!r}")
+    return float(value)
+
+
+def _scene_at(path: Path) -> Scene | None:
+    if (path / "left.png").is_file() and (path / "disp_gt.npy").is_file():
+        mask = path / "mask_nonocc.npy"
+        meta = path / "meta.json"
+        return Scene(
+            name=path.name, path=path, left_path=path / "left.png",
+            right_path=path / "right.png", gt_path=path / "disp_gt.npy",
+            mask_path=mask if mask.is_file() else None,
+            max_disparity_px=_meta_max_disparity(meta) if meta.is_file() else None,
+        )
+    gts = [path / n for n in ("disp0GT.pfm", "disp0.pfm") if (path / n).is_file()]
+    if (path / "im0.png").is_file() and gts:
+        max_disp = None
+        if (path / "calib.txt").is_file():
+            from .calib import read_middlebury_calib
+
+            ndisp = read_middlebury_calib(path / "calib.txt").ndisp
+            max_disp = None if ndisp is None else float(ndisp - 1)
+        mask = path / "mask0nocc.png"
+        return Scene(
+            name=path.name, path=path, left_path=path / "im0.png", right_path=path / "im1.png",
+            gt_path=gts[0], mask_path=mask if mask.is_file() else None,
+            max_disparity_px=max_disp,
+        )
+    return None
+
+
+def find_scenes(root: str | os.PathLike[str], patterns: Sequence[str] = ()) -> list[Scene]:
+    """The scenes in ``root`` (its sub-folders in name order, or ``root`` itself when it is a
+    scene), keeping those whose folder name matches one of the shell ``patterns`` if any are
+    given. Raises ValueError when ``root`` is not a folder or nothing matches."""
+    base = Path(root)
+    if not base.is_dir():
+        raise ValueError(f"DIR must be a folder of scenes, got {str(base)!r} (not a folder)")
+    itself = _scene_at(base)
+    if itself is not None:
+        found = [itself]
+    else:
+        found = [s for p in sorted(base.iterdir()) if p.is_dir() and (s := _scene_at(p))]
+    if not found:
+        raise ValueError(
+            f"no scene in {str(base)!r}: a scene folder holds left.png, right.png and "
+            "disp_gt.npy, or im0.png, im1.png and disp0GT.pfm / disp0.pfm"
+        )
+    if patterns:
+        kept = [s for s in found if any(fnmatch.fnmatchcase(s.name, p) for p in patterns)]
+        if not kept:
+            raise ValueError(
+                f"--scene {' '.join(patterns)} matches no scene in {str(base)!r}; "
+                f"there are: {', '.join(s.name for s in found)}"
+            )
+        found = kept
+    return found
+
+
+def num_disparities_for(max_disparity_px: float) -> int:
+    """``16 * ceil((D + 1) / 16)`` for D = ``ceil(max_disparity_px)``: the smallest multiple of
+    16 whose search range ``0 .. num_disparities - 1`` reaches the largest disparity."""
+    if not (isinstance(max_disparity_px, (int, float)) and math.isfinite(max_disparity_px)
+            and max_disparity_px >= 0):
+        raise ValueError(f"max_disparity_px must be a finite number >= 0, got {max_disparity_px!r}")
+    return 16 * math.ceil((math.ceil(max_disparity_px) + 1) / 16)
+
+
+# --------------------------------------------------------------------------------------------
+# Methods
+
+
+@dataclass(frozen=True)
+class Variant:
+    """One method at one block size (None: the method's default)."""
+
+    method: str
+    block_size: int | None
+
+
+Matcher = Callable[[np.ndarray, np.ndarray], np.ndarray]
+
+
+def _stereodepth_factory(
+    threads: int, options: dict[str, Any]
+) -> Callable[[Variant, int], Matcher]:
+    import stereodepth
+
+    block_match = getattr(stereodepth, "block_match", None)
+    if block_match is None:
+        raise _usage_error(
+            "method stereodepth needs stereodepth.block_match, which this installation lacks"
+        )
+
+    def make(variant: Variant, num_disparities: int) -> Matcher:
+        kwargs = dict(options)
+        if variant.block_size is not None:
+            kwargs["block_size"] = variant.block_size
+
+        def match(left: np.ndarray, right: np.ndarray) -> np.ndarray:
+            out = block_match(left, right, num_disparities=num_disparities, min_disparity=0,
+                              threads=threads, **kwargs)
+            return np.asarray(out)
+
+        return match
+
+    return make
+
+
+def _cv_message(exc: BaseException) -> str:
+    """The last line of an OpenCV error: the failed check, without the source location."""
+    lines = str(exc).strip().splitlines()
+    return lines[-1].strip() if lines else type(exc).__name__
+
+
+def _camel(key: str) -> str:
+    return "".join(part[:1].upper() + part[1:] for part in key.split("_"))
+
+
+def _opencv_factory(cv2: Any, options: dict[str, Any]) -> Callable[[Variant, int], Matcher]:
+    def grey(img: np.ndarray, method: str) -> np.ndarray:
+        if img.dtype != np.uint8:
+            raise ValueError(f"{method} needs 8-bit images, got {img.dtype}")
+        if img.ndim == 3:
+            return np.asarray(cv2.cvtColor(img, cv2.COLOR_RGB2GRAY))
+        return img
+
+    def make(variant: Variant, num_disparities: int) -> Matcher:
+        bs = variant.block_size
+        if bs is None:
+            raise ValueError(f"{variant.method} needs a block size, got None")
+        try:
+            if variant.method == "opencv-bm":
+                matcher = cv2.StereoBM_create(numDisparities=num_disparities, blockSize=bs)
+            else:
+                matcher = cv2.StereoSGBM_create(
+                    minDisparity=0, numDisparities=num_disparities, blockSize=bs,
+                    P1=8 * bs * bs, P2=32 * bs * bs,
+                )
+        except cv2.error as exc:
+            raise ValueError(
+                f"{variant.method} rejected its parameters: {_cv_message(exc)}"
+            ) from exc
+        for key, value in options.items():
+            setter = getattr(matcher, "set" + _camel(key), None)
+            if setter is not None:
+                try:
+                    setter(value)
+                except (cv2.error, TypeError) as exc:
+                    raise ValueError(
+                        f"--opencv-option {key}={value!r} rejected by {variant.method}: "
+                        f"{_cv_message(exc)}"
+                    ) from exc
+
+        def match(left: np.ndarray, right: np.ndarray) -> np.ndarray:
+            try:
+                raw = matcher.compute(grey(left, variant.method), grey(right, variant.method))
+            except cv2.error as exc:
+                raise ValueError(f"{variant.method} failed: {_cv_message(exc)}") from exc
+            disparity: np.ndarray = raw.astype(np.float32) * np.float32(1 / 16)
+            disparity[raw < 0] = np.nan
+            return disparity
+
+        return match
+
+    return make
+
+
+def _check_block_size(variant: Variant) -> None:
+    bs = variant.block_size
+    if bs is None:
+        return
+    if variant.method == "opencv-bm" and not (bs % 2 == 1 and 5 <= bs <= 255):
+        raise ValueError(f"block size of opencv-bm must be an odd integer in 5..255, got {bs}")
+    if variant.method == "opencv-sgbm" and not (bs % 2 == 1 and bs >= 1):
+        raise ValueError(f"block size of opencv-sgbm must be an odd integer >= 1, got {bs}")
+
+
+# --------------------------------------------------------------------------------------------
+# Running and scoring
+
+
+@dataclass(frozen=True)
+class EvalResult:
+    """One method at one block size on one scene. ``best`` marks the per-scene best row of a
+    method run at several block sizes (a copy of that block size's row)."""
+
+    scene: str
+    variant: Variant
+    num_disparities: int
+    width: int
+    height: int
+    region: str  # "nonocc" (the scene's mask) or "all" (every pixel with ground truth)
+    metrics: DisparityMetrics
+    times_s: tuple[float, ...] = field(repr=False)
+    best: bool = False
+
+    @property
+    def time_s(self) -> float:
+        """The median of the timed runs."""
+        return float(statistics.median(self.times_s))
+
+    @property
+    def work(self) -> int:
+        """Pixels x disparities searched."""
+        return self.width * self.height * self.num_disparities
+
+    @property
+    def ns_per_px_disparity(self) -> float:
+        return self.time_s * 1e9 / self.work
+
+    def as_dict(self) -> dict[str, Any]:
+        return {
+            "scene": self.scene, "method": self.variant.method,
+            "block_size": self.variant.block_size, "best": self.best,
+            "num_disparities": self.num_disparities, "width": self.width,
+            "height": self.height, "region": self.region, "metrics": self.metrics.as_dict(),
+            "time_s": self.time_s, "times_s": list(self.times_s),
+            "ns_per_px_disparity": self.ns_per_px_disparity,
+        }
+
+
+def _timed(match: Matcher, left: np.ndarray, right: np.ndarray,
+           repeat: int) -> tuple[np.ndarray, tuple[float, ...]]:
+    out = match(left, right)  # warm-up
+    times = []
+    for _ in range(repeat):
+        t0 = time.perf_counter()
+        out = match(left, right)
+        times.append(time.perf_counter() - t0)
+    return out, tuple(times)
+
+
+def _with_best(rows: list[EvalResult], best_by: str) -> list[EvalResult]:
+    """Adds, after the rows of each method run at several block sizes, a copy of the best."""
+    out: list[EvalResult] = []
+    i = 0
+    while i < len(rows):
+        j = i
+        while j < len(rows) and rows[j].variant.method == rows[i].variant.method:
+            j += 1
+        group = rows[i:j]
+        out += group
+        if len(group) > 1:
+            def key(r: EvalResult) -> tuple[float, int]:
+                v = getattr(r.metrics, best_by)
+                return (math.inf if math.isnan(v) else v, r.variant.block_size or 0)
+
+            out.append(replace(min(group, key=key), best=True))
+        i = j
+    return out
+
+
+def _evaluate_scene(
+    scene: Scene, variants: Sequence[Variant], factories: dict[str, Callable[[Variant, int],
+                                                                           Matcher]],
+    *, repeat: int, num_disparities: int | None, use_mask: bool, best_by: str,
+    progress: Callable[[str], None] | None,
+) -> list[EvalResult]:
+    left, right, gt, mask = scene.load()
+    if num_disparities is None:
+        max_disp = scene.max_disparity_px
+        if max_disp is None:
+            finite = gt[np.isfinite(gt)]
+            if finite.size == 0:
+                raise ValueError(f"scene {scene.name}: the ground truth has no finite value")
+            max_disp = max(float(finite.max()), 0.0)
+        num_disparities = num_disparities_for(max_disp)
+    if not use_mask:
+        mask = None
+    rows = []
+    for variant in variants:
+        match = factories[variant.method](variant, num_disparities)
+        try:
+            disparity, times = _timed(match, left, right, repeat)
+        except (ValueError, TypeError) as exc:
+            raise type(exc)(f"scene {scene.name}: {variant.method}: {exc}") from exc
+        if disparity.dtype.kind != "f" or disparity.shape != gt.shape:
+            raise ValueError(
+                f"scene {scene.name}: {variant.method} returned {disparity.dtype} "
+                f"{disparity.shape}, expected float {gt.shape}"
+            )
+        row = EvalResult(
+            scene=scene.name, variant=variant, num_disparities=num_disparities,
+            width=gt.shape[1], height=gt.shape[0], region="all" if mask is None else "nonocc",
+            metrics=evaluate(disparity, gt, mask), times_s=times,
+        )
+        if progress is not None:
+            progress(f"{scene.name}: {_label(row)[0]} block {_label(row)[1]}: "
+                     f"bad-2 {100 * row.metrics.bad_2:.2f} %, {1e3 * row.time_s:.1f} ms")
+        rows.append(row)
+    return _with_best(rows, best_by)
+
+
+# --------------------------------------------------------------------------------------------
+# Tables
+
+_METRIC_COLUMNS: tuple[tuple[str, str, float], ...] = (
+    ("density %", "density", 100.0),
+    ("bad-0.5 %", "bad_0_5", 100.0),
+    ("bad-1 %", "bad_1", 100.0),
+    ("bad-2 %", "bad_2", 100.0),
+    ("bad-4 %", "bad_4", 100.0),
+    ("bad-2(est) %", "bad_2_est", 100.0),
+    ("avgerr px", "avgerr", 1.0),
+    ("rms px", "rms", 1.0),
+)
+_COLUMNS = ("scene", "method", "block", "ndisp", "region",
+            *(c[0] for c in _METRIC_COLUMNS), "time ms", "ns/(px·d)")
+
+
+def _label(row: EvalResult) -> tuple[str, str]:
+    bs = row.variant.block_size
+    block = "default" if bs is None else str(bs)
+    return row.variant.method, f"best={block}" if row.best else block
+
+
+def _num(value: float, digits: int = 2) -> str:
+    return "-" if math.isnan(value) else f"{value:.{digits}f}"
+
+
+def _means(rows: Sequence[EvalResult]) -> list[dict[str, Any]]:
+    """One entry per method variant (and per method's best rows), in first-seen order."""
+    groups: dict[tuple[str, int | None, bool], list[EvalResult]] = {}
+    for r in rows:
+        key = (r.variant.method, None if r.best else r.variant.block_size, r.best)
+        groups.setdefault(key, []).append(r)
+    out = []
+    for (method, bs, best), group in groups.items():
+        metrics = {
+            k: statistics.fmean(float(getattr(r.metrics, k)) for r in group)
+            for k in DisparityMetrics.__dataclass_fields__ if k not in ("evaluated", "estimated")
+        }
+        total_time = sum(r.time_s for r in group)
+        out.append({
+            "method": method, "block_size": bs, "best": best, "scenes": len(group),
+            "metrics": metrics, "time_s": total_time / len(group),
+            "ns_per_px_disparity": total_time * 1e9 / sum(r.work for r in group),
+        })
+    return out
+
+
+def _table_rows(rows: Sequence[EvalResult]) -> list[list[str]]:
+    cells = []
+    for r in rows:
+        method, block = _label(r)
+        m = r.metrics
+        cells.append([
+            r.scene, method, block, str(r.num_disparities), r.region,
+            *(_num(getattr(m, attr) * k) for _, attr, k in _METRIC_COLUMNS),
+            _num(1e3 * r.time_s, 1), _num(r.ns_per_px_disparity, 3),
+        ])
+    for mean in _means(rows):
+        bs = mean["block_size"]
+        block = "best" if mean["best"] else ("default" if bs is None else str(bs))
+        cells.append([
+            "mean", mean["method"], block, "", "",
+            *(_num(mean["metrics"][attr] * k) for _, attr, k in _METRIC_COLUMNS),
+            _num(1e3 * mean["time_s"], 1), _num(mean["ns_per_px_disparity"], 3),
+        ])
+    return cells
+
+
+def format_table(rows: Sequence[EvalResult], *, markdown: bool = False) -> str:
+    """The per-scene table with a ``mean`` row per method variant, as text or Markdown."""
+    cells = _table_rows(rows)
+    numeric = [i == 3 or i >= 5 for i in range(len(_COLUMNS))]  # not scene, method, block, region
+    if markdown:
+        lines = ["| " + " | ".join(_COLUMNS) + " |"]
+        lines.append("|" + "|".join("---:" if n else "---" for n in numeric) + "|")
+        lines += ["| " + " | ".join(c) + " |" for c in cells]
+        return "\n".join(lines)
+    widths = [max(len(h), *(len(c[i]) for c in cells)) for i, h in enumerate(_COLUMNS)]
+
+    def line(values: Sequence[str]) -> str:
+        return "  ".join(v.rjust(w) if n else v.ljust(w)
+                         for v, w, n in zip(values, widths, numeric, strict=True)).rstrip()
+
+    out = [line(_COLUMNS), "  ".join("-" * w for w in widths)]
+    for i, c in enumerate(cells):
+        if c[0] == "mean" and i > 0 and cells[i - 1][0] != "mean":
+            out.append("")
+        out.append(line(c))
+    return "\n".join(out)
+
+
+# --------------------------------------------------------------------------------------------
+# Command line
+
+
+def _method_spec(text: str) -> tuple[str, tuple[int, ...] | None]:
+    name, _, sizes = text.partition(":")
+    if name not in METHODS:
+        raise argparse.ArgumentTypeError(
+            f"method must be one of {', '.join(METHODS)} (optionally METHOD:SIZE[,SIZE...]), "
+            f"got {text!r}"
+        )
+    if not _:
+        return name, None
+    try:
+        values = tuple(int(v) for v in sizes.split(","))
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"block sizes after {name}: must be integers separated by commas, got {sizes!r}"
+        ) from None
+    return name, values
+
+
+def _key_value(text: str) -> tuple[str, Any]:
+    key, sep, raw = text.partition("=")
+    if not sep or not re.fullmatch(r"[A-Za-z_][A-Za-z0-9_]*", key):
+        raise argparse.ArgumentTypeError(f"expected KEY=VALUE with KEY a name, got {text!r}")
+    low = raw.lower()
+    value: Any
+    if low in ("true", "false"):
+        value = low == "true"
+    elif low == "none":
+        value = None
+    else:
+        try:
+            value = int(raw)
+        except ValueError:
+            try:
+                value = float(raw)
+            except ValueError:
+                value = raw
+    return key, value
+
+
+def _available_threads() -> int:
+    try:
+        return len(os.sched_getaffinity(0))
+    except AttributeError:  # pragma: no cover - not Linux
+        return os.cpu_count() or 1
+
+
+def register(subparsers: Any) -> None:
+    """Adds ``stereodepth eval`` to the command's subparsers."""
+    p = subparsers.add_parser(
+        "eval",
+        help="run stereo matchers on scenes with ground truth: accuracy and speed",
+        description=(
+            "Runs stereo matchers on every scene folder in DIR and prints one row per scene "
+            "and method: density, bad-pixel rates (holes count as bad), mean and RMS error, "
+            "the median run time and the nanoseconds per pixel x disparity, with a mean row "
+            "per method. Scene folders hold left.png, right.png, disp_gt.npy "
+            "[, mask_nonocc.npy, meta.json] or Middlebury's im0.png, im1.png, disp0GT.pfm / "
+            "disp0.pfm [, mask0nocc.png, calib.txt]. Every method searches disparities "
+            "0 .. N-1 with N = 16*ceil((D+1)/16), D the largest ground-truth disparity "
+            "(meta.json max_disp, else calib.txt ndisp-1, else the ground truth's maximum)."
+        ),
+    )
+    p.add_argument("dir", metavar="DIR", help="a folder of scene folders (or one scene folder)")
+    m = p.add_argument_group("methods")
+    m.add_argument(
+        "--method", nargs="+", type=_method_spec, default=None, metavar="METHOD[:SIZES]",
+        help="stereodepth, opencv-bm, opencv-sgbm, each optionally with its own block sizes "
+        "(opencv-bm:9,15); default: stereodepth. OpenCV methods are skipped with a note when "
+        "cv2 does not import",
+    )
+    m.add_argument(
+        "--block-size", nargs="+", type=int, metavar="N",
+        help="block sizes for the methods given without their own (defaults: the matcher's "
+        "own for stereodepth, 9 for opencv-bm, 5 for opencv-sgbm). With several, each is run "
+        "and a best= row per scene picks the one with the lowest --best-by score",
+    )
+    m.add_argument("--best-by", choices=_BEST_BY, default="bad_2",
+                   help="the score that picks the best block size (default bad_2)")
+    m.add_argument(
+        "--option", action="append", type=_key_value, default=[], metavar="KEY=VALUE",
+        help="keyword argument for stereodepth.block_match, repeatable (e.g. cost=census, "
+        "subpixel=false); true/false/none, integers and floats are converted",
+    )
+    m.add_argument(
+        "--opencv-option", action="append", type=_key_value, default=[], metavar="KEY=VALUE",
+        help="OpenCV matcher parameter, repeatable: uniqueness_ratio=10 calls "
+        "setUniquenessRatio(10) on every selected OpenCV matcher that has it (mode=2 runs "
+        "SGBM as MODE_SGBM_3WAY)",
+    )
+    m.add_argument("--num-disparities", type=int, metavar="N",
+                   help="search 0 .. N-1 on every scene (a multiple of 16) instead of the range "
+                   "from the ground truth")
+    r = p.add_argument_group("run")
+    r.add_argument("--scene", action="append", default=[], metavar="PATTERN",
+                   help="only scene folders whose name matches this shell pattern, repeatable")
+    r.add_argument("--threads", type=int, default=0, metavar="N",
+                   help="threads for every method (default 0: every core this process may "
+                   f"use, here {_available_threads()})")
+    r.add_argument("--repeat", type=int, default=3, metavar="N",
+                   help="timed runs after one warm-up; the time is their median (default 3)")
+    r.add_argument("--no-mask", action="store_true",
+                   help="score all pixels with ground truth, also where a scene has a "
+                   "non-occluded mask")
+    o = p.add_argument_group("output").add_mutually_exclusive_group()
+    o.add_argument("--json", action="store_true", help="print one JSON object")
+    o.add_argument("--markdown", action="store_true", help="print the table as Markdown")
+    p.set_defaults(func=run)
+
+
+def _variants(specs: Sequence[tuple[str, tuple[int, ...] | None]],
+              block_sizes: Sequence[int] | None) -> list[Variant]:
+    """The method variants to run, grouped by method in the order the methods first appear."""
+    out: list[Variant] = []
+    for name, sizes in specs:
+        chosen: Sequence[int | None]
+        if sizes is not None:
+            chosen = sizes
+        elif block_sizes:
+            chosen = block_sizes
+        else:
+            chosen = [METHODS[name]]
+        for bs in chosen:
+            v = Variant(name, bs)
+            _check_block_size(v)
+            if v not in out:
+                out.append(v)
+    order = list(dict.fromkeys(v.method for v in out))
+    return sorted(out, key=lambda v: order.index(v.method))
+
+
+def _matcher_default_block_size() -> int | None:
+    """The default ``block_size`` of stereodepth.block_match, when its signature shows one."""
+    import inspect
+
+    import stereodepth
+
+    try:
+        default = inspect.signature(getattr(stereodepth, "block_match")).parameters[  # noqa: B009
+            "block_size"].default
+    except (AttributeError, KeyError, TypeError, ValueError):
+        return None
+    return default if isinstance(default, int) and not isinstance(default, bool) else None
+
+
+def _jsonable(value: Any) -> Any:
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    if isinstance(value, dict):
+        return {k: _jsonable(v) for k, v in value.items()}
+    if isinstance(value, list):
+        return [_jsonable(v) for v in value]
+    return value
+
+
+def run(args: argparse.Namespace) -> int:
+    """Runs ``stereodepth eval``; returns the exit status."""
+    if args.repeat < 1:
+        raise ValueError(f"--repeat must be an integer >= 1, got {args.repeat}")
+    if args.threads < 0:
+        raise ValueError(f"--threads must be an integer >= 0 (0: every core), got {args.threads}")
+    if args.num_disparities is not None and (
+        args.num_disparities < 16 or args.num_disparities % 16
+    ):
+        raise ValueError(
+            f"--num-disparities must be a positive multiple of 16, got {args.num_disparities}"
+        )
+    threads = args.threads or _available_threads()
+    options = dict(args.option)
+    for key in options:
+        if key in _RESERVED_OPTIONS:
+            raise _usage_error(f"--option {key}: {_RESERVED_OPTIONS[key]}")
+    opencv_options = dict(args.opencv_option)
+    variants = _variants(args.method or [("stereodepth", None)], args.block_size)
+    scenes = find_scenes(args.dir, args.scene)
+
+    notes: list[str] = []
+    factories: dict[str, Callable[[Variant, int], Matcher]] = {}
+    methods = {v.method for v in variants}
+    cv2: Any = None
+    if methods & set(_OPENCV_METHODS):
+        try:
+            import cv2
+        except ImportError:
+            skipped = ", ".join(sorted(methods & set(_OPENCV_METHODS)))
+            how = '(pip install opencv-python-headless, or "stereodepth[bench]")'
+            variants = [v for v in variants if v.method not in _OPENCV_METHODS]
+            if not variants:
+                raise _usage_error(
+                    f"{skipped} need(s) OpenCV, which is not installed {how}") from None
+            notes.append(f"skipped {skipped}: OpenCV is not installed {how}")
+        else:
+            for key in opencv_options:
+                probes = [cv2.StereoBM_create() if m == "opencv-bm" else cv2.StereoSGBM_create()
+                          for m in methods & set(_OPENCV_METHODS)]
+                if not any(hasattr(x, "set" + _camel(key)) for x in probes):
+                    raise _usage_error(
+                        f"--opencv-option {key}: no selected OpenCV matcher has "
+                        f"set{_camel(key)}()"
+                    )
+            factory = _opencv_factory(cv2, opencv_options)
+            factories["opencv-bm"] = factories["opencv-sgbm"] = factory
+    elif opencv_options:
+        raise _usage_error("--opencv-option needs an OpenCV method (--method opencv-bm ...)")
+    if "stereodepth" in methods:
+        factories["stereodepth"] = _stereodepth_factory(threads, options)
+    elif options:
+        raise _usage_error("--option is for stereodepth.block_match: add --method stereodepth")
+    for note in notes:
+        print(f"stereodepth eval: {note}", file=sys.stderr)
+
+    if "stereodepth" in factories:
+        # Name the matcher's default block size in the results (passing it changes nothing).
+        default_bs = _matcher_default_block_size()
+        variants = list(dict.fromkeys(
+            Variant(v.method, default_bs) if v.method == "stereodepth" and v.block_size is None
+            else v for v in variants))
+
+    progress = None
+    if not args.json and sys.stderr.isatty():
+        def progress(text: str) -> None:
+            print(text, file=sys.stderr, flush=True)
+
+    rows: list[EvalResult] = []
+    saved_threads = cv2.getNumThreads() if cv2 is not None else None
+    try:
+        if cv2 is not None:
+            cv2.setNumThreads(threads)
+        for scene in scenes:
+            rows += _evaluate_scene(
+                scene, variants, factories, repeat=args.repeat,
+                num_disparities=args.num_disparities, use_mask=not args.no_mask,
+                best_by=args.best_by, progress=progress,
+            )
+    finally:
+        if cv2 is not None and saved_threads is not None:
+            cv2.setNumThreads(saved_threads)
+
+    if args.json:
+        from . import __version__
+
+        report = {
+            "dir": str(args.dir), "threads": threads, "repeat": args.repeat,
+            "best_by": args.best_by, "stereodepth_version": __version__,
+            "opencv_version": None if cv2 is None else str(cv2.__version__),
+            "notes": notes, "results": [r.as_dict() for r in rows], "means": _means(rows),
+        }
+        print(json.dumps(_jsonable(report), indent=2, allow_nan=False))
+        return 0
+    if args.markdown:
+        print(format_table(rows, markdown=True))
+        return 0
+    print(f"{len(scenes)} scene(s) in {args.dir}; threads {threads}; time: median of "
+          f"{args.repeat} run(s) after a warm-up; scores over non-occluded pixels where a "
+          "scene has a mask (region nonocc)")
+    print()
+    print(format_table(rows))
+    return 0

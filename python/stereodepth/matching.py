@@ -1,0 +1,424 @@
+"""Dense block-matching disparity, natively: :func:`block_match` and :class:`StereoMatcher`.
+
+The matcher compares a square block around each pixel of the left image with blocks along the
+same row of the right image, ``min_disparity .. min_disparity + num_disparities - 1`` pixels to
+the left, and keeps the disparity of least cost (the lowest disparity on a tie). Everything is
+integer arithmetic up to the sub-pixel step, so the native kernel and the numpy oracle
+(:func:`stereodepth.reference.block_match`) agree exactly.
+
+Steps, in the kernel and in the oracle alike:
+
+1. Grey: uint8 and uint16 grey images are used as they are; RGB (uint8, (H, W, 3)) becomes
+   ``(9798 R + 19235 G + 3735 B + 16384) >> 15``, OpenCV's ``COLOR_RGB2GRAY`` bit for bit.
+2. Pixel cost. ``cost="census"``: the 5x5 census transform (24 bits: "neighbour < centre"),
+   compared by Hamming distance, 0..24 per pixel. ``cost="sad"``: the absolute difference of
+   the x-Sobel-prefiltered images ``clip(sobel_x, -31, 31) + 31``, 0..62 per pixel, as
+   OpenCV's StereoBM; for uint16 images the Sobel response is first shifted right by 8 bits.
+   Pixels outside the image repeat the nearest edge pixel (for the neighbours of the census
+   and the Sobel filter, and for a right-image pixel left of column 0 or right of the last).
+3. Aggregation: the sum of pixel costs over a ``block_size`` x ``block_size`` block, the block
+   clamped at the image border the same way (edge rows and columns repeat).
+4. Winner: the disparity of least block cost; the lowest disparity on a tie.
+5. Validity (NaN where any check fails):
+
+   - the search range must lie inside the right image: ``x - d`` in ``[0, W)`` for every
+     searched ``d``. Pixels in the left ``min_disparity + num_disparities - 1`` columns (and,
+     for a negative ``min_disparity``, the right ``-min_disparity`` columns) are NaN;
+   - texture: the block sum of ``min(|sobel_x|, 31)`` (the clipped gradient, on the same scale
+     as the SAD prefilter) must be ``>= texture_threshold * block_size**2``, so
+     ``texture_threshold`` is a mean gradient per pixel in grey levels; 0 turns it off;
+   - uniqueness: every cost more than one disparity away from the winner must exceed the
+     winning cost by more than ``uniqueness_ratio`` percent:
+     ``second * 100 > best * (100 + uniqueness_ratio)``; 0 turns it off;
+   - left-right consistency: the right image's own winner at ``x - d`` (the least cost along
+     the other diagonal of the same costs, lowest disparity on a tie) must be within
+     ``lr_max_diff`` pixels of ``d``; None turns it off.
+6. Sub-pixel: the winner ``d`` moves by ``delta`` fitted to the costs ``c0, c1, c2`` at
+   ``d - 1, d, d + 1``, in float32: ``"parabola"``:
+   ``delta = (c0 - c2) / (2 (c0 + c2 - 2 c1))``; ``"equiangular"`` (a V fit):
+   ``delta = (c0 - c2) / (2 max(c0 - c1, c2 - c1))``. No move at either end of the range, or
+   where the denominator is 0.
+7. Speckle filter (``speckle_window > 0``): 4-connected regions of valid pixels whose
+   neighbours differ by at most ``speckle_range`` pixels are removed (NaN) when they have at
+   most ``speckle_window`` pixels, as OpenCV's ``filterSpeckles``.
+
+Confidence (``return_confidence=True``): ``(second - best) / second`` in ``[0, 1]``, where
+``second`` is the least cost more than one disparity away from the winner: 0 for a winner no
+better than another candidate, near 1 for a sharp, unique minimum; 1 when there is no other
+candidate (``num_disparities <= 2``), 0 where the disparity is NaN. Thresholding it is the
+uniqueness check: ``confidence > r / (100 + r)`` is ``uniqueness_ratio = r``.
+
+Limits: block costs are accumulated in 16 bits, so ``block_size`` is at most 51 for census and
+31 for SAD (the largest block sum then stays below 65535); ``num_disparities`` is at most
+4096 and ``|min_disparity|`` at most 32768. Memory is O(W * num_disparities) per thread plus
+a few bytes per pixel; there is never a full cost volume.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from . import _core
+from . import _validate as check
+
+__all__ = [
+    "MAX_BLOCK_SIZE",
+    "MAX_NUM_DISPARITIES",
+    "StereoMatcher",
+    "block_match",
+    "to_opencv_disparity",
+]
+
+#: The largest block size per cost (block costs are summed in 16 bits).
+MAX_BLOCK_SIZE = {"census": 51, "sad": 31}
+#: The largest ``num_disparities``.
+MAX_NUM_DISPARITIES = 4096
+#: The largest ``|min_disparity|``.
+MAX_ABS_MIN_DISPARITY = 32768
+#: The largest per-pixel cost of each cost function.
+PIXEL_COST_MAX = {"census": 24, "sad": 62}
+#: The cap of the x-Sobel prefilter (OpenCV's preFilterCap default).
+PREFILTER_CAP = 31
+#: The census window (5x5: 24 bits).
+CENSUS_WINDOW = 5
+
+_SUBPIXEL_MODES = ("parabola", "equiangular")
+#: The sub-pixel fit that ``subpixel=True`` chooses for each cost (see bench/README.md).
+DEFAULT_SUBPIXEL = {"census": "equiangular", "sad": "equiangular"}
+
+# Defaults (chosen by measuring on the shared scenes; see bench/README.md).
+DEFAULT_BLOCK_SIZE = 9
+DEFAULT_UNIQUENESS_RATIO = 10.0
+DEFAULT_TEXTURE_THRESHOLD = 0.0
+DEFAULT_SPECKLE_WINDOW = 0
+DEFAULT_SPECKLE_RANGE = 1.0
+
+
+class BlockMatchOptions:
+    """The checked, resolved parameters shared by the native kernel and the numpy oracle."""
+
+    __slots__ = (
+        "block_size", "cost", "lr_max_diff", "min_disparity", "num_disparities",
+        "return_confidence", "speckle_range", "speckle_window", "subpixel",
+        "texture_sum_min", "texture_threshold", "threads", "uniqueness_factor",
+        "uniqueness_ratio",
+    )
+
+    def __init__(
+        self,
+        *,
+        num_disparities: Any,
+        min_disparity: Any = 0,
+        block_size: Any = DEFAULT_BLOCK_SIZE,
+        cost: Any = "census",
+        subpixel: Any = True,
+        uniqueness_ratio: Any = DEFAULT_UNIQUENESS_RATIO,
+        texture_threshold: Any = DEFAULT_TEXTURE_THRESHOLD,
+        lr_max_diff: Any = 1.0,
+        speckle_window: Any = DEFAULT_SPECKLE_WINDOW,
+        speckle_range: Any = DEFAULT_SPECKLE_RANGE,
+        threads: Any = None,
+        return_confidence: Any = False,
+    ) -> None:
+        if not isinstance(cost, str):
+            raise TypeError(f"cost must be 'census' or 'sad', got {type(cost).__name__} {cost!r}")
+        if cost not in MAX_BLOCK_SIZE:
+            raise ValueError(f"cost must be 'census' or 'sad', got {cost!r}")
+        self.cost: str = cost
+
+        nd = check.integer("num_disparities", num_disparities)
+        if not 1 <= nd <= MAX_NUM_DISPARITIES:
+            raise ValueError(
+                f"num_disparities must be an integer in [1, {MAX_NUM_DISPARITIES}], got {nd}"
+            )
+        self.num_disparities = nd
+        md = check.integer("min_disparity", min_disparity)
+        if abs(md) > MAX_ABS_MIN_DISPARITY:
+            raise ValueError(
+                f"min_disparity must be an integer in [-{MAX_ABS_MIN_DISPARITY}, "
+                f"{MAX_ABS_MIN_DISPARITY}], got {md}"
+            )
+        self.min_disparity = md
+
+        bs = check.integer("block_size", block_size)
+        limit = MAX_BLOCK_SIZE[cost]
+        if bs < 3 or bs % 2 == 0 or bs > limit:
+            raise ValueError(
+                f"block_size must be an odd integer in [3, {limit}] for cost={cost!r} "
+                f"(block costs are summed in 16 bits), got {bs}"
+            )
+        self.block_size = bs
+
+        if isinstance(subpixel, (bool, np.bool_)):
+            self.subpixel: str | None = DEFAULT_SUBPIXEL[cost] if subpixel else None
+        elif isinstance(subpixel, str):
+            if subpixel not in _SUBPIXEL_MODES:
+                raise ValueError(
+                    f"subpixel must be True, False, 'parabola' or 'equiangular', got {subpixel!r}"
+                )
+            self.subpixel = subpixel
+        else:
+            raise TypeError(
+                "subpixel must be True, False, 'parabola' or 'equiangular', "
+                f"got {type(subpixel).__name__} {subpixel!r}"
+            )
+
+        self.uniqueness_ratio = check.non_negative("uniqueness_ratio", uniqueness_ratio)
+        # The check is second * 100 > best * uniqueness_factor; 0 means off.
+        self.uniqueness_factor = (
+            100.0 + self.uniqueness_ratio if self.uniqueness_ratio > 0 else 0.0
+        )
+        self.texture_threshold = check.non_negative("texture_threshold", texture_threshold)
+        # The block's gradient sum must be >= texture_sum_min (computed once, here, so the
+        # kernel and the oracle compare against the same double).
+        self.texture_sum_min = self.texture_threshold * float(bs * bs)
+        if lr_max_diff is None:
+            self.lr_max_diff: float | None = None
+        else:
+            self.lr_max_diff = check.non_negative("lr_max_diff", lr_max_diff)
+        self.speckle_window = check.integer("speckle_window", speckle_window, minimum=0)
+        self.speckle_range = check.non_negative("speckle_range", speckle_range)
+        self.threads = check.threads(threads)
+        if not isinstance(return_confidence, (bool, np.bool_)):
+            raise TypeError(
+                f"return_confidence must be a bool, got {type(return_confidence).__name__} "
+                f"{return_confidence!r}"
+            )
+        self.return_confidence = bool(return_confidence)
+
+    def as_dict(self) -> dict[str, Any]:
+        """The public parameters, resolved (``subpixel`` as the fit's name or None)."""
+        return {
+            "num_disparities": self.num_disparities,
+            "min_disparity": self.min_disparity,
+            "block_size": self.block_size,
+            "cost": self.cost,
+            "subpixel": self.subpixel if self.subpixel is not None else False,
+            "uniqueness_ratio": self.uniqueness_ratio,
+            "texture_threshold": self.texture_threshold,
+            "lr_max_diff": self.lr_max_diff,
+            "speckle_window": self.speckle_window,
+            "speckle_range": self.speckle_range,
+            "threads": self.threads,
+            "return_confidence": self.return_confidence,
+        }
+
+
+_IMAGE_RULE = "2-D uint8 or uint16 grey, or (H, W, 3) uint8 RGB"
+
+
+def as_image(image: Any, name: str) -> np.ndarray:
+    """Checks dtype and shape; returns a C-contiguous array (copying only when needed)."""
+    if not isinstance(image, np.ndarray):
+        raise TypeError(
+            f"{name} must be a numpy.ndarray ({_IMAGE_RULE}), got {type(image).__name__}")
+    if image.dtype not in (np.uint8, np.uint16):
+        raise TypeError(f"{name} must be {_IMAGE_RULE}, got dtype {image.dtype}")
+    if image.ndim == 3:
+        if image.shape[2] != 3 or image.dtype != np.uint8:
+            raise ValueError(f"{name} must be {_IMAGE_RULE}, got shape {image.shape} {image.dtype}")
+    elif image.ndim != 2:
+        raise ValueError(f"{name} must be {_IMAGE_RULE}, got shape {image.shape}")
+    if image.shape[0] < 1 or image.shape[1] < 1:
+        raise ValueError(
+            f"{name} must have at least one row and one column, got shape {image.shape}")
+    return np.ascontiguousarray(image)
+
+
+def as_pair(left: Any, right: Any) -> tuple[np.ndarray, np.ndarray]:
+    left_arr = as_image(left, "left")
+    right_arr = as_image(right, "right")
+    if left_arr.shape != right_arr.shape:
+        raise ValueError(
+            f"left and right must have the same shape, got {left_arr.shape} and {right_arr.shape}"
+        )
+    if left_arr.dtype != right_arr.dtype:
+        raise TypeError(
+            f"left and right must have the same dtype, got {left_arr.dtype} and {right_arr.dtype}"
+        )
+    return left_arr, right_arr
+
+
+class StereoMatcher:
+    """The block matcher as an object for per-frame use.
+
+    The parameters are those of :func:`block_match` (``return_confidence`` included), checked
+    once here; :meth:`compute` then matches a pair, reusing the matcher's internal buffers from
+    one frame to the next. Calls from several threads on one matcher are safe (they take turns);
+    use one matcher per thread to match in parallel.
+
+    ``isa`` picks the instruction set of the kernel: ``"auto"`` (the best this CPU runs, capped
+    by the environment variable STEREODEPTH_ISA), ``"baseline"``, ``"avx2"`` or ``"avx512"``.
+    Every choice gives the same output; it exists for testing and benchmarking.
+    """
+
+    def __init__(
+        self,
+        *,
+        num_disparities: int,
+        min_disparity: int = 0,
+        block_size: int = DEFAULT_BLOCK_SIZE,
+        cost: str = "census",
+        subpixel: bool | str = True,
+        uniqueness_ratio: float = DEFAULT_UNIQUENESS_RATIO,
+        texture_threshold: float = DEFAULT_TEXTURE_THRESHOLD,
+        lr_max_diff: float | None = 1.0,
+        speckle_window: int = DEFAULT_SPECKLE_WINDOW,
+        speckle_range: float = DEFAULT_SPECKLE_RANGE,
+        threads: int | None = None,
+        return_confidence: bool = False,
+        isa: str = "auto",
+    ) -> None:
+        self._options = BlockMatchOptions(
+            num_disparities=num_disparities, min_disparity=min_disparity, block_size=block_size,
+            cost=cost, subpixel=subpixel, uniqueness_ratio=uniqueness_ratio,
+            texture_threshold=texture_threshold, lr_max_diff=lr_max_diff,
+            speckle_window=speckle_window, speckle_range=speckle_range, threads=threads,
+            return_confidence=return_confidence,
+        )
+        if not isinstance(isa, str):
+            raise TypeError(f"isa must be a str, got {type(isa).__name__} {isa!r}")
+        o = self._options
+        self._native = _core.BlockMatcher(
+            o.num_disparities, o.min_disparity, o.block_size, o.cost,
+            o.subpixel or "none", o.uniqueness_ratio, o.texture_threshold,
+            -1.0 if o.lr_max_diff is None else o.lr_max_diff,
+            o.speckle_window, o.speckle_range, o.threads, isa,
+        )
+
+    @property
+    def params(self) -> dict[str, Any]:
+        """The resolved parameters."""
+        return self._options.as_dict()
+
+    def __repr__(self) -> str:
+        args = ", ".join(f"{k}={v!r}" for k, v in self.params.items())
+        return f"StereoMatcher({args})"
+
+    def compute(
+        self, left: Any, right: Any
+    ) -> np.ndarray | tuple[np.ndarray, np.ndarray]:
+        """The float32 disparity of ``left`` (and the confidence, if the matcher was made
+        with ``return_confidence=True``); see :func:`block_match`."""
+        left_arr, right_arr = as_pair(left, right)
+        shape = left_arr.shape[:2]
+        disparity = np.empty(shape, dtype=np.float32)
+        confidence = (
+            np.empty(shape, dtype=np.float32) if self._options.return_confidence else None
+        )
+        self._native.compute(left_arr, right_arr, disparity, confidence)
+        if confidence is not None:
+            return disparity, confidence
+        return disparity
+
+
+def block_match(
+    left: Any,
+    right: Any,
+    *,
+    num_disparities: int,
+    min_disparity: int = 0,
+    block_size: int = DEFAULT_BLOCK_SIZE,
+    cost: str = "census",
+    subpixel: bool | str = True,
+    uniqueness_ratio: float = DEFAULT_UNIQUENESS_RATIO,
+    texture_threshold: float = DEFAULT_TEXTURE_THRESHOLD,
+    lr_max_diff: float | None = 1.0,
+    speckle_window: int = DEFAULT_SPECKLE_WINDOW,
+    speckle_range: float = DEFAULT_SPECKLE_RANGE,
+    threads: int | None = None,
+    return_confidence: bool = False,
+) -> np.ndarray | tuple[np.ndarray, np.ndarray]:
+    """Dense disparity of the left image by block matching, natively.
+
+    Parameters
+    ----------
+    left, right
+        The rectified pair, the same shape and dtype: (H, W) uint8 or uint16 grey, or
+        (H, W, 3) uint8 RGB (turned into grey as OpenCV's ``COLOR_RGB2GRAY``).
+    num_disparities
+        How many disparities to search, any integer in [1, 4096].
+    min_disparity
+        The smallest disparity searched, in pixels; may be negative.
+    block_size
+        The side of the square matching block, odd, >= 3 (at most 51 for census, 31 for SAD).
+        The cost per pixel does not depend on it.
+    cost
+        ``"census"`` (5x5 census, Hamming distance; robust to gain and bias between the
+        cameras) or ``"sad"`` (absolute differences of the x-Sobel-prefiltered images, as
+        OpenCV's StereoBM).
+    subpixel
+        Refine the winning disparity from its neighbours' costs: True for the fit measured
+        best for the cost, ``"parabola"`` or ``"equiangular"``, or False for integers.
+    uniqueness_ratio
+        Percent by which every cost more than one disparity away must exceed the winner's;
+        0 turns the check off.
+    texture_threshold
+        Least mean clipped x-gradient per pixel of the block (grey levels); flatter blocks are
+        NaN. 0 turns the check off.
+    lr_max_diff
+        Largest difference, in pixels, between the left disparity and the right image's own
+        disparity at the matched pixel; None turns the check off.
+    speckle_window, speckle_range
+        Remove connected regions of at most ``speckle_window`` pixels whose neighbouring
+        disparities differ by at most ``speckle_range`` px; ``speckle_window=0`` turns it off.
+    threads
+        Threads to split the rows over; None or 0 for every core available. The output does
+        not depend on it.
+    return_confidence
+        Also return the confidence map (see below).
+
+    Returns
+    -------
+    The float32 (H, W) disparity in pixels, NaN where there is no reliable match; with
+    ``return_confidence=True``, ``(disparity, confidence)``, the confidence float32 in
+    [0, 1]: ``(second - best) / second`` from the cost curve, where ``second`` is the least
+    cost more than one disparity away from the winner (0 where the disparity is NaN).
+
+    The steps, the validity rules and the limits are described in :mod:`stereodepth.matching`.
+    The GIL is released while the kernel runs.
+    """
+    matcher = StereoMatcher(
+        num_disparities=num_disparities, min_disparity=min_disparity, block_size=block_size,
+        cost=cost, subpixel=subpixel, uniqueness_ratio=uniqueness_ratio,
+        texture_threshold=texture_threshold, lr_max_diff=lr_max_diff,
+        speckle_window=speckle_window, speckle_range=speckle_range, threads=threads,
+        return_confidence=return_confidence,
+    )
+    return matcher.compute(left, right)
+
+
+def to_opencv_disparity(disparity: Any, *, min_disparity: int = 0) -> np.ndarray:
+    """A float disparity map (NaN for holes) in OpenCV's StereoBM/StereoSGBM format.
+
+    Returns int16 disparity x 16, rounded to the nearest sixteenth (half away from zero), with
+    holes (NaN) set to OpenCV's invalid value ``(min_disparity - 1) * 16``. Raises ValueError
+    when a finite disparity does not fit (OpenCV's format holds -2048 < d < 2048), or when the
+    invalid value itself does not fit in int16.
+    """
+    arr = np.asarray(disparity)
+    if arr.dtype.kind != "f":
+        raise TypeError(f"disparity must be a float array (NaN for holes), got dtype {arr.dtype}")
+    md = check.integer("min_disparity", min_disparity)
+    invalid = (md - 1) * 16
+    info = np.iinfo(np.int16)
+    if not info.min <= invalid <= info.max:
+        raise ValueError(
+            f"min_disparity must be in [-2047, 2048] (OpenCV's invalid value (min_disparity - 1)"
+            f" * 16 must fit in int16), got {md}"
+        )
+    if np.isinf(arr).any():
+        raise ValueError("disparity must be finite or NaN (holes), got an infinite value")
+    finite = np.isfinite(arr)
+    scaled = np.where(finite, arr.astype(np.float64) * 16.0, 0.0)
+    fixed = np.trunc(scaled + np.copysign(0.5, scaled))
+    if finite.any():
+        lo, hi = float(fixed[finite].min()), float(fixed[finite].max())
+        if lo < info.min or hi > info.max:
+            raise ValueError(
+                "disparity must lie in (-2048, 2048) px to fit OpenCV's int16 x16 format, "
+                f"got values from {lo / 16} to {hi / 16}"
+            )
+    return np.where(finite, fixed, invalid).astype(np.int16)

@@ -1,0 +1,173 @@
+"""Accuracy of a disparity map against ground truth: density, bad-pixel rates, mean errors.
+
+The convention is the one of the Middlebury stereo evaluation, also used by our shared scenes
+(``shared/data/stereo/README.md``):
+
+- The *evaluated* pixels are those whose ground truth is finite and, when a mask is given,
+  where the mask is true (typically the non-occluded pixels).
+- An evaluated pixel has an *estimate* when its disparity is finite; NaN (or any non-finite
+  value) is a hole.
+- ``bad_t`` is the fraction of evaluated pixels whose estimate is missing or off by more than
+  ``t`` pixels: holes count as bad. ``bad_t_est`` is the same fraction among the evaluated
+  pixels that have an estimate (holes left out).
+- ``density`` is the fraction of evaluated pixels with an estimate; ``avgerr`` and ``rms`` are
+  the mean and root-mean-square absolute error over those pixels.
+
+Fractions are in [0, 1] (multiply by 100 for percent). Errors are computed in float64.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+from typing import Any
+
+import numpy as np
+
+__all__ = ["BAD_THRESHOLDS_PX", "DisparityMetrics", "evaluate"]
+
+#: The error thresholds of the bad-pixel rates, in pixels.
+BAD_THRESHOLDS_PX: tuple[float, ...] = (0.5, 1.0, 2.0, 4.0)
+
+
+@dataclass(frozen=True)
+class DisparityMetrics:
+    """The accuracy of one disparity map; see the module docstring for the convention.
+
+    Attributes
+    ----------
+    evaluated
+        Number of evaluated pixels: finite ground truth, inside the mask when one is given.
+    estimated
+        Number of evaluated pixels with an estimate (a finite disparity).
+    density
+        ``estimated / evaluated``.
+    bad_0_5, bad_1, bad_2, bad_4
+        Fraction of evaluated pixels that are holes or off by more than 0.5, 1, 2 or 4 px.
+    bad_0_5_est, bad_1_est, bad_2_est, bad_4_est
+        Fraction of estimated pixels off by more than 0.5, 1, 2 or 4 px.
+    avgerr
+        Mean absolute error in pixels over the estimated pixels.
+    rms
+        Root-mean-square error in pixels over the estimated pixels.
+
+    Fractions are NaN when there is no pixel to take them over (no evaluated pixel; for the
+    ``_est`` rates, ``avgerr`` and ``rms``: no estimated pixel).
+    """
+
+    evaluated: int
+    estimated: int
+    density: float
+    bad_0_5: float
+    bad_1: float
+    bad_2: float
+    bad_4: float
+    bad_0_5_est: float
+    bad_1_est: float
+    bad_2_est: float
+    bad_4_est: float
+    avgerr: float
+    rms: float
+
+    def as_dict(self) -> dict[str, Any]:
+        """The fields as a plain dict (ints and floats), in declaration order."""
+        return asdict(self)
+
+
+def _float_map(name: str, value: Any, what: str) -> np.ndarray:
+    if isinstance(value, (bool, np.bool_)):
+        raise TypeError(f"{name} must be a 2-D floating-point array ({what}), got bool {value!r}")
+    try:
+        arr = value if isinstance(value, np.ndarray) else np.asarray(value)
+    except Exception as exc:  # ragged lists and the like
+        raise TypeError(
+            f"{name} must be a 2-D floating-point array ({what}), got {type(value).__name__}"
+        ) from exc
+    if arr.dtype.kind != "f":
+        hint = ""
+        if name == "disparity" and arr.dtype == np.int16:
+            hint = (
+                "; OpenCV's fixed-point output must be converted first: "
+                "d = raw.astype(np.float32) / 16 with d[raw < 0] = np.nan"
+            )
+        elif name == "disparity" and arr.dtype == np.uint16:
+            hint = (
+                "; KITTI's PNG encoding must be converted first: "
+                "d = raw.astype(np.float32) / 256 with d[raw == 0] = np.nan"
+            )
+        raise TypeError(
+            f"{name} must be a floating-point array ({what}), got dtype {arr.dtype}{hint}"
+        )
+    if arr.ndim != 2:
+        raise ValueError(f"{name} must have shape (H, W), got {arr.shape}")
+    return arr
+
+
+def evaluate(disparity: Any, gt: Any, mask: Any = None) -> DisparityMetrics:
+    """Scores an estimated disparity map against the ground truth.
+
+    Parameters
+    ----------
+    disparity
+        (H, W) float16/32/64 disparity of the left image in pixels, NaN where there is no
+        estimate (the output of :func:`stereodepth.block_match`). Integer encodings are
+        rejected: convert OpenCV's int16 (x16) output with ``raw.astype(np.float32) / 16`` and
+        its negative values to NaN, KITTI's uint16 (x256) with ``/ 256`` and 0 to NaN.
+    gt
+        (H, W) floating-point ground-truth disparity; non-finite values (NaN, or inf as in
+        Middlebury's PFM files) mark unknown pixels, which are not evaluated.
+    mask
+        Optional (H, W) bool array: only pixels where it is true are evaluated (for example
+        the non-occluded pixels).
+
+    Returns
+    -------
+    DisparityMetrics
+        Density, bad-pixel rates with and without holes, mean and RMS error.
+
+    Raises TypeError for a non-float disparity or ground truth or a non-bool mask, and
+    ValueError for shapes that are not (H, W) or do not match.
+    """
+    d = _float_map("disparity", disparity, "pixels, NaN for holes")
+    g = _float_map("gt", gt, "pixels, NaN where unknown")
+    if g.shape != d.shape:
+        raise ValueError(f"gt must have the shape of disparity {d.shape}, got {g.shape}")
+    evaluated = np.isfinite(g)
+    if mask is not None:
+        m = mask if isinstance(mask, np.ndarray) else np.asarray(mask)
+        if m.dtype != np.bool_:
+            raise TypeError(f"mask must be a bool array, got dtype {m.dtype}")
+        if m.shape != d.shape:
+            raise ValueError(f"mask must have the shape of disparity {d.shape}, got {m.shape}")
+        evaluated &= m
+
+    n_eval = int(np.count_nonzero(evaluated))
+    est = d[evaluated].astype(np.float64)
+    ok = np.isfinite(est)
+    err = np.abs(est[ok] - g[evaluated][ok].astype(np.float64))
+    n_est = int(err.size)
+    nan = float("nan")
+
+    def frac(count: int, total: int) -> float:
+        return count / total if total else nan
+
+    bad: dict[str, float] = {}
+    for t in BAD_THRESHOLDS_PX:
+        key = "bad_" + f"{t:g}".replace(".", "_")
+        wrong = int(np.count_nonzero(err > t))
+        bad[key] = frac(wrong + n_eval - n_est, n_eval)
+        bad[key + "_est"] = frac(wrong, n_est)
+    return DisparityMetrics(
+        evaluated=n_eval,
+        estimated=n_est,
+        density=frac(n_est, n_eval),
+        bad_0_5=bad["bad_0_5"],
+        bad_1=bad["bad_1"],
+        bad_2=bad["bad_2"],
+        bad_4=bad["bad_4"],
+        bad_0_5_est=bad["bad_0_5_est"],
+        bad_1_est=bad["bad_1_est"],
+        bad_2_est=bad["bad_2_est"],
+        bad_4_est=bad["bad_4_est"],
+        avgerr=float(err.mean()) if n_est else nan,
+        rms=float(np.sqrt(np.mean(err * err))) if n_est else nan,
+    )

@@ -1,0 +1,163 @@
+"""The calculator's two charts as an image, for ``stereodepth calc --plot``: matplotlib.
+
+The data come from :func:`stereodepth.charts.chart_data`, as on the web page. Needs
+matplotlib (the ``plot`` extra): ``pip install "stereodepth[plot]"``. Drawing uses the Agg
+canvas directly (no pyplot, no global state), so it is safe from several threads.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import tempfile
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+from . import _validate as check
+from .charts import Chart, Charts, chart_data
+from .rig import StereoRig
+
+if TYPE_CHECKING:
+    from matplotlib.axes import Axes
+    from matplotlib.figure import Figure
+
+__all__ = ["draw_charts", "save_charts"]
+
+#: The image formats save_charts writes, by file suffix.
+FORMATS: dict[str, str] = {".png": "png", ".svg": "svg", ".pdf": "pdf"}
+
+# The web page's colours: curves in blue and amber, the target in red.
+_SERIES_COLOURS = ("#2563eb", "#d97706", "#059669")
+_TARGET_COLOUR = "#dc2626"
+
+
+def _matplotlib() -> None:
+    try:
+        import matplotlib  # noqa: F401
+    except ImportError as exc:  # pragma: no cover - depends on the environment
+        raise ImportError(
+            'the charts need matplotlib: pip install "stereodepth[plot]"'
+        ) from exc
+
+
+def _label(chart: Chart, name: str, y: float) -> str:
+    what = "Z" if chart.y_label.startswith("depth Z") else "ΔZ"
+    step = name.partition(", ")[2]
+    return f"{what} = {y:.4g} m" + (f" ({step})" if step else "")
+
+
+def _draw(ax: Axes, chart: Chart) -> None:
+    import math
+
+    for i, s in enumerate(chart.series):
+        ax.plot(s.x, s.y, color=_SERIES_COLOURS[i % len(_SERIES_COLOURS)], lw=2, label=s.name)
+    xs = [x for s in chart.series for x in s.x]
+    for i, m in enumerate(chart.markers):
+        edge = _SERIES_COLOURS[i % len(_SERIES_COLOURS)] if len(chart.markers) > 1 else "white"
+        if i == 0:
+            ax.axvline(m.x, color=_TARGET_COLOUR, lw=0.8, ls=":", zorder=1)
+        ax.plot([m.x], [m.y], ls="none", marker="D", ms=8, color=_TARGET_COLOUR,
+                markeredgecolor=edge, markeredgewidth=1.5, label=m.name, zorder=3)
+        # Label on the side with more room: left of a point in the right part of the axis.
+        right_part = bool(xs) and chart.x_log and min(xs) < max(xs) and (
+            math.log(m.x / min(xs)) / math.log(max(xs) / min(xs)) > 0.6
+        )
+        ax.annotate(
+            _label(chart, m.name, m.y), (m.x, m.y), xytext=(-10 if right_part else 10, 0),
+            textcoords="offset points", fontsize=8, color=_TARGET_COLOUR, va="center",
+            ha="right" if right_part else "left", zorder=4,
+            bbox={"boxstyle": "round,pad=0.25", "fc": "white", "ec": "#fecaca", "lw": 0.8},
+        )
+    if chart.x_log:
+        ax.set_xscale("log")
+    if chart.y_log:
+        ax.set_yscale("log")
+    ax.set_title(chart.title, fontsize=11, loc="left", fontweight="bold")
+    ax.set_xlabel(chart.x_label)
+    ax.set_ylabel(chart.y_label)
+    ax.grid(True, which="major", color="#d4d4d8", lw=0.8)
+    ax.grid(True, which="minor", color="#f0f0f2", lw=0.5)
+    if chart.series or chart.markers:
+        ax.legend(fontsize=8, frameon=False, loc="best")
+
+
+def draw_charts(charts: Charts, *, title: str | None = None) -> Figure:
+    """The two charts side by side on a new matplotlib Figure (Agg canvas), under ``title``."""
+    _matplotlib()
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=(11, 4.4), dpi=100, layout="constrained")
+    FigureCanvasAgg(fig)
+    left, right = fig.subplots(1, 2)
+    _draw(left, charts.depth_vs_disparity)
+    _draw(right, charts.error_vs_depth)
+    if title:
+        fig.suptitle(title, fontsize=9, color="#52525b", x=0.01, ha="left")
+    return fig
+
+
+def _format(path: Path) -> str:
+    fmt = FORMATS.get(path.suffix.lower())
+    if fmt is None:
+        raise ValueError(
+            f"the chart file must end in {', '.join(FORMATS)}, got {str(path)!r}"
+        )
+    return fmt
+
+
+def save_charts(
+    rig: StereoRig,
+    path: str | os.PathLike[str],
+    *,
+    disparity_px: float | None = None,
+    disparity_step_px: float = 1.0,
+    max_disparity_px: float | None = None,
+    dpi: int = 120,
+) -> Path:
+    """Writes the charts of :func:`stereodepth.charts.chart_data` (depth vs disparity, depth
+    error vs depth for 1 px and ``disparity_step_px``, the target ``disparity_px`` marked) to
+    ``path`` (.png, .svg or .pdf) and returns the path.
+
+    The file is written whole or not at all: to a temporary file in the same folder, then
+    renamed over ``path``. Bad arguments raise before anything is written."""
+    if not isinstance(path, (str, os.PathLike)):
+        raise TypeError(f"path must be a str or os.PathLike, got {type(path).__name__} {path!r}")
+    out = Path(path)
+    fmt = _format(out)
+    if not out.parent.is_dir():
+        raise ValueError(f"the chart file's folder must exist, got {str(out.parent)!r}")
+    if not 10 <= check.integer("dpi", dpi, minimum=10) <= 1200:
+        raise ValueError(f"dpi must be an integer from 10 to 1200, got {dpi!r}")
+    charts = chart_data(
+        rig, disparity_px=disparity_px, disparity_step_px=disparity_step_px,
+        max_disparity_px=max_disparity_px,
+    )
+    fig = draw_charts(charts, title=repr(rig))
+    _write_atomic(out, lambda f: fig.savefig(f, format=fmt, dpi=dpi))
+    return out
+
+
+def _write_atomic(path: Path, write: Any) -> None:
+    """Calls ``write(binary_file)`` on a temporary file beside ``path``, then renames it over
+    ``path``; on any error the temporary file is removed and ``path`` is left as it was."""
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    try:
+        with os.fdopen(fd, "wb") as f:
+            write(f)
+            f.flush()
+            os.fsync(f.fileno())
+        # mkstemp makes the file private (0600); give it the mode a new file would have.
+        mode = path.stat().st_mode & 0o777 if path.exists() else 0o666 & ~_umask()
+        os.chmod(tmp, mode)
+        os.replace(tmp, path)
+    except BaseException:
+        with contextlib.suppress(OSError):
+            os.unlink(tmp)
+        raise
+
+
+def _umask() -> int:
+    mask = os.umask(0o022)
+    os.umask(mask)
+    return mask

@@ -1,0 +1,14 @@
+"""The calculator as a local web page: ``stereodepth serve``.
+
+- :mod:`stereodepth.web.app`: the FastAPI app (``create_app()``): the page, its static files
+  and plotly.js from the installed plotly package (offline), and the JSON API ``/api/calc``
+  with its OpenAPI schema at ``/openapi.json``.
+- :mod:`stereodepth.web.serve`: the ``serve`` subcommand (uvicorn on 127.0.0.1).
+
+Needs the ``web`` extra: ``pip install "stereodepth[web]"``. This package imports nothing
+heavy itself, so that the command line stays quick.
+"""
+
+from __future__ import annotations
+
+__all__: list[str] = []

@@ -1,0 +1,115 @@
+"""``stereodepth serve``: the calculator as a local web page (FastAPI app on uvicorn).
+
+Listens on 127.0.0.1 (this machine only) unless ``--host`` says otherwise, and prints where
+on start-up. ``--port 0`` takes any free port. Ctrl+C (or SIGTERM) stops it.
+"""
+
+from __future__ import annotations
+
+import argparse
+import ipaddress
+import socket
+import sys
+import threading
+from typing import Any
+
+DEFAULT_HOST = "127.0.0.1"
+DEFAULT_PORT = 8000
+
+
+def register(subparsers: Any) -> None:
+    """Adds the ``serve`` subcommand."""
+    p = subparsers.add_parser(
+        "serve",
+        help="the calculator as a local web page with live results, table and charts",
+        description=(
+            "Serves the stereo depth calculator as a web page: inputs, live results, the "
+            "disparity-to-depth table and charts, all from the library's JSON API "
+            "(/api/calc; schema at /openapi.json). Needs the 'web' extra."
+        ),
+    )
+    p.add_argument("--host", default=DEFAULT_HOST,
+                   help=f"address to listen on (default {DEFAULT_HOST}: this machine only)")
+    p.add_argument("--port", type=int, default=DEFAULT_PORT,
+                   help=f"TCP port (default {DEFAULT_PORT}; 0: any free port)")
+    p.add_argument("--open", action="store_true", help="open the page in a web browser")
+    p.set_defaults(func=run)
+
+
+def _is_loopback(host: str) -> bool:
+    if host == "localhost":
+        return True
+    try:
+        return ipaddress.ip_address(host).is_loopback
+    except ValueError:
+        return False
+
+
+def bind(host: str, port: int) -> socket.socket:
+    """A listening TCP socket on ``host``:``port`` (0: a free port), or ValueError."""
+    if isinstance(port, bool) or not isinstance(port, int) or not 0 <= port <= 65535:
+        raise ValueError(f"--port must be an integer from 0 to 65535, got {port!r}")
+    try:
+        infos = socket.getaddrinfo(host, port, type=socket.SOCK_STREAM, flags=socket.AI_PASSIVE)
+    except socket.gaierror as exc:
+        raise ValueError(f"--host must be an address of this machine, got {host!r} "
+                         f"({exc.strerror})") from None
+    family, kind, proto, _, address = infos[0]
+    sock = socket.socket(family, kind, proto)
+    try:
+        sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        sock.bind(address)
+        sock.listen(128)
+    except OSError as exc:
+        sock.close()
+        raise ValueError(
+            f"cannot listen on {host} port {port}: {exc.strerror or exc}; "
+            "choose another --port (0 takes any free port)"
+        ) from None
+    return sock
+
+
+def url_of(sock: socket.socket) -> str:
+    """The page's address for a bound socket."""
+    host, port = sock.getsockname()[:2]
+    if sock.family == socket.AF_INET6:
+        host = f"[{host}]"
+    return f"http://{host}:{port}/"
+
+
+def run(args: argparse.Namespace) -> int:
+    """Serves until interrupted; returns the exit status."""
+    try:
+        import uvicorn
+
+        from .app import create_app
+    except ImportError as exc:
+        print(f"stereodepth serve: error: the web page needs the 'web' extra: "
+              f'pip install "stereodepth[web]" ({exc})', file=sys.stderr)
+        return 1
+
+    sock = bind(args.host, args.port)
+    url = url_of(sock)
+    if not _is_loopback(args.host):
+        print(f"stereodepth serve: warning: listening on {args.host}, which other machines "
+              "may reach; the default 127.0.0.1 keeps the page on this machine",
+              file=sys.stderr, flush=True)
+    print(f"stereodepth serve: the calculator is at {url}  (Ctrl+C stops it)", flush=True)
+    if args.open:
+        import webbrowser
+
+        # The socket already listens, so the browser's first request waits in its backlog.
+        threading.Thread(target=webbrowser.open, args=(url,), daemon=True).start()
+
+    config = uvicorn.Config(create_app(), log_level="warning", access_log=False,
+                            lifespan="off")
+    server = uvicorn.Server(config)
+    try:
+        # uvicorn shuts down gracefully on Ctrl+C or SIGTERM, then raises the signal again.
+        server.run(sockets=[sock])
+    except KeyboardInterrupt:
+        pass
+    finally:
+        sock.close()
+    print("stereodepth serve: stopped", flush=True)
+    return 0

@@ -1,0 +1,627 @@
+"""stereodepth batch: finding pairs, computing them, failing one pair at a time, atomic outputs,
+resuming, Ctrl-C and kill -9, and the same job on a real Dask LocalCluster."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+
+import stereodepth
+from stereodepth import batch, cli, io
+
+Image = pytest.importorskip("PIL.Image")
+
+SHAPE = (48, 64)
+CALIB: dict[str, Any] = {"focal": 700.0, "cx": 31.5, "cx1": 33.5, "cy": 23.5,
+                         "baseline_mm": 120.0, "ndisp": 16}
+
+
+# --- building inputs --------------------------------------------------------------------------
+def random_pair(seed: int, shift: int, *, shape: tuple[int, int] = SHAPE, rgb: bool = True
+                ) -> tuple[np.ndarray, np.ndarray]:
+    """A random-dot pair whose true disparity is ``shift`` everywhere."""
+    rng = np.random.default_rng(seed)
+    left = rng.integers(0, 256, (*shape, 3) if rgb else shape, dtype=np.uint8)
+    return left, np.roll(left, -shift, axis=1)
+
+
+def calib_text(ndisp: int | None = 16) -> str:
+    c = CALIB
+    text = (f"cam0=[{c['focal']} 0 {c['cx']}; 0 {c['focal']} {c['cy']}; 0 0 1]\n"
+            f"cam1=[{c['focal']} 0 {c['cx1']}; 0 {c['focal']} {c['cy']}; 0 0 1]\n"
+            f"doffs={c['cx1'] - c['cx']}\nbaseline={c['baseline_mm']}\n"
+            f"width={SHAPE[1]}\nheight={SHAPE[0]}\n")
+    return text + (f"ndisp={ndisp}\n" if ndisp is not None else "")
+
+
+def middlebury_folder(root: Path, n: int, *, first_seed: int = 0) -> list[str]:
+    """``n`` Middlebury scene folders (im0.png, im1.png, calib.txt); returns their names."""
+    names = []
+    for i in range(n):
+        d = root / f"scene{i:02d}"
+        d.mkdir(parents=True)
+        left, right = random_pair(first_seed + i, 2 + i % 5)
+        Image.fromarray(left).save(d / "im0.png")
+        Image.fromarray(right).save(d / "im1.png")
+        (d / "calib.txt").write_text(calib_text())
+        names.append(d.name)
+    return names
+
+
+def run_cli(*argv: str | Path) -> int:
+    return cli.main([str(a) for a in argv])
+
+
+def report_of(out: Path) -> dict[str, Any]:
+    data: dict[str, Any] = json.loads((out / "report.json").read_text())
+    return data
+
+
+def temp_files(d: Path) -> list[str]:
+    return sorted(p.name for p in d.iterdir() if p.name.endswith(".tmp"))
+
+
+def expected_maps(scene: Path, fmt: str = "npy") -> tuple[np.ndarray, np.ndarray]:
+    """What batch must write for a Middlebury scene, computed directly."""
+    left, right = io.read_image(scene / "im0.png"), io.read_image(scene / "im1.png")
+    disparity = stereodepth.matching.block_match(left, right, num_disparities=CALIB["ndisp"])
+    assert isinstance(disparity, np.ndarray)
+    depth = stereodepth.disparity_to_depth(
+        disparity, focal_px=CALIB["focal"], baseline_m=CALIB["baseline_mm"] / 1000,
+        doffs_px=CALIB["cx1"] - CALIB["cx"],
+        dtype=np.uint16 if fmt == "png16" else np.float32)
+    return disparity, depth
+
+
+def outputs_bytes(out: Path) -> dict[str, bytes]:
+    """Every output file's bytes (not the records and the report, which hold times)."""
+    return {p.name: p.read_bytes() for p in sorted(out.iterdir())
+            if p.suffix in (".npy", ".png", ".pfm", ".ply")}
+
+
+# --- finding pairs ----------------------------------------------------------------------------
+def test_find_pairs_in_middlebury_scene_folders(tmp_path: Path) -> None:
+    names = middlebury_folder(tmp_path, 3)
+    (tmp_path / "scene01" / "im1E.png").write_bytes(b"")  # Middlebury's other exposures
+    (tmp_path / "notes").mkdir()  # a folder with no pair is ignored
+    pairs = batch.find_pairs(tmp_path)
+    assert [p.stem for p in pairs] == names
+    assert pairs[1].left == tmp_path / "scene01" / "im0.png"
+    assert pairs[1].right == tmp_path / "scene01" / "im1.png"
+    assert pairs[1].calib_file == tmp_path / "scene01" / "calib.txt"
+    # one scene folder as INPUT
+    one = batch.find_pairs(tmp_path / "scene02")
+    assert [(p.stem, p.left.name) for p in one] == [("scene02", "im0.png")]
+
+
+def test_find_pairs_in_kitti_folders_with_calibration(tmp_path: Path) -> None:
+    for sub in ("image_2", "image_3", "image_0", "image_1", "calib"):
+        (tmp_path / sub).mkdir()
+    for frame in ("000000_10", "000000_11", "000001_10"):
+        for sub in ("image_2", "image_3"):
+            Image.fromarray(np.zeros((4, 6), np.uint8)).save(tmp_path / sub / f"{frame}.png")
+    (tmp_path / "image_3" / "000001_10.png").unlink()  # a missing right image
+    (tmp_path / "calib" / "000000.txt").write_text(kitti_calib_2012())
+    pairs = batch.find_pairs(tmp_path)
+    assert [p.stem for p in pairs] == ["000000_10", "000000_11", "000001_10"]
+    assert pairs[0].right == tmp_path / "image_3" / "000000_10.png"
+    assert pairs[1].calib_file == tmp_path / "calib" / "000000.txt"
+    assert pairs[0].kitti_cams == (2, 3)
+    assert pairs[2].calib_file is None and not pairs[2].right.exists()
+    resolved = batch.resolve_calibration(pairs, num_disparities=64)
+    c = resolved[0].calibration
+    assert c is not None
+    assert c.focal_px == pytest.approx(721.5377)
+    assert c.baseline_m == pytest.approx((44.85728 + 339.5242) / 721.5377)
+    assert (c.cx_px, c.cy_px, c.doffs_px) == (609.5593, 172.854, 0.0)
+    assert resolved[2].problem is not None and resolved[2].problem.startswith("no calibration")
+
+
+def kitti_calib_2012() -> str:
+    """KITTI 2012 training/calib/000000.txt: the rectified projection matrices P0..P3."""
+    rows = {
+        0: "0.000000e+00", 1: "-3.875744e+02", 2: "4.485728e+01", 3: "-3.395242e+02",
+    }
+    return "".join(
+        f"P{i}: 7.215377e+02 0.000000e+00 6.095593e+02 {tx} 0.000000e+00 7.215377e+02 "
+        "1.728540e+02 0.000000e+00 0.000000e+00 0.000000e+00 1.000000e+00 0.000000e+00\n"
+        for i, tx in rows.items()
+    )
+
+
+def test_read_kitti_calib_2012_and_2015(tmp_path: Path) -> None:
+    p = tmp_path / "c.txt"
+    p.write_text(kitti_calib_2012())
+    grey = batch.read_kitti_calib(p, (0, 1))
+    assert grey.baseline_m == pytest.approx(387.5744 / 721.5377)
+    assert grey.focal_px == 721.5377
+    rect = "\n".join(line.replace("P", "P_rect_0", 1) for line in kitti_calib_2012().splitlines())
+    p.write_text("calib_time: 09-Jan-2012\n" + rect + "\n")
+    assert batch.read_calibration(p) == batch.read_kitti_calib(p)  # cameras 2 and 3
+    p.write_text("P2: 1 2 3\n")
+    with pytest.raises(ValueError, match="P2 must be 12 numbers, got 3"):
+        batch.read_kitti_calib(p)
+    p.write_text(kitti_calib_2012().replace("P3:", "Q3:"))
+    with pytest.raises(ValueError, match="missing P3"):
+        batch.read_kitti_calib(p)
+
+
+def test_find_pairs_by_name_and_in_left_right_folders(tmp_path: Path) -> None:
+    a = tmp_path / "a"
+    a.mkdir()
+    for name in ("0001_left.png", "0001_right.png", "0002_left.png", "0002_right.png",
+                 "readme.txt"):
+        (a / name).write_bytes(b"")
+    assert [(p.stem, p.right.name) for p in batch.find_pairs(a)] == [
+        ("0001", "0001_right.png"), ("0002", "0002_right.png")]
+    b = tmp_path / "b"
+    for side in ("left", "right"):
+        (b / side).mkdir(parents=True)
+        (b / side / "f7.png").write_bytes(b"")
+    assert [(p.stem, p.right) for p in batch.find_pairs(b)] == [("f7", b / "right" / "f7.png")]
+    c = tmp_path / "c"
+    c.mkdir()
+    for name in ("x_cam0.png", "x_cam1.png"):
+        (c / name).write_bytes(b"")
+    with pytest.raises(batch.UsageError, match="no stereo pairs found"):
+        batch.find_pairs(c)
+    assert [p.right.name for p in batch.find_pairs(c, pair_names=[("cam0", "cam1")])] == [
+        "x_cam1.png"]
+
+
+def test_find_pairs_in_a_csv_list(tmp_path: Path) -> None:
+    (tmp_path / "imgs").mkdir()
+    csv = tmp_path / "pairs.csv"
+    csv.write_text("left,right,stem\n# a comment\n\nimgs/a_left.png,imgs/a_right.png,\n"
+                   f"{tmp_path}/imgs/b0.png,imgs/b1.png,frame-b\n")
+    pairs = batch.find_pairs(csv)
+    assert [(p.stem, p.left, p.right) for p in pairs] == [
+        ("a", tmp_path / "imgs/a_left.png", tmp_path / "imgs/a_right.png"),
+        ("frame-b", tmp_path / "imgs/b0.png", tmp_path / "imgs/b1.png"),
+    ]
+    csv.write_text("a.png,b.png\nc.png\n")
+    with pytest.raises(batch.UsageError, match=r"pairs.csv:2: expected left,right\[,stem\], "
+                       "got 'c.png'"):
+        batch.find_pairs(csv)
+    csv.write_text("x/im0.png,x/im1.png\ny/im0.png,y/im1.png,x\n")
+    with pytest.raises(batch.UsageError, match="two pairs would write the same outputs 'x'"):
+        batch.find_pairs(csv)
+
+
+def test_find_pairs_rejects(tmp_path: Path) -> None:
+    with pytest.raises(batch.UsageError, match="INPUT not found"):
+        batch.find_pairs(tmp_path / "absent")
+    (tmp_path / "list.txt").write_text("a,b\n")
+    with pytest.raises(batch.UsageError, match=r"must be a folder or a \.csv list"):
+        batch.find_pairs(tmp_path / "list.txt")
+    with pytest.raises(batch.UsageError, match="no stereo pairs found in"):
+        batch.find_pairs(tmp_path)
+
+
+# --- computing --------------------------------------------------------------------------------
+@pytest.mark.parametrize("fmt", ["npy", "png16", "pfm"])
+def test_outputs_equal_the_direct_computation(tmp_path: Path, fmt: str) -> None:
+    names = middlebury_folder(tmp_path / "in", 2)
+    out = tmp_path / "out"
+    assert run_cli("batch", tmp_path / "in", "-o", out, "--format", fmt, "--ply",
+                   "--quiet") == 0
+    for name in names:
+        disparity, depth = expected_maps(tmp_path / "in" / name, fmt)
+        if fmt == "npy":
+            got_d = np.load(out / f"{name}.disparity.npy")
+            got_z = np.load(out / f"{name}.depth.npy")
+        elif fmt == "pfm":
+            got_d, got_z = (io.read_pfm(out / f"{name}.disparity.pfm"),
+                            io.read_pfm(out / f"{name}.depth.pfm"))
+        else:
+            got_d, got_z = (io.read_image(out / f"{name}.disparity.png"),
+                            io.read_image(out / f"{name}.depth.png"))
+            d64 = disparity.astype(np.float64)
+            disparity = np.where(np.isfinite(d64) & (d64 > 0), np.rint(d64 * 256), 0).astype(
+                np.uint16)
+        np.testing.assert_array_equal(got_d, disparity, strict=True)
+        np.testing.assert_array_equal(got_z, depth, strict=True)
+        assert np.isfinite(disparity).mean() > 0.5  # the matcher found the shift
+        record = json.loads((out / f"{name}.json").read_text())
+        assert record["status"] == "ok"
+        assert record["density"] == pytest.approx(np.count_nonzero(
+            np.isfinite(expected_maps(tmp_path / "in" / name)[0])) / disparity.size)
+        assert record["outputs"]["ply"]["points"] > 0
+        ply = (out / f"{name}.ply").read_bytes()
+        assert b"element vertex %d\n" % record["outputs"]["ply"]["points"] in ply
+    report = report_of(out)
+    assert report["counts"] == {"ok": 2, "skipped": 0, "failed": 0, "cancelled": 0}
+    assert report["exit_status"] == 0
+    assert [p["stem"] for p in report["pairs"]] == names
+    assert temp_files(out) == []
+
+
+def test_bad_pairs_are_reported_and_the_rest_complete(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    inp = tmp_path / "in"
+    names = middlebury_folder(inp, 6)
+    data = (inp / names[1] / "im1.png").read_bytes()
+    (inp / names[1] / "im1.png").write_bytes(data[: len(data) // 3])  # corrupt
+    (inp / names[2] / "im1.png").unlink()  # missing right image
+    small = random_pair(9, 3, shape=(40, 64))[1]
+    Image.fromarray(small).save(inp / names[3] / "im1.png")  # size mismatch
+    (inp / names[4] / "calib.txt").write_text("cam0=[1 2 3]\nbaseline=1\n")  # bad calibration
+    out = tmp_path / "out"
+    assert run_cli("batch", inp, "-o", out) == 1
+    report = report_of(out)
+    status = {p["stem"]: (p["status"], p["error"]) for p in report["pairs"]}
+    assert status[names[0]] == ("ok", None) and status[names[5]] == ("ok", None)
+    assert status[names[1]][0] == "failed" and "cannot decode image" in status[names[1]][1]
+    assert status[names[2]][0] == "failed"
+    assert status[names[2]][1] == f"missing right image {inp / names[2] / 'im1.png'}"
+    assert status[names[3]] == ("failed", "left and right differ in size: 64x48 and 64x40 px")
+    assert "bad calibration" in status[names[4]][1] and "cam0 must be a 3x3" in status[names[4]][1]
+    assert report["counts"] == {"ok": 2, "skipped": 0, "failed": 4, "cancelled": 0}
+    assert report["exit_status"] == 1
+    printed = capsys.readouterr().out
+    assert "6 pairs: 2 done, 4 failed" in printed
+    for n in names[1:5]:
+        assert f"failed {n}:" in printed
+        assert not list(out.glob(f"{n}.*"))
+    for n in (names[0], names[5]):
+        assert (out / f"{n}.depth.npy").is_file() and (out / f"{n}.json").is_file()
+    # fix the missing image: the next run does that pair only
+    Image.fromarray(random_pair(2, 4)[1]).save(inp / names[2] / "im1.png")
+    assert run_cli("batch", inp, "-o", out, "--quiet") == 1
+    counts = report_of(out)["counts"]
+    assert counts == {"ok": 1, "skipped": 2, "failed": 3, "cancelled": 0}
+
+
+def test_grey_and_rgb_pair_is_matched_in_grey(tmp_path: Path) -> None:
+    left, right = random_pair(5, 3)
+    Image.fromarray(left).save(tmp_path / "left.png")
+    Image.fromarray(batch._to_grey(right)).save(tmp_path / "right.png")
+    out = tmp_path / "out"
+    assert run_cli("batch", tmp_path, "-o", out, "--focal-px", 700, "--baseline-mm", 100,
+                   "--num-disparities", 16, "--quiet") == 0
+    want = stereodepth.matching.block_match(batch._to_grey(left), batch._to_grey(right),
+                                            num_disparities=16)
+    np.testing.assert_array_equal(np.load(out / f"{tmp_path.name}.disparity.npy"), want)
+
+
+def test_resume_skips_complete_pairs_and_redoes_changed_ones(tmp_path: Path) -> None:
+    inp, out = tmp_path / "in", tmp_path / "out"
+    names = middlebury_folder(inp, 3)
+    assert run_cli("batch", inp, "-o", out, "--quiet") == 0
+    first = outputs_bytes(out)
+    assert run_cli("batch", inp, "-o", out, "--quiet") == 0
+    assert report_of(out)["counts"]["skipped"] == 3
+    skipped = report_of(out)["pairs"][0]
+    assert skipped["status"] == "skipped" and skipped["density"] > 0.5
+    # an output deleted, an input rewritten: those two pairs are redone
+    (out / f"{names[0]}.depth.npy").unlink()
+    left = io.read_image(inp / names[1] / "im0.png")
+    Image.fromarray(left).save(inp / names[1] / "im0.png")
+    os.utime(inp / names[1] / "im0.png", ns=(1, 1))
+    assert run_cli("batch", inp, "-o", out, "--quiet") == 0
+    assert [p["status"] for p in report_of(out)["pairs"]] == ["ok", "ok", "skipped"]
+    assert outputs_bytes(out) == first
+    # different settings: everything is redone; --force redoes it again
+    assert run_cli("batch", inp, "-o", out, "--quiet", "--block-size", "7") == 0
+    assert report_of(out)["counts"]["ok"] == 3
+    assert run_cli("batch", inp, "-o", out, "--quiet", "--block-size", "7") == 0
+    assert report_of(out)["counts"]["skipped"] == 3
+    assert run_cli("batch", inp, "-o", out, "--quiet", "--block-size", "7", "--force") == 0
+    assert report_of(out)["counts"]["ok"] == 3
+
+
+# --- interruptions ----------------------------------------------------------------------------
+SLOW_MATCHER = """
+import time
+from stereodepth import matching
+_match = getattr(matching.block_match, "__wrapped__", matching.block_match)  # run twice: once
+def _slow(*args, **kwargs):
+    time.sleep({delay})
+    return _match(*args, **kwargs)
+_slow.__wrapped__ = _match
+matching.block_match = _slow
+"""
+
+
+def cli_process(argv: list[str], prelude: str) -> subprocess.Popen[str]:
+    script = prelude + "\nimport sys\nfrom stereodepth import cli\n" + \
+        f"sys.exit(cli.main({argv!r}))\n"
+    return subprocess.Popen([sys.executable, "-c", script], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True)
+
+
+def wait_for(predicate: Any, timeout: float = 60.0) -> None:
+    deadline = time.monotonic() + timeout
+    while not predicate():
+        if time.monotonic() > deadline:
+            raise TimeoutError("condition not met in time")
+        time.sleep(0.02)
+
+
+def test_ctrl_c_stops_cleanly_and_the_next_run_resumes(tmp_path: Path) -> None:
+    inp, out = tmp_path / "in", tmp_path / "out"
+    names = middlebury_folder(inp, 12)
+    with cli_process(["batch", str(inp), "-o", str(out)],
+                     SLOW_MATCHER.format(delay=0.3)) as proc:
+        try:
+            wait_for(lambda: out.is_dir() and any(out.glob("*.json")))
+        finally:
+            proc.send_signal(signal.SIGINT)
+            stdout, stderr = proc.communicate(timeout=60)
+    assert proc.returncode == 130, stderr
+    assert "interrupted" in stderr
+    assert "run the same command again to resume" in stdout
+    report = report_of(out)
+    counts = report["counts"]
+    assert report["interrupted"] and report["exit_status"] == 130
+    assert counts["ok"] >= 1 and counts["cancelled"] >= 1 and counts["failed"] == 0
+    assert counts["ok"] + counts["cancelled"] == 12
+    assert temp_files(out) == []
+    done = [p["stem"] for p in report["pairs"] if p["status"] == "ok"]
+    assert sorted(p.stem for p in out.glob("*.json") if p.name != "report.json") == sorted(done)
+    assert run_cli("batch", inp, "-o", out, "--quiet") == 0
+    again = report_of(out)["counts"]
+    assert again == {"ok": 12 - len(done), "skipped": len(done), "failed": 0, "cancelled": 0}
+    for name in names:
+        np.testing.assert_array_equal(np.load(out / f"{name}.depth.npy"),
+                                      expected_maps(inp / name)[1], strict=True)
+
+
+HALF_WRITE = """
+import os, sys, time
+import numpy as np
+from stereodepth import io
+_write_npy = io.write_npy
+def _half_then_hang(path, array):
+    if os.path.basename(str(path)) == "scene03.depth.npy":
+        import io as _io
+        buf = _io.BytesIO()
+        np.save(buf, array)
+        with io.atomic_write(path) as f:
+            f.write(buf.getvalue()[: len(buf.getvalue()) // 2])
+            f.flush()
+            print("half written", flush=True)
+            time.sleep(120)
+    return _write_npy(path, array)
+io.write_npy = _half_then_hang
+"""
+
+
+def test_kill_leaves_no_partial_file_and_the_next_run_completes(tmp_path: Path) -> None:
+    inp, out = tmp_path / "in", tmp_path / "out"
+    names = middlebury_folder(inp, 6)
+    with cli_process(["batch", str(inp), "-o", str(out)], HALF_WRITE) as proc:
+        try:
+            assert proc.stdout is not None
+            assert proc.stdout.readline().strip() == "half written"
+        finally:
+            proc.send_signal(signal.SIGKILL)
+            proc.communicate(timeout=60)
+    assert proc.returncode == -signal.SIGKILL
+    assert not (out / "scene03.depth.npy").exists()
+    # the half-written file (and whatever the other pair in flight was writing) as temporaries
+    left_over = temp_files(out)
+    assert any(t.startswith(".scene03.depth.npy.stereodepth-") for t in left_over)
+    assert all(t.startswith(".") and ".stereodepth-" in t for t in left_over)
+    # everything under a final name is complete
+    records = {p.stem for p in out.glob("*.json")}
+    assert "scene03" not in records
+    for f in out.glob("*.npy"):
+        stem, kind = f.name.split(".")[:2]
+        want = expected_maps(inp / stem)[0 if kind == "disparity" else 1]
+        np.testing.assert_array_equal(np.load(f), want, strict=True)
+    for stem in records:
+        assert (out / f"{stem}.disparity.npy").is_file() and (out / f"{stem}.depth.npy").is_file()
+    # the next run sweeps the temporary file and does what is left
+    assert run_cli("batch", inp, "-o", out, "--quiet") == 0
+    counts = report_of(out)["counts"]
+    assert counts["skipped"] == len(records) and counts["ok"] == 6 - len(records)
+    assert temp_files(out) == []
+    for name in names:
+        np.testing.assert_array_equal(np.load(out / f"{name}.depth.npy"),
+                                      expected_maps(inp / name)[1], strict=True)
+
+
+def test_a_second_job_on_the_same_outdir_is_refused(tmp_path: Path) -> None:
+    inp, out = tmp_path / "in", tmp_path / "out"
+    middlebury_folder(inp, 1)
+    out.mkdir()
+    import fcntl
+
+    fd = os.open(out / batch.LOCK_NAME, os.O_RDWR | os.O_CREAT)
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX)
+        with pytest.raises(batch.UsageError, match="another stereodepth batch job is writing"):
+            batch.run_batch(batch.resolve_calibration(batch.find_pairs(inp)),
+                            batch.BatchOptions(out_dir=out))
+    finally:
+        os.close(fd)
+
+
+# --- usage errors -----------------------------------------------------------------------------
+@pytest.mark.parametrize(
+    ("extra", "calib", "message"),
+    [
+        ([], False, "no calibration for any pair: give --focal-px and --baseline-mm"),
+        (["--focal-px", "700"], False, "give both --focal-px and --baseline-mm"),
+        (["--focal-px", "700", "--baseline-mm", "100"], False, "--num-disparities is required"),
+        (["--focal-px", "-7", "--baseline-mm", "100"], False,
+         "--focal-px must be a finite number > 0, got -7.0"),
+        (["--cx-px", "3"], True, "--cx-px goes with --focal-px and --baseline-mm"),
+        (["--workers", "2", "--scheduler", "tcp://127.0.0.1:1"], True,
+         "give --scheduler or --workers, not both"),
+        (["--workers", "0"], True, "--workers must be an integer >= 1, got 0"),
+        (["--block-size", "4"], True, "block_size must be an odd integer"),
+        (["--option", "num_disparities=4"], True, "--option num_disparities: use "
+         "--num-disparities"),
+        (["--option", "colour=1"], True, "matcher options: .*colour"),
+        (["--num-disparities", "0"], True, "--num-disparities must be an integer >= 1, got 0"),
+        (["--max-depth-m", "nan"], True, "--max-depth-m must be a finite number >= 0"),
+        (["--calib", "nowhere.txt"], True, "--calib: calibration file not found"),
+    ],
+)
+def test_usage_errors_exit_2(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], extra: list[str], calib: bool,
+    message: str
+) -> None:
+    left, right = random_pair(0, 2)
+    Image.fromarray(left).save(tmp_path / "im0.png")
+    Image.fromarray(right).save(tmp_path / "im1.png")
+    if calib:
+        (tmp_path / "calib.txt").write_text(calib_text())
+    assert run_cli("batch", tmp_path, "-o", tmp_path / "out", *extra) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("stereodepth batch: error: ")
+    import re
+
+    assert re.search(message, err), err
+    assert not (tmp_path / "out").exists()
+
+
+# --- a real Dask cluster ----------------------------------------------------------------------
+@pytest.fixture
+def local_cluster() -> Any:
+    distributed = pytest.importorskip("distributed")
+    # dashboard_address: a free loopback port (None would still try 8787, and warn if taken)
+    with distributed.LocalCluster(n_workers=2, processes=True, threads_per_worker=1,
+                                  host="127.0.0.1", dashboard_address="127.0.0.1:0"
+                                  ) as cluster:
+        yield cluster
+
+
+@pytest.mark.cluster
+def test_cluster_results_equal_embedded_bit_for_bit(tmp_path: Path, local_cluster: Any) -> None:
+    inp = tmp_path / "in"
+    middlebury_folder(inp, 6)
+    assert run_cli("batch", inp, "-o", tmp_path / "here", "--ply", "--quiet") == 0
+    assert run_cli("batch", inp, "-o", tmp_path / "there", "--ply", "--quiet",
+                   "--scheduler", local_cluster.scheduler_address) == 0
+    report = report_of(tmp_path / "there")
+    assert report["runner"] == f"dask {local_cluster.scheduler_address}"
+    assert report["counts"]["ok"] == 6
+    here, there = outputs_bytes(tmp_path / "here"), outputs_bytes(tmp_path / "there")
+    assert len(here) == 18 and here == there
+
+
+@pytest.mark.cluster
+def test_a_worker_killed_mid_job_and_the_job_completes(tmp_path: Path, local_cluster: Any) -> None:
+    distributed = pytest.importorskip("distributed")
+    inp = tmp_path / "in"
+    n = 10
+    middlebury_folder(inp, n)
+    assert run_cli("batch", inp, "-o", tmp_path / "here", "--quiet") == 0
+    pairs = batch.resolve_calibration(batch.find_pairs(inp))
+    killed: list[str] = []
+    with distributed.Client(local_cluster.scheduler_address) as client:
+        client.run(exec, SLOW_MATCHER.format(delay=0.4), {})  # each pair takes >= 0.4 s
+        pids = client.run(os.getpid)
+
+        def kill_a_busy_worker(record: dict[str, Any]) -> None:
+            if killed:
+                return
+            deadline = time.monotonic() + 10
+            while time.monotonic() < deadline:  # a worker between two pairs is not busy
+                busy = [w for w, keys in client.processing().items() if keys]
+                if busy:
+                    os.kill(pids[busy[0]], signal.SIGKILL)
+                    killed.append(busy[0])
+                    return
+                time.sleep(0.01)
+
+        report = batch.run_batch(pairs, batch.BatchOptions(out_dir=tmp_path / "there"),
+                                 scheduler=local_cluster.scheduler_address,
+                                 on_result=kill_a_busy_worker)
+    assert killed
+    assert report.counts == {"ok": n, "skipped": 0, "failed": 0, "cancelled": 0}
+    assert outputs_bytes(tmp_path / "there") == outputs_bytes(tmp_path / "here")
+    assert temp_files(tmp_path / "there") == []
+
+
+@pytest.mark.cluster
+def test_workers_option_starts_a_local_cluster(tmp_path: Path) -> None:
+    pytest.importorskip("distributed")
+    inp = tmp_path / "in"
+    middlebury_folder(inp, 3)
+    assert run_cli("batch", inp, "-o", tmp_path / "here", "--quiet") == 0
+    assert run_cli("batch", inp, "-o", tmp_path / "there", "--quiet", "--workers", "2") == 0
+    assert report_of(tmp_path / "there")["runner"] == "local dask cluster of 2 worker processes"
+    assert outputs_bytes(tmp_path / "there") == outputs_bytes(tmp_path / "here")
+
+
+def test_on_result_runs_in_the_calling_thread(tmp_path: Path) -> None:
+    inp = tmp_path / "in"
+    middlebury_folder(inp, 3)
+    seen: list[tuple[str, int]] = []
+    report = batch.run_batch(
+        batch.resolve_calibration(batch.find_pairs(inp)),
+        batch.BatchOptions(out_dir=tmp_path / "out"),
+        on_result=lambda r: seen.append((r["status"], threading.get_ident())))
+    assert sorted(s for s, _ in seen) == ["ok"] * 3
+    assert {t for _, t in seen} == {threading.get_ident()}
+    assert report.exit_status == 0
+
+
+def test_progress_bar_and_summary(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    inp = tmp_path / "in"
+    middlebury_folder(inp, 3)
+    report = batch.run_batch(batch.resolve_calibration(batch.find_pairs(inp)),
+                             batch.BatchOptions(out_dir=tmp_path / "out"), progress=True)
+    err = capsys.readouterr().err
+    assert "stereodepth batch" in err and "3/3" in err
+    batch.print_summary(report, tmp_path / "out" / "report.json")
+    out = capsys.readouterr().out
+    assert out.startswith("3 pairs: 3 done in ") and "pairs/s, embedded)" in out
+
+
+@pytest.mark.cluster
+def test_ctrl_c_in_a_terminal_with_local_workers(tmp_path: Path) -> None:
+    """Ctrl-C reaches the whole process group: the job stops with status 130 and a report,
+    the worker processes (which ignore SIGINT) print no tracebacks, no temporary file is
+    left. The workers are slowed down through dask's worker preload hook."""
+    pytest.importorskip("distributed")
+    inp, out = tmp_path / "in", tmp_path / "out"
+    middlebury_folder(inp, 12)
+    preload = tmp_path / "slow_worker.py"
+    preload.write_text(SLOW_MATCHER.format(delay=0.5))
+    env = {**os.environ, "DASK_DISTRIBUTED__WORKER__PRELOAD": json.dumps([str(preload)])}
+    argv = [sys.executable, "-m", "stereodepth.cli", "batch", str(inp), "-o", str(out),
+            "--workers", "2"]
+    with subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                          env=env, start_new_session=True) as proc:
+        try:
+            wait_for(lambda: out.is_dir() and any(out.glob("scene*.json")), timeout=120)
+        finally:
+            os.killpg(proc.pid, signal.SIGINT)
+            _, stderr = proc.communicate(timeout=120)
+    assert proc.returncode == 130, stderr
+    assert "Traceback" not in stderr, stderr
+    assert "interrupted" in stderr
+    report = report_of(out)
+    assert report["interrupted"] and report["counts"]["cancelled"] >= 1
+    assert report["counts"]["ok"] >= 1 and report["counts"]["failed"] == 0
+    assert temp_files(out) == []
+
+
+def test_non_ascii_names_and_a_csv_list(tmp_path: Path) -> None:
+    left, right = random_pair(8, 3)
+    (tmp_path / "façade").mkdir()
+    Image.fromarray(left).save(tmp_path / "façade" / "gauche.png")
+    Image.fromarray(right).save(tmp_path / "façade" / "droite.png")
+    (tmp_path / "pairs.csv").write_text("façade/gauche.png,façade/droite.png,vue-été\n",
+                                        encoding="utf-8")
+    out = tmp_path / "out"
+    assert run_cli("batch", tmp_path / "pairs.csv", "-o", out, "--focal-px", 700,
+                   "--baseline-mm", 100, "--num-disparities", 16, "--ply", "--quiet") == 0
+    assert (out / "vue-été.ply").read_bytes().count(b"comment stereodepth") == 1
+    assert report_of(out)["pairs"][0]["stem"] == "vue-été"

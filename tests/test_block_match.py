@@ -1,0 +1,625 @@
+"""stereodepth.block_match / StereoMatcher against the numpy oracle, and its rules.
+
+The oracle (stereodepth.reference.block_match) follows the documented steps with a full cost
+volume; the kernel must agree exactly on integer disparities and validity, and within 1e-3 px
+after the sub-pixel step. Images are small so the oracle stays fast.
+"""
+
+from __future__ import annotations
+
+import threading
+from concurrent.futures import ThreadPoolExecutor
+from typing import Any
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+import stereodepth as sd
+from stereodepth import reference as ref
+from stereodepth._reference_block_match import grey
+from stereodepth.io import read_image
+
+SUPPORTED_ISAS: list[str] = list(sd.build_info()["supported_isas"])
+
+
+# ------------------------------------------------------------------------------------------
+# Test images
+
+
+def shifted_pair(
+    shape: tuple[int, int], shift: int, *, seed: int, dtype: Any = np.uint8, rgb: bool = False
+) -> tuple[np.ndarray, np.ndarray]:
+    """A random-dot stereogram: left[y, x] = right[y, x - shift]."""
+    rng = np.random.default_rng(seed)
+    h, w = shape
+    top = 65536 if dtype == np.uint16 else 256
+    extra = abs(shift)
+    size = (h, w + extra, 3) if rgb else (h, w + extra)
+    canvas = rng.integers(0, top, size=size).astype(dtype)
+    m = max(0, -shift)
+    left = canvas[:, m : m + w]
+    right = canvas[:, m + shift : m + shift + w]
+    return np.ascontiguousarray(left), np.ascontiguousarray(right)
+
+
+def slanted_pair(
+    shape: tuple[int, int], *, d0: float, dx: float, dy: float, seed: int
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A textured slanted plane: disparity d0 + dx * x + dy * y (sub-pixel), left sampled
+    from the right image by linear interpolation along each row."""
+    rng = np.random.default_rng(seed)
+    h, w = shape
+    # Smooth-ish texture so interpolation is meaningful.
+    base = rng.random((h, w + 8)) * 255
+    base = (base + np.roll(base, 1, axis=1) + np.roll(base, 1, axis=0)) / 3
+    right = base[:, :w]
+    ys, xs = np.mgrid[0:h, 0:w].astype(np.float64)
+    disp = d0 + dx * xs + dy * ys
+    left = np.empty((h, w))
+    cols = np.arange(w + 8, dtype=np.float64)
+    for y in range(h):
+        left[y] = np.interp(xs[y] - disp[y], cols, base[y])
+    return left.round().astype(np.uint8), right.round().astype(np.uint8), disp.astype(np.float32)
+
+
+def assert_agree(native: Any, oracle: Any, *, subpixel: bool) -> None:
+    """The same NaNs; equal disparities (within 1e-3 px after the sub-pixel step)."""
+    if isinstance(oracle, tuple):
+        assert isinstance(native, tuple)
+        assert_agree(native[0], oracle[0], subpixel=subpixel)
+        np.testing.assert_allclose(native[1], oracle[1], rtol=0, atol=1e-6)
+        return
+    assert native.dtype == np.float32
+    assert native.shape == oracle.shape
+    np.testing.assert_array_equal(np.isnan(native), np.isnan(oracle))
+    if subpixel:
+        np.testing.assert_allclose(native, oracle, rtol=0, atol=1e-3)
+    else:
+        np.testing.assert_array_equal(native, oracle)
+
+
+# Parameter sets that exercise every step; each is compared with the oracle.
+CONFIGS: list[dict[str, Any]] = [
+    {"subpixel": False, "uniqueness_ratio": 0, "lr_max_diff": None},
+    {"subpixel": False},
+    {},
+    {"cost": "sad"},
+    {"cost": "sad", "subpixel": "parabola", "block_size": 5},
+    {"subpixel": "parabola", "return_confidence": True},
+    {"block_size": 3, "uniqueness_ratio": 25, "lr_max_diff": 0},
+    {"block_size": 15, "texture_threshold": 8.0, "lr_max_diff": 2.5},
+    {"speckle_window": 30, "speckle_range": 0.5, "return_confidence": True},
+    {"cost": "sad", "texture_threshold": 3.0, "uniqueness_ratio": 2.5, "return_confidence": True},
+]
+
+
+def config_id(cfg: dict[str, Any]) -> str:
+    return ",".join(f"{k}={v}" for k, v in cfg.items()) or "defaults"
+
+
+def subpixel_of(cfg: dict[str, Any]) -> bool:
+    return cfg.get("subpixel", True) is not False
+
+
+# ------------------------------------------------------------------------------------------
+# Native against the oracle
+
+
+@pytest.mark.parametrize("isa", SUPPORTED_ISAS)
+@pytest.mark.parametrize("cfg", CONFIGS, ids=config_id)
+def test_random_dots_match_oracle(cfg: dict[str, Any], isa: str) -> None:
+    left, right = shifted_pair((31, 77), 6, seed=1)
+    # Some flat and some repeated texture: ties, and work for the validity checks.
+    left[5:15, 20:40] = 128
+    right[5:15, 14:34] = 128
+    left[20:28, 40:70] = np.tile(np.array([0, 0, 255, 255], np.uint8), 8)[:30]
+    right[20:28, 34:64] = np.tile(np.array([0, 0, 255, 255], np.uint8), 8)[:30]
+    kw = {"num_disparities": 21, "min_disparity": -3, **cfg}
+    native = sd.StereoMatcher(isa=isa, **kw).compute(left, right)
+    assert_agree(native, ref.block_match(left, right, **kw), subpixel=subpixel_of(cfg))
+
+
+@pytest.mark.parametrize("isa", SUPPORTED_ISAS)
+@pytest.mark.parametrize("cost", ["census", "sad"])
+def test_ties_go_to_the_lowest_disparity(isa: str, cost: str) -> None:
+    # A flat pair costs the same at every disparity; a pattern of period 4 ties every 4 px.
+    kw: dict[str, Any] = {"num_disparities": 11, "min_disparity": -2, "cost": cost,
+                          "subpixel": False, "uniqueness_ratio": 0, "lr_max_diff": None}
+    flat = np.full((9, 30), 77, np.uint8)
+    d = sd.StereoMatcher(isa=isa, **kw).compute(flat, flat)
+    assert (d[:, 8:28] == -2).all()
+    row = np.tile(np.array([10, 200, 60, 130], np.uint8), 10)
+    stripes = np.repeat(row[None, :], 9, axis=0)
+    left = np.ascontiguousarray(stripes[:, 0:30])
+    right = np.ascontiguousarray(stripes[:, 3:33])  # shift 3, and -1 and 7 (period 4)
+    d = sd.StereoMatcher(isa=isa, **kw).compute(left, right)
+    np.testing.assert_array_equal(d[:, 12:22], -1.0)
+    np.testing.assert_array_equal(d, ref.block_match(left, right, **kw))
+
+
+@pytest.mark.parametrize("cfg", CONFIGS, ids=config_id)
+def test_slanted_plane_matches_oracle(cfg: dict[str, Any]) -> None:
+    left, right, _ = slanted_pair((26, 90), d0=4.3, dx=0.09, dy=0.05, seed=2)
+    kw = {"num_disparities": 19, **cfg}
+    assert_agree(sd.block_match(left, right, **kw), ref.block_match(left, right, **kw),
+                 subpixel=subpixel_of(cfg))
+
+
+def test_slanted_plane_is_recovered_to_subpixel_accuracy() -> None:
+    left, right, disp = slanted_pair((40, 120), d0=6.2, dx=0.05, dy=0.02, seed=3)
+    est = sd.block_match(left, right, num_disparities=24, block_size=7)
+    good = np.isfinite(est)
+    assert good.mean() > 0.6
+    err = np.abs(est - disp)[good]
+    assert np.median(err) < 0.25
+    assert (err < 1).mean() > 0.95
+
+
+@pytest.mark.parametrize("dtype", [np.uint8, np.uint16])
+@pytest.mark.parametrize("cost", ["census", "sad"])
+def test_dtypes_match_oracle(dtype: Any, cost: str) -> None:
+    left, right = shifted_pair((20, 60), 4, seed=4, dtype=dtype)
+    kw = {"num_disparities": 12, "cost": cost, "return_confidence": True}
+    assert_agree(sd.block_match(left, right, **kw), ref.block_match(left, right, **kw),
+                 subpixel=True)
+
+
+def test_rgb_matches_oracle_and_is_matched_as_its_grey() -> None:
+    left, right = shifted_pair((20, 50), 5, seed=5, rgb=True)
+    kw: dict[str, Any] = {"num_disparities": 10, "return_confidence": True}
+    native = sd.block_match(left, right, **kw)
+    assert_agree(native, ref.block_match(left, right, **kw), subpixel=True)
+    gl, gr = grey(left).astype(np.uint8), grey(right).astype(np.uint8)
+    grey_result = sd.block_match(gl, gr, **kw)
+    np.testing.assert_array_equal(native[0], grey_result[0])
+    np.testing.assert_array_equal(native[1], grey_result[1])
+
+
+def test_grey_conversion_is_opencvs() -> None:
+    cv2 = pytest.importorskip("cv2")
+    rgb = np.random.default_rng(6).integers(0, 256, (17, 23, 3)).astype(np.uint8)
+    np.testing.assert_array_equal(grey(rgb), cv2.cvtColor(rgb, cv2.COLOR_RGB2GRAY))
+
+
+@pytest.mark.parametrize("cost", ["census", "sad"])
+def test_sixteen_bit_image_of_an_eight_bit_one_matches_the_same(cost: str) -> None:
+    # Census compares; SAD shifts the 16-bit Sobel response by 8 bits: x256 changes nothing.
+    left, right = shifted_pair((18, 48), 3, seed=7)
+    kw = {"num_disparities": 9, "cost": cost}
+    a = sd.block_match(left, right, **kw)
+    b = sd.block_match(left.astype(np.uint16) * 256, right.astype(np.uint16) * 256, **kw)
+    np.testing.assert_array_equal(a, b)
+
+
+@pytest.mark.data
+def test_scene_crops_match_oracle(stereo_scenes: list[Any]) -> None:
+    for scene in stereo_scenes:
+        left = read_image(scene.left_path)
+        right = read_image(scene.right_path)
+        h, w = left.shape[:2]
+        y0, x0 = h // 2 - 20, w // 2 - 60
+        lc = np.ascontiguousarray(left[y0 : y0 + 40, x0 : x0 + 150])
+        rc = np.ascontiguousarray(right[y0 : y0 + 40, x0 : x0 + 150])
+        for cfg in ({"return_confidence": True}, {"cost": "sad", "subpixel": "parabola"}):
+            kw = {"num_disparities": 48, **cfg}
+            assert_agree(sd.block_match(lc, rc, **kw), ref.block_match(lc, rc, **kw),
+                         subpixel=True)
+
+
+# ------------------------------------------------------------------------------------------
+# Shapes that break tails
+
+
+@pytest.mark.parametrize(
+    ("shape", "nd", "md"),
+    [
+        ((1, 40), 8, 0),       # a single row
+        ((3, 1), 1, 0),        # a single column
+        ((12, 7), 3, 0),       # narrow, odd
+        ((9, 10), 16, 0),      # width smaller than num_disparities: all NaN
+        ((10, 33), 1, 0),      # one disparity
+        ((10, 33), 2, -1),     # two disparities, no second-best
+        ((11, 45), 33, -5),    # lanes beyond one vector
+        ((13, 70), 17, -20),   # all negative disparities
+        ((6, 1023), 31, 2),    # wide, odd
+    ],
+)
+@pytest.mark.parametrize("cfg", [{}, {"return_confidence": True, "cost": "sad"}], ids=config_id)
+def test_tail_shapes_match_oracle(
+    shape: tuple[int, int], nd: int, md: int, cfg: dict[str, Any]
+) -> None:
+    left, right = shifted_pair(shape, max(md, 0) + nd // 2, seed=8)
+    kw = {"num_disparities": nd, "min_disparity": md, **cfg}
+    assert_agree(sd.block_match(left, right, **kw), ref.block_match(left, right, **kw),
+                 subpixel=True)
+
+
+def test_many_disparities_take_the_generic_path() -> None:
+    # More than 256 disparities: the AVX-512 build leaves its register-resident pass.
+    left, right = shifted_pair((8, 330), 270, seed=9)
+    kw: dict[str, Any] = {"num_disparities": 290, "block_size": 5, "return_confidence": True}
+    assert_agree(sd.block_match(left, right, **kw), ref.block_match(left, right, **kw),
+                 subpixel=True)
+
+
+def test_width_smaller_than_num_disparities_is_all_nan() -> None:
+    left, right = shifted_pair((10, 12), 2, seed=10)
+    assert np.isnan(sd.block_match(left, right, num_disparities=13)).all()
+
+
+def test_search_range_leaving_the_image_is_nan() -> None:
+    left, right = shifted_pair((16, 60), 5, seed=11)
+    d = sd.block_match(left, right, num_disparities=10, min_disparity=-4, subpixel=False,
+                       uniqueness_ratio=0, lr_max_diff=None)
+    # x - d must lie in [0, 60) for every d in [-4, 5]: columns 5 .. 55.
+    assert np.isnan(d[:, :5]).all()
+    assert np.isnan(d[:, 56:]).all()
+    assert np.isfinite(d[:, 5:56]).all()
+
+
+@settings(max_examples=25, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(
+    shift=st.integers(-6, 12),
+    md=st.integers(-8, 4),
+    nd=st.integers(9, 24),
+    bs=st.sampled_from([3, 5, 9]),
+    seed=st.integers(0, 2**16),
+)
+def test_shifted_random_dots_give_the_shift(shift: int, md: int, nd: int, bs: int,
+                                            seed: int) -> None:
+    if not md <= shift <= md + nd - 1:
+        shift = md + (shift - md) % nd
+    w = 64
+    left, right = shifted_pair((12, w), shift, seed=seed)
+    d = sd.block_match(left, right, num_disparities=nd, min_disparity=md, block_size=bs,
+                       subpixel=False)
+    # Away from the borders (search range, block and census window inside the image) the
+    # cost at the shift is 0 and every other disparity costs more.
+    r = bs // 2 + 2
+    x0 = max(md + nd - 1, 0) + r + max(shift, 0)
+    x1 = min(w - 1 + md, w - 1) - r - max(-shift, 0)
+    if x1 >= x0:
+        np.testing.assert_array_equal(d[:, x0 : x1 + 1], np.float32(shift))
+    d_sub = sd.block_match(left, right, num_disparities=nd, min_disparity=md, block_size=bs)
+    if x1 >= x0:
+        assert np.all(np.abs(d_sub[:, x0 : x1 + 1] - shift) <= 0.5)
+
+
+# ------------------------------------------------------------------------------------------
+# Limits: the largest blocks on 16-bit images with costs near their maximum
+
+
+@pytest.mark.parametrize(("cost", "bs"), [("census", 51), ("sad", 31)])
+def test_largest_block_sizes_do_not_overflow(cost: str, bs: int) -> None:
+    rng = np.random.default_rng(12)
+    right = rng.integers(0, 65536, (bs + 4, 70)).astype(np.uint16)
+    left = (65535 - right).astype(np.uint16)  # inverted: costs near the maximum everywhere
+    kw: dict[str, Any] = {"num_disparities": 6, "cost": cost, "block_size": bs,
+                          "uniqueness_ratio": 0, "lr_max_diff": None, "return_confidence": True}
+    assert_agree(sd.block_match(left, right, **kw), ref.block_match(left, right, **kw),
+                 subpixel=True)
+
+
+def test_block_size_limits_are_exported() -> None:
+    assert sd.matching.MAX_BLOCK_SIZE == {"census": 51, "sad": 31}
+    for cost, bs in sd.matching.MAX_BLOCK_SIZE.items():
+        assert bs * bs * sd.matching.PIXEL_COST_MAX[cost] < 0xFFFF
+        assert (bs + 2) ** 2 * sd.matching.PIXEL_COST_MAX[cost] >= 0xFFFF
+
+
+# ------------------------------------------------------------------------------------------
+# Instruction sets and threads
+
+
+@pytest.mark.parametrize("isa", SUPPORTED_ISAS)
+@pytest.mark.parametrize(
+    "cfg",
+    [
+        {"num_disparities": 37, "min_disparity": -3, "return_confidence": True},
+        {"num_disparities": 64, "cost": "sad", "subpixel": "parabola", "texture_threshold": 2},
+        {"num_disparities": 5, "speckle_window": 10, "return_confidence": True},
+        {"num_disparities": 160, "block_size": 13},
+        {"num_disparities": 270, "block_size": 5, "return_confidence": True},
+    ],
+    ids=config_id,
+)
+def test_each_isa_matches_the_scalar_path(isa: str, cfg: dict[str, Any]) -> None:
+    left, right, _ = slanted_pair((37, 301), d0=20.0, dx=0.03, dy=0.1, seed=13)
+    scalar = sd.StereoMatcher(isa="baseline", **cfg).compute(left, right)
+    simd = sd.StereoMatcher(isa=isa, **cfg).compute(left, right)
+    if isinstance(scalar, tuple):
+        for a, b in zip(scalar, simd, strict=True):
+            np.testing.assert_array_equal(a, b)
+    else:
+        np.testing.assert_array_equal(scalar, simd)
+
+
+@pytest.mark.parametrize("isa", SUPPORTED_ISAS)
+def test_each_isa_on_odd_shapes(isa: str) -> None:
+    for shape, nd, md in [((1, 1), 1, 0), ((5, 3), 2, -1), ((9, 65), 33, 0), ((4, 97), 64, -7)]:
+        left, right = shifted_pair(shape, nd // 2 + md, seed=14)
+        for cfg in ({"return_confidence": True}, {"cost": "sad", "return_confidence": True}):
+            kw = {"num_disparities": nd, "min_disparity": md, **cfg}
+            scalar = sd.StereoMatcher(isa="baseline", **kw).compute(left, right)
+            simd = sd.StereoMatcher(isa=isa, **kw).compute(left, right)
+            for a, b in zip(scalar, simd, strict=True):
+                np.testing.assert_array_equal(a, b)
+
+
+def test_unknown_isa_is_rejected() -> None:
+    with pytest.raises(ValueError, match="isa must be one of"):
+        sd.StereoMatcher(num_disparities=8, isa="sse9")
+
+
+@pytest.mark.parametrize("cfg", [{}, {"cost": "sad", "return_confidence": True, "block_size": 21}],
+                         ids=config_id)
+def test_thread_counts_give_identical_output(cfg: dict[str, Any]) -> None:
+    left, right, _ = slanted_pair((131, 90), d0=9.0, dx=0.02, dy=0.05, seed=15)
+    outs = [sd.block_match(left, right, num_disparities=24, threads=t, **cfg) for t in (1, 2, 3)]
+    for other in outs[1:]:
+        if isinstance(other, tuple):
+            for a, b in zip(outs[0], other, strict=True):
+                np.testing.assert_array_equal(a, b)
+        else:
+            np.testing.assert_array_equal(outs[0], other)
+
+
+def test_concurrent_calls_from_python_threads() -> None:
+    pairs = [slanted_pair((40, 80), d0=5.0 + i, dx=0.01, dy=0.0, seed=20 + i)[:2]
+             for i in range(6)]
+    kw: dict[str, Any] = {"num_disparities": 16, "threads": 2, "return_confidence": True}
+    serial = [sd.block_match(lft, rgt, **kw) for lft, rgt in pairs]
+    shared = sd.StereoMatcher(**kw)
+    barrier = threading.Barrier(4)
+
+    def work(i: int) -> tuple[Any, Any]:
+        if i < 4:
+            barrier.wait(timeout=60)
+        lft, rgt = pairs[i % len(pairs)]
+        return sd.block_match(lft, rgt, **kw), shared.compute(lft, rgt)
+
+    with ThreadPoolExecutor(max_workers=4) as pool:
+        results = list(pool.map(work, range(12)))
+    for i, (own, via_shared) in enumerate(results):
+        want = serial[i % len(pairs)]
+        for a, b, c in zip(want, own, via_shared, strict=True):
+            np.testing.assert_array_equal(a, b)
+            np.testing.assert_array_equal(a, c)
+
+
+# ------------------------------------------------------------------------------------------
+# StereoMatcher and the output format
+
+
+def test_matcher_reuses_its_buffers_across_sizes() -> None:
+    m = sd.StereoMatcher(num_disparities=12, return_confidence=True)
+    for shape, seed in [((30, 70), 30), ((12, 200), 31), ((30, 70), 32), ((5, 13), 33)]:
+        left, right = shifted_pair(shape, 4, seed=seed)
+        got = m.compute(left, right)
+        want = sd.block_match(left, right, num_disparities=12, return_confidence=True)
+        for a, b in zip(got, want, strict=True):
+            np.testing.assert_array_equal(a, b)
+
+
+def test_matcher_params_and_repr() -> None:
+    m = sd.StereoMatcher(num_disparities=32, block_size=7, lr_max_diff=None)
+    p = m.params
+    assert p["num_disparities"] == 32
+    assert p["block_size"] == 7
+    assert p["lr_max_diff"] is None
+    assert p["subpixel"] in ("parabola", "equiangular")
+    assert repr(m).startswith("StereoMatcher(num_disparities=32")
+    assert sd.StereoMatcher(num_disparities=4, subpixel=False).params["subpixel"] is False
+
+
+def test_inputs_are_not_modified_and_views_are_accepted() -> None:
+    left, right = shifted_pair((20, 80), 3, seed=34)
+    lc, rc = left.copy(), right.copy()
+    d1 = sd.block_match(left[:, ::2], right[:, ::2], num_disparities=6)  # non-contiguous
+    d2 = sd.block_match(np.ascontiguousarray(left[:, ::2]), np.ascontiguousarray(right[:, ::2]),
+                        num_disparities=6)
+    np.testing.assert_array_equal(d1, d2)
+    np.testing.assert_array_equal(left, lc)
+    np.testing.assert_array_equal(right, rc)
+
+
+def test_confidence_is_in_unit_interval_and_zero_on_holes() -> None:
+    left, right, _ = slanted_pair((30, 80), d0=5.0, dx=0.05, dy=0.0, seed=35)
+    d, c = sd.block_match(left, right, num_disparities=16, return_confidence=True)
+    assert c.dtype == np.float32
+    assert ((c >= 0) & (c <= 1)).all()
+    assert (c[np.isnan(d)] == 0).all()
+    # The uniqueness check is a threshold on the confidence.
+    d10 = sd.block_match(left, right, num_disparities=16, uniqueness_ratio=10)
+    d0, c0 = sd.block_match(left, right, num_disparities=16, uniqueness_ratio=0,
+                            return_confidence=True)
+    away = np.abs(c0.astype(np.float64) - 10 / 110) > 1e-6  # float32 rounding at the edge
+    np.testing.assert_array_equal(np.isfinite(d10)[away], (np.isfinite(d0) & (c0 > 10 / 110))[away])
+
+
+def test_to_opencv_disparity() -> None:
+    d = np.array([[0.0, 1.5, np.nan], [2.03125, 63.9375, -0.5]], dtype=np.float32)
+    out = sd.to_opencv_disparity(d)
+    assert out.dtype == np.int16
+    np.testing.assert_array_equal(out, [[0, 24, -16], [33, 1023, -8]])
+    out = sd.to_opencv_disparity(d, min_disparity=-4)
+    assert out[0, 2] == -80
+    # Round trip through the depth converter's OpenCV convention.
+    assert np.allclose(out[np.isfinite(d)] / 16, d[np.isfinite(d)], atol=1 / 32)
+
+
+# ------------------------------------------------------------------------------------------
+# Rejected input: one test per rule
+
+GOOD = shifted_pair((8, 20), 2, seed=40)
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "exc", "match"),
+    [
+        ({"num_disparities": 0}, ValueError,
+         r"num_disparities must be an integer in \[1, 4096\], got 0"),
+        ({"num_disparities": 4097}, ValueError,
+         r"num_disparities must be an integer in \[1, 4096\], got 4097"),
+        ({"num_disparities": 1.5}, TypeError, "num_disparities must be an integer, got float 1.5"),
+        ({"num_disparities": True}, TypeError, "num_disparities must be an integer, got bool"),
+        ({"num_disparities": None}, TypeError, "num_disparities must be an integer, got NoneType"),
+        ({"num_disparities": 8, "min_disparity": 40000}, ValueError,
+         r"min_disparity must be an integer in \[-32768, 32768\], got 40000"),
+        ({"num_disparities": 8, "min_disparity": 1.0}, TypeError,
+         "min_disparity must be an integer, got float"),
+        ({"num_disparities": 8, "block_size": 4}, ValueError,
+         r"block_size must be an odd integer in \[3, 51\] for cost='census' \(block costs are"
+         r" summed in 16 bits\), got 4"),
+        ({"num_disparities": 8, "block_size": 1}, ValueError,
+         "block_size must be an odd integer in .* got 1"),
+        ({"num_disparities": 8, "block_size": 53}, ValueError,
+         "block_size must be an odd integer in .* got 53"),
+        ({"num_disparities": 8, "block_size": 33, "cost": "sad"}, ValueError,
+         r"block_size must be an odd integer in \[3, 31\] for cost='sad'.* got 33"),
+        ({"num_disparities": 8, "block_size": 9.0}, TypeError,
+         "block_size must be an integer, got float"),
+        ({"num_disparities": 8, "cost": "ncc"}, ValueError,
+         "cost must be 'census' or 'sad', got 'ncc'"),
+        ({"num_disparities": 8, "cost": 1}, TypeError, "cost must be 'census' or 'sad', got int 1"),
+        ({"num_disparities": 8, "subpixel": "quadratic"}, ValueError,
+         "subpixel must be True, False, 'parabola' or 'equiangular', got 'quadratic'"),
+        ({"num_disparities": 8, "subpixel": 1}, TypeError,
+         "subpixel must be True, False, 'parabola' or 'equiangular', got int 1"),
+        ({"num_disparities": 8, "uniqueness_ratio": -1}, ValueError,
+         "uniqueness_ratio must be a finite number >= 0, got -1"),
+        ({"num_disparities": 8, "uniqueness_ratio": float("nan")}, ValueError,
+         "uniqueness_ratio must be a finite number >= 0, got nan"),
+        ({"num_disparities": 8, "uniqueness_ratio": "10"}, TypeError,
+         "uniqueness_ratio must be a real number, got str '10'"),
+        ({"num_disparities": 8, "texture_threshold": -0.5}, ValueError,
+         "texture_threshold must be a finite number >= 0, got -0.5"),
+        ({"num_disparities": 8, "texture_threshold": float("inf")}, ValueError,
+         "texture_threshold must be a finite number >= 0, got inf"),
+        ({"num_disparities": 8, "lr_max_diff": -1}, ValueError,
+         "lr_max_diff must be a finite number >= 0, got -1"),
+        ({"num_disparities": 8, "lr_max_diff": float("nan")}, ValueError,
+         "lr_max_diff must be a finite number >= 0, got nan"),
+        ({"num_disparities": 8, "lr_max_diff": "1"}, TypeError,
+         "lr_max_diff must be a real number, got str"),
+        ({"num_disparities": 8, "speckle_window": -1}, ValueError,
+         "speckle_window must be an integer >= 0, got -1"),
+        ({"num_disparities": 8, "speckle_window": 2.5}, TypeError,
+         "speckle_window must be an integer, got float 2.5"),
+        ({"num_disparities": 8, "speckle_range": -1.0}, ValueError,
+         "speckle_range must be a finite number >= 0, got -1.0"),
+        ({"num_disparities": 8, "speckle_range": float("nan")}, ValueError,
+         "speckle_range must be a finite number >= 0, got nan"),
+        ({"num_disparities": 8, "threads": -1}, ValueError,
+         "threads must be an integer >= 0, got -1"),
+        ({"num_disparities": 8, "threads": 1.5}, TypeError,
+         "threads must be an integer, got float 1.5"),
+        ({"num_disparities": 8, "return_confidence": "yes"}, TypeError,
+         "return_confidence must be a bool, got str 'yes'"),
+    ],
+)
+def test_rejected_parameters(kwargs: dict[str, Any], exc: type[Exception], match: str) -> None:
+    with pytest.raises(exc, match=match):
+        sd.block_match(*GOOD, **kwargs)
+    with pytest.raises(exc, match=match):
+        sd.StereoMatcher(**kwargs)
+    with pytest.raises(exc, match=match):
+        ref.block_match(*GOOD, **kwargs)
+
+
+L8 = np.zeros((6, 9), np.uint8)
+
+
+@pytest.mark.parametrize(
+    ("left", "right", "exc", "match"),
+    [
+        ([[1, 2], [3, 4]], L8, TypeError,
+         r"left must be a numpy.ndarray \(2-D uint8 or uint16 grey, or \(H, W, 3\) uint8 RGB\),"
+         r" got list"),
+        (L8, "right.png", TypeError, "right must be a numpy.ndarray .* got str"),
+        (L8.astype(np.float32), L8, TypeError,
+         r"left must be 2-D uint8 or uint16 grey, or \(H, W, 3\) uint8 RGB, got dtype float32"),
+        (L8, L8.astype(np.int16), TypeError, "right must be .* got dtype int16"),
+        (np.zeros((6, 9, 4), np.uint8), L8, ValueError,
+         r"left must be .* got shape \(6, 9, 4\) uint8"),
+        (np.zeros((6, 9, 3), np.uint16), L8, ValueError,
+         r"left must be .* got shape \(6, 9, 3\) uint16"),
+        (np.zeros(9, np.uint8), L8, ValueError, r"left must be .* got shape \(9,\)"),
+        (np.zeros((0, 9), np.uint8), np.zeros((0, 9), np.uint8), ValueError,
+         r"left must have at least one row and one column, got shape \(0, 9\)"),
+        (L8, np.zeros((6, 8), np.uint8), ValueError,
+         r"left and right must have the same shape, got \(6, 9\) and \(6, 8\)"),
+        (L8, L8.astype(np.uint16), TypeError,
+         "left and right must have the same dtype, got uint8 and uint16"),
+        (L8, np.zeros((6, 9, 3), np.uint8), ValueError,
+         r"left and right must have the same shape, got \(6, 9\) and \(6, 9, 3\)"),
+    ],
+)
+def test_rejected_images(left: Any, right: Any, exc: type[Exception], match: str) -> None:
+    with pytest.raises(exc, match=match):
+        sd.block_match(left, right, num_disparities=4)
+    with pytest.raises(exc, match=match):
+        ref.block_match(left, right, num_disparities=4)
+
+
+def test_rejected_image_too_wide_for_the_disparities() -> None:
+    wide = np.zeros((1, 300_000), np.uint8)
+    with pytest.raises(ValueError, match="image width times num_disparities must be below 2"):
+        sd.block_match(wide, wide, num_disparities=4096)
+
+
+def test_matcher_rejects_missing_and_unknown_parameters() -> None:
+    missing = "missing 1 required keyword-only argument: 'num_disparities'"
+    with pytest.raises(TypeError, match=missing):
+        sd.StereoMatcher(block_size=9)
+    with pytest.raises(TypeError, match="unexpected keyword argument 'blocksize'"):
+        sd.StereoMatcher(num_disparities=8, blocksize=9)
+
+
+def test_native_layer_rejects_bad_parameters_too() -> None:
+    # The C++ core validates on its own (for C++ users): a ValueError naming the rule.
+    from stereodepth import _core
+
+    args = [8, 0, 9, "census", "equiangular", 10.0, 0.0, 1.0, 0, 1.0, 1]
+    bad = list(args)
+    bad[2] = 4
+    with pytest.raises(ValueError, match="block_size must be an odd integer in"):
+        _core.BlockMatcher(*bad)
+    bad = list(args)
+    bad[0] = 0
+    with pytest.raises(ValueError, match="num_disparities must be an integer in"):
+        _core.BlockMatcher(*bad)
+    bad = list(args)
+    bad[3] = "ncc"
+    with pytest.raises(ValueError, match="cost must be 'census' or 'sad'"):
+        _core.BlockMatcher(*bad)
+    m = _core.BlockMatcher(*args)
+    out = np.empty((6, 9), np.float32)
+    with pytest.raises(ValueError, match="same shape"):
+        m.compute(L8, np.zeros((6, 8), np.uint8), out)
+    with pytest.raises(TypeError, match="disparity must have dtype float32"):
+        m.compute(L8, L8, np.empty((6, 9), np.float64))
+    with pytest.raises(ValueError, match="disparity must have the shape of the images"):
+        m.compute(L8, L8, np.empty((6, 8), np.float32))
+
+
+@pytest.mark.parametrize(
+    ("value", "kwargs", "exc", "match"),
+    [
+        (np.zeros((2, 2), np.int16), {}, TypeError,
+         "disparity must be a float array .* got dtype int16"),
+        (np.full((2, 2), 2048.0, np.float32), {}, ValueError,
+         r"disparity must lie in \(-2048, 2048\) px"),
+        (np.full((2, 2), np.inf, np.float32), {}, ValueError, "disparity must be finite or NaN"),
+        (np.zeros((2, 2), np.float32), {"min_disparity": 4000}, ValueError,
+         r"min_disparity must be in \[-2047, 2048\]"),
+        (np.zeros((2, 2), np.float32), {"min_disparity": 1.5}, TypeError,
+         "min_disparity must be an integer"),
+    ],
+)
+def test_to_opencv_disparity_rejects(value: Any, kwargs: dict[str, Any], exc: type[Exception],
+                                     match: str) -> None:
+    with pytest.raises(exc, match=match):
+        sd.to_opencv_disparity(value, **kwargs)

@@ -1,0 +1,49 @@
+"""``stereodepth calc --plot``: the two charts from the command line."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+from stereodepth.cli import main
+
+pytest.importorskip("matplotlib", reason="the plot extra is not installed")
+
+ARM = ["--baseline-mm", "150", "--focal-mm", "6", "--pixel-um", "2.8", "--width-px", "1280"]
+
+
+def test_plot_writes_the_charts_and_says_where(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    out = tmp_path / "charts.png"
+    assert main(["calc", *ARM, "--disparity-px", "250", "--subpixel-px", "0.25",
+                 "--max-disparity-px", "256", "--plot", str(out)]) == 0
+    assert out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    text = capsys.readouterr().out
+    assert "1.28571 m" in text
+    assert text.rstrip().endswith(f"charts written to {out}")
+
+
+def test_plot_with_json_keeps_stdout_json(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    out = tmp_path / "charts.svg"
+    assert main(["calc", *ARM, "--disparity-px", "35", "--json", "--plot", str(out)]) == 0
+    assert json.loads(capsys.readouterr().out)["disparity_px"] == 35.0
+    assert out.read_bytes().startswith(b"<?xml")
+
+
+@pytest.mark.parametrize(("name", "message"), [
+    ("charts.txt", "the chart file must end in .png, .svg, .pdf, got"),
+    ("missing/charts.png", "the chart file's folder must exist, got"),
+])
+def test_bad_plot_path_is_one_line_and_status_2(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], name: str, message: str
+) -> None:
+    assert main(["calc", *ARM, "--disparity-px", "250", "--plot", str(tmp_path / name)]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"stereodepth calc: error: {message}")
+    assert err.count("\n") == 1
+    assert list(tmp_path.iterdir()) == []

@@ -1,0 +1,178 @@
+"""stereodepth.dask: the kernels over dask arrays equal the numpy functions frame by frame, bit
+for bit, on any chunking, from memory-mapped stacks and on a real LocalCluster."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+
+import stereodepth
+from stereodepth import matching
+
+da = pytest.importorskip("dask.array")
+sdd = pytest.importorskip("stereodepth.dask")
+
+RIG = {"focal_px": 718.856, "baseline_m": 0.537166}
+N, H, W = 5, 36, 50
+
+
+def stack(seed: int = 0, *, rgb: bool = False) -> tuple[np.ndarray, np.ndarray]:
+    """N random-dot pairs, pair i shifted by 2 + i pixels."""
+    rng = np.random.default_rng(seed)
+    left = rng.integers(0, 256, (N, H, W, 3) if rgb else (N, H, W), dtype=np.uint8)
+    right = np.stack([np.roll(left[i], -(2 + i), axis=1) for i in range(N)])
+    return left, right
+
+
+def disparities(seed: int = 1) -> np.ndarray:
+    rng = np.random.default_rng(seed)
+    d = (rng.random((N, H, W)) * 60).astype(np.float32)
+    d[rng.random(d.shape) < 0.1] = np.nan
+    return d
+
+
+def assert_same(a: Any, b: np.ndarray) -> None:
+    np.testing.assert_array_equal(np.asarray(a), b, strict=True)
+
+
+@pytest.mark.parametrize("chunks", [(1, H, W), (2, 7, 13), (N, H, W)])
+@pytest.mark.parametrize("dtype", [np.float32, np.uint16])
+def test_disparity_to_depth_equals_numpy(chunks: tuple[int, ...], dtype: type) -> None:
+    d = disparities()
+    lazy = sdd.disparity_to_depth(da.from_array(d, chunks=chunks), **RIG, dtype=dtype,
+                                  max_depth_m=60.0)
+    assert lazy.dtype == dtype and lazy.chunks == da.from_array(d, chunks=chunks).chunks
+    want = stereodepth.disparity_to_depth(d, **RIG, dtype=dtype, max_depth_m=60.0)
+    assert_same(lazy.compute(scheduler="threads"), want)
+    assert_same(sdd.disparity_to_depth(da.from_array(d[0]), **RIG).compute(),
+                stereodepth.disparity_to_depth(d[0], **RIG))
+
+
+def test_a_stack_larger_than_one_chunk_from_memory_mapped_files(tmp_path: Path) -> None:
+    """The out-of-core path: read frame by frame from .npy files, write frame by frame."""
+    d = disparities(2)
+    np.save(tmp_path / "disparity.npy", d)
+    src = np.load(tmp_path / "disparity.npy", mmap_mode="r")
+    dst = np.lib.format.open_memmap(tmp_path / "depth.npy", mode="w+", dtype=np.float32,
+                                    shape=d.shape)
+    depth = sdd.disparity_to_depth(da.from_array(src, chunks=(1, H, W)), **RIG)
+    da.store(depth, dst, scheduler="threads")
+    dst.flush()
+    del dst
+    assert_same(np.load(tmp_path / "depth.npy"), stereodepth.disparity_to_depth(d, **RIG))
+
+
+@pytest.mark.parametrize("rgb", [False, True], ids=["grey", "rgb"])
+@pytest.mark.parametrize("chunks", ["frame", "split"])
+def test_block_match_equals_numpy_frame_by_frame(rgb: bool, chunks: str) -> None:
+    left, right = stack(3, rgb=rgb)
+    if chunks == "frame":
+        c: tuple[int, ...] = (1, H, W, 3) if rgb else (1, H, W)
+    else:  # frames split across chunks: rechunked to whole frames
+        c = (2, 11, 17, 3) if rgb else (2, 11, 17)
+    lazy = sdd.block_match(da.from_array(left, chunks=c), da.from_array(right, chunks=c),
+                           num_disparities=16, block_size=7)
+    assert lazy.shape == (N, H, W) and lazy.dtype == np.float32
+    assert all(len(ch) == 1 for ch in lazy.chunks[1:])
+    got = lazy.compute(scheduler="threads")
+    for i in range(N):
+        want = matching.block_match(left[i], right[i], num_disparities=16, block_size=7)
+        assert_same(got[i], want)
+        assert np.nanmedian(got[i]) == pytest.approx(2 + i, abs=0.05)
+    one = sdd.block_match(da.from_array(left[0]), da.from_array(right[0]), num_disparities=16,
+                          block_size=7)
+    assert_same(one.compute(), got[0])
+
+
+def test_reproject_equals_numpy() -> None:
+    d = disparities(4)
+    rig = {**RIG, "cx_px": 24.5, "cy_px": 17.0}
+    lazy = sdd.reproject(da.from_array(d, chunks=(2, 9, 50)), **rig)
+    assert lazy.shape == (N, H, W, 3) and lazy.chunks[1:] == ((H,), (W,), (3,))
+    assert_same(lazy.compute(scheduler="threads"), stereodepth.reproject(d, **rig))
+    assert_same(sdd.reproject(da.from_array(d[1]), **RIG).compute(),
+                stereodepth.reproject(d[1], **RIG))
+
+
+def test_the_whole_chain_is_lazy_and_checked_up_front() -> None:
+    left, right = stack(5)
+    calls: list[int] = []
+    lazy_left = da.from_array(left, chunks=(1, H, W)).map_blocks(
+        lambda b: calls.append(1) or b, dtype=np.uint8, meta=np.empty((0, 0, 0), np.uint8))
+    disparity = sdd.block_match(lazy_left, da.from_array(right, chunks=(1, H, W)),
+                                num_disparities=16)
+    depth = sdd.disparity_to_depth(disparity, **RIG)
+    assert calls == []  # nothing ran yet
+    got = depth.compute(scheduler="synchronous")
+    assert len(calls) == N
+    want = [stereodepth.disparity_to_depth(
+        matching.block_match(left[i], right[i], num_disparities=16), **RIG) for i in range(N)]
+    assert_same(got, np.stack(want))
+
+
+@pytest.mark.parametrize(
+    ("call", "exc", "message"),
+    [
+        (lambda: sdd.disparity_to_depth(np.ones((2, 2), np.float32), **RIG), TypeError,
+         "disparity must be a dask.array.Array .* got ndarray"),
+        (lambda: sdd.disparity_to_depth(da.ones((2, 2), dtype=np.float32), focal_px=1.0,
+                                        baseline_m=-1.0), ValueError,
+         "baseline_m must be a finite number > 0, got -1.0"),
+        (lambda: sdd.disparity_to_depth(da.ones((2, 2), dtype=np.uint8), **RIG), TypeError,
+         "disparity must have dtype float16"),
+        (lambda: sdd.disparity_to_depth(da.ones((2, 2), dtype=np.float32), **RIG, colour=1),
+         TypeError, "unexpected keyword argument 'colour'"),
+        (lambda: sdd.disparity_to_depth(da.ones((2, 2), dtype=np.float32), **RIG,
+                                        out=np.empty((2, 2), np.float32)),
+         TypeError, "out is not accepted for dask arrays"),
+        (lambda: sdd.block_match(da.ones((2, 8, 8), dtype=np.uint8),
+                                 da.ones((2, 8, 9), dtype=np.uint8), num_disparities=4),
+         ValueError, r"left and right must have the same shape, got \(2, 8, 8\) and \(2, 8, 9\)"),
+        (lambda: sdd.block_match(da.ones((8, 8), dtype=np.uint8),
+                                 da.ones((8, 8), dtype=np.uint16), num_disparities=4),
+         TypeError, "left and right must have the same dtype, got uint8 and uint16"),
+        (lambda: sdd.block_match(da.ones((8, 8), dtype=np.float32),
+                                 da.ones((8, 8), dtype=np.float32), num_disparities=4),
+         TypeError, "left must be uint8 or uint16 images, got dtype float32"),
+        (lambda: sdd.block_match(da.ones((2, 8, 8, 4), dtype=np.uint8),
+                                 da.ones((2, 8, 8, 4), dtype=np.uint8), num_disparities=4),
+         ValueError, r"left must have shape .* got \(2, 8, 8, 4\) uint8"),
+        (lambda: sdd.block_match(da.ones((8, 8), dtype=np.uint8), da.ones((8, 8), dtype=np.uint8)),
+         TypeError, "missing required keyword argument: 'num_disparities'"),
+        (lambda: sdd.block_match(da.ones((8, 8), dtype=np.uint8), da.ones((8, 8), dtype=np.uint8),
+                                 num_disparities=4, block_size=4),
+         ValueError, "block_size must be an odd integer"),
+        (lambda: sdd.block_match(da.ones((8, 8), dtype=np.uint8), da.ones((8, 8), dtype=np.uint8),
+                                 num_disparities=4, return_confidence=True),
+         TypeError, "return_confidence is not accepted for dask arrays"),
+        (lambda: sdd.reproject(da.ones((2, 2), dtype=np.float32), Q=np.eye(3)), ValueError,
+         r"Q must be a 4x4 matrix"),
+        (lambda: sdd.reproject(da.ones((2, 2, 2, 2), dtype=np.float32), **RIG), ValueError,
+         r"disparity must have shape \(H, W\) or \(N, H, W\), got \(2, 2, 2, 2\)"),
+    ],
+)
+def test_rejects_bad_input_before_computing(call: Any, exc: type, message: str) -> None:
+    with pytest.raises(exc, match=message):
+        call()
+
+
+@pytest.mark.cluster
+def test_on_a_local_cluster() -> None:
+    distributed = pytest.importorskip("distributed")
+    left, right = stack(6, rgb=True)
+    # dashboard_address: a free loopback port (None would still try 8787, and warn if taken)
+    with distributed.LocalCluster(n_workers=2, processes=True, threads_per_worker=1,
+                                  host="127.0.0.1", dashboard_address="127.0.0.1:0"
+                                  ) as cluster, distributed.Client(cluster) as client:
+        disparity = sdd.block_match(da.from_array(left, chunks=(1, H, W, 3)),
+                                    da.from_array(right, chunks=(1, H, W, 3)),
+                                    num_disparities=16)
+        depth = sdd.disparity_to_depth(disparity, **RIG, dtype=np.uint16)
+        got = client.compute(depth).result()
+    want = [stereodepth.disparity_to_depth(
+        matching.block_match(left[i], right[i], num_disparities=16), **RIG, dtype=np.uint16)
+        for i in range(N)]
+    assert_same(got, np.stack(want))

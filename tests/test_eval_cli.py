@@ -1,0 +1,711 @@
+"""``stereodepth eval``: scene discovery, disparity range, methods, scores, timing and output.
+
+The scores the command prints are checked against an independent run of the same matcher
+followed by :func:`stereodepth.metrics.evaluate`; synthetic random-dot scenes (written as real
+PNG files) check that the pair is fed the right way round.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import re
+import statistics
+import sys
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+
+import stereodepth
+from stereodepth import cli
+from stereodepth.evaluation import find_scenes, num_disparities_for
+from stereodepth.metrics import evaluate
+
+PIL_Image = pytest.importorskip("PIL.Image")
+
+
+# --------------------------------------------------------------------------------------------
+# Helpers
+
+
+def random_dot_pair(
+    height: int, width: int, bands: list[int], *, rgb: bool, seed: int
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A random-dot stereogram: horizontal bands of rows, each a plane at one disparity.
+
+    left(x) = right(x - d); the ground truth is NaN in the left d columns (no match inside
+    the right image)."""
+    rng = np.random.default_rng(seed)
+    dmax = max(bands)
+    shape = (height, width + dmax, 3) if rgb else (height, width + dmax)
+    texture = rng.integers(0, 256, shape, dtype=np.uint8)
+    left = np.ascontiguousarray(texture[:, :width])
+    right = np.empty_like(left)
+    gt = np.full((height, width), np.nan, dtype=np.float32)
+    edges = np.linspace(0, height, len(bands) + 1).astype(int)
+    for d, y0, y1 in zip(bands, edges[:-1], edges[1:], strict=True):
+        right[y0:y1] = texture[y0:y1, d:d + width]
+        gt[y0:y1, d:] = d
+    return left, right, gt
+
+
+def write_png(path: Path, image: np.ndarray) -> None:
+    PIL_Image.fromarray(image).save(path)
+
+
+def write_scene(
+    folder: Path, left: np.ndarray, right: np.ndarray, gt: np.ndarray,
+    mask: np.ndarray | None = None, meta: dict[str, Any] | None = None,
+) -> Path:
+    folder.mkdir(parents=True)
+    write_png(folder / "left.png", left)
+    write_png(folder / "right.png", right)
+    np.save(folder / "disp_gt.npy", gt)
+    if mask is not None:
+        np.save(folder / "mask_nonocc.npy", mask)
+    if meta is not None:
+        (folder / "meta.json").write_text(json.dumps(meta))
+    return folder
+
+
+def write_pfm(path: Path, image: np.ndarray) -> None:
+    """Little-endian single-channel PFM, bottom row first (written here, not by the package)."""
+    h, w = image.shape
+    with open(path, "wb") as f:
+        f.write(f"Pf\n{w} {h}\n-1.0\n".encode())
+        f.write(image[::-1].astype("<f4").tobytes())
+
+
+@pytest.fixture
+def scenes_dir(tmp_path: Path) -> Path:
+    """Two scenes: RGB with a mask and meta.json; grey with neither."""
+    root = tmp_path / "scenes"
+    left, right, gt = random_dot_pair(64, 128, [5, 11], rgb=True, seed=1)
+    mask = np.ones(gt.shape, dtype=bool)
+    mask[:, -10:] = False
+    write_scene(root / "rds-a", left, right, gt, mask, {"max_disp": 11, "scene": "a"})
+    left, right, gt = random_dot_pair(64, 150, [20], rgb=False, seed=2)
+    write_scene(root / "rds-b", left, right, gt)
+    (root / "not-a-scene").mkdir()
+    (root / "README.md").write_text("not a scene")
+    return root
+
+
+def load(folder: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray | None]:
+    with PIL_Image.open(folder / "left.png") as im:
+        left = np.asarray(im)
+    with PIL_Image.open(folder / "right.png") as im:
+        right = np.asarray(im)
+    mask_path = folder / "mask_nonocc.npy"
+    mask = np.load(mask_path) if mask_path.exists() else None
+    return left, right, np.load(folder / "disp_gt.npy"), mask
+
+
+def run_eval(capsys: pytest.CaptureFixture[str], *argv: str) -> tuple[int, str, str]:
+    status = cli.main(["eval", *argv])
+    out, err = capsys.readouterr()
+    return status, out, err
+
+
+def run_json(capsys: pytest.CaptureFixture[str], *argv: str) -> dict[str, Any]:
+    status, out, err = run_eval(capsys, *argv, "--json")
+    assert status == 0, err
+    report: dict[str, Any] = json.loads(out)
+    return report
+
+
+def rows_of(report: dict[str, Any], scene: str, method: str) -> list[dict[str, Any]]:
+    return [r for r in report["results"] if r["scene"] == scene and r["method"] == method]
+
+
+def assert_same_metrics(got: dict[str, Any], want: dict[str, Any]) -> None:
+    assert set(got) == set(want)
+    for key, value in want.items():
+        if isinstance(value, float) and math.isnan(value):
+            assert got[key] is None, key
+        else:
+            assert got[key] == pytest.approx(value, rel=1e-12, abs=0), key
+
+
+def opencv_disparity(cv2: Any, kind: str, left: np.ndarray, right: np.ndarray,
+                     num_disparities: int, block_size: int, **setters: Any) -> np.ndarray:
+    """OpenCV's matcher as the eval documentation describes it, written out independently."""
+    if kind == "bm":
+        m = cv2.StereoBM_create(numDisparities=num_disparities, blockSize=block_size)
+    else:
+        m = cv2.StereoSGBM_create(minDisparity=0, numDisparities=num_disparities,
+                                  blockSize=block_size, P1=8 * block_size**2,
+                                  P2=32 * block_size**2)
+    for name, value in setters.items():
+        getattr(m, name)(value)
+    if left.ndim == 3:
+        left = cv2.cvtColor(left, cv2.COLOR_RGB2GRAY)
+        right = cv2.cvtColor(right, cv2.COLOR_RGB2GRAY)
+    raw = m.compute(left, right)
+    d = raw.astype(np.float64) / 16.0
+    d[raw < 0] = np.nan
+    return d.astype(np.float32)
+
+
+def native_block_match() -> Any:
+    """stereodepth.block_match when it is exported and its native kernel is built."""
+    fn = getattr(stereodepth, "block_match", None)
+    if fn is None or not hasattr(stereodepth._core, "BlockMatcher"):
+        pytest.skip("stereodepth.block_match is not available in this build yet")
+    return fn
+
+
+# --------------------------------------------------------------------------------------------
+# Scenes and the disparity range
+
+
+def test_find_scenes(scenes_dir: Path) -> None:
+    found = find_scenes(scenes_dir)
+    assert [s.name for s in found] == ["rds-a", "rds-b"]
+    a, b = found
+    assert a.mask_path == scenes_dir / "rds-a" / "mask_nonocc.npy"
+    assert a.max_disparity_px == 11
+    assert b.mask_path is None
+    assert b.max_disparity_px is None
+    assert [s.name for s in find_scenes(scenes_dir, ["*-b"])] == ["rds-b"]
+    assert [s.name for s in find_scenes(scenes_dir / "rds-a")] == ["rds-a"]  # DIR is a scene
+
+
+def test_num_disparities_for_against_definition() -> None:
+    for tenth in range(0, 3000, 7):
+        d = tenth / 10
+        n = num_disparities_for(d)
+        # the smallest multiple of 16 whose range 0 .. n-1 holds every integer up to ceil(d)
+        smallest = next(k for k in range(16, 1000, 16) if k - 1 >= math.ceil(d))
+        assert n == smallest, d
+    assert [num_disparities_for(v) for v in (0, 14, 15, 16, 55, 64, 148)] == [
+        16, 16, 16, 32, 64, 80, 160]
+
+
+@pytest.mark.parametrize("bad", [-1, math.nan, math.inf])
+def test_num_disparities_for_rejects(bad: float) -> None:
+    with pytest.raises(ValueError, match=r"^max_disparity_px must be a finite number >= 0"):
+        num_disparities_for(bad)
+
+
+def test_middlebury_layout(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    cv2 = pytest.importorskip("cv2")
+    left, right, gt = random_dot_pair(40, 100, [7, 13], rgb=True, seed=5)
+    folder = tmp_path / "Pair-perfect"
+    folder.mkdir()
+    write_png(folder / "im0.png", left)
+    write_png(folder / "im1.png", right)
+    pfm_gt = np.where(np.isnan(gt), np.inf, gt).astype(np.float32)  # PFM: inf = unknown
+    write_pfm(folder / "disp0GT.pfm", pfm_gt)
+    mask_png = np.full(gt.shape, 255, dtype=np.uint8)
+    mask_png[:5] = 128  # occluded in MiddEval3's masks
+    write_png(folder / "mask0nocc.png", mask_png)
+    (folder / "calib.txt").write_text(
+        "cam0=[1000 0 50; 0 1000 20; 0 0 1]\ncam1=[1000 0 50; 0 1000 20; 0 0 1]\n"
+        "doffs=0\nbaseline=100\nwidth=100\nheight=40\nndisp=40\n"
+    )
+    (scene,) = find_scenes(tmp_path)
+    assert (scene.name, scene.max_disparity_px) == ("Pair-perfect", 39)
+    report = run_json(capsys, str(tmp_path), "--method", "opencv-bm", "--repeat", "1")
+    (row,) = report["results"]
+    assert row["num_disparities"] == 48
+    assert row["region"] == "nonocc"
+    want = evaluate(opencv_disparity(cv2, "bm", left, right, 48, 9), gt, mask_png == 255)
+    assert_same_metrics(row["metrics"], want.as_dict())
+    assert row["metrics"]["evaluated"] == int((np.isfinite(gt) & (mask_png == 255)).sum())
+
+
+# --------------------------------------------------------------------------------------------
+# OpenCV methods, checked against an independent run
+
+
+def test_opencv_bm_matches_direct_run(scenes_dir: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    cv2 = pytest.importorskip("cv2")
+    report = run_json(capsys, str(scenes_dir), "--method", "opencv-bm:9,15", "--repeat", "2",
+                      "--threads", "1")
+    assert report["threads"] == 1
+    assert report["repeat"] == 2
+    for name, ndisp in (("rds-a", 16), ("rds-b", 32)):
+        left, right, gt, mask = load(scenes_dir / name)
+        rows = rows_of(report, name, "opencv-bm")
+        assert [(r["block_size"], r["best"]) for r in rows[:2]] == [(9, False), (15, False)]
+        for row in rows[:2]:
+            assert row["num_disparities"] == ndisp
+            assert row["region"] == ("nonocc" if mask is not None else "all")
+            assert (row["width"], row["height"]) == (gt.shape[1], gt.shape[0])
+            d = opencv_disparity(cv2, "bm", left, right, ndisp, row["block_size"])
+            assert_same_metrics(row["metrics"], evaluate(d, gt, mask).as_dict())
+            # random dots: the pair is fed the right way round, the x16 decoding is right
+            assert row["metrics"]["bad_2_est"] < 0.05  # (errors: where the planes meet)
+            assert row["metrics"]["density"] > 0.5  # holes: borders of a small image
+        best = rows[2]
+        assert best["best"] is True
+        expected = min(rows[:2], key=lambda r: (r["metrics"]["bad_2"], r["block_size"]))
+        assert best["block_size"] == expected["block_size"]
+        assert best["metrics"] == expected["metrics"]
+    assert len(report["results"]) == 6
+
+
+def test_opencv_sgbm_matches_direct_run(scenes_dir: Path,
+                                        capsys: pytest.CaptureFixture[str]) -> None:
+    cv2 = pytest.importorskip("cv2")
+    report = run_json(capsys, str(scenes_dir), "--method", "opencv-sgbm", "--repeat", "1",
+                      "--scene", "rds-a")
+    (row,) = report["results"]
+    assert (row["scene"], row["block_size"], row["num_disparities"]) == ("rds-a", 5, 16)
+    left, right, gt, mask = load(scenes_dir / "rds-a")
+    d = opencv_disparity(cv2, "sgbm", left, right, 16, 5)
+    assert_same_metrics(row["metrics"], evaluate(d, gt, mask).as_dict())
+    assert row["metrics"]["bad_2_est"] < 0.05
+
+
+def test_opencv_option_is_applied(scenes_dir: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    cv2 = pytest.importorskip("cv2")
+    report = run_json(capsys, str(scenes_dir / "rds-a"), "--method", "opencv-bm:11",
+                      "--opencv-option", "uniqueness_ratio=60", "--opencv-option",
+                      "texture_threshold=0", "--repeat", "1")
+    (row,) = report["results"]
+    left, right, gt, mask = load(scenes_dir / "rds-a")
+    d = opencv_disparity(cv2, "bm", left, right, 16, 11, setUniquenessRatio=60,
+                         setTextureThreshold=0)
+    plain = opencv_disparity(cv2, "bm", left, right, 16, 11)
+    assert np.isnan(d).sum() != np.isnan(plain).sum()  # the option changes the result
+    assert_same_metrics(row["metrics"], evaluate(d, gt, mask).as_dict())
+
+
+def test_block_size_option_and_num_disparities_override(
+    scenes_dir: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    pytest.importorskip("cv2")
+    report = run_json(capsys, str(scenes_dir), "--method", "opencv-bm", "opencv-sgbm:3",
+                      "--block-size", "7", "--num-disparities", "48", "--repeat", "1")
+    got = [(r["scene"], r["method"], r["block_size"], r["num_disparities"])
+           for r in report["results"]]
+    assert got == [
+        ("rds-a", "opencv-bm", 7, 48), ("rds-a", "opencv-sgbm", 3, 48),
+        ("rds-b", "opencv-bm", 7, 48), ("rds-b", "opencv-sgbm", 3, 48),
+    ]
+
+
+def test_opencv_threads_are_restored(scenes_dir: Path,
+                                     capsys: pytest.CaptureFixture[str]) -> None:
+    cv2 = pytest.importorskip("cv2")
+    before = cv2.getNumThreads()
+    run_json(capsys, str(scenes_dir / "rds-b"), "--method", "opencv-bm", "--threads", "1",
+             "--repeat", "1")
+    assert cv2.getNumThreads() == before
+
+
+def test_timing_fields(scenes_dir: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    pytest.importorskip("cv2")
+    report = run_json(capsys, str(scenes_dir), "--method", "opencv-bm", "--repeat", "3")
+    for row in report["results"]:
+        assert len(row["times_s"]) == 3
+        assert all(t > 0 for t in row["times_s"])
+        assert row["time_s"] == statistics.median(row["times_s"])
+        work = row["width"] * row["height"] * row["num_disparities"]
+        assert row["ns_per_px_disparity"] == pytest.approx(row["time_s"] * 1e9 / work)
+    (mean,) = report["means"]
+    results = report["results"]
+    assert mean["scenes"] == 2
+    assert mean["time_s"] == pytest.approx(sum(r["time_s"] for r in results) / 2)
+    assert mean["ns_per_px_disparity"] == pytest.approx(
+        sum(r["time_s"] for r in results) * 1e9
+        / sum(r["width"] * r["height"] * r["num_disparities"] for r in results))
+    for key in ("bad_2", "density", "avgerr"):
+        assert mean["metrics"][key] == pytest.approx(
+            sum(r["metrics"][key] for r in results) / 2)
+
+
+def test_no_mask_scores_all_pixels(scenes_dir: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    pytest.importorskip("cv2")
+    report = run_json(capsys, str(scenes_dir / "rds-a"), "--method", "opencv-bm",
+                      "--no-mask", "--repeat", "1")
+    (row,) = report["results"]
+    _, _, gt, _ = load(scenes_dir / "rds-a")
+    assert row["region"] == "all"
+    assert row["metrics"]["evaluated"] == int(np.isfinite(gt).sum())
+
+
+# --------------------------------------------------------------------------------------------
+# Tables
+
+
+def test_markdown_table(scenes_dir: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    pytest.importorskip("cv2")
+    status, out, _ = run_eval(capsys, str(scenes_dir), "--method", "opencv-bm:9,15",
+                              "opencv-sgbm", "--repeat", "1", "--markdown")
+    assert status == 0
+    lines = out.strip().splitlines()
+    # header, separator, 2 scenes x (bm 9, bm 15, bm best, sgbm 5), 4 mean rows
+    assert len(lines) == 2 + 8 + 4
+    cells = [[c.strip() for c in line.strip("|").split("|")] for line in lines]
+    assert all(len(c) == len(cells[0]) for c in cells)
+    assert cells[0][:3] == ["scene", "method", "block"]
+    assert cells[1][:6] == ["---", "---", "---", "---:", "---", "---:"]  # numbers to the right
+    assert "bad-2 %" in cells[0]
+    assert "ns/(px·d)" in cells[0]
+    assert [c[2] for c in cells[2:6]] == ["9", "15", cells[4][2], "5"]
+    assert cells[4][2] in ("best=9", "best=15")
+    assert [(c[0], c[1], c[2]) for c in cells[-4:]] == [
+        ("mean", "opencv-bm", "9"), ("mean", "opencv-bm", "15"), ("mean", "opencv-bm", "best"),
+        ("mean", "opencv-sgbm", "5")]
+
+
+def test_text_table_matches_json(scenes_dir: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    pytest.importorskip("cv2")
+    status, out, _ = run_eval(capsys, str(scenes_dir), "--method", "opencv-bm",
+                              "--repeat", "1")
+    assert status == 0
+    report = run_json(capsys, str(scenes_dir), "--method", "opencv-bm", "--repeat", "1")
+    lines = out.splitlines()
+    assert "threads" in lines[0]
+    i = next(i for i, line in enumerate(lines) if line.startswith("scene"))
+    spans = [m.span() for m in re.finditer(r"-+", lines[i + 1])]  # the dashes under each title
+
+    def cells(line: str) -> list[str]:
+        return [line[a:b].strip() for a, b in spans]
+
+    header = cells(lines[i])
+    table = [cells(line) for line in lines[i + 2:] if line.strip()]
+    assert [t[0] for t in table] == ["rds-a", "rds-b", "mean"]
+    assert [t[4] for t in table] == ["nonocc", "all", ""]
+    for t, row in zip(table, [*report["results"], report["means"][0]], strict=True):
+        for title, key in (("bad-2 %", "bad_2"), ("density %", "density"),
+                           ("bad-2(est) %", "bad_2_est")):
+            want = 100 * row["metrics"][key]
+            assert float(t[header.index(title)]) == pytest.approx(want, abs=0.0051)
+        assert float(t[header.index("avgerr px")]) == pytest.approx(
+            row["metrics"]["avgerr"], abs=0.0051)
+
+
+# --------------------------------------------------------------------------------------------
+# Without OpenCV, and the stereodepth method through a stand-in matcher
+
+
+def test_opencv_missing_is_reported(scenes_dir: Path, capsys: pytest.CaptureFixture[str],
+                                    monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setitem(sys.modules, "cv2", None)  # import cv2 raises ImportError
+    status, out, err = run_eval(capsys, str(scenes_dir), "--method", "opencv-bm", "opencv-sgbm")
+    assert status == 2
+    assert out == ""
+    assert "opencv-bm, opencv-sgbm need(s) OpenCV, which is not installed" in err
+    assert "pip install opencv-python-headless" in err
+
+
+def fake_matcher(calls: list[dict[str, Any]]) -> Any:
+    """Stands in for stereodepth.block_match: returns the ground truth of the scene + 0.75."""
+
+    def block_match(left: np.ndarray, right: np.ndarray, **kwargs: Any) -> np.ndarray:
+        calls.append({"shape": left.shape, "dtype": left.dtype, **kwargs})
+        h, w = left.shape[:2]
+        d = np.full((h, w), 0.75, dtype=np.float32)
+        d[:, : w // 4] = np.nan
+        return d
+
+    return block_match
+
+
+def test_stereodepth_method_passes_options(
+    scenes_dir: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    calls: list[dict[str, Any]] = []
+    monkeypatch.setattr(stereodepth, "block_match", fake_matcher(calls), raising=False)
+    report = run_json(capsys, str(scenes_dir), "--repeat", "2", "--threads", "1",
+                      "--block-size", "7", "11", "--option", "cost=sad", "--option",
+                      "subpixel=false", "--option", "uniqueness_ratio=12.5", "--option",
+                      "lr_max_diff=none", "--option", "speckle_window=50")
+    # 2 scenes x 2 block sizes x (1 warm-up + 2 timed)
+    assert len(calls) == 12
+    first = calls[0]
+    assert first["shape"] == (64, 128, 3)  # RGB passed straight to the matcher
+    assert first["dtype"] == np.uint8
+    assert {k: first[k] for k in ("num_disparities", "min_disparity", "threads", "block_size",
+                                  "cost", "subpixel", "uniqueness_ratio", "lr_max_diff",
+                                  "speckle_window")} == {
+        "num_disparities": 16, "min_disparity": 0, "threads": 1, "block_size": 7,
+        "cost": "sad", "subpixel": False, "uniqueness_ratio": 12.5, "lr_max_diff": None,
+        "speckle_window": 50}
+    assert [c["block_size"] for c in calls] == [7] * 3 + [11] * 3 + [7] * 3 + [11] * 3
+    assert calls[6]["num_disparities"] == 32
+    for name in ("rds-a", "rds-b"):
+        _, _, gt, mask = load(scenes_dir / name)
+        d = np.full(gt.shape, 0.75, dtype=np.float32)
+        d[:, : gt.shape[1] // 4] = np.nan
+        for row in rows_of(report, name, "stereodepth"):
+            assert_same_metrics(row["metrics"], evaluate(d, gt, mask).as_dict())
+
+
+def test_stereodepth_default_block_size_is_not_passed(
+    scenes_dir: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    calls: list[dict[str, Any]] = []
+    monkeypatch.setattr(stereodepth, "block_match", fake_matcher(calls), raising=False)
+    report = run_json(capsys, str(scenes_dir / "rds-b"), "--repeat", "1")
+    assert "block_size" not in calls[0]
+    assert report["results"][0]["block_size"] is None
+    assert report["threads"] >= 1
+    assert calls[0]["threads"] == report["threads"]
+
+
+def test_stereodepth_default_block_size_is_named(
+    scenes_dir: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    calls: list[dict[str, Any]] = []
+    fake = fake_matcher(calls)
+
+    def block_match(left: np.ndarray, right: np.ndarray, *, num_disparities: int,
+                    block_size: int = 13, **kwargs: Any) -> np.ndarray:
+        return fake(left, right, num_disparities=num_disparities, block_size=block_size,
+                    **kwargs)
+
+    monkeypatch.setattr(stereodepth, "block_match", block_match, raising=False)
+    status, out, _ = run_eval(capsys, str(scenes_dir / "rds-b"), "--repeat", "1", "--markdown")
+    assert status == 0
+    assert calls[0]["block_size"] == 13
+    assert "| rds-b | stereodepth | 13 | 32 | all |" in out
+
+
+def test_variants_are_grouped_by_method(scenes_dir: Path,
+                                        capsys: pytest.CaptureFixture[str]) -> None:
+    pytest.importorskip("cv2")
+    report = run_json(capsys, str(scenes_dir / "rds-b"), "--method", "opencv-bm:9",
+                      "opencv-sgbm", "opencv-bm:15,9", "--repeat", "1")
+    got = [(r["method"], r["block_size"], r["best"]) for r in report["results"]]
+    best = min(report["results"][:2], key=lambda r: (r["metrics"]["bad_2"], r["block_size"]))
+    assert got == [("opencv-bm", 9, False), ("opencv-bm", 15, False),
+                   ("opencv-bm", best["block_size"], True), ("opencv-sgbm", 5, False)]
+
+
+def test_opencv_missing_skips_only_opencv(
+    scenes_dir: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    monkeypatch.setitem(sys.modules, "cv2", None)
+    monkeypatch.setattr(stereodepth, "block_match", fake_matcher([]), raising=False)
+    status, out, err = run_eval(capsys, str(scenes_dir), "--method", "stereodepth", "opencv-bm",
+                                "--repeat", "1", "--markdown")
+    assert status == 0
+    assert "skipped opencv-bm: OpenCV is not installed" in err
+    assert "stereodepth" in out
+    assert "opencv" not in out
+
+
+def test_stereodepth_missing_is_reported(
+    scenes_dir: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    monkeypatch.delattr(stereodepth, "block_match", raising=False)
+    status, _, err = run_eval(capsys, str(scenes_dir), "--method", "stereodepth")
+    assert status == 2
+    assert "method stereodepth needs stereodepth.block_match" in err
+
+
+def test_matcher_errors_name_the_scene(
+    scenes_dir: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    def failing(left: np.ndarray, right: np.ndarray, **kwargs: Any) -> np.ndarray:
+        raise ValueError(f"block_size must be an odd integer >= 3, got {kwargs['block_size']}")
+
+    monkeypatch.setattr(stereodepth, "block_match", failing, raising=False)
+    status, _, err = run_eval(capsys, str(scenes_dir), "--block-size", "4")
+    assert status == 2
+    assert "scene rds-a: stereodepth: block_size must be an odd integer >= 3, got 4" in err
+
+
+# --------------------------------------------------------------------------------------------
+# The real matcher (runs once stereodepth.block_match is built)
+
+
+def test_stereodepth_matches_direct_run(scenes_dir: Path,
+                                        capsys: pytest.CaptureFixture[str]) -> None:
+    block_match = native_block_match()
+    report = run_json(capsys, str(scenes_dir), "--repeat", "1", "--threads", "2")
+    for name, ndisp in (("rds-a", 16), ("rds-b", 32)):
+        left, right, gt, mask = load(scenes_dir / name)
+        (row,) = rows_of(report, name, "stereodepth")
+        assert row["num_disparities"] == ndisp
+        d = block_match(left, right, num_disparities=ndisp, min_disparity=0, threads=2)
+        assert_same_metrics(row["metrics"], evaluate(d, gt, mask).as_dict())
+        # random dots: fed the right way round
+        assert row["metrics"]["bad_2_est"] < 0.05
+        assert row["metrics"]["density"] > 0.5
+
+
+# --------------------------------------------------------------------------------------------
+# The shared scenes (a small subset, so that it stays quick)
+
+
+@pytest.mark.data
+def test_shared_scene_opencv(stereo_data_dir: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    cv2 = pytest.importorskip("cv2")
+    report = run_json(capsys, str(stereo_data_dir), "--scene", "mb2001-tsukuba", "--method",
+                      "opencv-bm:9,15", "opencv-sgbm", "--repeat", "1", "--threads", "2")
+    folder = stereo_data_dir / "mb2001-tsukuba"
+    meta = json.loads((folder / "meta.json").read_text())
+    left, right = (stereodepth.io.read_image(folder / n) for n in ("left.png", "right.png"))
+    gt, mask = np.load(folder / "disp_gt.npy"), np.load(folder / "mask_nonocc.npy")
+    ndisp = 16 * math.ceil((meta["max_disp"] + 1) / 16)
+    rows = report["results"]
+    assert [(r["method"], r["block_size"], r["best"]) for r in rows][:2] == [
+        ("opencv-bm", 9, False), ("opencv-bm", 15, False)]
+    for row in rows:
+        assert (row["num_disparities"], row["region"]) == (ndisp, "nonocc")
+        kind = "bm" if row["method"] == "opencv-bm" else "sgbm"
+        d = opencv_disparity(cv2, kind, left, right, ndisp, row["block_size"])
+        assert_same_metrics(row["metrics"], evaluate(d, gt, mask).as_dict())
+    sgbm = rows_of(report, "mb2001-tsukuba", "opencv-sgbm")[0]["metrics"]
+    assert sgbm["bad_2"] < 0.10  # SGBM is known to get ~5 % on Tsukuba
+
+
+@pytest.mark.data
+def test_shared_scene_stereodepth(stereo_data_dir: Path,
+                                  capsys: pytest.CaptureFixture[str]) -> None:
+    block_match = native_block_match()
+    report = run_json(capsys, str(stereo_data_dir), "--scene", "mb2001-tsukuba",
+                      "--scene", "mb2003-cones", "--repeat", "1", "--threads", "2")
+    assert [r["scene"] for r in report["results"]] == ["mb2001-tsukuba", "mb2003-cones"]
+    for row in report["results"]:
+        folder = stereo_data_dir / row["scene"]
+        left, right = (stereodepth.io.read_image(folder / n) for n in ("left.png", "right.png"))
+        gt, mask = np.load(folder / "disp_gt.npy"), np.load(folder / "mask_nonocc.npy")
+        d = block_match(left, right, num_disparities=row["num_disparities"], threads=2)
+        assert_same_metrics(row["metrics"], evaluate(d, gt, mask).as_dict())
+        assert row["metrics"]["bad_4"] < 0.5  # a working matcher, not noise
+
+
+# --------------------------------------------------------------------------------------------
+# Rejected input: one test each
+
+
+@pytest.mark.parametrize(
+    ("argv", "message"),
+    [
+        (["--repeat", "0"], "--repeat must be an integer >= 1, got 0"),
+        (["--threads", "-1"], "--threads must be an integer >= 0 (0: every core), got -1"),
+        (["--num-disparities", "20"],
+         "--num-disparities must be a positive multiple of 16, got 20"),
+        (["--method", "opencv-bm:4"],
+         "block size of opencv-bm must be an odd integer in 5..255, got 4"),
+        (["--method", "opencv-sgbm:6"],
+         "block size of opencv-sgbm must be an odd integer >= 1, got 6"),
+        (["--option", "threads=3"], "--option threads: use --threads"),
+        (["--option", "num_disparities=64"], "--option num_disparities: set per scene"),
+        (["--method", "opencv-bm", "--option", "cost=sad"],
+         "--option is for stereodepth.block_match: add --method stereodepth"),
+        (["--scene", "nothing*"], "--scene nothing* matches no scene in"),
+    ],
+)
+def test_rejected_arguments(scenes_dir: Path, capsys: pytest.CaptureFixture[str],
+                            monkeypatch: pytest.MonkeyPatch, argv: list[str],
+                            message: str) -> None:
+    monkeypatch.setattr(stereodepth, "block_match", fake_matcher([]), raising=False)
+    status, out, err = run_eval(capsys, str(scenes_dir), *argv)
+    assert status == 2
+    assert out == ""
+    assert err.startswith("stereodepth eval: error: ")
+    assert message in err
+
+
+def test_rejects_unknown_opencv_option(scenes_dir: Path,
+                                       capsys: pytest.CaptureFixture[str]) -> None:
+    pytest.importorskip("cv2")
+    status, _, err = run_eval(capsys, str(scenes_dir), "--method", "opencv-bm",
+                              "--opencv-option", "nonsense_knob=1")
+    assert status == 2
+    assert "--opencv-option nonsense_knob: no selected OpenCV matcher has setNonsenseKnob()" in err
+
+
+def test_rejects_opencv_option_value(scenes_dir: Path,
+                                     capsys: pytest.CaptureFixture[str]) -> None:
+    pytest.importorskip("cv2")
+    status, _, err = run_eval(capsys, str(scenes_dir), "--method", "opencv-bm",
+                              "--opencv-option", "uniqueness_ratio=abc")
+    assert status == 2
+    assert "--opencv-option uniqueness_ratio='abc' rejected by opencv-bm" in err
+
+
+@pytest.mark.parametrize(
+    "argv",
+    [
+        ["--method", "opencv-xyz"],
+        ["--method", "opencv-bm:9,x"],
+        ["--option", "no-equals-sign"],
+        ["--json", "--markdown"],
+        ["--best-by", "speed"],
+    ],
+)
+def test_rejected_by_the_parser(scenes_dir: Path, capsys: pytest.CaptureFixture[str],
+                                argv: list[str]) -> None:
+    with pytest.raises(SystemExit) as info:
+        cli.main(["eval", str(scenes_dir), *argv])
+    assert info.value.code == 2
+    assert "stereodepth eval: error:" in capsys.readouterr().err
+
+
+def test_rejects_missing_dir(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    status, _, err = run_eval(capsys, str(tmp_path / "nowhere"))
+    assert status == 2
+    assert "DIR must be a folder of scenes, got" in err
+    assert "nowhere" in err
+
+
+def test_rejects_dir_without_scenes(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    (tmp_path / "empty").mkdir()
+    status, _, err = run_eval(capsys, str(tmp_path))
+    assert status == 2
+    assert "no scene in" in err
+    assert "left.png, right.png and disp_gt.npy" in err
+
+
+def test_rejects_bad_meta(scenes_dir: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    (scenes_dir / "rds-a" / "meta.json").write_text('{"max_disp": "big"}')
+    status, _, err = run_eval(capsys, str(scenes_dir))
+    assert status == 2
+    assert "meta.json: max_disp must be a number >= 0, got 'big'" in err
+
+
+def test_rejects_unreadable_meta(scenes_dir: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    (scenes_dir / "rds-a" / "meta.json").write_text("{not json")
+    status, _, err = run_eval(capsys, str(scenes_dir))
+    assert status == 2
+    assert "meta.json: cannot read JSON" in err
+
+
+def test_rejects_mismatched_pair(scenes_dir: Path, capsys: pytest.CaptureFixture[str],
+                                 monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setattr(stereodepth, "block_match", fake_matcher([]), raising=False)
+    write_png(scenes_dir / "rds-b" / "right.png", np.zeros((64, 149), dtype=np.uint8))
+    status, _, err = run_eval(capsys, str(scenes_dir), "--scene", "rds-b")
+    assert status == 2
+    assert ("scene rds-b: left and right images must have the same shape, got (64, 150) and "
+            "(64, 149)") in err
+
+
+def test_rejects_gt_of_wrong_shape(scenes_dir: Path, capsys: pytest.CaptureFixture[str],
+                                   monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setattr(stereodepth, "block_match", fake_matcher([]), raising=False)
+    np.save(scenes_dir / "rds-b" / "disp_gt.npy", np.zeros((64, 151), dtype=np.float32))
+    status, _, err = run_eval(capsys, str(scenes_dir), "--scene", "rds-b")
+    assert status == 2
+    assert ("disp_gt.npy: ground truth must be a float array of the image's shape (64, 150), "
+            "got float32 (64, 151)") in err
+
+
+def test_rejects_non_bool_mask(scenes_dir: Path, capsys: pytest.CaptureFixture[str],
+                               monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setattr(stereodepth, "block_match", fake_matcher([]), raising=False)
+    np.save(scenes_dir / "rds-a" / "mask_nonocc.npy", np.ones((64, 128), dtype=np.uint8))
+    status, _, err = run_eval(capsys, str(scenes_dir), "--scene", "rds-a")
+    assert status == 2
+    assert ("mask_nonocc.npy: mask must be a bool array of the image's shape (64, 128), "
+            "got uint8 (64, 128)") in err
+
+
+def test_rejects_gt_without_values(scenes_dir: Path, capsys: pytest.CaptureFixture[str],
+                                   monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setattr(stereodepth, "block_match", fake_matcher([]), raising=False)
+    np.save(scenes_dir / "rds-b" / "disp_gt.npy", np.full((64, 150), np.nan, dtype=np.float32))
+    status, _, err = run_eval(capsys, str(scenes_dir), "--scene", "rds-b")
+    assert status == 2
+    assert "scene rds-b: the ground truth has no finite value" in err

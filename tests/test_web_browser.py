@@ -1,0 +1,413 @@
+"""End to end: ``stereodepth serve`` as a real server on a free loopback port, then the page in
+a real headless Chromium (Playwright driving the system's ``chromium``).
+
+The browser is found as $STEREODEPTH_CHROMIUM, else ``chromium`` or ``chromium-browser`` on the
+PATH; without one (or without Playwright) the browser tests skip and say why. Screenshots go to
+tests/artifacts/ (printed; look at them).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import queue
+import re
+import shutil
+import signal
+import subprocess
+import sys
+import threading
+import time
+import urllib.error
+import urllib.request
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from stereodepth import StereoRig
+from stereodepth.cli import main
+
+pytest.importorskip("fastapi", reason="the web extra is not installed")
+
+ARTIFACTS = Path(__file__).resolve().parent / "artifacts"
+ARM = {"baseline_mm": "150", "focal_mm": "6", "pixel_um": "2.8", "width_px": "1280",
+       "disparity_px": "250"}
+ARM_ARGS = ["--baseline-mm", "150", "--focal-mm", "6", "--pixel-um", "2.8", "--width-px", "1280"]
+START_TIMEOUT_S = 30
+
+
+class Server:
+    """``stereodepth serve --port 0`` in a subprocess; its URL from its first line."""
+
+    def __init__(self, *args: str, env: dict[str, str] | None = None) -> None:
+        self.proc = subprocess.Popen(
+            [sys.executable, "-m", "stereodepth.cli", "serve", *args],
+            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+            env=None if env is None else {**os.environ, **env},
+        )
+        lines: queue.Queue[str] = queue.Queue()
+        assert self.proc.stdout is not None
+        stdout = self.proc.stdout
+        def read() -> None:
+            for line in stdout:
+                lines.put(line)
+
+        self.reader = threading.Thread(target=read, daemon=True)
+        self.reader.start()
+        try:
+            self.first_line = lines.get(timeout=START_TIMEOUT_S)
+        except queue.Empty:
+            self.stop()
+            raise AssertionError(f"the server did not start in {START_TIMEOUT_S} s") from None
+        found = re.search(r"http://[^\s]+/", self.first_line)
+        assert found, self.first_line
+        self.url = found.group(0)
+
+    def stop(self) -> tuple[int, str]:
+        if self.proc.poll() is None:
+            self.proc.send_signal(signal.SIGINT)
+            try:
+                self.proc.wait(timeout=15)
+            except subprocess.TimeoutExpired:
+                self.proc.kill()
+                self.proc.wait()
+        self.reader.join(timeout=10)  # it ends at the end of the server's output
+        assert self.proc.stdout is not None and self.proc.stderr is not None
+        self.proc.stdout.close()
+        err = self.proc.stderr.read()
+        self.proc.stderr.close()
+        return self.proc.returncode, err
+
+
+def get_json(url: str) -> tuple[int, Any]:
+    try:
+        with urllib.request.urlopen(url, timeout=10) as r:
+            return r.status, json.loads(r.read())
+    except urllib.error.HTTPError as e:
+        return e.code, json.loads(e.read())
+
+
+# --- the real server -----------------------------------------------------------------------------
+def test_serve_listens_on_loopback_answers_and_stops() -> None:
+    server = Server("--port", "0")
+    try:
+        assert server.url.startswith("http://127.0.0.1:")
+        assert "the calculator is at" in server.first_line
+        status, body = get_json(server.url + "api/calc?baseline_mm=150&focal_mm=6&pixel_um=2.8"
+                                             "&width_px=1280&disparity_px=250")
+        assert status == 200
+        assert body["summary"] == json.loads(
+            json.dumps(StereoRig(150, 6, 2.8, width_px=1280).summary(250))
+        )
+        status, body = get_json(server.url + "api/calc?baseline_mm=-1&focal_mm=6&pixel_um=2.8")
+        assert status == 422 and body["detail"][0]["loc"] == ["query", "baseline_mm"]
+        with urllib.request.urlopen(server.url, timeout=10) as r:
+            assert b"Stereo depth calculator" in r.read()
+    finally:
+        code, err = server.stop()
+    assert code == 0, err
+
+
+def test_serve_open_opens_the_page(tmp_path: Path) -> None:
+    opened = tmp_path / "opened.txt"
+    # webbrowser runs $BROWSER with the URL for %s: here, a script that notes it.
+    fake = f"{sys.executable} -c \"import sys; open(sys.argv[1], 'w').write(sys.argv[2])\""
+    server = Server("--port", "0", "--open", env={"BROWSER": f"{fake} {opened} %s"})
+    try:
+        for _ in range(100):
+            if opened.exists() and opened.read_text():
+                break
+            time.sleep(0.1)
+        assert opened.read_text() == server.url
+    finally:
+        code, err = server.stop()
+    assert code == 0, err
+
+
+@pytest.mark.parametrize(("args", "message"), [
+    (["--port", "70000"], "--port must be an integer from 0 to 65535, got 70000"),
+    (["--host", "no.such.host.invalid"], "--host must be an address of this machine"),
+])
+def test_serve_rejects_bad_options(
+    capsys: pytest.CaptureFixture[str], args: list[str], message: str
+) -> None:
+    assert main(["serve", *args]) == 2
+    assert capsys.readouterr().err.startswith(f"stereodepth serve: error: {message}")
+
+
+def test_serve_reports_a_busy_port(capsys: pytest.CaptureFixture[str]) -> None:
+    import socket
+
+    with socket.socket() as busy:
+        busy.bind(("127.0.0.1", 0))
+        busy.listen(1)
+        port = busy.getsockname()[1]
+        assert main(["serve", "--port", str(port)]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"stereodepth serve: error: cannot listen on 127.0.0.1 port {port}")
+    assert "--port" in err
+
+
+# --- the page in a real browser ------------------------------------------------------------------
+def chromium_executable() -> str | None:
+    env = os.environ.get("STEREODEPTH_CHROMIUM")
+    if env:
+        return env if Path(env).is_file() else None
+    for name in ("chromium", "chromium-browser"):
+        found = shutil.which(name)
+        if found:
+            return found
+    return None
+
+
+@pytest.fixture(scope="module")
+def server() -> Iterator[Server]:
+    s = Server("--port", "0")
+    yield s
+    code, err = s.stop()
+    assert code == 0, err
+
+
+@pytest.fixture(scope="module")
+def browser() -> Iterator[Any]:
+    sync_api = pytest.importorskip("playwright.sync_api",
+                                   reason="Playwright for Python is not installed")
+    exe = chromium_executable()
+    if exe is None:
+        pytest.skip("no Chromium: install Debian's chromium package or set "
+                    "STEREODEPTH_CHROMIUM to its executable")
+    # A loaded 2-core machine may take seconds to start plotly.js: wait up to 20 s.
+    sync_api.expect.set_options(timeout=20_000)
+    with sync_api.sync_playwright() as pw:
+        # --no-sandbox: Chromium's sandbox cannot start as root in a container.
+        b = pw.chromium.launch(executable_path=exe,
+                               args=["--no-sandbox", "--disable-dev-shm-usage"])
+        yield b
+        b.close()
+
+
+class Page:
+    """A browser page on the server, which records every request and console error."""
+
+    def __init__(self, context: Any, url: str) -> None:
+        self.url = url
+        self.requests: list[str] = []
+        self.errors: list[str] = []
+
+        def route(r: Any) -> None:
+            self.requests.append(r.request.url)
+            if r.request.url.startswith(url):
+                r.continue_()
+            else:  # the page must work offline: nothing may leave this machine
+                r.abort()
+
+        self.page = context.new_page()
+        self.page.route("**/*", route)
+        self.page.on("pageerror", lambda e: self.errors.append(f"page error: {e}"))
+        self.page.on("console", self._console)
+        self.page.goto(url, wait_until="domcontentloaded")  # the charts come later
+        self.expect(self.page.locator("#status")).to_have_text("Up to date.")
+
+    def _console(self, msg: Any) -> None:
+        # A 422 answer is logged by Chromium as a failed resource: that is the page working.
+        if msg.type == "error" and "status of 422" not in msg.text:
+            self.errors.append(f"console: {msg.text}")
+
+    @staticmethod
+    def expect(locator: Any) -> Any:
+        from playwright.sync_api import expect
+
+        return expect(locator)
+
+    def value(self, key: str) -> str:
+        return str(self.page.locator(f"#out-{key} .value").inner_text())
+
+    def fill(self, values: dict[str, str]) -> None:
+        for name, v in values.items():
+            self.page.fill(f"#{name}", v)
+
+    def screenshot(self, name: str) -> Path:
+        ARTIFACTS.mkdir(exist_ok=True)
+        self.page.mouse.move(0, 0)  # no hover effects in the picture
+        path = ARTIFACTS / name
+        self.page.screenshot(path=str(path), full_page=True)
+        print(f"screenshot: {path}")
+        return path
+
+    def close(self) -> None:
+        assert all(u.startswith(self.url) for u in self.requests), self.requests
+        assert self.errors == []
+        self.page.close()
+
+
+@pytest.fixture(scope="module")
+def context(browser: Any) -> Iterator[Any]:
+    """One browser profile for the module, so plotly.js is fetched once (it is cached)."""
+    c = browser.new_context(viewport={"width": 1440, "height": 900})
+    yield c
+    c.close()
+
+
+@pytest.fixture
+def page(context: Any, server: Server) -> Iterator[Page]:
+    p = Page(context, server.url)
+    yield p
+    p.close()
+
+
+def cli_text(*args: str) -> str:
+    proc = subprocess.run([sys.executable, "-m", "stereodepth.cli", "calc", *args],
+                          capture_output=True, text=True, timeout=60, check=True)
+    return proc.stdout
+
+
+def cli_value(text: str, label: str) -> str:
+    found = re.search(rf"^{re.escape(label)}\s+(\S+)", text, re.M)
+    assert found, (label, text)
+    return found.group(1)
+
+
+@pytest.mark.browser
+def test_example_1_results_table_and_charts(page: Page) -> None:
+    p = page.page
+    p.click("#preset-car")
+    page.expect(p.locator("#out-depth_m .value")).to_have_text("20.4082")
+    page.expect(p.locator("#preset-car")).to_have_attribute("aria-pressed", "true")
+
+    page.fill(ARM)  # typed in, as a user would
+    page.expect(p.locator("#out-depth_m .value")).to_have_text("1.28571")
+    page.expect(p.locator("#preset-arm")).to_have_attribute("aria-pressed", "true")
+    page.expect(p.locator("#preset-car")).to_have_attribute("aria-pressed", "false")
+    assert round(float(page.value("depth_m")), 2) == 1.29
+    page.expect(p.locator("#status")).to_have_text("Up to date.")
+
+    # The page shows the CLI's digits.
+    text = cli_text(*ARM_ARGS, "--disparity-px", "250", "--subpixel-px", "0.25",
+                    "--max-disparity-px", "256")
+    for key, label in [("depth_m", "depth"), ("disparity_mm", "disparity on the sensor"),
+                       ("depth_resolution_m", "depth resolution (1 px)"),
+                       ("max_depth_m", "max depth (1 px disparity)"),
+                       ("focal_px", "focal length"),
+                       ("depth_resolution_subpx_m", "depth resolution (0.25 px)"),
+                       ("min_depth_m", "min depth (search to 256 px)")]:
+        assert page.value(key) == cli_value(text, label), key
+    assert page.value("hfov_deg") == f"{StereoRig(150, 6, 2.8, width_px=1280).hfov_deg:.6g}"
+
+    # The table: the library's rows, the target's row marked.
+    summary = StereoRig(150, 6, 2.8, width_px=1280).summary(250, disparity_step_px=0.25)
+    rows = p.locator("#depth-table tbody tr")
+    page.expect(rows).to_have_count(len(summary["table"]))
+    first = rows.nth(0).locator("td").all_inner_texts()
+    assert first[0] == "1" and first[2] == f"{summary['table'][0]['depth_m']:.6g}"
+    assert p.locator("#depth-table tbody tr.near td").first.inner_text() == "256"
+    headers = p.locator("#depth-table thead th").all_inner_texts()
+    assert headers[0] == "Disparity d (px)" and headers[-1] == "Depth resolution, 0.25 px (m)"
+
+    # The charts: drawn by plotly into SVG, with the curves and the marked target.
+    for chart_id, n_series in [("chart-depth", 1), ("chart-error", 2)]:
+        chart = p.locator(f"#{chart_id}")
+        page.expect(chart.locator(".scatterlayer .trace")).to_have_count(n_series + n_series)
+        drawn = p.evaluate(
+            f"""() => document.getElementById('{chart_id}').data.map(
+                t => ({{name: t.name, n: t.x.length, x: t.x[0], y: t.y[0]}}))"""
+        )
+        assert len(drawn) == 2 * n_series
+        assert all(t["n"] > 0 for t in drawn)
+        # Each curve is a drawn SVG line across most of the plot's width (plotly simplifies a
+        # straight line on log axes to a few points).
+        widths = p.evaluate(
+            f"""() => {{
+                const gd = document.getElementById('{chart_id}');
+                return [...gd.querySelectorAll('.scatterlayer .trace path.js-line')]
+                    .map(e => e.getBBox().width / gd._fullLayout._size.w);
+            }}"""
+        )
+        assert len(widths) == n_series and all(w > 0.8 for w in widths), widths
+        assert chart.locator(".annotation-text").count() == n_series
+    markers = {t["name"]: t for t in p.evaluate(
+        """() => ['chart-depth', 'chart-error'].flatMap(id => document.getElementById(id).data
+               .filter(t => t.mode === 'markers')
+               .map(t => ({name: t.name, x: t.x[0], y: t.y[0]})))"""
+    )}
+    assert markers["target"] == {"name": "target", "x": 250, "y": summary["depth_m"]}
+    assert markers["target, 1 px"]["y"] == summary["depth_resolution_m"]
+    assert markers["target, 0.25 px"]["y"] == summary["depth_resolution_subpx_m"]
+    assert p.locator("#chart-depth .annotation-text").text_content() == "Z = 1.286 m"
+
+    # The inverse question, answered by the library.
+    required = StereoRig(150, 6, 2.8).required_baseline_mm(2, 0.005, 0.25)
+    assert page.value("required_baseline_mm") == f"{required:.6g}"
+    page.screenshot("web-page.png")
+
+
+BAD = [
+    ("baseline_mm", "-5", "Baseline B must be a number > 0 and <= 1000000, got -5"),
+    ("baseline_mm", "abc", "Baseline B must be a number > 0 and <= 1000000, got 'abc'"),
+    ("baseline_mm", "", "Baseline B is required"),
+    ("focal_mm", "0", "Focal length f must be a number > 0 and <= 10000, got 0"),
+    ("pixel_um", "NaN", "Pixel size p must be a number > 0 and <= 1000, got NaN"),
+    ("width_px", "1e300", "Image width W must be an integer >= 1 and <= 1000000, got 1e300"),
+    ("disparity_px", "-1", "Disparity d must be a number >= 0 and <= 1000000, got -1"),
+    ("disparity_step_px", "1e999", "Sub-pixel accuracy Δd must be a number > 0 and <= 1000, "
+                                   "got 1e999"),
+    ("inverse_depth_m", "", "At depth Z is required with depth error ΔZ"),
+]
+
+
+@pytest.mark.browser
+def test_bad_input_shows_a_message_at_its_field_and_keeps_the_results(page: Page) -> None:
+    p = page.page
+    page.fill(ARM)
+    page.expect(p.locator("#out-depth_m .value")).to_have_text("1.28571")
+    before = p.locator("#depth-table tbody").inner_html()
+    for name, text, message in BAD:
+        good = p.input_value(f"#{name}")
+        p.fill(f"#{name}", text)
+        error = p.locator(f"#{name}-error")
+        page.expect(error).to_be_visible()
+        page.expect(error).to_have_text(message)
+        page.expect(p.locator(f"#{name}")).to_have_attribute("aria-invalid", "true")
+        page.expect(p.locator("#status")).to_contain_text("showing the last valid results")
+        assert page.value("depth_m") == "1.28571"  # the last good results stay
+        assert p.locator("#depth-table tbody").inner_html() == before
+        if name == "baseline_mm" and text == "-5":
+            page.screenshot("web-page-error.png")
+        p.fill(f"#{name}", good)
+        page.expect(error).to_be_hidden()
+        page.expect(p.locator("#status")).to_have_text("Up to date.")
+    assert p.locator(".field.invalid").count() == 0
+
+
+@pytest.mark.browser
+def test_focal_length_in_pixels_and_use_this_baseline(page: Page) -> None:
+    p = page.page
+    page.fill(ARM)
+    page.expect(p.locator("#out-depth_m .value")).to_have_text("1.28571")
+    p.check('input[name="focal_mode"][value="px"]')
+    page.expect(p.locator("#focal_px")).to_be_visible()
+    page.expect(p.locator("#focal_mm")).to_be_hidden()
+    assert float(p.input_value("#focal_px")) == StereoRig(150, 6, 2.8).focal_px
+    page.expect(p.locator("#status")).to_have_text("Up to date.")
+    assert page.value("depth_m") == "1.28571"
+    assert page.value("disparity_mm") == "—"  # needs the pixel size
+
+    p.fill("#focal_px", "1000")
+    page.expect(p.locator("#out-depth_m .value")).to_have_text(
+        f"{StereoRig.from_pixels(150, 1000).depth_m(250):.6g}")
+    p.click("#use-baseline")
+    required = StereoRig.from_pixels(150, 1000).required_baseline_mm(2, 0.005, 0.25)
+    page.expect(p.locator("#baseline_mm")).to_have_value(f"{required:.6g}")
+    page.expect(p.locator("#status")).to_have_text("Up to date.")
+    got = StereoRig.from_pixels(float(f"{required:.6g}"), 1000).depth_resolution_m(2, 0.25)
+    assert got == pytest.approx(0.005, rel=1e-5)
+
+
+@pytest.mark.browser
+def test_page_digits_are_printfs(page: Page) -> None:
+    values = [1.2857142857142856, 0.005142857142857143, 321.4285714285714, 2142.8571428571427,
+              0.7, 1e-5, 9.9999951e-5, 999999.5, 1234567.8, 0.1, 100.0, 2.5e-10, 1e21,
+              123456789.0, 0.00012345678, 33.25826391851462, 7.0, 5e-324, 1.7976931348623157e308]
+    got = page.page.evaluate("vs => vs.map(v => window.stereodepth.formatG(v))", values)
+    assert got == [f"{v:.6g}" for v in values]
