@@ -13,6 +13,15 @@
 #include "block_match_kernels.hpp"
 #include "stereodepth/parallel.hpp"
 
+#if defined(__SANITIZE_ADDRESS__)
+#include <sanitizer/asan_interface.h>
+#define STEREODEPTH_POISON(p, n) ASAN_POISON_MEMORY_REGION(p, n)
+#define STEREODEPTH_UNPOISON(p, n) ASAN_UNPOISON_MEMORY_REGION(p, n)
+#else
+#define STEREODEPTH_POISON(p, n) ((void)(p), (void)(n))
+#define STEREODEPTH_UNPOISON(p, n) ((void)(p), (void)(n))
+#endif
+
 namespace stereodepth {
 namespace {
 
@@ -38,19 +47,26 @@ template <typename T>
 
 const char* cost_name(MatchCost cost) { return cost == MatchCost::kCensus ? "census" : "sad"; }
 
-// 64-byte aligned pieces carved out of one byte buffer.
+// 64-byte aligned pieces carved out of one byte buffer, with a 64-byte gap after each piece
+// that AddressSanitizer builds poison, so an overrun of any piece is caught.
 class Arena {
  public:
   explicit Arena(std::vector<std::uint8_t>* storage) : storage_(storage) {}
   // First pass: count; second pass (after reserve()): hand out pointers.
   template <typename T>
   T* take(std::size_t count) {
-    const std::size_t bytes = (count * sizeof(T) + 63) & ~std::size_t{63};
-    T* p = base_ ? reinterpret_cast<T*>(base_ + used_) : nullptr;
-    used_ += bytes;
+    const std::size_t bytes = count * sizeof(T);
+    const std::size_t step = ((bytes + 63) & ~std::size_t{63}) + 64;
+    T* p = nullptr;
+    if (base_) {
+      p = reinterpret_cast<T*>(base_ + used_);
+      STEREODEPTH_POISON(base_ + used_ + bytes, step - bytes);
+    }
+    used_ += step;
     return p;
   }
   void reserve() {
+    STEREODEPTH_UNPOISON(storage_->data(), storage_->size());
     if (storage_->size() < used_ + 64) storage_->resize(used_ + 64);
     const auto addr = reinterpret_cast<std::uintptr_t>(storage_->data());
     base_ = storage_->data() + ((64 - addr % 64) % 64);
@@ -186,19 +202,35 @@ void validate(const BlockMatchParams& p) {
 }
 
 struct BlockMatcher::Workspace {
-  std::vector<std::uint8_t> grey_left, grey_right;  // RGB input only
-  std::vector<std::uint8_t> features;               // both feature images and the texture
-  std::vector<std::vector<std::uint8_t>> bands;     // per-band scratch
+  ~Workspace() {
+    for (auto& band : bands) STEREODEPTH_UNPOISON(band.data(), band.size());
+  }
+
+  std::vector<std::vector<std::uint8_t>> bands;  // per band: scratch, grey and feature rows
   std::vector<std::int32_t> labels;                 // speckle filter
   std::vector<std::int64_t> stack;
   std::vector<std::uint8_t> remove;
-  std::vector<std::uint32_t> unique_min;  // uniqueness thresholds per winning cost
 };
 
 BlockMatcher::BlockMatcher(const BlockMatchParams& params, int threads, Isa isa)
     : params_(params), threads_(resolve_threads(threads)), isa_(isa),
       workspace_(std::make_unique<Workspace>()) {
   validate(params_);
+  if (params_.uniqueness_ratio > 0) {
+    // The uniqueness check, second * 100 > best * (100 + ratio), as a table of the least
+    // passing second-best cost per winning cost (the same double arithmetic), capped at
+    // 0xFFFF, above every block cost.
+    uniqueness_factor_ = 100.0 + params_.uniqueness_ratio;
+    const int max_cost = params_.block_size * params_.block_size * pixel_cost_max(params_.cost);
+    unique_min_.resize(static_cast<std::size_t>(max_cost) + 1);
+    for (int b = 0; b <= max_cost; ++b) {
+      const double bound = static_cast<double>(b) * uniqueness_factor_;
+      double s = std::floor(bound / 100.0);
+      while (s > 0 && s * 100.0 > bound) s -= 1.0;
+      while (!(s * 100.0 > bound)) s += 1.0;
+      unique_min_[static_cast<std::size_t>(b)] = static_cast<std::uint32_t>(std::min(s, 65535.0));
+    }
+  }
 }
 
 BlockMatcher::~BlockMatcher() = default;
@@ -225,139 +257,145 @@ void BlockMatcher::compute(const StereoImage& left, const StereoImage& right,
     throw std::invalid_argument("the images must have fewer than 2^31 pixels");
   }
 
-  std::lock_guard<std::mutex> lock(mutex_);
-  Workspace& ws = *workspace_;
   const detail::BlockMatchKernels& k = kernels_for(isa_);
-  const int threads = threads_;
-  const std::ptrdiff_t min_band = std::max<std::ptrdiff_t>(16, 2 * p.block_size);
-
-  // 1. Grey: RGB is converted; grey images are read in place.
-  const bool sixteen = left.format == PixelFormat::kGrey16;
-  const void* gl = left.data;
-  const void* gr = right.data;
-  std::ptrdiff_t gstride = sixteen ? left.row_stride / 2 : left.row_stride;  // elements
-  std::ptrdiff_t gstride_r = sixteen ? right.row_stride / 2 : right.row_stride;
-  if (left.format == PixelFormat::kRgb8) {
-    const auto n = static_cast<std::size_t>(rows * cols);
-    ws.grey_left.resize(n);
-    ws.grey_right.resize(n);
-    parallel_for_rows(rows, threads, (1 << 15) / cols + 1, [&](std::ptrdiff_t b, std::ptrdiff_t e) {
-      for (std::ptrdiff_t y = b; y < e; ++y) {
-        k.rgb_to_grey(static_cast<const std::uint8_t*>(left.data) + y * left.row_stride,
-                      ws.grey_left.data() + y * cols, cols);
-        k.rgb_to_grey(static_cast<const std::uint8_t*>(right.data) + y * right.row_stride,
-                      ws.grey_right.data() + y * cols, cols);
-      }
-    });
-    gl = ws.grey_left.data();
-    gr = ws.grey_right.data();
-    gstride = gstride_r = cols;
-  }
-
-  // 2. Feature images (census codes or prefiltered pixels) and the texture map.
-  const bool census = p.cost == MatchCost::kCensus;
-  const bool texture_on = p.texture_threshold > 0;
-  const std::size_t feat_size = census ? 4 : 1;
-  const auto npix = static_cast<std::size_t>(rows * cols);
-  ws.features.resize(2 * npix * feat_size + (texture_on ? npix : 0) + 64);
-  std::uint8_t* fbase = ws.features.data();
-  std::uint8_t* feat_l = fbase;
-  std::uint8_t* feat_r = fbase + npix * feat_size;
-  std::uint8_t* texture = texture_on ? fbase + 2 * npix * feat_size : nullptr;
-  auto grey_row = [&](const void* base, std::ptrdiff_t stride, std::ptrdiff_t y) -> const void* {
-    y = std::clamp<std::ptrdiff_t>(y, 0, rows - 1);
-    return sixteen ? static_cast<const void*>(static_cast<const std::uint16_t*>(base) + y * stride)
-                   : static_cast<const void*>(static_cast<const std::uint8_t*>(base) + y * stride);
-  };
-  auto feature_rows = [&](const void* base, std::ptrdiff_t stride, std::uint8_t* feat,
-                          std::uint8_t* tex, std::ptrdiff_t y) {
-    if (census) {
-      const void* r5[5];
-      for (int i = 0; i < 5; ++i) r5[i] = grey_row(base, stride, y + i - 2);
-      auto* out = reinterpret_cast<std::uint32_t*>(feat) + y * cols;
-      if (sixteen) {
-        k.census_row16(reinterpret_cast<const std::uint16_t* const*>(r5), out, cols);
-      } else {
-        k.census_row8(reinterpret_cast<const std::uint8_t* const*>(r5), out, cols);
-      }
-    }
-    std::uint8_t* pre = census ? nullptr : feat + y * cols;
-    std::uint8_t* t = tex ? tex + y * cols : nullptr;
-    if (pre || t) {
-      const void* r3[3];
-      for (int i = 0; i < 3; ++i) r3[i] = grey_row(base, stride, y + i - 1);
-      if (sixteen) {
-        k.sobel_row16(reinterpret_cast<const std::uint16_t* const*>(r3), pre, t, cols);
-      } else {
-        k.sobel_row8(reinterpret_cast<const std::uint8_t* const*>(r3), pre, t, cols);
-      }
-    }
-  };
-  parallel_for_rows(rows, threads, (1 << 13) / cols + 1, [&](std::ptrdiff_t b, std::ptrdiff_t e) {
-    for (std::ptrdiff_t y = b; y < e; ++y) {
-      feature_rows(gl, gstride, feat_l, texture, y);
-      feature_rows(gr, gstride_r, feat_r, nullptr, y);
-    }
-  });
-
-  // 3. Matching, in bands of rows.
   const int dp = (p.num_disparities + k.lanes - 1) / k.lanes * k.lanes;
   if (static_cast<double>(cols) * dp >= 1073741824.0) {
     throw std::invalid_argument("the image width times num_disparities must be below 2^30, got " +
                                 std::to_string(cols) + " x " + std::to_string(p.num_disparities));
   }
+
+  std::lock_guard<std::mutex> lock(mutex_);
+  Workspace& ws = *workspace_;
+  const int r = p.block_size / 2;
+  const bool sixteen = left.format == PixelFormat::kGrey16;
+  const bool rgb = left.format == PixelFormat::kRgb8;
+  const bool census = p.cost == MatchCost::kCensus;
+  const bool texture_on = p.texture_threshold > 0;
+  const std::size_t feat_size = census ? 4 : 1;
+
+  // Bands of rows, one per thread, each with enough rows that its set-up (the block's rows
+  // above and below) stays small.
+  const std::ptrdiff_t min_band = std::max<std::ptrdiff_t>(16, 2 * p.block_size);
   const std::ptrdiff_t nbands =
-      std::max<std::ptrdiff_t>(1, std::min<std::ptrdiff_t>(threads, rows / min_band));
+      std::max<std::ptrdiff_t>(1, std::min<std::ptrdiff_t>(threads_, rows / min_band));
+  struct Band {
+    std::ptrdiff_t y0, y1;  // output rows
+    std::ptrdiff_t f0, f1;  // feature rows: the output rows and the block's reach
+    std::ptrdiff_t g0, g1;  // grey rows: the feature rows and the census window's reach
+    detail::BandScratch scratch;
+    std::uint8_t* grey[2];  // RGB only: grey rows g0..g1
+    std::uint8_t* feat[2];  // feature rows f0..f1, left and right
+    std::uint8_t* texture;  // texture rows f0..f1, or null
+  };
+  std::vector<Band> bands(static_cast<std::size_t>(nbands));
   if (static_cast<std::ptrdiff_t>(ws.bands.size()) < nbands) ws.bands.resize(nbands);
-  std::vector<detail::BandScratch> scratch(static_cast<std::size_t>(nbands));
-  for (std::ptrdiff_t b = 0; b < nbands; ++b) {
-    Arena arena(&ws.bands[static_cast<std::size_t>(b)]);
-    carve_band(arena, cols, dp, feat_size);
-    arena.reserve();
-    scratch[static_cast<std::size_t>(b)] = carve_band(arena, cols, dp, feat_size);
-  }
-  detail::MatchArgs a{};
-  a.cost = p.cost;
-  a.left_feat = feat_l;
-  a.right_feat = feat_r;
-  a.feat_stride = cols;
-  a.texture = texture;
-  a.texture_stride = cols;
-  a.rows = rows;
-  a.cols = cols;
-  a.min_d = p.min_disparity;
-  a.num_d = p.num_disparities;
-  a.dp = dp;
-  a.radius = p.block_size / 2;
-  a.subpixel = p.subpixel;
-  a.uniqueness_factor = p.uniqueness_ratio > 0 ? 100.0 + p.uniqueness_ratio : 0.0;
-  a.unique_min = nullptr;
-  if (p.uniqueness_ratio > 0) {
-    // unique_min[b]: the least cost s with s * 100 > b * (100 + ratio), in the same double
-    // arithmetic as the check itself; capped at 0xFFFF, above every block cost.
-    const double factor = a.uniqueness_factor;
-    const int max_cost = p.block_size * p.block_size * pixel_cost_max(p.cost);
-    ws.unique_min.resize(static_cast<std::size_t>(max_cost) + 1);
-    for (int b = 0; b <= max_cost; ++b) {
-      const double bound = static_cast<double>(b) * factor;
-      double s = std::floor(bound / 100.0);
-      while (s > 0 && s * 100.0 > bound) s -= 1.0;
-      while (!(s * 100.0 > bound)) s += 1.0;
-      ws.unique_min[static_cast<std::size_t>(b)] =
-          static_cast<std::uint32_t>(std::min(s, 65535.0));
+  for (std::ptrdiff_t i = 0; i < nbands; ++i) {
+    Band& band = bands[static_cast<std::size_t>(i)];
+    band.y0 = rows * i / nbands;
+    band.y1 = rows * (i + 1) / nbands;
+    band.f0 = std::max<std::ptrdiff_t>(0, band.y0 - r);
+    band.f1 = std::min<std::ptrdiff_t>(rows, band.y1 + r);
+    band.g0 = std::max<std::ptrdiff_t>(0, band.f0 - 2);
+    band.g1 = std::min<std::ptrdiff_t>(rows, band.f1 + 2);
+    const auto fpix = static_cast<std::size_t>((band.f1 - band.f0) * cols);
+    const auto gpix = static_cast<std::size_t>((band.g1 - band.g0) * cols);
+    Arena arena(&ws.bands[static_cast<std::size_t>(i)]);
+    for (int pass = 0; pass < 2; ++pass) {
+      band.scratch = carve_band(arena, cols, dp, feat_size);
+      band.grey[0] = arena.take<std::uint8_t>(rgb ? gpix : 0);
+      band.grey[1] = arena.take<std::uint8_t>(rgb ? gpix : 0);
+      band.feat[0] = arena.take<std::uint8_t>(fpix * feat_size);
+      band.feat[1] = arena.take<std::uint8_t>(fpix * feat_size);
+      band.texture = arena.take<std::uint8_t>(texture_on ? fpix : 0);
+      if (pass == 0) arena.reserve();
     }
-    a.unique_min = ws.unique_min.data();
+    if (!texture_on) band.texture = nullptr;
   }
-  a.lr_max_diff = p.lr_max_diff;
-  a.disp = disparity.data;
-  a.disp_stride = disparity.row_stride;
-  a.conf = confidence.data;
-  a.conf_stride = confidence.row_stride;
+
+  detail::MatchArgs common{};
+  common.cost = p.cost;
+  common.feat_stride = cols;
+  common.texture_stride = cols;
+  common.rows = rows;
+  common.cols = cols;
+  common.min_d = p.min_disparity;
+  common.num_d = p.num_disparities;
+  common.dp = dp;
+  common.radius = r;
+  common.subpixel = p.subpixel;
+  common.uniqueness_factor = uniqueness_factor_;
+  common.unique_min = unique_min_.empty() ? nullptr : unique_min_.data();
+  common.texture_sum_min = p.texture_threshold * static_cast<double>(p.block_size * p.block_size);
+  common.lr_max_diff = p.lr_max_diff;
+  common.disp = disparity.data;
+  common.disp_stride = disparity.row_stride;
+  common.conf = confidence.data;
+  common.conf_stride = confidence.row_stride;
+
+  const StereoImage* images[2] = {&left, &right};
+  auto run_band = [&](Band& band) {
+    // 1. Grey rows: RGB is converted, grey images are read in place.
+    const void* grey_base[2];
+    std::ptrdiff_t grey_stride[2], grey_row0[2];
+    for (int im = 0; im < 2; ++im) {
+      const StereoImage& src = *images[im];
+      if (rgb) {
+        for (std::ptrdiff_t y = band.g0; y < band.g1; ++y) {
+          k.rgb_to_grey(static_cast<const std::uint8_t*>(src.data) + y * src.row_stride,
+                        band.grey[im] + (y - band.g0) * cols, cols);
+        }
+        grey_base[im] = band.grey[im];
+        grey_stride[im] = cols;
+        grey_row0[im] = band.g0;
+      } else {
+        grey_base[im] = src.data;
+        grey_stride[im] = sixteen ? src.row_stride / 2 : src.row_stride;
+        grey_row0[im] = 0;
+      }
+    }
+    auto grey_row = [&](int im, std::ptrdiff_t y) -> const void* {
+      const std::ptrdiff_t off = (std::clamp<std::ptrdiff_t>(y, 0, rows - 1) - grey_row0[im]) *
+                                 grey_stride[im];
+      return sixteen ? static_cast<const void*>(static_cast<const std::uint16_t*>(grey_base[im]) + off)
+                     : static_cast<const void*>(static_cast<const std::uint8_t*>(grey_base[im]) + off);
+    };
+    // 2. Feature rows (census codes or prefiltered pixels) and the texture.
+    for (int im = 0; im < 2; ++im) {
+      for (std::ptrdiff_t y = band.f0; y < band.f1; ++y) {
+        const std::ptrdiff_t at = (y - band.f0) * cols;
+        if (census) {
+          const void* r5[5];
+          for (int i = 0; i < 5; ++i) r5[i] = grey_row(im, y + i - 2);
+          auto* out = reinterpret_cast<std::uint32_t*>(band.feat[im]) + at;
+          if (sixteen) {
+            k.census_row16(reinterpret_cast<const std::uint16_t* const*>(r5), out, cols);
+          } else {
+            k.census_row8(reinterpret_cast<const std::uint8_t* const*>(r5), out, cols);
+          }
+        }
+        std::uint8_t* pre = census ? nullptr : band.feat[im] + at;
+        std::uint8_t* tex = im == 0 && band.texture ? band.texture + at : nullptr;
+        if (pre || tex) {
+          const void* r3[3];
+          for (int i = 0; i < 3; ++i) r3[i] = grey_row(im, y + i - 1);
+          if (sixteen) {
+            k.sobel_row16(reinterpret_cast<const std::uint16_t* const*>(r3), pre, tex, cols);
+          } else {
+            k.sobel_row8(reinterpret_cast<const std::uint8_t* const*>(r3), pre, tex, cols);
+          }
+        }
+      }
+    }
+    // 3. Matching.
+    detail::MatchArgs a = common;
+    a.left_feat = band.feat[0];
+    a.right_feat = band.feat[1];
+    a.feat_row0 = band.f0;
+    a.texture = band.texture;
+    k.match_band(a, band.scratch, band.y0, band.y1);
+  };
   parallel_for_rows(nbands, static_cast<int>(nbands), 1, [&](std::ptrdiff_t b, std::ptrdiff_t e) {
-    for (std::ptrdiff_t band = b; band < e; ++band) {
-      k.match_band(a, scratch[static_cast<std::size_t>(band)], rows * band / nbands,
-                   rows * (band + 1) / nbands);
-    }
+    for (std::ptrdiff_t i = b; i < e; ++i) run_band(bands[static_cast<std::size_t>(i)]);
   });
 
   // 4. Speckle filter, on the whole map.

@@ -881,10 +881,14 @@ void match_band_impl(const MatchArgs& a, const BandScratch& s, ptrdiff_t y0, ptr
   const ptrdiff_t npad = cols + dp + kRowPad;
   const F* lfeat = static_cast<const F*>(a.left_feat);
   const F* rfeat = static_cast<const F*>(a.right_feat);
-  auto lrow = [&](ptrdiff_t y) { return lfeat + clamp_index(y, 0, rows - 1) * a.feat_stride; };
-  auto rrow = [&](ptrdiff_t y) { return rfeat + clamp_index(y, 0, rows - 1) * a.feat_stride; };
+  auto lrow = [&](ptrdiff_t y) {
+    return lfeat + (clamp_index(y, 0, rows - 1) - a.feat_row0) * a.feat_stride;
+  };
+  auto rrow = [&](ptrdiff_t y) {
+    return rfeat + (clamp_index(y, 0, rows - 1) - a.feat_row0) * a.feat_stride;
+  };
   auto trow = [&](ptrdiff_t y) {
-    return a.texture + clamp_index(y, 0, rows - 1) * a.texture_stride;
+    return a.texture + (clamp_index(y, 0, rows - 1) - a.feat_row0) * a.texture_stride;
   };
   F* rpad_in = static_cast<F*>(s.rpad_in);
   F* rpad_out = static_cast<F*>(s.rpad_out);

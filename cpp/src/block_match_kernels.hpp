@@ -17,11 +17,13 @@ namespace stereodepth::detail {
 // Everything the band kernel reads and writes.
 struct MatchArgs {
   MatchCost cost;
-  // Feature images (rows x cols): census codes (uint32) or prefiltered pixels (uint8).
+  // Feature rows: census codes (uint32) or prefiltered pixels (uint8), for the image rows
+  // feat_row0 .. (the band's rows and the block's reach above and below them).
   const void* left_feat;
   const void* right_feat;
   std::ptrdiff_t feat_stride;  // elements
-  // min(|sobel_x|, 31) of the left image, or null when the texture check is off.
+  std::ptrdiff_t feat_row0;
+  // min(|sobel_x|, 31) of the left image for the same rows, or null when the check is off.
   const std::uint8_t* texture;
   std::ptrdiff_t texture_stride;
   std::ptrdiff_t rows, cols;

@@ -69,6 +69,8 @@ from typing import Any
 
 import numpy as np
 
+from .cli import key_value_option
+
 __all__ = [
     "BatchOptions",
     "BatchReport",
@@ -881,27 +883,6 @@ def _dask_client(scheduler: str | None, workers: int | None, threads: int | None
 
 
 # --- the command --------------------------------------------------------------------------------
-def _key_value(text: str) -> tuple[str, Any]:
-    key, sep, raw = text.partition("=")
-    if not sep or not re.fullmatch(r"[A-Za-z_][A-Za-z0-9_]*", key):
-        raise argparse.ArgumentTypeError(f"expected KEY=VALUE with KEY a name, got {text!r}")
-    low = raw.lower()
-    value: Any
-    if low in ("true", "false"):
-        value = low == "true"
-    elif low == "none":
-        value = None
-    else:
-        try:
-            value = int(raw)
-        except ValueError:
-            try:
-                value = float(raw)
-            except ValueError:
-                value = raw
-    return key, value
-
-
 def register(subparsers: Any) -> None:
     """Adds ``stereodepth batch`` to the command's subparsers."""
     p = subparsers.add_parser(
@@ -947,7 +928,7 @@ def register(subparsers: Any) -> None:
     m.add_argument("--min-disparity", type=int, metavar="D", help="smallest disparity searched")
     m.add_argument("--block-size", type=int, metavar="N", help="odd block side")
     m.add_argument("--cost", choices=("census", "sad"), help="matching cost")
-    m.add_argument("--option", action="append", type=_key_value, default=[],
+    m.add_argument("--option", action="append", type=key_value_option, default=[],
                    metavar="KEY=VALUE",
                    help="other keyword argument of stereodepth.block_match, repeatable "
                    "(e.g. uniqueness_ratio=15, subpixel=false)")

@@ -9,6 +9,7 @@ import argparse
 import importlib
 import json
 import math
+import re
 import sys
 from collections.abc import Sequence
 from typing import Any
@@ -24,6 +25,28 @@ _SUBCOMMAND_MODULES: tuple[str, ...] = (
 
 class UsageError(Exception):
     """Bad input on the command line: reported in one line, exit status 2."""
+
+
+def key_value_option(text: str) -> tuple[str, Any]:
+    """argparse type of ``--option KEY=VALUE``: the value as bool, None, int, float or str."""
+    key, sep, raw = text.partition("=")
+    if not sep or not re.fullmatch(r"[A-Za-z_][A-Za-z0-9_]*", key):
+        raise argparse.ArgumentTypeError(f"expected KEY=VALUE with KEY a name, got {text!r}")
+    low = raw.lower()
+    value: Any
+    if low in ("true", "false"):
+        value = low == "true"
+    elif low == "none":
+        value = None
+    else:
+        try:
+            value = int(raw)
+        except ValueError:
+            try:
+                value = float(raw)
+            except ValueError:
+                value = raw
+    return key, value
 
 
 def _rig_from_args(args: argparse.Namespace) -> StereoRig:

@@ -56,7 +56,6 @@ import fnmatch
 import json
 import math
 import os
-import re
 import statistics
 import sys
 import time
@@ -67,6 +66,7 @@ from typing import Any
 
 import numpy as np
 
+from .cli import key_value_option
 from .metrics import DisparityMetrics, evaluate
 
 __all__ = [
@@ -577,27 +577,6 @@ def _method_spec(text: str) -> tuple[str, tuple[int, ...] | None]:
     return name, values
 
 
-def _key_value(text: str) -> tuple[str, Any]:
-    key, sep, raw = text.partition("=")
-    if not sep or not re.fullmatch(r"[A-Za-z_][A-Za-z0-9_]*", key):
-        raise argparse.ArgumentTypeError(f"expected KEY=VALUE with KEY a name, got {text!r}")
-    low = raw.lower()
-    value: Any
-    if low in ("true", "false"):
-        value = low == "true"
-    elif low == "none":
-        value = None
-    else:
-        try:
-            value = int(raw)
-        except ValueError:
-            try:
-                value = float(raw)
-            except ValueError:
-                value = raw
-    return key, value
-
-
 def _available_threads() -> int:
     try:
         return len(os.sched_getaffinity(0))
@@ -638,12 +617,12 @@ def register(subparsers: Any) -> None:
     m.add_argument("--best-by", choices=_BEST_BY, default="bad_2",
                    help="the score that picks the best block size (default bad_2)")
     m.add_argument(
-        "--option", action="append", type=_key_value, default=[], metavar="KEY=VALUE",
+        "--option", action="append", type=key_value_option, default=[], metavar="KEY=VALUE",
         help="keyword argument for stereodepth.block_match, repeatable (e.g. cost=census, "
         "subpixel=false); true/false/none, integers and floats are converted",
     )
     m.add_argument(
-        "--opencv-option", action="append", type=_key_value, default=[], metavar="KEY=VALUE",
+        "--opencv-option", action="append", type=key_value_option, default=[], metavar="KEY=VALUE",
         help="OpenCV matcher parameter, repeatable: uniqueness_ratio=10 calls "
         "setUniquenessRatio(10) on every selected OpenCV matcher that has it (mode=2 runs "
         "SGBM as MODE_SGBM_3WAY)",
@@ -737,6 +716,8 @@ def run(args: argparse.Namespace) -> int:
     notes: list[str] = []
     factories: dict[str, Callable[[Variant, int], Matcher]] = {}
     methods = {v.method for v in variants}
+    if options and "stereodepth" not in methods:
+        raise _usage_error("--option is for stereodepth.block_match: add --method stereodepth")
     cv2: Any = None
     if methods & set(_OPENCV_METHODS):
         try:
@@ -764,8 +745,6 @@ def run(args: argparse.Namespace) -> int:
         raise _usage_error("--opencv-option needs an OpenCV method (--method opencv-bm ...)")
     if "stereodepth" in methods:
         factories["stereodepth"] = _stereodepth_factory(threads, options)
-    elif options:
-        raise _usage_error("--option is for stereodepth.block_match: add --method stereodepth")
     for note in notes:
         print(f"stereodepth eval: {note}", file=sys.stderr)
 

@@ -7,6 +7,7 @@
 #include <cstdint>
 #include <memory>
 #include <mutex>
+#include <vector>
 
 #include "stereodepth/dispatch.hpp"
 #include "stereodepth/image_view.hpp"
@@ -81,6 +82,8 @@ class BlockMatcher {
   BlockMatchParams params_;
   int threads_;
   Isa isa_;
+  double uniqueness_factor_ = 0.0;        // 100 + ratio, or 0 when the check is off
+  std::vector<std::uint32_t> unique_min_;  // the same check as a table (see the kernels)
   std::unique_ptr<Workspace> workspace_;
   std::mutex mutex_;
 };
