@@ -1,9 +1,16 @@
 """Shared benchmark plumbing: every benchmark records which implementation it times in
 ``benchmark.extra_info["impl"]``; at the end, each group's medians are printed as ratios to
-stereodepth's own, so one run gives the comparison on this (noisy, shared) machine."""
+stereodepth's own, so one run gives the comparison on this (noisy, shared) machine.
+
+Optional extras a benchmark may record: ``extra_info["pixel_disparities"]`` (W x H x D of a
+stereo matcher) adds the time per pixel-disparity. When an implementation label appears in
+several groups beside stereodepth, the summary ends with the median over those groups of its
+time relative to stereodepth's."""
 
 from __future__ import annotations
 
+from collections import defaultdict
+from statistics import median
 from typing import Any
 
 import pytest
@@ -17,6 +24,7 @@ def pytest_terminal_summary(terminalreporter: Any, exitstatus: int, config: Any)
         return
     tr = terminalreporter
     tr.write_sep("=", "median time relative to stereodepth (lower is faster)")
+    across: dict[str, list[float]] = defaultdict(list)
     for group, items in groups:
         ours = [b for b in items if b["extra_info"].get("impl") == "stereodepth"]
         ref = ours[0]["median"] if ours else None
@@ -24,7 +32,18 @@ def pytest_terminal_summary(terminalreporter: Any, exitstatus: int, config: Any)
         for b in sorted(items, key=lambda b: b["median"]):
             label = b["extra_info"].get("impl", b["name"])
             ratio = f"{b['median'] / ref:8.2f}x" if ref else "        -"
-            tr.write_line(f"    {label:<40} median {b['median'] * 1e3:10.3f} ms  {ratio}")
+            work = b["extra_info"].get("pixel_disparities")
+            per = f"  {b['median'] * 1e9 / work:6.3f} ns/(px*d)" if work else ""
+            tr.write_line(f"    {label:<40} median {b['median'] * 1e3:10.3f} ms  {ratio}{per}")
+            if ref and label != "stereodepth":
+                across[label].append(b["median"] / ref)
+    shared = {label: r for label, r in across.items() if len(r) > 1}
+    if shared:
+        tr.write_sep("-", "median over groups, relative to stereodepth")
+        for label, ratios in sorted(shared.items()):
+            m = median(ratios)
+            tr.write_line(f"    {label:<40} {m:8.2f}x over {len(ratios)} groups "
+                          f"(stereodepth / {label}: {1 / m:.3f})")
 
 
 @pytest.fixture

@@ -5,9 +5,16 @@
 //
 // One row of a band: (1) the block-column sums colsum[x][q] gain the pixel costs of the row
 // entering the block and lose those of the row leaving it; (2) a running sum along the row
-// gives each pixel's block costs acc[q]; the pixel's winner, second-best cost and sub-pixel
-// step follow, and acc also updates the right image's running winners (the other diagonal of
-// the same costs); (3) the left-right check reads those winners.
+// gives each pixel's block costs; its winner (least cost, lowest disparity on a tie), the
+// uniqueness data and the costs beside the winner go to a per-pixel record, and the same
+// costs update the right image's running winners (the other diagonal); (3) a second pass over
+// the records applies the checks (left-right among them) and the sub-pixel step.
+//
+// The AVX-512 build keeps a pixel's costs in registers (dp <= 256: one template per vector
+// count), does step (1) for column x + r on the way (so the column sums are read back from
+// L1), rotates each pixel's costs into aligned right-winner blocks held in registers, and
+// does step (3) sixteen pixels at a time. Every path computes the same integers, and the
+// floating-point steps use the same IEEE operations in the same order as the numpy oracle.
 #include "block_match_kernels.hpp"
 
 #include <cmath>
@@ -15,8 +22,14 @@
 #include <cstdlib>
 #include <cstring>
 #include <limits>
+#include <type_traits>
 
 #if defined(__AVX2__) || defined(__AVX512F__)
+#if defined(__GNUC__) && !defined(__clang__)
+// GCC 12's AVX-512 intrinsics start from _mm512_undefined_*(), which its flow analysis then
+// reports as "may be used uninitialized" (GCC bug 105593): not a problem in this code.
+#pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
+#endif
 #include <immintrin.h>
 #endif
 
@@ -61,15 +74,20 @@ void rgb_to_grey(const uint8_t* rgb, uint8_t* grey, ptrdiff_t cols) {
   }
 }
 
-// The 5x5 census code at column x: one bit per neighbour, row-major, the first neighbour in
-// bit 23, set where the neighbour (clamped to the image) is darker than the centre.
+// The census neighbours: the border of the 5x5 window (16 pixels), row-major.
+constexpr bool on_ring(int dy, int dx) {  // dy = 0..4 (row y + dy - 2), dx = -2..2
+  return dy == 0 || dy == 4 || dx == -2 || dx == 2;
+}
+
+// The census code at column x: one bit per ring neighbour, row-major, the first in bit 15,
+// set where the neighbour (clamped to the image) is darker than the centre.
 template <typename T>
 uint32_t census_at(const T* const* rows, ptrdiff_t x, ptrdiff_t cols) {
   const T c = rows[2][x];
   uint32_t code = 0;
   for (int dy = 0; dy < 5; ++dy) {
     for (int dx = -2; dx <= 2; ++dx) {
-      if (dy == 2 && dx == 0) continue;
+      if (!on_ring(dy, dx)) continue;
       const T v = rows[dy][clamp_index(x + dx, 0, cols - 1)];
       code = (code << 1) | static_cast<uint32_t>(v < c);
     }
@@ -78,12 +96,59 @@ uint32_t census_at(const T* const* rows, ptrdiff_t x, ptrdiff_t cols) {
 }
 
 #if defined(STEREODEPTH_BM_AVX512)
+// The census codes of N = 64 (8-bit) or 32 (16-bit) interior pixels from x: each neighbour's
+// comparison mask adds its bit into one of two byte planes (bits 8-15, 0-7), which are then
+// widened and merged into 32-bit codes.
 template <typename T>
-inline __m512i load16_epi32(const T* p) {
-  if constexpr (sizeof(T) == 1) {
-    return _mm512_cvtepu8_epi32(_mm_loadu_si128(reinterpret_cast<const __m128i*>(p)));
-  } else {
-    return _mm512_cvtepu16_epi32(_mm256_loadu_si256(reinterpret_cast<const __m256i*>(p)));
+inline void census_block(const T* const* rows, ptrdiff_t x, uint32_t* out) {
+  constexpr int kN = sizeof(T) == 1 ? 64 : 32;
+  using Mask = std::conditional_t<kN == 64, __mmask64, __mmask32>;
+  auto load = [](const T* p) {
+    if constexpr (kN == 64) {
+      return _mm512_loadu_si512(p);
+    } else {
+      return _mm512_loadu_si512(p);
+    }
+  };
+  auto less = [](__m512i a, __m512i b) -> Mask {
+    if constexpr (kN == 64) {
+      return _mm512_cmplt_epu8_mask(a, b);
+    } else {
+      return _mm512_cmplt_epu16_mask(a, b);
+    }
+  };
+  const __m512i c = load(rows[2] + x);
+  __m512i plane[2] = {_mm512_setzero_si512(), _mm512_setzero_si512()};
+  int bit = 15;
+  for (int dy = 0; dy < 5; ++dy) {
+    for (int dx = -2; dx <= 2; ++dx) {
+      if (!on_ring(dy, dx)) continue;
+      const Mask m = less(load(rows[dy] + x + dx), c);
+      const int p = 1 - bit / 8;  // plane 0: bits 8-15
+      const __m512i b = _mm512_set1_epi8(static_cast<char>(1 << (bit % 8)));
+      if constexpr (kN == 64) {
+        plane[p] = _mm512_mask_add_epi8(plane[p], m, plane[p], b);
+      } else {
+        // 32 pixels: the planes' low 32 bytes.
+        plane[p] = _mm512_mask_add_epi8(plane[p], static_cast<__mmask64>(m), plane[p], b);
+      }
+      --bit;
+    }
+  }
+  // Group G of 16 pixels (the index must be a compile-time constant for vextracti32x4).
+  auto emit = [&](auto group) {
+    constexpr int kG = decltype(group)::value;
+    auto bytes = [&](int p) {
+      return _mm512_cvtepu8_epi32(_mm512_extracti32x4_epi32(plane[p], kG));
+    };
+    const __m512i code = _mm512_or_si512(_mm512_slli_epi32(bytes(0), 8), bytes(1));
+    _mm512_storeu_si512(out + x + 16 * kG, code);
+  };
+  emit(std::integral_constant<int, 0>{});
+  emit(std::integral_constant<int, 1>{});
+  if constexpr (kN == 64) {
+    emit(std::integral_constant<int, 2>{});
+    emit(std::integral_constant<int, 3>{});
   }
 }
 #endif
@@ -93,19 +158,15 @@ void census_row(const T* const* rows, uint32_t* out, ptrdiff_t cols) {
   ptrdiff_t x = 0;
   for (; x < cols && x < 2; ++x) out[x] = census_at(rows, x, cols);
 #if defined(STEREODEPTH_BM_AVX512)
-  for (; x + 16 <= cols - 2; x += 16) {
-    const __m512i c = load16_epi32(rows[2] + x);
-    __m512i code = _mm512_setzero_si512();
-    int bit = 23;
-    for (int dy = 0; dy < 5; ++dy) {
-      for (int dx = -2; dx <= 2; ++dx) {
-        if (dy == 2 && dx == 0) continue;
-        const __mmask16 m = _mm512_cmplt_epu32_mask(load16_epi32(rows[dy] + x + dx), c);
-        code = _mm512_mask_or_epi32(code, m, code, _mm512_set1_epi32(1 << bit));
-        --bit;
-      }
+  constexpr ptrdiff_t kBlock = sizeof(T) == 1 ? 64 : 32;
+  if (cols - 4 >= kBlock) {
+    for (; x + kBlock <= cols - 2; x += kBlock) census_block(rows, x, out);
+    // The tail: one more block ending at the last interior column (overlapping the previous
+    // one; the overlapped codes are computed twice, identically).
+    if (x < cols - 2) {
+      census_block(rows, cols - 2 - kBlock, out);
+      x = cols - 2;
     }
-    _mm512_storeu_si512(out + x, code);
   }
 #endif
   for (; x < cols - 2; ++x) {
@@ -115,7 +176,7 @@ void census_row(const T* const* rows, uint32_t* out, ptrdiff_t cols) {
     for (int dy = 0; dy < 5; ++dy) {
       const T* p = rows[dy];
       for (int dx = -2; dx <= 2; ++dx) {
-        if (dy == 2 && dx == 0) continue;
+        if (!on_ring(dy, dx)) continue;
         code = (code << 1) | static_cast<uint32_t>(p[x + dx] < c);
       }
     }
@@ -327,19 +388,26 @@ struct RowCtx {
   int dp, nd, qpad, radius, min_d;
   SubpixelFit subpixel;
   bool lr_on, need_second;
+  // AVX-512 first pass without confidence: `second` holds, instead of the second-best cost,
+  // how many lanes cost less than the uniqueness threshold unique_min[best]; the second pass
+  // subtracts the winner and its two neighbours (see decide_avx512).
+  bool count_low;
   double texture_sum_min, uniqueness_factor, lr_max_diff;
   uint16_t* acc;   // dp lanes of scratch (generic pass)
   uint16_t* rmin;  // generic pass
   // Right winners: rarg[i] is the left column (mod 2^16) whose block won right column
   // i + jmin; its disparity index is (rarg[i] - i + dp - 1) mod 2^16.
   uint16_t* rarg;
-  // Winner records (see BandScratch).
-  uint16_t* best;
-  int32_t* kbest;
-  uint16_t* second;
-  uint32_t* tsum;
-  uint16_t* arow;  // every pixel's costs, when the sub-pixel step needs its neighbours
+  WinnerRecord* rec;  // the row's winner records
   const uint32_t* unique_min;  // null when off
+  // The column-sum update of this row, when the first pass does it on the way (fused): the
+  // left feature rows and padded right rows entering and leaving the block; null otherwise.
+  const void* in_left;
+  const void* in_rpad;
+  const void* out_left;
+  const void* out_rpad;
+  const void* in_quad;  // census: the padded rows regrouped (see quads_of)
+  const void* out_quad;
   float* drow;
   float* crow;  // null when no confidence is wanted
 };
@@ -348,10 +416,7 @@ constexpr uint32_t kNone = 0xFFFFu;  // no search (best) / no second-best (secon
 
 // The record of a pixel with no search: its block leaves the right image.
 inline void record_none(const RowCtx& c, ptrdiff_t x) {
-  c.best[x] = kNone;
-  c.kbest[x] = 0;
-  c.second[x] = kNone;
-  c.tsum[x] = 0;
+  c.rec[x] = WinnerRecord{static_cast<uint16_t>(kNone), static_cast<uint16_t>(kNone), 0, 0, 0};
 }
 
 struct Winner {
@@ -561,12 +626,16 @@ void winners_generic(const RowCtx& c) {
       continue;
     }
     const Winner w = find_winner(acc, c.qpad, dp);
-    c.best[x] = static_cast<uint16_t>(w.best);
-    c.kbest[x] = dp - 1 - w.q;
-    c.second[x] = static_cast<uint16_t>(c.need_second ? second_cost(acc, c.qpad, dp, w.q) : kNone);
-    c.tsum[x] = tsum;
+    WinnerRecord& rec = c.rec[x];
+    rec.best = static_cast<uint16_t>(w.best);
+    rec.kbest = dp - 1 - w.q;
+    rec.second = static_cast<uint16_t>(c.need_second ? second_cost(acc, c.qpad, dp, w.q) : kNone);
+    rec.tsum = tsum;
+    rec.around = 0;
     if (c.subpixel != SubpixelFit::kNone) {
-      std::memcpy(c.arow + x * dp, acc, sizeof(uint16_t) * static_cast<size_t>(dp));
+      const uint32_t c0 = w.q + 1 < dp ? acc[w.q + 1] : 0u;  // disparity index kb - 1
+      const uint32_t c2 = w.q >= 1 ? acc[w.q - 1] : 0u;      // disparity index kb + 1
+      rec.around = c0 | (c2 << 16);
     }
   }
 }
@@ -575,17 +644,122 @@ void winners_generic(const RowCtx& c) {
 
 constexpr int kMaxChunks = 8;
 
+// rotation_table()[s] lane j = (j - s) mod 32: the index of a rotation by s lanes.
+const __m512i* rotation_table() {
+  struct Table {
+    alignas(64) uint16_t lanes[32][32];
+    Table() {
+      for (int s = 0; s < 32; ++s) {
+        for (int j = 0; j < 32; ++j) lanes[s][j] = static_cast<uint16_t>((j - s) & 31);
+      }
+    }
+  };
+  static const Table table;
+  return reinterpret_cast<const __m512i*>(table.lanes);
+}
+
+// quads[i] = the 128-bit blocks rpad[i..i+3], rpad[i+8..i+11], rpad[i+16..i+19],
+// rpad[i+24..i+27]: the codes that _mm512_packs_epi32 needs in its first operand to produce
+// lanes i..i+31 in order (quads[i + 4] gives the second operand).
+// With invert, each code is stored as ~code << 16 (the leaving row's form, see update_col).
+void quads_of(const uint32_t* rpad, __m512i* quads, ptrdiff_t n, bool invert) {
+  const __m512i ones = _mm512_set1_epi32(-1);
+  for (ptrdiff_t i = 0; i < n; ++i) {
+    __m512i v = _mm512_shuffle_i32x4(_mm512_loadu_si512(rpad + i),
+                                     _mm512_loadu_si512(rpad + i + 16), 0x88);
+    if (invert) v = _mm512_slli_epi32(_mm512_xor_si512(v, ones), 16);
+    _mm512_store_si512(quads + i, v);
+  }
+}
+
 // First pass with the NC vectors of costs in registers. The right winners stay in registers
 // too, for the NC + 1 aligned blocks of 32 right columns that the current group of 32 left
 // columns reaches: each pixel's costs are rotated by x mod 32 lanes into place.
-template <int NC>
+template <int NC, typename Cost>
 void winners_avx512(const RowCtx& c) {
-  const ptrdiff_t cols = c.cols;
-  const int dp = c.dp, r = c.radius;
+  using F = typename Cost::Feature;
+  // Everything the loop reads from c, in locals: the compiler then need not reload it after
+  // each store (and dp is a constant).
+  constexpr int kDp = 32 * NC;
+  constexpr int dp = kDp;
+  const ptrdiff_t cols = c.cols, xlo = c.xlo, xhi = c.xhi;
+  const int r = c.radius;
+  const uint32_t* const texcol = c.texcol;
+  const uint32_t* const unique_min = c.unique_min;
+  WinnerRecord* const records = c.rec;
+  uint16_t* const rarg = c.rarg;
+  const bool lr_on = c.lr_on, count_low = c.count_low, need_second = c.need_second;
   const __m512i ones = _mm512_set1_epi16(-1);
   const __m512i padv = _mm512_maskz_mov_epi16(pad_mask(c.qpad), ones);
   const __m512i iota = lane_iota();
-  const uint16_t* S = c.colsum;
+  uint16_t* S = const_cast<uint16_t*>(c.colsum);
+
+  // The fused column-sum update: column j gains the entering row's costs and loses the
+  // leaving row's, just before the running sum reads it (so it is read back from L1).
+  const F* in_l = static_cast<const F*>(c.in_left);
+  const F* in_r = static_cast<const F*>(c.in_rpad);
+  const F* out_l = static_cast<const F*>(c.out_left);
+  const F* out_r = static_cast<const F*>(c.out_rpad);
+  const __m512i* in_q = static_cast<const __m512i*>(c.in_quad);
+  const __m512i* out_q = static_cast<const __m512i*>(c.out_quad);
+  const bool half_pad = c.qpad >= 16;  // the first vector's lower half is all padding
+  auto update_col = [&](ptrdiff_t j) {
+    uint16_t* s = S + j * dp;
+    if constexpr (sizeof(F) == 4) {
+      // quads[j + q] holds the codes of lanes q + {0-3, 8-11, 16-19, 24-27}, quads[j + q + 4]
+      // those of q + {4-7, 12-15, 20-23, 28-31}: vpackssdw interleaves their 128-bit blocks
+      // back into lane order. Codes have 16 bits: the entering row's XOR sits in the low half
+      // of a 32-bit lane, the complement of the leaving row's in the high half (its quads are
+      // stored as ~code << 16), so one popcount gives c_in + 16 - c_out.
+      const __m512i liv = _mm512_set1_epi32(static_cast<int>(in_l[j]));
+      const __m512i lov = _mm512_set1_epi32(static_cast<int>(out_l[j] << 16));
+      const __m512i* qi = in_q + j;
+      const __m512i* qo = out_q + j;
+      // (a ^ b) | c: vpternlogd with the truth table 0xBE.
+      auto diff16 = [&](const __m512i* in, const __m512i* out) {
+        return _mm512_popcnt_epi32(_mm512_ternarylogic_epi32(
+            _mm512_loadu_si512(in), liv, _mm512_xor_si512(_mm512_loadu_si512(out), lov), 0xBE));
+      };
+      const __m512i bias = _mm512_set1_epi16(16);
+      int i = 0;
+      if (half_pad) {
+        // Lanes 0-15 are padding: only lanes 16-31 of the first vector, which packs from the
+        // upper halves of the two quad vectors.
+        const __m256i li = _mm512_castsi512_si256(liv), lo = _mm512_castsi512_si256(lov);
+        auto upper = [](const __m512i* p) {
+          return _mm256_loadu_si256(reinterpret_cast<const __m256i*>(p) + 1);
+        };
+        auto diff8 = [&](const __m512i* in, const __m512i* out) {
+          return _mm256_popcnt_epi32(_mm256_ternarylogic_epi32(
+              upper(in), li, _mm256_xor_si256(upper(out), lo), 0xBE));
+        };
+        const __m256i d = _mm256_sub_epi16(_mm256_packs_epi32(diff8(qi, qo), diff8(qi + 4, qo + 4)),
+                                           _mm512_castsi512_si256(bias));
+        auto* sh = reinterpret_cast<__m256i*>(s) + 1;
+        _mm256_store_si256(sh, _mm256_add_epi16(_mm256_load_si256(sh), d));
+        i = 1;
+      }
+      for (; i < NC; ++i) {
+        const int q = 32 * i;
+        const __m512i d = _mm512_sub_epi16(
+            _mm512_packs_epi32(diff16(qi + q, qo + q), diff16(qi + q + 4, qo + q + 4)), bias);
+        _mm512_store_si512(s + q, _mm512_add_epi16(_mm512_load_si512(s + q), d));
+      }
+    } else {
+      const __m512i liv = _mm512_set1_epi16(static_cast<short>(in_l[j]));
+      const __m512i lov = _mm512_set1_epi16(static_cast<short>(out_l[j]));
+      for (int i = 0; i < NC; ++i) {
+        const int q = 32 * i;
+        const __m512i d = _mm512_sub_epi16(sad_cost32(liv, in_r + j + q),
+                                           sad_cost32(lov, out_r + j + q));
+        _mm512_store_si512(s + q, _mm512_add_epi16(_mm512_load_si512(s + q), d));
+      }
+    }
+  };
+  const bool fused = in_l != nullptr;
+  if (fused) {
+    for (ptrdiff_t j = 0; j <= r && j < cols; ++j) update_col(j);
+  }
 
   __m512i A[NC];
   for (int i = 0; i < NC; ++i) A[i] = _mm512_setzero_si512();
@@ -595,7 +769,7 @@ void winners_avx512(const RowCtx& c) {
     for (int i = 0; i < NC; ++i) {
       A[i] = _mm512_add_epi16(A[i], _mm512_loadu_si512(S + xx * dp + 32 * i));
     }
-    if (c.texcol) tsum += c.texcol[xx];
+    if (texcol) tsum += texcol[xx];
   }
   A[0] = _mm512_or_si512(A[0], padv);  // padding lanes: 0xFFFF, never a winner
 
@@ -604,9 +778,15 @@ void winners_avx512(const RowCtx& c) {
     B[i] = ones;
     K[i] = _mm512_setzero_si512();
   }
+  // The winner's neighbours serve the sub-pixel step and the counted uniqueness check.
+  const bool around = c.subpixel != SubpixelFit::kNone || count_low;
+  const __m512i one = _mm512_set1_epi16(1);
+  __m512i xv = _mm512_setzero_si512();  // x in every lane
+  const __m512i* rotations = rotation_table();
 
   for (ptrdiff_t x = 0; x < cols; ++x) {
     if (x > 0) {
+      if (fused && x + r < cols) update_col(x + r);
       const ptrdiff_t xp = clamp_index(x + r, 0, cols - 1);
       const ptrdiff_t xm = clamp_index(x - r - 1, 0, cols - 1);
       const uint16_t* plus = S + xp * dp;
@@ -616,12 +796,12 @@ void winners_avx512(const RowCtx& c) {
                                 _mm512_loadu_si512(minus + 32 * i));
       }
       A[0] = _mm512_or_si512(A[0], padv);
-      if (c.texcol) tsum += c.texcol[xp] - c.texcol[xm];
+      if (texcol) tsum += texcol[xp] - texcol[xm];
     }
-    if (c.lr_on) {
+    if (lr_on) {
       const int s = static_cast<int>(x & 31);
       if (s == 0 && x > 0) {
-        _mm512_store_si512(c.rarg + (x - 32), K[0]);
+        _mm512_store_si512(rarg + (x - 32), K[0]);
         for (int i = 0; i < NC; ++i) {
           B[i] = B[i + 1];
           K[i] = K[i + 1];
@@ -629,11 +809,8 @@ void winners_avx512(const RowCtx& c) {
         B[NC] = ones;
         K[NC] = _mm512_setzero_si512();
       }
-      const __m512i idx =
-          _mm512_and_si512(_mm512_sub_epi16(iota, _mm512_set1_epi16(static_cast<short>(s))),
-                           _mm512_set1_epi16(31));
+      const __m512i idx = _mm512_load_si512(rotations + s);  // lane j <- (j - s) mod 32
       const __mmask32 from_prev = static_cast<__mmask32>((std::uint64_t{1} << s) - 1u);
-      const __m512i xv = _mm512_set1_epi16(static_cast<short>(x));
       __m512i prev = ones;
       for (int i = 0; i <= NC; ++i) {
         const __m512i cur = i < NC ? _mm512_permutexvar_epi16(idx, A[i]) : ones;
@@ -643,8 +820,9 @@ void winners_avx512(const RowCtx& c) {
         K[i] = _mm512_mask_mov_epi16(K[i], lt, xv);
         prev = cur;
       }
+      xv = _mm512_add_epi16(xv, one);
     }
-    if (x < c.xlo || x > c.xhi) {
+    if (x < xlo || x > xhi) {
       record_none(c, x);
       continue;
     }
@@ -652,56 +830,84 @@ void winners_avx512(const RowCtx& c) {
     for (int i = 1; i < NC; ++i) mn = _mm512_min_epu16(mn, A[i]);
     const uint32_t best = hmin_epu16(mn);
     const __m512i bv = _mm512_set1_epi16(static_cast<short>(best));
+    // The winner: the highest lane holding the least cost (the lowest disparity on a tie).
+    // Branch-free: which vector holds the winner changes from pixel to pixel, and a
+    // mispredicted branch costs more than this whole selection.
     int qb = 0;
-    for (int i = 0; i < NC; ++i) {
-      const unsigned m = static_cast<unsigned>(_mm512_cmpeq_epi16_mask(A[i], bv));
-      qb = m ? 32 * i + 31 - __builtin_clz(m) : qb;
+    for (int i = 0; i < NC; i += 2) {
+      std::uint64_t w = _mm512_cmpeq_epi16_mask(A[i], bv);
+      if (i + 1 < NC) {
+        w |= static_cast<std::uint64_t>(_mm512_cmpeq_epi16_mask(A[i + 1], bv)) << 32;
+      }
+      const int top = 32 * i + 63 - __builtin_clzll(w | 1u);
+      const int found = -static_cast<int>(w != 0);  // all ones when this pair holds the least
+      qb ^= (qb ^ top) & found;
     }
     uint32_t second = kNone;
-    if (c.crow) {
+    if (count_low) {
+      // The lanes below the uniqueness threshold (the winner among them); this does not wait
+      // for the winner's lane. The threshold is stored twice per 32-bit word, so a dword
+      // broadcast from memory fills the 16-bit lanes.
+      const __m512i thr = _mm512_set1_epi32(static_cast<int>(unique_min[best]));
+      second = 0;
+      for (int i = 0; i < NC; ++i) {
+        second += static_cast<uint32_t>(__builtin_popcount(_mm512_cmplt_epu16_mask(A[i], thr)));
+      }
+    } else if (need_second) {
       // The exact second-best cost, for the confidence.
       __m512i m2 = ones;
       for (int i = 0; i < NC; ++i) {
         m2 = _mm512_min_epu16(m2, _mm512_mask_mov_epi16(A[i], near_mask(iota, 32 * i, qb), ones));
       }
       second = hmin_epu16(m2);
-    } else if (c.unique_min) {
-      // Only the uniqueness verdict: does any cost away from the winner fall below the
-      // threshold? (0: fails, kNone: passes; see BandScratch.)
-      const __m512i thr = _mm512_set1_epi16(static_cast<short>(c.unique_min[best]));
-      __mmask32 low = 0;
-      for (int i = 0; i < NC; ++i) {
-        low |= _mm512_mask_cmplt_epu16_mask(static_cast<__mmask32>(~near_mask(iota, 32 * i, qb)),
-                                            A[i], thr);
-      }
-      second = low ? 0u : kNone;
     }
-    c.best[x] = static_cast<uint16_t>(best);
-    c.kbest[x] = dp - 1 - qb;
-    c.second[x] = static_cast<uint16_t>(second);
-    c.tsum[x] = tsum;
-    if (c.subpixel != SubpixelFit::kNone) {
-      uint16_t* dst = c.arow + x * dp;
-      for (int i = 0; i < NC; ++i) _mm512_store_si512(dst + 32 * i, A[i]);
+    WinnerRecord* rec = records + x;
+    rec->best = static_cast<uint16_t>(best);
+    rec->second = static_cast<uint16_t>(second);
+    rec->kbest = kDp - 1 - qb;
+    rec->tsum = tsum;
+    rec->around = 0;
+    if (around) {
+      // c0 | c2 << 16: lanes qb + 1 and qb - 1 (disparity index kb - 1 and kb + 1), 0 beyond
+      // the lanes. Two-source permutes pick them out of each pair of vectors. (Written out
+      // here: a lambda taking A by reference would keep A in memory.)
+      const __m512i want = _mm512_set1_epi32(static_cast<int>(
+          (static_cast<uint32_t>(qb + 1) & 0xFFFFu) | (static_cast<uint32_t>(qb - 1) << 16)));
+      __m512i got = _mm512_setzero_si512();
+      for (int i = 0; i < NC; i += 2) {
+        const __m512i rel =
+            _mm512_sub_epi16(want, _mm512_set1_epi16(static_cast<short>(32 * i)));
+        __m512i t;
+        if (i + 1 < NC) {
+          t = _mm512_permutex2var_epi16(A[i], rel, A[i + 1]);
+        } else {
+          t = _mm512_permutexvar_epi16(rel, A[i]);
+        }
+        const __mmask32 in = _mm512_cmplt_epu16_mask(
+            rel, _mm512_set1_epi16(static_cast<short>(i + 1 < NC ? 64 : 32)));
+        got = _mm512_mask_mov_epi16(got, in & 3u, t);
+      }
+      rec->around = static_cast<uint32_t>(_mm_cvtsi128_si32(_mm512_castsi512_si128(got)));
     }
   }
-  if (c.lr_on) {
+  if (lr_on) {
     const ptrdiff_t base = (cols - 1) & ~ptrdiff_t{31};
-    for (int i = 0; i <= NC; ++i) _mm512_store_si512(c.rarg + base + 32 * i, K[i]);
+    for (int i = 0; i <= NC; ++i) _mm512_store_si512(rarg + base + 32 * i, K[i]);
   }
 }
 
-template <int NC>
+// The first pass for dp = 32 * NC when NC <= kMaxChunks; false otherwise.
+template <int NC, typename Cost>
 bool winners_fixed(const RowCtx& c) {
   if constexpr (NC > kMaxChunks) {
     (void)c;
     return false;
   } else {
     if (c.dp == 32 * NC) {
-      winners_avx512<NC>(c);
+      winners_avx512<NC, Cost>(c);
       return true;
     }
-    return winners_fixed<NC + 1>(c);
+    return winners_fixed<NC + 1, Cost>(c);
   }
 }
 
@@ -718,28 +924,50 @@ void decide_avx512(const RowCtx& c) {
   // An integer disparity difference d passes the left-right check when d <= lr_max_diff,
   // that is d <= floor(lr_max_diff).
   const int lr_int = c.lr_max_diff >= 65536.0 ? 65536 : static_cast<int>(std::floor(c.lr_max_diff));
-  auto u16 = [](const uint16_t* p) {
-    return _mm512_cvtepu16_epi32(_mm256_loadu_si256(reinterpret_cast<const __m256i*>(p)));
-  };
   auto to_pd_lo = [](__m512i v) { return _mm512_cvtepu32_pd(_mm512_castsi512_si256(v)); };
   auto to_pd_hi = [](__m512i v) { return _mm512_cvtepu32_pd(_mm512_extracti64x4_epi64(v, 1)); };
   for (ptrdiff_t x = 0; x < cols; x += 16) {
     const __mmask16 lanes =
         cols - x >= 16 ? static_cast<__mmask16>(0xFFFF)
                        : static_cast<__mmask16>((1u << (cols - x)) - 1u);
-    const __m512i b = u16(c.best + x);
-    const __m512i s2 = u16(c.second + x);
-    const __m512i kb = _mm512_loadu_si512(c.kbest + x);
+    // 16 records = four vectors of four; pick each field out with two-source permutes.
+    const __m512i* rv = reinterpret_cast<const __m512i*>(c.rec + x);
+    const __m512i r0 = _mm512_loadu_si512(rv), r1 = _mm512_loadu_si512(rv + 1);
+    const __m512i r2 = _mm512_loadu_si512(rv + 2), r3 = _mm512_loadu_si512(rv + 3);
+    auto field = [&](int f) {
+      const __m512i idx = _mm512_add_epi32(_mm512_slli_epi32(iota, 2), _mm512_set1_epi32(f));
+      const __m512i lo = _mm512_permutex2var_epi32(r0, idx, r1);  // lanes 0-7
+      const __m512i hi = _mm512_permutex2var_epi32(r2, idx, r3);  // lanes 0-7
+      return _mm512_inserti64x4(lo, _mm512_castsi512_si256(hi), 1);
+    };
+    const __m512i f0 = field(0);  // best | second << 16
+    const __m512i b = _mm512_and_si512(f0, _mm512_set1_epi32(0xFFFF));
+    const __m512i s2 = _mm512_srli_epi32(f0, 16);
+    const __m512i kb = field(1);
     __mmask16 ok = lanes & _mm512_cmpneq_epi32_mask(b, none);
     if (c.texcol) {
-      const __m512i t = _mm512_loadu_si512(c.tsum + x);
+      const __m512i t = field(2);
       const __m512d tmin = _mm512_set1_pd(c.texture_sum_min);
       const __mmask8 lo = _mm512_cmp_pd_mask(to_pd_lo(t), tmin, _CMP_NLT_UQ);
       const __mmask8 hi = _mm512_cmp_pd_mask(to_pd_hi(t), tmin, _CMP_NLT_UQ);
       ok &= static_cast<__mmask16>(lo | (static_cast<unsigned>(hi) << 8));
     }
     const __mmask16 has2 = _mm512_cmpneq_epi32_mask(s2, none);
-    if (c.uniqueness_factor > 0) {
+    if (c.count_low) {
+      // Unique when the lanes below the threshold are only the winner and those of its two
+      // neighbours (disparity index kb - 1 and kb + 1, where they exist) below it.
+      const __m512i thr = _mm512_and_si512(
+          _mm512_mask_i32gather_epi32(zero, ok, b, c.unique_min, 4), _mm512_set1_epi32(0xFFFF));
+      const __m512i nb = field(3);
+      const __mmask16 low0 = _mm512_cmpge_epi32_mask(kb, _mm512_set1_epi32(1)) &
+                             _mm512_cmplt_epi32_mask(_mm512_and_si512(nb, _mm512_set1_epi32(0xFFFF)), thr);
+      const __mmask16 low2 = _mm512_cmple_epi32_mask(kb, _mm512_set1_epi32(c.nd - 2)) &
+                             _mm512_cmplt_epi32_mask(_mm512_srli_epi32(nb, 16), thr);
+      const __m512i near = _mm512_add_epi32(
+          _mm512_set1_epi32(1), _mm512_add_epi32(_mm512_maskz_set1_epi32(low0, 1),
+                                                 _mm512_maskz_set1_epi32(low2, 1)));
+      ok &= _mm512_cmpeq_epi32_mask(s2, near);
+    } else if (c.uniqueness_factor > 0) {
       const __m512d hundred = _mm512_set1_pd(100.0);
       const __m512d f = _mm512_set1_pd(c.uniqueness_factor);
       const __mmask8 lo = _mm512_cmp_pd_mask(_mm512_mul_pd(to_pd_lo(s2), hundred),
@@ -763,20 +991,9 @@ void decide_avx512(const RowCtx& c) {
     if (sub) {
       const __mmask16 interior = ok & _mm512_cmpge_epi32_mask(kb, _mm512_set1_epi32(1)) &
                                  _mm512_cmple_epi32_mask(kb, _mm512_set1_epi32(c.nd - 2));
-      // The costs at disparity index kb - 1 and kb + 1: lanes q + 1 and q - 1 of the pixel's
-      // costs in arow (q = dp - 1 - kb), gathered as the low halves of 32-bit reads.
-      const __m512i xs = _mm512_add_epi32(_mm512_set1_epi32(static_cast<int>(x)), iota);
-      const __m512i at = _mm512_add_epi32(_mm512_mullo_epi32(xs, _mm512_set1_epi32(dp)),
-                                          _mm512_sub_epi32(_mm512_set1_epi32(dp - 1), kb));
-      const __m512i low16 = _mm512_set1_epi32(0xFFFF);
-      const __m512i c0 = _mm512_and_si512(
-          _mm512_mask_i32gather_epi32(zero, interior, _mm512_add_epi32(at, _mm512_set1_epi32(1)),
-                                      c.arow, 2),
-          low16);
-      const __m512i c2 = _mm512_and_si512(
-          _mm512_mask_i32gather_epi32(zero, interior, _mm512_sub_epi32(at, _mm512_set1_epi32(1)),
-                                      c.arow, 2),
-          low16);
+      const __m512i nb = field(3);
+      const __m512i c0 = _mm512_and_si512(nb, _mm512_set1_epi32(0xFFFF));
+      const __m512i c2 = _mm512_srli_epi32(nb, 16);
       const __m512 num = _mm512_cvtepi32_ps(_mm512_sub_epi32(c0, c2));
       __m512i den_i;
       if (parabola) {
@@ -801,16 +1018,18 @@ void decide_avx512(const RowCtx& c) {
 
 #endif
 
-// Second pass, one pixel at a time: the checks, the sub-pixel step and the outputs.
-void decide_generic(const RowCtx& c) {
+// Second pass, one pixel at a time: the checks, the sub-pixel step and the outputs. (The
+// AVX-512 build uses decide_avx512, which gives the same results.)
+[[maybe_unused]] void decide_generic(const RowCtx& c) {
   const float nan = std::numeric_limits<float>::quiet_NaN();
   for (ptrdiff_t x = 0; x < c.cols; ++x) {
-    const uint32_t b = c.best[x];
-    const uint32_t s2 = c.second[x];
-    const int kb = c.kbest[x];
+    const WinnerRecord& rec = c.rec[x];
+    const uint32_t b = rec.best;
+    const uint32_t s2 = rec.second;
+    const int kb = rec.kbest;
     const bool has2 = s2 != kNone;
     bool ok = b != kNone;
-    if (ok && c.texcol) ok = !(static_cast<double>(c.tsum[x]) < c.texture_sum_min);
+    if (ok && c.texcol) ok = !(static_cast<double>(rec.tsum) < c.texture_sum_min);
     if (ok && c.uniqueness_factor > 0 && has2) {
       ok = static_cast<double>(s2) * 100.0 > static_cast<double>(b) * c.uniqueness_factor;
     }
@@ -827,9 +1046,9 @@ void decide_generic(const RowCtx& c) {
     }
     float d = static_cast<float>(c.min_d + kb);
     if (c.subpixel != SubpixelFit::kNone && kb >= 1 && kb <= c.nd - 2) {
-      const uint16_t* costs = c.arow + x * c.dp;
-      const int q = c.dp - 1 - kb;
-      const int32_t c0 = costs[q + 1], c1 = static_cast<int32_t>(b), c2 = costs[q - 1];
+      const int32_t c0 = static_cast<int32_t>(rec.around & 0xFFFFu);
+      const int32_t c1 = static_cast<int32_t>(b);
+      const int32_t c2 = static_cast<int32_t>(rec.around >> 16);
       const float num = static_cast<float>(c0 - c2);
       float den;
       if (c.subpixel == SubpixelFit::kParabola) {
@@ -848,10 +1067,28 @@ void decide_generic(const RowCtx& c) {
   }
 }
 
+// Whether this build's first pass updates the column sums itself for this dp.
+inline bool fuses_update(int dp) {
+#if defined(STEREODEPTH_BM_AVX512)
+  return dp <= 32 * kMaxChunks;
+#else
+  (void)dp;
+  return false;
+#endif
+}
+
+template <typename Cost>
 void row_pass(const RowCtx& c) {
 #if defined(STEREODEPTH_BM_AVX512)
-  if (!winners_fixed<1>(c)) winners_generic(c);
-  decide_avx512(c);
+  if (c.dp <= 32 * kMaxChunks) {
+    RowCtx counted = c;
+    counted.count_low = c.unique_min != nullptr && c.crow == nullptr;
+    winners_fixed<1, Cost>(counted);
+    decide_avx512(counted);
+  } else {
+    winners_generic(c);
+    decide_avx512(c);
+  }
 #else
   winners_generic(c);
   decide_generic(c);
@@ -872,7 +1109,8 @@ void pad_right_row(const F* row, F* pad, ptrdiff_t cols, ptrdiff_t n, ptrdiff_t 
 }
 
 template <typename Cost>
-void match_band_impl(const MatchArgs& a, const BandScratch& s, ptrdiff_t y0, ptrdiff_t y1) {
+void match_band_impl(const MatchArgs& a, const BandScratch& s, ptrdiff_t y0, ptrdiff_t y1,
+                     bool fresh) {
   using F = typename Cost::Feature;
   const ptrdiff_t cols = a.cols, rows = a.rows;
   const int dp = a.dp, r = a.radius;
@@ -914,15 +1152,12 @@ void match_band_impl(const MatchArgs& a, const BandScratch& s, ptrdiff_t y0, ptr
   c.acc = s.acc;
   c.rmin = s.rmin;
   c.rarg = s.rarg;
-  c.best = s.best;
-  c.kbest = s.kbest;
-  c.second = s.second;
-  c.tsum = s.tsum;
-  c.arow = s.arow;
+  c.rec = static_cast<WinnerRecord*>(s.records);
   c.unique_min = a.unique_min;
 
+  const bool fused = fuses_update(dp);
   for (ptrdiff_t y = y0; y < y1; ++y) {
-    if (y == y0) {
+    if (fresh && y == y0) {
       std::memset(s.colsum, 0, sizeof(uint16_t) * static_cast<size_t>(cols) * dp);
       if (tex_on) std::memset(s.texcol, 0, sizeof(uint32_t) * static_cast<size_t>(cols));
       for (ptrdiff_t dy = -r; dy <= r; ++dy) {
@@ -939,7 +1174,24 @@ void match_band_impl(const MatchArgs& a, const BandScratch& s, ptrdiff_t y0, ptr
       if (yin != yout) {
         pad_right_row(rrow(yin), rpad_in, cols, npad, jmin);
         pad_right_row(rrow(yout), rpad_out, cols, npad, jmin);
-        update_cost_rows<Cost>(lrow(yin), rpad_in, lrow(yout), rpad_out, s.colsum, cols, dp);
+        if (fused) {
+          c.in_left = lrow(yin);
+          c.in_rpad = rpad_in;
+          c.out_left = lrow(yout);
+          c.out_rpad = rpad_out;
+#if defined(STEREODEPTH_BM_AVX512)
+          if constexpr (sizeof(F) == 4) {
+            // Every lane q < dp of every column x < cols reads quads below cols + dp - 28.
+            const ptrdiff_t nq = cols + dp - 28;
+            quads_of(rpad_in, static_cast<__m512i*>(s.quad_in), nq, false);
+            quads_of(rpad_out, static_cast<__m512i*>(s.quad_out), nq, true);
+            c.in_quad = s.quad_in;
+            c.out_quad = s.quad_out;
+          }
+#endif
+        } else {
+          update_cost_rows<Cost>(lrow(yin), rpad_in, lrow(yout), rpad_out, s.colsum, cols, dp);
+        }
         if (tex_on) {
           const uint8_t* ti = trow(yin);
           const uint8_t* to = trow(yout);
@@ -950,15 +1202,62 @@ void match_band_impl(const MatchArgs& a, const BandScratch& s, ptrdiff_t y0, ptr
 
     c.drow = a.disp + y * a.disp_stride;
     c.crow = a.conf ? a.conf + y * a.conf_stride : nullptr;
-    row_pass(c);
+    row_pass<Cost>(c);
+    c.in_left = c.in_rpad = c.out_left = c.out_rpad = nullptr;
   }
 }
 
-void match_band(const MatchArgs& a, const BandScratch& s, ptrdiff_t y0, ptrdiff_t y1) {
+// ------------------------------------------------------------------------------------------
+// The speckle filter's links of one row (see SpeckleLinksFn).
+
+void speckle_links(const float* d, const float* u, ptrdiff_t cols, float rf, std::uint64_t* valid,
+                   std::uint64_t* left, std::uint64_t* up) {
+  const ptrdiff_t words = (cols + 63) / 64;
+  std::memset(valid, 0, sizeof(std::uint64_t) * static_cast<size_t>(words));
+  std::memset(left, 0, sizeof(std::uint64_t) * static_cast<size_t>(words));
+  std::memset(up, 0, sizeof(std::uint64_t) * static_cast<size_t>(words));
+  ptrdiff_t i = 0;
+#if defined(STEREODEPTH_BM_AVX512)
+  // 16 columns at a time; column 0 has no left neighbour (done below).
+  auto* v16 = reinterpret_cast<uint16_t*>(valid);
+  auto* l16 = reinterpret_cast<uint16_t*>(left);
+  auto* u16 = reinterpret_cast<uint16_t*>(up);
+  const __m512 r = _mm512_set1_ps(rf);
+  const __m512 sign = _mm512_set1_ps(-0.0f);
+  if (cols > 16) {
+    for (; i + 16 <= cols; i += 16) {
+      const __m512 di = _mm512_loadu_ps(d + i);
+      v16[i / 16] = _mm512_cmp_ps_mask(di, di, _CMP_ORD_Q);
+      if (i > 0) {
+        const __m512 dl = _mm512_loadu_ps(d + i - 1);
+        l16[i / 16] = _mm512_cmp_ps_mask(_mm512_andnot_ps(sign, _mm512_sub_ps(di, dl)), r,
+                                         _CMP_LE_OQ);
+      }
+      if (u) {
+        const __m512 du = _mm512_loadu_ps(u + i);
+        u16[i / 16] = _mm512_cmp_ps_mask(_mm512_andnot_ps(sign, _mm512_sub_ps(di, du)), r,
+                                         _CMP_LE_OQ);
+      }
+    }
+    // The first 16 columns' left links (column 0 has none).
+    for (ptrdiff_t j = 1; j < 16; ++j) {
+      if (std::fabs(d[j] - d[j - 1]) <= rf) left[0] |= std::uint64_t{1} << j;
+    }
+  }
+#endif
+  for (; i < cols; ++i) {
+    const std::uint64_t bit = std::uint64_t{1} << (i & 63);
+    if (d[i] == d[i]) valid[i >> 6] |= bit;
+    if (i > 0 && std::fabs(d[i] - d[i - 1]) <= rf) left[i >> 6] |= bit;
+    if (u && std::fabs(d[i] - u[i]) <= rf) up[i >> 6] |= bit;
+  }
+}
+
+void match_band(const MatchArgs& a, const BandScratch& s, ptrdiff_t y0, ptrdiff_t y1, bool fresh) {
   if (a.cost == MatchCost::kCensus) {
-    match_band_impl<CensusCost>(a, s, y0, y1);
+    match_band_impl<CensusCost>(a, s, y0, y1, fresh);
   } else {
-    match_band_impl<SadCost>(a, s, y0, y1);
+    match_band_impl<SadCost>(a, s, y0, y1, fresh);
   }
 }
 
@@ -973,6 +1272,7 @@ const BlockMatchKernels& block_match_kernels() {
       &sobel_row<uint8_t>,
       &sobel_row<uint16_t>,
       &match_band,
+      &speckle_links,
   };
   return kernels;
 }

@@ -31,7 +31,8 @@ struct MatchArgs {
   SubpixelFit subpixel;
   double uniqueness_factor;  // 100 + uniqueness_ratio, or 0 when the check is off
   // The same check as a table: a winner of cost b passes when every cost more than one
-  // disparity away is >= unique_min[b] (values capped at 0xFFFF). Null when off.
+  // disparity away is >= unique_min[b] & 0xFFFF (capped at 0xFFFF; the value is stored in
+  // both halves of the word). Null when off.
   const std::uint32_t* unique_min;
   double texture_sum_min;    // texture_threshold * block_size^2, or 0 when off
   double lr_max_diff;        // negative when off
@@ -41,23 +42,33 @@ struct MatchArgs {
   std::ptrdiff_t conf_stride;
 };
 
-// Per-band scratch memory, allocated by the caller (band_scratch_layout gives the sizes).
+// One pixel's winner, written by the first pass of a row and read by the second.
+struct WinnerRecord {
+  std::uint16_t best;    // least block cost; 0xFFFF: no search (the range leaves the image)
+  std::uint16_t second;  // least cost more than one disparity away (0xFFFF: none), or, in
+                         // the AVX-512 counted mode, the number of costs below the
+                         // uniqueness threshold
+  std::int32_t kbest;    // disparity index of the least cost
+  std::uint32_t tsum;    // block texture sum
+  std::uint32_t around;  // costs at disparity index kbest - 1 and + 1: c0 | c2 << 16
+};
+static_assert(sizeof(WinnerRecord) == 16, "records are read four to a vector");
+
+// Per-band scratch memory, allocated by the caller (carve_band gives the sizes).
 struct BandScratch {
   std::uint16_t* colsum;   // cols * dp: block-column sums of the pixel costs
   std::uint16_t* acc;      // dp: block sums of the current pixel
   void* rpad_in;           // cols + dp + kRowPad features: the padded right row entering
   void* rpad_out;          // the same for the leaving row
+  // AVX-512, census: the padded rows regrouped for in-order packing (see the kernels);
+  // (cols + dp + kRowPad) x 64 bytes each.
+  void* quad_in;
+  void* quad_out;
   std::uint16_t* rmin;     // cols + dp + kRowPad: least cost per right column
   std::uint16_t* rarg;     // cols + dp + kRowPad: the left column (mod 2^16) that gave it
   std::uint32_t* texcol;   // cols: block-column sums of the texture
-  // The row's winner records, one per column (written by the first pass of a row, read by the
-  // second): least cost (0xFFFF: no search), its disparity index, the second-best cost more
-  // than one disparity away (0xFFFF: none; 0: fails the uniqueness check), the block texture.
-  std::uint16_t* best;     // cols + 16
-  std::int32_t* kbest;     // cols + 16
-  std::uint16_t* second;   // cols + 16
-  std::uint32_t* tsum;     // cols + 16
-  std::uint16_t* arow;     // cols * dp + 32: every pixel's costs (for the sub-pixel step)
+  // The row's winner records (see WinnerRecord), cols + 16 of them.
+  void* records;
 };
 
 // Elements of slack after each padded row, so vector loops may overrun.
@@ -74,8 +85,16 @@ using SobelRow8Fn = void (*)(const std::uint8_t* const* rows, std::uint8_t* pref
                              std::uint8_t* texture, std::ptrdiff_t cols);
 using SobelRow16Fn = void (*)(const std::uint16_t* const* rows, std::uint8_t* prefiltered,
                               std::uint8_t* texture, std::ptrdiff_t cols);
+// Matches rows y0 .. y1 - 1. fresh: start from scratch at y0; otherwise the scratch holds the
+// column sums of row y0 - 1 (a band continued in pieces).
 using MatchBandFn = void (*)(const MatchArgs& args, const BandScratch& scratch,
-                             std::ptrdiff_t y0, std::ptrdiff_t y1);
+                             std::ptrdiff_t y0, std::ptrdiff_t y1, bool fresh);
+// The speckle filter's links of one row, as bits of 64-bit words ((cols + 63) / 64 each; the
+// bits past cols are 0): valid (d[i] is not NaN), left (d[i] and d[i - 1] are linked: both
+// valid, |d[i] - d[i - 1]| <= range_f), up (d[i] and u[i] linked; all 0 when u is null).
+using SpeckleLinksFn = void (*)(const float* d, const float* u, std::ptrdiff_t cols,
+                                float range_f, std::uint64_t* valid, std::uint64_t* left,
+                                std::uint64_t* up);
 
 struct BlockMatchKernels {
   int lanes;  // dp is a multiple of this
@@ -85,6 +104,7 @@ struct BlockMatchKernels {
   SobelRow8Fn sobel_row8;
   SobelRow16Fn sobel_row16;
   MatchBandFn match_band;
+  SpeckleLinksFn speckle_links;
 };
 
 #define STEREODEPTH_DECLARE_BLOCK_MATCH_KERNELS(ns) \

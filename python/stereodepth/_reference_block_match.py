@@ -43,13 +43,14 @@ def shifted(g: np.ndarray, dy: int, dx: int) -> np.ndarray:
 
 
 def census(g: np.ndarray, window: int = CENSUS_WINDOW) -> np.ndarray:
-    """uint64 census codes: one bit per neighbour (row-major, centre skipped, first neighbour
-    in the highest bit), set where the neighbour is darker than the centre."""
+    """uint64 census codes over the border of the window (the 16 pixels two away from the
+    centre for 5x5): one bit per neighbour, row-major, the first in the highest bit, set where
+    the neighbour is darker than the centre."""
     half = window // 2
     code = np.zeros(g.shape, dtype=np.uint64)
     for dy in range(-half, half + 1):
         for dx in range(-half, half + 1):
-            if dy == 0 and dx == 0:
+            if max(abs(dy), abs(dx)) != half:
                 continue
             code = (code << np.uint64(1)) | (shifted(g, dy, dx) < g).astype(np.uint64)
     return code

@@ -14,8 +14,8 @@
 
 namespace stereodepth {
 
-// Pixel cost: census (5x5, 24 bits, Hamming distance, 0..24) or SAD of the x-Sobel-prefiltered
-// images (clip(sobel, -31, 31) + 31, 0..62).
+// Pixel cost: census (the 16 pixels on the border of the 5x5 window, Hamming distance, 0..16)
+// or SAD of the x-Sobel-prefiltered images (clip(sobel, -31, 31) + 31, 0..62).
 enum class MatchCost { kCensus = 0, kSad = 1 };
 
 // How the winning disparity is refined from the costs at d - 1, d, d + 1.
@@ -24,12 +24,12 @@ enum class SubpixelFit { kNone = 0, kParabola = 1, kEquiangular = 2 };
 // Limits. Block costs are summed in 16 bits: block_size^2 * pixel_cost_max(cost) <= 65535.
 inline constexpr int kMaxNumDisparities = 4096;
 inline constexpr int kMaxAbsMinDisparity = 32768;
-inline constexpr int kCensusCostMax = 24;
+inline constexpr int kCensusCostMax = 16;
 inline constexpr int kSadCostMax = 62;
 inline constexpr int kPrefilterCap = 31;
 
 int pixel_cost_max(MatchCost cost);
-int max_block_size(MatchCost cost);  // 51 for census, 31 for SAD
+int max_block_size(MatchCost cost);  // 63 for census, 31 for SAD
 
 struct BlockMatchParams {
   int num_disparities = 64;   // [1, kMaxNumDisparities]
