@@ -43,8 +43,9 @@ def scenes(tmp_path_factory: pytest.TempPathFactory) -> list[dict[str, Any]]:
     """The shared scenes as Middlebury folders: [{name, dir, ndisp, focal, baseline_mm,
     doffs}]."""
     root = data_dir()
-    found = sorted(p for p in root.iterdir() if (p / "meta.json").is_file()) if root.is_dir() \
-        else []
+    found = (
+        sorted(p for p in root.iterdir() if (p / "meta.json").is_file()) if root.is_dir() else []
+    )
     if not found:
         pytest.skip(f"shared stereo scenes not found at {root}")
     out = tmp_path_factory.mktemp("scenes")
@@ -61,9 +62,18 @@ def scenes(tmp_path_factory: pytest.TempPathFactory) -> list[dict[str, Any]]:
         doffs = meta.get("doffs") or 0.0
         (d / "calib.txt").write_text(
             f"cam0=[{focal} 0 {meta['width'] / 2}; 0 {focal} {meta['height'] / 2}; 0 0 1]\n"
-            f"doffs={doffs}\nbaseline={baseline}\nndisp={ndisp}\n")
-        info.append({"name": p.name, "dir": d, "ndisp": ndisp, "focal": focal,
-                     "baseline_mm": baseline, "doffs": doffs})
+            f"doffs={doffs}\nbaseline={baseline}\nndisp={ndisp}\n"
+        )
+        info.append(
+            {
+                "name": p.name,
+                "dir": d,
+                "ndisp": ndisp,
+                "focal": focal,
+                "baseline_mm": baseline,
+                "doffs": doffs,
+            }
+        )
     return info
 
 
@@ -91,9 +101,13 @@ def fresh(tmp_path: Path) -> Any:
 @pytest.fixture(scope="module")
 def cluster_address() -> Iterator[str]:
     distributed = pytest.importorskip("distributed")
-    with distributed.LocalCluster(n_workers=2, processes=True, threads_per_worker=1,
-                                  host="127.0.0.1", dashboard_address="127.0.0.1:0"
-                                  ) as cluster:
+    with distributed.LocalCluster(
+        n_workers=2,
+        processes=True,
+        threads_per_worker=1,
+        host="127.0.0.1",
+        dashboard_address="127.0.0.1:0",
+    ) as cluster:
         yield cluster.scheduler_address
 
 
@@ -115,34 +129,57 @@ def run_ours(out: Path, pairs: list[batch.Pair], **kw: Any) -> batch.BatchReport
     return report
 
 
-def test_batch_embedded(benchmark: Any, impl: Any, fresh: Any, pairs: list[batch.Pair],
-                        scenes: list[dict[str, Any]]) -> None:
+def test_batch_embedded(
+    benchmark: Any, impl: Any, fresh: Any, pairs: list[batch.Pair], scenes: list[dict[str, Any]]
+) -> None:
     benchmark.group = GROUP
     impl("stereodepth")  # batch embedded: EMBEDDED_IN_FLIGHT pairs at a time
     outs: list[Path] = []
-    benchmark.pedantic(lambda out: outs.append(out) or run_ours(out, pairs), setup=fresh,
-                       rounds=ROUNDS, iterations=1, warmup_rounds=1)
+    benchmark.pedantic(
+        lambda out: outs.append(out) or run_ours(out, pairs),
+        setup=fresh,
+        rounds=ROUNDS,
+        iterations=1,
+        warmup_rounds=1,
+    )
     check_outputs(outs[-1], scenes)
     benchmark.extra_info["pairs"] = len(pairs)
 
 
 @pytest.mark.parametrize("in_flight", [1, 2])
-def test_batch_embedded_fewer_in_flight(benchmark: Any, impl: Any, fresh: Any,
-                                        pairs: list[batch.Pair], scenes: list[dict[str, Any]],
-                                        monkeypatch: pytest.MonkeyPatch, in_flight: int) -> None:
+def test_batch_embedded_fewer_in_flight(
+    benchmark: Any,
+    impl: Any,
+    fresh: Any,
+    pairs: list[batch.Pair],
+    scenes: list[dict[str, Any]],
+    monkeypatch: pytest.MonkeyPatch,
+    in_flight: int,
+) -> None:
     """The embedded runner with fewer pairs at a time than its default: what overlapping
     reading and writing with matching buys."""
     benchmark.group = GROUP
     impl(f"stereodepth, {in_flight} pair{'s' if in_flight > 1 else ''} in flight")
     monkeypatch.setattr(batch, "EMBEDDED_IN_FLIGHT", in_flight)
     outs: list[Path] = []
-    benchmark.pedantic(lambda out: outs.append(out) or run_ours(out, pairs), setup=fresh,
-                       rounds=ROUNDS, iterations=1, warmup_rounds=1)
+    benchmark.pedantic(
+        lambda out: outs.append(out) or run_ours(out, pairs),
+        setup=fresh,
+        rounds=ROUNDS,
+        iterations=1,
+        warmup_rounds=1,
+    )
     check_outputs(outs[-1], scenes)
 
 
-def test_batch_local_cluster(benchmark: Any, impl: Any, fresh: Any, pairs: list[batch.Pair],
-                             scenes: list[dict[str, Any]], cluster_address: str) -> None:
+def test_batch_local_cluster(
+    benchmark: Any,
+    impl: Any,
+    fresh: Any,
+    pairs: list[batch.Pair],
+    scenes: list[dict[str, Any]],
+    cluster_address: str,
+) -> None:
     """The same job on an already running LocalCluster of 2 worker processes, 1 thread each
     (the matcher then uses every core in each worker, as --scheduler does by default)."""
     benchmark.group = GROUP
@@ -150,7 +187,11 @@ def test_batch_local_cluster(benchmark: Any, impl: Any, fresh: Any, pairs: list[
     outs: list[Path] = []
     benchmark.pedantic(
         lambda out: outs.append(out) or run_ours(out, pairs, scheduler=cluster_address),
-        setup=fresh, rounds=ROUNDS, iterations=1, warmup_rounds=1)
+        setup=fresh,
+        rounds=ROUNDS,
+        iterations=1,
+        warmup_rounds=1,
+    )
     check_outputs(outs[-1], scenes)
 
 
@@ -160,20 +201,26 @@ def python_loop_stereodepth(out: Path, scenes: list[dict[str, Any]]) -> None:
         left = sdio.read_image(s["dir"] / "im0.png")
         right = sdio.read_image(s["dir"] / "im1.png")
         d = stereodepth.block_match(left, right, num_disparities=s["ndisp"])
-        z = stereodepth.disparity_to_depth(d, focal_px=s["focal"],
-                                           baseline_m=s["baseline_mm"] / 1000,
-                                           doffs_px=s["doffs"])
+        z = stereodepth.disparity_to_depth(
+            d, focal_px=s["focal"], baseline_m=s["baseline_mm"] / 1000, doffs_px=s["doffs"]
+        )
         np.save(out / f"{s['name']}.disparity.npy", d)
         np.save(out / f"{s['name']}.depth.npy", z)
 
 
-def test_python_loop_stereodepth(benchmark: Any, impl: Any, fresh: Any,
-                                 scenes: list[dict[str, Any]]) -> None:
+def test_python_loop_stereodepth(
+    benchmark: Any, impl: Any, fresh: Any, scenes: list[dict[str, Any]]
+) -> None:
     benchmark.group = GROUP
     impl("python loop: block_match")
     outs: list[Path] = []
-    benchmark.pedantic(lambda out: outs.append(out) or python_loop_stereodepth(out, scenes),
-                       setup=fresh, rounds=ROUNDS, iterations=1, warmup_rounds=1)
+    benchmark.pedantic(
+        lambda out: outs.append(out) or python_loop_stereodepth(out, scenes),
+        setup=fresh,
+        rounds=ROUNDS,
+        iterations=1,
+        warmup_rounds=1,
+    )
     check_outputs(outs[-1], scenes)
 
 
@@ -192,14 +239,20 @@ def python_loop_opencv(cv2: Any, out: Path, scenes: list[dict[str, Any]]) -> Non
         np.save(out / f"{s['name']}.depth.npy", z)
 
 
-def test_python_loop_opencv_stereobm(benchmark: Any, impl: Any, fresh: Any,
-                                     scenes: list[dict[str, Any]]) -> None:
+def test_python_loop_opencv_stereobm(
+    benchmark: Any, impl: Any, fresh: Any, scenes: list[dict[str, Any]]
+) -> None:
     cv2 = pytest.importorskip("cv2")
     benchmark.group = GROUP
     impl("python loop: OpenCV StereoBM + np.where")
     outs: list[Path] = []
-    benchmark.pedantic(lambda out: outs.append(out) or python_loop_opencv(cv2, out, scenes),
-                       setup=fresh, rounds=ROUNDS, iterations=1, warmup_rounds=1)
+    benchmark.pedantic(
+        lambda out: outs.append(out) or python_loop_opencv(cv2, out, scenes),
+        setup=fresh,
+        rounds=ROUNDS,
+        iterations=1,
+        warmup_rounds=1,
+    )
     check_outputs(outs[-1], scenes)
 
 
@@ -211,7 +264,7 @@ RIG = {"focal_px": 1400.0, "baseline_m": 0.12, "cx_px": 960.0, "cy_px": 540.0, "
 @pytest.fixture(scope="module")
 def reproject_case() -> tuple[np.ndarray, np.ndarray]:
     rng = np.random.default_rng(0)
-    d = (rng.random(REPROJECT_SHAPE, dtype=np.float32) * 190 + 1)
+    d = rng.random(REPROJECT_SHAPE, dtype=np.float32) * 190 + 1
     d[rng.random(REPROJECT_SHAPE) < 0.05] = np.nan
     return d, reference.reproject(d, **RIG)
 
@@ -228,8 +281,7 @@ def test_reproject_stereodepth(benchmark: Any, impl: Any, reproject_case: Any) -
     np.testing.assert_array_equal(out, want)
 
 
-def test_reproject_stereodepth_one_thread(benchmark: Any, impl: Any,
-                                          reproject_case: Any) -> None:
+def test_reproject_stereodepth_one_thread(benchmark: Any, impl: Any, reproject_case: Any) -> None:
     d, want = reproject_case
     benchmark.group = RGROUP
     impl("stereodepth threads=1")
@@ -253,6 +305,5 @@ def test_reproject_oracle(benchmark: Any, impl: Any, reproject_case: Any) -> Non
     d, want = reproject_case
     benchmark.group = RGROUP
     impl("oracle (stereodepth.reference)")
-    got = benchmark.pedantic(reference.reproject, args=(d,), kwargs=RIG, rounds=3,
-                             iterations=1)
+    got = benchmark.pedantic(reference.reproject, args=(d,), kwargs=RIG, rounds=3, iterations=1)
     np.testing.assert_array_equal(got, want)

@@ -105,8 +105,7 @@ def test_scene(benchmark: Any, impl: Any, scene_dir: Path, impl_name: str) -> No
         matcher = sd.StereoMatcher(num_disparities=nd, threads=THREADS)
         d = benchmark(matcher.compute, left, right)
         # Deterministic for any thread count, and better than chance against the ground truth.
-        np.testing.assert_array_equal(d, sd.block_match(left, right, num_disparities=nd,
-                                                        threads=1))
+        np.testing.assert_array_equal(d, sd.block_match(left, right, num_disparities=nd, threads=1))
         assert evaluate(d, s["gt"], s["mask"]).bad_2 < 0.5
     else:
         cv2 = cv2_or_skip()
@@ -132,8 +131,10 @@ def test_speed_vs_opencv_interleaved() -> None:
     cv2 = cv2_or_skip()
     rounds = int(os.environ.get("STEREODEPTH_BENCH_ROUNDS", "21"))
     print()
-    print("| scene | W x H x ndisp | stereodepth ms | StereoBM(9) ms | ratio | "
-          "stereodepth ns/(px*d) |")
+    print(
+        "| scene | W x H x ndisp | stereodepth ms | StereoBM(9) ms | ratio | "
+        "stereodepth ns/(px*d) |"
+    )
     print("|---|---|---:|---:|---:|---:|")
     ratios = []
     for path in SCENES:
@@ -156,9 +157,11 @@ def test_speed_vs_opencv_interleaved() -> None:
             per_round.append((t1 - t0) / (t2 - t1))
         ratio = float(np.median(per_round))
         ratios.append(ratio)
-        print(f"| {s['name']} | {w} x {h} x {nd} | {1e3 * np.median(ours):.2f} | "
-              f"{1e3 * np.median(theirs):.2f} | {ratio:.3f} | "
-              f"{1e9 * np.median(ours) / (w * h * nd):.3f} |")
+        print(
+            f"| {s['name']} | {w} x {h} x {nd} | {1e3 * np.median(ours):.2f} | "
+            f"{1e3 * np.median(theirs):.2f} | {ratio:.3f} | "
+            f"{1e9 * np.median(ours) / (w * h * nd):.3f} |"
+        )
     print(f"median over scenes of stereodepth / StereoBM: {np.median(ratios):.3f}")
     assert len(ratios) == len(SCENES)
 
@@ -176,30 +179,38 @@ def test_accuracy_targets() -> None:
     rows = []
     for path in SCENES:
         s = load_scene(path)
-        ours = evaluate(sd.block_match(s["left"], s["right"], num_disparities=s["ndisp"]),
-                        s["gt"], s["mask"])
+        ours = evaluate(
+            sd.block_match(s["left"], s["right"], num_disparities=s["ndisp"]), s["gt"], s["mask"]
+        )
         bm = {}
         for bs in (9, 15):
             raw = cv2.StereoBM_create(numDisparities=s["ndisp"], blockSize=bs).compute(
-                s["left"], s["right"])
+                s["left"], s["right"]
+            )
             bm[bs] = evaluate(opencv_disparity(raw), s["gt"], s["mask"])
         best = min(bm, key=lambda b: bm[b].bad_2)
         rows.append((s["name"], ours, best, bm[best], min(m.bad_0_5_est for m in bm.values())))
     print()
-    print("| scene | stereodepth bad-2 % | BM bad-2 % (block) | stereodepth bad-0.5(est) % "
-          "| BM bad-0.5(est) % | density % (ours / BM) |")
+    print(
+        "| scene | stereodepth bad-2 % | BM bad-2 % (block) | stereodepth bad-0.5(est) % "
+        "| BM bad-0.5(est) % | density % (ours / BM) |"
+    )
     print("|---|---:|---:|---:|---:|---:|")
     for name, ours, best, bm, _ in rows:
-        print(f"| {name} | {100 * ours.bad_2:.1f} | {100 * bm.bad_2:.1f} ({best}) | "
-              f"{100 * ours.bad_0_5_est:.1f} | {100 * bm.bad_0_5_est:.1f} | "
-              f"{100 * ours.density:.0f} / {100 * bm.density:.0f} |")
+        print(
+            f"| {name} | {100 * ours.bad_2:.1f} | {100 * bm.bad_2:.1f} ({best}) | "
+            f"{100 * ours.bad_0_5_est:.1f} | {100 * bm.bad_0_5_est:.1f} | "
+            f"{100 * ours.density:.0f} / {100 * bm.density:.0f} |"
+        )
     ours_b2 = float(np.mean([r[1].bad_2 for r in rows]))
     bm_b2 = float(np.mean([r[3].bad_2 for r in rows]))
     ours_b05 = float(np.mean([r[1].bad_0_5_est for r in rows]))
     bm_b05 = float(np.mean([r[3].bad_0_5_est for r in rows]))
     bm_b05_min = float(np.mean([r[4] for r in rows]))
-    print(f"| mean | {100 * ours_b2:.2f} | {100 * bm_b2:.2f} | {100 * ours_b05:.2f} | "
-          f"{100 * bm_b05:.2f} (per-scene best: {100 * bm_b05_min:.2f}) | |")
+    print(
+        f"| mean | {100 * ours_b2:.2f} | {100 * bm_b2:.2f} | {100 * ours_b05:.2f} | "
+        f"{100 * bm_b05:.2f} (per-scene best: {100 * bm_b05_min:.2f}) | |"
+    )
     print(f"bad-2: {100 * (1 - ours_b2 / bm_b2):.1f} % below StereoBM's")
     assert ours_b2 <= 0.85 * bm_b2
     assert ours_b05 < min(bm_b05, bm_b05_min)

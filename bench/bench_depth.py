@@ -28,8 +28,12 @@ def make_disparity(dtype: type) -> np.ndarray:
     return d.astype(dtype)
 
 
-CASES = [(np.float32, np.float32), (np.float32, np.uint16), (np.int16, np.float32),
-         (np.int16, np.uint16)]
+CASES = [
+    (np.float32, np.float32),
+    (np.float32, np.uint16),
+    (np.int16, np.float32),
+    (np.int16, np.uint16),
+]
 
 
 def case_id(c: tuple[type, type]) -> str:
@@ -40,8 +44,9 @@ def case_id(c: tuple[type, type]) -> str:
 def case(request: Any) -> tuple[np.ndarray, np.ndarray, np.dtype]:
     in_dtype, out_dtype = request.param
     d = make_disparity(in_dtype)
-    want = reference.disparity_to_depth(d, focal_px=FOCAL_PX, baseline_m=BASELINE_M,
-                                        dtype=out_dtype)
+    want = reference.disparity_to_depth(
+        d, focal_px=FOCAL_PX, baseline_m=BASELINE_M, dtype=out_dtype
+    )
     return d, want, np.dtype(out_dtype)
 
 
@@ -64,8 +69,14 @@ def test_stereodepth(benchmark: Any, impl: Any, case: Any) -> None:
     group(benchmark, case)
     impl("stereodepth")
     out = np.empty(d.shape, out_dtype)
-    benchmark(stereodepth.disparity_to_depth, d, focal_px=FOCAL_PX, baseline_m=BASELINE_M,
-              dtype=out_dtype, out=out)
+    benchmark(
+        stereodepth.disparity_to_depth,
+        d,
+        focal_px=FOCAL_PX,
+        baseline_m=BASELINE_M,
+        dtype=out_dtype,
+        out=out,
+    )
     np.testing.assert_array_equal(out, want)
 
 
@@ -74,8 +85,15 @@ def test_stereodepth_one_thread(benchmark: Any, impl: Any, case: Any) -> None:
     group(benchmark, case)
     impl("stereodepth threads=1")
     out = np.empty(d.shape, out_dtype)
-    benchmark(stereodepth.disparity_to_depth, d, focal_px=FOCAL_PX, baseline_m=BASELINE_M,
-              dtype=out_dtype, out=out, threads=1)
+    benchmark(
+        stereodepth.disparity_to_depth,
+        d,
+        focal_px=FOCAL_PX,
+        baseline_m=BASELINE_M,
+        dtype=out_dtype,
+        out=out,
+        threads=1,
+    )
     np.testing.assert_array_equal(out, want)
 
 
@@ -83,9 +101,13 @@ def test_oracle(benchmark: Any, impl: Any, case: Any) -> None:
     d, want, out_dtype = case
     group(benchmark, case)
     impl("oracle (stereodepth.reference)")
-    got = benchmark.pedantic(reference.disparity_to_depth, args=(d,),
-                             kwargs={"focal_px": FOCAL_PX, "baseline_m": BASELINE_M,
-                                         "dtype": out_dtype}, rounds=3, iterations=1)
+    got = benchmark.pedantic(
+        reference.disparity_to_depth,
+        args=(d,),
+        kwargs={"focal_px": FOCAL_PX, "baseline_m": BASELINE_M, "dtype": out_dtype},
+        rounds=3,
+        iterations=1,
+    )
     np.testing.assert_array_equal(got, want)
 
 

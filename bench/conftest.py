@@ -42,8 +42,10 @@ def pytest_terminal_summary(terminalreporter: Any, exitstatus: int, config: Any)
         tr.write_sep("-", "median over groups, relative to stereodepth")
         for label, ratios in sorted(shared.items()):
             m = median(ratios)
-            tr.write_line(f"    {label:<40} {m:8.2f}x over {len(ratios)} groups "
-                          f"(stereodepth / {label}: {1 / m:.3f})")
+            tr.write_line(
+                f"    {label:<40} {m:8.2f}x over {len(ratios)} groups "
+                f"(stereodepth / {label}: {1 / m:.3f})"
+            )
 
 
 @pytest.fixture

@@ -22,13 +22,20 @@ from stereodepth import batch, cli, io
 Image = pytest.importorskip("PIL.Image")
 
 SHAPE = (48, 64)
-CALIB: dict[str, Any] = {"focal": 700.0, "cx": 31.5, "cx1": 33.5, "cy": 23.5,
-                         "baseline_mm": 120.0, "ndisp": 16}
+CALIB: dict[str, Any] = {
+    "focal": 700.0,
+    "cx": 31.5,
+    "cx1": 33.5,
+    "cy": 23.5,
+    "baseline_mm": 120.0,
+    "ndisp": 16,
+}
 
 
 # --- building inputs --------------------------------------------------------------------------
-def random_pair(seed: int, shift: int, *, shape: tuple[int, int] = SHAPE, rgb: bool = True
-                ) -> tuple[np.ndarray, np.ndarray]:
+def random_pair(
+    seed: int, shift: int, *, shape: tuple[int, int] = SHAPE, rgb: bool = True
+) -> tuple[np.ndarray, np.ndarray]:
     """A random-dot pair whose true disparity is ``shift`` everywhere."""
     rng = np.random.default_rng(seed)
     left = rng.integers(0, 256, (*shape, 3) if rgb else shape, dtype=np.uint8)
@@ -37,10 +44,12 @@ def random_pair(seed: int, shift: int, *, shape: tuple[int, int] = SHAPE, rgb: b
 
 def calib_text(ndisp: int | None = 16) -> str:
     c = CALIB
-    text = (f"cam0=[{c['focal']} 0 {c['cx']}; 0 {c['focal']} {c['cy']}; 0 0 1]\n"
-            f"cam1=[{c['focal']} 0 {c['cx1']}; 0 {c['focal']} {c['cy']}; 0 0 1]\n"
-            f"doffs={c['cx1'] - c['cx']}\nbaseline={c['baseline_mm']}\n"
-            f"width={SHAPE[1]}\nheight={SHAPE[0]}\n")
+    text = (
+        f"cam0=[{c['focal']} 0 {c['cx']}; 0 {c['focal']} {c['cy']}; 0 0 1]\n"
+        f"cam1=[{c['focal']} 0 {c['cx1']}; 0 {c['focal']} {c['cy']}; 0 0 1]\n"
+        f"doffs={c['cx1'] - c['cx']}\nbaseline={c['baseline_mm']}\n"
+        f"width={SHAPE[1]}\nheight={SHAPE[0]}\n"
+    )
     return text + (f"ndisp={ndisp}\n" if ndisp is not None else "")
 
 
@@ -77,16 +86,22 @@ def expected_maps(scene: Path, fmt: str = "npy") -> tuple[np.ndarray, np.ndarray
     disparity = stereodepth.matching.block_match(left, right, num_disparities=CALIB["ndisp"])
     assert isinstance(disparity, np.ndarray)
     depth = stereodepth.disparity_to_depth(
-        disparity, focal_px=CALIB["focal"], baseline_m=CALIB["baseline_mm"] / 1000,
+        disparity,
+        focal_px=CALIB["focal"],
+        baseline_m=CALIB["baseline_mm"] / 1000,
         doffs_px=CALIB["cx1"] - CALIB["cx"],
-        dtype=np.uint16 if fmt == "png16" else np.float32)
+        dtype=np.uint16 if fmt == "png16" else np.float32,
+    )
     return disparity, depth
 
 
 def outputs_bytes(out: Path) -> dict[str, bytes]:
     """Every output file's bytes (not the records and the report, which hold times)."""
-    return {p.name: p.read_bytes() for p in sorted(out.iterdir())
-            if p.suffix in (".npy", ".png", ".pfm", ".ply")}
+    return {
+        p.name: p.read_bytes()
+        for p in sorted(out.iterdir())
+        if p.suffix in (".npy", ".png", ".pfm", ".ply")
+    }
 
 
 # --- finding pairs ----------------------------------------------------------------------------
@@ -130,7 +145,10 @@ def test_find_pairs_in_kitti_folders_with_calibration(tmp_path: Path) -> None:
 def kitti_calib_2012() -> str:
     """KITTI 2012 training/calib/000000.txt: the rectified projection matrices P0..P3."""
     rows = {
-        0: "0.000000e+00", 1: "-3.875744e+02", 2: "4.485728e+01", 3: "-3.395242e+02",
+        0: "0.000000e+00",
+        1: "-3.875744e+02",
+        2: "4.485728e+01",
+        3: "-3.395242e+02",
     }
     return "".join(
         f"P{i}: 7.215377e+02 0.000000e+00 6.095593e+02 {tx} 0.000000e+00 7.215377e+02 "
@@ -159,11 +177,18 @@ def test_read_kitti_calib_2012_and_2015(tmp_path: Path) -> None:
 def test_find_pairs_by_name_and_in_left_right_folders(tmp_path: Path) -> None:
     a = tmp_path / "a"
     a.mkdir()
-    for name in ("0001_left.png", "0001_right.png", "0002_left.png", "0002_right.png",
-                 "readme.txt"):
+    for name in (
+        "0001_left.png",
+        "0001_right.png",
+        "0002_left.png",
+        "0002_right.png",
+        "readme.txt",
+    ):
         (a / name).write_bytes(b"")
     assert [(p.stem, p.right.name) for p in batch.find_pairs(a)] == [
-        ("0001", "0001_right.png"), ("0002", "0002_right.png")]
+        ("0001", "0001_right.png"),
+        ("0002", "0002_right.png"),
+    ]
     b = tmp_path / "b"
     for side in ("left", "right"):
         (b / side).mkdir(parents=True)
@@ -176,22 +201,28 @@ def test_find_pairs_by_name_and_in_left_right_folders(tmp_path: Path) -> None:
     with pytest.raises(batch.UsageError, match="no stereo pairs found"):
         batch.find_pairs(c)
     assert [p.right.name for p in batch.find_pairs(c, pair_names=[("cam0", "cam1")])] == [
-        "x_cam1.png"]
+        "x_cam1.png"
+    ]
 
 
 def test_find_pairs_in_a_csv_list(tmp_path: Path) -> None:
     (tmp_path / "imgs").mkdir()
     csv = tmp_path / "pairs.csv"
-    csv.write_text("left,right,stem\n# a comment\n\nimgs/a_left.png,imgs/a_right.png,\n"
-                   f"{tmp_path}/imgs/b0.png,imgs/b1.png,frame-b\n")
+    csv.write_text(
+        "left,right,stem\n# a comment\n\nimgs/a_left.png,imgs/a_right.png,\n"
+        f"{tmp_path}/imgs/b0.png,imgs/b1.png,frame-b\n"
+    )
     pairs = batch.find_pairs(csv)
     assert [(p.stem, p.left, p.right) for p in pairs] == [
         ("a", tmp_path / "imgs/a_left.png", tmp_path / "imgs/a_right.png"),
         ("frame-b", tmp_path / "imgs/b0.png", tmp_path / "imgs/b1.png"),
     ]
     csv.write_text("a.png,b.png\nc.png\n")
-    with pytest.raises(batch.UsageError, match=r"pairs.csv:2: expected left,right\[,stem\], "
-                       "got 'c.png'"):
+    with pytest.raises(
+        batch.UsageError,
+        match=r"pairs.csv:2: expected left,right\[,stem\], "
+        "got 'c.png'",
+    ):
         batch.find_pairs(csv)
     csv.write_text("x/im0.png,x/im1.png\ny/im0.png,y/im1.png,x\n")
     with pytest.raises(batch.UsageError, match="two pairs would write the same outputs 'x'"):
@@ -213,29 +244,34 @@ def test_find_pairs_rejects(tmp_path: Path) -> None:
 def test_outputs_equal_the_direct_computation(tmp_path: Path, fmt: str) -> None:
     names = middlebury_folder(tmp_path / "in", 2)
     out = tmp_path / "out"
-    assert run_cli("batch", tmp_path / "in", "-o", out, "--format", fmt, "--ply",
-                   "--quiet") == 0
+    assert run_cli("batch", tmp_path / "in", "-o", out, "--format", fmt, "--ply", "--quiet") == 0
     for name in names:
         disparity, depth = expected_maps(tmp_path / "in" / name, fmt)
         if fmt == "npy":
             got_d = np.load(out / f"{name}.disparity.npy")
             got_z = np.load(out / f"{name}.depth.npy")
         elif fmt == "pfm":
-            got_d, got_z = (io.read_pfm(out / f"{name}.disparity.pfm"),
-                            io.read_pfm(out / f"{name}.depth.pfm"))
+            got_d, got_z = (
+                io.read_pfm(out / f"{name}.disparity.pfm"),
+                io.read_pfm(out / f"{name}.depth.pfm"),
+            )
         else:
-            got_d, got_z = (io.read_image(out / f"{name}.disparity.png"),
-                            io.read_image(out / f"{name}.depth.png"))
+            got_d, got_z = (
+                io.read_image(out / f"{name}.disparity.png"),
+                io.read_image(out / f"{name}.depth.png"),
+            )
             d64 = disparity.astype(np.float64)
             disparity = np.where(np.isfinite(d64) & (d64 > 0), np.rint(d64 * 256), 0).astype(
-                np.uint16)
+                np.uint16
+            )
         np.testing.assert_array_equal(got_d, disparity, strict=True)
         np.testing.assert_array_equal(got_z, depth, strict=True)
         assert np.isfinite(disparity).mean() > 0.5  # the matcher found the shift
         record = json.loads((out / f"{name}.json").read_text())
         assert record["status"] == "ok"
-        assert record["density"] == pytest.approx(np.count_nonzero(
-            np.isfinite(expected_maps(tmp_path / "in" / name)[0])) / disparity.size)
+        assert record["density"] == pytest.approx(
+            np.count_nonzero(np.isfinite(expected_maps(tmp_path / "in" / name)[0])) / disparity.size
+        )
         assert record["outputs"]["ply"]["points"] > 0
         ply = (out / f"{name}.ply").read_bytes()
         assert b"element vertex %d\n" % record["outputs"]["ply"]["points"] in ply
@@ -288,10 +324,25 @@ def test_grey_and_rgb_pair_is_matched_in_grey(tmp_path: Path) -> None:
     Image.fromarray(left).save(tmp_path / "left.png")
     Image.fromarray(batch._to_grey(right)).save(tmp_path / "right.png")
     out = tmp_path / "out"
-    assert run_cli("batch", tmp_path, "-o", out, "--focal-px", 700, "--baseline-mm", 100,
-                   "--num-disparities", 16, "--quiet") == 0
-    want = stereodepth.matching.block_match(batch._to_grey(left), batch._to_grey(right),
-                                            num_disparities=16)
+    assert (
+        run_cli(
+            "batch",
+            tmp_path,
+            "-o",
+            out,
+            "--focal-px",
+            700,
+            "--baseline-mm",
+            100,
+            "--num-disparities",
+            16,
+            "--quiet",
+        )
+        == 0
+    )
+    want = stereodepth.matching.block_match(
+        batch._to_grey(left), batch._to_grey(right), num_disparities=16
+    )
     np.testing.assert_array_equal(np.load(out / f"{tmp_path.name}.disparity.npy"), want)
 
 
@@ -335,10 +386,12 @@ matching.block_match = _slow
 
 
 def cli_process(argv: list[str], prelude: str) -> subprocess.Popen[str]:
-    script = prelude + "\nimport sys\nfrom stereodepth import cli\n" + \
-        f"sys.exit(cli.main({argv!r}))\n"
-    return subprocess.Popen([sys.executable, "-c", script], stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE, text=True)
+    script = (
+        prelude + "\nimport sys\nfrom stereodepth import cli\n" + f"sys.exit(cli.main({argv!r}))\n"
+    )
+    return subprocess.Popen(
+        [sys.executable, "-c", script], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True
+    )
 
 
 def wait_for(predicate: Any, timeout: float = 60.0) -> None:
@@ -352,8 +405,7 @@ def wait_for(predicate: Any, timeout: float = 60.0) -> None:
 def test_ctrl_c_stops_cleanly_and_the_next_run_resumes(tmp_path: Path) -> None:
     inp, out = tmp_path / "in", tmp_path / "out"
     names = middlebury_folder(inp, 12)
-    with cli_process(["batch", str(inp), "-o", str(out)],
-                     SLOW_MATCHER.format(delay=0.3)) as proc:
+    with cli_process(["batch", str(inp), "-o", str(out)], SLOW_MATCHER.format(delay=0.3)) as proc:
         try:
             wait_for(lambda: out.is_dir() and any(out.glob("*.json")))
         finally:
@@ -374,8 +426,9 @@ def test_ctrl_c_stops_cleanly_and_the_next_run_resumes(tmp_path: Path) -> None:
     again = report_of(out)["counts"]
     assert again == {"ok": 12 - len(done), "skipped": len(done), "failed": 0, "cancelled": 0}
     for name in names:
-        np.testing.assert_array_equal(np.load(out / f"{name}.depth.npy"),
-                                      expected_maps(inp / name)[1], strict=True)
+        np.testing.assert_array_equal(
+            np.load(out / f"{name}.depth.npy"), expected_maps(inp / name)[1], strict=True
+        )
 
 
 HALF_WRITE = """
@@ -429,8 +482,9 @@ def test_kill_leaves_no_partial_file_and_the_next_run_completes(tmp_path: Path) 
     assert counts["skipped"] == len(records) and counts["ok"] == 6 - len(records)
     assert temp_files(out) == []
     for name in names:
-        np.testing.assert_array_equal(np.load(out / f"{name}.depth.npy"),
-                                      expected_maps(inp / name)[1], strict=True)
+        np.testing.assert_array_equal(
+            np.load(out / f"{name}.depth.npy"), expected_maps(inp / name)[1], strict=True
+        )
 
 
 def test_a_second_job_on_the_same_outdir_is_refused(tmp_path: Path) -> None:
@@ -443,8 +497,9 @@ def test_a_second_job_on_the_same_outdir_is_refused(tmp_path: Path) -> None:
     try:
         fcntl.flock(fd, fcntl.LOCK_EX)
         with pytest.raises(batch.UsageError, match="another stereodepth batch job is writing"):
-            batch.run_batch(batch.resolve_calibration(batch.find_pairs(inp)),
-                            batch.BatchOptions(out_dir=out))
+            batch.run_batch(
+                batch.resolve_calibration(batch.find_pairs(inp)), batch.BatchOptions(out_dir=out)
+            )
     finally:
         os.close(fd)
 
@@ -456,15 +511,24 @@ def test_a_second_job_on_the_same_outdir_is_refused(tmp_path: Path) -> None:
         ([], False, "no calibration for any pair: give --focal-px and --baseline-mm"),
         (["--focal-px", "700"], False, "give both --focal-px and --baseline-mm"),
         (["--focal-px", "700", "--baseline-mm", "100"], False, "--num-disparities is required"),
-        (["--focal-px", "-7", "--baseline-mm", "100"], False,
-         "--focal-px must be a finite number > 0, got -7.0"),
+        (
+            ["--focal-px", "-7", "--baseline-mm", "100"],
+            False,
+            "--focal-px must be a finite number > 0, got -7.0",
+        ),
         (["--cx-px", "3"], True, "--cx-px goes with --focal-px and --baseline-mm"),
-        (["--workers", "2", "--scheduler", "tcp://127.0.0.1:1"], True,
-         "give --scheduler or --workers, not both"),
+        (
+            ["--workers", "2", "--scheduler", "tcp://127.0.0.1:1"],
+            True,
+            "give --scheduler or --workers, not both",
+        ),
         (["--workers", "0"], True, "--workers must be an integer >= 1, got 0"),
         (["--block-size", "4"], True, "block_size must be an odd integer"),
-        (["--option", "num_disparities=4"], True, "--option num_disparities: use "
-         "--num-disparities"),
+        (
+            ["--option", "num_disparities=4"],
+            True,
+            "--option num_disparities: use --num-disparities",
+        ),
         (["--option", "colour=1"], True, "matcher options: .*colour"),
         (["--num-disparities", "0"], True, "--num-disparities must be an integer >= 1, got 0"),
         (["--max-depth-m", "nan"], True, "--max-depth-m must be a finite number >= 0"),
@@ -472,8 +536,7 @@ def test_a_second_job_on_the_same_outdir_is_refused(tmp_path: Path) -> None:
     ],
 )
 def test_usage_errors_exit_2(
-    tmp_path: Path, capsys: pytest.CaptureFixture[str], extra: list[str], calib: bool,
-    message: str
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], extra: list[str], calib: bool, message: str
 ) -> None:
     left, right = random_pair(0, 2)
     Image.fromarray(left).save(tmp_path / "im0.png")
@@ -494,9 +557,13 @@ def test_usage_errors_exit_2(
 def local_cluster() -> Any:
     distributed = pytest.importorskip("distributed")
     # dashboard_address: a free loopback port (None would still try 8787, and warn if taken)
-    with distributed.LocalCluster(n_workers=2, processes=True, threads_per_worker=1,
-                                  host="127.0.0.1", dashboard_address="127.0.0.1:0"
-                                  ) as cluster:
+    with distributed.LocalCluster(
+        n_workers=2,
+        processes=True,
+        threads_per_worker=1,
+        host="127.0.0.1",
+        dashboard_address="127.0.0.1:0",
+    ) as cluster:
         yield cluster
 
 
@@ -505,8 +572,19 @@ def test_cluster_results_equal_embedded_bit_for_bit(tmp_path: Path, local_cluste
     inp = tmp_path / "in"
     middlebury_folder(inp, 6)
     assert run_cli("batch", inp, "-o", tmp_path / "here", "--ply", "--quiet") == 0
-    assert run_cli("batch", inp, "-o", tmp_path / "there", "--ply", "--quiet",
-                   "--scheduler", local_cluster.scheduler_address) == 0
+    assert (
+        run_cli(
+            "batch",
+            inp,
+            "-o",
+            tmp_path / "there",
+            "--ply",
+            "--quiet",
+            "--scheduler",
+            local_cluster.scheduler_address,
+        )
+        == 0
+    )
     report = report_of(tmp_path / "there")
     assert report["runner"] == f"dask {local_cluster.scheduler_address}"
     assert report["counts"]["ok"] == 6
@@ -539,9 +617,12 @@ def test_a_worker_killed_mid_job_and_the_job_completes(tmp_path: Path, local_clu
                     return
                 time.sleep(0.01)
 
-        report = batch.run_batch(pairs, batch.BatchOptions(out_dir=tmp_path / "there"),
-                                 scheduler=local_cluster.scheduler_address,
-                                 on_result=kill_a_busy_worker)
+        report = batch.run_batch(
+            pairs,
+            batch.BatchOptions(out_dir=tmp_path / "there"),
+            scheduler=local_cluster.scheduler_address,
+            on_result=kill_a_busy_worker,
+        )
     assert killed
     assert report.counts == {"ok": n, "skipped": 0, "failed": 0, "cancelled": 0}
     assert outputs_bytes(tmp_path / "there") == outputs_bytes(tmp_path / "here")
@@ -566,7 +647,8 @@ def test_on_result_runs_in_the_calling_thread(tmp_path: Path) -> None:
     report = batch.run_batch(
         batch.resolve_calibration(batch.find_pairs(inp)),
         batch.BatchOptions(out_dir=tmp_path / "out"),
-        on_result=lambda r: seen.append((r["status"], threading.get_ident())))
+        on_result=lambda r: seen.append((r["status"], threading.get_ident())),
+    )
     assert sorted(s for s, _ in seen) == ["ok"] * 3
     assert {t for _, t in seen} == {threading.get_ident()}
     assert report.exit_status == 0
@@ -575,8 +657,11 @@ def test_on_result_runs_in_the_calling_thread(tmp_path: Path) -> None:
 def test_progress_bar_and_summary(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     inp = tmp_path / "in"
     middlebury_folder(inp, 3)
-    report = batch.run_batch(batch.resolve_calibration(batch.find_pairs(inp)),
-                             batch.BatchOptions(out_dir=tmp_path / "out"), progress=True)
+    report = batch.run_batch(
+        batch.resolve_calibration(batch.find_pairs(inp)),
+        batch.BatchOptions(out_dir=tmp_path / "out"),
+        progress=True,
+    )
     err = capsys.readouterr().err
     assert "stereodepth batch" in err and "3/3" in err
     batch.print_summary(report, tmp_path / "out" / "report.json")
@@ -595,10 +680,25 @@ def test_ctrl_c_in_a_terminal_with_local_workers(tmp_path: Path) -> None:
     preload = tmp_path / "slow_worker.py"
     preload.write_text(SLOW_MATCHER.format(delay=0.5))
     env = {**os.environ, "DASK_DISTRIBUTED__WORKER__PRELOAD": json.dumps([str(preload)])}
-    argv = [sys.executable, "-m", "stereodepth.cli", "batch", str(inp), "-o", str(out),
-            "--workers", "2"]
-    with subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                          env=env, start_new_session=True) as proc:
+    argv = [
+        sys.executable,
+        "-m",
+        "stereodepth.cli",
+        "batch",
+        str(inp),
+        "-o",
+        str(out),
+        "--workers",
+        "2",
+    ]
+    with subprocess.Popen(
+        argv,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        env=env,
+        start_new_session=True,
+    ) as proc:
         try:
             wait_for(lambda: out.is_dir() and any(out.glob("scene*.json")), timeout=120)
         finally:
@@ -618,10 +718,26 @@ def test_non_ascii_names_and_a_csv_list(tmp_path: Path) -> None:
     (tmp_path / "façade").mkdir()
     Image.fromarray(left).save(tmp_path / "façade" / "gauche.png")
     Image.fromarray(right).save(tmp_path / "façade" / "droite.png")
-    (tmp_path / "pairs.csv").write_text("façade/gauche.png,façade/droite.png,vue-été\n",
-                                        encoding="utf-8")
+    (tmp_path / "pairs.csv").write_text(
+        "façade/gauche.png,façade/droite.png,vue-été\n", encoding="utf-8"
+    )
     out = tmp_path / "out"
-    assert run_cli("batch", tmp_path / "pairs.csv", "-o", out, "--focal-px", 700,
-                   "--baseline-mm", 100, "--num-disparities", 16, "--ply", "--quiet") == 0
+    assert (
+        run_cli(
+            "batch",
+            tmp_path / "pairs.csv",
+            "-o",
+            out,
+            "--focal-px",
+            700,
+            "--baseline-mm",
+            100,
+            "--num-disparities",
+            16,
+            "--ply",
+            "--quiet",
+        )
+        == 0
+    )
     assert (out / "vue-été.ply").read_bytes().count(b"comment stereodepth") == 1
     assert report_of(out)["pairs"][0]["stem"] == "vue-été"

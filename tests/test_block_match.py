@@ -125,8 +125,14 @@ def test_random_dots_match_oracle(cfg: dict[str, Any], isa: str) -> None:
 @pytest.mark.parametrize("cost", ["census", "sad"])
 def test_ties_go_to_the_lowest_disparity(isa: str, cost: str) -> None:
     # A flat pair costs the same at every disparity; a pattern of period 4 ties every 4 px.
-    kw: dict[str, Any] = {"num_disparities": 11, "min_disparity": -2, "cost": cost,
-                          "subpixel": False, "uniqueness_ratio": 0, "lr_max_diff": None}
+    kw: dict[str, Any] = {
+        "num_disparities": 11,
+        "min_disparity": -2,
+        "cost": cost,
+        "subpixel": False,
+        "uniqueness_ratio": 0,
+        "lr_max_diff": None,
+    }
     flat = np.full((9, 30), 77, np.uint8)
     d = sd.StereoMatcher(isa=isa, **kw).compute(flat, flat)
     assert (d[:, 8:28] == -2).all()
@@ -143,8 +149,11 @@ def test_ties_go_to_the_lowest_disparity(isa: str, cost: str) -> None:
 def test_slanted_plane_matches_oracle(cfg: dict[str, Any]) -> None:
     left, right, _ = slanted_pair((26, 90), d0=4.3, dx=0.09, dy=0.05, seed=2)
     kw = {"num_disparities": 19, **cfg}
-    assert_agree(sd.block_match(left, right, **kw), ref.block_match(left, right, **kw),
-                 subpixel=subpixel_of(cfg))
+    assert_agree(
+        sd.block_match(left, right, **kw),
+        ref.block_match(left, right, **kw),
+        subpixel=subpixel_of(cfg),
+    )
 
 
 def test_slanted_plane_is_recovered_to_subpixel_accuracy() -> None:
@@ -162,8 +171,9 @@ def test_slanted_plane_is_recovered_to_subpixel_accuracy() -> None:
 def test_dtypes_match_oracle(dtype: Any, cost: str) -> None:
     left, right = shifted_pair((20, 60), 4, seed=4, dtype=dtype)
     kw = {"num_disparities": 12, "cost": cost, "return_confidence": True}
-    assert_agree(sd.block_match(left, right, **kw), ref.block_match(left, right, **kw),
-                 subpixel=True)
+    assert_agree(
+        sd.block_match(left, right, **kw), ref.block_match(left, right, **kw), subpixel=True
+    )
 
 
 def test_rgb_matches_oracle_and_is_matched_as_its_grey() -> None:
@@ -204,8 +214,7 @@ def test_scene_crops_match_oracle(stereo_scenes: list[Any]) -> None:
         rc = np.ascontiguousarray(right[y0 : y0 + 40, x0 : x0 + 150])
         for cfg in ({"return_confidence": True}, {"cost": "sad", "subpixel": "parabola"}):
             kw = {"num_disparities": 48, **cfg}
-            assert_agree(sd.block_match(lc, rc, **kw), ref.block_match(lc, rc, **kw),
-                         subpixel=True)
+            assert_agree(sd.block_match(lc, rc, **kw), ref.block_match(lc, rc, **kw), subpixel=True)
 
 
 # ------------------------------------------------------------------------------------------
@@ -215,15 +224,15 @@ def test_scene_crops_match_oracle(stereo_scenes: list[Any]) -> None:
 @pytest.mark.parametrize(
     ("shape", "nd", "md"),
     [
-        ((1, 40), 8, 0),       # a single row
-        ((3, 1), 1, 0),        # a single column
-        ((12, 7), 3, 0),       # narrow, odd
-        ((9, 10), 16, 0),      # width smaller than num_disparities: all NaN
-        ((10, 33), 1, 0),      # one disparity
-        ((10, 33), 2, -1),     # two disparities, no second-best
-        ((11, 45), 33, -5),    # lanes beyond one vector
-        ((13, 70), 17, -20),   # all negative disparities
-        ((6, 1023), 31, 2),    # wide, odd
+        ((1, 40), 8, 0),  # a single row
+        ((3, 1), 1, 0),  # a single column
+        ((12, 7), 3, 0),  # narrow, odd
+        ((9, 10), 16, 0),  # width smaller than num_disparities: all NaN
+        ((10, 33), 1, 0),  # one disparity
+        ((10, 33), 2, -1),  # two disparities, no second-best
+        ((11, 45), 33, -5),  # lanes beyond one vector
+        ((13, 70), 17, -20),  # all negative disparities
+        ((6, 1023), 31, 2),  # wide, odd
     ],
 )
 @pytest.mark.parametrize("cfg", [{}, {"return_confidence": True, "cost": "sad"}], ids=config_id)
@@ -232,16 +241,18 @@ def test_tail_shapes_match_oracle(
 ) -> None:
     left, right = shifted_pair(shape, max(md, 0) + nd // 2, seed=8)
     kw = {"num_disparities": nd, "min_disparity": md, **cfg}
-    assert_agree(sd.block_match(left, right, **kw), ref.block_match(left, right, **kw),
-                 subpixel=True)
+    assert_agree(
+        sd.block_match(left, right, **kw), ref.block_match(left, right, **kw), subpixel=True
+    )
 
 
 def test_many_disparities_take_the_generic_path() -> None:
     # More than 256 disparities: the AVX-512 build leaves its register-resident pass.
     left, right = shifted_pair((8, 330), 270, seed=9)
     kw: dict[str, Any] = {"num_disparities": 290, "block_size": 5, "return_confidence": True}
-    assert_agree(sd.block_match(left, right, **kw), ref.block_match(left, right, **kw),
-                 subpixel=True)
+    assert_agree(
+        sd.block_match(left, right, **kw), ref.block_match(left, right, **kw), subpixel=True
+    )
 
 
 def test_width_smaller_than_num_disparities_is_all_nan() -> None:
@@ -251,8 +262,15 @@ def test_width_smaller_than_num_disparities_is_all_nan() -> None:
 
 def test_search_range_leaving_the_image_is_nan() -> None:
     left, right = shifted_pair((16, 60), 5, seed=11)
-    d = sd.block_match(left, right, num_disparities=10, min_disparity=-4, subpixel=False,
-                       uniqueness_ratio=0, lr_max_diff=None)
+    d = sd.block_match(
+        left,
+        right,
+        num_disparities=10,
+        min_disparity=-4,
+        subpixel=False,
+        uniqueness_ratio=0,
+        lr_max_diff=None,
+    )
     # x - d must lie in [0, 60) for every d in [-4, 5]: columns 5 .. 55.
     assert np.isnan(d[:, :5]).all()
     assert np.isnan(d[:, 56:]).all()
@@ -267,14 +285,16 @@ def test_search_range_leaving_the_image_is_nan() -> None:
     bs=st.sampled_from([3, 5, 9]),
     seed=st.integers(0, 2**16),
 )
-def test_shifted_random_dots_give_the_shift(shift: int, md: int, nd: int, bs: int,
-                                            seed: int) -> None:
+def test_shifted_random_dots_give_the_shift(
+    shift: int, md: int, nd: int, bs: int, seed: int
+) -> None:
     if not md <= shift <= md + nd - 1:
         shift = md + (shift - md) % nd
     w = 64
     left, right = shifted_pair((12, w), shift, seed=seed)
-    d = sd.block_match(left, right, num_disparities=nd, min_disparity=md, block_size=bs,
-                       subpixel=False)
+    d = sd.block_match(
+        left, right, num_disparities=nd, min_disparity=md, block_size=bs, subpixel=False
+    )
     # Away from the borders (search range, block and census window inside the image) the
     # cost at the shift is 0 and every other disparity costs more.
     r = bs // 2 + 2
@@ -296,10 +316,17 @@ def test_largest_block_sizes_do_not_overflow(cost: str, bs: int) -> None:
     rng = np.random.default_rng(12)
     right = rng.integers(0, 65536, (bs + 4, 70)).astype(np.uint16)
     left = (65535 - right).astype(np.uint16)  # inverted: costs near the maximum everywhere
-    kw: dict[str, Any] = {"num_disparities": 6, "cost": cost, "block_size": bs,
-                          "uniqueness_ratio": 0, "lr_max_diff": None, "return_confidence": True}
-    assert_agree(sd.block_match(left, right, **kw), ref.block_match(left, right, **kw),
-                 subpixel=True)
+    kw: dict[str, Any] = {
+        "num_disparities": 6,
+        "cost": cost,
+        "block_size": bs,
+        "uniqueness_ratio": 0,
+        "lr_max_diff": None,
+        "return_confidence": True,
+    }
+    assert_agree(
+        sd.block_match(left, right, **kw), ref.block_match(left, right, **kw), subpixel=True
+    )
 
 
 def test_block_size_limits_are_exported() -> None:
@@ -353,8 +380,9 @@ def test_unknown_isa_is_rejected() -> None:
         sd.StereoMatcher(num_disparities=8, isa="sse9")
 
 
-@pytest.mark.parametrize("cfg", [{}, {"cost": "sad", "return_confidence": True, "block_size": 21}],
-                         ids=config_id)
+@pytest.mark.parametrize(
+    "cfg", [{}, {"cost": "sad", "return_confidence": True, "block_size": 21}], ids=config_id
+)
 def test_thread_counts_give_identical_output(cfg: dict[str, Any]) -> None:
     left, right, _ = slanted_pair((131, 90), d0=9.0, dx=0.02, dy=0.05, seed=15)
     outs = [sd.block_match(left, right, num_disparities=24, threads=t, **cfg) for t in (1, 2, 3)]
@@ -390,15 +418,18 @@ def test_speckle_regions_across_bands_match_oracle(threads: int) -> None:
         h, w = rng.integers(1, 7, size=2)
         left[y : y + h, x : x + w] = rng.integers(0, 256, size=(min(h, 96 - y), min(w, 64 - x)))
     for window, spread in [(40, 0.5), (200, 2.0)]:
-        kw: dict[str, Any] = {"num_disparities": 16, "speckle_window": window,
-                              "speckle_range": spread, "return_confidence": True}
+        kw: dict[str, Any] = {
+            "num_disparities": 16,
+            "speckle_window": window,
+            "speckle_range": spread,
+            "return_confidence": True,
+        }
         native = sd.block_match(left, right, threads=threads, **kw)
         assert_agree(native, ref.block_match(left, right, **kw), subpixel=True)
 
 
 def test_concurrent_calls_from_python_threads() -> None:
-    pairs = [slanted_pair((40, 80), d0=5.0 + i, dx=0.01, dy=0.0, seed=20 + i)[:2]
-             for i in range(6)]
+    pairs = [slanted_pair((40, 80), d0=5.0 + i, dx=0.01, dy=0.0, seed=20 + i)[:2] for i in range(6)]
     kw: dict[str, Any] = {"num_disparities": 16, "threads": 2, "return_confidence": True}
     serial = [sd.block_match(lft, rgt, **kw) for lft, rgt in pairs]
     shared = sd.StereoMatcher(**kw)
@@ -448,8 +479,9 @@ def test_inputs_are_not_modified_and_views_are_accepted() -> None:
     left, right = shifted_pair((20, 80), 3, seed=34)
     lc, rc = left.copy(), right.copy()
     d1 = sd.block_match(left[:, ::2], right[:, ::2], num_disparities=6)  # non-contiguous
-    d2 = sd.block_match(np.ascontiguousarray(left[:, ::2]), np.ascontiguousarray(right[:, ::2]),
-                        num_disparities=6)
+    d2 = sd.block_match(
+        np.ascontiguousarray(left[:, ::2]), np.ascontiguousarray(right[:, ::2]), num_disparities=6
+    )
     np.testing.assert_array_equal(d1, d2)
     np.testing.assert_array_equal(left, lc)
     np.testing.assert_array_equal(right, rc)
@@ -463,8 +495,9 @@ def test_confidence_is_in_unit_interval_and_zero_on_holes() -> None:
     assert (c[np.isnan(d)] == 0).all()
     # The uniqueness check is a threshold on the confidence.
     d10 = sd.block_match(left, right, num_disparities=16, uniqueness_ratio=10)
-    d0, c0 = sd.block_match(left, right, num_disparities=16, uniqueness_ratio=0,
-                            return_confidence=True)
+    d0, c0 = sd.block_match(
+        left, right, num_disparities=16, uniqueness_ratio=0, return_confidence=True
+    )
     away = np.abs(c0.astype(np.float64) - 10 / 110) > 1e-6  # float32 rounding at the edge
     np.testing.assert_array_equal(np.isfinite(d10)[away], (np.isfinite(d0) & (c0 > 10 / 110))[away])
 
@@ -489,65 +522,146 @@ GOOD = shifted_pair((8, 20), 2, seed=40)
 @pytest.mark.parametrize(
     ("kwargs", "exc", "match"),
     [
-        ({"num_disparities": 0}, ValueError,
-         r"num_disparities must be an integer in \[1, 4096\], got 0"),
-        ({"num_disparities": 4097}, ValueError,
-         r"num_disparities must be an integer in \[1, 4096\], got 4097"),
+        (
+            {"num_disparities": 0},
+            ValueError,
+            r"num_disparities must be an integer in \[1, 4096\], got 0",
+        ),
+        (
+            {"num_disparities": 4097},
+            ValueError,
+            r"num_disparities must be an integer in \[1, 4096\], got 4097",
+        ),
         ({"num_disparities": 1.5}, TypeError, "num_disparities must be an integer, got float 1.5"),
         ({"num_disparities": True}, TypeError, "num_disparities must be an integer, got bool"),
         ({"num_disparities": None}, TypeError, "num_disparities must be an integer, got NoneType"),
-        ({"num_disparities": 8, "min_disparity": 40000}, ValueError,
-         r"min_disparity must be an integer in \[-32768, 32768\], got 40000"),
-        ({"num_disparities": 8, "min_disparity": 1.0}, TypeError,
-         "min_disparity must be an integer, got float"),
-        ({"num_disparities": 8, "block_size": 4}, ValueError,
-         r"block_size must be an odd integer in \[3, 63\] for cost='census' \(block costs are"
-         r" summed in 16 bits\), got 4"),
-        ({"num_disparities": 8, "block_size": 1}, ValueError,
-         "block_size must be an odd integer in .* got 1"),
-        ({"num_disparities": 8, "block_size": 65}, ValueError,
-         "block_size must be an odd integer in .* got 65"),
-        ({"num_disparities": 8, "block_size": 33, "cost": "sad"}, ValueError,
-         r"block_size must be an odd integer in \[3, 31\] for cost='sad'.* got 33"),
-        ({"num_disparities": 8, "block_size": 9.0}, TypeError,
-         "block_size must be an integer, got float"),
-        ({"num_disparities": 8, "cost": "ncc"}, ValueError,
-         "cost must be 'census' or 'sad', got 'ncc'"),
+        (
+            {"num_disparities": 8, "min_disparity": 40000},
+            ValueError,
+            r"min_disparity must be an integer in \[-32768, 32768\], got 40000",
+        ),
+        (
+            {"num_disparities": 8, "min_disparity": 1.0},
+            TypeError,
+            "min_disparity must be an integer, got float",
+        ),
+        (
+            {"num_disparities": 8, "block_size": 4},
+            ValueError,
+            r"block_size must be an odd integer in \[3, 63\] for cost='census' \(block costs are"
+            r" summed in 16 bits\), got 4",
+        ),
+        (
+            {"num_disparities": 8, "block_size": 1},
+            ValueError,
+            "block_size must be an odd integer in .* got 1",
+        ),
+        (
+            {"num_disparities": 8, "block_size": 65},
+            ValueError,
+            "block_size must be an odd integer in .* got 65",
+        ),
+        (
+            {"num_disparities": 8, "block_size": 33, "cost": "sad"},
+            ValueError,
+            r"block_size must be an odd integer in \[3, 31\] for cost='sad'.* got 33",
+        ),
+        (
+            {"num_disparities": 8, "block_size": 9.0},
+            TypeError,
+            "block_size must be an integer, got float",
+        ),
+        (
+            {"num_disparities": 8, "cost": "ncc"},
+            ValueError,
+            "cost must be 'census' or 'sad', got 'ncc'",
+        ),
         ({"num_disparities": 8, "cost": 1}, TypeError, "cost must be 'census' or 'sad', got int 1"),
-        ({"num_disparities": 8, "subpixel": "quadratic"}, ValueError,
-         "subpixel must be True, False, 'parabola' or 'equiangular', got 'quadratic'"),
-        ({"num_disparities": 8, "subpixel": 1}, TypeError,
-         "subpixel must be True, False, 'parabola' or 'equiangular', got int 1"),
-        ({"num_disparities": 8, "uniqueness_ratio": -1}, ValueError,
-         "uniqueness_ratio must be a finite number >= 0, got -1"),
-        ({"num_disparities": 8, "uniqueness_ratio": float("nan")}, ValueError,
-         "uniqueness_ratio must be a finite number >= 0, got nan"),
-        ({"num_disparities": 8, "uniqueness_ratio": "10"}, TypeError,
-         "uniqueness_ratio must be a real number, got str '10'"),
-        ({"num_disparities": 8, "texture_threshold": -0.5}, ValueError,
-         "texture_threshold must be a finite number >= 0, got -0.5"),
-        ({"num_disparities": 8, "texture_threshold": float("inf")}, ValueError,
-         "texture_threshold must be a finite number >= 0, got inf"),
-        ({"num_disparities": 8, "lr_max_diff": -1}, ValueError,
-         "lr_max_diff must be a finite number >= 0, got -1"),
-        ({"num_disparities": 8, "lr_max_diff": float("nan")}, ValueError,
-         "lr_max_diff must be a finite number >= 0, got nan"),
-        ({"num_disparities": 8, "lr_max_diff": "1"}, TypeError,
-         "lr_max_diff must be a real number, got str"),
-        ({"num_disparities": 8, "speckle_window": -1}, ValueError,
-         "speckle_window must be an integer >= 0, got -1"),
-        ({"num_disparities": 8, "speckle_window": 2.5}, TypeError,
-         "speckle_window must be an integer, got float 2.5"),
-        ({"num_disparities": 8, "speckle_range": -1.0}, ValueError,
-         "speckle_range must be a finite number >= 0, got -1.0"),
-        ({"num_disparities": 8, "speckle_range": float("nan")}, ValueError,
-         "speckle_range must be a finite number >= 0, got nan"),
-        ({"num_disparities": 8, "threads": -1}, ValueError,
-         "threads must be an integer >= 0, got -1"),
-        ({"num_disparities": 8, "threads": 1.5}, TypeError,
-         "threads must be an integer, got float 1.5"),
-        ({"num_disparities": 8, "return_confidence": "yes"}, TypeError,
-         "return_confidence must be a bool, got str 'yes'"),
+        (
+            {"num_disparities": 8, "subpixel": "quadratic"},
+            ValueError,
+            "subpixel must be True, False, 'parabola' or 'equiangular', got 'quadratic'",
+        ),
+        (
+            {"num_disparities": 8, "subpixel": 1},
+            TypeError,
+            "subpixel must be True, False, 'parabola' or 'equiangular', got int 1",
+        ),
+        (
+            {"num_disparities": 8, "uniqueness_ratio": -1},
+            ValueError,
+            "uniqueness_ratio must be a finite number >= 0, got -1",
+        ),
+        (
+            {"num_disparities": 8, "uniqueness_ratio": float("nan")},
+            ValueError,
+            "uniqueness_ratio must be a finite number >= 0, got nan",
+        ),
+        (
+            {"num_disparities": 8, "uniqueness_ratio": "10"},
+            TypeError,
+            "uniqueness_ratio must be a real number, got str '10'",
+        ),
+        (
+            {"num_disparities": 8, "texture_threshold": -0.5},
+            ValueError,
+            "texture_threshold must be a finite number >= 0, got -0.5",
+        ),
+        (
+            {"num_disparities": 8, "texture_threshold": float("inf")},
+            ValueError,
+            "texture_threshold must be a finite number >= 0, got inf",
+        ),
+        (
+            {"num_disparities": 8, "lr_max_diff": -1},
+            ValueError,
+            "lr_max_diff must be a finite number >= 0, got -1",
+        ),
+        (
+            {"num_disparities": 8, "lr_max_diff": float("nan")},
+            ValueError,
+            "lr_max_diff must be a finite number >= 0, got nan",
+        ),
+        (
+            {"num_disparities": 8, "lr_max_diff": "1"},
+            TypeError,
+            "lr_max_diff must be a real number, got str",
+        ),
+        (
+            {"num_disparities": 8, "speckle_window": -1},
+            ValueError,
+            "speckle_window must be an integer >= 0, got -1",
+        ),
+        (
+            {"num_disparities": 8, "speckle_window": 2.5},
+            TypeError,
+            "speckle_window must be an integer, got float 2.5",
+        ),
+        (
+            {"num_disparities": 8, "speckle_range": -1.0},
+            ValueError,
+            "speckle_range must be a finite number >= 0, got -1.0",
+        ),
+        (
+            {"num_disparities": 8, "speckle_range": float("nan")},
+            ValueError,
+            "speckle_range must be a finite number >= 0, got nan",
+        ),
+        (
+            {"num_disparities": 8, "threads": -1},
+            ValueError,
+            "threads must be an integer >= 0, got -1",
+        ),
+        (
+            {"num_disparities": 8, "threads": 1.5},
+            TypeError,
+            "threads must be an integer, got float 1.5",
+        ),
+        (
+            {"num_disparities": 8, "return_confidence": "yes"},
+            TypeError,
+            "return_confidence must be a bool, got str 'yes'",
+        ),
     ],
 )
 def test_rejected_parameters(kwargs: dict[str, Any], exc: type[Exception], match: str) -> None:
@@ -565,26 +679,58 @@ L8 = np.zeros((6, 9), np.uint8)
 @pytest.mark.parametrize(
     ("left", "right", "exc", "match"),
     [
-        ([[1, 2], [3, 4]], L8, TypeError,
-         r"left must be a numpy.ndarray \(2-D uint8 or uint16 grey, or \(H, W, 3\) uint8 RGB\),"
-         r" got list"),
+        (
+            [[1, 2], [3, 4]],
+            L8,
+            TypeError,
+            r"left must be a numpy.ndarray \(2-D uint8 or uint16 grey, or \(H, W, 3\) uint8 RGB\),"
+            r" got list",
+        ),
         (L8, "right.png", TypeError, "right must be a numpy.ndarray .* got str"),
-        (L8.astype(np.float32), L8, TypeError,
-         r"left must be 2-D uint8 or uint16 grey, or \(H, W, 3\) uint8 RGB, got dtype float32"),
+        (
+            L8.astype(np.float32),
+            L8,
+            TypeError,
+            r"left must be 2-D uint8 or uint16 grey, or \(H, W, 3\) uint8 RGB, got dtype float32",
+        ),
         (L8, L8.astype(np.int16), TypeError, "right must be .* got dtype int16"),
-        (np.zeros((6, 9, 4), np.uint8), L8, ValueError,
-         r"left must be .* got shape \(6, 9, 4\) uint8"),
-        (np.zeros((6, 9, 3), np.uint16), L8, ValueError,
-         r"left must be .* got shape \(6, 9, 3\) uint16"),
+        (
+            np.zeros((6, 9, 4), np.uint8),
+            L8,
+            ValueError,
+            r"left must be .* got shape \(6, 9, 4\) uint8",
+        ),
+        (
+            np.zeros((6, 9, 3), np.uint16),
+            L8,
+            ValueError,
+            r"left must be .* got shape \(6, 9, 3\) uint16",
+        ),
         (np.zeros(9, np.uint8), L8, ValueError, r"left must be .* got shape \(9,\)"),
-        (np.zeros((0, 9), np.uint8), np.zeros((0, 9), np.uint8), ValueError,
-         r"left must have at least one row and one column, got shape \(0, 9\)"),
-        (L8, np.zeros((6, 8), np.uint8), ValueError,
-         r"left and right must have the same shape, got \(6, 9\) and \(6, 8\)"),
-        (L8, L8.astype(np.uint16), TypeError,
-         "left and right must have the same dtype, got uint8 and uint16"),
-        (L8, np.zeros((6, 9, 3), np.uint8), ValueError,
-         r"left and right must have the same shape, got \(6, 9\) and \(6, 9, 3\)"),
+        (
+            np.zeros((0, 9), np.uint8),
+            np.zeros((0, 9), np.uint8),
+            ValueError,
+            r"left must have at least one row and one column, got shape \(0, 9\)",
+        ),
+        (
+            L8,
+            np.zeros((6, 8), np.uint8),
+            ValueError,
+            r"left and right must have the same shape, got \(6, 9\) and \(6, 8\)",
+        ),
+        (
+            L8,
+            L8.astype(np.uint16),
+            TypeError,
+            "left and right must have the same dtype, got uint8 and uint16",
+        ),
+        (
+            L8,
+            np.zeros((6, 9, 3), np.uint8),
+            ValueError,
+            r"left and right must have the same shape, got \(6, 9\) and \(6, 9, 3\)",
+        ),
     ],
 )
 def test_rejected_images(left: Any, right: Any, exc: type[Exception], match: str) -> None:
@@ -638,18 +784,35 @@ def test_native_layer_rejects_bad_parameters_too() -> None:
 @pytest.mark.parametrize(
     ("value", "kwargs", "exc", "match"),
     [
-        (np.zeros((2, 2), np.int16), {}, TypeError,
-         "disparity must be a float array .* got dtype int16"),
-        (np.full((2, 2), 2048.0, np.float32), {}, ValueError,
-         r"disparity must lie in \(-2048, 2048\) px"),
+        (
+            np.zeros((2, 2), np.int16),
+            {},
+            TypeError,
+            "disparity must be a float array .* got dtype int16",
+        ),
+        (
+            np.full((2, 2), 2048.0, np.float32),
+            {},
+            ValueError,
+            r"disparity must lie in \(-2048, 2048\) px",
+        ),
         (np.full((2, 2), np.inf, np.float32), {}, ValueError, "disparity must be finite or NaN"),
-        (np.zeros((2, 2), np.float32), {"min_disparity": 4000}, ValueError,
-         r"min_disparity must be in \[-2047, 2048\]"),
-        (np.zeros((2, 2), np.float32), {"min_disparity": 1.5}, TypeError,
-         "min_disparity must be an integer"),
+        (
+            np.zeros((2, 2), np.float32),
+            {"min_disparity": 4000},
+            ValueError,
+            r"min_disparity must be in \[-2047, 2048\]",
+        ),
+        (
+            np.zeros((2, 2), np.float32),
+            {"min_disparity": 1.5},
+            TypeError,
+            "min_disparity must be an integer",
+        ),
     ],
 )
-def test_to_opencv_disparity_rejects(value: Any, kwargs: dict[str, Any], exc: type[Exception],
-                                     match: str) -> None:
+def test_to_opencv_disparity_rejects(
+    value: Any, kwargs: dict[str, Any], exc: type[Exception], match: str
+) -> None:
     with pytest.raises(exc, match=match):
         sd.to_opencv_disparity(value, **kwargs)

@@ -31,8 +31,15 @@ def test_console_script_prints_results_and_table() -> None:
 def test_json_output_equals_the_library(capsys: pytest.CaptureFixture[str]) -> None:
     assert main(["calc", *ARM, "--disparity-px", "250", "--json"]) == 0
     out = json.loads(capsys.readouterr().out)
-    for key in ("depth_m", "disparity_mm", "max_depth_m", "depth_resolution_m", "focal_px",
-                "hfov_deg", "table"):
+    for key in (
+        "depth_m",
+        "disparity_mm",
+        "max_depth_m",
+        "depth_resolution_m",
+        "focal_px",
+        "hfov_deg",
+        "table",
+    ):
         assert key in out
     rig = StereoRig(150, 6, 2.8, width_px=1280)
     assert out == json.loads(json.dumps(rig.summary(250)))
@@ -40,8 +47,21 @@ def test_json_output_equals_the_library(capsys: pytest.CaptureFixture[str]) -> N
 
 
 def test_focal_px_replaces_focal_mm_and_pixel_um(capsys: pytest.CaptureFixture[str]) -> None:
-    assert main(["calc", "--baseline-mm", "537.166", "--focal-px", "718.856",
-                 "--disparity-px", "40", "--json"]) == 0
+    assert (
+        main(
+            [
+                "calc",
+                "--baseline-mm",
+                "537.166",
+                "--focal-px",
+                "718.856",
+                "--disparity-px",
+                "40",
+                "--json",
+            ]
+        )
+        == 0
+    )
     out = json.loads(capsys.readouterr().out)
     assert out["depth_m"] == pytest.approx(0.537166 * 718.856 / 40)
     assert out["disparity_mm"] is None and out["hfov_deg"] is None
@@ -56,13 +76,19 @@ def test_markdown_table(capsys: pytest.CaptureFixture[str]) -> None:
 @pytest.mark.parametrize(
     ("args", "message"),
     [
-        (["--baseline-mm", "-150", "--focal-mm", "6", "--pixel-um", "2.8"],
-         "baseline_mm must be a finite number > 0, got -150.0"),
-        (["--baseline-mm", "150", "--focal-mm", "6", "--pixel-um", "0"],
-         "pixel_um must be a finite number > 0, got 0.0"),
+        (
+            ["--baseline-mm", "-150", "--focal-mm", "6", "--pixel-um", "2.8"],
+            "baseline_mm must be a finite number > 0, got -150.0",
+        ),
+        (
+            ["--baseline-mm", "150", "--focal-mm", "6", "--pixel-um", "0"],
+            "pixel_um must be a finite number > 0, got 0.0",
+        ),
         (["--baseline-mm", "150", "--focal-mm", "6"], "give --focal-mm and --pixel-um"),
-        (["--baseline-mm", "150", "--focal-mm", "6", "--pixel-um", "2", "--focal-px", "9"],
-         "not both"),
+        (
+            ["--baseline-mm", "150", "--focal-mm", "6", "--pixel-um", "2", "--focal-px", "9"],
+            "not both",
+        ),
         ([*ARM, "--disparity-px", "nan"], "disparity_px must be finite and >= 0, got nan"),
         ([*ARM, "--subpixel-px", "-0.1"], "disparity_step_px must be a finite number > 0"),
     ],

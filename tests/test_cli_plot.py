@@ -18,8 +18,23 @@ def test_plot_writes_the_charts_and_says_where(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     out = tmp_path / "charts.png"
-    assert main(["calc", *ARM, "--disparity-px", "250", "--subpixel-px", "0.25",
-                 "--max-disparity-px", "256", "--plot", str(out)]) == 0
+    assert (
+        main(
+            [
+                "calc",
+                *ARM,
+                "--disparity-px",
+                "250",
+                "--subpixel-px",
+                "0.25",
+                "--max-disparity-px",
+                "256",
+                "--plot",
+                str(out),
+            ]
+        )
+        == 0
+    )
     assert out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     text = capsys.readouterr().out
     assert "1.28571 m" in text
@@ -35,10 +50,13 @@ def test_plot_with_json_keeps_stdout_json(
     assert out.read_bytes().startswith(b"<?xml")
 
 
-@pytest.mark.parametrize(("name", "message"), [
-    ("charts.txt", "the chart file must end in .png, .svg, .pdf, got"),
-    ("missing/charts.png", "the chart file's folder must exist, got"),
-])
+@pytest.mark.parametrize(
+    ("name", "message"),
+    [
+        ("charts.txt", "the chart file must end in .png, .svg, .pdf, got"),
+        ("missing/charts.png", "the chart file's folder must exist, got"),
+    ],
+)
 def test_bad_plot_path_is_one_line_and_status_2(
     tmp_path: Path, capsys: pytest.CaptureFixture[str], name: str, message: str
 ) -> None:

@@ -42,13 +42,16 @@ def assert_same(a: Any, b: np.ndarray) -> None:
 @pytest.mark.parametrize("dtype", [np.float32, np.uint16])
 def test_disparity_to_depth_equals_numpy(chunks: tuple[int, ...], dtype: type) -> None:
     d = disparities()
-    lazy = sdd.disparity_to_depth(da.from_array(d, chunks=chunks), **RIG, dtype=dtype,
-                                  max_depth_m=60.0)
+    lazy = sdd.disparity_to_depth(
+        da.from_array(d, chunks=chunks), **RIG, dtype=dtype, max_depth_m=60.0
+    )
     assert lazy.dtype == dtype and lazy.chunks == da.from_array(d, chunks=chunks).chunks
     want = stereodepth.disparity_to_depth(d, **RIG, dtype=dtype, max_depth_m=60.0)
     assert_same(lazy.compute(scheduler="threads"), want)
-    assert_same(sdd.disparity_to_depth(da.from_array(d[0]), **RIG).compute(),
-                stereodepth.disparity_to_depth(d[0], **RIG))
+    assert_same(
+        sdd.disparity_to_depth(da.from_array(d[0]), **RIG).compute(),
+        stereodepth.disparity_to_depth(d[0], **RIG),
+    )
 
 
 def test_a_stack_larger_than_one_chunk_from_memory_mapped_files(tmp_path: Path) -> None:
@@ -56,8 +59,9 @@ def test_a_stack_larger_than_one_chunk_from_memory_mapped_files(tmp_path: Path) 
     d = disparities(2)
     np.save(tmp_path / "disparity.npy", d)
     src = np.load(tmp_path / "disparity.npy", mmap_mode="r")
-    dst = np.lib.format.open_memmap(tmp_path / "depth.npy", mode="w+", dtype=np.float32,
-                                    shape=d.shape)
+    dst = np.lib.format.open_memmap(
+        tmp_path / "depth.npy", mode="w+", dtype=np.float32, shape=d.shape
+    )
     depth = sdd.disparity_to_depth(da.from_array(src, chunks=(1, H, W)), **RIG)
     da.store(depth, dst, scheduler="threads")
     dst.flush()
@@ -73,8 +77,12 @@ def test_block_match_equals_numpy_frame_by_frame(rgb: bool, chunks: str) -> None
         c: tuple[int, ...] = (1, H, W, 3) if rgb else (1, H, W)
     else:  # frames split across chunks: rechunked to whole frames
         c = (2, 11, 17, 3) if rgb else (2, 11, 17)
-    lazy = sdd.block_match(da.from_array(left, chunks=c), da.from_array(right, chunks=c),
-                           num_disparities=16, block_size=7)
+    lazy = sdd.block_match(
+        da.from_array(left, chunks=c),
+        da.from_array(right, chunks=c),
+        num_disparities=16,
+        block_size=7,
+    )
     assert lazy.shape == (N, H, W) and lazy.dtype == np.float32
     assert all(len(ch) == 1 for ch in lazy.chunks[1:])
     got = lazy.compute(scheduler="threads")
@@ -82,8 +90,9 @@ def test_block_match_equals_numpy_frame_by_frame(rgb: bool, chunks: str) -> None
         want = matching.block_match(left[i], right[i], num_disparities=16, block_size=7)
         assert_same(got[i], want)
         assert np.nanmedian(got[i]) == pytest.approx(2 + i, abs=0.05)
-    one = sdd.block_match(da.from_array(left[0]), da.from_array(right[0]), num_disparities=16,
-                          block_size=7)
+    one = sdd.block_match(
+        da.from_array(left[0]), da.from_array(right[0]), num_disparities=16, block_size=7
+    )
     assert_same(one.compute(), got[0])
 
 
@@ -93,65 +102,136 @@ def test_reproject_equals_numpy() -> None:
     lazy = sdd.reproject(da.from_array(d, chunks=(2, 9, 50)), **rig)
     assert lazy.shape == (N, H, W, 3) and lazy.chunks[1:] == ((H,), (W,), (3,))
     assert_same(lazy.compute(scheduler="threads"), stereodepth.reproject(d, **rig))
-    assert_same(sdd.reproject(da.from_array(d[1]), **RIG).compute(),
-                stereodepth.reproject(d[1], **RIG))
+    assert_same(
+        sdd.reproject(da.from_array(d[1]), **RIG).compute(), stereodepth.reproject(d[1], **RIG)
+    )
 
 
 def test_the_whole_chain_is_lazy_and_checked_up_front() -> None:
     left, right = stack(5)
     calls: list[int] = []
     lazy_left = da.from_array(left, chunks=(1, H, W)).map_blocks(
-        lambda b: calls.append(1) or b, dtype=np.uint8, meta=np.empty((0, 0, 0), np.uint8))
-    disparity = sdd.block_match(lazy_left, da.from_array(right, chunks=(1, H, W)),
-                                num_disparities=16)
+        lambda b: calls.append(1) or b, dtype=np.uint8, meta=np.empty((0, 0, 0), np.uint8)
+    )
+    disparity = sdd.block_match(
+        lazy_left, da.from_array(right, chunks=(1, H, W)), num_disparities=16
+    )
     depth = sdd.disparity_to_depth(disparity, **RIG)
     assert calls == []  # nothing ran yet
     got = depth.compute(scheduler="synchronous")
     assert len(calls) == N
-    want = [stereodepth.disparity_to_depth(
-        matching.block_match(left[i], right[i], num_disparities=16), **RIG) for i in range(N)]
+    want = [
+        stereodepth.disparity_to_depth(
+            matching.block_match(left[i], right[i], num_disparities=16), **RIG
+        )
+        for i in range(N)
+    ]
     assert_same(got, np.stack(want))
 
 
 @pytest.mark.parametrize(
     ("call", "exc", "message"),
     [
-        (lambda: sdd.disparity_to_depth(np.ones((2, 2), np.float32), **RIG), TypeError,
-         "disparity must be a dask.array.Array .* got ndarray"),
-        (lambda: sdd.disparity_to_depth(da.ones((2, 2), dtype=np.float32), focal_px=1.0,
-                                        baseline_m=-1.0), ValueError,
-         "baseline_m must be a finite number > 0, got -1.0"),
-        (lambda: sdd.disparity_to_depth(da.ones((2, 2), dtype=np.uint8), **RIG), TypeError,
-         "disparity must have dtype float16"),
-        (lambda: sdd.disparity_to_depth(da.ones((2, 2), dtype=np.float32), **RIG, colour=1),
-         TypeError, "unexpected keyword argument 'colour'"),
-        (lambda: sdd.disparity_to_depth(da.ones((2, 2), dtype=np.float32), **RIG,
-                                        out=np.empty((2, 2), np.float32)),
-         TypeError, "out is not accepted for dask arrays"),
-        (lambda: sdd.block_match(da.ones((2, 8, 8), dtype=np.uint8),
-                                 da.ones((2, 8, 9), dtype=np.uint8), num_disparities=4),
-         ValueError, r"left and right must have the same shape, got \(2, 8, 8\) and \(2, 8, 9\)"),
-        (lambda: sdd.block_match(da.ones((8, 8), dtype=np.uint8),
-                                 da.ones((8, 8), dtype=np.uint16), num_disparities=4),
-         TypeError, "left and right must have the same dtype, got uint8 and uint16"),
-        (lambda: sdd.block_match(da.ones((8, 8), dtype=np.float32),
-                                 da.ones((8, 8), dtype=np.float32), num_disparities=4),
-         TypeError, "left must be uint8 or uint16 images, got dtype float32"),
-        (lambda: sdd.block_match(da.ones((2, 8, 8, 4), dtype=np.uint8),
-                                 da.ones((2, 8, 8, 4), dtype=np.uint8), num_disparities=4),
-         ValueError, r"left must have shape .* got \(2, 8, 8, 4\) uint8"),
-        (lambda: sdd.block_match(da.ones((8, 8), dtype=np.uint8), da.ones((8, 8), dtype=np.uint8)),
-         TypeError, "missing required keyword argument: 'num_disparities'"),
-        (lambda: sdd.block_match(da.ones((8, 8), dtype=np.uint8), da.ones((8, 8), dtype=np.uint8),
-                                 num_disparities=4, block_size=4),
-         ValueError, "block_size must be an odd integer"),
-        (lambda: sdd.block_match(da.ones((8, 8), dtype=np.uint8), da.ones((8, 8), dtype=np.uint8),
-                                 num_disparities=4, return_confidence=True),
-         TypeError, "return_confidence is not accepted for dask arrays"),
-        (lambda: sdd.reproject(da.ones((2, 2), dtype=np.float32), Q=np.eye(3)), ValueError,
-         r"Q must be a 4x4 matrix"),
-        (lambda: sdd.reproject(da.ones((2, 2, 2, 2), dtype=np.float32), **RIG), ValueError,
-         r"disparity must have shape \(H, W\) or \(N, H, W\), got \(2, 2, 2, 2\)"),
+        (
+            lambda: sdd.disparity_to_depth(np.ones((2, 2), np.float32), **RIG),
+            TypeError,
+            "disparity must be a dask.array.Array .* got ndarray",
+        ),
+        (
+            lambda: sdd.disparity_to_depth(
+                da.ones((2, 2), dtype=np.float32), focal_px=1.0, baseline_m=-1.0
+            ),
+            ValueError,
+            "baseline_m must be a finite number > 0, got -1.0",
+        ),
+        (
+            lambda: sdd.disparity_to_depth(da.ones((2, 2), dtype=np.uint8), **RIG),
+            TypeError,
+            "disparity must have dtype float16",
+        ),
+        (
+            lambda: sdd.disparity_to_depth(da.ones((2, 2), dtype=np.float32), **RIG, colour=1),
+            TypeError,
+            "unexpected keyword argument 'colour'",
+        ),
+        (
+            lambda: sdd.disparity_to_depth(
+                da.ones((2, 2), dtype=np.float32), **RIG, out=np.empty((2, 2), np.float32)
+            ),
+            TypeError,
+            "out is not accepted for dask arrays",
+        ),
+        (
+            lambda: sdd.block_match(
+                da.ones((2, 8, 8), dtype=np.uint8),
+                da.ones((2, 8, 9), dtype=np.uint8),
+                num_disparities=4,
+            ),
+            ValueError,
+            r"left and right must have the same shape, got \(2, 8, 8\) and \(2, 8, 9\)",
+        ),
+        (
+            lambda: sdd.block_match(
+                da.ones((8, 8), dtype=np.uint8), da.ones((8, 8), dtype=np.uint16), num_disparities=4
+            ),
+            TypeError,
+            "left and right must have the same dtype, got uint8 and uint16",
+        ),
+        (
+            lambda: sdd.block_match(
+                da.ones((8, 8), dtype=np.float32),
+                da.ones((8, 8), dtype=np.float32),
+                num_disparities=4,
+            ),
+            TypeError,
+            "left must be uint8 or uint16 images, got dtype float32",
+        ),
+        (
+            lambda: sdd.block_match(
+                da.ones((2, 8, 8, 4), dtype=np.uint8),
+                da.ones((2, 8, 8, 4), dtype=np.uint8),
+                num_disparities=4,
+            ),
+            ValueError,
+            r"left must have shape .* got \(2, 8, 8, 4\) uint8",
+        ),
+        (
+            lambda: sdd.block_match(
+                da.ones((8, 8), dtype=np.uint8), da.ones((8, 8), dtype=np.uint8)
+            ),
+            TypeError,
+            "missing required keyword argument: 'num_disparities'",
+        ),
+        (
+            lambda: sdd.block_match(
+                da.ones((8, 8), dtype=np.uint8),
+                da.ones((8, 8), dtype=np.uint8),
+                num_disparities=4,
+                block_size=4,
+            ),
+            ValueError,
+            "block_size must be an odd integer",
+        ),
+        (
+            lambda: sdd.block_match(
+                da.ones((8, 8), dtype=np.uint8),
+                da.ones((8, 8), dtype=np.uint8),
+                num_disparities=4,
+                return_confidence=True,
+            ),
+            TypeError,
+            "return_confidence is not accepted for dask arrays",
+        ),
+        (
+            lambda: sdd.reproject(da.ones((2, 2), dtype=np.float32), Q=np.eye(3)),
+            ValueError,
+            r"Q must be a 4x4 matrix",
+        ),
+        (
+            lambda: sdd.reproject(da.ones((2, 2, 2, 2), dtype=np.float32), **RIG),
+            ValueError,
+            r"disparity must have shape \(H, W\) or \(N, H, W\), got \(2, 2, 2, 2\)",
+        ),
     ],
 )
 def test_rejects_bad_input_before_computing(call: Any, exc: type, message: str) -> None:
@@ -164,15 +244,27 @@ def test_on_a_local_cluster() -> None:
     distributed = pytest.importorskip("distributed")
     left, right = stack(6, rgb=True)
     # dashboard_address: a free loopback port (None would still try 8787, and warn if taken)
-    with distributed.LocalCluster(n_workers=2, processes=True, threads_per_worker=1,
-                                  host="127.0.0.1", dashboard_address="127.0.0.1:0"
-                                  ) as cluster, distributed.Client(cluster) as client:
-        disparity = sdd.block_match(da.from_array(left, chunks=(1, H, W, 3)),
-                                    da.from_array(right, chunks=(1, H, W, 3)),
-                                    num_disparities=16)
+    with (
+        distributed.LocalCluster(
+            n_workers=2,
+            processes=True,
+            threads_per_worker=1,
+            host="127.0.0.1",
+            dashboard_address="127.0.0.1:0",
+        ) as cluster,
+        distributed.Client(cluster) as client,
+    ):
+        disparity = sdd.block_match(
+            da.from_array(left, chunks=(1, H, W, 3)),
+            da.from_array(right, chunks=(1, H, W, 3)),
+            num_disparities=16,
+        )
         depth = sdd.disparity_to_depth(disparity, **RIG, dtype=np.uint16)
         got = client.compute(depth).result()
-    want = [stereodepth.disparity_to_depth(
-        matching.block_match(left[i], right[i], num_disparities=16), **RIG, dtype=np.uint16)
-        for i in range(N)]
+    want = [
+        stereodepth.disparity_to_depth(
+            matching.block_match(left[i], right[i], num_disparities=16), **RIG, dtype=np.uint16
+        )
+        for i in range(N)
+    ]
     assert_same(got, np.stack(want))

@@ -26,8 +26,23 @@ def special_values(dtype: type) -> np.ndarray:
             vals += [-1, -16, -17]
         return np.array(vals, dtype=dtype)
     finfo = np.finfo(dtype)
-    vals = [0.0, -0.0, 1.0, -1.0, 0.5, 1e-3, np.nan, np.inf, -np.inf, finfo.max, -finfo.max,
-            finfo.tiny, finfo.smallest_subnormal, -finfo.smallest_subnormal, finfo.eps]
+    vals = [
+        0.0,
+        -0.0,
+        1.0,
+        -1.0,
+        0.5,
+        1e-3,
+        np.nan,
+        np.inf,
+        -np.inf,
+        finfo.max,
+        -finfo.max,
+        finfo.tiny,
+        finfo.smallest_subnormal,
+        -finfo.smallest_subnormal,
+        finfo.eps,
+    ]
     return np.array(vals, dtype=dtype)
 
 
@@ -62,8 +77,12 @@ def assert_same(a: np.ndarray, b: np.ndarray) -> None:
 def test_native_matches_oracle(in_dtype: type, out_dtype: type, shape: tuple[int, ...]) -> None:
     rng = np.random.default_rng(abs(hash((np.dtype(in_dtype).name, shape))) % 2**32)
     d = random_disparity(rng, in_dtype, shape)
-    kw = {"focal_px": FOCAL_PX, "baseline_m": BASELINE_M, "dtype": out_dtype,
-              "scale": default_scale(in_dtype)}
+    kw = {
+        "focal_px": FOCAL_PX,
+        "baseline_m": BASELINE_M,
+        "dtype": out_dtype,
+        "scale": default_scale(in_dtype),
+    }
     assert_same(stereodepth.disparity_to_depth(d, **kw), reference.disparity_to_depth(d, **kw))
 
 
@@ -72,8 +91,13 @@ def test_native_matches_oracle(in_dtype: type, out_dtype: type, shape: tuple[int
 def test_every_special_value_matches_oracle(in_dtype: type, out_dtype: type) -> None:
     d = special_values(in_dtype).reshape(1, -1)
     for doffs in (0.0, 31.34, -2.5):
-        kw = {"focal_px": FOCAL_PX, "baseline_m": BASELINE_M, "dtype": out_dtype, "doffs_px": doffs,
-                  "scale": default_scale(in_dtype) or 1.0}
+        kw = {
+            "focal_px": FOCAL_PX,
+            "baseline_m": BASELINE_M,
+            "dtype": out_dtype,
+            "doffs_px": doffs,
+            "scale": default_scale(in_dtype) or 1.0,
+        }
         assert_same(stereodepth.disparity_to_depth(d, **kw), reference.disparity_to_depth(d, **kw))
 
 
@@ -98,8 +122,17 @@ def test_every_isa_matches_baseline(in_dtype: type) -> None:
     """Each instruction-set variant this CPU runs gives the scalar baseline's bits."""
     rng = np.random.default_rng(11)
     d = random_disparity(rng, in_dtype, (4, 1000))
-    args = (FOCAL_PX, BASELINE_M, 1.5, default_scale(in_dtype) or 1.0, 0.5, 100.0, None,
-            in_dtype == np.int16, 1)
+    args = (
+        FOCAL_PX,
+        BASELINE_M,
+        1.5,
+        default_scale(in_dtype) or 1.0,
+        0.5,
+        100.0,
+        None,
+        in_dtype == np.int16,
+        1,
+    )
     for out_dtype in OUT_DTYPES:
         want = np.empty(d.shape, out_dtype)
         _core.disparity_to_depth(d, want, *args, isa="baseline")
@@ -112,8 +145,9 @@ def test_every_isa_matches_baseline(in_dtype: type) -> None:
 def test_float32_result_is_within_two_ulp_of_exact() -> None:
     rng = np.random.default_rng(3)
     d = (rng.random((64, 257)) * 300 + 1e-3).astype(np.float32)
-    got = stereodepth.disparity_to_depth(d, focal_px=FOCAL_PX, baseline_m=BASELINE_M,
-                                         doffs_px=1.25, scale=0.7)
+    got = stereodepth.disparity_to_depth(
+        d, focal_px=FOCAL_PX, baseline_m=BASELINE_M, doffs_px=1.25, scale=0.7
+    )
     exact = FOCAL_PX * BASELINE_M / (d.astype(np.float64) * 0.7 + 1.25)
     ulp = np.spacing(exact.astype(np.float32)).astype(np.float64)
     assert np.all(np.abs(got - exact) <= 2 * ulp)
@@ -127,8 +161,9 @@ def test_opencv_int16_and_kitti_uint16_conventions() -> None:
     assert np.isnan(z[0, 2:]).all()
     # KITTI: disparity * 256, 0 = no data; even with a principal point offset.
     kitti = np.array([[256 * 40, 0, 1]], dtype=np.uint16)
-    z = stereodepth.disparity_to_depth(kitti, focal_px=700.0, baseline_m=0.5, scale=1 / 256,
-                                       doffs_px=3.0)
+    z = stereodepth.disparity_to_depth(
+        kitti, focal_px=700.0, baseline_m=0.5, scale=1 / 256, doffs_px=3.0
+    )
     np.testing.assert_allclose(z[0, 0], 700 * 0.5 / 43, rtol=1e-6)
     assert np.isnan(z[0, 1]) and np.isfinite(z[0, 2])
 
@@ -139,8 +174,9 @@ def test_uint16_millimetres_round_half_even_and_clamp() -> None:
     mm = stereodepth.disparity_to_depth(d, focal_px=1.0, baseline_m=0.0025, dtype=np.uint16)
     # 2.5 mm -> 2, 1.25 mm -> 1, 0.625 mm -> 1, huge -> 65535, zero disparity and NaN -> 0.
     np.testing.assert_array_equal(mm, [[2, 1, 1, 65535, 0, 0]])
-    mm = stereodepth.disparity_to_depth(d, focal_px=1.0, baseline_m=0.0025, dtype=np.uint16,
-                                        max_depth_m=10.0)
+    mm = stereodepth.disparity_to_depth(
+        d, focal_px=1.0, baseline_m=0.0025, dtype=np.uint16, max_depth_m=10.0
+    )
     assert mm[0, 3] == 0  # beyond max_depth_m is invalid, not clamped
 
 
@@ -155,25 +191,29 @@ def test_thread_count_does_not_change_bits(threads: int) -> None:
     rng = np.random.default_rng(5)
     d = random_disparity(rng, np.float32, (3, 301, 211))
     want = stereodepth.disparity_to_depth(d, focal_px=FOCAL_PX, baseline_m=BASELINE_M, threads=1)
-    got = stereodepth.disparity_to_depth(d, focal_px=FOCAL_PX, baseline_m=BASELINE_M,
-                                         threads=threads)
+    got = stereodepth.disparity_to_depth(
+        d, focal_px=FOCAL_PX, baseline_m=BASELINE_M, threads=threads
+    )
     assert_same(got, want)
 
 
 def test_concurrent_calls_from_python_threads() -> None:
     rng = np.random.default_rng(9)
     inputs = [random_disparity(rng, np.float32, (400, 300)) for _ in range(6)]
-    want = [reference.disparity_to_depth(d, focal_px=FOCAL_PX, baseline_m=BASELINE_M)
-            for d in inputs]
+    want = [
+        reference.disparity_to_depth(d, focal_px=FOCAL_PX, baseline_m=BASELINE_M) for d in inputs
+    ]
     results: dict[int, list[np.ndarray]] = {}
     errors: list[BaseException] = []
 
     def work(i: int) -> None:
         try:
             results[i] = [
-                stereodepth.disparity_to_depth(d, focal_px=FOCAL_PX, baseline_m=BASELINE_M,
-                                               threads=2)
-                for d in inputs for _ in range(5)
+                stereodepth.disparity_to_depth(
+                    d, focal_px=FOCAL_PX, baseline_m=BASELINE_M, threads=2
+                )
+                for d in inputs
+                for _ in range(5)
             ]
         except BaseException as exc:  # pragma: no cover - reported below
             errors.append(exc)
@@ -194,16 +234,18 @@ def test_strided_and_reversed_inputs_are_handled() -> None:
     base = random_disparity(rng, np.float32, (4, 40, 60))
     for view in (base[:, ::2, :], base[:, :, ::3], base[::-1, ::-1], base[1], base[..., 5:]):
         got = stereodepth.disparity_to_depth(view, focal_px=FOCAL_PX, baseline_m=BASELINE_M)
-        want = reference.disparity_to_depth(np.ascontiguousarray(view), focal_px=FOCAL_PX,
-                                            baseline_m=BASELINE_M)
+        want = reference.disparity_to_depth(
+            np.ascontiguousarray(view), focal_px=FOCAL_PX, baseline_m=BASELINE_M
+        )
         assert_same(got, want)
 
 
 def test_out_is_filled_in_place_and_returned() -> None:
     d = np.full((5, 6), 10.0, dtype=np.float32)
     out = np.empty((5, 6), dtype=np.uint16)
-    res = stereodepth.disparity_to_depth(d, focal_px=100.0, baseline_m=0.1, dtype=np.uint16,
-                                         out=out)
+    res = stereodepth.disparity_to_depth(
+        d, focal_px=100.0, baseline_m=0.1, dtype=np.uint16, out=out
+    )
     assert res is out and (out == 1000).all()
     # float32 in place: out may be the input itself.
     want = reference.disparity_to_depth(d, focal_px=100.0, baseline_m=0.1)
@@ -219,12 +261,10 @@ def test_empty_input_gives_empty_output() -> None:
 
 
 def test_rig_depth_map_uses_the_rig() -> None:
-    rig = stereodepth.StereoRig.from_pixels(baseline_mm=176.252, focal_px=1038.018,
-                                            doffs_px=53.271)
+    rig = stereodepth.StereoRig.from_pixels(baseline_mm=176.252, focal_px=1038.018, doffs_px=53.271)
     d = np.array([[10.0, 60.0]], dtype=np.float32)
     got = rig.depth_map(d)
-    want = reference.disparity_to_depth(d, focal_px=1038.018, baseline_m=0.176252,
-                                        doffs_px=53.271)
+    want = reference.disparity_to_depth(d, focal_px=1038.018, baseline_m=0.176252, doffs_px=53.271)
     assert_same(got, want)
     np.testing.assert_allclose(got[0], rig.depth_m(np.array([10.0, 60.0])), rtol=1e-6)
 
@@ -232,7 +272,8 @@ def test_rig_depth_map_uses_the_rig() -> None:
 @settings(max_examples=60, deadline=None)
 @given(
     st.lists(st.floats(0.01, 1e4, allow_nan=False), min_size=2, max_size=40),
-    st.floats(1.0, 5000.0), st.floats(1e-3, 2.0),
+    st.floats(1.0, 5000.0),
+    st.floats(1e-3, 2.0),
 )
 def test_depth_decreases_as_disparity_grows(ds: list[float], focal: float, base: float) -> None:
     d = np.sort(np.array(ds, dtype=np.float32))[None, :]
@@ -250,14 +291,18 @@ def test_real_kitti_ground_truth_matches_oracle_and_calibration(stereo_scenes) -
     raw = np.where(np.isfinite(gt), np.round(gt * 256), 0).astype(np.uint16)  # KITTI's encoding
     kw = {"focal_px": m["focal_px"], "baseline_m": m["baseline_mm"] / 1000, "scale": 1 / 256}
     for dtype in OUT_DTYPES:
-        assert_same(stereodepth.disparity_to_depth(raw, dtype=dtype, **kw),
-                    reference.disparity_to_depth(raw, dtype=dtype, **kw))
-    z = stereodepth.disparity_to_depth(gt, focal_px=m["focal_px"],
-                                       baseline_m=m["baseline_mm"] / 1000)
+        assert_same(
+            stereodepth.disparity_to_depth(raw, dtype=dtype, **kw),
+            reference.disparity_to_depth(raw, dtype=dtype, **kw),
+        )
+    z = stereodepth.disparity_to_depth(
+        gt, focal_px=m["focal_px"], baseline_m=m["baseline_mm"] / 1000
+    )
     valid = np.isfinite(gt) & (gt > 0)
     np.testing.assert_array_equal(np.isfinite(z), valid)
-    np.testing.assert_allclose(z[valid], m["focal_px"] * m["baseline_mm"] / 1000 / gt[valid],
-                               rtol=1e-6)
+    np.testing.assert_allclose(
+        z[valid], m["focal_px"] * m["baseline_mm"] / 1000 / gt[valid], rtol=1e-6
+    )
 
 
 # --- rejected input: one test per case, type and message checked ---------------------------
@@ -290,15 +335,27 @@ D = np.ones((2, 3), np.float32)
         (D, {"dtype": "nonsense"}, TypeError, "dtype must be numpy.float32 or numpy.uint16"),
         (D, {"min_depth_m": -1.0}, ValueError, "min_depth_m must be a finite number >= 0"),
         (D, {"max_depth_m": 0.0}, ValueError, "max_depth_m must be a finite number > 0"),
-        (D, {"min_depth_m": 5.0, "max_depth_m": 1.0}, ValueError,
-         r"max_depth_m must be >= min_depth_m \(5.0\), got 1.0"),
+        (
+            D,
+            {"min_depth_m": 5.0, "max_depth_m": 1.0},
+            ValueError,
+            r"max_depth_m must be >= min_depth_m \(5.0\), got 1.0",
+        ),
         (D, {"invalid_value": "x"}, TypeError, "invalid_value must be a real number"),
         (D, {"threads": -1}, ValueError, "threads must be an integer >= 0, got -1"),
         (D, {"threads": 1.5}, TypeError, "threads must be an integer, got float"),
-        (D, {"out": np.empty((2, 3), np.float64)}, TypeError,
-         "out must have dtype float32 .* got float64"),
-        (D, {"out": np.empty((3, 2), np.float32)}, ValueError,
-         r"out must have the shape of disparity \(2, 3\), got \(3, 2\)"),
+        (
+            D,
+            {"out": np.empty((2, 3), np.float64)},
+            TypeError,
+            "out must have dtype float32 .* got float64",
+        ),
+        (
+            D,
+            {"out": np.empty((3, 2), np.float32)},
+            ValueError,
+            r"out must have the shape of disparity \(2, 3\), got \(3, 2\)",
+        ),
         (D, {"out": np.empty((2, 6), np.float32)[:, ::2]}, TypeError, "out must be C-contiguous"),
         (D, {"out": [[0.0] * 3] * 2}, TypeError, "out must be a numpy.ndarray, got list"),
     ],
@@ -327,8 +384,9 @@ def test_rejected_overlapping_out() -> None:
     # Same start, different item size: float16 input read while float32 output is written.
     raw = np.zeros(24, np.uint8)
     with pytest.raises(ValueError, match="out overlaps disparity"):
-        stereodepth.disparity_to_depth(raw.view(np.float16)[:6].reshape(2, 3),
-                                       out=raw.view(np.float32).reshape(2, 3), **GOOD)
+        stereodepth.disparity_to_depth(
+            raw.view(np.float16)[:6].reshape(2, 3), out=raw.view(np.float32).reshape(2, 3), **GOOD
+        )
 
 
 def test_unknown_isa_is_rejected() -> None:

@@ -46,7 +46,7 @@ def random_dot_pair(
     gt = np.full((height, width), np.nan, dtype=np.float32)
     edges = np.linspace(0, height, len(bands) + 1).astype(int)
     for d, y0, y1 in zip(bands, edges[:-1], edges[1:], strict=True):
-        right[y0:y1] = texture[y0:y1, d:d + width]
+        right[y0:y1] = texture[y0:y1, d : d + width]
         gt[y0:y1, d:] = d
     return left, right, gt
 
@@ -56,8 +56,12 @@ def write_png(path: Path, image: np.ndarray) -> None:
 
 
 def write_scene(
-    folder: Path, left: np.ndarray, right: np.ndarray, gt: np.ndarray,
-    mask: np.ndarray | None = None, meta: dict[str, Any] | None = None,
+    folder: Path,
+    left: np.ndarray,
+    right: np.ndarray,
+    gt: np.ndarray,
+    mask: np.ndarray | None = None,
+    meta: dict[str, Any] | None = None,
 ) -> Path:
     folder.mkdir(parents=True)
     write_png(folder / "left.png", left)
@@ -129,15 +133,26 @@ def assert_same_metrics(got: dict[str, Any], want: dict[str, Any]) -> None:
             assert got[key] == pytest.approx(value, rel=1e-12, abs=0), key
 
 
-def opencv_disparity(cv2: Any, kind: str, left: np.ndarray, right: np.ndarray,
-                     num_disparities: int, block_size: int, **setters: Any) -> np.ndarray:
+def opencv_disparity(
+    cv2: Any,
+    kind: str,
+    left: np.ndarray,
+    right: np.ndarray,
+    num_disparities: int,
+    block_size: int,
+    **setters: Any,
+) -> np.ndarray:
     """OpenCV's matcher as the eval documentation describes it, written out independently."""
     if kind == "bm":
         m = cv2.StereoBM_create(numDisparities=num_disparities, blockSize=block_size)
     else:
-        m = cv2.StereoSGBM_create(minDisparity=0, numDisparities=num_disparities,
-                                  blockSize=block_size, P1=8 * block_size**2,
-                                  P2=32 * block_size**2)
+        m = cv2.StereoSGBM_create(
+            minDisparity=0,
+            numDisparities=num_disparities,
+            blockSize=block_size,
+            P1=8 * block_size**2,
+            P2=32 * block_size**2,
+        )
     for name, value in setters.items():
         getattr(m, name)(value)
     if left.ndim == 3:
@@ -181,7 +196,14 @@ def test_num_disparities_for_against_definition() -> None:
         smallest = next(k for k in range(16, 1000, 16) if k - 1 >= math.ceil(d))
         assert n == smallest, d
     assert [num_disparities_for(v) for v in (0, 14, 15, 16, 55, 64, 148)] == [
-        16, 16, 16, 32, 64, 80, 160]
+        16,
+        16,
+        16,
+        32,
+        64,
+        80,
+        160,
+    ]
 
 
 @pytest.mark.parametrize("bad", [-1, math.nan, math.inf])
@@ -223,8 +245,9 @@ def test_middlebury_layout(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -
 
 def test_opencv_bm_matches_direct_run(scenes_dir: Path, capsys: pytest.CaptureFixture[str]) -> None:
     cv2 = pytest.importorskip("cv2")
-    report = run_json(capsys, str(scenes_dir), "--method", "opencv-bm:9,15", "--repeat", "2",
-                      "--threads", "1")
+    report = run_json(
+        capsys, str(scenes_dir), "--method", "opencv-bm:9,15", "--repeat", "2", "--threads", "1"
+    )
     assert report["threads"] == 1
     assert report["repeat"] == 2
     for name, ndisp in (("rds-a", 16), ("rds-b", 32)):
@@ -248,11 +271,13 @@ def test_opencv_bm_matches_direct_run(scenes_dir: Path, capsys: pytest.CaptureFi
     assert len(report["results"]) == 6
 
 
-def test_opencv_sgbm_matches_direct_run(scenes_dir: Path,
-                                        capsys: pytest.CaptureFixture[str]) -> None:
+def test_opencv_sgbm_matches_direct_run(
+    scenes_dir: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
     cv2 = pytest.importorskip("cv2")
-    report = run_json(capsys, str(scenes_dir), "--method", "opencv-sgbm", "--repeat", "1",
-                      "--scene", "rds-a")
+    report = run_json(
+        capsys, str(scenes_dir), "--method", "opencv-sgbm", "--repeat", "1", "--scene", "rds-a"
+    )
     (row,) = report["results"]
     assert (row["scene"], row["block_size"], row["num_disparities"]) == ("rds-a", 5, 16)
     left, right, gt, mask = load(scenes_dir / "rds-a")
@@ -263,13 +288,23 @@ def test_opencv_sgbm_matches_direct_run(scenes_dir: Path,
 
 def test_opencv_option_is_applied(scenes_dir: Path, capsys: pytest.CaptureFixture[str]) -> None:
     cv2 = pytest.importorskip("cv2")
-    report = run_json(capsys, str(scenes_dir / "rds-a"), "--method", "opencv-bm:11",
-                      "--opencv-option", "uniqueness_ratio=60", "--opencv-option",
-                      "texture_threshold=0", "--repeat", "1")
+    report = run_json(
+        capsys,
+        str(scenes_dir / "rds-a"),
+        "--method",
+        "opencv-bm:11",
+        "--opencv-option",
+        "uniqueness_ratio=60",
+        "--opencv-option",
+        "texture_threshold=0",
+        "--repeat",
+        "1",
+    )
     (row,) = report["results"]
     left, right, gt, mask = load(scenes_dir / "rds-a")
-    d = opencv_disparity(cv2, "bm", left, right, 16, 11, setUniquenessRatio=60,
-                         setTextureThreshold=0)
+    d = opencv_disparity(
+        cv2, "bm", left, right, 16, 11, setUniquenessRatio=60, setTextureThreshold=0
+    )
     plain = opencv_disparity(cv2, "bm", left, right, 16, 11)
     assert np.isnan(d).sum() != np.isnan(plain).sum()  # the option changes the result
     assert_same_metrics(row["metrics"], evaluate(d, gt, mask).as_dict())
@@ -279,22 +314,43 @@ def test_block_size_option_and_num_disparities_override(
     scenes_dir: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     pytest.importorskip("cv2")
-    report = run_json(capsys, str(scenes_dir), "--method", "opencv-bm", "opencv-sgbm:3",
-                      "--block-size", "7", "--num-disparities", "48", "--repeat", "1")
-    got = [(r["scene"], r["method"], r["block_size"], r["num_disparities"])
-           for r in report["results"]]
+    report = run_json(
+        capsys,
+        str(scenes_dir),
+        "--method",
+        "opencv-bm",
+        "opencv-sgbm:3",
+        "--block-size",
+        "7",
+        "--num-disparities",
+        "48",
+        "--repeat",
+        "1",
+    )
+    got = [
+        (r["scene"], r["method"], r["block_size"], r["num_disparities"]) for r in report["results"]
+    ]
     assert got == [
-        ("rds-a", "opencv-bm", 7, 48), ("rds-a", "opencv-sgbm", 3, 48),
-        ("rds-b", "opencv-bm", 7, 48), ("rds-b", "opencv-sgbm", 3, 48),
+        ("rds-a", "opencv-bm", 7, 48),
+        ("rds-a", "opencv-sgbm", 3, 48),
+        ("rds-b", "opencv-bm", 7, 48),
+        ("rds-b", "opencv-sgbm", 3, 48),
     ]
 
 
-def test_opencv_threads_are_restored(scenes_dir: Path,
-                                     capsys: pytest.CaptureFixture[str]) -> None:
+def test_opencv_threads_are_restored(scenes_dir: Path, capsys: pytest.CaptureFixture[str]) -> None:
     cv2 = pytest.importorskip("cv2")
     before = cv2.getNumThreads()
-    run_json(capsys, str(scenes_dir / "rds-b"), "--method", "opencv-bm", "--threads", "1",
-             "--repeat", "1")
+    run_json(
+        capsys,
+        str(scenes_dir / "rds-b"),
+        "--method",
+        "opencv-bm",
+        "--threads",
+        "1",
+        "--repeat",
+        "1",
+    )
     assert cv2.getNumThreads() == before
 
 
@@ -312,17 +368,19 @@ def test_timing_fields(scenes_dir: Path, capsys: pytest.CaptureFixture[str]) -> 
     assert mean["scenes"] == 2
     assert mean["time_s"] == pytest.approx(sum(r["time_s"] for r in results) / 2)
     assert mean["ns_per_px_disparity"] == pytest.approx(
-        sum(r["time_s"] for r in results) * 1e9
-        / sum(r["width"] * r["height"] * r["num_disparities"] for r in results))
+        sum(r["time_s"] for r in results)
+        * 1e9
+        / sum(r["width"] * r["height"] * r["num_disparities"] for r in results)
+    )
     for key in ("bad_2", "density", "avgerr"):
-        assert mean["metrics"][key] == pytest.approx(
-            sum(r["metrics"][key] for r in results) / 2)
+        assert mean["metrics"][key] == pytest.approx(sum(r["metrics"][key] for r in results) / 2)
 
 
 def test_no_mask_scores_all_pixels(scenes_dir: Path, capsys: pytest.CaptureFixture[str]) -> None:
     pytest.importorskip("cv2")
-    report = run_json(capsys, str(scenes_dir / "rds-a"), "--method", "opencv-bm",
-                      "--no-mask", "--repeat", "1")
+    report = run_json(
+        capsys, str(scenes_dir / "rds-a"), "--method", "opencv-bm", "--no-mask", "--repeat", "1"
+    )
     (row,) = report["results"]
     _, _, gt, _ = load(scenes_dir / "rds-a")
     assert row["region"] == "all"
@@ -335,8 +393,16 @@ def test_no_mask_scores_all_pixels(scenes_dir: Path, capsys: pytest.CaptureFixtu
 
 def test_markdown_table(scenes_dir: Path, capsys: pytest.CaptureFixture[str]) -> None:
     pytest.importorskip("cv2")
-    status, out, _ = run_eval(capsys, str(scenes_dir), "--method", "opencv-bm:9,15",
-                              "opencv-sgbm", "--repeat", "1", "--markdown")
+    status, out, _ = run_eval(
+        capsys,
+        str(scenes_dir),
+        "--method",
+        "opencv-bm:9,15",
+        "opencv-sgbm",
+        "--repeat",
+        "1",
+        "--markdown",
+    )
     assert status == 0
     lines = out.strip().splitlines()
     # header, separator, 2 scenes x (bm 9, bm 15, bm best, sgbm 5), 4 mean rows
@@ -350,14 +416,16 @@ def test_markdown_table(scenes_dir: Path, capsys: pytest.CaptureFixture[str]) ->
     assert [c[2] for c in cells[2:6]] == ["9", "15", cells[4][2], "5"]
     assert cells[4][2] in ("best=9", "best=15")
     assert [(c[0], c[1], c[2]) for c in cells[-4:]] == [
-        ("mean", "opencv-bm", "9"), ("mean", "opencv-bm", "15"), ("mean", "opencv-bm", "best"),
-        ("mean", "opencv-sgbm", "5")]
+        ("mean", "opencv-bm", "9"),
+        ("mean", "opencv-bm", "15"),
+        ("mean", "opencv-bm", "best"),
+        ("mean", "opencv-sgbm", "5"),
+    ]
 
 
 def test_text_table_matches_json(scenes_dir: Path, capsys: pytest.CaptureFixture[str]) -> None:
     pytest.importorskip("cv2")
-    status, out, _ = run_eval(capsys, str(scenes_dir), "--method", "opencv-bm",
-                              "--repeat", "1")
+    status, out, _ = run_eval(capsys, str(scenes_dir), "--method", "opencv-bm", "--repeat", "1")
     assert status == 0
     report = run_json(capsys, str(scenes_dir), "--method", "opencv-bm", "--repeat", "1")
     lines = out.splitlines()
@@ -369,24 +437,29 @@ def test_text_table_matches_json(scenes_dir: Path, capsys: pytest.CaptureFixture
         return [line[a:b].strip() for a, b in spans]
 
     header = cells(lines[i])
-    table = [cells(line) for line in lines[i + 2:] if line.strip()]
+    table = [cells(line) for line in lines[i + 2 :] if line.strip()]
     assert [t[0] for t in table] == ["rds-a", "rds-b", "mean"]
     assert [t[4] for t in table] == ["nonocc", "all", ""]
     for t, row in zip(table, [*report["results"], report["means"][0]], strict=True):
-        for title, key in (("bad-2 %", "bad_2"), ("density %", "density"),
-                           ("bad-2(est) %", "bad_2_est")):
+        for title, key in (
+            ("bad-2 %", "bad_2"),
+            ("density %", "density"),
+            ("bad-2(est) %", "bad_2_est"),
+        ):
             want = 100 * row["metrics"][key]
             assert float(t[header.index(title)]) == pytest.approx(want, abs=0.0051)
         assert float(t[header.index("avgerr px")]) == pytest.approx(
-            row["metrics"]["avgerr"], abs=0.0051)
+            row["metrics"]["avgerr"], abs=0.0051
+        )
 
 
 # --------------------------------------------------------------------------------------------
 # Without OpenCV, and the stereodepth method through a stand-in matcher
 
 
-def test_opencv_missing_is_reported(scenes_dir: Path, capsys: pytest.CaptureFixture[str],
-                                    monkeypatch: pytest.MonkeyPatch) -> None:
+def test_opencv_missing_is_reported(
+    scenes_dir: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
+) -> None:
     monkeypatch.setitem(sys.modules, "cv2", None)  # import cv2 raises ImportError
     status, out, err = run_eval(capsys, str(scenes_dir), "--method", "opencv-bm", "opencv-sgbm")
     assert status == 2
@@ -413,21 +486,56 @@ def test_stereodepth_method_passes_options(
 ) -> None:
     calls: list[dict[str, Any]] = []
     monkeypatch.setattr(stereodepth, "block_match", fake_matcher(calls), raising=False)
-    report = run_json(capsys, str(scenes_dir), "--repeat", "2", "--threads", "1",
-                      "--block-size", "7", "11", "--option", "cost=sad", "--option",
-                      "subpixel=false", "--option", "uniqueness_ratio=12.5", "--option",
-                      "lr_max_diff=none", "--option", "speckle_window=50")
+    report = run_json(
+        capsys,
+        str(scenes_dir),
+        "--repeat",
+        "2",
+        "--threads",
+        "1",
+        "--block-size",
+        "7",
+        "11",
+        "--option",
+        "cost=sad",
+        "--option",
+        "subpixel=false",
+        "--option",
+        "uniqueness_ratio=12.5",
+        "--option",
+        "lr_max_diff=none",
+        "--option",
+        "speckle_window=50",
+    )
     # 2 scenes x 2 block sizes x (1 warm-up + 2 timed)
     assert len(calls) == 12
     first = calls[0]
     assert first["shape"] == (64, 128, 3)  # RGB passed straight to the matcher
     assert first["dtype"] == np.uint8
-    assert {k: first[k] for k in ("num_disparities", "min_disparity", "threads", "block_size",
-                                  "cost", "subpixel", "uniqueness_ratio", "lr_max_diff",
-                                  "speckle_window")} == {
-        "num_disparities": 16, "min_disparity": 0, "threads": 1, "block_size": 7,
-        "cost": "sad", "subpixel": False, "uniqueness_ratio": 12.5, "lr_max_diff": None,
-        "speckle_window": 50}
+    assert {
+        k: first[k]
+        for k in (
+            "num_disparities",
+            "min_disparity",
+            "threads",
+            "block_size",
+            "cost",
+            "subpixel",
+            "uniqueness_ratio",
+            "lr_max_diff",
+            "speckle_window",
+        )
+    } == {
+        "num_disparities": 16,
+        "min_disparity": 0,
+        "threads": 1,
+        "block_size": 7,
+        "cost": "sad",
+        "subpixel": False,
+        "uniqueness_ratio": 12.5,
+        "lr_max_diff": None,
+        "speckle_window": 50,
+    }
     assert [c["block_size"] for c in calls] == [7] * 3 + [11] * 3 + [7] * 3 + [11] * 3
     assert calls[6]["num_disparities"] == 32
     for name in ("rds-a", "rds-b"):
@@ -456,10 +564,15 @@ def test_stereodepth_default_block_size_is_named(
     calls: list[dict[str, Any]] = []
     fake = fake_matcher(calls)
 
-    def block_match(left: np.ndarray, right: np.ndarray, *, num_disparities: int,
-                    block_size: int = 13, **kwargs: Any) -> np.ndarray:
-        return fake(left, right, num_disparities=num_disparities, block_size=block_size,
-                    **kwargs)
+    def block_match(
+        left: np.ndarray,
+        right: np.ndarray,
+        *,
+        num_disparities: int,
+        block_size: int = 13,
+        **kwargs: Any,
+    ) -> np.ndarray:
+        return fake(left, right, num_disparities=num_disparities, block_size=block_size, **kwargs)
 
     monkeypatch.setattr(stereodepth, "block_match", block_match, raising=False)
     status, out, _ = run_eval(capsys, str(scenes_dir / "rds-b"), "--repeat", "1", "--markdown")
@@ -468,15 +581,28 @@ def test_stereodepth_default_block_size_is_named(
     assert "| rds-b | stereodepth | 13 | 32 | all |" in out
 
 
-def test_variants_are_grouped_by_method(scenes_dir: Path,
-                                        capsys: pytest.CaptureFixture[str]) -> None:
+def test_variants_are_grouped_by_method(
+    scenes_dir: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
     pytest.importorskip("cv2")
-    report = run_json(capsys, str(scenes_dir / "rds-b"), "--method", "opencv-bm:9",
-                      "opencv-sgbm", "opencv-bm:15,9", "--repeat", "1")
+    report = run_json(
+        capsys,
+        str(scenes_dir / "rds-b"),
+        "--method",
+        "opencv-bm:9",
+        "opencv-sgbm",
+        "opencv-bm:15,9",
+        "--repeat",
+        "1",
+    )
     got = [(r["method"], r["block_size"], r["best"]) for r in report["results"]]
     best = min(report["results"][:2], key=lambda r: (r["metrics"]["bad_2"], r["block_size"]))
-    assert got == [("opencv-bm", 9, False), ("opencv-bm", 15, False),
-                   ("opencv-bm", best["block_size"], True), ("opencv-sgbm", 5, False)]
+    assert got == [
+        ("opencv-bm", 9, False),
+        ("opencv-bm", 15, False),
+        ("opencv-bm", best["block_size"], True),
+        ("opencv-sgbm", 5, False),
+    ]
 
 
 def test_opencv_missing_skips_only_opencv(
@@ -484,8 +610,16 @@ def test_opencv_missing_skips_only_opencv(
 ) -> None:
     monkeypatch.setitem(sys.modules, "cv2", None)
     monkeypatch.setattr(stereodepth, "block_match", fake_matcher([]), raising=False)
-    status, out, err = run_eval(capsys, str(scenes_dir), "--method", "stereodepth", "opencv-bm",
-                                "--repeat", "1", "--markdown")
+    status, out, err = run_eval(
+        capsys,
+        str(scenes_dir),
+        "--method",
+        "stereodepth",
+        "opencv-bm",
+        "--repeat",
+        "1",
+        "--markdown",
+    )
     assert status == 0
     assert "skipped opencv-bm: OpenCV is not installed" in err
     assert "stereodepth" in out
@@ -517,8 +651,9 @@ def test_matcher_errors_name_the_scene(
 # The real matcher (runs once stereodepth.block_match is built)
 
 
-def test_stereodepth_matches_direct_run(scenes_dir: Path,
-                                        capsys: pytest.CaptureFixture[str]) -> None:
+def test_stereodepth_matches_direct_run(
+    scenes_dir: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
     block_match = native_block_match()
     report = run_json(capsys, str(scenes_dir), "--repeat", "1", "--threads", "2")
     for name, ndisp in (("rds-a", 16), ("rds-b", 32)):
@@ -539,8 +674,19 @@ def test_stereodepth_matches_direct_run(scenes_dir: Path,
 @pytest.mark.data
 def test_shared_scene_opencv(stereo_data_dir: Path, capsys: pytest.CaptureFixture[str]) -> None:
     cv2 = pytest.importorskip("cv2")
-    report = run_json(capsys, str(stereo_data_dir), "--scene", "mb2001-tsukuba", "--method",
-                      "opencv-bm:9,15", "opencv-sgbm", "--repeat", "1", "--threads", "2")
+    report = run_json(
+        capsys,
+        str(stereo_data_dir),
+        "--scene",
+        "mb2001-tsukuba",
+        "--method",
+        "opencv-bm:9,15",
+        "opencv-sgbm",
+        "--repeat",
+        "1",
+        "--threads",
+        "2",
+    )
     folder = stereo_data_dir / "mb2001-tsukuba"
     meta = json.loads((folder / "meta.json").read_text())
     left, right = (stereodepth.io.read_image(folder / n) for n in ("left.png", "right.png"))
@@ -548,7 +694,9 @@ def test_shared_scene_opencv(stereo_data_dir: Path, capsys: pytest.CaptureFixtur
     ndisp = 16 * math.ceil((meta["max_disp"] + 1) / 16)
     rows = report["results"]
     assert [(r["method"], r["block_size"], r["best"]) for r in rows][:2] == [
-        ("opencv-bm", 9, False), ("opencv-bm", 15, False)]
+        ("opencv-bm", 9, False),
+        ("opencv-bm", 15, False),
+    ]
     for row in rows:
         assert (row["num_disparities"], row["region"]) == (ndisp, "nonocc")
         kind = "bm" if row["method"] == "opencv-bm" else "sgbm"
@@ -559,11 +707,22 @@ def test_shared_scene_opencv(stereo_data_dir: Path, capsys: pytest.CaptureFixtur
 
 
 @pytest.mark.data
-def test_shared_scene_stereodepth(stereo_data_dir: Path,
-                                  capsys: pytest.CaptureFixture[str]) -> None:
+def test_shared_scene_stereodepth(
+    stereo_data_dir: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
     block_match = native_block_match()
-    report = run_json(capsys, str(stereo_data_dir), "--scene", "mb2001-tsukuba",
-                      "--scene", "mb2003-cones", "--repeat", "1", "--threads", "2")
+    report = run_json(
+        capsys,
+        str(stereo_data_dir),
+        "--scene",
+        "mb2001-tsukuba",
+        "--scene",
+        "mb2003-cones",
+        "--repeat",
+        "1",
+        "--threads",
+        "2",
+    )
     assert [r["scene"] for r in report["results"]] == ["mb2001-tsukuba", "mb2003-cones"]
     for row in report["results"]:
         folder = stereo_data_dir / row["scene"]
@@ -583,22 +742,34 @@ def test_shared_scene_stereodepth(stereo_data_dir: Path,
     [
         (["--repeat", "0"], "--repeat must be an integer >= 1, got 0"),
         (["--threads", "-1"], "--threads must be an integer >= 0 (0: every core), got -1"),
-        (["--num-disparities", "20"],
-         "--num-disparities must be a positive multiple of 16, got 20"),
-        (["--method", "opencv-bm:4"],
-         "block size of opencv-bm must be an odd integer in 5..255, got 4"),
-        (["--method", "opencv-sgbm:6"],
-         "block size of opencv-sgbm must be an odd integer >= 1, got 6"),
+        (
+            ["--num-disparities", "20"],
+            "--num-disparities must be a positive multiple of 16, got 20",
+        ),
+        (
+            ["--method", "opencv-bm:4"],
+            "block size of opencv-bm must be an odd integer in 5..255, got 4",
+        ),
+        (
+            ["--method", "opencv-sgbm:6"],
+            "block size of opencv-sgbm must be an odd integer >= 1, got 6",
+        ),
         (["--option", "threads=3"], "--option threads: use --threads"),
         (["--option", "num_disparities=64"], "--option num_disparities: set per scene"),
-        (["--method", "opencv-bm", "--option", "cost=sad"],
-         "--option is for stereodepth.block_match: add --method stereodepth"),
+        (
+            ["--method", "opencv-bm", "--option", "cost=sad"],
+            "--option is for stereodepth.block_match: add --method stereodepth",
+        ),
         (["--scene", "nothing*"], "--scene nothing* matches no scene in"),
     ],
 )
-def test_rejected_arguments(scenes_dir: Path, capsys: pytest.CaptureFixture[str],
-                            monkeypatch: pytest.MonkeyPatch, argv: list[str],
-                            message: str) -> None:
+def test_rejected_arguments(
+    scenes_dir: Path,
+    capsys: pytest.CaptureFixture[str],
+    monkeypatch: pytest.MonkeyPatch,
+    argv: list[str],
+    message: str,
+) -> None:
     monkeypatch.setattr(stereodepth, "block_match", fake_matcher([]), raising=False)
     status, out, err = run_eval(capsys, str(scenes_dir), *argv)
     assert status == 2
@@ -607,20 +778,22 @@ def test_rejected_arguments(scenes_dir: Path, capsys: pytest.CaptureFixture[str]
     assert message in err
 
 
-def test_rejects_unknown_opencv_option(scenes_dir: Path,
-                                       capsys: pytest.CaptureFixture[str]) -> None:
+def test_rejects_unknown_opencv_option(
+    scenes_dir: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
     pytest.importorskip("cv2")
-    status, _, err = run_eval(capsys, str(scenes_dir), "--method", "opencv-bm",
-                              "--opencv-option", "nonsense_knob=1")
+    status, _, err = run_eval(
+        capsys, str(scenes_dir), "--method", "opencv-bm", "--opencv-option", "nonsense_knob=1"
+    )
     assert status == 2
     assert "--opencv-option nonsense_knob: no selected OpenCV matcher has setNonsenseKnob()" in err
 
 
-def test_rejects_opencv_option_value(scenes_dir: Path,
-                                     capsys: pytest.CaptureFixture[str]) -> None:
+def test_rejects_opencv_option_value(scenes_dir: Path, capsys: pytest.CaptureFixture[str]) -> None:
     pytest.importorskip("cv2")
-    status, _, err = run_eval(capsys, str(scenes_dir), "--method", "opencv-bm",
-                              "--opencv-option", "uniqueness_ratio=abc")
+    status, _, err = run_eval(
+        capsys, str(scenes_dir), "--method", "opencv-bm", "--opencv-option", "uniqueness_ratio=abc"
+    )
     assert status == 2
     assert "--opencv-option uniqueness_ratio='abc' rejected by opencv-bm" in err
 
@@ -635,8 +808,9 @@ def test_rejects_opencv_option_value(scenes_dir: Path,
         ["--best-by", "speed"],
     ],
 )
-def test_rejected_by_the_parser(scenes_dir: Path, capsys: pytest.CaptureFixture[str],
-                                argv: list[str]) -> None:
+def test_rejected_by_the_parser(
+    scenes_dir: Path, capsys: pytest.CaptureFixture[str], argv: list[str]
+) -> None:
     with pytest.raises(SystemExit) as info:
         cli.main(["eval", str(scenes_dir), *argv])
     assert info.value.code == 2
@@ -672,38 +846,47 @@ def test_rejects_unreadable_meta(scenes_dir: Path, capsys: pytest.CaptureFixture
     assert "meta.json: cannot read JSON" in err
 
 
-def test_rejects_mismatched_pair(scenes_dir: Path, capsys: pytest.CaptureFixture[str],
-                                 monkeypatch: pytest.MonkeyPatch) -> None:
+def test_rejects_mismatched_pair(
+    scenes_dir: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
+) -> None:
     monkeypatch.setattr(stereodepth, "block_match", fake_matcher([]), raising=False)
     write_png(scenes_dir / "rds-b" / "right.png", np.zeros((64, 149), dtype=np.uint8))
     status, _, err = run_eval(capsys, str(scenes_dir), "--scene", "rds-b")
     assert status == 2
-    assert ("scene rds-b: left and right images must have the same shape, got (64, 150) and "
-            "(64, 149)") in err
+    assert (
+        "scene rds-b: left and right images must have the same shape, got (64, 150) and (64, 149)"
+    ) in err
 
 
-def test_rejects_gt_of_wrong_shape(scenes_dir: Path, capsys: pytest.CaptureFixture[str],
-                                   monkeypatch: pytest.MonkeyPatch) -> None:
+def test_rejects_gt_of_wrong_shape(
+    scenes_dir: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
+) -> None:
     monkeypatch.setattr(stereodepth, "block_match", fake_matcher([]), raising=False)
     np.save(scenes_dir / "rds-b" / "disp_gt.npy", np.zeros((64, 151), dtype=np.float32))
     status, _, err = run_eval(capsys, str(scenes_dir), "--scene", "rds-b")
     assert status == 2
-    assert ("disp_gt.npy: ground truth must be a float array of the image's shape (64, 150), "
-            "got float32 (64, 151)") in err
+    assert (
+        "disp_gt.npy: ground truth must be a float array of the image's shape (64, 150), "
+        "got float32 (64, 151)"
+    ) in err
 
 
-def test_rejects_non_bool_mask(scenes_dir: Path, capsys: pytest.CaptureFixture[str],
-                               monkeypatch: pytest.MonkeyPatch) -> None:
+def test_rejects_non_bool_mask(
+    scenes_dir: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
+) -> None:
     monkeypatch.setattr(stereodepth, "block_match", fake_matcher([]), raising=False)
     np.save(scenes_dir / "rds-a" / "mask_nonocc.npy", np.ones((64, 128), dtype=np.uint8))
     status, _, err = run_eval(capsys, str(scenes_dir), "--scene", "rds-a")
     assert status == 2
-    assert ("mask_nonocc.npy: mask must be a bool array of the image's shape (64, 128), "
-            "got uint8 (64, 128)") in err
+    assert (
+        "mask_nonocc.npy: mask must be a bool array of the image's shape (64, 128), "
+        "got uint8 (64, 128)"
+    ) in err
 
 
-def test_rejects_gt_without_values(scenes_dir: Path, capsys: pytest.CaptureFixture[str],
-                                   monkeypatch: pytest.MonkeyPatch) -> None:
+def test_rejects_gt_without_values(
+    scenes_dir: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
+) -> None:
     monkeypatch.setattr(stereodepth, "block_match", fake_matcher([]), raising=False)
     np.save(scenes_dir / "rds-b" / "disp_gt.npy", np.full((64, 150), np.nan, dtype=np.float32))
     status, _, err = run_eval(capsys, str(scenes_dir), "--scene", "rds-b")

@@ -101,8 +101,9 @@ def test_a_killed_writer_leaves_no_partial_file(tmp_path: Path) -> None:
             print("writing", flush=True)
             time.sleep(60)
     """)
-    with subprocess.Popen([sys.executable, "-c", script], stdout=subprocess.PIPE,
-                          text=True) as proc:
+    with subprocess.Popen(
+        [sys.executable, "-c", script], stdout=subprocess.PIPE, text=True
+    ) as proc:
         try:
             assert proc.stdout is not None
             assert proc.stdout.readline().strip() == "writing"
@@ -156,8 +157,11 @@ def test_png16_round_trip_and_extremes(tmp_path: Path) -> None:
     ("array", "exc", "message"),
     [
         (np.zeros((2, 2), np.float32), TypeError, "array must have dtype uint16, got float32"),
-        (np.zeros((2, 2, 3), np.uint16), ValueError,
-         r"array must be a non-empty \(H, W\) array, got shape \(2, 2, 3\)"),
+        (
+            np.zeros((2, 2, 3), np.uint16),
+            ValueError,
+            r"array must be a non-empty \(H, W\) array, got shape \(2, 2, 3\)",
+        ),
         (np.zeros((0, 2), np.uint16), ValueError, r"got shape \(0, 2\)"),
         ([[1, 2]], TypeError, "array must be a numpy.ndarray, got list"),
     ],
@@ -169,8 +173,14 @@ def test_write_png16_rejects(tmp_path: Path, array: object, exc: type, message: 
 
 
 def test_disparity_png16_is_kitti_format(tmp_path: Path) -> None:
-    d = np.array([[0.0, 1.0, 10.5, 255.99], [np.nan, -3.0, np.inf, 300.0],
-                  [1 / 1024, 1 / 256, 100.00195, 2.5]], np.float32)
+    d = np.array(
+        [
+            [0.0, 1.0, 10.5, 255.99],
+            [np.nan, -3.0, np.inf, 300.0],
+            [1 / 1024, 1 / 256, 100.00195, 2.5],
+        ],
+        np.float32,
+    )
     io.write_disparity_png16(tmp_path / "d.png", d)
     raw = io.read_image(tmp_path / "d.png")
     assert raw.dtype == np.uint16
@@ -201,7 +211,7 @@ def test_pfm_layout_on_disk(tmp_path: Path) -> None:
     io.write_pfm(tmp_path / "a.pfm", a)
     data = (tmp_path / "a.pfm").read_bytes()
     assert data.startswith(b"Pf\n3 2\n-1.0\n")
-    assert np.frombuffer(data[len(b"Pf\n3 2\n-1.0\n"):], "<f4").tolist() == [4, 5, 6, 1, 2, 3]
+    assert np.frombuffer(data[len(b"Pf\n3 2\n-1.0\n") :], "<f4").tolist() == [4, 5, 6, 1, 2, 3]
     # Another writer's layout: one header line, big-endian
     (tmp_path / "be.pfm").write_bytes(b"Pf 3 2 1.0\n" + a[::-1].astype(">f4").tobytes())
     np.testing.assert_array_equal(io.read_pfm(tmp_path / "be.pfm"), a, strict=True)
@@ -214,8 +224,11 @@ def test_read_pfm_rejects(tmp_path: Path) -> None:
     with pytest.raises(ValueError, match=r"magic\.pfm: not a PFM file"):
         io.read_pfm(tmp_path / "magic.pfm")
     (tmp_path / "cut.pfm").write_bytes(b"PF\n3 2\n-1\n" + bytes(40))
-    with pytest.raises(ValueError, match=r"cut.pfm: truncated PFM: 3x2x3 needs 72 bytes of data, "
-                       r"got 40"):
+    with pytest.raises(
+        ValueError,
+        match=r"cut.pfm: truncated PFM: 3x2x3 needs 72 bytes of data, "
+        r"got 40",
+    ):
         io.read_pfm(tmp_path / "cut.pfm")
     (tmp_path / "zero.pfm").write_bytes(b"Pf\n1 1\n0\n" + bytes(4))
     with pytest.raises(ValueError, match=r"zero\.pfm: bad PFM scale 0"):
@@ -226,10 +239,18 @@ def test_read_pfm_rejects(tmp_path: Path) -> None:
     ("array", "kwargs", "exc", "message"),
     [
         (np.zeros((2, 2), np.uint16), {}, TypeError, "array must have a float dtype, got uint16"),
-        (np.zeros((2, 2, 2), np.float32), {}, ValueError,
-         r"array must have shape \(H, W\) or \(H, W, 3\), got \(2, 2, 2\)"),
-        (np.zeros((2, 2), np.float32), {"scale": 0.0}, ValueError,
-         "scale must be a finite number > 0, got 0.0"),
+        (
+            np.zeros((2, 2, 2), np.float32),
+            {},
+            ValueError,
+            r"array must have shape \(H, W\) or \(H, W, 3\), got \(2, 2, 2\)",
+        ),
+        (
+            np.zeros((2, 2), np.float32),
+            {"scale": 0.0},
+            ValueError,
+            "scale must be a finite number > 0, got 0.0",
+        ),
     ],
 )
 def test_write_pfm_rejects(

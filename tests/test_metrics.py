@@ -77,8 +77,6 @@ def test_hand_computed_example() -> None:
     assert m.rms == pytest.approx(math.sqrt((0.0625 + 1.0 + 0 + 20.25 + 9.0) / 5))
 
 
-
-
 @pytest.mark.parametrize("dtype", [np.float16, np.float32, np.float64])
 @pytest.mark.parametrize("with_mask", [False, True])
 @pytest.mark.parametrize("shape", [(1, 1), (1, 7), (7, 1), (13, 17)])
@@ -99,7 +97,8 @@ def test_random_against_loops(dtype: type, with_mask: bool, shape: tuple[int, in
 @settings(max_examples=60, deadline=None)
 @given(
     data=hnp.arrays(
-        np.float32, st.tuples(st.integers(1, 6), st.integers(1, 6)),
+        np.float32,
+        st.tuples(st.integers(1, 6), st.integers(1, 6)),
         elements=st.floats(-10, 80, width=32) | st.just(np.nan) | st.just(np.inf),
     ),
     noise=st.lists(st.floats(-6, 6, width=32) | st.just(np.nan), min_size=36, max_size=36),
@@ -198,8 +197,11 @@ def test_accepts_lists_and_views() -> None:
 
 
 def test_rejects_int16_disparity_with_conversion_hint() -> None:
-    with pytest.raises(TypeError, match=r"disparity must be a floating-point .* got dtype int16; "
-                       r"OpenCV's fixed-point output must be converted first"):
+    with pytest.raises(
+        TypeError,
+        match=r"disparity must be a floating-point .* got dtype int16; "
+        r"OpenCV's fixed-point output must be converted first",
+    ):
         evaluate(np.zeros((2, 2), np.int16), np.zeros((2, 2), np.float32))
 
 

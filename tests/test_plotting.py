@@ -50,8 +50,7 @@ def test_markers_are_the_calculators_results() -> None:
     assert (t.name, t.x, t.y) == ("target", 250.0, s["depth_m"])
     m1, m2 = c.error_vs_depth.markers
     assert (m1.name, m1.x, m1.y) == ("target, 1 px", s["depth_m"], s["depth_resolution_m"])
-    assert (m2.name, m2.x, m2.y) == ("target, 0.25 px", s["depth_m"],
-                                     s["depth_resolution_subpx_m"])
+    assert (m2.name, m2.x, m2.y) == ("target, 0.25 px", s["depth_m"], s["depth_resolution_subpx_m"])
 
 
 def test_whole_pixel_step_has_one_error_curve() -> None:
@@ -95,15 +94,26 @@ def test_to_dict_is_json_ready() -> None:
     assert d["error_vs_depth"]["y_label"] == "depth error ΔZ (m)"
 
 
-@pytest.mark.parametrize(("kwargs", "exc", "msg"), [
-    ({"disparity_px": -1}, ValueError, "disparity_px must be finite and >= 0, got -1.0"),
-    ({"disparity_px": math.nan}, ValueError, "disparity_px must be finite"),
-    ({"disparity_px": "5"}, TypeError, "disparity_px must be a real number, got str '5'"),
-    ({"disparity_step_px": 0}, ValueError, "disparity_step_px must be a finite number > 0, got 0"),
-    ({"max_disparity_px": -3}, ValueError, "max_disparity_px must be a finite number > 0, got -3"),
-    ({"points": 1}, ValueError, "points must be an integer >= 2, got 1"),
-    ({"points": 2.5}, TypeError, "points must be an integer, got float 2.5"),
-])
+@pytest.mark.parametrize(
+    ("kwargs", "exc", "msg"),
+    [
+        ({"disparity_px": -1}, ValueError, "disparity_px must be finite and >= 0, got -1.0"),
+        ({"disparity_px": math.nan}, ValueError, "disparity_px must be finite"),
+        ({"disparity_px": "5"}, TypeError, "disparity_px must be a real number, got str '5'"),
+        (
+            {"disparity_step_px": 0},
+            ValueError,
+            "disparity_step_px must be a finite number > 0, got 0",
+        ),
+        (
+            {"max_disparity_px": -3},
+            ValueError,
+            "max_disparity_px must be a finite number > 0, got -3",
+        ),
+        ({"points": 1}, ValueError, "points must be an integer >= 2, got 1"),
+        ({"points": 2.5}, TypeError, "points must be an integer, got float 2.5"),
+    ],
+)
 def test_chart_data_rejects(kwargs: dict[str, Any], exc: type[Exception], msg: str) -> None:
     with pytest.raises(exc) as info:
         chart_data(ARM, **kwargs)
@@ -114,15 +124,26 @@ _pos = st.floats(min_value=1e-6, max_value=1e6)
 
 
 @settings(max_examples=150, deadline=None)
-@given(baseline=_pos, focal=_pos, pixel=_pos, target=st.none() | st.floats(0, 1e6),
-       step=st.floats(1e-6, 1e3), top=st.none() | _pos)
+@given(
+    baseline=_pos,
+    focal=_pos,
+    pixel=_pos,
+    target=st.none() | st.floats(0, 1e6),
+    step=st.floats(1e-6, 1e3),
+    top=st.none() | _pos,
+)
 def test_curves_are_finite_positive_and_monotonic(
-    baseline: float, focal: float, pixel: float, target: float | None, step: float,
+    baseline: float,
+    focal: float,
+    pixel: float,
+    target: float | None,
+    step: float,
     top: float | None,
 ) -> None:
     rig = StereoRig(baseline, focal, pixel)
-    c = chart_data(rig, disparity_px=target, disparity_step_px=step, max_disparity_px=top,
-                   points=40)
+    c = chart_data(
+        rig, disparity_px=target, disparity_step_px=step, max_disparity_px=top, points=40
+    )
     for chart in (c.depth_vs_disparity, c.error_vs_depth):
         for s in chart.series:
             x, y = np.array(s.x), np.array(s.y)

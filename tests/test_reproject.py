@@ -19,10 +19,20 @@ from stereodepth.pointcloud import q_matrix
 
 IN_DTYPES = [np.float16, np.float32, np.float64, np.int16, np.uint16]
 ISAS = stereodepth.build_info()["supported_isas"]
-RIG = {"focal_px": 718.856, "baseline_m": 0.537166, "cx_px": 607.19, "cy_px": 185.22,
-       "doffs_px": 0.0}
-MB_RIG = {"focal_px": 1038.018, "baseline_m": 0.176252, "cx_px": 322.037, "cy_px": 243.393,
-          "doffs_px": 53.271}
+RIG = {
+    "focal_px": 718.856,
+    "baseline_m": 0.537166,
+    "cx_px": 607.19,
+    "cy_px": 185.22,
+    "doffs_px": 0.0,
+}
+MB_RIG = {
+    "focal_px": 1038.018,
+    "baseline_m": 0.176252,
+    "cx_px": 322.037,
+    "cy_px": 243.393,
+    "doffs_px": 53.271,
+}
 
 
 def special_values(dtype: type) -> np.ndarray:
@@ -33,8 +43,25 @@ def special_values(dtype: type) -> np.ndarray:
             vals += [-1, -16, -17]
         return np.array(vals, dtype=dtype)
     finfo = np.finfo(dtype)
-    return np.array([0.0, -0.0, 1.0, -1.0, 0.5, 1e-3, np.nan, np.inf, -np.inf, finfo.max,
-                     -finfo.max, finfo.tiny, finfo.smallest_subnormal, finfo.eps], dtype=dtype)
+    return np.array(
+        [
+            0.0,
+            -0.0,
+            1.0,
+            -1.0,
+            0.5,
+            1e-3,
+            np.nan,
+            np.inf,
+            -np.inf,
+            finfo.max,
+            -finfo.max,
+            finfo.tiny,
+            finfo.smallest_subnormal,
+            finfo.eps,
+        ],
+        dtype=dtype,
+    )
 
 
 def random_disparity(rng: np.random.Generator, dtype: type, shape: tuple[int, ...]) -> np.ndarray:
@@ -84,12 +111,31 @@ def test_native_matches_oracle(in_dtype: type, shape: tuple[int, ...], isa: str)
         # every instruction set, through the kernel itself
         arr = d.astype(np.float32) if in_dtype == np.float16 else d
         opts = stereodepth.pointcloud.ReprojectOptions(
-            d, Q=kw.get("Q"), focal_px=kw.get("focal_px"), baseline_m=kw.get("baseline_m"),
-            cx_px=kw.get("cx_px"), cy_px=kw.get("cy_px"), doffs_px=kw.get("doffs_px"),
-            scale=kw["scale"], min_depth_m=None, max_depth_m=None, invalid_value=None)
+            d,
+            Q=kw.get("Q"),
+            focal_px=kw.get("focal_px"),
+            baseline_m=kw.get("baseline_m"),
+            cx_px=kw.get("cx_px"),
+            cy_px=kw.get("cy_px"),
+            doffs_px=kw.get("doffs_px"),
+            scale=kw["scale"],
+            min_depth_m=None,
+            max_depth_m=None,
+            invalid_value=None,
+        )
         out = np.empty((*d.shape, 3), np.float32)
-        _core.reproject(arr, out, opts.Q, opts.scale, opts.min_depth_m, opts.max_depth_m,
-                        opts.invalid_value, opts.negative_invalid, 0, isa)
+        _core.reproject(
+            arr,
+            out,
+            opts.Q,
+            opts.scale,
+            opts.min_depth_m,
+            opts.max_depth_m,
+            opts.invalid_value,
+            opts.negative_invalid,
+            0,
+            isa,
+        )
         assert_same(out, want)
 
 
@@ -162,8 +208,9 @@ def test_non_contiguous_input_and_out() -> None:
 def test_points_match_the_closed_forms() -> None:
     rows, cols = 9, 17
     d = np.linspace(1.0, 90.0, rows * cols, dtype=np.float64).reshape(rows, cols)
-    f, b, cx, cy, doffs = (MB_RIG[k] for k in ("focal_px", "baseline_m", "cx_px", "cy_px",
-                                               "doffs_px"))
+    f, b, cx, cy, doffs = (
+        MB_RIG[k] for k in ("focal_px", "baseline_m", "cx_px", "cy_px", "doffs_px")
+    )
     p = stereodepth.reproject(d, **MB_RIG)
     z = f * b / (d + doffs)
     x = (np.arange(cols) - cx) * b / (d + doffs)
@@ -175,16 +222,21 @@ def test_points_match_the_closed_forms() -> None:
 
 @settings(max_examples=60, deadline=None)
 @given(
-    focal=st.floats(100, 3000), baseline=st.floats(0.01, 2.0), cx=st.floats(-50, 400),
-    cy=st.floats(-50, 300), doffs=st.floats(-5, 200), seed=st.integers(0, 2**32 - 1),
+    focal=st.floats(100, 3000),
+    baseline=st.floats(0.01, 2.0),
+    cx=st.floats(-50, 400),
+    cy=st.floats(-50, 300),
+    doffs=st.floats(-5, 200),
+    seed=st.integers(0, 2**32 - 1),
 )
 def test_points_project_back_to_their_pixel(
     focal: float, baseline: float, cx: float, cy: float, doffs: float, seed: int
 ) -> None:
     rng = np.random.default_rng(seed)
     d = (rng.random((5, 11)) * 200).astype(np.float32)
-    p = stereodepth.reproject(d, focal_px=focal, baseline_m=baseline, cx_px=cx, cy_px=cy,
-                              doffs_px=doffs).astype(np.float64)
+    p = stereodepth.reproject(
+        d, focal_px=focal, baseline_m=baseline, cx_px=cx, cy_px=cy, doffs_px=doffs
+    ).astype(np.float64)
     valid = np.isfinite(p[..., 2])
     np.testing.assert_array_equal(valid, d.astype(np.float64) + doffs > 0)
     u = focal * p[..., 0] / p[..., 2] + cx
@@ -193,8 +245,9 @@ def test_points_project_back_to_their_pixel(
     np.testing.assert_allclose(u[valid], cols[valid], atol=1e-3)
     np.testing.assert_allclose(v[valid], rows[valid], atol=1e-3)
     # and Z is the depth of disparity_to_depth (float64 path)
-    z = stereodepth.disparity_to_depth(d.astype(np.float64), focal_px=focal,
-                                       baseline_m=baseline, doffs_px=doffs)
+    z = stereodepth.disparity_to_depth(
+        d.astype(np.float64), focal_px=focal, baseline_m=baseline, doffs_px=doffs
+    )
     np.testing.assert_allclose(p[..., 2][valid], z[valid], rtol=2e-7)
 
 
@@ -273,13 +326,22 @@ def test_ground_truth_point_cloud_of_a_real_scene(stereo_scenes: list[Any]) -> N
         pytest.skip("mb2014q-adirondack not in the shared data")
     gt = scene.gt()
     cam0 = np.array(scene.meta["calib"]["cam0"]).reshape(3, 3)
-    rig = {"focal_px": cam0[0, 0], "baseline_m": scene.meta["baseline_mm"] / 1000,
-           "cx_px": cam0[0, 2], "cy_px": cam0[1, 2], "doffs_px": scene.meta["doffs"]}
+    rig = {
+        "focal_px": cam0[0, 0],
+        "baseline_m": scene.meta["baseline_mm"] / 1000,
+        "cx_px": cam0[0, 2],
+        "cy_px": cam0[1, 2],
+        "doffs_px": scene.meta["doffs"],
+    }
     p = stereodepth.reproject(gt, **rig)
     assert_same(p, reference.reproject(gt, **rig))
     assert_same(np.isnan(p[..., 2]), np.isnan(gt))
-    z = stereodepth.disparity_to_depth(gt.astype(np.float64), focal_px=rig["focal_px"],
-                                       baseline_m=rig["baseline_m"], doffs_px=rig["doffs_px"])
+    z = stereodepth.disparity_to_depth(
+        gt.astype(np.float64),
+        focal_px=rig["focal_px"],
+        baseline_m=rig["baseline_m"],
+        doffs_px=rig["doffs_px"],
+    )
     np.testing.assert_allclose(p[..., 2], z, rtol=2e-7)
     # a room-sized scene: 1 to 5 m away
     assert np.nanmin(p[..., 2]) > 1.0 and np.nanmax(p[..., 2]) < 5.0
@@ -292,8 +354,11 @@ def test_ground_truth_point_cloud_of_a_real_scene(stereo_scenes: list[Any]) -> N
         ({"Q": np.eye(3)}, ValueError, r"Q must be a 4x4 matrix, got shape \(3, 3\)"),
         ({"Q": np.full((4, 4), np.nan)}, ValueError, "Q must be finite"),
         ({"Q": [["a"] * 4] * 4}, TypeError, "Q must be a 4x4 array of real numbers"),
-        ({"Q": np.eye(4), "focal_px": 700.0}, ValueError,
-         "give either Q or focal_px and baseline_m .*, not both; got Q and focal_px"),
+        (
+            {"Q": np.eye(4), "focal_px": 700.0},
+            ValueError,
+            "give either Q or focal_px and baseline_m .*, not both; got Q and focal_px",
+        ),
         ({"focal_px": 700.0}, ValueError, "needs Q, or focal_px and baseline_m; baseline_m"),
         ({}, ValueError, "needs Q, or focal_px and baseline_m; focal_px and baseline_m missing"),
         ({**RIG, "focal_px": -1.0}, ValueError, "focal_px must be a finite number > 0, got -1.0"),
@@ -301,8 +366,11 @@ def test_ground_truth_point_cloud_of_a_real_scene(stereo_scenes: list[Any]) -> N
         ({**RIG, "cx_px": np.nan}, ValueError, "cx_px must be finite, got nan"),
         ({**RIG, "baseline_m": "1"}, TypeError, "baseline_m must be a real number, got str"),
         ({**RIG, "scale": 0.0}, ValueError, "scale must be a finite number > 0, got 0.0"),
-        ({**RIG, "min_depth_m": 5.0, "max_depth_m": 1.0}, ValueError,
-         r"max_depth_m must be >= min_depth_m \(5.0\), got 1.0"),
+        (
+            {**RIG, "min_depth_m": 5.0, "max_depth_m": 1.0},
+            ValueError,
+            r"max_depth_m must be >= min_depth_m \(5.0\), got 1.0",
+        ),
         ({**RIG, "threads": -1}, ValueError, "threads must be an integer >= 0, got -1"),
         ({**RIG, "threads": 1.5}, TypeError, "threads must be an integer, got float"),
     ],
@@ -315,10 +383,17 @@ def test_rejects_bad_options(kwargs: dict[str, Any], exc: type, message: str) ->
 @pytest.mark.parametrize(
     ("disparity", "exc", "message"),
     [
-        (np.ones((4, 5), np.uint8), TypeError, "disparity must have dtype float16, float32, "
-         "float64, int16 .* got uint8"),
-        (np.ones(5, np.float32), ValueError, r"must have shape \(H, W\) or \(N, H, W\), got "
-         r"\(5,\)"),
+        (
+            np.ones((4, 5), np.uint8),
+            TypeError,
+            "disparity must have dtype float16, float32, float64, int16 .* got uint8",
+        ),
+        (
+            np.ones(5, np.float32),
+            ValueError,
+            r"must have shape \(H, W\) or \(N, H, W\), got "
+            r"\(5,\)",
+        ),
         (np.ones((1, 2, 3, 4), np.float32), ValueError, "got \\(1, 2, 3, 4\\)"),
         ("nope", TypeError, "disparity must have dtype"),
     ],
@@ -332,8 +407,11 @@ def test_rejects_bad_disparity(disparity: Any, exc: type, message: str) -> None:
     ("out", "exc", "message"),
     [
         (np.empty((4, 5, 3), np.float64), TypeError, "out must have dtype float32, got float64"),
-        (np.empty((4, 5), np.float32), ValueError,
-         r"out must have shape \(4, 5, 3\), got \(4, 5\)"),
+        (
+            np.empty((4, 5), np.float32),
+            ValueError,
+            r"out must have shape \(4, 5, 3\), got \(4, 5\)",
+        ),
         (np.empty((4, 5, 6), np.float32)[..., ::2], TypeError, "out must be C-contiguous"),
         ([0.0], TypeError, "out must be a numpy.ndarray, got list"),
     ],
@@ -355,22 +433,24 @@ def test_rejects_read_only_and_overlapping_out() -> None:
 
 def test_kernel_rejects_what_the_wrapper_never_sends() -> None:
     out = np.empty((2, 3, 3), np.float32)
-    with pytest.raises(TypeError, match="disparity must have dtype float32, float64, int16 or "
-                       "uint16, got float16"):
-        _core.reproject(np.ones((2, 3), np.float16), out, np.eye(4), 1.0, 0.0, 1.0, None,
-                        False, 1)
+    with pytest.raises(
+        TypeError, match="disparity must have dtype float32, float64, int16 or uint16, got float16"
+    ):
+        _core.reproject(np.ones((2, 3), np.float16), out, np.eye(4), 1.0, 0.0, 1.0, None, False, 1)
     with pytest.raises(ValueError, match="Q must be finite"):
-        _core.reproject(np.ones((2, 3), np.float32), out, np.full((4, 4), np.inf), 1.0, 0.0,
-                        1.0, None, False, 1)
+        _core.reproject(
+            np.ones((2, 3), np.float32), out, np.full((4, 4), np.inf), 1.0, 0.0, 1.0, None, False, 1
+        )
     with pytest.raises(ValueError, match="Q must be a 4x4 float64 array"):
-        _core.reproject(np.ones((2, 3), np.float32), out, np.eye(3), 1.0, 0.0, 1.0, None,
-                        False, 1)
+        _core.reproject(np.ones((2, 3), np.float32), out, np.eye(3), 1.0, 0.0, 1.0, None, False, 1)
     with pytest.raises(ValueError, match=r"out must have shape \(2, 3\) \+ \(3,\)"):
-        _core.reproject(np.ones((2, 3), np.float32), out[:1], np.eye(4), 1.0, 0.0, 1.0, None,
-                        False, 1)
+        _core.reproject(
+            np.ones((2, 3), np.float32), out[:1], np.eye(4), 1.0, 0.0, 1.0, None, False, 1
+        )
     with pytest.raises(ValueError, match="isa must be one of"):
-        _core.reproject(np.ones((2, 3), np.float32), out, np.eye(4), 1.0, 0.0, 1.0, None,
-                        False, 1, "sse9")
+        _core.reproject(
+            np.ones((2, 3), np.float32), out, np.eye(4), 1.0, 0.0, 1.0, None, False, 1, "sse9"
+        )
 
 
 # --- PLY --------------------------------------------------------------------------------------
@@ -423,16 +503,30 @@ def test_write_ply_grey_uint16_and_uncoloured(tmp_path: Path) -> None:
 @pytest.mark.parametrize(
     ("points", "colors", "exc", "message"),
     [
-        (np.zeros((4, 2)), None, ValueError, r"points must have shape \(N, 3\) or \(H, W, 3\), "
-         r"got \(4, 2\)"),
+        (
+            np.zeros((4, 2)),
+            None,
+            ValueError,
+            r"points must have shape \(N, 3\) or \(H, W, 3\), "
+            r"got \(4, 2\)",
+        ),
         (np.zeros(3), None, ValueError, r"got \(3,\)"),
         (np.array([["a"] * 3]), None, TypeError, "points must be a real array, got dtype <U1"),
-        (np.zeros((4, 3)), np.zeros((4, 3), np.float32), TypeError,
-         "colors must have dtype uint8 or uint16, got float32"),
+        (
+            np.zeros((4, 3)),
+            np.zeros((4, 3), np.float32),
+            TypeError,
+            "colors must have dtype uint8 or uint16, got float32",
+        ),
         (np.zeros((4, 3)), None, ValueError, "comment must be ASCII text"),
-        (np.zeros((4, 3)), np.zeros((5, 3), np.uint8), ValueError,
-         re.escape("colors must have shape (4,) (grey) or (4, 3) (RGB) to match points, got "
-                   "(5, 3)")),
+        (
+            np.zeros((4, 3)),
+            np.zeros((5, 3), np.uint8),
+            ValueError,
+            re.escape(
+                "colors must have shape (4,) (grey) or (4, 3) (RGB) to match points, got (5, 3)"
+            ),
+        ),
     ],
 )
 def test_write_ply_rejects(

@@ -148,8 +148,17 @@ def test_summary_has_every_result_and_is_json_ready() -> None:
 
     rig = StereoRig(**ARM)
     s = rig.summary(250, disparity_step_px=0.1, max_disparity_px=256)
-    for key in ("depth_m", "disparity_mm", "max_depth_m", "depth_resolution_m", "focal_px",
-                "hfov_deg", "table", "min_depth_m", "depth_resolution_subpx_m"):
+    for key in (
+        "depth_m",
+        "disparity_mm",
+        "max_depth_m",
+        "depth_resolution_m",
+        "focal_px",
+        "hfov_deg",
+        "table",
+        "min_depth_m",
+        "depth_resolution_subpx_m",
+    ):
         assert s[key] is not None, key
     assert s["depth_m"] == rig.depth_m(250)
     json.dumps(s, allow_nan=False)

@@ -56,12 +56,30 @@ def cli_args(params: dict[str, Any]) -> list[str]:
 # --- the same numbers as Python and the CLI -----------------------------------------------------
 CASES = [
     pytest.param({**ARM, "disparity_px": 250}, id="arm"),
-    pytest.param({**CAR, "disparity_px": 35, "disparity_step_px": 0.25,
-                  "max_disparity_px": 192}, id="car-subpixel-range"),
-    pytest.param({"baseline_mm": 193.001, "focal_px": 3979.911, "doffs_px": 124.343,
-                  "width_px": 2964, "height_px": 1988, "disparity_px": 0}, id="middlebury-px"),
-    pytest.param({**ARM, "disparity_px": 0.5, "disparity_step_px": 0.1,
-                  "table_disparities_px": [0, 0.5, 7, 1023]}, id="own-table-infinity"),
+    pytest.param(
+        {**CAR, "disparity_px": 35, "disparity_step_px": 0.25, "max_disparity_px": 192},
+        id="car-subpixel-range",
+    ),
+    pytest.param(
+        {
+            "baseline_mm": 193.001,
+            "focal_px": 3979.911,
+            "doffs_px": 124.343,
+            "width_px": 2964,
+            "height_px": 1988,
+            "disparity_px": 0,
+        },
+        id="middlebury-px",
+    ),
+    pytest.param(
+        {
+            **ARM,
+            "disparity_px": 0.5,
+            "disparity_step_px": 0.1,
+            "table_disparities_px": [0, 0.5, 7, 1023],
+        },
+        id="own-table-infinity",
+    ),
     pytest.param({"baseline_mm": 120, "focal_mm": 4, "pixel_um": 3}, id="no-target"),
 ]
 
@@ -69,16 +87,25 @@ CASES = [
 def _rig(params: dict[str, Any]) -> StereoRig:
     if "focal_px" in params:
         return StereoRig.from_pixels(
-            params["baseline_mm"], params["focal_px"], width_px=params.get("width_px"),
-            doffs_px=params.get("doffs_px", 0.0), height_px=params.get("height_px"),
+            params["baseline_mm"],
+            params["focal_px"],
+            width_px=params.get("width_px"),
+            doffs_px=params.get("doffs_px", 0.0),
+            height_px=params.get("height_px"),
         )
-    return StereoRig(params["baseline_mm"], params["focal_mm"], params["pixel_um"],
-                     width_px=params.get("width_px"), height_px=params.get("height_px"))
+    return StereoRig(
+        params["baseline_mm"],
+        params["focal_mm"],
+        params["pixel_um"],
+        width_px=params.get("width_px"),
+        height_px=params.get("height_px"),
+    )
 
 
 def _summary(params: dict[str, Any]) -> dict[str, Any]:
     return _rig(params).summary(
-        params.get("disparity_px"), disparity_step_px=params.get("disparity_step_px", 1.0),
+        params.get("disparity_px"),
+        disparity_step_px=params.get("disparity_step_px", 1.0),
         max_disparity_px=params.get("max_disparity_px"),
         table_disparities_px=params.get("table_disparities_px"),
     )
@@ -109,7 +136,8 @@ def test_worked_examples(client: TestClient) -> None:
 def test_charts_are_the_libraries_chart_data(client: TestClient, params: dict[str, Any]) -> None:
     body = calc(client, **params).json()
     expected = chart_data(
-        _rig(params), disparity_px=params.get("disparity_px"),
+        _rig(params),
+        disparity_px=params.get("disparity_px"),
         disparity_step_px=params.get("disparity_step_px", 1.0),
         max_disparity_px=params.get("max_disparity_px"),
     ).to_dict()
@@ -127,31 +155,48 @@ def test_charts_are_the_libraries_chart_data(client: TestClient, params: dict[st
 def test_inverse_gives_the_libraries_baseline_and_that_baseline_gives_the_error(
     client: TestClient,
 ) -> None:
-    body = calc(client, **ARM, disparity_px=250, disparity_step_px=0.25, inverse_depth_m=2,
-                inverse_depth_resolution_m=0.005).json()
+    body = calc(
+        client,
+        **ARM,
+        disparity_px=250,
+        disparity_step_px=0.25,
+        inverse_depth_m=2,
+        inverse_depth_resolution_m=0.005,
+    ).json()
     inv = body["inverse"]
     rig = StereoRig(**ARM)
     assert inv["required_baseline_mm"] == rig.required_baseline_mm(2, 0.005, 0.25)
-    assert inv == {"depth_m": 2, "depth_resolution_m": 0.005, "disparity_step_px": 0.25,
-                   "focal_px": rig.focal_px, "required_baseline_mm": inv["required_baseline_mm"]}
+    assert inv == {
+        "depth_m": 2,
+        "depth_resolution_m": 0.005,
+        "disparity_step_px": 0.25,
+        "focal_px": rig.focal_px,
+        "required_baseline_mm": inv["required_baseline_mm"],
+    }
     better = StereoRig(inv["required_baseline_mm"], 6, 2.8)
     assert better.depth_resolution_m(2.0, 0.25) == pytest.approx(0.005, rel=1e-12)
     assert calc(client, **ARM).json()["inverse"] is None
 
 
-@pytest.mark.parametrize(("given_", "missing"), [
-    ({"inverse_depth_m": 2}, "inverse_depth_resolution_m"),
-    ({"inverse_depth_resolution_m": 0.01}, "inverse_depth_m"),
-])
+@pytest.mark.parametrize(
+    ("given_", "missing"),
+    [
+        ({"inverse_depth_m": 2}, "inverse_depth_resolution_m"),
+        ({"inverse_depth_resolution_m": 0.01}, "inverse_depth_m"),
+    ],
+)
 def test_inverse_needs_both_values(
     client: TestClient, given_: dict[str, float], missing: str
 ) -> None:
     r = calc(client, **ARM, **given_)
     assert r.status_code == 422
-    assert r.json()["detail"] == [{
-        "loc": ["query", missing], "type": "missing",
-        "msg": f"{missing} is required with {next(iter(given_))}",
-    }]
+    assert r.json()["detail"] == [
+        {
+            "loc": ["query", missing],
+            "type": "missing",
+            "msg": f"{missing} is required with {next(iter(given_))}",
+        }
+    ]
 
 
 # --- bad input: 422 at the parameter, with the rule and what was received --------------------
@@ -166,9 +211,17 @@ BAD = {
     "inf": "inf",
 }
 # Zero is allowed for the disparity (a point at infinity); every other parameter is > 0.
-CHECKED = ["baseline_mm", "focal_mm", "pixel_um", "width_px", "disparity_px",
-           "disparity_step_px", "max_disparity_px", "inverse_depth_m",
-           "inverse_depth_resolution_m"]
+CHECKED = [
+    "baseline_mm",
+    "focal_mm",
+    "pixel_um",
+    "width_px",
+    "disparity_px",
+    "disparity_step_px",
+    "max_disparity_px",
+    "inverse_depth_m",
+    "inverse_depth_resolution_m",
+]
 
 
 def _bad_cases() -> list[Any]:
@@ -185,8 +238,12 @@ def _bad_cases() -> list[Any]:
 def test_bad_value_answers_422_naming_the_parameter(
     client: TestClient, name: str, text: str
 ) -> None:
-    params: dict[str, Any] = {**ARM, "disparity_px": 250, "inverse_depth_m": 2,
-                              "inverse_depth_resolution_m": 0.005}
+    params: dict[str, Any] = {
+        **ARM,
+        "disparity_px": 250,
+        "inverse_depth_m": 2,
+        "inverse_depth_resolution_m": 0.005,
+    }
     params[name] = text
     r = calc(client, **params)
     assert r.status_code == 422, r.text
@@ -203,22 +260,47 @@ def test_rule_matches_the_schema_range() -> None:
     assert FIELDS["disparity_px"].rule == "a number >= 0 and <= 1000000"
 
 
-@pytest.mark.parametrize(("params", "loc", "msg"), [
-    pytest.param({"focal_mm": 6, "pixel_um": 2.8}, "baseline_mm", "baseline_mm is required",
-                 id="no-baseline"),
-    pytest.param({"baseline_mm": 150, "pixel_um": 2.8}, "focal_mm",
-                 "focal_mm is required (or give focal_px)", id="no-focal"),
-    pytest.param({"baseline_mm": 150, "focal_mm": 6, "pixel_um": 2.8, "focal_px": 2000},
-                 "focal_mm", "give either focal_px, or focal_mm and pixel_um, not both "
-                 "(got focal_px and focal_mm)", id="both-focals"),
-    pytest.param({**ARM, "doffs_px": 3}, "doffs_px",
-                 "doffs_px goes with focal_px (a calibration in pixels)", id="doffs-with-mm"),
-    pytest.param({"baseline_mm": 150, "focal_px": 2000, "doffs_px": -0.5, "disparity_px": 0.2},
-                 "disparity_px", "disparity_px must be finite and >= 0.5, got 0.2",
-                 id="library-rule-doffs"),
-    pytest.param({**ARM, "width_px": "1280.5"}, "width_px",
-                 "width_px must be an integer >= 1 and <= 1000000, got 1280.5", id="fraction"),
-])
+@pytest.mark.parametrize(
+    ("params", "loc", "msg"),
+    [
+        pytest.param(
+            {"focal_mm": 6, "pixel_um": 2.8},
+            "baseline_mm",
+            "baseline_mm is required",
+            id="no-baseline",
+        ),
+        pytest.param(
+            {"baseline_mm": 150, "pixel_um": 2.8},
+            "focal_mm",
+            "focal_mm is required (or give focal_px)",
+            id="no-focal",
+        ),
+        pytest.param(
+            {"baseline_mm": 150, "focal_mm": 6, "pixel_um": 2.8, "focal_px": 2000},
+            "focal_mm",
+            "give either focal_px, or focal_mm and pixel_um, not both (got focal_px and focal_mm)",
+            id="both-focals",
+        ),
+        pytest.param(
+            {**ARM, "doffs_px": 3},
+            "doffs_px",
+            "doffs_px goes with focal_px (a calibration in pixels)",
+            id="doffs-with-mm",
+        ),
+        pytest.param(
+            {"baseline_mm": 150, "focal_px": 2000, "doffs_px": -0.5, "disparity_px": 0.2},
+            "disparity_px",
+            "disparity_px must be finite and >= 0.5, got 0.2",
+            id="library-rule-doffs",
+        ),
+        pytest.param(
+            {**ARM, "width_px": "1280.5"},
+            "width_px",
+            "width_px must be an integer >= 1 and <= 1000000, got 1280.5",
+            id="fraction",
+        ),
+    ],
+)
 def test_rules_across_parameters(
     client: TestClient, params: dict[str, Any], loc: str, msg: str
 ) -> None:
@@ -233,13 +315,17 @@ def test_every_bad_parameter_is_reported_at_once(client: TestClient) -> None:
     r = client.get("/api/calc?baseline_mm=x&focal_mm=-1&pixel_um=nan&width_px=0")
     assert r.status_code == 422
     assert [e["loc"][1] for e in r.json()["detail"]] == [
-        "baseline_mm", "focal_mm", "pixel_um", "width_px"
+        "baseline_mm",
+        "focal_mm",
+        "pixel_um",
+        "width_px",
     ]
 
 
 def test_bad_table_value_is_located(client: TestClient) -> None:
-    r = client.get("/api/calc?baseline_mm=1&focal_px=10&table_disparities_px=2"
-                   "&table_disparities_px=-1")
+    r = client.get(
+        "/api/calc?baseline_mm=1&focal_px=10&table_disparities_px=2&table_disparities_px=-1"
+    )
     assert r.status_code == 422
     (err,) = r.json()["detail"]
     assert err["loc"] == ["query", "table_disparities_px", 1]
@@ -249,15 +335,17 @@ def test_bad_table_value_is_located(client: TestClient) -> None:
 _value = st.one_of(
     st.floats(allow_nan=True, allow_infinity=True).map(repr),
     st.floats(min_value=1e-300, max_value=1e6).map(repr),
-    st.integers(min_value=-10**30, max_value=10**30).map(str),
+    st.integers(min_value=-(10**30), max_value=10**30).map(str),
     st.sampled_from(["", " ", "nan", "-inf", "1e999", "5e-324", "0x10", "1,5", "١٢", "1_0"]),
     st.text(max_size=8),
 )
 
 
 @settings(max_examples=300, deadline=None)
-@given(params=st.dictionaries(st.sampled_from(sorted(FIELDS)), _value, max_size=8),
-       base=st.sampled_from([ARM, {"baseline_mm": 1, "focal_px": 10}, {}]))
+@given(
+    params=st.dictionaries(st.sampled_from(sorted(FIELDS)), _value, max_size=8),
+    base=st.sampled_from([ARM, {"baseline_mm": 1, "focal_px": 10}, {}]),
+)
 def test_no_input_answers_500(
     client: TestClient, params: dict[str, str], base: dict[str, Any]
 ) -> None:

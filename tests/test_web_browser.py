@@ -32,8 +32,13 @@ from stereodepth.cli import main
 pytest.importorskip("fastapi", reason="the web extra is not installed")
 
 ARTIFACTS = Path(__file__).resolve().parent / "artifacts"
-ARM = {"baseline_mm": "150", "focal_mm": "6", "pixel_um": "2.8", "width_px": "1280",
-       "disparity_px": "250"}
+ARM = {
+    "baseline_mm": "150",
+    "focal_mm": "6",
+    "pixel_um": "2.8",
+    "width_px": "1280",
+    "disparity_px": "250",
+}
 ARM_ARGS = ["--baseline-mm", "150", "--focal-mm", "6", "--pixel-um", "2.8", "--width-px", "1280"]
 START_TIMEOUT_S = 30
 
@@ -44,12 +49,15 @@ class Server:
     def __init__(self, *args: str, env: dict[str, str] | None = None) -> None:
         self.proc = subprocess.Popen(
             [sys.executable, "-m", "stereodepth.cli", "serve", *args],
-            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            text=True,
             env=None if env is None else {**os.environ, **env},
         )
         lines: queue.Queue[str] = queue.Queue()
         assert self.proc.stdout is not None
         stdout = self.proc.stdout
+
         def read() -> None:
             for line in stdout:
                 lines.put(line)
@@ -95,8 +103,10 @@ def test_serve_listens_on_loopback_answers_and_stops() -> None:
     try:
         assert server.url.startswith("http://127.0.0.1:")
         assert "the calculator is at" in server.first_line
-        status, body = get_json(server.url + "api/calc?baseline_mm=150&focal_mm=6&pixel_um=2.8"
-                                             "&width_px=1280&disparity_px=250")
+        status, body = get_json(
+            server.url + "api/calc?baseline_mm=150&focal_mm=6&pixel_um=2.8"
+            "&width_px=1280&disparity_px=250"
+        )
         assert status == 200
         assert body["summary"] == json.loads(
             json.dumps(StereoRig(150, 6, 2.8, width_px=1280).summary(250))
@@ -126,10 +136,13 @@ def test_serve_open_opens_the_page(tmp_path: Path) -> None:
     assert code == 0, err
 
 
-@pytest.mark.parametrize(("args", "message"), [
-    (["--port", "70000"], "--port must be an integer from 0 to 65535, got 70000"),
-    (["--host", "no.such.host.invalid"], "--host must be an address of this machine"),
-])
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [
+        (["--port", "70000"], "--port must be an integer from 0 to 65535, got 70000"),
+        (["--host", "no.such.host.invalid"], "--host must be an address of this machine"),
+    ],
+)
 def test_serve_rejects_bad_options(
     capsys: pytest.CaptureFixture[str], args: list[str], message: str
 ) -> None:
@@ -172,18 +185,22 @@ def server() -> Iterator[Server]:
 
 @pytest.fixture(scope="module")
 def browser() -> Iterator[Any]:
-    sync_api = pytest.importorskip("playwright.sync_api",
-                                   reason="Playwright for Python is not installed")
+    sync_api = pytest.importorskip(
+        "playwright.sync_api", reason="Playwright for Python is not installed"
+    )
     exe = chromium_executable()
     if exe is None:
-        pytest.skip("no Chromium: install Debian's chromium package or set "
-                    "STEREODEPTH_CHROMIUM to its executable")
+        pytest.skip(
+            "no Chromium: install Debian's chromium package or set "
+            "STEREODEPTH_CHROMIUM to its executable"
+        )
     # A loaded 2-core machine may take seconds to start plotly.js: wait up to 20 s.
     sync_api.expect.set_options(timeout=20_000)
     with sync_api.sync_playwright() as pw:
         # --no-sandbox: Chromium's sandbox cannot start as root in a container.
-        b = pw.chromium.launch(executable_path=exe,
-                               args=["--no-sandbox", "--disable-dev-shm-usage"])
+        b = pw.chromium.launch(
+            executable_path=exe, args=["--no-sandbox", "--disable-dev-shm-usage"]
+        )
         yield b
         b.close()
 
@@ -258,8 +275,13 @@ def page(context: Any, server: Server) -> Iterator[Page]:
 
 
 def cli_text(*args: str) -> str:
-    proc = subprocess.run([sys.executable, "-m", "stereodepth.cli", "calc", *args],
-                          capture_output=True, text=True, timeout=60, check=True)
+    proc = subprocess.run(
+        [sys.executable, "-m", "stereodepth.cli", "calc", *args],
+        capture_output=True,
+        text=True,
+        timeout=60,
+        check=True,
+    )
     return proc.stdout
 
 
@@ -284,14 +306,18 @@ def test_example_1_results_table_and_charts(page: Page) -> None:
     page.expect(p.locator("#status")).to_have_text("Up to date.")
 
     # The page shows the CLI's digits.
-    text = cli_text(*ARM_ARGS, "--disparity-px", "250", "--subpixel-px", "0.25",
-                    "--max-disparity-px", "256")
-    for key, label in [("depth_m", "depth"), ("disparity_mm", "disparity on the sensor"),
-                       ("depth_resolution_m", "depth resolution (1 px)"),
-                       ("max_depth_m", "max depth (1 px disparity)"),
-                       ("focal_px", "focal length"),
-                       ("depth_resolution_subpx_m", "depth resolution (0.25 px)"),
-                       ("min_depth_m", "min depth (search to 256 px)")]:
+    text = cli_text(
+        *ARM_ARGS, "--disparity-px", "250", "--subpixel-px", "0.25", "--max-disparity-px", "256"
+    )
+    for key, label in [
+        ("depth_m", "depth"),
+        ("disparity_mm", "disparity on the sensor"),
+        ("depth_resolution_m", "depth resolution (1 px)"),
+        ("max_depth_m", "max depth (1 px disparity)"),
+        ("focal_px", "focal length"),
+        ("depth_resolution_subpx_m", "depth resolution (0.25 px)"),
+        ("min_depth_m", "min depth (search to 256 px)"),
+    ]:
         assert page.value(key) == cli_value(text, label), key
     assert page.value("hfov_deg") == f"{StereoRig(150, 6, 2.8, width_px=1280).hfov_deg:.6g}"
 
@@ -326,11 +352,14 @@ def test_example_1_results_table_and_charts(page: Page) -> None:
         )
         assert len(widths) == n_series and all(w > 0.8 for w in widths), widths
         assert chart.locator(".annotation-text").count() == n_series
-    markers = {t["name"]: t for t in p.evaluate(
-        """() => ['chart-depth', 'chart-error'].flatMap(id => document.getElementById(id).data
+    markers = {
+        t["name"]: t
+        for t in p.evaluate(
+            """() => ['chart-depth', 'chart-error'].flatMap(id => document.getElementById(id).data
                .filter(t => t.mode === 'markers')
                .map(t => ({name: t.name, x: t.x[0], y: t.y[0]})))"""
-    )}
+        )
+    }
     assert markers["target"] == {"name": "target", "x": 250, "y": summary["depth_m"]}
     assert markers["target, 1 px"]["y"] == summary["depth_resolution_m"]
     assert markers["target, 0.25 px"]["y"] == summary["depth_resolution_subpx_m"]
@@ -350,8 +379,11 @@ BAD = [
     ("pixel_um", "NaN", "Pixel size p must be a number > 0 and <= 1000, got NaN"),
     ("width_px", "1e300", "Image width W must be an integer >= 1 and <= 1000000, got 1e300"),
     ("disparity_px", "-1", "Disparity d must be a number >= 0 and <= 1000000, got -1"),
-    ("disparity_step_px", "1e999", "Sub-pixel accuracy Δd must be a number > 0 and <= 1000, "
-                                   "got 1e999"),
+    (
+        "disparity_step_px",
+        "1e999",
+        "Sub-pixel accuracy Δd must be a number > 0 and <= 1000, got 1e999",
+    ),
     ("inverse_depth_m", "", "At depth Z is required with depth error ΔZ"),
 ]
 
@@ -395,7 +427,8 @@ def test_focal_length_in_pixels_and_use_this_baseline(page: Page) -> None:
 
     p.fill("#focal_px", "1000")
     page.expect(p.locator("#out-depth_m .value")).to_have_text(
-        f"{StereoRig.from_pixels(150, 1000).depth_m(250):.6g}")
+        f"{StereoRig.from_pixels(150, 1000).depth_m(250):.6g}"
+    )
     p.click("#use-baseline")
     required = StereoRig.from_pixels(150, 1000).required_baseline_mm(2, 0.005, 0.25)
     page.expect(p.locator("#baseline_mm")).to_have_value(f"{required:.6g}")
@@ -406,8 +439,26 @@ def test_focal_length_in_pixels_and_use_this_baseline(page: Page) -> None:
 
 @pytest.mark.browser
 def test_page_digits_are_printfs(page: Page) -> None:
-    values = [1.2857142857142856, 0.005142857142857143, 321.4285714285714, 2142.8571428571427,
-              0.7, 1e-5, 9.9999951e-5, 999999.5, 1234567.8, 0.1, 100.0, 2.5e-10, 1e21,
-              123456789.0, 0.00012345678, 33.25826391851462, 7.0, 5e-324, 1.7976931348623157e308]
+    values = [
+        1.2857142857142856,
+        0.005142857142857143,
+        321.4285714285714,
+        2142.8571428571427,
+        0.7,
+        1e-5,
+        9.9999951e-5,
+        999999.5,
+        1234567.8,
+        0.1,
+        100.0,
+        2.5e-10,
+        1e21,
+        123456789.0,
+        0.00012345678,
+        33.25826391851462,
+        7.0,
+        5e-324,
+        1.7976931348623157e308,
+    ]
     got = page.page.evaluate("vs => vs.map(v => window.stereodepth.formatG(v))", values)
     assert got == [f"{v:.6g}" for v in values]

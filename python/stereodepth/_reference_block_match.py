@@ -28,7 +28,8 @@ def grey(image: np.ndarray) -> np.ndarray:
     if image.ndim == 3:
         rgb = image.astype(np.int32)
         g: np.ndarray = (
-            rgb[..., 0] * 9798 + rgb[..., 1] * 19235 + rgb[..., 2] * 3735 + 16384) >> 15
+            rgb[..., 0] * 9798 + rgb[..., 1] * 19235 + rgb[..., 2] * 3735 + 16384
+        ) >> 15
         return g
     return image.astype(np.int32)
 
@@ -66,8 +67,11 @@ def popcount(x: np.ndarray) -> np.ndarray:
 
 def sobel_x(g: np.ndarray, *, sixteen_bit: bool) -> np.ndarray:
     """The x-Sobel response (int32), shifted right by 8 bits for 16-bit images."""
-    s: np.ndarray = (shifted(g, -1, 1) - shifted(g, -1, -1)) + 2 * (
-        shifted(g, 0, 1) - shifted(g, 0, -1)) + (shifted(g, 1, 1) - shifted(g, 1, -1))
+    s: np.ndarray = (
+        (shifted(g, -1, 1) - shifted(g, -1, -1))
+        + 2 * (shifted(g, 0, 1) - shifted(g, 0, -1))
+        + (shifted(g, 1, 1) - shifted(g, 1, -1))
+    )
     return s >> 8 if sixteen_bit else s
 
 
@@ -85,8 +89,9 @@ def box_sum(c: np.ndarray, radius: int) -> np.ndarray:
     return s[:, n:] - s[:, :-n]
 
 
-def pixel_costs(gl: np.ndarray, gr: np.ndarray, o: BlockMatchOptions, *,
-                sixteen_bit: bool) -> np.ndarray:
+def pixel_costs(
+    gl: np.ndarray, gr: np.ndarray, o: BlockMatchOptions, *, sixteen_bit: bool
+) -> np.ndarray:
     """c[y, x, k]: the cost of matching left (y, x) with right (y, clamp(x - d)), d = min + k."""
     h, w = gl.shape
     if o.cost == "census":
@@ -112,10 +117,16 @@ def speckle_filter(disp: np.ndarray, window: int, max_diff: float) -> np.ndarray
     valid = np.isfinite(disp)
     d64 = np.where(valid, disp, 0).astype(np.float32)
     # |a - b| in float32, compared with max_diff in float64, as the kernel does.
-    east = valid[:, :-1] & valid[:, 1:] & (
-        np.abs(d64[:, 1:] - d64[:, :-1]).astype(np.float64) <= max_diff)
-    south = valid[:-1, :] & valid[1:, :] & (
-        np.abs(d64[1:, :] - d64[:-1, :]).astype(np.float64) <= max_diff)
+    east = (
+        valid[:, :-1]
+        & valid[:, 1:]
+        & (np.abs(d64[:, 1:] - d64[:, :-1]).astype(np.float64) <= max_diff)
+    )
+    south = (
+        valid[:-1, :]
+        & valid[1:, :]
+        & (np.abs(d64[1:, :] - d64[:-1, :]).astype(np.float64) <= max_diff)
+    )
     # Every pixel's label converges to the least index in its region.
     labels = np.arange(h * w, dtype=np.int64).reshape(h, w)
     big = np.int64(h * w)
@@ -175,7 +186,8 @@ def block_match(
     has_second = second < sentinel
     if o.uniqueness_factor > 0:
         ok &= ~has_second | (
-            second.astype(np.float64) * 100.0 > best.astype(np.float64) * o.uniqueness_factor)
+            second.astype(np.float64) * 100.0 > best.astype(np.float64) * o.uniqueness_factor
+        )
 
     if o.lr_max_diff is not None:
         # The right image's winner at xr: the least agg[xr + d, k] over d with xr + d in the

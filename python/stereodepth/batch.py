@@ -84,8 +84,7 @@ __all__ = [
     "run_batch",
 ]
 
-IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".ppm", ".pgm", ".pnm", ".bmp", ".tif", ".tiff",
-                  ".webp")
+IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".ppm", ".pgm", ".pnm", ".bmp", ".tif", ".tiff", ".webp")
 #: Left/right sub-folders, in the order they are tried, with their KITTI camera numbers.
 FOLDER_PAIRS: tuple[tuple[str, str, tuple[int, int] | None], ...] = (
     ("image_2", "image_3", (2, 3)),
@@ -94,7 +93,10 @@ FOLDER_PAIRS: tuple[tuple[str, str, tuple[int, int] | None], ...] = (
 )
 #: Tokens that name the left and right image of a pair, in the order they are tried.
 PAIR_NAMES: tuple[tuple[str, str], ...] = (
-    ("im0", "im1"), ("left", "right"), ("Left", "Right"), ("LEFT", "RIGHT"),
+    ("im0", "im1"),
+    ("left", "right"),
+    ("Left", "Right"),
+    ("LEFT", "RIGHT"),
 )
 FORMATS = {"npy": "npy", "png16": "png", "pfm": "pfm"}
 STATUSES = ("ok", "skipped", "failed", "cancelled")
@@ -181,7 +183,7 @@ def _token_split(stem: str, names: Sequence[tuple[str, str]]) -> tuple[str, str,
     for left_tok, right_tok in names:
         i = stem.rfind(left_tok)
         if i >= 0:
-            rest = (stem[:i].rstrip("_-. ") + "_" + stem[i + len(left_tok):].lstrip("_-. "))
+            rest = stem[:i].rstrip("_-. ") + "_" + stem[i + len(left_tok) :].lstrip("_-. ")
             return left_tok, right_tok, rest.strip("_")
     return None
 
@@ -195,11 +197,17 @@ def _scene_pairs(d: Path, names: Sequence[tuple[str, str]], *, prefix: str | Non
             continue
         left_tok, right_tok, rest = split
         i = f.stem.rfind(left_tok)
-        right_name = f.stem[:i] + right_tok + f.stem[i + len(left_tok):] + f.suffix
+        right_name = f.stem[:i] + right_tok + f.stem[i + len(left_tok) :] + f.suffix
         stem = (rest or d.name) if prefix is None else (f"{prefix}_{rest}" if rest else prefix)
         calib = d / "calib.txt"
-        pairs.append(Pair(stem=_safe_stem(stem), left=f, right=d / right_name,
-                          calib_file=calib if calib.is_file() else None))
+        pairs.append(
+            Pair(
+                stem=_safe_stem(stem),
+                left=f,
+                right=d / right_name,
+                calib_file=calib if calib.is_file() else None,
+            )
+        )
     return pairs
 
 
@@ -224,8 +232,15 @@ def _folder_pairs(root: Path) -> list[Pair] | None:
             kitti = cams if calib is not None else None
             if calib is None and shared_calib.is_file():
                 calib = shared_calib
-            pairs.append(Pair(stem=_safe_stem(f.stem), left=f, right=rd / f.name,
-                              calib_file=calib, kitti_cams=kitti))
+            pairs.append(
+                Pair(
+                    stem=_safe_stem(f.stem),
+                    left=f,
+                    right=rd / f.name,
+                    calib_file=calib,
+                    kitti_cams=kitti,
+                )
+            )
         return pairs
     return None
 
@@ -246,18 +261,24 @@ def _csv_pairs(path: Path, names: Sequence[tuple[str, str]]) -> list[Pair]:
             first = False
             if len(cells) not in (2, 3) or not cells[0] or not cells[1]:
                 raise UsageError(
-                    f"{path}:{lineno}: expected left,right[,stem], got {','.join(row)!r}")
+                    f"{path}:{lineno}: expected left,right[,stem], got {','.join(row)!r}"
+                )
             left = (path.parent / cells[0]) if not Path(cells[0]).is_absolute() else Path(cells[0])
-            right = (path.parent / cells[1]) if not Path(cells[1]).is_absolute() else Path(
-                cells[1])
+            right = (path.parent / cells[1]) if not Path(cells[1]).is_absolute() else Path(cells[1])
             if len(cells) == 3 and cells[2]:
                 stem = cells[2]
             else:
                 split = _token_split(left.stem, names)
                 stem = (split[2] if split else left.stem) or left.parent.name
             calib = left.parent / "calib.txt"
-            pairs.append(Pair(stem=_safe_stem(stem), left=left, right=right,
-                              calib_file=calib if calib.is_file() else None))
+            pairs.append(
+                Pair(
+                    stem=_safe_stem(stem),
+                    left=left,
+                    right=right,
+                    calib_file=calib if calib.is_file() else None,
+                )
+            )
     return pairs
 
 
@@ -331,14 +352,22 @@ def read_kitti_calib(path: str | os.PathLike[str], cams: tuple[int, int] = (2, 3
         raise ValueError(f"{p}: P{lc} focal length must be > 0, got {f}")
     baseline = float(pl[0, 3] - pr[0, 3]) / f
     if not baseline > 0:
-        raise ValueError(f"{p}: camera {rc} must be right of camera {lc}, got a baseline of "
-                         f"{baseline} m")
-    return Calibration(focal_px=f, baseline_m=baseline, doffs_px=float(pr[0, 2] - pl[0, 2]),
-                       cx_px=float(pl[0, 2]), cy_px=float(pl[1, 2]), source=str(p))
+        raise ValueError(
+            f"{p}: camera {rc} must be right of camera {lc}, got a baseline of {baseline} m"
+        )
+    return Calibration(
+        focal_px=f,
+        baseline_m=baseline,
+        doffs_px=float(pr[0, 2] - pl[0, 2]),
+        cx_px=float(pl[0, 2]),
+        cy_px=float(pl[1, 2]),
+        source=str(p),
+    )
 
 
-def read_calibration(path: str | os.PathLike[str], cams: tuple[int, int] | None = None
-                     ) -> Calibration:
+def read_calibration(
+    path: str | os.PathLike[str], cams: tuple[int, int] | None = None
+) -> Calibration:
     """A Middlebury ``calib.txt`` or a KITTI calibration file, told apart by their content."""
     from .calib import read_middlebury_calib
 
@@ -349,9 +378,15 @@ def read_calibration(path: str | os.PathLike[str], cams: tuple[int, int] | None 
     if re.search(r"^\s*P(_rect_0)?\d\s*:", text, flags=re.MULTILINE):
         return read_kitti_calib(p, cams or (2, 3))
     c = read_middlebury_calib(p)
-    return Calibration(focal_px=c.focal_px, baseline_m=c.baseline_mm / 1000.0,
-                       doffs_px=c.doffs_px, cx_px=float(c.cam0[0, 2]),
-                       cy_px=float(c.cam0[1, 2]), num_disparities=c.ndisp, source=str(p))
+    return Calibration(
+        focal_px=c.focal_px,
+        baseline_m=c.baseline_mm / 1000.0,
+        doffs_px=c.doffs_px,
+        cx_px=float(c.cam0[0, 2]),
+        cy_px=float(c.cam0[1, 2]),
+        num_disparities=c.ndisp,
+        source=str(p),
+    )
 
 
 def resolve_calibration(
@@ -394,22 +429,32 @@ def resolve_calibration(
         if calib is None:
             problem = problem or (
                 "no calibration: give --focal-px and --baseline-mm, or --calib FILE, or put a "
-                "calib.txt beside the images")
+                "calib.txt beside the images"
+            )
         nd = num_disparities
         if nd is None and calib is not None:
             nd = calib.num_disparities
         if nd is None and calib is not None:
             problem = problem or "no --num-disparities and no ndisp in the calibration"
         out.append(replace(p, calibration=calib, num_disparities=nd, problem=problem))
-    if out and all(p.calibration is None for p in out) and all(
-            p.problem and p.problem.startswith("no calibration") for p in out):
+    if (
+        out
+        and all(p.calibration is None for p in out)
+        and all(p.problem and p.problem.startswith("no calibration") for p in out)
+    ):
         raise UsageError(
             "no calibration for any pair: give --focal-px and --baseline-mm, or --calib FILE "
-            "(Middlebury calib.txt or KITTI calib)")
-    if out and num_disparities is None and all(p.num_disparities is None for p in out) and \
-            any(p.calibration is not None for p in out):
+            "(Middlebury calib.txt or KITTI calib)"
+        )
+    if (
+        out
+        and num_disparities is None
+        and all(p.num_disparities is None for p in out)
+        and any(p.calibration is not None for p in out)
+    ):
         raise UsageError(
-            "--num-disparities is required (no Middlebury calib.txt with ndisp was found)")
+            "--num-disparities is required (no Middlebury calib.txt with ndisp was found)"
+        )
     return out
 
 
@@ -446,7 +491,8 @@ def completed_record(pair: Pair, options: BatchOptions) -> dict[str, Any] | None
     try:
         record = json.loads(path.read_text(encoding="utf-8"))
         if record.get("status") != "ok" or record.get("settings") != _jsonable(
-                _settings(pair, options)):
+            _settings(pair, options)
+        ):
             return None
         inputs = record["inputs"]
         if inputs != {"left": _file_stamp(pair.left), "right": _file_stamp(pair.right)}:
@@ -498,7 +544,8 @@ def _load_pair(pair: Pair) -> tuple[np.ndarray, np.ndarray, np.ndarray, dict[str
     if left.shape[:2] != right.shape[:2]:
         raise ValueError(
             f"left and right differ in size: {left.shape[1]}x{left.shape[0]} and "
-            f"{right.shape[1]}x{right.shape[0]} px")
+            f"{right.shape[1]}x{right.shape[0]} px"
+        )
     colours = left
     if left.ndim != right.ndim:  # one RGB, one grey: match in grey
         left = _to_grey(left) if left.ndim == 3 else left
@@ -533,9 +580,15 @@ def process_pair(pair: Pair, options: BatchOptions, threads: int | None = None) 
     from .pointcloud import reproject, write_ply
 
     t0 = time.perf_counter()
-    record: dict[str, Any] = {"stem": pair.stem, "left": str(pair.left),
-                              "right": str(pair.right), "status": "failed", "error": None,
-                              "time_s": None, "density": None}
+    record: dict[str, Any] = {
+        "stem": pair.stem,
+        "left": str(pair.left),
+        "right": str(pair.right),
+        "status": "failed",
+        "error": None,
+        "time_s": None,
+        "density": None,
+    }
     try:
         if pair.problem:
             raise ValueError(pair.problem)
@@ -547,33 +600,51 @@ def process_pair(pair: Pair, options: BatchOptions, threads: int | None = None) 
         threads = _task_threads() if threads is None else threads
         left, right, colours, stamps = _load_pair(pair)
         disparity = matching.block_match(
-            left, right, num_disparities=pair.num_disparities,
-            **{**options.matcher, "threads": threads})
+            left,
+            right,
+            num_disparities=pair.num_disparities,
+            **{**options.matcher, "threads": threads},
+        )
         if not isinstance(disparity, np.ndarray):  # pragma: no cover - no confidence asked
             raise TypeError("block_match returned more than the disparity")
         depth = disparity_to_depth(
-            disparity, focal_px=calib.focal_px, baseline_m=calib.baseline_m,
-            doffs_px=calib.doffs_px, min_depth_m=options.min_depth_m,
+            disparity,
+            focal_px=calib.focal_px,
+            baseline_m=calib.baseline_m,
+            doffs_px=calib.doffs_px,
+            min_depth_m=options.min_depth_m,
             max_depth_m=options.max_depth_m,
-            dtype=np.uint16 if options.format == "png16" else np.float32, threads=threads)
+            dtype=np.uint16 if options.format == "png16" else np.float32,
+            threads=threads,
+        )
         paths = options.output_paths(pair.stem)
         _write_map(paths["disparity"], "disparity", disparity, options.format)
         _write_map(paths["depth"], "depth", depth, options.format)
         outputs: dict[str, Any] = {}
         if "ply" in paths:
             points = reproject(
-                disparity, focal_px=calib.focal_px, baseline_m=calib.baseline_m,
-                cx_px=calib.cx_px, cy_px=calib.cy_px, doffs_px=calib.doffs_px,
-                min_depth_m=options.min_depth_m, max_depth_m=options.max_depth_m,
-                threads=threads)
+                disparity,
+                focal_px=calib.focal_px,
+                baseline_m=calib.baseline_m,
+                cx_px=calib.cx_px,
+                cy_px=calib.cy_px,
+                doffs_px=calib.doffs_px,
+                min_depth_m=options.min_depth_m,
+                max_depth_m=options.max_depth_m,
+                threads=threads,
+            )
             stem = pair.stem.encode("ascii", "backslashreplace").decode("ascii")
-            n = write_ply(paths["ply"], points, colours,
-                          comment=f"stereodepth {__version__}: {stem}, metres")
+            n = write_ply(
+                paths["ply"], points, colours, comment=f"stereodepth {__version__}: {stem}, metres"
+            )
             outputs["ply_points"] = n
         density = float(np.count_nonzero(np.isfinite(disparity))) / max(disparity.size, 1)
         record.update(
-            status="ok", width=int(disparity.shape[1]), height=int(disparity.shape[0]),
-            density=density, inputs=stamps,
+            status="ok",
+            width=int(disparity.shape[1]),
+            height=int(disparity.shape[0]),
+            density=density,
+            inputs=stamps,
             outputs={k: {"path": str(p), "bytes": p.stat().st_size} for k, p in paths.items()},
             settings=_settings(pair, options),
         )
@@ -641,11 +712,18 @@ class BatchReport:
     def as_dict(self) -> dict[str, Any]:
         from . import __version__
 
-        data: dict[str, Any] = _jsonable({
-            "stereodepth": __version__, "runner": self.runner, "started": self.started,
-            "elapsed_s": self.elapsed_s, "interrupted": self.interrupted,
-            "counts": self.counts, "exit_status": self.exit_status, "pairs": self.pairs,
-        })
+        data: dict[str, Any] = _jsonable(
+            {
+                "stereodepth": __version__,
+                "runner": self.runner,
+                "started": self.started,
+                "elapsed_s": self.elapsed_s,
+                "interrupted": self.interrupted,
+                "counts": self.counts,
+                "exit_status": self.exit_status,
+                "pairs": self.pairs,
+            }
+        )
         return data
 
 
@@ -677,8 +755,13 @@ class _Progress:
         if enabled:
             from tqdm import tqdm
 
-            self._bar = tqdm(total=total, unit="pair", file=sys.stderr, dynamic_ncols=True,
-                             desc="stereodepth batch")
+            self._bar = tqdm(
+                total=total,
+                unit="pair",
+                file=sys.stderr,
+                dynamic_ncols=True,
+                desc="stereodepth batch",
+            )
 
     def update(self, record: dict[str, Any]) -> None:
         if record["status"] == "failed":
@@ -693,8 +776,12 @@ class _Progress:
             self._bar.close()
 
 
-def _run_embedded(todo: list[tuple[int, Pair]], options: BatchOptions,
-                  done: Callable[[int, dict[str, Any]], None], threads: int | None) -> None:
+def _run_embedded(
+    todo: list[tuple[int, Pair]],
+    options: BatchOptions,
+    done: Callable[[int, dict[str, Any]], None],
+    threads: int | None,
+) -> None:
     from concurrent.futures import FIRST_COMPLETED, ThreadPoolExecutor, wait
 
     pool = ThreadPoolExecutor(max_workers=EMBEDDED_IN_FLIGHT, thread_name_prefix="stereodepth")
@@ -717,16 +804,21 @@ def _run_embedded(todo: list[tuple[int, Pair]], options: BatchOptions,
     pool.shutdown(wait=True)
 
 
-def _run_dask(todo: list[tuple[int, Pair]], options: BatchOptions,
-              done: Callable[[int, dict[str, Any]], None], threads: int | None,
-              client: Any) -> None:
+def _run_dask(
+    todo: list[tuple[int, Pair]],
+    options: BatchOptions,
+    done: Callable[[int, dict[str, Any]], None],
+    threads: int | None,
+    client: Any,
+) -> None:
     from distributed import as_completed
 
     run_id = uuid.uuid4().hex[:8]
     futures = {}
     for i, p in todo:
-        f = client.submit(process_pair, p, options, threads, key=f"stereodepth-{run_id}-{i}",
-                          pure=False)
+        f = client.submit(
+            process_pair, p, options, threads, key=f"stereodepth-{run_id}-{i}", pure=False
+        )
         futures[f] = i
     pending = set(futures)
     try:
@@ -736,9 +828,15 @@ def _run_dask(todo: list[tuple[int, Pair]], options: BatchOptions,
                 record = f.result()
             except Exception as exc:  # the task itself never raises: a worker kept dying
                 pair = dict(todo)[i]
-                record = {"stem": pair.stem, "left": str(pair.left), "right": str(pair.right),
-                          "status": "failed", "time_s": None, "density": None,
-                          "error": f"{type(exc).__name__}: {exc}"}
+                record = {
+                    "stem": pair.stem,
+                    "left": str(pair.left),
+                    "right": str(pair.right),
+                    "status": "failed",
+                    "time_s": None,
+                    "density": None,
+                    "error": f"{type(exc).__name__}: {exc}",
+                }
             pending.discard(f)
             done(i, record)
     except KeyboardInterrupt:
@@ -803,9 +901,17 @@ def run_batch(
                     todo.append((i, p))
                     continue
                 keep = ("time_s", "density", "width", "height", "outputs")
-                done(i, {"stem": p.stem, "left": str(p.left), "right": str(p.right),
-                         "status": "skipped", "error": None,
-                         **{k: earlier.get(k) for k in keep}})
+                done(
+                    i,
+                    {
+                        "stem": p.stem,
+                        "left": str(p.left),
+                        "right": str(p.right),
+                        "status": "skipped",
+                        "error": None,
+                        **{k: earlier.get(k) for k in keep},
+                    },
+                )
             if scheduler is None and workers is None:
                 if todo:
                     _run_embedded(todo, options, done, threads)
@@ -824,14 +930,31 @@ def run_batch(
         if rec is None:
             # Interrupted: a pair whose result did not reach us may have finished anyway.
             earlier = completed_record(p, options)
-            rec = {"stem": p.stem, "left": str(p.left), "right": str(p.right),
-                   "status": "cancelled", "error": None, "time_s": None, "density": None}
+            rec = {
+                "stem": p.stem,
+                "left": str(p.left),
+                "right": str(p.right),
+                "status": "cancelled",
+                "error": None,
+                "time_s": None,
+                "density": None,
+            }
             if earlier is not None:
-                rec.update({k: earlier.get(k) for k in ("status", "time_s", "density", "width",
-                                                        "height", "outputs")})
+                rec.update(
+                    {
+                        k: earlier.get(k)
+                        for k in ("status", "time_s", "density", "width", "height", "outputs")
+                    }
+                )
         final.append(rec)
-    return BatchReport(pairs=final, runner=runner, elapsed_s=time.perf_counter() - t0,
-                       interrupted=interrupted, started=started, removed_temp_files=removed)
+    return BatchReport(
+        pairs=final,
+        runner=runner,
+        elapsed_s=time.perf_counter() - t0,
+        interrupted=interrupted,
+        started=started,
+        removed_temp_files=removed,
+    )
 
 
 @contextlib.contextmanager
@@ -852,13 +975,15 @@ def _sigint_ignored_in_children() -> Iterator[None]:
 
 
 @contextlib.contextmanager
-def _dask_client(scheduler: str | None, workers: int | None, threads: int | None
-                 ) -> Iterator[tuple[Any, str, int | None]]:
+def _dask_client(
+    scheduler: str | None, workers: int | None, threads: int | None
+) -> Iterator[tuple[Any, str, int | None]]:
     try:
         from distributed import Client, LocalCluster
     except ImportError as exc:  # pragma: no cover - depends on the environment
         raise UsageError(
-            'running on Dask needs dask.distributed: pip install "stereodepth[batch]"') from exc
+            'running on Dask needs dask.distributed: pip install "stereodepth[batch]"'
+        ) from exc
     if scheduler is not None:
         try:
             client = Client(scheduler, timeout="10s")  # type: ignore[no-untyped-call]
@@ -876,8 +1001,13 @@ def _dask_client(scheduler: str | None, workers: int | None, threads: int | None
     # and shuts the cluster down, rather than each worker dying with a traceback.
     with _sigint_ignored_in_children():
         cluster = LocalCluster(  # type: ignore[no-untyped-call]
-            n_workers=workers, threads_per_worker=1, processes=True, host="127.0.0.1",
-            dashboard_address="127.0.0.1:0", silence_logs=logging.ERROR)
+            n_workers=workers,
+            threads_per_worker=1,
+            processes=True,
+            host="127.0.0.1",
+            dashboard_address="127.0.0.1:0",
+            silence_logs=logging.ERROR,
+        )
     with cluster, Client(cluster) as client:  # type: ignore[no-untyped-call]
         yield client, f"local dask cluster of {workers} worker processes", task_threads
 
@@ -897,58 +1027,101 @@ def register(subparsers: Any) -> None:
         ),
     )
     p.add_argument("input", metavar="INPUT", help="a folder of pairs or a CSV list")
-    p.add_argument("-o", "--output", required=True, metavar="OUTDIR",
-                   help="the folder for the outputs (created if needed)")
+    p.add_argument(
+        "-o",
+        "--output",
+        required=True,
+        metavar="OUTDIR",
+        help="the folder for the outputs (created if needed)",
+    )
     c = p.add_argument_group("calibration (default: each pair's calib.txt or KITTI calib)")
     c.add_argument("--focal-px", type=float, help="focal length in pixels")
     c.add_argument("--baseline-mm", type=float, help="baseline in millimetres")
-    c.add_argument("--doffs-px", type=float, default=0.0,
-                   help="principal point offset cx_right - cx_left in px (Middlebury doffs)")
-    c.add_argument("--cx-px", type=float, help="left principal point x for --ply (default: "
-                   "the image centre)")
+    c.add_argument(
+        "--doffs-px",
+        type=float,
+        default=0.0,
+        help="principal point offset cx_right - cx_left in px (Middlebury doffs)",
+    )
+    c.add_argument(
+        "--cx-px", type=float, help="left principal point x for --ply (default: the image centre)"
+    )
     c.add_argument("--cy-px", type=float, help="left principal point y for --ply")
-    c.add_argument("--calib", metavar="FILE",
-                   help="one calibration for every pair: Middlebury calib.txt or KITTI calib")
+    c.add_argument(
+        "--calib",
+        metavar="FILE",
+        help="one calibration for every pair: Middlebury calib.txt or KITTI calib",
+    )
     o = p.add_argument_group("output")
-    o.add_argument("--format", choices=sorted(FORMATS), default="npy",
-                   help="npy: float32 (NaN invalid); png16: depth in mm and disparity x 256 "
-                   "(0 invalid); pfm: float32 (default npy)")
-    o.add_argument("--ply", action="store_true",
-                   help="also write a coloured binary PLY point cloud in metres")
+    o.add_argument(
+        "--format",
+        choices=sorted(FORMATS),
+        default="npy",
+        help="npy: float32 (NaN invalid); png16: depth in mm and disparity x 256 "
+        "(0 invalid); pfm: float32 (default npy)",
+    )
+    o.add_argument(
+        "--ply", action="store_true", help="also write a coloured binary PLY point cloud in metres"
+    )
     o.add_argument("--min-depth-m", type=float, help="depths nearer than this are invalid")
     o.add_argument("--max-depth-m", type=float, help="depths farther than this are invalid")
-    o.add_argument("--report", metavar="FILE",
-                   help="the JSON report (default OUTDIR/report.json)")
-    o.add_argument("--force", action="store_true",
-                   help="recompute pairs whose outputs are already complete")
+    o.add_argument("--report", metavar="FILE", help="the JSON report (default OUTDIR/report.json)")
+    o.add_argument(
+        "--force", action="store_true", help="recompute pairs whose outputs are already complete"
+    )
     o.add_argument("--quiet", action="store_true", help="no progress bar and no summary")
     m = p.add_argument_group("matcher (stereodepth.block_match)")
-    m.add_argument("--num-disparities", type=int, metavar="N",
-                   help="disparities searched (default: ndisp from calib.txt; else required)")
+    m.add_argument(
+        "--num-disparities",
+        type=int,
+        metavar="N",
+        help="disparities searched (default: ndisp from calib.txt; else required)",
+    )
     m.add_argument("--min-disparity", type=int, metavar="D", help="smallest disparity searched")
     m.add_argument("--block-size", type=int, metavar="N", help="odd block side")
     m.add_argument("--cost", choices=("census", "sad"), help="matching cost")
-    m.add_argument("--option", action="append", type=key_value_option, default=[],
-                   metavar="KEY=VALUE",
-                   help="other keyword argument of stereodepth.block_match, repeatable "
-                   "(e.g. uniqueness_ratio=15, subpixel=false)")
-    m.add_argument("--pair-names", nargs=2, metavar=("LEFT", "RIGHT"),
-                   help="the tokens that name a left and a right image (default: im0 im1, "
-                   "left right)")
+    m.add_argument(
+        "--option",
+        action="append",
+        type=key_value_option,
+        default=[],
+        metavar="KEY=VALUE",
+        help="other keyword argument of stereodepth.block_match, repeatable "
+        "(e.g. uniqueness_ratio=15, subpixel=false)",
+    )
+    m.add_argument(
+        "--pair-names",
+        nargs=2,
+        metavar=("LEFT", "RIGHT"),
+        help="the tokens that name a left and a right image (default: im0 im1, left right)",
+    )
     r = p.add_argument_group("where it runs (default: this process)")
-    r.add_argument("--scheduler", metavar="ADDRESS",
-                   help="an existing dask.distributed scheduler, tcp://HOST:PORT")
-    r.add_argument("--workers", type=int, metavar="N",
-                   help="start a local Dask cluster of N worker processes")
-    r.add_argument("--threads", type=int, metavar="N",
-                   help="matcher threads per pair (default: every core; with --workers N, "
-                   "the cores / N; on a --scheduler cluster, a worker's cores / its threads)")
+    r.add_argument(
+        "--scheduler",
+        metavar="ADDRESS",
+        help="an existing dask.distributed scheduler, tcp://HOST:PORT",
+    )
+    r.add_argument(
+        "--workers", type=int, metavar="N", help="start a local Dask cluster of N worker processes"
+    )
+    r.add_argument(
+        "--threads",
+        type=int,
+        metavar="N",
+        help="matcher threads per pair (default: every core; with --workers N, "
+        "the cores / N; on a --scheduler cluster, a worker's cores / its threads)",
+    )
     p.set_defaults(func=run)
 
 
-_RESERVED = {"num_disparities": "--num-disparities", "min_disparity": "--min-disparity",
-             "block_size": "--block-size", "cost": "--cost", "threads": "--threads",
-             "return_confidence": "(not available in batch)"}
+_RESERVED = {
+    "num_disparities": "--num-disparities",
+    "min_disparity": "--min-disparity",
+    "block_size": "--block-size",
+    "cost": "--cost",
+    "threads": "--threads",
+    "return_confidence": "(not available in batch)",
+}
 
 
 def _matcher_options(args: argparse.Namespace) -> dict[str, Any]:
@@ -975,8 +1148,9 @@ def _given_calibration(args: argparse.Namespace) -> Calibration | None:
     if args.focal_px is None and args.baseline_mm is None:
         for name in ("cx_px", "cy_px"):
             if getattr(args, name) is not None:
-                raise UsageError(f"--{name.replace('_', '-')} goes with --focal-px and "
-                                 "--baseline-mm")
+                raise UsageError(
+                    f"--{name.replace('_', '-')} goes with --focal-px and --baseline-mm"
+                )
         if args.doffs_px:
             raise UsageError("--doffs-px goes with --focal-px and --baseline-mm")
         return None
@@ -1006,8 +1180,11 @@ def print_summary(report: BatchReport, report_path: Path, file: Any = None) -> N
     if c["cancelled"]:
         words.append(f"{c['cancelled']} cancelled")
     rate = f"{c['ok'] / report.elapsed_s:.2f} pairs/s, " if c["ok"] and report.elapsed_s else ""
-    print(f"{n} pair{'s' if n != 1 else ''}: {', '.join(words)} in {report.elapsed_s:.1f} s "
-          f"({rate}{report.runner})", file=out)
+    print(
+        f"{n} pair{'s' if n != 1 else ''}: {', '.join(words)} in {report.elapsed_s:.1f} s "
+        f"({rate}{report.runner})",
+        file=out,
+    )
     if report.interrupted:
         print("interrupted: run the same command again to resume", file=out)
     for rec in report.failed:
@@ -1027,19 +1204,33 @@ def run(args: argparse.Namespace) -> int:
         v = getattr(args, name)
         if v is not None and not (math.isfinite(v) and v >= 0):
             raise UsageError(f"--{name.replace('_', '-')} must be a finite number >= 0, got {v}")
-    pairs = find_pairs(args.input, pair_names=[tuple(args.pair_names)] if args.pair_names
-                       else None)
-    pairs = resolve_calibration(pairs, given=given,
-                                calib_file=Path(args.calib) if args.calib else None,
-                                num_disparities=args.num_disparities)
+    pairs = find_pairs(args.input, pair_names=[tuple(args.pair_names)] if args.pair_names else None)
+    pairs = resolve_calibration(
+        pairs,
+        given=given,
+        calib_file=Path(args.calib) if args.calib else None,
+        num_disparities=args.num_disparities,
+    )
     out_dir = Path(args.output)
     if out_dir.exists() and not out_dir.is_dir():
         raise UsageError(f"OUTDIR must be a folder, got the file {out_dir}")
-    options = BatchOptions(out_dir=out_dir, format=args.format, ply=args.ply, matcher=matcher,
-                           min_depth_m=args.min_depth_m, max_depth_m=args.max_depth_m,
-                           force=args.force)
-    report = run_batch(pairs, options, scheduler=args.scheduler, workers=args.workers,
-                       threads=args.threads, progress=not args.quiet and sys.stderr.isatty())
+    options = BatchOptions(
+        out_dir=out_dir,
+        format=args.format,
+        ply=args.ply,
+        matcher=matcher,
+        min_depth_m=args.min_depth_m,
+        max_depth_m=args.max_depth_m,
+        force=args.force,
+    )
+    report = run_batch(
+        pairs,
+        options,
+        scheduler=args.scheduler,
+        workers=args.workers,
+        threads=args.threads,
+        progress=not args.quiet and sys.stderr.isatty(),
+    )
     report_path = Path(args.report) if args.report else out_dir / "report.json"
     data = report.as_dict()
     data["input"] = str(args.input)

@@ -73,6 +73,11 @@ def read_middlebury_calib(path: str | os.PathLike[str]) -> MiddleburyCalib:
         raise ValueError(f"{p}: baseline must be > 0 mm, got {fields['baseline']!r}")
     doffs = number("doffs", 0.0) or 0.0
     return MiddleburyCalib(
-        cam0=cam0, cam1=cam1, doffs_px=doffs, baseline_mm=baseline,
-        width_px=whole("width"), height_px=whole("height"), ndisp=whole("ndisp"),
+        cam0=cam0,
+        cam1=cam1,
+        doffs_px=doffs,
+        baseline_mm=baseline,
+        width_px=whole("width"),
+        height_px=whole("height"),
+        ndisp=whole("ndisp"),
     )

@@ -68,8 +68,11 @@ class Chart:
 
     def to_dict(self) -> dict[str, Any]:
         return {
-            "title": self.title, "x_label": self.x_label, "y_label": self.y_label,
-            "x_log": self.x_log, "y_log": self.y_log,
+            "title": self.title,
+            "x_label": self.x_label,
+            "y_label": self.y_label,
+            "x_log": self.x_log,
+            "y_log": self.y_log,
             "series": [s.to_dict() for s in self.series],
             "markers": [m.to_dict() for m in self.markers],
         }
@@ -143,8 +146,8 @@ def chart_data(
     if disparity_px is not None:
         target = check.real("disparity_px", disparity_px)
         rig.depth_m(target)  # the rig's rule for a disparity: finite and >= max(0, -doffs)
-    limit = None if max_disparity_px is None else check.positive(
-        "max_disparity_px", max_disparity_px
+    limit = (
+        None if max_disparity_px is None else check.positive("max_disparity_px", max_disparity_px)
     )
 
     # Extreme rigs and targets overflow to inf or underflow to 0: those points are left out.

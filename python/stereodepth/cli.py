@@ -19,7 +19,9 @@ from .rig import StereoRig
 # Modules that add a subcommand: each has register(subparsers) that adds its parser with
 # set_defaults(func=run), where run(args) -> int. They import heavy dependencies inside run.
 _SUBCOMMAND_MODULES: tuple[str, ...] = (
-    "stereodepth.evaluation", "stereodepth.web.serve", "stereodepth.batch",
+    "stereodepth.evaluation",
+    "stereodepth.web.serve",
+    "stereodepth.batch",
 )
 
 
@@ -54,7 +56,10 @@ def _rig_from_args(args: argparse.Namespace) -> StereoRig:
         if args.focal_mm is not None or args.pixel_um is not None:
             raise UsageError("give either --focal-px, or --focal-mm and --pixel-um, not both")
         return StereoRig.from_pixels(
-            args.baseline_mm, args.focal_px, width_px=args.width_px, doffs_px=args.doffs_px,
+            args.baseline_mm,
+            args.focal_px,
+            width_px=args.width_px,
+            doffs_px=args.doffs_px,
             height_px=args.height_px,
         )
     if args.focal_mm is None or args.pixel_um is None:
@@ -62,7 +67,10 @@ def _rig_from_args(args: argparse.Namespace) -> StereoRig:
     if args.doffs_px:
         raise UsageError("--doffs-px goes with --focal-px (a calibration in pixels)")
     return StereoRig(
-        args.baseline_mm, args.focal_mm, args.pixel_um, width_px=args.width_px,
+        args.baseline_mm,
+        args.focal_mm,
+        args.pixel_um,
+        width_px=args.width_px,
         height_px=args.height_px,
     )
 
@@ -93,11 +101,16 @@ def _print_summary(rig: StereoRig, s: dict[str, Any]) -> None:
         lines.append(("depth resolution (1 px)", _fmt(s["depth_resolution_m"], "m")))
         lines.append(("  exact, Z(d) - Z(d+1)", _fmt(s["depth_resolution_exact_m"], "m")))
         if s["disparity_step_px"] != 1.0:
-            lines.append((f"depth resolution ({_fmt(s['disparity_step_px'])} px)",
-                          _fmt(s["depth_resolution_subpx_m"], "m")))
+            lines.append(
+                (
+                    f"depth resolution ({_fmt(s['disparity_step_px'])} px)",
+                    _fmt(s["depth_resolution_subpx_m"], "m"),
+                )
+            )
     if s["min_depth_m"] is not None:
-        lines.append((f"min depth (search to {_fmt(s['max_disparity_px'])} px)",
-                      _fmt(s["min_depth_m"], "m")))
+        lines.append(
+            (f"min depth (search to {_fmt(s['max_disparity_px'])} px)", _fmt(s["min_depth_m"], "m"))
+        )
     width = max(len(k) for k, _ in lines)
     for key, value in lines:
         print(f"{key.ljust(width)}  {value}")
@@ -114,37 +127,61 @@ def _add_calc(sub: Any) -> None:
     g.add_argument("--focal-mm", type=float, help="focal length f in mm")
     g.add_argument("--pixel-um", type=float, help="pixel size p in micrometres")
     g.add_argument("--focal-px", type=float, help="focal length in pixels (replaces the two above)")
-    g.add_argument("--doffs-px", type=float, default=0.0,
-                   help="principal point offset in px, with --focal-px (Middlebury doffs)")
+    g.add_argument(
+        "--doffs-px",
+        type=float,
+        default=0.0,
+        help="principal point offset in px, with --focal-px (Middlebury doffs)",
+    )
     g.add_argument("--width-px", type=int, help="image width in px (for the field of view)")
     g.add_argument("--height-px", type=int, help="image height in px")
     q = p.add_argument_group("the question")
     q.add_argument("--disparity-px", type=float, help="disparity d of the target in px")
-    q.add_argument("--subpixel-px", type=float, default=1.0,
-                   help="the matcher's disparity step in px (default 1)")
-    q.add_argument("--max-disparity-px", type=float,
-                   help="top of the disparity search range, for the min depth")
-    q.add_argument("--table-disparities-px", type=float, nargs="+", metavar="D",
-                   help="disparities for the table (default: 1 to 256 px)")
+    q.add_argument(
+        "--subpixel-px",
+        type=float,
+        default=1.0,
+        help="the matcher's disparity step in px (default 1)",
+    )
+    q.add_argument(
+        "--max-disparity-px",
+        type=float,
+        help="top of the disparity search range, for the min depth",
+    )
+    q.add_argument(
+        "--table-disparities-px",
+        type=float,
+        nargs="+",
+        metavar="D",
+        help="disparities for the table (default: 1 to 256 px)",
+    )
     o = p.add_argument_group("output")
     o.add_argument("--json", action="store_true", help="print one JSON object")
     o.add_argument("--markdown", action="store_true", help="print the table as Markdown")
-    o.add_argument("--plot", metavar="PNG",
-                   help="write the two charts to this image (needs the 'plot' extra)")
+    o.add_argument(
+        "--plot", metavar="PNG", help="write the two charts to this image (needs the 'plot' extra)"
+    )
     p.set_defaults(func=_run_calc)
 
 
 def _run_calc(args: argparse.Namespace) -> int:
     rig = _rig_from_args(args)
     summary = rig.summary(
-        args.disparity_px, disparity_step_px=args.subpixel_px,
-        max_disparity_px=args.max_disparity_px, table_disparities_px=args.table_disparities_px,
+        args.disparity_px,
+        disparity_step_px=args.subpixel_px,
+        max_disparity_px=args.max_disparity_px,
+        table_disparities_px=args.table_disparities_px,
     )
     if args.plot:
         from .plotting import save_charts
 
-        save_charts(rig, args.plot, disparity_px=args.disparity_px,
-                    disparity_step_px=args.subpixel_px, max_disparity_px=args.max_disparity_px)
+        save_charts(
+            rig,
+            args.plot,
+            disparity_px=args.disparity_px,
+            disparity_step_px=args.subpixel_px,
+            max_disparity_px=args.max_disparity_px,
+        )
     if args.json:
         print(json.dumps(summary, indent=2, allow_nan=False))
         return 0

@@ -30,8 +30,7 @@ def _da() -> Any:
     try:
         import dask.array as da
     except ImportError as exc:  # pragma: no cover - depends on the environment
-        raise ImportError(
-            'stereodepth.dask needs dask: pip install "stereodepth[batch]"') from exc
+        raise ImportError('stereodepth.dask needs dask: pip install "stereodepth[batch]"') from exc
     return da
 
 
@@ -67,8 +66,12 @@ def disparity_to_depth(disparity: Any, **options: Any) -> Any:
     # Every check of the numpy function, now rather than at compute time, on a tiny stand-in.
     probe = np.zeros((1,) * d.ndim, dtype=d.dtype)
     out_dtype = stereodepth.disparity_to_depth(probe, **options).dtype
-    return d.map_blocks(_depth_block, dtype=out_dtype, options=options,
-                        meta=np.empty((0,) * d.ndim, dtype=out_dtype))
+    return d.map_blocks(
+        _depth_block,
+        dtype=out_dtype,
+        options=options,
+        meta=np.empty((0,) * d.ndim, dtype=out_dtype),
+    )
 
 
 def _depth_block(block: np.ndarray, *, options: dict[str, Any]) -> np.ndarray:
@@ -92,11 +95,9 @@ def block_match(left: Any, right: Any, **params: Any) -> Any:
         raise TypeError("block_match() missing required keyword argument: 'num_disparities'")
     BlockMatchOptions(**params)
     if la.shape != ra.shape:
-        raise ValueError(
-            f"left and right must have the same shape, got {la.shape} and {ra.shape}")
+        raise ValueError(f"left and right must have the same shape, got {la.shape} and {ra.shape}")
     if la.dtype != ra.dtype:
-        raise TypeError(
-            f"left and right must have the same dtype, got {la.dtype} and {ra.dtype}")
+        raise TypeError(f"left and right must have the same dtype, got {la.dtype} and {ra.dtype}")
     if la.dtype not in (np.uint8, np.uint16):
         raise TypeError(f"left must be uint8 or uint16 images, got dtype {la.dtype}")
     # (N, H, W, 3) and (H, W, 3) uint8 are RGB; (N, H, W) and (H, W) grey.
@@ -105,18 +106,27 @@ def block_match(left: Any, right: Any, **params: Any) -> Any:
     if la.ndim not in (2, 3, 4) or (rgb and (la.shape[-1] != 3 or la.dtype != np.uint8)):
         raise ValueError(
             "left must have shape (H, W) or (N, H, W) grey, or (H, W, 3) or (N, H, W, 3) uint8 "
-            f"RGB, got {la.shape} {la.dtype}")
+            f"RGB, got {la.shape} {la.dtype}"
+        )
     la = _frames_per_chunk(la, frame_axes)
     ra = ra.rechunk(la.chunks)
     drop = [la.ndim - 1] if rgb else []
     stacked = la.ndim == frame_axes + 1
     meta = np.empty((0,) * (la.ndim - len(drop)), dtype=np.float32)
-    return la.map_blocks(_match_block, ra, dtype=np.float32, drop_axis=drop, params=params,
-                         stacked=stacked, meta=meta)
+    return la.map_blocks(
+        _match_block,
+        ra,
+        dtype=np.float32,
+        drop_axis=drop,
+        params=params,
+        stacked=stacked,
+        meta=meta,
+    )
 
 
-def _match_block(left: np.ndarray, right: np.ndarray, *, params: dict[str, Any],
-                 stacked: bool) -> np.ndarray:
+def _match_block(
+    left: np.ndarray, right: np.ndarray, *, params: dict[str, Any], stacked: bool
+) -> np.ndarray:
     from stereodepth import matching
 
     if not stacked:
@@ -146,9 +156,14 @@ def reproject(disparity: Any, **options: Any) -> Any:
     probe = np.zeros((1, *d.shape[-2:]) if d.ndim == 3 else d.shape[-2:], dtype=d.dtype)
     stereodepth.reproject(probe, **options)
     d = _frames_per_chunk(d, 2)
-    return d.map_blocks(_reproject_block, dtype=np.float32, new_axis=d.ndim,
-                        chunks=(*d.chunks, (3,)), options=options,
-                        meta=np.empty((0,) * (d.ndim + 1), dtype=np.float32))
+    return d.map_blocks(
+        _reproject_block,
+        dtype=np.float32,
+        new_axis=d.ndim,
+        chunks=(*d.chunks, (3,)),
+        options=options,
+        meta=np.empty((0,) * (d.ndim + 1), dtype=np.float32),
+    )
 
 
 def _reproject_block(block: np.ndarray, *, options: dict[str, Any]) -> np.ndarray:

@@ -21,8 +21,15 @@ class DepthOptions:
     """The checked, resolved options shared by the native kernel and the numpy oracle."""
 
     __slots__ = (
-        "baseline_m", "doffs_px", "dtype", "focal_px", "invalid_value", "max_depth_m",
-        "min_depth_m", "negative_invalid", "scale",
+        "baseline_m",
+        "doffs_px",
+        "dtype",
+        "focal_px",
+        "invalid_value",
+        "max_depth_m",
+        "min_depth_m",
+        "negative_invalid",
+        "scale",
     )
 
     def __init__(
@@ -57,8 +64,9 @@ class DepthOptions:
         if out_dtype not in (np.dtype(np.float32), np.dtype(np.uint16)):
             raise TypeError(f"dtype must be numpy.float32 or numpy.uint16, got {out_dtype}")
         self.dtype = out_dtype
-        self.min_depth_m = 0.0 if min_depth_m is None else check.non_negative(
-            "min_depth_m", min_depth_m)
+        self.min_depth_m = (
+            0.0 if min_depth_m is None else check.non_negative("min_depth_m", min_depth_m)
+        )
         if max_depth_m is None:
             self.max_depth_m = FLOAT32_MAX
         else:
@@ -100,9 +108,7 @@ def prepare_out(out: Any, disparity: np.ndarray, dtype: np.dtype) -> np.ndarray:
     if out.dtype != dtype:
         raise TypeError(f"out must have dtype {dtype} (the dtype argument), got {out.dtype}")
     if out.shape != disparity.shape:
-        raise ValueError(
-            f"out must have the shape of disparity {disparity.shape}, got {out.shape}"
-        )
+        raise ValueError(f"out must have the shape of disparity {disparity.shape}, got {out.shape}")
     if not out.flags.c_contiguous:
         raise TypeError("out must be C-contiguous")
     if not out.flags.writeable:
@@ -167,8 +173,14 @@ def disparity_to_depth(
     """
     arr = as_disparity(disparity)
     opts = DepthOptions(
-        arr, focal_px=focal_px, baseline_m=baseline_m, doffs_px=doffs_px, scale=scale,
-        dtype=dtype, min_depth_m=min_depth_m, max_depth_m=max_depth_m,
+        arr,
+        focal_px=focal_px,
+        baseline_m=baseline_m,
+        doffs_px=doffs_px,
+        scale=scale,
+        dtype=dtype,
+        min_depth_m=min_depth_m,
+        max_depth_m=max_depth_m,
         invalid_value=invalid_value,
     )
     nthreads = check.threads(threads)
@@ -180,7 +192,16 @@ def disparity_to_depth(
     ):
         arr = np.ascontiguousarray(arr)
     _core.disparity_to_depth(
-        arr, result, opts.focal_px, opts.baseline_m, opts.doffs_px, opts.scale,
-        opts.min_depth_m, opts.max_depth_m, opts.invalid_value, opts.negative_invalid, nthreads,
+        arr,
+        result,
+        opts.focal_px,
+        opts.baseline_m,
+        opts.doffs_px,
+        opts.scale,
+        opts.min_depth_m,
+        opts.max_depth_m,
+        opts.invalid_value,
+        opts.negative_invalid,
+        nthreads,
     )
     return result

@@ -93,8 +93,18 @@ _RESERVED_OPTIONS = {
     "threads": "use --threads",
     "return_confidence": "eval scores the disparity only",
 }
-_BEST_BY = ("bad_0_5", "bad_1", "bad_2", "bad_4", "bad_0_5_est", "bad_1_est", "bad_2_est",
-            "bad_4_est", "avgerr", "rms")
+_BEST_BY = (
+    "bad_0_5",
+    "bad_1",
+    "bad_2",
+    "bad_4",
+    "bad_0_5_est",
+    "bad_1_est",
+    "bad_2_est",
+    "bad_4_est",
+    "avgerr",
+    "rms",
+)
 
 
 def _usage_error(message: str) -> Exception:
@@ -178,8 +188,11 @@ def _scene_at(path: Path) -> Scene | None:
         mask = path / "mask_nonocc.npy"
         meta = path / "meta.json"
         return Scene(
-            name=path.name, path=path, left_path=path / "left.png",
-            right_path=path / "right.png", gt_path=path / "disp_gt.npy",
+            name=path.name,
+            path=path,
+            left_path=path / "left.png",
+            right_path=path / "right.png",
+            gt_path=path / "disp_gt.npy",
             mask_path=mask if mask.is_file() else None,
             max_disparity_px=_meta_max_disparity(meta) if meta.is_file() else None,
         )
@@ -193,8 +206,12 @@ def _scene_at(path: Path) -> Scene | None:
             max_disp = None if ndisp is None else float(ndisp - 1)
         mask = path / "mask0nocc.png"
         return Scene(
-            name=path.name, path=path, left_path=path / "im0.png", right_path=path / "im1.png",
-            gt_path=gts[0], mask_path=mask if mask.is_file() else None,
+            name=path.name,
+            path=path,
+            left_path=path / "im0.png",
+            right_path=path / "im1.png",
+            gt_path=gts[0],
+            mask_path=mask if mask.is_file() else None,
             max_disparity_px=max_disp,
         )
     return None
@@ -231,8 +248,11 @@ def find_scenes(root: str | os.PathLike[str], patterns: Sequence[str] = ()) -> l
 def num_disparities_for(max_disparity_px: float) -> int:
     """``16 * ceil((D + 1) / 16)`` for D = ``ceil(max_disparity_px)``: the smallest multiple of
     16 whose search range ``0 .. num_disparities - 1`` reaches the largest disparity."""
-    if not (isinstance(max_disparity_px, (int, float)) and math.isfinite(max_disparity_px)
-            and max_disparity_px >= 0):
+    if not (
+        isinstance(max_disparity_px, (int, float))
+        and math.isfinite(max_disparity_px)
+        and max_disparity_px >= 0
+    ):
         raise ValueError(f"max_disparity_px must be a finite number >= 0, got {max_disparity_px!r}")
     return 16 * math.ceil((math.ceil(max_disparity_px) + 1) / 16)
 
@@ -269,8 +289,14 @@ def _stereodepth_factory(
             kwargs["block_size"] = variant.block_size
 
         def match(left: np.ndarray, right: np.ndarray) -> np.ndarray:
-            out = block_match(left, right, num_disparities=num_disparities, min_disparity=0,
-                              threads=threads, **kwargs)
+            out = block_match(
+                left,
+                right,
+                num_disparities=num_disparities,
+                min_disparity=0,
+                threads=threads,
+                **kwargs,
+            )
             return np.asarray(out)
 
         return match
@@ -305,8 +331,11 @@ def _opencv_factory(cv2: Any, options: dict[str, Any]) -> Callable[[Variant, int
                 matcher = cv2.StereoBM_create(numDisparities=num_disparities, blockSize=bs)
             else:
                 matcher = cv2.StereoSGBM_create(
-                    minDisparity=0, numDisparities=num_disparities, blockSize=bs,
-                    P1=8 * bs * bs, P2=32 * bs * bs,
+                    minDisparity=0,
+                    numDisparities=num_disparities,
+                    blockSize=bs,
+                    P1=8 * bs * bs,
+                    P2=32 * bs * bs,
                 )
         except cv2.error as exc:
             raise ValueError(
@@ -382,17 +411,24 @@ class EvalResult:
 
     def as_dict(self) -> dict[str, Any]:
         return {
-            "scene": self.scene, "method": self.variant.method,
-            "block_size": self.variant.block_size, "best": self.best,
-            "num_disparities": self.num_disparities, "width": self.width,
-            "height": self.height, "region": self.region, "metrics": self.metrics.as_dict(),
-            "time_s": self.time_s, "times_s": list(self.times_s),
+            "scene": self.scene,
+            "method": self.variant.method,
+            "block_size": self.variant.block_size,
+            "best": self.best,
+            "num_disparities": self.num_disparities,
+            "width": self.width,
+            "height": self.height,
+            "region": self.region,
+            "metrics": self.metrics.as_dict(),
+            "time_s": self.time_s,
+            "times_s": list(self.times_s),
             "ns_per_px_disparity": self.ns_per_px_disparity,
         }
 
 
-def _timed(match: Matcher, left: np.ndarray, right: np.ndarray,
-           repeat: int) -> tuple[np.ndarray, tuple[float, ...]]:
+def _timed(
+    match: Matcher, left: np.ndarray, right: np.ndarray, repeat: int
+) -> tuple[np.ndarray, tuple[float, ...]]:
     out = match(left, right)  # warm-up
     times = []
     for _ in range(repeat):
@@ -413,6 +449,7 @@ def _with_best(rows: list[EvalResult], best_by: str) -> list[EvalResult]:
         group = rows[i:j]
         out += group
         if len(group) > 1:
+
             def key(r: EvalResult) -> tuple[float, int]:
                 v = getattr(r.metrics, best_by)
                 return (math.inf if math.isnan(v) else v, r.variant.block_size or 0)
@@ -423,9 +460,14 @@ def _with_best(rows: list[EvalResult], best_by: str) -> list[EvalResult]:
 
 
 def _evaluate_scene(
-    scene: Scene, variants: Sequence[Variant], factories: dict[str, Callable[[Variant, int],
-                                                                           Matcher]],
-    *, repeat: int, num_disparities: int | None, use_mask: bool, best_by: str,
+    scene: Scene,
+    variants: Sequence[Variant],
+    factories: dict[str, Callable[[Variant, int], Matcher]],
+    *,
+    repeat: int,
+    num_disparities: int | None,
+    use_mask: bool,
+    best_by: str,
     progress: Callable[[str], None] | None,
 ) -> list[EvalResult]:
     left, right, gt, mask = scene.load()
@@ -452,13 +494,20 @@ def _evaluate_scene(
                 f"{disparity.shape}, expected float {gt.shape}"
             )
         row = EvalResult(
-            scene=scene.name, variant=variant, num_disparities=num_disparities,
-            width=gt.shape[1], height=gt.shape[0], region="all" if mask is None else "nonocc",
-            metrics=evaluate(disparity, gt, mask), times_s=times,
+            scene=scene.name,
+            variant=variant,
+            num_disparities=num_disparities,
+            width=gt.shape[1],
+            height=gt.shape[0],
+            region="all" if mask is None else "nonocc",
+            metrics=evaluate(disparity, gt, mask),
+            times_s=times,
         )
         if progress is not None:
-            progress(f"{scene.name}: {_label(row)[0]} block {_label(row)[1]}: "
-                     f"bad-2 {100 * row.metrics.bad_2:.2f} %, {1e3 * row.time_s:.1f} ms")
+            progress(
+                f"{scene.name}: {_label(row)[0]} block {_label(row)[1]}: "
+                f"bad-2 {100 * row.metrics.bad_2:.2f} %, {1e3 * row.time_s:.1f} ms"
+            )
         rows.append(row)
     return _with_best(rows, best_by)
 
@@ -476,8 +525,16 @@ _METRIC_COLUMNS: tuple[tuple[str, str, float], ...] = (
     ("avgerr px", "avgerr", 1.0),
     ("rms px", "rms", 1.0),
 )
-_COLUMNS = ("scene", "method", "block", "ndisp", "region",
-            *(c[0] for c in _METRIC_COLUMNS), "time ms", "ns/(px·d)")
+_COLUMNS = (
+    "scene",
+    "method",
+    "block",
+    "ndisp",
+    "region",
+    *(c[0] for c in _METRIC_COLUMNS),
+    "time ms",
+    "ns/(px·d)",
+)
 
 
 def _label(row: EvalResult) -> tuple[str, str]:
@@ -500,14 +557,21 @@ def _means(rows: Sequence[EvalResult]) -> list[dict[str, Any]]:
     for (method, bs, best), group in groups.items():
         metrics = {
             k: statistics.fmean(float(getattr(r.metrics, k)) for r in group)
-            for k in DisparityMetrics.__dataclass_fields__ if k not in ("evaluated", "estimated")
+            for k in DisparityMetrics.__dataclass_fields__
+            if k not in ("evaluated", "estimated")
         }
         total_time = sum(r.time_s for r in group)
-        out.append({
-            "method": method, "block_size": bs, "best": best, "scenes": len(group),
-            "metrics": metrics, "time_s": total_time / len(group),
-            "ns_per_px_disparity": total_time * 1e9 / sum(r.work for r in group),
-        })
+        out.append(
+            {
+                "method": method,
+                "block_size": bs,
+                "best": best,
+                "scenes": len(group),
+                "metrics": metrics,
+                "time_s": total_time / len(group),
+                "ns_per_px_disparity": total_time * 1e9 / sum(r.work for r in group),
+            }
+        )
     return out
 
 
@@ -516,19 +580,33 @@ def _table_rows(rows: Sequence[EvalResult]) -> list[list[str]]:
     for r in rows:
         method, block = _label(r)
         m = r.metrics
-        cells.append([
-            r.scene, method, block, str(r.num_disparities), r.region,
-            *(_num(getattr(m, attr) * k) for _, attr, k in _METRIC_COLUMNS),
-            _num(1e3 * r.time_s, 1), _num(r.ns_per_px_disparity, 3),
-        ])
+        cells.append(
+            [
+                r.scene,
+                method,
+                block,
+                str(r.num_disparities),
+                r.region,
+                *(_num(getattr(m, attr) * k) for _, attr, k in _METRIC_COLUMNS),
+                _num(1e3 * r.time_s, 1),
+                _num(r.ns_per_px_disparity, 3),
+            ]
+        )
     for mean in _means(rows):
         bs = mean["block_size"]
         block = "best" if mean["best"] else ("default" if bs is None else str(bs))
-        cells.append([
-            "mean", mean["method"], block, "", "",
-            *(_num(mean["metrics"][attr] * k) for _, attr, k in _METRIC_COLUMNS),
-            _num(1e3 * mean["time_s"], 1), _num(mean["ns_per_px_disparity"], 3),
-        ])
+        cells.append(
+            [
+                "mean",
+                mean["method"],
+                block,
+                "",
+                "",
+                *(_num(mean["metrics"][attr] * k) for _, attr, k in _METRIC_COLUMNS),
+                _num(1e3 * mean["time_s"], 1),
+                _num(mean["ns_per_px_disparity"], 3),
+            ]
+        )
     return cells
 
 
@@ -544,8 +622,9 @@ def format_table(rows: Sequence[EvalResult], *, markdown: bool = False) -> str:
     widths = [max(len(h), *(len(c[i]) for c in cells)) for i, h in enumerate(_COLUMNS)]
 
     def line(values: Sequence[str]) -> str:
-        return "  ".join(v.rjust(w) if n else v.ljust(w)
-                         for v, w, n in zip(values, widths, numeric, strict=True)).rstrip()
+        return "  ".join(
+            v.rjust(w) if n else v.ljust(w) for v, w, n in zip(values, widths, numeric, strict=True)
+        ).rstrip()
 
     out = [line(_COLUMNS), "  ".join("-" * w for w in widths)]
     for i, c in enumerate(cells):
@@ -603,52 +682,93 @@ def register(subparsers: Any) -> None:
     p.add_argument("dir", metavar="DIR", help="a folder of scene folders (or one scene folder)")
     m = p.add_argument_group("methods")
     m.add_argument(
-        "--method", nargs="+", type=_method_spec, default=None, metavar="METHOD[:SIZES]",
+        "--method",
+        nargs="+",
+        type=_method_spec,
+        default=None,
+        metavar="METHOD[:SIZES]",
         help="stereodepth, opencv-bm, opencv-sgbm, each optionally with its own block sizes "
         "(opencv-bm:9,15); default: stereodepth. OpenCV methods are skipped with a note when "
         "cv2 does not import",
     )
     m.add_argument(
-        "--block-size", nargs="+", type=int, metavar="N",
+        "--block-size",
+        nargs="+",
+        type=int,
+        metavar="N",
         help="block sizes for the methods given without their own (defaults: the matcher's "
         "own for stereodepth, 9 for opencv-bm, 5 for opencv-sgbm). With several, each is run "
         "and a best= row per scene picks the one with the lowest --best-by score",
     )
-    m.add_argument("--best-by", choices=_BEST_BY, default="bad_2",
-                   help="the score that picks the best block size (default bad_2)")
     m.add_argument(
-        "--option", action="append", type=key_value_option, default=[], metavar="KEY=VALUE",
+        "--best-by",
+        choices=_BEST_BY,
+        default="bad_2",
+        help="the score that picks the best block size (default bad_2)",
+    )
+    m.add_argument(
+        "--option",
+        action="append",
+        type=key_value_option,
+        default=[],
+        metavar="KEY=VALUE",
         help="keyword argument for stereodepth.block_match, repeatable (e.g. cost=census, "
         "subpixel=false); true/false/none, integers and floats are converted",
     )
     m.add_argument(
-        "--opencv-option", action="append", type=key_value_option, default=[], metavar="KEY=VALUE",
+        "--opencv-option",
+        action="append",
+        type=key_value_option,
+        default=[],
+        metavar="KEY=VALUE",
         help="OpenCV matcher parameter, repeatable: uniqueness_ratio=10 calls "
         "setUniquenessRatio(10) on every selected OpenCV matcher that has it (mode=2 runs "
         "SGBM as MODE_SGBM_3WAY)",
     )
-    m.add_argument("--num-disparities", type=int, metavar="N",
-                   help="search 0 .. N-1 on every scene (a multiple of 16) instead of the range "
-                   "from the ground truth")
+    m.add_argument(
+        "--num-disparities",
+        type=int,
+        metavar="N",
+        help="search 0 .. N-1 on every scene (a multiple of 16) instead of the range "
+        "from the ground truth",
+    )
     r = p.add_argument_group("run")
-    r.add_argument("--scene", action="append", default=[], metavar="PATTERN",
-                   help="only scene folders whose name matches this shell pattern, repeatable")
-    r.add_argument("--threads", type=int, default=0, metavar="N",
-                   help="threads for every method (default 0: every core this process may "
-                   f"use, here {_available_threads()})")
-    r.add_argument("--repeat", type=int, default=3, metavar="N",
-                   help="timed runs after one warm-up; the time is their median (default 3)")
-    r.add_argument("--no-mask", action="store_true",
-                   help="score all pixels with ground truth, also where a scene has a "
-                   "non-occluded mask")
+    r.add_argument(
+        "--scene",
+        action="append",
+        default=[],
+        metavar="PATTERN",
+        help="only scene folders whose name matches this shell pattern, repeatable",
+    )
+    r.add_argument(
+        "--threads",
+        type=int,
+        default=0,
+        metavar="N",
+        help="threads for every method (default 0: every core this process may "
+        f"use, here {_available_threads()})",
+    )
+    r.add_argument(
+        "--repeat",
+        type=int,
+        default=3,
+        metavar="N",
+        help="timed runs after one warm-up; the time is their median (default 3)",
+    )
+    r.add_argument(
+        "--no-mask",
+        action="store_true",
+        help="score all pixels with ground truth, also where a scene has a non-occluded mask",
+    )
     o = p.add_argument_group("output").add_mutually_exclusive_group()
     o.add_argument("--json", action="store_true", help="print one JSON object")
     o.add_argument("--markdown", action="store_true", help="print the table as Markdown")
     p.set_defaults(func=run)
 
 
-def _variants(specs: Sequence[tuple[str, tuple[int, ...] | None]],
-              block_sizes: Sequence[int] | None) -> list[Variant]:
+def _variants(
+    specs: Sequence[tuple[str, tuple[int, ...] | None]], block_sizes: Sequence[int] | None
+) -> list[Variant]:
     """The method variants to run, grouped by method in the order the methods first appear."""
     out: list[Variant] = []
     for name, sizes in specs:
@@ -675,8 +795,13 @@ def _matcher_default_block_size() -> int | None:
     import stereodepth
 
     try:
-        default = inspect.signature(getattr(stereodepth, "block_match")).parameters[  # noqa: B009
-            "block_size"].default
+        default = (
+            inspect.signature(getattr(stereodepth, "block_match"))
+            .parameters[  # noqa: B009
+                "block_size"
+            ]
+            .default
+        )
     except (AttributeError, KeyError, TypeError, ValueError):
         return None
     return default if isinstance(default, int) and not isinstance(default, bool) else None
@@ -728,16 +853,18 @@ def run(args: argparse.Namespace) -> int:
             variants = [v for v in variants if v.method not in _OPENCV_METHODS]
             if not variants:
                 raise _usage_error(
-                    f"{skipped} need(s) OpenCV, which is not installed {how}") from None
+                    f"{skipped} need(s) OpenCV, which is not installed {how}"
+                ) from None
             notes.append(f"skipped {skipped}: OpenCV is not installed {how}")
         else:
             for key in opencv_options:
-                probes = [cv2.StereoBM_create() if m == "opencv-bm" else cv2.StereoSGBM_create()
-                          for m in methods & set(_OPENCV_METHODS)]
+                probes = [
+                    cv2.StereoBM_create() if m == "opencv-bm" else cv2.StereoSGBM_create()
+                    for m in methods & set(_OPENCV_METHODS)
+                ]
                 if not any(hasattr(x, "set" + _camel(key)) for x in probes):
                     raise _usage_error(
-                        f"--opencv-option {key}: no selected OpenCV matcher has "
-                        f"set{_camel(key)}()"
+                        f"--opencv-option {key}: no selected OpenCV matcher has set{_camel(key)}()"
                     )
             factory = _opencv_factory(cv2, opencv_options)
             factories["opencv-bm"] = factories["opencv-sgbm"] = factory
@@ -751,12 +878,18 @@ def run(args: argparse.Namespace) -> int:
     if "stereodepth" in factories:
         # Name the matcher's default block size in the results (passing it changes nothing).
         default_bs = _matcher_default_block_size()
-        variants = list(dict.fromkeys(
-            Variant(v.method, default_bs) if v.method == "stereodepth" and v.block_size is None
-            else v for v in variants))
+        variants = list(
+            dict.fromkeys(
+                Variant(v.method, default_bs)
+                if v.method == "stereodepth" and v.block_size is None
+                else v
+                for v in variants
+            )
+        )
 
     progress = None
     if not args.json and sys.stderr.isatty():
+
         def progress(text: str) -> None:
             print(text, file=sys.stderr, flush=True)
 
@@ -767,9 +900,14 @@ def run(args: argparse.Namespace) -> int:
             cv2.setNumThreads(threads)
         for scene in scenes:
             rows += _evaluate_scene(
-                scene, variants, factories, repeat=args.repeat,
-                num_disparities=args.num_disparities, use_mask=not args.no_mask,
-                best_by=args.best_by, progress=progress,
+                scene,
+                variants,
+                factories,
+                repeat=args.repeat,
+                num_disparities=args.num_disparities,
+                use_mask=not args.no_mask,
+                best_by=args.best_by,
+                progress=progress,
             )
     finally:
         if cv2 is not None and saved_threads is not None:
@@ -779,19 +917,26 @@ def run(args: argparse.Namespace) -> int:
         from . import __version__
 
         report = {
-            "dir": str(args.dir), "threads": threads, "repeat": args.repeat,
-            "best_by": args.best_by, "stereodepth_version": __version__,
+            "dir": str(args.dir),
+            "threads": threads,
+            "repeat": args.repeat,
+            "best_by": args.best_by,
+            "stereodepth_version": __version__,
             "opencv_version": None if cv2 is None else str(cv2.__version__),
-            "notes": notes, "results": [r.as_dict() for r in rows], "means": _means(rows),
+            "notes": notes,
+            "results": [r.as_dict() for r in rows],
+            "means": _means(rows),
         }
         print(json.dumps(_jsonable(report), indent=2, allow_nan=False))
         return 0
     if args.markdown:
         print(format_table(rows, markdown=True))
         return 0
-    print(f"{len(scenes)} scene(s) in {args.dir}; threads {threads}; time: median of "
-          f"{args.repeat} run(s) after a warm-up; scores over non-occluded pixels where a "
-          "scene has a mask (region nonocc)")
+    print(
+        f"{len(scenes)} scene(s) in {args.dir}; threads {threads}; time: median of "
+        f"{args.repeat} run(s) after a warm-up; scores over non-occluded pixels where a "
+        "scene has a mask (region nonocc)"
+    )
     print()
     print(format_table(rows))
     return 0

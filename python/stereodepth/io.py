@@ -35,9 +35,7 @@ def _pil() -> Any:
     try:
         from PIL import Image
     except ImportError as exc:  # pragma: no cover - depends on the environment
-        raise ImportError(
-            'reading images needs Pillow: pip install "stereodepth[batch]"'
-        ) from exc
+        raise ImportError('reading images needs Pillow: pip install "stereodepth[batch]"') from exc
     return Image
 
 
@@ -158,8 +156,9 @@ def _check_2d(name: str, array: Any, dtypes: tuple[type, ...]) -> np.ndarray:
     return array
 
 
-def write_png16(path: str | os.PathLike[str], array: np.ndarray, *, compress_level: int = 1
-                ) -> None:
+def write_png16(
+    path: str | os.PathLike[str], array: np.ndarray, *, compress_level: int = 1
+) -> None:
     """A (H, W) uint16 array as a 16-bit greyscale PNG, atomically (for depth in millimetres
     from ``disparity_to_depth(..., dtype=numpy.uint16)``: 0 means no depth).
 
@@ -231,7 +230,7 @@ def read_pfm(path: str | os.PathLike[str]) -> np.ndarray:
         raise ValueError(f"{p}: bad PFM scale 0 (its sign gives the byte order)")
     dtype = np.dtype("<f4" if scale < 0 else ">f4")
     count = width * height * channels
-    body = data[m.end():]
+    body = data[m.end() :]
     if len(body) < count * 4:
         raise ValueError(
             f"{p}: truncated PFM: {width}x{height}x{channels} needs {count * 4} bytes of data, "
@@ -240,4 +239,3 @@ def read_pfm(path: str | os.PathLike[str]) -> np.ndarray:
     a = np.frombuffer(body, dtype=dtype, count=count)
     shape = (height, width) if channels == 1 else (height, width, 3)
     return a.reshape(shape)[::-1].astype(np.float32)  # native order, top to bottom, a copy
-

@@ -113,9 +113,19 @@ class BlockMatchOptions:
     """The checked, resolved parameters shared by the native kernel and the numpy oracle."""
 
     __slots__ = (
-        "block_size", "cost", "lr_max_diff", "min_disparity", "num_disparities",
-        "return_confidence", "speckle_range", "speckle_window", "subpixel",
-        "texture_sum_min", "texture_threshold", "threads", "uniqueness_factor",
+        "block_size",
+        "cost",
+        "lr_max_diff",
+        "min_disparity",
+        "num_disparities",
+        "return_confidence",
+        "speckle_range",
+        "speckle_window",
+        "subpixel",
+        "texture_sum_min",
+        "texture_threshold",
+        "threads",
+        "uniqueness_factor",
         "uniqueness_ratio",
     )
 
@@ -180,9 +190,7 @@ class BlockMatchOptions:
 
         self.uniqueness_ratio = check.non_negative("uniqueness_ratio", uniqueness_ratio)
         # The check is second * 100 > best * uniqueness_factor; 0 means off.
-        self.uniqueness_factor = (
-            100.0 + self.uniqueness_ratio if self.uniqueness_ratio > 0 else 0.0
-        )
+        self.uniqueness_factor = 100.0 + self.uniqueness_ratio if self.uniqueness_ratio > 0 else 0.0
         self.texture_threshold = check.non_negative("texture_threshold", texture_threshold)
         # The block's gradient sum must be >= texture_sum_min (computed once, here, so the
         # kernel and the oracle compare against the same double).
@@ -226,7 +234,8 @@ def as_image(image: Any, name: str) -> np.ndarray:
     """Checks dtype and shape; returns a C-contiguous array (copying only when needed)."""
     if not isinstance(image, np.ndarray):
         raise TypeError(
-            f"{name} must be a numpy.ndarray ({_IMAGE_RULE}), got {type(image).__name__}")
+            f"{name} must be a numpy.ndarray ({_IMAGE_RULE}), got {type(image).__name__}"
+        )
     if image.dtype not in (np.uint8, np.uint16):
         raise TypeError(f"{name} must be {_IMAGE_RULE}, got dtype {image.dtype}")
     if image.ndim == 3:
@@ -236,7 +245,8 @@ def as_image(image: Any, name: str) -> np.ndarray:
         raise ValueError(f"{name} must be {_IMAGE_RULE}, got shape {image.shape}")
     if image.shape[0] < 1 or image.shape[1] < 1:
         raise ValueError(
-            f"{name} must have at least one row and one column, got shape {image.shape}")
+            f"{name} must have at least one row and one column, got shape {image.shape}"
+        )
     return np.ascontiguousarray(image)
 
 
@@ -285,20 +295,35 @@ class StereoMatcher:
         isa: str = "auto",
     ) -> None:
         self._options = BlockMatchOptions(
-            num_disparities=num_disparities, min_disparity=min_disparity, block_size=block_size,
-            cost=cost, subpixel=subpixel, uniqueness_ratio=uniqueness_ratio,
-            texture_threshold=texture_threshold, lr_max_diff=lr_max_diff,
-            speckle_window=speckle_window, speckle_range=speckle_range, threads=threads,
+            num_disparities=num_disparities,
+            min_disparity=min_disparity,
+            block_size=block_size,
+            cost=cost,
+            subpixel=subpixel,
+            uniqueness_ratio=uniqueness_ratio,
+            texture_threshold=texture_threshold,
+            lr_max_diff=lr_max_diff,
+            speckle_window=speckle_window,
+            speckle_range=speckle_range,
+            threads=threads,
             return_confidence=return_confidence,
         )
         if not isinstance(isa, str):
             raise TypeError(f"isa must be a str, got {type(isa).__name__} {isa!r}")
         o = self._options
         self._native = _core.BlockMatcher(
-            o.num_disparities, o.min_disparity, o.block_size, o.cost,
-            o.subpixel or "none", o.uniqueness_ratio, o.texture_threshold,
+            o.num_disparities,
+            o.min_disparity,
+            o.block_size,
+            o.cost,
+            o.subpixel or "none",
+            o.uniqueness_ratio,
+            o.texture_threshold,
             -1.0 if o.lr_max_diff is None else o.lr_max_diff,
-            o.speckle_window, o.speckle_range, o.threads, isa,
+            o.speckle_window,
+            o.speckle_range,
+            o.threads,
+            isa,
         )
 
     @property
@@ -310,17 +335,13 @@ class StereoMatcher:
         args = ", ".join(f"{k}={v!r}" for k, v in self.params.items())
         return f"StereoMatcher({args})"
 
-    def compute(
-        self, left: Any, right: Any
-    ) -> np.ndarray | tuple[np.ndarray, np.ndarray]:
+    def compute(self, left: Any, right: Any) -> np.ndarray | tuple[np.ndarray, np.ndarray]:
         """The float32 disparity of ``left`` (and the confidence, if the matcher was made
         with ``return_confidence=True``); see :func:`block_match`."""
         left_arr, right_arr = as_pair(left, right)
         shape = left_arr.shape[:2]
         disparity = np.empty(shape, dtype=np.float32)
-        confidence = (
-            np.empty(shape, dtype=np.float32) if self._options.return_confidence else None
-        )
+        confidence = np.empty(shape, dtype=np.float32) if self._options.return_confidence else None
         self._native.compute(left_arr, right_arr, disparity, confidence)
         if confidence is not None:
             return disparity, confidence
@@ -394,10 +415,17 @@ def block_match(
     The GIL is released while the kernel runs.
     """
     matcher = StereoMatcher(
-        num_disparities=num_disparities, min_disparity=min_disparity, block_size=block_size,
-        cost=cost, subpixel=subpixel, uniqueness_ratio=uniqueness_ratio,
-        texture_threshold=texture_threshold, lr_max_diff=lr_max_diff,
-        speckle_window=speckle_window, speckle_range=speckle_range, threads=threads,
+        num_disparities=num_disparities,
+        min_disparity=min_disparity,
+        block_size=block_size,
+        cost=cost,
+        subpixel=subpixel,
+        uniqueness_ratio=uniqueness_ratio,
+        texture_threshold=texture_threshold,
+        lr_max_diff=lr_max_diff,
+        speckle_window=speckle_window,
+        speckle_range=speckle_range,
+        threads=threads,
         return_confidence=return_confidence,
     )
     return matcher.compute(left, right)

@@ -35,9 +35,7 @@ def _matplotlib() -> None:
     try:
         import matplotlib  # noqa: F401
     except ImportError as exc:  # pragma: no cover - depends on the environment
-        raise ImportError(
-            'the charts need matplotlib: pip install "stereodepth[plot]"'
-        ) from exc
+        raise ImportError('the charts need matplotlib: pip install "stereodepth[plot]"') from exc
 
 
 def _label(chart: Chart, name: str, y: float) -> str:
@@ -56,16 +54,35 @@ def _draw(ax: Axes, chart: Chart) -> None:
         edge = _SERIES_COLOURS[i % len(_SERIES_COLOURS)] if len(chart.markers) > 1 else "white"
         if i == 0:
             ax.axvline(m.x, color=_TARGET_COLOUR, lw=0.8, ls=":", zorder=1)
-        ax.plot([m.x], [m.y], ls="none", marker="D", ms=8, color=_TARGET_COLOUR,
-                markeredgecolor=edge, markeredgewidth=1.5, label=m.name, zorder=3)
+        ax.plot(
+            [m.x],
+            [m.y],
+            ls="none",
+            marker="D",
+            ms=8,
+            color=_TARGET_COLOUR,
+            markeredgecolor=edge,
+            markeredgewidth=1.5,
+            label=m.name,
+            zorder=3,
+        )
         # Label on the side with more room: left of a point in the right part of the axis.
-        right_part = bool(xs) and chart.x_log and min(xs) < max(xs) and (
-            math.log(m.x / min(xs)) / math.log(max(xs) / min(xs)) > 0.6
+        right_part = (
+            bool(xs)
+            and chart.x_log
+            and min(xs) < max(xs)
+            and (math.log(m.x / min(xs)) / math.log(max(xs) / min(xs)) > 0.6)
         )
         ax.annotate(
-            _label(chart, m.name, m.y), (m.x, m.y), xytext=(-10 if right_part else 10, 0),
-            textcoords="offset points", fontsize=8, color=_TARGET_COLOUR, va="center",
-            ha="right" if right_part else "left", zorder=4,
+            _label(chart, m.name, m.y),
+            (m.x, m.y),
+            xytext=(-10 if right_part else 10, 0),
+            textcoords="offset points",
+            fontsize=8,
+            color=_TARGET_COLOUR,
+            va="center",
+            ha="right" if right_part else "left",
+            zorder=4,
             bbox={"boxstyle": "round,pad=0.25", "fc": "white", "ec": "#fecaca", "lw": 0.8},
         )
     if chart.x_log:
@@ -100,9 +117,7 @@ def draw_charts(charts: Charts, *, title: str | None = None) -> Figure:
 def _format(path: Path) -> str:
     fmt = FORMATS.get(path.suffix.lower())
     if fmt is None:
-        raise ValueError(
-            f"the chart file must end in {', '.join(FORMATS)}, got {str(path)!r}"
-        )
+        raise ValueError(f"the chart file must end in {', '.join(FORMATS)}, got {str(path)!r}")
     return fmt
 
 
@@ -130,7 +145,9 @@ def save_charts(
     if not 10 <= check.integer("dpi", dpi, minimum=10) <= 1200:
         raise ValueError(f"dpi must be an integer from 10 to 1200, got {dpi!r}")
     charts = chart_data(
-        rig, disparity_px=disparity_px, disparity_step_px=disparity_step_px,
+        rig,
+        disparity_px=disparity_px,
+        disparity_step_px=disparity_step_px,
         max_disparity_px=max_disparity_px,
     )
     fig = draw_charts(charts, title=repr(rig))

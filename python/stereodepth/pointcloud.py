@@ -33,8 +33,12 @@ def q_matrix(
     cy = check.finite("cy_px", cy_px)
     doffs = check.finite("doffs_px", doffs_px)
     return np.array(
-        [[b, 0.0, 0.0, -cx * b], [0.0, b, 0.0, -cy * b], [0.0, 0.0, 0.0, f * b],
-         [0.0, 0.0, 1.0, doffs]],
+        [
+            [b, 0.0, 0.0, -cx * b],
+            [0.0, b, 0.0, -cy * b],
+            [0.0, 0.0, 0.0, f * b],
+            [0.0, 0.0, 1.0, doffs],
+        ],
         dtype=np.float64,
     )
 
@@ -59,8 +63,13 @@ class ReprojectOptions:
         max_depth_m: Any,
         invalid_value: Any,
     ) -> None:
-        rig = {"focal_px": focal_px, "baseline_m": baseline_m, "cx_px": cx_px, "cy_px": cy_px,
-               "doffs_px": doffs_px}
+        rig = {
+            "focal_px": focal_px,
+            "baseline_m": baseline_m,
+            "cx_px": cx_px,
+            "cy_px": cy_px,
+            "doffs_px": doffs_px,
+        }
         if Q is not None:
             given = [k for k, v in rig.items() if v is not None]
             if given:
@@ -78,7 +87,8 @@ class ReprojectOptions:
                 )
             rows, cols = disparity.shape[-2:]
             self.Q = q_matrix(
-                focal_px=focal_px, baseline_m=baseline_m,
+                focal_px=focal_px,
+                baseline_m=baseline_m,
                 cx_px=(cols - 1) / 2.0 if cx_px is None else cx_px,
                 cy_px=(rows - 1) / 2.0 if cy_px is None else cy_px,
                 doffs_px=0.0 if doffs_px is None else doffs_px,
@@ -86,8 +96,14 @@ class ReprojectOptions:
         # The disparity conventions (scale, holes, limits) are exactly disparity_to_depth's;
         # the rig numbers given here only satisfy its checks and are not used.
         o = DepthOptions(
-            disparity, focal_px=1.0, baseline_m=1.0, doffs_px=0.0, scale=scale,
-            dtype=np.float32, min_depth_m=min_depth_m, max_depth_m=max_depth_m,
+            disparity,
+            focal_px=1.0,
+            baseline_m=1.0,
+            doffs_px=0.0,
+            scale=scale,
+            dtype=np.float32,
+            min_depth_m=min_depth_m,
+            max_depth_m=max_depth_m,
             invalid_value=invalid_value,
         )
         self.scale = o.scale
@@ -177,8 +193,16 @@ def reproject(
     """
     arr = as_disparity(disparity)
     opts = ReprojectOptions(
-        arr, Q=Q, focal_px=focal_px, baseline_m=baseline_m, cx_px=cx_px, cy_px=cy_px,
-        doffs_px=doffs_px, scale=scale, min_depth_m=min_depth_m, max_depth_m=max_depth_m,
+        arr,
+        Q=Q,
+        focal_px=focal_px,
+        baseline_m=baseline_m,
+        cx_px=cx_px,
+        cy_px=cy_px,
+        doffs_px=doffs_px,
+        scale=scale,
+        min_depth_m=min_depth_m,
+        max_depth_m=max_depth_m,
         invalid_value=invalid_value,
     )
     nthreads = check.threads(threads)
@@ -192,8 +216,15 @@ def reproject(
     ):
         arr = np.ascontiguousarray(arr)
     _core.reproject(
-        arr, result, opts.Q, opts.scale, opts.min_depth_m, opts.max_depth_m,
-        opts.invalid_value, opts.negative_invalid, nthreads,
+        arr,
+        result,
+        opts.Q,
+        opts.scale,
+        opts.min_depth_m,
+        opts.max_depth_m,
+        opts.invalid_value,
+        opts.negative_invalid,
+        nthreads,
     )
     return result
 

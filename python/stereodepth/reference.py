@@ -35,8 +35,14 @@ def disparity_to_depth(
     """Oracle of :func:`stereodepth.disparity_to_depth` (``threads`` is checked, then unused)."""
     arr = as_disparity(disparity)
     o = DepthOptions(
-        arr, focal_px=focal_px, baseline_m=baseline_m, doffs_px=doffs_px, scale=scale,
-        dtype=dtype, min_depth_m=min_depth_m, max_depth_m=max_depth_m,
+        arr,
+        focal_px=focal_px,
+        baseline_m=baseline_m,
+        doffs_px=doffs_px,
+        scale=scale,
+        dtype=dtype,
+        min_depth_m=min_depth_m,
+        max_depth_m=max_depth_m,
         invalid_value=invalid_value,
     )
     check.threads(threads)
@@ -62,8 +68,11 @@ def disparity_to_depth(
             z = k / den
             if o.dtype == np.float32:
                 zf = z.astype(np.float32)
-                ok = (den > 0) & (zf >= np.float32(o.min_depth_m)) & (
-                    zf <= np.float32(o.max_depth_m))
+                ok = (
+                    (den > 0)
+                    & (zf >= np.float32(o.min_depth_m))
+                    & (zf <= np.float32(o.max_depth_m))
+                )
             else:
                 ok = (den > 0) & (z >= o.min_depth_m) & (z <= o.max_depth_m)
             if o.invalid_value is not None:
@@ -100,8 +109,16 @@ def reproject(
 
     arr = as_disparity(disparity)
     o = ReprojectOptions(
-        arr, Q=Q, focal_px=focal_px, baseline_m=baseline_m, cx_px=cx_px, cy_px=cy_px,
-        doffs_px=doffs_px, scale=scale, min_depth_m=min_depth_m, max_depth_m=max_depth_m,
+        arr,
+        Q=Q,
+        focal_px=focal_px,
+        baseline_m=baseline_m,
+        cx_px=cx_px,
+        cy_px=cy_px,
+        doffs_px=doffs_px,
+        scale=scale,
+        min_depth_m=min_depth_m,
+        max_depth_m=max_depth_m,
         invalid_value=invalid_value,
     )
     check.threads(threads)
@@ -121,8 +138,13 @@ def reproject(
             for i in range(3)
         ]
         px, py, pz = xyz
-        ok = (np.isfinite(px) & np.isfinite(py) & (pz > 0)
-              & (pz >= np.float32(o.min_depth_m)) & (pz <= np.float32(o.max_depth_m)))
+        ok = (
+            np.isfinite(px)
+            & np.isfinite(py)
+            & (pz > 0)
+            & (pz >= np.float32(o.min_depth_m))
+            & (pz <= np.float32(o.max_depth_m))
+        )
     if o.invalid_value is not None:
         # compared in float32, or float64 for float64 input, as disparity_to_depth does
         if arr.dtype == np.float64:

@@ -26,7 +26,22 @@ __all__ = ["DepthTable", "StereoRig"]
 ArrayLike = Any
 #: The default disparities of StereoRig.table(): a 1-1.5-2 series from 1 to 256 px.
 DEFAULT_TABLE_DISPARITIES_PX: tuple[float, ...] = (
-    1, 2, 3, 4, 6, 8, 12, 16, 24, 32, 48, 64, 96, 128, 192, 256,
+    1,
+    2,
+    3,
+    4,
+    6,
+    8,
+    12,
+    16,
+    24,
+    32,
+    48,
+    64,
+    96,
+    128,
+    192,
+    256,
 )
 
 
@@ -95,8 +110,15 @@ class StereoRig:
     (1.2857, 0.7)
     """
 
-    __slots__ = ("_baseline_mm", "_doffs_px", "_focal_mm", "_focal_px", "_height_px",
-                 "_pixel_um", "_width_px")
+    __slots__ = (
+        "_baseline_mm",
+        "_doffs_px",
+        "_focal_mm",
+        "_focal_px",
+        "_height_px",
+        "_pixel_um",
+        "_width_px",
+    )
 
     def __init__(
         self,
@@ -149,8 +171,11 @@ class StereoRig:
 
         c = read_middlebury_calib(path)
         return cls.from_pixels(
-            baseline_mm=c.baseline_mm, focal_px=c.focal_px, width_px=c.width_px,
-            doffs_px=c.doffs_px, height_px=c.height_px,
+            baseline_mm=c.baseline_mm,
+            focal_px=c.focal_px,
+            width_px=c.width_px,
+            doffs_px=c.doffs_px,
+            height_px=c.height_px,
         )
 
     # --- the rig's numbers -----------------------------------------------------------------
@@ -185,8 +210,10 @@ class StereoRig:
 
     def __repr__(self) -> str:
         if self._focal_mm is not None:
-            core = (f"baseline_mm={self._baseline_mm!r}, focal_mm={self._focal_mm!r}, "
-                    f"pixel_um={self._pixel_um!r}")
+            core = (
+                f"baseline_mm={self._baseline_mm!r}, focal_mm={self._focal_mm!r}, "
+                f"pixel_um={self._pixel_um!r}"
+            )
         else:
             core = f"baseline_mm={self._baseline_mm!r}, focal_px={self._focal_px!r}"
             if self._doffs_px:
@@ -418,6 +445,9 @@ class StereoRig:
         from .depth import disparity_to_depth
 
         return disparity_to_depth(
-            disparity, focal_px=self._focal_px, baseline_m=self._baseline_mm / 1000.0,
-            doffs_px=self._doffs_px, **options,
+            disparity,
+            focal_px=self._focal_px,
+            baseline_m=self._baseline_mm / 1000.0,
+            doffs_px=self._doffs_px,
+            **options,
         )

@@ -85,9 +85,14 @@ class Field:
 
     def to_dict(self) -> dict[str, Any]:
         return {
-            "name": self.name, "unit": self.unit, "description": self.description,
-            "rule": self.rule, "integer": self.integer, "minimum": self.minimum,
-            "exclusive_minimum": self.exclusive_minimum, "maximum": self.maximum,
+            "name": self.name,
+            "unit": self.unit,
+            "description": self.description,
+            "rule": self.rule,
+            "integer": self.integer,
+            "minimum": self.minimum,
+            "exclusive_minimum": self.exclusive_minimum,
+            "maximum": self.maximum,
         }
 
     def query(self) -> Any:
@@ -104,22 +109,54 @@ _F = [
     Field("baseline_mm", "mm", "baseline B: the distance between the optical centres"),
     Field("focal_mm", "mm", "focal length f of the lenses", maximum=1e4),
     Field("pixel_um", "µm", "pixel size p of the sensor", maximum=1e3),
-    Field("focal_px", "px", "focal length in pixels, f / p (replaces focal_mm and pixel_um)",
-          maximum=1e7),
-    Field("doffs_px", "px", "principal point offset, with focal_px (Middlebury doffs)",
-          minimum=-1e6, exclusive_minimum=False),
-    Field("width_px", "px", "image width W, for the horizontal field of view", integer=True,
-          minimum=1, exclusive_minimum=False),
-    Field("height_px", "px", "image height, for the vertical field of view", integer=True,
-          minimum=1, exclusive_minimum=False),
-    Field("disparity_px", "px", "disparity d of the target (0: infinitely far)",
-          exclusive_minimum=False),
-    Field("disparity_step_px", "px",
-          "the matcher's disparity accuracy, e.g. 0.25 for sub-pixel; 1 for whole pixels",
-          maximum=1e3),
+    Field(
+        "focal_px",
+        "px",
+        "focal length in pixels, f / p (replaces focal_mm and pixel_um)",
+        maximum=1e7,
+    ),
+    Field(
+        "doffs_px",
+        "px",
+        "principal point offset, with focal_px (Middlebury doffs)",
+        minimum=-1e6,
+        exclusive_minimum=False,
+    ),
+    Field(
+        "width_px",
+        "px",
+        "image width W, for the horizontal field of view",
+        integer=True,
+        minimum=1,
+        exclusive_minimum=False,
+    ),
+    Field(
+        "height_px",
+        "px",
+        "image height, for the vertical field of view",
+        integer=True,
+        minimum=1,
+        exclusive_minimum=False,
+    ),
+    Field(
+        "disparity_px",
+        "px",
+        "disparity d of the target (0: infinitely far)",
+        exclusive_minimum=False,
+    ),
+    Field(
+        "disparity_step_px",
+        "px",
+        "the matcher's disparity accuracy, e.g. 0.25 for sub-pixel; 1 for whole pixels",
+        maximum=1e3,
+    ),
     Field("max_disparity_px", "px", "top of the disparity search range, for the min depth"),
-    Field("table_disparities_px", "px", "disparities for the table (default 1 to 256 px)",
-          exclusive_minimum=False),
+    Field(
+        "table_disparities_px",
+        "px",
+        "disparities for the table (default 1 to 256 px)",
+        exclusive_minimum=False,
+    ),
     Field("inverse_depth_m", "m", "the inverse question: at this depth Z ..."),
     Field("inverse_depth_resolution_m", "m", "... which baseline gives this depth error ΔZ?"),
 ]
@@ -230,7 +267,7 @@ def _library_error(exc: Exception, names: dict[str, str]) -> dict[str, Any]:
     first = msg.split(" ", 1)[0]
     field = names.get(first, first)
     if field in FIELDS:
-        return _error(field, field + msg[len(first):])
+        return _error(field, field + msg[len(first) :])
     return _error(None, msg)
 
 
@@ -274,21 +311,38 @@ def _finite_or_none(x: float) -> float | None:
 
 
 def _rig(
-    baseline_mm: float, focal_mm: float | None, pixel_um: float | None, focal_px: float | None,
-    doffs_px: float | None, width_px: int | None, height_px: int | None,
+    baseline_mm: float,
+    focal_mm: float | None,
+    pixel_um: float | None,
+    focal_px: float | None,
+    doffs_px: float | None,
+    width_px: int | None,
+    height_px: int | None,
 ) -> StereoRig | list[dict[str, Any]]:
     """The rig, or the errors that prevent it (the rules of ``stereodepth calc``)."""
     if focal_px is not None:
         clash = [n for n, v in (("focal_mm", focal_mm), ("pixel_um", pixel_um)) if v is not None]
         if clash:
-            return [_error(n, f"give either focal_px, or focal_mm and pixel_um, not both "
-                              f"(got focal_px and {n})") for n in clash]
+            return [
+                _error(
+                    n,
+                    f"give either focal_px, or focal_mm and pixel_um, not both "
+                    f"(got focal_px and {n})",
+                )
+                for n in clash
+            ]
         return StereoRig.from_pixels(
-            baseline_mm, focal_px, width_px=width_px, doffs_px=doffs_px or 0.0,
+            baseline_mm,
+            focal_px,
+            width_px=width_px,
+            doffs_px=doffs_px or 0.0,
             height_px=height_px,
         )
-    errors = [_error(n, f"{n} is required (or give focal_px)", "missing")
-              for n, v in (("focal_mm", focal_mm), ("pixel_um", pixel_um)) if v is None]
+    errors = [
+        _error(n, f"{n} is required (or give focal_px)", "missing")
+        for n, v in (("focal_mm", focal_mm), ("pixel_um", pixel_um))
+        if v is None
+    ]
     if doffs_px:
         errors.append(_error("doffs_px", "doffs_px goes with focal_px (a calibration in pixels)"))
     if errors or focal_mm is None or pixel_um is None:
@@ -323,19 +377,25 @@ def calculate(
             return rig
         try:
             summary = rig.summary(
-                disparity_px, disparity_step_px=disparity_step_px,
-                max_disparity_px=max_disparity_px, table_disparities_px=table_disparities_px,
+                disparity_px,
+                disparity_step_px=disparity_step_px,
+                max_disparity_px=max_disparity_px,
+                table_disparities_px=table_disparities_px,
             )
             charts = chart_data(
-                rig, disparity_px=disparity_px, disparity_step_px=disparity_step_px,
+                rig,
+                disparity_px=disparity_px,
+                disparity_step_px=disparity_step_px,
                 max_disparity_px=max_disparity_px,
             ).to_dict()
         except _LIBRARY_ERRORS as exc:
             return [_library_error(exc, _SUMMARY_NAMES)]
 
         inverse = None
-        asked = {"inverse_depth_m": inverse_depth_m,
-                 "inverse_depth_resolution_m": inverse_depth_resolution_m}
+        asked = {
+            "inverse_depth_m": inverse_depth_m,
+            "inverse_depth_resolution_m": inverse_depth_resolution_m,
+        }
         given = [n for n, v in asked.items() if v is not None]
         if len(given) == 1:
             (missing,) = set(asked) - set(given)
@@ -380,9 +440,11 @@ def calc(
     max_disparity_px: Annotated[float | None, FIELDS["max_disparity_px"].query()] = None,
     table_disparities_px: Annotated[
         list[Annotated[float, PydanticField(ge=0, le=1e6, allow_inf_nan=False)]] | None,
-        Query(description=f"{FIELDS['table_disparities_px'].description} (px): "
-                          f"{FIELDS['table_disparities_px'].rule}; repeat the parameter",
-              max_length=_TABLE_MAX_ROWS),
+        Query(
+            description=f"{FIELDS['table_disparities_px'].description} (px): "
+            f"{FIELDS['table_disparities_px'].rule}; repeat the parameter",
+            max_length=_TABLE_MAX_ROWS,
+        ),
     ] = None,
     inverse_depth_m: Annotated[float | None, FIELDS["inverse_depth_m"].query()] = None,
     inverse_depth_resolution_m: Annotated[
@@ -390,11 +452,17 @@ def calc(
     ] = None,
 ) -> JSONResponse:
     result = calculate(
-        baseline_mm=baseline_mm, focal_mm=focal_mm, pixel_um=pixel_um, focal_px=focal_px,
-        doffs_px=doffs_px, width_px=width_px, height_px=height_px,
+        baseline_mm=baseline_mm,
+        focal_mm=focal_mm,
+        pixel_um=pixel_um,
+        focal_px=focal_px,
+        doffs_px=doffs_px,
+        width_px=width_px,
+        height_px=height_px,
         disparity_px=disparity_px,
         disparity_step_px=1.0 if disparity_step_px is None else disparity_step_px,
-        max_disparity_px=max_disparity_px, table_disparities_px=table_disparities_px,
+        max_disparity_px=max_disparity_px,
+        table_disparities_px=table_disparities_px,
         inverse_depth_m=inverse_depth_m,
         inverse_depth_resolution_m=inverse_depth_resolution_m,
     )
@@ -446,13 +514,17 @@ def create_app() -> FastAPI:
 
     @app.get("/vendor/plotly.min.js", include_in_schema=False)
     def plotly() -> FileResponse:
-        return FileResponse(plotly_js, media_type="text/javascript",
-                            headers={"Cache-Control": "public, max-age=86400"})
+        return FileResponse(
+            plotly_js,
+            media_type="text/javascript",
+            headers={"Cache-Control": "public, max-age=86400"},
+        )
 
     @app.get("/", include_in_schema=False)
     def index() -> FileResponse:
-        return FileResponse(STATIC_DIR / "index.html", media_type="text/html",
-                            headers={"Cache-Control": "no-cache"})
+        return FileResponse(
+            STATIC_DIR / "index.html", media_type="text/html", headers={"Cache-Control": "no-cache"}
+        )
 
     app.mount("/static", StaticFiles(directory=STATIC_DIR), name="static")
     return app

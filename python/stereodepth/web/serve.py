@@ -28,10 +28,17 @@ def register(subparsers: Any) -> None:
             "(/api/calc; schema at /openapi.json). Needs the 'web' extra."
         ),
     )
-    p.add_argument("--host", default=DEFAULT_HOST,
-                   help=f"address to listen on (default {DEFAULT_HOST}: this machine only)")
-    p.add_argument("--port", type=int, default=DEFAULT_PORT,
-                   help=f"TCP port (default {DEFAULT_PORT}; 0: any free port)")
+    p.add_argument(
+        "--host",
+        default=DEFAULT_HOST,
+        help=f"address to listen on (default {DEFAULT_HOST}: this machine only)",
+    )
+    p.add_argument(
+        "--port",
+        type=int,
+        default=DEFAULT_PORT,
+        help=f"TCP port (default {DEFAULT_PORT}; 0: any free port)",
+    )
     p.add_argument("--open", action="store_true", help="open the page in a web browser")
     p.set_defaults(func=run)
 
@@ -52,8 +59,9 @@ def bind(host: str, port: int) -> socket.socket:
     try:
         infos = socket.getaddrinfo(host, port, type=socket.SOCK_STREAM, flags=socket.AI_PASSIVE)
     except socket.gaierror as exc:
-        raise ValueError(f"--host must be an address of this machine, got {host!r} "
-                         f"({exc.strerror})") from None
+        raise ValueError(
+            f"--host must be an address of this machine, got {host!r} ({exc.strerror})"
+        ) from None
     family, kind, proto, _, address = infos[0]
     sock = socket.socket(family, kind, proto)
     try:
@@ -84,16 +92,22 @@ def run(args: argparse.Namespace) -> int:
 
         from .app import create_app
     except ImportError as exc:
-        print(f"stereodepth serve: error: the web page needs the 'web' extra: "
-              f'pip install "stereodepth[web]" ({exc})', file=sys.stderr)
+        print(
+            f"stereodepth serve: error: the web page needs the 'web' extra: "
+            f'pip install "stereodepth[web]" ({exc})',
+            file=sys.stderr,
+        )
         return 1
 
     sock = bind(args.host, args.port)
     url = url_of(sock)
     if not _is_loopback(args.host):
-        print(f"stereodepth serve: warning: listening on {args.host}, which other machines "
-              "may reach; the default 127.0.0.1 keeps the page on this machine",
-              file=sys.stderr, flush=True)
+        print(
+            f"stereodepth serve: warning: listening on {args.host}, which other machines "
+            "may reach; the default 127.0.0.1 keeps the page on this machine",
+            file=sys.stderr,
+            flush=True,
+        )
     print(f"stereodepth serve: the calculator is at {url}  (Ctrl+C stops it)", flush=True)
     if args.open:
         import webbrowser
@@ -101,8 +115,7 @@ def run(args: argparse.Namespace) -> int:
         # The socket already listens, so the browser's first request waits in its backlog.
         threading.Thread(target=webbrowser.open, args=(url,), daemon=True).start()
 
-    config = uvicorn.Config(create_app(), log_level="warning", access_log=False,
-                            lifespan="off")
+    config = uvicorn.Config(create_app(), log_level="warning", access_log=False, lifespan="off")
     server = uvicorn.Server(config)
     try:
         # uvicorn shuts down gracefully on Ctrl+C or SIGTERM, then raises the signal again.
