@@ -105,3 +105,18 @@ def test_bad_input_is_one_line_and_status_2(args: list[str], message: str) -> No
 def test_unparseable_number_is_status_2() -> None:
     r = run("calc", "--baseline-mm", "abc", "--focal-mm", "6", "--pixel-um", "2")
     assert r.returncode == 2 and "invalid float value: 'abc'" in r.stderr
+
+
+def test_plot_without_matplotlib_is_one_line_and_status_1(
+    tmp_path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    monkeypatch.setitem(sys.modules, "matplotlib", None)  # import matplotlib fails
+    out = tmp_path / "charts.png"
+    argv = ["calc", "--baseline-mm", "150", "--focal-px", "2143", "--plot", str(out)]
+    assert main(argv) == 1
+    err = capsys.readouterr().err
+    assert (
+        err
+        == 'stereodepth calc: error: the charts need matplotlib: pip install "stereodepth[plot]"\n'
+    )
+    assert not out.exists()

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import sys
 
 import numpy as np
 import pytest
@@ -192,6 +193,14 @@ def test_depth_decreases_with_disparity(ds: list[float]) -> None:
         ({**ARM, "width_px": 0}, ValueError, "width_px must be an integer >= 1, got 0"),
         ({**ARM, "width_px": 12.5}, TypeError, "width_px must be an integer, got float"),
         ({**ARM, "height_px": -3}, ValueError, "height_px must be an integer >= 1, got -3"),
+        ({**ARM, "width_px": 10**30}, ValueError, "width_px must be an integer <= 16777216"),
+        ({**ARM, "focal_mm": 1e-300, "pixel_um": 1e20}, ValueError, "focal length of 1e-317 px"),
+        ({**ARM, "focal_mm": 1e300, "pixel_um": 1e-20}, ValueError, "focal length of inf px"),
+        (
+            {**ARM, "baseline_mm": 1e-300, "focal_mm": 1e-12},
+            ValueError,
+            "B\\*f = 3.57.*e-313 m\\*px, outside",
+        ),
     ],
 )
 def test_rejected_rig(kwargs, exc, match) -> None:
@@ -212,6 +221,11 @@ def test_rejected_rig(kwargs, exc, match) -> None:
         (lambda r: r.depth_resolution_m(-1.0), ValueError, "depth_m must be > 0, got -1.0"),
         (lambda r: r.depth_resolution_m(1.0, exact=1), TypeError, "exact must be a bool"),
         (lambda r: r.min_depth_m(0), ValueError, "max_disparity_px must be a finite number > 0"),
+        (
+            lambda r: StereoRig.from_pixels(100, 700, doffs_px=-5).min_depth_m(3),
+            ValueError,
+            "max_disparity_px must be finite and >= 5, got 3.0",
+        ),
         (lambda r: r.required_baseline_mm(10, 0), ValueError, "depth_resolution_m .* got 0"),
         (lambda r: r.table([]), ValueError, "disparities_px must be a non-empty 1-D sequence"),
         (lambda r: r.table([1, -1]), ValueError, "disparities_px must be finite and >= 0"),
@@ -226,3 +240,42 @@ def test_rejected_questions(call, exc, match) -> None:
 def test_hfov_needs_width() -> None:
     with pytest.raises(ValueError, match="hfov_deg needs width_px, got None"):
         _ = StereoRig(baseline_mm=1, focal_mm=1, pixel_um=1).hfov_deg
+
+
+@pytest.mark.parametrize("doffs", [-0.5, -1.0, -5.0, -300.5])
+def test_negative_doffs_moves_infinity(doffs: float) -> None:
+    # With d + doffs <= 0 at 1 px, a whole-pixel matcher already reaches infinity.
+    rig = StereoRig.from_pixels(100, 700, width_px=640, doffs_px=doffs)
+    assert rig.max_depth_m == (math.inf if doffs <= -1 else 70.0 / (1 + doffs))
+    rows = rig.table().to_records()
+    assert rows[0]["disparity_px"] >= -doffs
+    assert rows[0]["disparity_px"] < -doffs + 2 or rows[0]["disparity_px"] in (1.0, 6.0)
+    summary = rig.summary(400, max_disparity_px=500)
+    assert summary["max_depth_m"] == (None if doffs <= -1 else rig.max_depth_m)
+    assert summary["depth_m"] == pytest.approx(70.0 / (400 + doffs))
+
+
+_EXTREME = st.sampled_from([1e-300, 1e-150, 1e-12, 1e-3, 1.0, 1e3, 1e12, 1e150, 1e300])
+
+
+@settings(max_examples=150, deadline=None)
+@given(_EXTREME, _EXTREME, _EXTREME, st.sampled_from([0.0, 1e-300, 0.5, 1.0, 1e300]))
+def test_extreme_numbers_answer_or_raise_value_error(b: float, f: float, p: float, d: float):
+    """Far outside any real rig, every answer is a number, inf or None, never a warning (the
+    suite turns warnings into errors) or a ZeroDivisionError; a rig whose focal length or
+    B*f leaves the range of a double is refused at construction."""
+    focal_px = f / (p / 1000.0)
+    if not (
+        sys.float_info.min <= focal_px < math.inf
+        and sys.float_info.min <= b / 1000.0 * focal_px < math.inf
+    ):
+        with pytest.raises(ValueError, match="outside the range of a double"):
+            StereoRig(b, f, p, width_px=1 << 24, height_px=1)
+        return
+    rig = StereoRig(b, f, p, width_px=1 << 24, height_px=1)
+    summary = rig.summary(d, disparity_step_px=0.25, max_disparity_px=256)
+    assert summary["focal_px"] > 0
+    for row in summary["table"]:
+        assert all(v is None or v >= 0 for v in row.values())
+    rig.table(disparity_step_px=0.5).to_text()
+    assert rig.required_baseline_mm(1e300, 1e-300) >= 0

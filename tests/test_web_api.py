@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import json
 import re
-import warnings
 from typing import Any
 
 import pytest
@@ -14,10 +13,7 @@ from hypothesis import strategies as st
 
 pytest.importorskip("fastapi", reason="the web extra is not installed")
 
-with warnings.catch_warnings():
-    # Starlette's test client asks for httpx2 rather than httpx; either works the same here.
-    warnings.filterwarnings("ignore", message=".*httpx2", category=UserWarning)
-    from fastapi.testclient import TestClient
+from fastapi.testclient import TestClient
 
 from stereodepth import StereoRig
 from stereodepth.charts import chart_data

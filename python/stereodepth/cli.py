@@ -1,6 +1,7 @@
 """The ``stereodepth`` command: ``calc`` here; other subcommands register from their modules.
 
-Bad input prints one line, ``stereodepth <command>: error: ...``, and exits with status 2.
+Bad input prints one line, ``stereodepth <command>: error: ...``, and exits with status 2; a
+missing optional extra (matplotlib for ``--plot``, say) prints one line and exits with 1.
 """
 
 from __future__ import annotations
@@ -216,6 +217,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     except (UsageError, ValueError, TypeError) as exc:
         print(f"stereodepth {args.command}: error: {exc}", file=sys.stderr)
         return 2
+    except ImportError as exc:  # an optional extra that is not installed
+        print(f"stereodepth {args.command}: error: {exc}", file=sys.stderr)
+        return 1
     except KeyboardInterrupt:
         print(f"stereodepth {args.command}: interrupted", file=sys.stderr)
         return 130

@@ -788,23 +788,15 @@ def _variants(
     return sorted(out, key=lambda v: order.index(v.method))
 
 
-def _matcher_default_block_size() -> int | None:
-    """The default ``block_size`` of stereodepth.block_match, when its signature shows one."""
+def _matcher_default_block_size() -> int:
+    """The default ``block_size`` of stereodepth.block_match, read from its signature."""
     import inspect
 
-    import stereodepth
+    from stereodepth.matching import block_match
 
-    try:
-        default = (
-            inspect.signature(getattr(stereodepth, "block_match"))
-            .parameters[  # noqa: B009
-                "block_size"
-            ]
-            .default
-        )
-    except (AttributeError, KeyError, TypeError, ValueError):
-        return None
-    return default if isinstance(default, int) and not isinstance(default, bool) else None
+    default = inspect.signature(block_match).parameters["block_size"].default
+    assert isinstance(default, int)
+    return default
 
 
 def _jsonable(value: Any) -> Any:

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import math
 import os
+import sys
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 from typing import Any, overload
@@ -92,6 +93,17 @@ class DepthTable:
         return self.to_text()
 
 
+#: The largest image width or height accepted: far beyond any sensor, small enough that
+#: every derived number stays an ordinary float.
+MAX_IMAGE_SIZE_PX = 1 << 24
+
+
+def _image_size(name: str, value: int | None) -> int | None:
+    if value is None:
+        return None
+    return check.integer(name, value, minimum=1, maximum=MAX_IMAGE_SIZE_PX)
+
+
 def _fmt(v: float) -> str:
     if math.isinf(v):
         return "inf"
@@ -132,13 +144,10 @@ class StereoRig:
         self._focal_mm: float | None = check.positive("focal_mm", focal_mm)
         self._pixel_um: float | None = check.positive("pixel_um", pixel_um)
         self._focal_px = self._focal_mm / (self._pixel_um / 1000.0)
-        self._width_px = (
-            None if width_px is None else check.integer("width_px", width_px, minimum=1)
-        )
-        self._height_px = (
-            None if height_px is None else check.integer("height_px", height_px, minimum=1)
-        )
+        self._width_px = _image_size("width_px", width_px)
+        self._height_px = _image_size("height_px", height_px)
         self._doffs_px = 0.0
+        self._check_scale(f"focal_mm={focal_mm!r} and pixel_um={pixel_um!r}")
 
     @classmethod
     def from_pixels(
@@ -157,12 +166,27 @@ class StereoRig:
         rig._focal_px = check.positive("focal_px", focal_px)
         rig._focal_mm = None
         rig._pixel_um = None
-        rig._width_px = None if width_px is None else check.integer("width_px", width_px, minimum=1)
-        rig._height_px = (
-            None if height_px is None else check.integer("height_px", height_px, minimum=1)
-        )
+        rig._width_px = _image_size("width_px", width_px)
+        rig._height_px = _image_size("height_px", height_px)
         rig._doffs_px = check.finite("doffs_px", doffs_px)
+        rig._check_scale(f"focal_px={focal_px!r}")
         return rig
+
+    def _check_scale(self, focal: str) -> None:
+        """Rejects parameters whose products leave the range of a double, where every answer
+        would be 0 or inf: a focal length of 0 or inf pixels, or a zero or infinite B * f."""
+        tiny = sys.float_info.min
+        if not tiny <= self._focal_px < math.inf:
+            raise ValueError(
+                f"{focal} give a focal length of {self._focal_px!r} px, outside the range of a "
+                "double"
+            )
+        bf = self._bf_m_px
+        if not tiny <= bf < math.inf:
+            raise ValueError(
+                f"baseline_mm={self._baseline_mm!r} with a focal length of {self._focal_px!r} px "
+                f"gives B*f = {bf!r} m*px, outside the range of a double"
+            )
 
     @classmethod
     def from_middlebury_calib(cls, path: str | os.PathLike[str]) -> StereoRig:
@@ -250,7 +274,7 @@ class StereoRig:
         A disparity of 0 (with doffs 0) is a point at infinity: ``inf``. Negative, NaN or
         infinite disparities raise ValueError."""
         d = self._disparity("disparity_px", disparity_px)
-        with np.errstate(divide="ignore", over="ignore"):
+        with np.errstate(divide="ignore", over="ignore", under="ignore"):
             z = self._bf_m_px / (d + self._doffs_px)
         return _answer(z, d)
 
@@ -261,7 +285,8 @@ class StereoRig:
     def disparity_px(self, depth_m: ArrayLike) -> Any:
         """The disparity in pixels of a point at ``depth_m`` metres (> 0; inf gives -doffs)."""
         z = self._depth("depth_m", depth_m)
-        return _answer(self._bf_m_px / z - self._doffs_px, z)
+        with np.errstate(over="ignore", under="ignore"):
+            return _answer(self._bf_m_px / z - self._doffs_px, z)
 
     def _depth(self, name: str, depth_m: ArrayLike) -> np.ndarray:
         z = check.real_array(name, depth_m)
@@ -279,18 +304,22 @@ class StereoRig:
                 "focal_mm, pixel_um) rather than from_pixels"
             )
         d = self._disparity("disparity_px", disparity_px)
-        return _answer(d * (self._pixel_um / 1000.0), d)
+        with np.errstate(over="ignore", under="ignore"):
+            return _answer(d * (self._pixel_um / 1000.0), d)
 
     @property
     def max_depth_m(self) -> float:
         """The depth at a disparity of 1 px: the farthest a whole-pixel matcher can tell from
-        infinity."""
+        infinity. ``inf`` when ``doffs_px <= -1``, where a disparity of 1 px or less is already
+        at infinity."""
+        if 1.0 + self._doffs_px <= 0.0:
+            return math.inf
         return float(self.depth_m(1.0))
 
     def min_depth_m(self, max_disparity_px: float) -> float:
         """The nearest depth a matcher searching disparities up to ``max_disparity_px`` sees."""
         d = check.positive("max_disparity_px", max_disparity_px)
-        return float(self.depth_m(d))
+        return float(self.depth_m(self._disparity("max_disparity_px", d)))
 
     def depth_resolution_m(
         self, depth_m: ArrayLike, disparity_step_px: float = 1.0, *, exact: bool = False
@@ -306,11 +335,12 @@ class StereoRig:
         step = check.positive("disparity_step_px", disparity_step_px)
         if not isinstance(exact, bool):
             raise TypeError(f"exact must be a bool, got {type(exact).__name__} {exact!r}")
-        if exact:
-            den = self._bf_m_px / z  # d + doffs
-            dz = z - self._bf_m_px / (den + step)
-        else:
-            dz = z * z * step / self._bf_m_px
+        with np.errstate(over="ignore", under="ignore", invalid="ignore"):
+            if exact:
+                den = self._bf_m_px / z  # d + doffs
+                dz = z - self._bf_m_px / (den + step)
+            else:
+                dz = z * z * step / self._bf_m_px
         return _answer(dz, z)
 
     def required_baseline_mm(
@@ -322,7 +352,9 @@ class StereoRig:
         z = check.positive("depth_m", depth_m)
         dz = check.positive("depth_resolution_m", depth_resolution_m)
         step = check.positive("disparity_step_px", disparity_step_px)
-        return z * z * step / (dz * self._focal_px) * 1000.0
+        with np.errstate(over="ignore", under="ignore"):
+            b = np.float64(z) * z * step / (dz * self._focal_px) * 1000.0
+        return float(b)
 
     # --- field of view ---------------------------------------------------------------------
     @property
@@ -330,14 +362,14 @@ class StereoRig:
         """The horizontal field of view, 2 atan(W / 2 f_px), in degrees (needs width_px)."""
         if self._width_px is None:
             raise ValueError("hfov_deg needs width_px, got None")
-        return math.degrees(2.0 * math.atan(self._width_px / (2.0 * self._focal_px)))
+        return math.degrees(2.0 * math.atan(self._width_px / 2.0 / self._focal_px))
 
     @property
     def vfov_deg(self) -> float:
         """The vertical field of view in degrees (needs height_px)."""
         if self._height_px is None:
             raise ValueError("vfov_deg needs height_px, got None")
-        return math.degrees(2.0 * math.atan(self._height_px / (2.0 * self._focal_px)))
+        return math.degrees(2.0 * math.atan(self._height_px / 2.0 / self._focal_px))
 
     # --- the table -------------------------------------------------------------------------
     def table(
@@ -353,8 +385,11 @@ class StereoRig:
         ``depth_m``, ``depth_resolution_m`` (for a 1 px step) and, for another
         ``disparity_step_px``, ``depth_resolution_subpx_m``."""
         if disparities_px is None:
+            # Below the image width, and not below infinity (d + doffs >= 0).
             limit = self._width_px - 1 if self._width_px is not None else math.inf
-            ds = [float(d) for d in DEFAULT_TABLE_DISPARITIES_PX if d <= limit] or [1.0]
+            lowest = max(0.0, -self._doffs_px)
+            ds = [float(d) for d in DEFAULT_TABLE_DISPARITIES_PX if lowest <= d <= limit]
+            ds = ds or [max(1.0, math.ceil(lowest))]
         else:
             arr = check.real_array("disparities_px", disparities_px)
             if arr.ndim != 1 or arr.size == 0:
@@ -365,19 +400,18 @@ class StereoRig:
         d = self._disparity("disparities_px", np.asarray(ds))
         step = check.positive("disparity_step_px", disparity_step_px)
         z = self.depth_m(d)
-        finite_z = np.where(np.isfinite(z), z, np.nan)
-        with np.errstate(invalid="ignore"):
-            res1 = finite_z**2 / self._bf_m_px
         columns: list[str] = ["disparity_px"]
         cols: list[np.ndarray] = [d]
-        if self._pixel_um is not None:
-            columns.append("disparity_mm")
-            cols.append(d * (self._pixel_um / 1000.0))
-        columns += ["depth_m", "depth_resolution_m"]
-        cols += [z, np.where(np.isfinite(z), res1, np.inf)]
-        if step != 1.0:
-            columns.append("depth_resolution_subpx_m")
-            cols.append(np.where(np.isfinite(z), res1 * step, np.inf))
+        with np.errstate(over="ignore", under="ignore", invalid="ignore"):
+            res1 = np.where(np.isfinite(z), z * z / self._bf_m_px, np.inf)
+            if self._pixel_um is not None:
+                columns.append("disparity_mm")
+                cols.append(d * (self._pixel_um / 1000.0))
+            columns += ["depth_m", "depth_resolution_m"]
+            cols += [z, res1]
+            if step != 1.0:
+                columns.append("depth_resolution_subpx_m")
+                cols.append(res1 * step)
         rows = tuple(tuple(float(c[i]) for c in cols) for i in range(len(ds)))
         return DepthTable(columns=tuple(columns), rows=rows)
 
@@ -421,7 +455,7 @@ class StereoRig:
             out["depth_m"] = z
             if self._pixel_um is not None:
                 out["disparity_mm"] = float(self.disparity_mm(d))
-            if math.isfinite(z):
+            if 0.0 < z < math.inf:
                 out["depth_resolution_m"] = float(self.depth_resolution_m(z))
                 out["depth_resolution_exact_m"] = float(self.depth_resolution_m(z, exact=True))
                 out["depth_resolution_subpx_m"] = float(self.depth_resolution_m(z, step))
