@@ -7,6 +7,7 @@ PNG files) check that the pair is fed the right way round.
 
 from __future__ import annotations
 
+import inspect
 import json
 import math
 import re
@@ -19,7 +20,7 @@ import numpy as np
 import pytest
 
 import stereodepth
-from stereodepth import cli
+from stereodepth import cli, matching
 from stereodepth.evaluation import find_scenes, num_disparities_for
 from stereodepth.metrics import evaluate
 
@@ -162,14 +163,6 @@ def opencv_disparity(
     d = raw.astype(np.float64) / 16.0
     d[raw < 0] = np.nan
     return d.astype(np.float32)
-
-
-def native_block_match() -> Any:
-    """stereodepth.block_match when it is exported and its native kernel is built."""
-    fn = getattr(stereodepth, "block_match", None)
-    if fn is None or not hasattr(stereodepth._core, "BlockMatcher"):
-        pytest.skip("stereodepth.block_match is not available in this build yet")
-    return fn
 
 
 # --------------------------------------------------------------------------------------------
@@ -469,23 +462,28 @@ def test_opencv_missing_is_reported(
 
 
 def fake_matcher(calls: list[dict[str, Any]]) -> Any:
-    """Stands in for stereodepth.block_match: returns the ground truth of the scene + 0.75."""
+    """Stands in for stereodepth.matching.StereoMatcher: records the parameters of each
+    compute call and returns 0.75 px everywhere but the left quarter (NaN)."""
 
-    def block_match(left: np.ndarray, right: np.ndarray, **kwargs: Any) -> np.ndarray:
-        calls.append({"shape": left.shape, "dtype": left.dtype, **kwargs})
-        h, w = left.shape[:2]
-        d = np.full((h, w), 0.75, dtype=np.float32)
-        d[:, : w // 4] = np.nan
-        return d
+    class FakeMatcher:
+        def __init__(self, **params: Any) -> None:
+            self.params = params
 
-    return block_match
+        def compute(self, left: np.ndarray, right: np.ndarray) -> np.ndarray:
+            calls.append({"shape": left.shape, "dtype": left.dtype, **self.params})
+            h, w = left.shape[:2]
+            d = np.full((h, w), 0.75, dtype=np.float32)
+            d[:, : w // 4] = np.nan
+            return d
+
+    return FakeMatcher
 
 
 def test_stereodepth_method_passes_options(
     scenes_dir: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
 ) -> None:
     calls: list[dict[str, Any]] = []
-    monkeypatch.setattr(stereodepth, "block_match", fake_matcher(calls), raising=False)
+    monkeypatch.setattr(matching, "StereoMatcher", fake_matcher(calls))
     report = run_json(
         capsys,
         str(scenes_dir),
@@ -546,39 +544,20 @@ def test_stereodepth_method_passes_options(
             assert_same_metrics(row["metrics"], evaluate(d, gt, mask).as_dict())
 
 
-def test_stereodepth_default_block_size_is_not_passed(
-    scenes_dir: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
-) -> None:
-    calls: list[dict[str, Any]] = []
-    monkeypatch.setattr(stereodepth, "block_match", fake_matcher(calls), raising=False)
-    report = run_json(capsys, str(scenes_dir / "rds-b"), "--repeat", "1")
-    assert "block_size" not in calls[0]
-    assert report["results"][0]["block_size"] is None
-    assert report["threads"] >= 1
-    assert calls[0]["threads"] == report["threads"]
-
-
 def test_stereodepth_default_block_size_is_named(
     scenes_dir: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
 ) -> None:
     calls: list[dict[str, Any]] = []
-    fake = fake_matcher(calls)
-
-    def block_match(
-        left: np.ndarray,
-        right: np.ndarray,
-        *,
-        num_disparities: int,
-        block_size: int = 13,
-        **kwargs: Any,
-    ) -> np.ndarray:
-        return fake(left, right, num_disparities=num_disparities, block_size=block_size, **kwargs)
-
-    monkeypatch.setattr(stereodepth, "block_match", block_match, raising=False)
+    monkeypatch.setattr(matching, "StereoMatcher", fake_matcher(calls))
+    report = run_json(capsys, str(scenes_dir / "rds-b"), "--repeat", "1")
+    default = inspect.signature(matching.block_match).parameters["block_size"].default
+    assert calls[0]["block_size"] == default  # the matcher's own default ...
+    assert report["results"][0]["block_size"] == default  # ... named in the results
+    assert report["threads"] >= 1
+    assert calls[0]["threads"] == report["threads"]
     status, out, _ = run_eval(capsys, str(scenes_dir / "rds-b"), "--repeat", "1", "--markdown")
     assert status == 0
-    assert calls[0]["block_size"] == 13
-    assert "| rds-b | stereodepth | 13 | 32 | all |" in out
+    assert f"| rds-b | stereodepth | {default} | 32 | all |" in out
 
 
 def test_variants_are_grouped_by_method(
@@ -609,7 +588,7 @@ def test_opencv_missing_skips_only_opencv(
     scenes_dir: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
 ) -> None:
     monkeypatch.setitem(sys.modules, "cv2", None)
-    monkeypatch.setattr(stereodepth, "block_match", fake_matcher([]), raising=False)
+    monkeypatch.setattr(matching, "StereoMatcher", fake_matcher([]))
     status, out, err = run_eval(
         capsys,
         str(scenes_dir),
@@ -626,35 +605,24 @@ def test_opencv_missing_skips_only_opencv(
     assert "opencv" not in out
 
 
-def test_stereodepth_missing_is_reported(
-    scenes_dir: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
-) -> None:
-    monkeypatch.delattr(stereodepth, "block_match", raising=False)
-    status, _, err = run_eval(capsys, str(scenes_dir), "--method", "stereodepth")
-    assert status == 2
-    assert "method stereodepth needs stereodepth.block_match" in err
-
-
 def test_matcher_errors_name_the_scene(
-    scenes_dir: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
+    scenes_dir: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    def failing(left: np.ndarray, right: np.ndarray, **kwargs: Any) -> np.ndarray:
-        raise ValueError(f"block_size must be an odd integer >= 3, got {kwargs['block_size']}")
-
-    monkeypatch.setattr(stereodepth, "block_match", failing, raising=False)
     status, _, err = run_eval(capsys, str(scenes_dir), "--block-size", "4")
     assert status == 2
-    assert "scene rds-a: stereodepth: block_size must be an odd integer >= 3, got 4" in err
+    assert err.startswith("stereodepth eval: error: scene rds-a: stereodepth: block_size must ")
+    assert err.rstrip().endswith("got 4")
+    assert err.count("\n") == 1
 
 
 # --------------------------------------------------------------------------------------------
-# The real matcher (runs once stereodepth.block_match is built)
+# The real matcher
 
 
 def test_stereodepth_matches_direct_run(
     scenes_dir: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    block_match = native_block_match()
+    block_match = stereodepth.block_match
     report = run_json(capsys, str(scenes_dir), "--repeat", "1", "--threads", "2")
     for name, ndisp in (("rds-a", 16), ("rds-b", 32)):
         left, right, gt, mask = load(scenes_dir / name)
@@ -710,7 +678,7 @@ def test_shared_scene_opencv(stereo_data_dir: Path, capsys: pytest.CaptureFixtur
 def test_shared_scene_stereodepth(
     stereo_data_dir: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    block_match = native_block_match()
+    block_match = stereodepth.block_match
     report = run_json(
         capsys,
         str(stereo_data_dir),
@@ -770,7 +738,7 @@ def test_rejected_arguments(
     argv: list[str],
     message: str,
 ) -> None:
-    monkeypatch.setattr(stereodepth, "block_match", fake_matcher([]), raising=False)
+    monkeypatch.setattr(matching, "StereoMatcher", fake_matcher([]))
     status, out, err = run_eval(capsys, str(scenes_dir), *argv)
     assert status == 2
     assert out == ""
@@ -849,7 +817,7 @@ def test_rejects_unreadable_meta(scenes_dir: Path, capsys: pytest.CaptureFixture
 def test_rejects_mismatched_pair(
     scenes_dir: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    monkeypatch.setattr(stereodepth, "block_match", fake_matcher([]), raising=False)
+    monkeypatch.setattr(matching, "StereoMatcher", fake_matcher([]))
     write_png(scenes_dir / "rds-b" / "right.png", np.zeros((64, 149), dtype=np.uint8))
     status, _, err = run_eval(capsys, str(scenes_dir), "--scene", "rds-b")
     assert status == 2
@@ -861,7 +829,7 @@ def test_rejects_mismatched_pair(
 def test_rejects_gt_of_wrong_shape(
     scenes_dir: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    monkeypatch.setattr(stereodepth, "block_match", fake_matcher([]), raising=False)
+    monkeypatch.setattr(matching, "StereoMatcher", fake_matcher([]))
     np.save(scenes_dir / "rds-b" / "disp_gt.npy", np.zeros((64, 151), dtype=np.float32))
     status, _, err = run_eval(capsys, str(scenes_dir), "--scene", "rds-b")
     assert status == 2
@@ -874,7 +842,7 @@ def test_rejects_gt_of_wrong_shape(
 def test_rejects_non_bool_mask(
     scenes_dir: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    monkeypatch.setattr(stereodepth, "block_match", fake_matcher([]), raising=False)
+    monkeypatch.setattr(matching, "StereoMatcher", fake_matcher([]))
     np.save(scenes_dir / "rds-a" / "mask_nonocc.npy", np.ones((64, 128), dtype=np.uint8))
     status, _, err = run_eval(capsys, str(scenes_dir), "--scene", "rds-a")
     assert status == 2
@@ -887,8 +855,49 @@ def test_rejects_non_bool_mask(
 def test_rejects_gt_without_values(
     scenes_dir: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    monkeypatch.setattr(stereodepth, "block_match", fake_matcher([]), raising=False)
+    monkeypatch.setattr(matching, "StereoMatcher", fake_matcher([]))
     np.save(scenes_dir / "rds-b" / "disp_gt.npy", np.full((64, 150), np.nan, dtype=np.float32))
     status, _, err = run_eval(capsys, str(scenes_dir), "--scene", "rds-b")
     assert status == 2
     assert "scene rds-b: the ground truth has no finite value" in err
+
+
+def test_time_ratios_are_medians_over_shared_scenes() -> None:
+    from stereodepth.evaluation import EvalResult, Variant, format_time_ratios, time_ratios
+
+    gt = np.ones((4, 4), dtype=np.float32)
+    metrics = evaluate(gt, gt)
+    ours, bm = Variant("stereodepth", 9), Variant("opencv-bm", 9)
+
+    def row(scene: str, variant: Variant, t: float, best: bool = False) -> EvalResult:
+        return EvalResult(scene, variant, 16, 4, 4, "all", metrics, (t, 99.0, t), best=best)
+
+    rows = [
+        row("a", ours, 1.0),
+        row("a", bm, 4.0),
+        row("a", bm, 4.0, best=True),  # copies of best rows are not counted twice
+        row("b", ours, 3.0),
+        row("b", bm, 2.0),
+        row("c", ours, 1.0),
+        row("c", bm, 5.0),
+        row("d", bm, 1.0),  # no stereodepth run on d
+    ]
+    (ratio,) = time_ratios(rows)
+    assert ratio["per_scene"] == {"a": 0.25, "b": 1.5, "c": 0.2}
+    assert ratio["median"] == 0.25
+    assert format_time_ratios(rows) == (
+        "time of stereodepth (block 9) / opencv-bm (block 9), median over 3 scene(s): 0.250"
+    )
+
+
+def test_time_ratio_lines_follow_the_table(
+    scenes_dir: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    pytest.importorskip("cv2")
+    status, out, _ = run_eval(capsys, str(scenes_dir), "--method", "stereodepth", "opencv-bm:9")
+    assert status == 0
+    assert re.search(
+        r"\ntime of stereodepth \(block 9\) / opencv-bm \(block 9\), median over 2 scene\(s\): "
+        r"\d+\.\d{3}\n$",
+        out,
+    )

@@ -275,29 +275,19 @@ Matcher = Callable[[np.ndarray, np.ndarray], np.ndarray]
 def _stereodepth_factory(
     threads: int, options: dict[str, Any]
 ) -> Callable[[Variant, int], Matcher]:
-    import stereodepth
-
-    block_match = getattr(stereodepth, "block_match", None)
-    if block_match is None:
-        raise _usage_error(
-            "method stereodepth needs stereodepth.block_match, which this installation lacks"
-        )
+    from stereodepth.matching import StereoMatcher
 
     def make(variant: Variant, num_disparities: int) -> Matcher:
         kwargs = dict(options)
         if variant.block_size is not None:
             kwargs["block_size"] = variant.block_size
+        # Made once per scene and reused across the timed runs, as the OpenCV matchers are.
+        matcher = StereoMatcher(
+            num_disparities=num_disparities, min_disparity=0, threads=threads, **kwargs
+        )
 
         def match(left: np.ndarray, right: np.ndarray) -> np.ndarray:
-            out = block_match(
-                left,
-                right,
-                num_disparities=num_disparities,
-                min_disparity=0,
-                threads=threads,
-                **kwargs,
-            )
-            return np.asarray(out)
+            return np.asarray(matcher.compute(left, right))
 
         return match
 
@@ -483,8 +473,8 @@ def _evaluate_scene(
         mask = None
     rows = []
     for variant in variants:
-        match = factories[variant.method](variant, num_disparities)
         try:
+            match = factories[variant.method](variant, num_disparities)
             disparity, times = _timed(match, left, right, repeat)
         except (ValueError, TypeError) as exc:
             raise type(exc)(f"scene {scene.name}: {variant.method}: {exc}") from exc
@@ -573,6 +563,45 @@ def _means(rows: Sequence[EvalResult]) -> list[dict[str, Any]]:
             }
         )
     return out
+
+
+def time_ratios(rows: Sequence[EvalResult]) -> list[dict[str, Any]]:
+    """stereodepth's time over each other method's, per scene, and their median over the
+    scenes both ran: one entry per pair of a stereodepth variant and another variant."""
+    ours = [r for r in rows if r.variant.method == "stereodepth" and not r.best]
+    others = [r for r in rows if r.variant.method != "stereodepth" and not r.best]
+    out = []
+    for mine in dict.fromkeys(r.variant for r in ours):
+        mine_by_scene = {r.scene: r for r in ours if r.variant == mine}
+        for theirs in dict.fromkeys(r.variant for r in others):
+            per_scene = {
+                r.scene: mine_by_scene[r.scene].time_s / r.time_s
+                for r in others
+                if r.variant == theirs and r.scene in mine_by_scene and r.time_s > 0
+            }
+            if per_scene:
+                out.append(
+                    {
+                        "method": mine.method,
+                        "block_size": mine.block_size,
+                        "versus": theirs.method,
+                        "versus_block_size": theirs.block_size,
+                        "scenes": len(per_scene),
+                        "per_scene": per_scene,
+                        "median": float(statistics.median(per_scene.values())),
+                    }
+                )
+    return out
+
+
+def format_time_ratios(rows: Sequence[EvalResult]) -> str:
+    """One line per :func:`time_ratios` entry."""
+    return "\n".join(
+        f"time of {t['method']} (block {t['block_size']}) / {t['versus']} "
+        f"(block {t['versus_block_size']}), median over {t['scenes']} scene(s): "
+        f"{t['median']:.3f}"
+        for t in time_ratios(rows)
+    )
 
 
 def _table_rows(rows: Sequence[EvalResult]) -> list[list[str]]:
@@ -918,11 +947,16 @@ def run(args: argparse.Namespace) -> int:
             "notes": notes,
             "results": [r.as_dict() for r in rows],
             "means": _means(rows),
+            "time_ratios": time_ratios(rows),
         }
         print(json.dumps(_jsonable(report), indent=2, allow_nan=False))
         return 0
+    ratios = format_time_ratios(rows)
     if args.markdown:
         print(format_table(rows, markdown=True))
+        if ratios:
+            print()
+            print(ratios.replace("\n", "  \n"))  # Markdown line breaks
         return 0
     print(
         f"{len(scenes)} scene(s) in {args.dir}; threads {threads}; time: median of "
@@ -931,4 +965,7 @@ def run(args: argparse.Namespace) -> int:
     )
     print()
     print(format_table(rows))
+    if ratios:
+        print()
+        print(ratios)
     return 0
