@@ -373,15 +373,16 @@ def test_resume_skips_complete_pairs_and_redoes_changed_ones(tmp_path: Path) -> 
 
 
 # --- interruptions ----------------------------------------------------------------------------
+# Dask may run a preload file twice in one module namespace: keep the original compute.
 SLOW_MATCHER = """
 import time
 from stereodepth import matching
-_match = getattr(matching.block_match, "__wrapped__", matching.block_match)  # run twice: once
-def _slow(*args, **kwargs):
+_compute = getattr(matching.StereoMatcher.compute, "__wrapped__", matching.StereoMatcher.compute)
+def _slow(self, left, right):
     time.sleep({delay})
-    return _match(*args, **kwargs)
-_slow.__wrapped__ = _match
-matching.block_match = _slow
+    return _compute(self, left, right)
+_slow.__wrapped__ = _compute
+matching.StereoMatcher.compute = _slow
 """
 
 
