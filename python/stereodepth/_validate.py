@@ -59,6 +59,13 @@ def integer(
     return v
 
 
+def available_cores() -> int:
+    """The CPUs this process may run on (its affinity mask): the kernels' default thread count."""
+    from . import _core
+
+    return int(_core.build_info()["default_threads"])
+
+
 def threads(value: Any) -> int:
     """None or 0 means every core this process may use."""
     if value is None:

@@ -70,6 +70,7 @@ from typing import Any
 
 import numpy as np
 
+from . import _validate as check
 from .cli import key_value_option
 
 __all__ = [
@@ -658,13 +659,6 @@ def process_pair(pair: Pair, options: BatchOptions, threads: int | None = None) 
     return result
 
 
-def _available_cores() -> int:
-    try:
-        return len(os.sched_getaffinity(0))
-    except AttributeError:  # pragma: no cover - not Linux
-        return os.cpu_count() or 1
-
-
 def _task_threads() -> int | None:
     """Matcher threads for a pair: every core, shared among a Dask worker's threads (None,
     every core, outside a worker)."""
@@ -675,7 +669,7 @@ def _task_threads() -> int | None:
     except (ImportError, ValueError):
         return None
     n = getattr(getattr(worker, "state", worker), "nthreads", 1) or 1
-    return max(1, _available_cores() // int(n))
+    return max(1, check.available_cores() // int(n))
 
 
 _thread_state = threading.local()
@@ -1007,7 +1001,7 @@ def _dask_client(
             yield client, f"dask {scheduler}", threads
         return
     assert workers is not None
-    task_threads = threads if threads is not None else max(1, _available_cores() // workers)
+    task_threads = threads if threads is not None else max(1, check.available_cores() // workers)
     # The scheduler's HTTP server binds a free loopback port: with dashboard_address=None it
     # would still try port 8787 and warn (or fail) when that is taken.
     # Ctrl-C in a terminal reaches every process of the group: the worker processes start with
@@ -1157,8 +1151,6 @@ def _matcher_options(args: argparse.Namespace) -> dict[str, Any]:
 
 
 def _given_calibration(args: argparse.Namespace) -> Calibration | None:
-    from . import _validate as check
-
     if args.focal_px is None and args.baseline_mm is None:
         for name in ("cx_px", "cy_px"):
             if getattr(args, name) is not None:

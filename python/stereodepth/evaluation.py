@@ -66,6 +66,7 @@ from typing import Any
 
 import numpy as np
 
+from . import _validate as check
 from .cli import key_value_option
 from .metrics import DisparityMetrics, evaluate
 
@@ -685,13 +686,6 @@ def _method_spec(text: str) -> tuple[str, tuple[int, ...] | None]:
     return name, values
 
 
-def _available_threads() -> int:
-    try:
-        return len(os.sched_getaffinity(0))
-    except AttributeError:  # pragma: no cover - not Linux
-        return os.cpu_count() or 1
-
-
 def register(subparsers: Any) -> None:
     """Adds ``stereodepth eval`` to the command's subparsers."""
     p = subparsers.add_parser(
@@ -775,7 +769,7 @@ def register(subparsers: Any) -> None:
         default=0,
         metavar="N",
         help="threads for every method (default 0: every core this process may "
-        f"use, here {_available_threads()})",
+        f"use, here {check.available_cores()})",
     )
     r.add_argument(
         "--repeat",
@@ -850,7 +844,7 @@ def run(args: argparse.Namespace) -> int:
         raise ValueError(
             f"--num-disparities must be a positive multiple of 16, got {args.num_disparities}"
         )
-    threads = args.threads or _available_threads()
+    threads = args.threads or check.available_cores()
     options = dict(args.option)
     for key in options:
         if key in _RESERVED_OPTIONS:
