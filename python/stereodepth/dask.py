@@ -130,11 +130,11 @@ def _match_block(
     from stereodepth import matching
 
     if not stacked:
-        disparity = matching.block_match(left, right, **params)
+        disparity = matching.thread_matcher(**params).compute(left, right)
         assert isinstance(disparity, np.ndarray)  # no confidence was asked for
         return disparity
     out = np.empty(left.shape[:3], dtype=np.float32)
-    matcher = matching.StereoMatcher(**params)
+    matcher = matching.thread_matcher(**params)
     for i in range(left.shape[0]):
         out[i] = matcher.compute(left[i], right[i])
     return out

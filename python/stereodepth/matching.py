@@ -69,6 +69,7 @@ rows were shared.
 
 from __future__ import annotations
 
+import threading
 from typing import Any
 
 import numpy as np
@@ -348,6 +349,25 @@ class StereoMatcher:
         return disparity
 
 
+_thread_state = threading.local()
+
+
+def thread_matcher(**params: Any) -> StereoMatcher:
+    """This thread's :class:`StereoMatcher` for ``params``: made on the first call and reused
+    while the parameters stay the same, so that a job matching pair after pair (the batch
+    command, the dask functions) does not allocate and fault in the matcher's buffers again
+    for every pair (a quarter of the time on a 0.35 MP pair). Each thread keeps one matcher,
+    released with the thread or when the parameters change."""
+    key = tuple(sorted(params.items(), key=lambda kv: kv[0]))
+    cached = getattr(_thread_state, "matcher", None)
+    if cached is None or cached[0] != key:
+        _thread_state.matcher = None  # release the old buffers before making the new ones
+        cached = (key, StereoMatcher(**params))
+        _thread_state.matcher = cached
+    matcher: StereoMatcher = cached[1]
+    return matcher
+
+
 def block_match(
     left: Any,
     right: Any,
@@ -412,7 +432,9 @@ def block_match(
     cost more than one disparity away from the winner (0 where the disparity is NaN).
 
     The steps, the validity rules and the limits are described in :mod:`stereodepth.matching`.
-    The GIL is released while the kernel runs.
+    The GIL is released while the kernel runs. Each call sets up the matcher's buffers anew;
+    for a stream of frames, a :class:`StereoMatcher` keeps them (about a quarter less time on a
+    0.35 MP pair).
     """
     matcher = StereoMatcher(
         num_disparities=num_disparities,
