@@ -67,11 +67,3 @@ def stereo_scenes() -> list[Scene]:
     if not found:
         pytest.skip(f"shared stereo scenes not found at {data_dir()}")
     return found
-
-
-def load_gray(path: Path) -> np.ndarray:
-    """A PNG as uint8 grey (H, W); RGB images are returned as (H, W, 3). Needs Pillow."""
-    from PIL import Image
-
-    with Image.open(path) as im:
-        return np.asarray(im)

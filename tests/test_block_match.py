@@ -205,6 +205,7 @@ def test_sixteen_bit_image_of_an_eight_bit_one_matches_the_same(cost: str) -> No
 
 @pytest.mark.data
 def test_scene_crops_match_oracle(stereo_scenes: list[Any]) -> None:
+    pytest.importorskip("PIL.Image", reason="reading the scenes needs Pillow (the batch extra)")
     for scene in stereo_scenes:
         left = read_image(scene.left_path)
         right = read_image(scene.right_path)

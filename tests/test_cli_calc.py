@@ -120,3 +120,20 @@ def test_plot_without_matplotlib_is_one_line_and_status_1(
         == 'stereodepth calc: error: the charts need matplotlib: pip install "stereodepth[plot]"\n'
     )
     assert not out.exists()
+
+
+def test_a_reader_that_stops_early_is_no_error() -> None:
+    # As `stereodepth calc ... | head -1`: the pipe closes after the first line.
+    exe = shutil.which("stereodepth")
+    cmd = [exe] if exe else [sys.executable, "-m", "stereodepth.cli"]
+    argv = [*cmd, "calc", *ARM, "--disparity-px", "250", "--table-disparities-px"]
+    argv += [str(d) for d in range(1, 4001)]  # more output than a pipe buffers
+    with subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=subprocess.PIPE) as proc:
+        assert proc.stdout is not None and proc.stderr is not None
+        first = proc.stdout.readline()
+        proc.stdout.close()
+        err = proc.stderr.read().decode()
+        proc.wait(timeout=60)
+    assert first.startswith(b"rig")
+    assert err == ""
+    assert proc.returncode == 1

@@ -10,6 +10,7 @@ import argparse
 import importlib
 import json
 import math
+import os
 import re
 import sys
 from collections.abc import Sequence
@@ -223,6 +224,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     except KeyboardInterrupt:
         print(f"stereodepth {args.command}: interrupted", file=sys.stderr)
         return 130
+    except BrokenPipeError:
+        # The reader went away (``stereodepth calc ... | head``): stop quietly, and keep
+        # Python from failing again when it flushes stdout at exit.
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+        return 1
 
 
 if __name__ == "__main__":
