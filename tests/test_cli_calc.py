@@ -137,3 +137,10 @@ def test_a_reader_that_stops_early_is_no_error() -> None:
     assert first.startswith(b"rig")
     assert err == ""
     assert proc.returncode == 1
+
+
+def test_python_dash_m_runs_the_command() -> None:
+    argv = [sys.executable, "-m", "stereodepth", "calc", *ARM, "--disparity-px", "250", "--json"]
+    r = subprocess.run(argv, capture_output=True, text=True, timeout=60)
+    assert r.returncode == 0, r.stderr
+    assert json.loads(r.stdout)["depth_m"] == StereoRig(150, 6, 2.8, 1280).depth_m(250)
