@@ -81,7 +81,7 @@ class Arena {
 };
 
 detail::BandScratch carve_band(Arena& arena, std::ptrdiff_t cols, int dp, std::size_t feat_size,
-                               bool quads) {
+                               int lanes) {
   const auto c = static_cast<std::size_t>(cols);
   const std::size_t row = c + static_cast<std::size_t>(dp) + detail::kRowPad;
   detail::BandScratch s{};
@@ -89,12 +89,14 @@ detail::BandScratch carve_band(Arena& arena, std::ptrdiff_t cols, int dp, std::s
   s.acc = arena.take<std::uint16_t>(static_cast<std::size_t>(dp));
   s.rpad_in = arena.take<std::uint8_t>(row * feat_size);
   s.rpad_out = arena.take<std::uint8_t>(row * feat_size);
-  s.quad_in = arena.take<std::uint8_t>(feat_size == 4 && quads ? row * 64 : 0);
-  s.quad_out = arena.take<std::uint8_t>(feat_size == 4 && quads ? row * 64 : 0);
+  const std::size_t quad = feat_size == 4 ? row * detail::regrouped_bytes(lanes) : 0;
+  s.quad_in = arena.take<std::uint8_t>(quad);
+  s.quad_out = arena.take<std::uint8_t>(quad);
   s.rmin = arena.take<std::uint16_t>(row);
   s.rarg = arena.take<std::uint16_t>(row);
   s.texcol = arena.take<std::uint32_t>(c);
   s.records = arena.take<detail::WinnerRecord>(c + 16);
+  s.recent = arena.take<std::uint16_t>(detail::recent_size(lanes, dp));
   return s;
 }
 
@@ -436,7 +438,7 @@ void BlockMatcher::compute(const StereoImage& left, const StereoImage& right,
     const auto gpix = static_cast<std::size_t>((wk.g1 - wk.g0) * cols);
     Arena arena(&ws.workers[w]);
     for (int pass = 0; pass < 2; ++pass) {
-      wk.scratch = carve_band(arena, cols, dp, feat_size, k.lanes == 32);
+      wk.scratch = carve_band(arena, cols, dp, feat_size, k.lanes);
       wk.grey[0] = arena.take<std::uint8_t>(rgb ? gpix : 0);
       wk.grey[1] = arena.take<std::uint8_t>(rgb ? gpix : 0);
       wk.feat[0] = arena.take<std::uint8_t>(fpix * feat_size);

@@ -227,15 +227,19 @@ struct SadCost {
 };
 
 #if defined(STEREODEPTH_BM_AVX2)
-// Set bits of each 32-bit lane (nibble lookup, then byte sums).
-inline __m256i popcnt_epi32(__m256i v) {
+// Set bits of each byte (nibble lookup).
+inline __m256i popcnt_epi8(__m256i v) {
   const __m256i lut = _mm256_setr_epi8(0, 1, 1, 2, 1, 2, 2, 3, 1, 2, 2, 3, 2, 3, 3, 4, 0, 1, 1, 2,
                                        1, 2, 2, 3, 1, 2, 2, 3, 2, 3, 3, 4);
   const __m256i low = _mm256_set1_epi8(0x0f);
   const __m256i lo = _mm256_shuffle_epi8(lut, _mm256_and_si256(v, low));
   const __m256i hi = _mm256_shuffle_epi8(lut, _mm256_and_si256(_mm256_srli_epi16(v, 4), low));
-  const __m256i bytes = _mm256_add_epi8(lo, hi);
-  const __m256i pairs = _mm256_maddubs_epi16(bytes, _mm256_set1_epi8(1));
+  return _mm256_add_epi8(lo, hi);
+}
+
+// Set bits of each 32-bit lane (byte counts, then their sums).
+inline __m256i popcnt_epi32(__m256i v) {
+  const __m256i pairs = _mm256_maddubs_epi16(popcnt_epi8(v), _mm256_set1_epi8(1));
   return _mm256_madd_epi16(pairs, _mm256_set1_epi16(1));
 }
 
@@ -398,6 +402,7 @@ struct RowCtx {
   // Right winners: rarg[i] is the left column (mod 2^16) whose block won right column
   // i + jmin; its disparity index is (rarg[i] - i + dp - 1) mod 2^16.
   uint16_t* rarg;
+  uint16_t* recent;   // AVX2: the block costs of the last 16 pixels (see winners_avx2)
   WinnerRecord* rec;  // the row's winner records
   const uint32_t* unique_min;  // null when off
   // The column-sum update of this row, when the first pass does it on the way (fused): the
@@ -896,20 +901,243 @@ void winners_avx512(const RowCtx& c) {
   }
 }
 
-// The first pass for dp = 32 * NC when NC <= kMaxChunks; false otherwise.
+#elif defined(STEREODEPTH_BM_AVX2)
+
+constexpr int kMaxChunks = 16;  // dp <= 256
+
+// The census codes of a padded right row (16 bits each) as uint16, one load per 16 lanes.
+void codes16_of(const uint32_t* rpad, uint16_t* out, ptrdiff_t n) {
+  for (ptrdiff_t i = 0; i < n; ++i) out[i] = static_cast<uint16_t>(rpad[i]);
+}
+
+// The right winners, updated 16 pixels at a time from the costs that winners_avx2 keeps:
+// row t of `recent` holds pixel x0 + t's dp costs at elements 16 .. 16 + dp - 1 (0xFFFF on
+// either side). Right column i = x0 + 16k + j (aligned block k = 0 .. NC of the columns these
+// pixels reach) receives lane i - x of pixel x, for x rising, i.e. disparity rising: a strict
+// < keeps the lowest. Doing this per block rather than per pixel keeps the block's winners in
+// two registers, and the loads never wait on a store that overlaps them only in part (which
+// the per-pixel update does: a store-forwarding stall for every vector).
+template <int NC>
+void right_group(const uint16_t* recent, uint16_t* rmin, uint16_t* rarg, ptrdiff_t x0, int n) {
+  constexpr ptrdiff_t kRow = 16 * NC + 32;
+  const __m256i one = _mm256_set1_epi16(1);
+  for (int k = 0; k <= NC; ++k) {
+    auto* pm = reinterpret_cast<__m256i*>(rmin + x0 + 16 * k);
+    auto* pa = reinterpret_cast<__m256i*>(rarg + x0 + 16 * k);
+    __m256i best = _mm256_load_si256(pm);
+    __m256i arg = _mm256_load_si256(pa);
+    __m256i xv = _mm256_set1_epi16(static_cast<short>(x0));
+    const uint16_t* p = recent + 16 + 16 * k;  // row t: lanes 16k - t ..
+    for (int t = 0; t < n; ++t, p += kRow - 1) {
+      const __m256i v = _mm256_loadu_si256(reinterpret_cast<const __m256i*>(p));
+      const __m256i m = _mm256_min_epu16(v, best);
+      arg = _mm256_blendv_epi8(xv, arg, _mm256_cmpeq_epi16(m, best));  // x where v < best
+      best = m;
+      xv = _mm256_add_epi16(xv, one);
+    }
+    _mm256_store_si256(pm, best);
+    _mm256_store_si256(pa, arg);
+  }
+}
+
+// First pass with the NC vectors of 16 costs in registers (the AVX2 form of winners_avx512):
+// the column-sum update fused in, a branch-free winner, and the right winners updated per
+// group of 16 pixels (right_group) from the costs stored in `recent`, which also gives the
+// winner's neighbours.
+template <int NC, typename Cost>
+void winners_avx2(const RowCtx& c) {
+  using F = typename Cost::Feature;
+  // Everything the loop reads from c, in locals (see winners_avx512).
+  constexpr int dp = 16 * NC;
+  constexpr ptrdiff_t kRow = dp + 32;  // a row of `recent`: 16 lanes of 0xFFFF either side
+  const ptrdiff_t cols = c.cols, xlo = c.xlo, xhi = c.xhi;
+  const int r = c.radius;
+  const uint32_t* const texcol = c.texcol;
+  const uint32_t* const unique_min = c.unique_min;
+  WinnerRecord* const records = c.rec;
+  uint16_t* const rmin = c.rmin;
+  uint16_t* const rarg = c.rarg;
+  uint16_t* const recent = c.recent;
+  const bool lr_on = c.lr_on, count_low = c.count_low, need_second = c.need_second;
+  const __m256i ones = _mm256_set1_epi16(-1);
+  const __m256i padv = pad_vector(c.qpad);
+  uint16_t* S = const_cast<uint16_t*>(c.colsum);
+
+  // The fused column-sum update (see winners_avx512). Census: the codes have 16 bits, so one
+  // 16-bit lane holds a whole XOR; its byte counts of the entering row minus those of the
+  // leaving row (-8 .. 8), summed in pairs by vpmaddubsw, give c_in - c_out.
+  const F* in_l = static_cast<const F*>(c.in_left);
+  const F* in_r = static_cast<const F*>(c.in_rpad);
+  const F* out_l = static_cast<const F*>(c.out_left);
+  const F* out_r = static_cast<const F*>(c.out_rpad);
+  const uint16_t* in16 = static_cast<const uint16_t*>(c.in_quad);
+  const uint16_t* out16 = static_cast<const uint16_t*>(c.out_quad);
+  auto update_col = [&](ptrdiff_t j) {
+    auto* s = reinterpret_cast<__m256i*>(S + j * dp);
+    if constexpr (sizeof(F) == 4) {
+      const __m256i li = _mm256_set1_epi16(static_cast<short>(in_l[j]));
+      const __m256i lo = _mm256_set1_epi16(static_cast<short>(out_l[j]));
+      const __m256i byte_ones = _mm256_set1_epi8(1);
+      auto load = [](const uint16_t* p) {
+        return _mm256_loadu_si256(reinterpret_cast<const __m256i*>(p));
+      };
+      for (int i = 0; i < NC; ++i) {
+        const __m256i pin = popcnt_epi8(_mm256_xor_si256(li, load(in16 + j + 16 * i)));
+        const __m256i pout = popcnt_epi8(_mm256_xor_si256(lo, load(out16 + j + 16 * i)));
+        const __m256i d = _mm256_maddubs_epi16(byte_ones, _mm256_sub_epi8(pin, pout));
+        _mm256_store_si256(s + i, _mm256_add_epi16(_mm256_load_si256(s + i), d));
+      }
+    } else {
+      const __m256i li = _mm256_set1_epi16(static_cast<short>(in_l[j]));
+      const __m256i lo = _mm256_set1_epi16(static_cast<short>(out_l[j]));
+      for (int i = 0; i < NC; ++i) {
+        const __m256i d = _mm256_sub_epi16(sad_cost16(li, in_r + j + 16 * i),
+                                           sad_cost16(lo, out_r + j + 16 * i));
+        _mm256_store_si256(s + i, _mm256_add_epi16(_mm256_load_si256(s + i), d));
+      }
+    }
+  };
+  const bool fused = in_l != nullptr;
+  if (fused) {
+    for (ptrdiff_t j = 0; j <= r && j < cols; ++j) update_col(j);
+  }
+
+  __m256i A[NC];
+  auto column = [&](ptrdiff_t j, int i) {
+    return _mm256_load_si256(reinterpret_cast<const __m256i*>(S + j * dp) + i);
+  };
+  for (int i = 0; i < NC; ++i) A[i] = _mm256_setzero_si256();
+  uint32_t tsum = 0;
+  for (ptrdiff_t dx = -r; dx <= r; ++dx) {
+    const ptrdiff_t xx = clamp_index(dx, 0, cols - 1);
+    for (int i = 0; i < NC; ++i) A[i] = _mm256_add_epi16(A[i], column(xx, i));
+    if (texcol) tsum += texcol[xx];
+  }
+  A[0] = _mm256_or_si256(A[0], padv);  // padding lanes: 0xFFFF, never a winner
+
+  // The winner's neighbours serve the sub-pixel step and the counted uniqueness check.
+  const bool around = c.subpixel != SubpixelFit::kNone || count_low;
+  const bool keep = lr_on || around;  // whether the costs go to `recent`
+  if (keep) {
+    for (ptrdiff_t t = 0; t < 16; ++t) {
+      for (int j = 0; j < 16; ++j) {
+        recent[t * kRow + j] = 0xFFFF;
+        recent[t * kRow + 16 + dp + j] = 0xFFFF;
+      }
+    }
+  }
+  if (lr_on) {
+    for (ptrdiff_t i = 0; i < cols + dp + 32; ++i) rmin[i] = 0xFFFF;
+  }
+  const __m256i iota = lane_iota16();
+  const __m256i two = _mm256_set1_epi16(2);
+
+  for (ptrdiff_t x = 0; x < cols; ++x) {
+    if (x > 0) {
+      if (fused && x + r < cols) update_col(x + r);
+      const ptrdiff_t xp = clamp_index(x + r, 0, cols - 1);
+      const ptrdiff_t xm = clamp_index(x - r - 1, 0, cols - 1);
+      for (int i = 0; i < NC; ++i) {
+        A[i] = _mm256_sub_epi16(_mm256_add_epi16(A[i], column(xp, i)), column(xm, i));
+      }
+      A[0] = _mm256_or_si256(A[0], padv);
+      if (texcol) tsum += texcol[xp] - texcol[xm];
+    }
+    const int t = static_cast<int>(x & 15);
+    uint16_t* const row = recent + t * kRow + 16;
+    if (keep) {
+      for (int i = 0; i < NC; ++i) _mm256_store_si256(reinterpret_cast<__m256i*>(row) + i, A[i]);
+    }
+    if (lr_on && (t == 15 || x == cols - 1)) right_group<NC>(recent, rmin, rarg, x - t, t + 1);
+    if (x < xlo || x > xhi) {
+      record_none(c, x);
+      continue;
+    }
+    __m256i mn = A[0];
+    for (int i = 1; i < NC; ++i) mn = _mm256_min_epu16(mn, A[i]);
+    const uint32_t best = hmin_epu16(mn);
+    const __m256i bv = _mm256_set1_epi16(static_cast<short>(best));
+    // The winner: the highest lane holding the least cost (the lowest disparity on a tie),
+    // branch-free (see winners_avx512). vpmovmskb gives two bits per 16-bit lane.
+    int qb = 0;
+    for (int i = 0; i < NC; i += 2) {
+      auto eq = [&](int k) {
+        return static_cast<std::uint64_t>(
+            static_cast<uint32_t>(_mm256_movemask_epi8(_mm256_cmpeq_epi16(A[k], bv))));
+      };
+      std::uint64_t w = eq(i);
+      if (i + 1 < NC) w |= eq(i + 1) << 32;
+      const int top = 16 * i + (63 - __builtin_clzll(w | 1u)) / 2;
+      const int found = -static_cast<int>(w != 0);  // all ones when this pair holds the least
+      qb ^= (qb ^ top) & found;
+    }
+    uint32_t second = kNone;
+    if (count_low) {
+      // How many lanes cost less than the uniqueness threshold (see winners_avx512): the
+      // lanes >= it are those with min(a, thr) == thr; two vectors' masks packed to bytes
+      // give one bit per lane.
+      const __m256i thr = _mm256_set1_epi32(static_cast<int>(unique_min[best]));
+      auto at_least = [&](int k) {
+        return _mm256_cmpeq_epi16(_mm256_min_epu16(A[k], thr), thr);
+      };
+      uint32_t high = 0;
+      for (int i = 0; i < NC; i += 2) {
+        const __m256i m = _mm256_packs_epi16(at_least(i), i + 1 < NC ? at_least(i + 1) : ones);
+        high += static_cast<uint32_t>(__builtin_popcount(
+            static_cast<uint32_t>(_mm256_movemask_epi8(m))));
+      }
+      second = static_cast<uint32_t>(16 * (NC + (NC & 1))) - high;
+    } else if (need_second) {
+      // The exact second-best cost, for the confidence: lanes qb - 1 .. qb + 1 are those with
+      // (lane - (qb - 1)) <= 2, unsigned.
+      __m256i m2 = ones;
+      for (int i = 0; i < NC; ++i) {
+        const __m256i rel =
+            _mm256_sub_epi16(iota, _mm256_set1_epi16(static_cast<short>(qb - 1 - 16 * i)));
+        const __m256i ex = _mm256_cmpeq_epi16(_mm256_min_epu16(rel, two), rel);
+        m2 = _mm256_min_epu16(m2, _mm256_or_si256(A[i], ex));
+      }
+      second = hmin_epu16(m2);
+    }
+    WinnerRecord* rec = records + x;
+    rec->best = static_cast<uint16_t>(best);
+    rec->second = static_cast<uint16_t>(second);
+    rec->kbest = dp - 1 - qb;
+    rec->tsum = tsum;
+    // c0 | c2 << 16: lanes qb + 1 and qb - 1 (disparity index kb - 1 and kb + 1). Beyond the
+    // lanes `recent` holds 0xFFFF where the other passes store 0: the second pass reads
+    // neither (it needs 1 <= kb <= nd - 2).
+    rec->around = around ? static_cast<uint32_t>(row[qb + 1]) | (static_cast<uint32_t>(row[qb - 1]) << 16)
+                         : 0u;
+  }
+}
+
+#endif
+
+#if defined(STEREODEPTH_BM_AVX512) || defined(STEREODEPTH_BM_AVX2)
+
+// The first pass for dp = kLanes * NC when NC <= kMaxChunks; false otherwise.
 template <int NC, typename Cost>
 bool winners_fixed(const RowCtx& c) {
   if constexpr (NC > kMaxChunks) {
     (void)c;
     return false;
   } else {
-    if (c.dp == 32 * NC) {
+    if (c.dp == kLanes * NC) {
+#if defined(STEREODEPTH_BM_AVX512)
       winners_avx512<NC, Cost>(c);
+#else
+      winners_avx2<NC, Cost>(c);
+#endif
       return true;
     }
     return winners_fixed<NC + 1, Cost>(c);
   }
 }
+
+#endif
+
+#if defined(STEREODEPTH_BM_AVX512)
 
 // Second pass, 16 pixels at a time; the same IEEE operations as decide_generic.
 void decide_avx512(const RowCtx& c) {
@@ -1030,7 +1258,14 @@ void decide_avx512(const RowCtx& c) {
     const bool has2 = s2 != kNone;
     bool ok = b != kNone;
     if (ok && c.texcol) ok = !(static_cast<double>(rec.tsum) < c.texture_sum_min);
-    if (ok && c.uniqueness_factor > 0 && has2) {
+    if (ok && c.count_low) {
+      // The counted form of the check (see decide_avx512): unique when the lanes below the
+      // threshold are the winner and those of its neighbours below it.
+      const uint32_t thr = c.unique_min[b] & 0xFFFFu;
+      const uint32_t near = 1u + static_cast<uint32_t>(kb >= 1 && (rec.around & 0xFFFFu) < thr) +
+                            static_cast<uint32_t>(kb <= c.nd - 2 && (rec.around >> 16) < thr);
+      ok = s2 == near;
+    } else if (ok && c.uniqueness_factor > 0 && has2) {
       ok = static_cast<double>(s2) * 100.0 > static_cast<double>(b) * c.uniqueness_factor;
     }
     if (ok && c.lr_on) {
@@ -1069,8 +1304,8 @@ void decide_avx512(const RowCtx& c) {
 
 // Whether this build's first pass updates the column sums itself for this dp.
 inline bool fuses_update(int dp) {
-#if defined(STEREODEPTH_BM_AVX512)
-  return dp <= 32 * kMaxChunks;
+#if defined(STEREODEPTH_BM_AVX512) || defined(STEREODEPTH_BM_AVX2)
+  return dp <= kLanes * kMaxChunks;
 #else
   (void)dp;
   return false;
@@ -1079,15 +1314,20 @@ inline bool fuses_update(int dp) {
 
 template <typename Cost>
 void row_pass(const RowCtx& c) {
+#if defined(STEREODEPTH_BM_AVX512) || defined(STEREODEPTH_BM_AVX2)
 #if defined(STEREODEPTH_BM_AVX512)
-  if (c.dp <= 32 * kMaxChunks) {
+  auto decide = decide_avx512;
+#else
+  auto decide = decide_generic;
+#endif
+  if (c.dp <= kLanes * kMaxChunks) {
     RowCtx counted = c;
     counted.count_low = c.unique_min != nullptr && c.crow == nullptr;
     winners_fixed<1, Cost>(counted);
-    decide_avx512(counted);
+    decide(counted);
   } else {
     winners_generic(c);
-    decide_avx512(c);
+    decide(c);
   }
 #else
   winners_generic(c);
@@ -1152,6 +1392,7 @@ void match_band_impl(const MatchArgs& a, const BandScratch& s, ptrdiff_t y0, ptr
   c.acc = s.acc;
   c.rmin = s.rmin;
   c.rarg = s.rarg;
+  c.recent = s.recent;
   c.rec = static_cast<WinnerRecord*>(s.records);
   c.unique_min = a.unique_min;
 
@@ -1185,6 +1426,13 @@ void match_band_impl(const MatchArgs& a, const BandScratch& s, ptrdiff_t y0, ptr
             const ptrdiff_t nq = cols + dp - 28;
             quads_of(rpad_in, static_cast<__m512i*>(s.quad_in), nq, false);
             quads_of(rpad_out, static_cast<__m512i*>(s.quad_out), nq, true);
+            c.in_quad = s.quad_in;
+            c.out_quad = s.quad_out;
+          }
+#elif defined(STEREODEPTH_BM_AVX2)
+          if constexpr (sizeof(F) == 4) {
+            codes16_of(rpad_in, static_cast<uint16_t*>(s.quad_in), npad);
+            codes16_of(rpad_out, static_cast<uint16_t*>(s.quad_out), npad);
             c.in_quad = s.quad_in;
             c.out_quad = s.quad_out;
           }

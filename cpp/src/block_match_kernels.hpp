@@ -60,8 +60,9 @@ struct BandScratch {
   std::uint16_t* acc;      // dp: block sums of the current pixel
   void* rpad_in;           // cols + dp + kRowPad features: the padded right row entering
   void* rpad_out;          // the same for the leaving row
-  // AVX-512, census: the padded rows regrouped for in-order packing (see the kernels);
-  // (cols + dp + kRowPad) x 64 bytes each.
+  // Census, the padded rows regrouped for the SIMD builds (see the kernels), cols + dp +
+  // kRowPad elements of regrouped_bytes(lanes) each: AVX-512, for in-order packing; AVX2, the
+  // 16-bit codes.
   void* quad_in;
   void* quad_out;
   std::uint16_t* rmin;     // cols + dp + kRowPad: least cost per right column
@@ -69,7 +70,19 @@ struct BandScratch {
   std::uint32_t* texcol;   // cols: block-column sums of the texture
   // The row's winner records (see WinnerRecord), cols + 16 of them.
   void* records;
+  // AVX2: the block costs of the last 16 pixels, recent_size(lanes, dp) of them.
+  std::uint16_t* recent;
 };
+
+// Bytes per element of the regrouped census rows of a build with this many lanes.
+inline constexpr std::size_t regrouped_bytes(int lanes) {
+  return lanes == 32 ? 64 : lanes == 16 ? 2 : 0;
+}
+
+// Elements of BandScratch::recent: 16 rows of dp + 32 (AVX2 builds only).
+inline constexpr std::size_t recent_size(int lanes, int dp) {
+  return lanes == 16 ? 16 * (static_cast<std::size_t>(dp) + 32) : 0;
+}
 
 // Elements of slack after each padded row, so vector loops may overrun.
 inline constexpr std::ptrdiff_t kRowPad = 64;
