@@ -411,8 +411,9 @@ struct RowCtx {
   const void* in_rpad;
   const void* out_left;
   const void* out_rpad;
-  const void* in_quad;  // census: the padded rows regrouped (see quads_of)
+  const void* in_quad;  // census: the padded rows regrouped (see quads_of, nibbles_of)
   const void* out_quad;
+  ptrdiff_t nibble_stride;  // AVX2: elements from the low nibbles to the high ones
   float* drow;
   float* crow;  // null when no confidence is wanted
 };
@@ -905,9 +906,14 @@ void winners_avx512(const RowCtx& c) {
 
 constexpr int kMaxChunks = 16;  // dp <= 256
 
-// The census codes of a padded right row (16 bits each) as uint16, one load per 16 lanes.
-void codes16_of(const uint32_t* rpad, uint16_t* out, ptrdiff_t n) {
-  for (ptrdiff_t i = 0; i < n; ++i) out[i] = static_cast<uint16_t>(rpad[i]);
+// The census codes of a padded right row (16 bits each) split into nibbles for the lookup
+// in update_col: out[i] = code & 0x0F0F and out[n + i] = (code >> 4) & 0x0F0F, one load per
+// 16 lanes.
+void nibbles_of(const uint32_t* rpad, uint16_t* out, ptrdiff_t n) {
+  for (ptrdiff_t i = 0; i < n; ++i) {
+    out[i] = static_cast<uint16_t>(rpad[i] & 0x0F0Fu);
+    out[n + i] = static_cast<uint16_t>((rpad[i] >> 4) & 0x0F0Fu);
+  }
 }
 
 // The right winners, updated 16 pixels at a time from the costs that winners_avx2 keeps:
@@ -964,26 +970,38 @@ void winners_avx2(const RowCtx& c) {
   uint16_t* S = const_cast<uint16_t*>(c.colsum);
 
   // The fused column-sum update (see winners_avx512). Census: the codes have 16 bits, so one
-  // 16-bit lane holds a whole XOR; its byte counts of the entering row minus those of the
-  // leaving row (-8 .. 8), summed in pairs by vpmaddubsw, give c_in - c_out.
+  // 16-bit lane holds a whole code. The right rows come split into nibbles (nibbles_of), so
+  // XOR with the left code's nibbles gives the vpshufb indices directly; the byte counts of
+  // the entering row minus those of the leaving row (-8 .. 8), summed in pairs by
+  // vpmaddubsw, give c_in - c_out.
   const F* in_l = static_cast<const F*>(c.in_left);
   const F* in_r = static_cast<const F*>(c.in_rpad);
   const F* out_l = static_cast<const F*>(c.out_left);
   const F* out_r = static_cast<const F*>(c.out_rpad);
   const uint16_t* in16 = static_cast<const uint16_t*>(c.in_quad);
   const uint16_t* out16 = static_cast<const uint16_t*>(c.out_quad);
+  const ptrdiff_t nib = c.nibble_stride;  // from the low nibbles to the high ones
   auto update_col = [&](ptrdiff_t j) {
     auto* s = reinterpret_cast<__m256i*>(S + j * dp);
     if constexpr (sizeof(F) == 4) {
-      const __m256i li = _mm256_set1_epi16(static_cast<short>(in_l[j]));
-      const __m256i lo = _mm256_set1_epi16(static_cast<short>(out_l[j]));
+      const uint32_t li = in_l[j], lo = out_l[j];
+      const __m256i li0 = _mm256_set1_epi16(static_cast<short>(li & 0x0F0Fu));
+      const __m256i li1 = _mm256_set1_epi16(static_cast<short>((li >> 4) & 0x0F0Fu));
+      const __m256i lo0 = _mm256_set1_epi16(static_cast<short>(lo & 0x0F0Fu));
+      const __m256i lo1 = _mm256_set1_epi16(static_cast<short>((lo >> 4) & 0x0F0Fu));
+      const __m256i lut = _mm256_setr_epi8(0, 1, 1, 2, 1, 2, 2, 3, 1, 2, 2, 3, 2, 3, 3, 4, 0, 1,
+                                           1, 2, 1, 2, 2, 3, 1, 2, 2, 3, 2, 3, 3, 4);
       const __m256i byte_ones = _mm256_set1_epi8(1);
-      auto load = [](const uint16_t* p) {
-        return _mm256_loadu_si256(reinterpret_cast<const __m256i*>(p));
+      // Set bits of each byte of (l ^ r): the counts of its two nibbles.
+      auto count = [&](__m256i l0, __m256i l1, const uint16_t* p) {
+        const __m256i r0 = _mm256_loadu_si256(reinterpret_cast<const __m256i*>(p));
+        const __m256i r1 = _mm256_loadu_si256(reinterpret_cast<const __m256i*>(p + nib));
+        return _mm256_add_epi8(_mm256_shuffle_epi8(lut, _mm256_xor_si256(l0, r0)),
+                               _mm256_shuffle_epi8(lut, _mm256_xor_si256(l1, r1)));
       };
       for (int i = 0; i < NC; ++i) {
-        const __m256i pin = popcnt_epi8(_mm256_xor_si256(li, load(in16 + j + 16 * i)));
-        const __m256i pout = popcnt_epi8(_mm256_xor_si256(lo, load(out16 + j + 16 * i)));
+        const __m256i pin = count(li0, li1, in16 + j + 16 * i);
+        const __m256i pout = count(lo0, lo1, out16 + j + 16 * i);
         const __m256i d = _mm256_maddubs_epi16(byte_ones, _mm256_sub_epi8(pin, pout));
         _mm256_store_si256(s + i, _mm256_add_epi16(_mm256_load_si256(s + i), d));
       }
@@ -1053,9 +1071,15 @@ void winners_avx2(const RowCtx& c) {
       record_none(c, x);
       continue;
     }
-    __m256i mn = A[0];
-    for (int i = 1; i < NC; ++i) mn = _mm256_min_epu16(mn, A[i]);
-    const uint32_t best = hmin_epu16(mn);
+    // The least cost: a tree of minima (shorter than a chain).
+    __m256i mins[NC];
+    for (int i = 0; i < NC; ++i) mins[i] = A[i];
+    for (int step = 1; step < NC; step *= 2) {
+      for (int i = 0; i + step < NC; i += 2 * step) {
+        mins[i] = _mm256_min_epu16(mins[i], mins[i + step]);
+      }
+    }
+    const uint32_t best = hmin_epu16(mins[0]);
     const __m256i bv = _mm256_set1_epi16(static_cast<short>(best));
     // The winner: the highest lane holding the least cost (the lowest disparity on a tie),
     // branch-free (see winners_avx512). vpmovmskb gives two bits per 16-bit lane.
@@ -1431,8 +1455,9 @@ void match_band_impl(const MatchArgs& a, const BandScratch& s, ptrdiff_t y0, ptr
           }
 #elif defined(STEREODEPTH_BM_AVX2)
           if constexpr (sizeof(F) == 4) {
-            codes16_of(rpad_in, static_cast<uint16_t*>(s.quad_in), npad);
-            codes16_of(rpad_out, static_cast<uint16_t*>(s.quad_out), npad);
+            nibbles_of(rpad_in, static_cast<uint16_t*>(s.quad_in), npad);
+            nibbles_of(rpad_out, static_cast<uint16_t*>(s.quad_out), npad);
+            c.nibble_stride = npad;
             c.in_quad = s.quad_in;
             c.out_quad = s.quad_out;
           }
