@@ -1326,6 +1326,131 @@ void decide_avx512(const RowCtx& c) {
   }
 }
 
+#if defined(STEREODEPTH_BM_AVX2)
+
+// 8 int32 lanes as two vectors of 4 doubles (exact).
+inline __m256d low_pd(__m256i v) { return _mm256_cvtepi32_pd(_mm256_castsi256_si128(v)); }
+inline __m256d high_pd(__m256i v) { return _mm256_cvtepi32_pd(_mm256_extracti128_si256(v, 1)); }
+
+// Two vectors of 4 double-comparison masks as one of 8 int32 masks, in order.
+inline __m256i masks_of(__m256d lo, __m256d hi) {
+  const __m256i even = _mm256_setr_epi32(0, 2, 4, 6, 0, 2, 4, 6);
+  auto half = [&](__m256d m) {
+    return _mm256_castsi256_si128(_mm256_permutevar8x32_epi32(_mm256_castpd_si256(m), even));
+  };
+  return _mm256_inserti128_si256(_mm256_castsi128_si256(half(lo)), half(hi), 1);
+}
+
+// Second pass, 8 pixels at a time; the same IEEE operations as decide_generic. Lane masks are
+// all ones (true) or zero; every integer here is below 2^31, so signed compares serve.
+void decide_avx2(const RowCtx& c) {
+  const ptrdiff_t cols = c.cols;
+  const int dp = c.dp;
+  const bool sub = c.subpixel != SubpixelFit::kNone;
+  const bool parabola = c.subpixel == SubpixelFit::kParabola;
+  const __m256i none = _mm256_set1_epi32(static_cast<int>(kNone));
+  const __m256i low16 = _mm256_set1_epi32(0xFFFF);
+  const __m256i iota = _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7);
+  const __m256i zero = _mm256_setzero_si256();
+  const __m256i all = _mm256_set1_epi32(-1);
+  const __m256 nan = _mm256_set1_ps(std::numeric_limits<float>::quiet_NaN());
+  // kb >= 1 and kb <= nd - 2: the winner has both neighbours.
+  auto interior = [&](__m256i kb) {
+    return _mm256_andnot_si256(_mm256_cmpgt_epi32(kb, _mm256_set1_epi32(c.nd - 2)),
+                               _mm256_cmpgt_epi32(kb, zero));
+  };
+  // See decide_avx512.
+  const int lr_int = c.lr_max_diff >= 65536.0 ? 65536 : static_cast<int>(std::floor(c.lr_max_diff));
+  // The transpose below leaves the pixels in the order 0, 2, 4, 6, 1, 3, 5, 7.
+  const __m256i unshuffle = _mm256_setr_epi32(0, 4, 1, 5, 2, 6, 3, 7);
+  for (ptrdiff_t x = 0; x < cols; x += 8) {
+    const __m256i lanes =
+        _mm256_cmpgt_epi32(_mm256_set1_epi32(static_cast<int>(std::min<ptrdiff_t>(cols - x, 8))), iota);
+    // 8 records, two per vector: a 4 x 4 transpose in each 128-bit half gives the fields of
+    // pixels 0, 2, 4, 6 (low half) and 1, 3, 5, 7 (high half).
+    const __m256i* rv = reinterpret_cast<const __m256i*>(c.rec + x);
+    const __m256i r0 = _mm256_loadu_si256(rv), r1 = _mm256_loadu_si256(rv + 1);
+    const __m256i r2 = _mm256_loadu_si256(rv + 2), r3 = _mm256_loadu_si256(rv + 3);
+    const __m256i t0 = _mm256_unpacklo_epi32(r0, r1), t1 = _mm256_unpackhi_epi32(r0, r1);
+    const __m256i t2 = _mm256_unpacklo_epi32(r2, r3), t3 = _mm256_unpackhi_epi32(r2, r3);
+    auto order = [&](__m256i v) { return _mm256_permutevar8x32_epi32(v, unshuffle); };
+    const __m256i f0 = order(_mm256_unpacklo_epi64(t0, t2));  // best | second << 16
+    const __m256i kb = order(_mm256_unpackhi_epi64(t0, t2));
+    const __m256i b = _mm256_and_si256(f0, low16);
+    const __m256i s2 = _mm256_srli_epi32(f0, 16);
+    const __m256i has2 = _mm256_xor_si256(_mm256_cmpeq_epi32(s2, none), all);
+    __m256i ok = _mm256_andnot_si256(_mm256_cmpeq_epi32(b, none), lanes);
+    if (c.texcol) {
+      const __m256i t = order(_mm256_unpacklo_epi64(t1, t3));
+      const __m256d tmin = _mm256_set1_pd(c.texture_sum_min);
+      ok = _mm256_and_si256(ok, masks_of(_mm256_cmp_pd(low_pd(t), tmin, _CMP_NLT_UQ),
+                                         _mm256_cmp_pd(high_pd(t), tmin, _CMP_NLT_UQ)));
+    }
+    const __m256i nb = order(_mm256_unpackhi_epi64(t1, t3));  // c0 | c2 << 16
+    const __m256i c0 = _mm256_and_si256(nb, low16);
+    const __m256i c2 = _mm256_srli_epi32(nb, 16);
+    if (c.count_low) {
+      // See decide_avx512.
+      const __m256i thr = _mm256_and_si256(
+          _mm256_mask_i32gather_epi32(zero, reinterpret_cast<const int*>(c.unique_min), b, ok, 4),
+          low16);
+      const __m256i low0 = _mm256_and_si256(_mm256_cmpgt_epi32(kb, zero), _mm256_cmpgt_epi32(thr, c0));
+      const __m256i low2 = _mm256_andnot_si256(
+          _mm256_cmpgt_epi32(kb, _mm256_set1_epi32(c.nd - 2)), _mm256_cmpgt_epi32(thr, c2));
+      // 1 + low0 + low2, the masks counting -1 each.
+      const __m256i near = _mm256_sub_epi32(_mm256_sub_epi32(_mm256_set1_epi32(1), low0), low2);
+      ok = _mm256_and_si256(ok, _mm256_cmpeq_epi32(s2, near));
+    } else if (c.uniqueness_factor > 0) {
+      const __m256d hundred = _mm256_set1_pd(100.0);
+      const __m256d f = _mm256_set1_pd(c.uniqueness_factor);
+      const __m256i unique =
+          masks_of(_mm256_cmp_pd(_mm256_mul_pd(low_pd(s2), hundred), _mm256_mul_pd(low_pd(b), f),
+                                 _CMP_GT_OQ),
+                   _mm256_cmp_pd(_mm256_mul_pd(high_pd(s2), hundred),
+                                 _mm256_mul_pd(high_pd(b), f), _CMP_GT_OQ));
+      ok = _mm256_and_si256(ok, _mm256_or_si256(_mm256_xor_si256(has2, all), unique));
+    }
+    if (c.lr_on) {
+      // i = x + dp - 1 - kb; the right winner's index is (rarg[i] - i + dp - 1) mod 2^16.
+      const __m256i xs = _mm256_add_epi32(_mm256_set1_epi32(static_cast<int>(x)), iota);
+      const __m256i i = _mm256_sub_epi32(_mm256_add_epi32(xs, _mm256_set1_epi32(dp - 1)), kb);
+      const __m256i g =
+          _mm256_mask_i32gather_epi32(zero, reinterpret_cast<const int*>(c.rarg), i, ok, 2);
+      const __m256i kr = _mm256_and_si256(
+          _mm256_add_epi32(_mm256_sub_epi32(g, i), _mm256_set1_epi32(dp - 1)), low16);
+      const __m256i diff = _mm256_abs_epi32(_mm256_sub_epi32(kb, kr));
+      ok = _mm256_andnot_si256(_mm256_cmpgt_epi32(diff, _mm256_set1_epi32(lr_int)), ok);
+    }
+    __m256 d = _mm256_cvtepi32_ps(_mm256_add_epi32(kb, _mm256_set1_epi32(c.min_d)));
+    if (sub) {
+      const __m256 num = _mm256_cvtepi32_ps(_mm256_sub_epi32(c0, c2));
+      __m256i den_i;
+      if (parabola) {
+        den_i = _mm256_sub_epi32(_mm256_add_epi32(c0, c2), _mm256_add_epi32(b, b));
+      } else {
+        den_i = _mm256_max_epi32(_mm256_sub_epi32(c0, b), _mm256_sub_epi32(c2, b));
+      }
+      const __m256 den = _mm256_cvtepi32_ps(_mm256_add_epi32(den_i, den_i));
+      // The lanes that take the step; the others' quotients (perhaps of a zero) are dropped.
+      const __m256 use = _mm256_and_ps(_mm256_castsi256_ps(_mm256_and_si256(ok, interior(kb))),
+                                       _mm256_cmp_ps(den, _mm256_setzero_ps(), _CMP_GT_OQ));
+      d = _mm256_blendv_ps(d, _mm256_add_ps(d, _mm256_div_ps(num, den)), use);
+    }
+    const __m256 okf = _mm256_castsi256_ps(ok);
+    _mm256_maskstore_ps(c.drow + x, lanes, _mm256_blendv_ps(nan, d, okf));
+    if (c.crow) {
+      const __m256 ratio = _mm256_div_ps(_mm256_cvtepi32_ps(_mm256_sub_epi32(s2, b)),
+                                         _mm256_cvtepi32_ps(s2));
+      const __m256 pos = _mm256_castsi256_ps(_mm256_cmpgt_epi32(s2, zero));
+      const __m256 conf = _mm256_blendv_ps(_mm256_set1_ps(1.0f), _mm256_and_ps(ratio, pos),
+                                           _mm256_castsi256_ps(has2));
+      _mm256_maskstore_ps(c.crow + x, lanes, _mm256_and_ps(conf, okf));
+    }
+  }
+}
+
+#endif
+
 // Whether this build's first pass updates the column sums itself for this dp.
 inline bool fuses_update(int dp) {
 #if defined(STEREODEPTH_BM_AVX512) || defined(STEREODEPTH_BM_AVX2)
@@ -1342,7 +1467,7 @@ void row_pass(const RowCtx& c) {
 #if defined(STEREODEPTH_BM_AVX512)
   auto decide = decide_avx512;
 #else
-  auto decide = decide_generic;
+  auto decide = decide_avx2;
 #endif
   if (c.dp <= kLanes * kMaxChunks) {
     RowCtx counted = c;
