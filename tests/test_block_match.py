@@ -376,6 +376,42 @@ def test_each_isa_on_odd_shapes(isa: str) -> None:
                 np.testing.assert_array_equal(a, b)
 
 
+# Disparity ranges that reach every fixed-size first pass of the SIMD builds (AVX2: 16 lanes a
+# vector, up to 256 disparities; AVX-512: 32 lanes, up to 256), with and without padding lanes,
+# and two beyond them (the generic pass).
+FIXED_PASS_RANGES = [16 * k - (k % 4) * 3 for k in range(1, 17)] + [9, 264]
+FIXED_PASS_CONFIGS: list[dict[str, Any]] = [
+    {},
+    {"return_confidence": True, "subpixel": "parabola", "min_disparity": -2},
+    {"lr_max_diff": None, "subpixel": False, "uniqueness_ratio": 0, "texture_threshold": 4.0},
+    {"lr_max_diff": 0, "uniqueness_ratio": 15, "block_size": 5},
+]
+
+
+@pytest.mark.parametrize("isa", [isa for isa in SUPPORTED_ISAS if isa != "baseline"])
+@pytest.mark.parametrize("cost", ["census", "sad"])
+@pytest.mark.parametrize("nd", FIXED_PASS_RANGES)
+def test_each_fixed_pass_matches_the_scalar_path(isa: str, cost: str, nd: int) -> None:
+    left, right, _ = slanted_pair((21, 120 + nd), d0=0.6 * nd, dx=0.02, dy=0.1, seed=nd)
+    # A flat patch (ties) and a repeated one (work for the uniqueness check).
+    left[3:12, 10:40] = 90
+    right[3:12, 10:40] = 90
+    left[12:20, 50:82] = np.tile(np.array([0, 0, 255, 255], np.uint8), 8)
+    right[12:20, 50:82] = np.tile(np.array([0, 0, 255, 255], np.uint8), 8)
+    for cfg in FIXED_PASS_CONFIGS:
+        kw = {"num_disparities": nd, "cost": cost, **cfg}
+        scalar = sd.StereoMatcher(isa="baseline", **kw).compute(left, right)
+        simd = sd.StereoMatcher(isa=isa, **kw).compute(left, right)
+        if isinstance(scalar, tuple):
+            for a, b in zip(scalar, simd, strict=True):
+                np.testing.assert_array_equal(a, b)
+        else:
+            np.testing.assert_array_equal(scalar, simd)
+        # Not a vacuous comparison: many pixels with a full search range are matched.
+        disparity = scalar[0] if isinstance(scalar, tuple) else scalar
+        assert np.isfinite(disparity[:, nd:]).mean() > 0.25
+
+
 def test_unknown_isa_is_rejected() -> None:
     with pytest.raises(ValueError, match="isa must be one of"):
         sd.StereoMatcher(num_disparities=8, isa="sse9")
