@@ -13,8 +13,11 @@
 // The AVX-512 build keeps a pixel's costs in registers (dp <= 256: one template per vector
 // count), does step (1) for column x + r on the way (so the column sums are read back from
 // L1), rotates each pixel's costs into aligned right-winner blocks held in registers, and
-// does step (3) sixteen pixels at a time. Every path computes the same integers, and the
-// floating-point steps use the same IEEE operations in the same order as the numpy oracle.
+// does step (3) sixteen pixels at a time. The AVX2 build does the same with 16-lane vectors
+// (also dp <= 256), except that it updates the right winners once per 16 pixels from the
+// costs it stored, and does step (3) eight pixels at a time. Every path computes the same
+// integers, and the floating-point steps use the same IEEE operations in the same order as
+// the numpy oracle.
 #include "block_match_kernels.hpp"
 
 #include <cmath>
@@ -392,9 +395,10 @@ struct RowCtx {
   int dp, nd, qpad, radius, min_d;
   SubpixelFit subpixel;
   bool lr_on, need_second;
-  // AVX-512 first pass without confidence: `second` holds, instead of the second-best cost,
-  // how many lanes cost less than the uniqueness threshold unique_min[best]; the second pass
-  // subtracts the winner and its two neighbours (see decide_avx512).
+  // Fixed-size SIMD first pass without confidence: `second` holds, instead of the
+  // second-best cost, how many lanes cost less than the uniqueness threshold
+  // unique_min[best]; the second pass subtracts the winner and its two neighbours (see
+  // decide_avx512).
   bool count_low;
   double texture_sum_min, uniqueness_factor, lr_max_diff;
   uint16_t* acc;   // dp lanes of scratch (generic pass)
@@ -1267,7 +1271,7 @@ void decide_avx512(const RowCtx& c) {
 #endif
 
 // Second pass, one pixel at a time: the checks, the sub-pixel step and the outputs. (The
-// AVX-512 build uses decide_avx512, which gives the same results.)
+// SIMD builds use decide_avx512 and decide_avx2, which give the same results.)
 [[maybe_unused]] void decide_generic(const RowCtx& c) {
   const float nan = std::numeric_limits<float>::quiet_NaN();
   for (ptrdiff_t x = 0; x < c.cols; ++x) {
@@ -1278,14 +1282,7 @@ void decide_avx512(const RowCtx& c) {
     const bool has2 = s2 != kNone;
     bool ok = b != kNone;
     if (ok && c.texcol) ok = !(static_cast<double>(rec.tsum) < c.texture_sum_min);
-    if (ok && c.count_low) {
-      // The counted form of the check (see decide_avx512): unique when the lanes below the
-      // threshold are the winner and those of its neighbours below it.
-      const uint32_t thr = c.unique_min[b] & 0xFFFFu;
-      const uint32_t near = 1u + static_cast<uint32_t>(kb >= 1 && (rec.around & 0xFFFFu) < thr) +
-                            static_cast<uint32_t>(kb <= c.nd - 2 && (rec.around >> 16) < thr);
-      ok = s2 == near;
-    } else if (ok && c.uniqueness_factor > 0 && has2) {
+    if (ok && c.uniqueness_factor > 0 && has2) {
       ok = static_cast<double>(s2) * 100.0 > static_cast<double>(b) * c.uniqueness_factor;
     }
     if (ok && c.lr_on) {

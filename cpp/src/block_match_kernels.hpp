@@ -46,8 +46,8 @@ struct MatchArgs {
 struct WinnerRecord {
   std::uint16_t best;    // least block cost; 0xFFFF: no search (the range leaves the image)
   std::uint16_t second;  // least cost more than one disparity away (0xFFFF: none), or, in
-                         // the AVX-512 counted mode, the number of costs below the
-                         // uniqueness threshold
+                         // the counted mode of the SIMD builds, the number of costs below
+                         // the uniqueness threshold
   std::int32_t kbest;    // disparity index of the least cost
   std::uint32_t tsum;    // block texture sum
   std::uint32_t around;  // costs at disparity index kbest - 1 and + 1: c0 | c2 << 16
