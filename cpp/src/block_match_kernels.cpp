@@ -1010,12 +1010,23 @@ void winners_avx2(const RowCtx& c) {
         _mm256_store_si256(s + i, _mm256_add_epi16(_mm256_load_si256(s + i), d));
       }
     } else {
-      const __m256i li = _mm256_set1_epi16(static_cast<short>(in_l[j]));
-      const __m256i lo = _mm256_set1_epi16(static_cast<short>(out_l[j]));
-      for (int i = 0; i < NC; ++i) {
-        const __m256i d = _mm256_sub_epi16(sad_cost16(li, in_r + j + 16 * i),
-                                           sad_cost16(lo, out_r + j + 16 * i));
-        _mm256_store_si256(s + i, _mm256_add_epi16(_mm256_load_si256(s + i), d));
+      // SAD, 32 lanes of bytes at a time: |l - r| = max - min, and the entering row's cost
+      // minus the leaving row's (-62 .. 62) fits a signed byte, widened for the sums. (With
+      // NC odd the last load reads 16 lanes past dp, into the padded row's slack.)
+      const __m256i li = _mm256_set1_epi8(static_cast<char>(in_l[j]));
+      const __m256i lo = _mm256_set1_epi8(static_cast<char>(out_l[j]));
+      auto cost = [](__m256i l, const uint8_t* p) {
+        const __m256i r = _mm256_loadu_si256(reinterpret_cast<const __m256i*>(p));
+        return _mm256_sub_epi8(_mm256_max_epu8(l, r), _mm256_min_epu8(l, r));
+      };
+      auto add = [&](int i, __m128i d) {
+        _mm256_store_si256(s + i, _mm256_add_epi16(_mm256_load_si256(s + i),
+                                                   _mm256_cvtepi8_epi16(d)));
+      };
+      for (int i = 0; i < NC; i += 2) {
+        const __m256i d = _mm256_sub_epi8(cost(li, in_r + j + 16 * i), cost(lo, out_r + j + 16 * i));
+        add(i, _mm256_castsi256_si128(d));
+        if (i + 1 < NC) add(i + 1, _mm256_extracti128_si256(d, 1));
       }
     }
   };
