@@ -230,19 +230,20 @@ struct SadCost {
 };
 
 #if defined(STEREODEPTH_BM_AVX2)
-// Set bits of each byte (nibble lookup).
-inline __m256i popcnt_epi8(__m256i v) {
-  const __m256i lut = _mm256_setr_epi8(0, 1, 1, 2, 1, 2, 2, 3, 1, 2, 2, 3, 2, 3, 3, 4, 0, 1, 1, 2,
-                                       1, 2, 2, 3, 1, 2, 2, 3, 2, 3, 3, 4);
+// The set bits of 0 .. 15 in each 128-bit half: a vpshufb table for nibbles.
+inline __m256i nibble_popcounts() {
+  return _mm256_setr_epi8(0, 1, 1, 2, 1, 2, 2, 3, 1, 2, 2, 3, 2, 3, 3, 4, 0, 1, 1, 2, 1, 2, 2, 3,
+                          1, 2, 2, 3, 2, 3, 3, 4);
+}
+
+// Set bits of each 32-bit lane (nibble lookup, then byte sums).
+inline __m256i popcnt_epi32(__m256i v) {
+  const __m256i lut = nibble_popcounts();
   const __m256i low = _mm256_set1_epi8(0x0f);
   const __m256i lo = _mm256_shuffle_epi8(lut, _mm256_and_si256(v, low));
   const __m256i hi = _mm256_shuffle_epi8(lut, _mm256_and_si256(_mm256_srli_epi16(v, 4), low));
-  return _mm256_add_epi8(lo, hi);
-}
-
-// Set bits of each 32-bit lane (byte counts, then their sums).
-inline __m256i popcnt_epi32(__m256i v) {
-  const __m256i pairs = _mm256_maddubs_epi16(popcnt_epi8(v), _mm256_set1_epi8(1));
+  const __m256i bytes = _mm256_add_epi8(lo, hi);
+  const __m256i pairs = _mm256_maddubs_epi16(bytes, _mm256_set1_epi8(1));
   return _mm256_madd_epi16(pairs, _mm256_set1_epi16(1));
 }
 
@@ -993,8 +994,7 @@ void winners_avx2(const RowCtx& c) {
       const __m256i li1 = _mm256_set1_epi16(static_cast<short>((li >> 4) & 0x0F0Fu));
       const __m256i lo0 = _mm256_set1_epi16(static_cast<short>(lo & 0x0F0Fu));
       const __m256i lo1 = _mm256_set1_epi16(static_cast<short>((lo >> 4) & 0x0F0Fu));
-      const __m256i lut = _mm256_setr_epi8(0, 1, 1, 2, 1, 2, 2, 3, 1, 2, 2, 3, 2, 3, 3, 4, 0, 1,
-                                           1, 2, 1, 2, 2, 3, 1, 2, 2, 3, 2, 3, 3, 4);
+      const __m256i lut = nibble_popcounts();
       const __m256i byte_ones = _mm256_set1_epi8(1);
       // Set bits of each byte of (l ^ r): the counts of its two nibbles.
       auto count = [&](__m256i l0, __m256i l1, const uint16_t* p) {
@@ -1024,7 +1024,8 @@ void winners_avx2(const RowCtx& c) {
                                                    _mm256_cvtepi8_epi16(d)));
       };
       for (int i = 0; i < NC; i += 2) {
-        const __m256i d = _mm256_sub_epi8(cost(li, in_r + j + 16 * i), cost(lo, out_r + j + 16 * i));
+        const __m256i d =
+            _mm256_sub_epi8(cost(li, in_r + j + 16 * i), cost(lo, out_r + j + 16 * i));
         add(i, _mm256_castsi256_si128(d));
         if (i + 1 < NC) add(i + 1, _mm256_extracti128_si256(d, 1));
       }
@@ -1142,8 +1143,10 @@ void winners_avx2(const RowCtx& c) {
     // c0 | c2 << 16: lanes qb + 1 and qb - 1 (disparity index kb - 1 and kb + 1). Beyond the
     // lanes `recent` holds 0xFFFF where the other passes store 0: the second pass reads
     // neither (it needs 1 <= kb <= nd - 2).
-    rec->around = around ? static_cast<uint32_t>(row[qb + 1]) | (static_cast<uint32_t>(row[qb - 1]) << 16)
-                         : 0u;
+    rec->around = 0;
+    if (around) {
+      rec->around = static_cast<uint32_t>(row[qb + 1]) | (static_cast<uint32_t>(row[qb - 1]) << 16);
+    }
   }
 }
 
@@ -1368,8 +1371,8 @@ void decide_avx2(const RowCtx& c) {
   // The transpose below leaves the pixels in the order 0, 2, 4, 6, 1, 3, 5, 7.
   const __m256i unshuffle = _mm256_setr_epi32(0, 4, 1, 5, 2, 6, 3, 7);
   for (ptrdiff_t x = 0; x < cols; x += 8) {
-    const __m256i lanes =
-        _mm256_cmpgt_epi32(_mm256_set1_epi32(static_cast<int>(std::min<ptrdiff_t>(cols - x, 8))), iota);
+    const int n = static_cast<int>(cols - x < 8 ? cols - x : 8);
+    const __m256i lanes = _mm256_cmpgt_epi32(_mm256_set1_epi32(n), iota);
     // 8 records, two per vector: a 4 x 4 transpose in each 128-bit half gives the fields of
     // pixels 0, 2, 4, 6 (low half) and 1, 3, 5, 7 (high half).
     const __m256i* rv = reinterpret_cast<const __m256i*>(c.rec + x);
@@ -1398,7 +1401,8 @@ void decide_avx2(const RowCtx& c) {
       const __m256i thr = _mm256_and_si256(
           _mm256_mask_i32gather_epi32(zero, reinterpret_cast<const int*>(c.unique_min), b, ok, 4),
           low16);
-      const __m256i low0 = _mm256_and_si256(_mm256_cmpgt_epi32(kb, zero), _mm256_cmpgt_epi32(thr, c0));
+      const __m256i low0 =
+          _mm256_and_si256(_mm256_cmpgt_epi32(kb, zero), _mm256_cmpgt_epi32(thr, c0));
       const __m256i low2 = _mm256_andnot_si256(
           _mm256_cmpgt_epi32(kb, _mm256_set1_epi32(c.nd - 2)), _mm256_cmpgt_epi32(thr, c2));
       // 1 + low0 + low2, the masks counting -1 each.
