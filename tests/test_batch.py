@@ -670,6 +670,29 @@ def test_progress_bar_and_summary(tmp_path: Path, capsys: pytest.CaptureFixture[
     assert out.startswith("3 pairs: 3 done in ") and "pairs/s, embedded)" in out
 
 
+def test_ctrl_c_during_a_dask_job_sets_a_flag_and_a_second_one_raises() -> None:
+    """While a Dask job runs, the first SIGINT only sets the runner's stop flag (Dask's blocking
+    calls are not safe to interrupt); a second one raises KeyboardInterrupt; the default handler
+    comes back afterwards. A handler the application installed is left alone."""
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
+    with batch._sigint_as_flag() as stop:
+        assert not stop.is_set()
+        signal.raise_signal(signal.SIGINT)
+        assert stop.is_set()
+        with pytest.raises(KeyboardInterrupt):
+            signal.raise_signal(signal.SIGINT)
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
+
+    seen: list[int] = []
+    previous = signal.signal(signal.SIGINT, lambda signum, frame: seen.append(signum))
+    try:
+        with batch._sigint_as_flag() as stop:
+            signal.raise_signal(signal.SIGINT)
+            assert not stop.is_set() and seen == [signal.SIGINT]
+    finally:
+        signal.signal(signal.SIGINT, previous)
+
+
 @pytest.mark.cluster
 def test_ctrl_c_in_a_terminal_with_local_workers(tmp_path: Path) -> None:
     """Ctrl-C reaches the whole process group: the job stops with status 130 and a report,

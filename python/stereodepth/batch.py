@@ -60,6 +60,7 @@ import math
 import os
 import re
 import sys
+import threading
 import time
 import uuid
 from collections.abc import Callable, Iterator, Sequence
@@ -802,8 +803,12 @@ def _run_dask(
     done: Callable[[int, dict[str, Any]], None],
     threads: int | None,
     client: Any,
+    stop: threading.Event,
 ) -> None:
-    from distributed import as_completed
+    """Runs the pairs on the client's cluster until all are done or ``stop`` is set (Ctrl-C,
+    see :func:`_sigint_as_flag`): then the tasks not started are cancelled, the results that
+    already arrived are kept, and KeyboardInterrupt is raised here, outside Dask's calls."""
+    import queue
 
     run_id = uuid.uuid4().hex[:8]
     futures = {}
@@ -812,31 +817,39 @@ def _run_dask(
             process_pair, p, options, threads, key=f"stereodepth-{run_id}-{i}", pure=False
         )
         futures[f] = i
+    arrived: queue.SimpleQueue[Any] = queue.SimpleQueue()
+    for f in futures:
+        f.add_done_callback(arrived.put)  # called from Dask's thread when the task ends
     pending = set(futures)
-    try:
-        for f in as_completed(list(futures)):  # type: ignore[no-untyped-call]
-            i = futures[f]
-            try:
-                record = f.result()
-            except Exception as exc:  # the task itself never raises: a worker kept dying
-                pair = dict(todo)[i]
-                record = {
-                    "stem": pair.stem,
-                    "left": str(pair.left),
-                    "right": str(pair.right),
-                    "status": "failed",
-                    "time_s": None,
-                    "density": None,
-                    "error": f"{type(exc).__name__}: {exc}",
-                }
-            pending.discard(f)
-            done(i, record)
-    except KeyboardInterrupt:
-        client.cancel([f for f in pending if not f.done()])
-        for f in pending:
-            if f.done() and f.status == "finished":
-                done(futures[f], f.result())
-        raise
+    while pending:
+        if stop.is_set():
+            client.cancel([f for f in pending if not f.done()])
+            for f in pending:
+                if f.done() and f.status == "finished":
+                    done(futures[f], f.result())
+            raise KeyboardInterrupt
+        try:
+            f = arrived.get(timeout=0.2)
+        except queue.Empty:
+            continue
+        if f not in pending:
+            continue
+        pending.discard(f)
+        i = futures[f]
+        try:
+            record = f.result()
+        except Exception as exc:  # the task itself never raises: a worker kept dying
+            pair = dict(todo)[i]
+            record = {
+                "stem": pair.stem,
+                "left": str(pair.left),
+                "right": str(pair.right),
+                "status": "failed",
+                "time_s": None,
+                "density": None,
+                "error": f"{type(exc).__name__}: {exc}",
+            }
+        done(i, record)
 
 
 def run_batch(
@@ -908,9 +921,12 @@ def run_batch(
                 if todo:
                     _run_embedded(todo, options, done, threads)
             else:
-                with _dask_client(scheduler, workers, threads) as (client, runner, task_threads):
+                with (
+                    _sigint_as_flag() as stop,
+                    _dask_client(scheduler, workers, threads) as (client, runner, task_threads),
+                ):
                     if todo:
-                        _run_dask(todo, options, done, task_threads, client)
+                        _run_dask(todo, options, done, task_threads, client, stop)
         except KeyboardInterrupt:
             interrupted = True
         finally:
@@ -950,11 +966,43 @@ def run_batch(
 
 
 @contextlib.contextmanager
+def _sigint_as_flag() -> Iterator[threading.Event]:
+    """For the block's duration, Ctrl-C (SIGINT) sets the returned event instead of raising
+    KeyboardInterrupt wherever the main thread happens to be.
+
+    dask.distributed's blocking calls are not safe to interrupt: a KeyboardInterrupt that lands
+    inside one can leave its event loop thread printing a traceback. The Dask runner checks the
+    event between calls and stops the job itself, and the cluster then shuts down in order; a
+    second Ctrl-C raises KeyboardInterrupt as usual. Only Python's default handler is replaced:
+    an application's own handler, an ignored SIGINT and threads other than the main one are
+    left alone (the event is then never set)."""
+    import signal
+
+    stop = threading.Event()
+    if (
+        threading.current_thread() is not threading.main_thread()
+        or signal.getsignal(signal.SIGINT) is not signal.default_int_handler
+    ):
+        yield stop
+        return
+
+    def handler(signum: int, frame: Any) -> None:
+        if stop.is_set():  # a second Ctrl-C: the user will not wait for the orderly stop
+            raise KeyboardInterrupt
+        stop.set()
+
+    previous = signal.signal(signal.SIGINT, handler)
+    try:
+        yield stop
+    finally:
+        signal.signal(signal.SIGINT, previous)
+
+
+@contextlib.contextmanager
 def _sigint_ignored_in_children() -> Iterator[None]:
     """SIGINT ignored while the block starts processes (which keep ignoring it), then restored.
     A no-op outside the main thread, where signal handlers cannot be set."""
     import signal
-    import threading
 
     if threading.current_thread() is not threading.main_thread():
         yield
