@@ -59,6 +59,7 @@ import logging
 import math
 import os
 import re
+import signal
 import sys
 import threading
 import time
@@ -570,6 +571,19 @@ def _write_map(path: Path, kind: str, array: np.ndarray, fmt: str) -> None:
         io.write_png16(path, array)
 
 
+def _record(pair: Pair, status: str, error: str | None = None) -> dict[str, Any]:
+    """The fields every record of a pair starts with; the rest are filled in as known."""
+    return {
+        "stem": pair.stem,
+        "left": str(pair.left),
+        "right": str(pair.right),
+        "status": status,
+        "error": error,
+        "time_s": None,
+        "density": None,
+    }
+
+
 def process_pair(pair: Pair, options: BatchOptions, threads: int | None = None) -> dict[str, Any]:
     """Computes and writes one pair's outputs; never raises for a bad pair.
 
@@ -582,15 +596,7 @@ def process_pair(pair: Pair, options: BatchOptions, threads: int | None = None) 
     from .pointcloud import reproject, write_ply
 
     t0 = time.perf_counter()
-    record: dict[str, Any] = {
-        "stem": pair.stem,
-        "left": str(pair.left),
-        "right": str(pair.right),
-        "status": "failed",
-        "error": None,
-        "time_s": None,
-        "density": None,
-    }
+    record = _record(pair, "failed")
     try:
         if pair.problem:
             raise ValueError(pair.problem)
@@ -817,6 +823,7 @@ def _run_dask(
             process_pair, p, options, threads, key=f"stereodepth-{run_id}-{i}", pure=False
         )
         futures[f] = i
+    pairs = dict(todo)
     arrived: queue.SimpleQueue[Any] = queue.SimpleQueue()
     for f in futures:
         f.add_done_callback(arrived.put)  # called from Dask's thread when the task ends
@@ -832,23 +839,12 @@ def _run_dask(
             f = arrived.get(timeout=0.2)
         except queue.Empty:
             continue
-        if f not in pending:
-            continue
-        pending.discard(f)
+        pending.discard(f)  # Dask calls a future's callback once
         i = futures[f]
         try:
             record = f.result()
         except Exception as exc:  # the task itself never raises: a worker kept dying
-            pair = dict(todo)[i]
-            record = {
-                "stem": pair.stem,
-                "left": str(pair.left),
-                "right": str(pair.right),
-                "status": "failed",
-                "time_s": None,
-                "density": None,
-                "error": f"{type(exc).__name__}: {exc}",
-            }
+            record = _record(pairs[i], "failed", f"{type(exc).__name__}: {exc}")
         done(i, record)
 
 
@@ -906,17 +902,7 @@ def run_batch(
                     todo.append((i, p))
                     continue
                 keep = ("time_s", "density", "width", "height", "outputs")
-                done(
-                    i,
-                    {
-                        "stem": p.stem,
-                        "left": str(p.left),
-                        "right": str(p.right),
-                        "status": "skipped",
-                        "error": None,
-                        **{k: earlier.get(k) for k in keep},
-                    },
-                )
+                done(i, {**_record(p, "skipped"), **{k: earlier.get(k) for k in keep}})
             if scheduler is None and workers is None:
                 if todo:
                     _run_embedded(todo, options, done, threads)
@@ -938,15 +924,7 @@ def run_batch(
         if rec is None:
             # Interrupted: a pair whose result did not reach us may have finished anyway.
             earlier = completed_record(p, options)
-            rec = {
-                "stem": p.stem,
-                "left": str(p.left),
-                "right": str(p.right),
-                "status": "cancelled",
-                "error": None,
-                "time_s": None,
-                "density": None,
-            }
+            rec = _record(p, "cancelled")
             if earlier is not None:
                 rec.update(
                     {
@@ -966,6 +944,21 @@ def run_batch(
 
 
 @contextlib.contextmanager
+def _sigint_handled_by(handler: Any) -> Iterator[None]:
+    """SIGINT goes to ``handler`` (a function or ``signal.SIG_IGN``) for the block's duration,
+    then the previous handler comes back. A no-op outside the main thread, where signal
+    handlers cannot be set."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = signal.signal(signal.SIGINT, handler)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
+
+
+@contextlib.contextmanager
 def _sigint_as_flag() -> Iterator[threading.Event]:
     """For the block's duration, Ctrl-C (SIGINT) sets the returned event instead of raising
     KeyboardInterrupt wherever the main thread happens to be.
@@ -976,42 +969,18 @@ def _sigint_as_flag() -> Iterator[threading.Event]:
     second Ctrl-C raises KeyboardInterrupt as usual. Only Python's default handler is replaced:
     an application's own handler, an ignored SIGINT and threads other than the main one are
     left alone (the event is then never set)."""
-    import signal
-
     stop = threading.Event()
-    if (
-        threading.current_thread() is not threading.main_thread()
-        or signal.getsignal(signal.SIGINT) is not signal.default_int_handler
-    ):
-        yield stop
-        return
 
     def handler(signum: int, frame: Any) -> None:
         if stop.is_set():  # a second Ctrl-C: the user will not wait for the orderly stop
             raise KeyboardInterrupt
         stop.set()
 
-    previous = signal.signal(signal.SIGINT, handler)
-    try:
+    if signal.getsignal(signal.SIGINT) is not signal.default_int_handler:
         yield stop
-    finally:
-        signal.signal(signal.SIGINT, previous)
-
-
-@contextlib.contextmanager
-def _sigint_ignored_in_children() -> Iterator[None]:
-    """SIGINT ignored while the block starts processes (which keep ignoring it), then restored.
-    A no-op outside the main thread, where signal handlers cannot be set."""
-    import signal
-
-    if threading.current_thread() is not threading.main_thread():
-        yield
         return
-    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
-    try:
-        yield
-    finally:
-        signal.signal(signal.SIGINT, previous)
+    with _sigint_handled_by(handler):
+        yield stop
 
 
 @contextlib.contextmanager
@@ -1039,7 +1008,7 @@ def _dask_client(
     # Ctrl-C in a terminal reaches every process of the group: the worker processes start with
     # SIGINT ignored (their children inherit it), so that this process alone stops the job
     # and shuts the cluster down, rather than each worker dying with a traceback.
-    with _sigint_ignored_in_children():
+    with _sigint_handled_by(signal.SIG_IGN):
         cluster = LocalCluster(  # type: ignore[no-untyped-call]
             n_workers=workers,
             threads_per_worker=1,
