@@ -14,8 +14,10 @@ import numpy as np
 from .matching import (
     CENSUS_WINDOW,
     PREFILTER_CAP,
+    UINT16_STRETCH_TOP,
     BlockMatchOptions,
-    as_pair,
+    check_channel_order,
+    check_pair,
 )
 
 __all__ = ["block_match"]
@@ -23,15 +25,34 @@ __all__ = ["block_match"]
 _POPCOUNT8 = np.array([bin(i).count("1") for i in range(256)], dtype=np.uint8)
 
 
-def grey(image: np.ndarray) -> np.ndarray:
-    """int32 grey: the image itself, or OpenCV's fixed-point RGB -> grey for RGB."""
+def grey(image: np.ndarray, *, channel_order: str = "rgb") -> np.ndarray:
+    """int32 grey: the image itself, or OpenCV's fixed-point RGB -> grey for (H, W, 3)
+    (``COLOR_RGB2GRAY``, or ``COLOR_BGR2GRAY`` for ``channel_order="bgr"``: the weights of
+    red and blue trade places)."""
     if image.ndim == 3:
-        rgb = image.astype(np.int32)
-        g: np.ndarray = (
-            rgb[..., 0] * 9798 + rgb[..., 1] * 19235 + rgb[..., 2] * 3735 + 16384
-        ) >> 15
+        c = image.astype(np.int32)
+        w0, w2 = (9798, 3735) if check_channel_order(channel_order) == "rgb" else (3735, 9798)
+        g: np.ndarray = (c[..., 0] * w0 + c[..., 1] * 19235 + c[..., 2] * w2 + 16384) >> 15
         return g
     return image.astype(np.int32)
+
+
+def stretched(gl: np.ndarray, gr: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """A uint16 pair's int32 grey on the scale of uint8: ``lo`` and ``hi`` over both images;
+    when ``0 < hi - lo < 65280`` every value ``v`` becomes
+    ``((v - lo) * 65280 + (hi - lo) // 2) // (hi - lo)``, else the pair is kept."""
+    lo = min(int(gl.min()), int(gr.min()))
+    hi = max(int(gl.max()), int(gr.max()))
+    if not 0 < hi - lo < UINT16_STRETCH_TOP:
+        return gl, gr
+    span = np.int64(hi - lo)
+
+    def one(g: np.ndarray) -> np.ndarray:
+        v = (g.astype(np.int64) - lo) * UINT16_STRETCH_TOP + span // 2
+        out: np.ndarray = (v // span).astype(np.int32)
+        return out
+
+    return one(gl), one(gr)
 
 
 def shifted(g: np.ndarray, dy: int, dx: int) -> np.ndarray:
@@ -157,9 +178,12 @@ def block_match(
     """Oracle of :func:`stereodepth.block_match`: the same parameters, rules and tie-break
     (``threads`` is checked, then unused)."""
     o = BlockMatchOptions(num_disparities=num_disparities, **params)
-    left_arr, right_arr = as_pair(left, right)
+    left_arr, right_arr = check_pair(left, right)
     sixteen_bit = left_arr.dtype == np.uint16
-    gl, gr = grey(left_arr), grey(right_arr)
+    gl = grey(left_arr, channel_order=o.channel_order)
+    gr = grey(right_arr, channel_order=o.channel_order)
+    if sixteen_bit:
+        gl, gr = stretched(gl, gr)
     h, w = gl.shape
     nd, dmin, r = o.num_disparities, o.min_disparity, o.block_size // 2
     ks = np.arange(nd)

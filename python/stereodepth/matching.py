@@ -9,14 +9,27 @@ validity; the sub-pixel step is the same float32 formula in both (the tests allo
 
 Steps, in the kernel and in the oracle alike:
 
-1. Grey: uint8 and uint16 grey images are used as they are; RGB (uint8, (H, W, 3)) becomes
+1. Grey: uint8 grey images are used as they are; RGB (uint8, (H, W, 3)) becomes
    ``(9798 R + 19235 G + 3735 B + 16384) >> 15``, OpenCV's ``COLOR_RGB2GRAY`` bit for bit.
+   The channels are taken as R, G, B unless ``channel_order="bgr"`` says they are B, G, R
+   (OpenCV's ``cv2.imread`` order); the grey image is then OpenCV's ``COLOR_BGR2GRAY``.
+   uint16 grey images are first stretched from the pair's joint range to the scale of a
+   uint8 image: with ``lo`` and ``hi`` the least and the largest value of both images, a pair
+   with ``0 < hi - lo < 65280`` becomes ``((v - lo) * 65280 + (hi - lo) // 2) // (hi - lo)``
+   (integer arithmetic, exact, strictly increasing, ``lo`` -> 0 and ``hi`` -> 65280 =
+   255 * 256); a constant pair and a pair whose range is already 65280 or wider are used as
+   they are. The costs below depend only on differences and comparisons of grey values, so
+   a 12-bit image (0..4095, or v * 16), a narrow-band thermal image (7000 + 6 v) or 8-bit
+   values in uint16 are matched at the scale of their min-max stretch to 0..255; an affine
+   encoding ``a * v + b`` of a uint8 pair that spans 0..255 gives exactly the disparity of
+   the uint8 pair. The range is the pair's own, frame by frame.
 2. Pixel cost. ``cost="census"``: a census transform over the border of the 5x5 window
    (the 16 pixels two away from the centre, one bit each: "neighbour < centre"), compared by
    Hamming distance, 0..16 per pixel. On the shared scenes this ring is more accurate than
    the full 5x5 census (24 bits) and cheaper. ``cost="sad"``: the absolute difference of
    the x-Sobel-prefiltered images ``clip(sobel_x, -31, 31) + 31``, 0..62 per pixel, as
-   OpenCV's StereoBM; for uint16 images the Sobel response is first shifted right by 8 bits.
+   OpenCV's StereoBM; for uint16 images (stretched as in step 1) the Sobel response is first
+   shifted right by 8 bits, which puts it on the scale of the uint8 min-max stretch.
    Pixels outside the image repeat the nearest edge pixel (for the neighbours of the census
    and the Sobel filter, and for a right-image pixel left of column 0 or right of the last).
 3. Aggregation: the sum of pixel costs over a ``block_size`` x ``block_size`` block, the block
@@ -29,7 +42,8 @@ Steps, in the kernel and in the oracle alike:
      for a negative ``min_disparity``, the right ``-min_disparity`` columns) are NaN;
    - texture: the block sum of ``min(|sobel_x|, 31)`` (the clipped gradient, on the same scale
      as the SAD prefilter) must be ``>= texture_threshold * block_size**2``, so
-     ``texture_threshold`` is a mean gradient per pixel in grey levels; 0 turns it off;
+     ``texture_threshold`` is a mean gradient per pixel in grey levels (of 0..255; for uint16,
+     of the pair's min-max stretch to 0..255, as in step 1); 0 turns it off;
    - uniqueness: every cost more than one disparity away from the winner must exceed the
      winning cost by more than ``uniqueness_ratio`` percent:
      ``second * 100 > best * (100 + uniqueness_ratio)``; 0 turns it off;
@@ -98,6 +112,12 @@ PREFILTER_CAP = 31
 #: The census window: its border, 16 pixels for 5x5, gives the bits.
 CENSUS_WINDOW = 5
 
+#: The top of the scale a uint16 pair is stretched to (255 * 256: after the 8-bit shift of
+#: the Sobel response, the grey levels of a uint8 image).
+UINT16_STRETCH_TOP = 255 * 256
+#: The channel orders of (H, W, 3) images.
+CHANNEL_ORDERS = ("rgb", "bgr")
+
 _SUBPIXEL_MODES = ("parabola", "equiangular")
 #: The sub-pixel fit that ``subpixel=True`` chooses for each cost (see bench/README.md).
 DEFAULT_SUBPIXEL = {"census": "equiangular", "sad": "equiangular"}
@@ -115,6 +135,7 @@ class BlockMatchOptions:
 
     __slots__ = (
         "block_size",
+        "channel_order",
         "cost",
         "lr_max_diff",
         "min_disparity",
@@ -145,6 +166,7 @@ class BlockMatchOptions:
         speckle_range: Any = DEFAULT_SPECKLE_RANGE,
         threads: Any = None,
         return_confidence: Any = False,
+        channel_order: Any = "rgb",
     ) -> None:
         if not isinstance(cost, str):
             raise TypeError(f"cost must be 'census' or 'sad', got {type(cost).__name__} {cost!r}")
@@ -209,6 +231,7 @@ class BlockMatchOptions:
                 f"{return_confidence!r}"
             )
         self.return_confidence = bool(return_confidence)
+        self.channel_order = check_channel_order(channel_order)
 
     def as_dict(self) -> dict[str, Any]:
         """The public parameters, resolved (``subpixel`` as the fit's name or None)."""
@@ -225,7 +248,20 @@ class BlockMatchOptions:
             "speckle_range": self.speckle_range,
             "threads": self.threads,
             "return_confidence": self.return_confidence,
+            "channel_order": self.channel_order,
         }
+
+
+def check_channel_order(channel_order: Any) -> str:
+    """``"rgb"`` or ``"bgr"``; TypeError / ValueError naming ``channel_order`` otherwise."""
+    if not isinstance(channel_order, str):
+        raise TypeError(
+            f"channel_order must be 'rgb' or 'bgr', got {type(channel_order).__name__} "
+            f"{channel_order!r}"
+        )
+    if channel_order not in CHANNEL_ORDERS:
+        raise ValueError(f"channel_order must be 'rgb' or 'bgr', got {channel_order!r}")
+    return channel_order
 
 
 _IMAGE_RULE = "2-D uint8 or uint16 grey, or (H, W, 3) uint8 RGB"
@@ -251,7 +287,8 @@ def as_image(image: Any, name: str) -> np.ndarray:
     return np.ascontiguousarray(image)
 
 
-def as_pair(left: Any, right: Any) -> tuple[np.ndarray, np.ndarray]:
+def check_pair(left: Any, right: Any) -> tuple[np.ndarray, np.ndarray]:
+    """Checks both images and that they agree; returns them C-contiguous, values unchanged."""
     left_arr = as_image(left, "left")
     right_arr = as_image(right, "right")
     if left_arr.shape != right_arr.shape:
@@ -265,10 +302,44 @@ def as_pair(left: Any, right: Any) -> tuple[np.ndarray, np.ndarray]:
     return left_arr, right_arr
 
 
+def stretch_uint16_pair(left: np.ndarray, right: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """A uint16 pair on the scale of its min-max stretch to uint8 (step 1 of the module
+    docstring): from the joint range ``[lo, hi]`` onto ``0 .. 65280`` when
+    ``0 < hi - lo < 65280``, rounded to the nearest integer (halves up); otherwise the pair
+    itself. New arrays; the inputs are not modified."""
+    lo = int(min(left.min(), right.min()))
+    span = int(max(left.max(), right.max())) - lo
+    if span == 0 or span >= UINT16_STRETCH_TOP:
+        return left, right
+    # One table entry per value in [lo, hi]; 65280 * 65279 + 32639 fits in int64 easily.
+    steps = np.arange(span + 1, dtype=np.int64)
+    table = ((steps * UINT16_STRETCH_TOP + span // 2) // span).astype(np.uint16)
+    return (
+        table[np.subtract(left, lo, dtype=np.uint16)],
+        table[np.subtract(right, lo, dtype=np.uint16)],
+    )
+
+
+def as_pair(left: Any, right: Any, *, channel_order: str = "rgb") -> tuple[np.ndarray, np.ndarray]:
+    """The pair as every matcher's kernel takes it: checked (:func:`check_pair`), C-contiguous,
+    (H, W, 3) images in R, G, B order (a reversed copy for ``channel_order="bgr"``; grey images
+    have no channel order and ignore it) and uint16 pairs stretched to the scale of uint8
+    (:func:`stretch_uint16_pair`). The rules are step 1 of the module docstring."""
+    order = check_channel_order(channel_order)
+    left_arr, right_arr = check_pair(left, right)
+    if left_arr.ndim == 3 and order == "bgr":
+        left_arr = np.ascontiguousarray(left_arr[..., ::-1])
+        right_arr = np.ascontiguousarray(right_arr[..., ::-1])
+    if left_arr.dtype == np.uint16:
+        left_arr, right_arr = stretch_uint16_pair(left_arr, right_arr)
+    return left_arr, right_arr
+
+
 class StereoMatcher:
     """The block matcher as an object for per-frame use.
 
-    The parameters are those of :func:`block_match` (``return_confidence`` included), checked
+    The parameters are those of :func:`block_match` (``return_confidence`` and
+    ``channel_order`` included), checked
     once here; :meth:`compute` then matches a pair, reusing the matcher's internal buffers from
     one frame to the next. Calls from several threads on one matcher are safe (they take turns);
     use one matcher per thread to match in parallel.
@@ -293,6 +364,7 @@ class StereoMatcher:
         speckle_range: float = DEFAULT_SPECKLE_RANGE,
         threads: int | None = None,
         return_confidence: bool = False,
+        channel_order: str = "rgb",
         isa: str = "auto",
     ) -> None:
         self._options = BlockMatchOptions(
@@ -308,6 +380,7 @@ class StereoMatcher:
             speckle_range=speckle_range,
             threads=threads,
             return_confidence=return_confidence,
+            channel_order=channel_order,
         )
         if not isinstance(isa, str):
             raise TypeError(f"isa must be a str, got {type(isa).__name__} {isa!r}")
@@ -339,7 +412,7 @@ class StereoMatcher:
     def compute(self, left: Any, right: Any) -> np.ndarray | tuple[np.ndarray, np.ndarray]:
         """The float32 disparity of ``left`` (and the confidence, if the matcher was made
         with ``return_confidence=True``); see :func:`block_match`."""
-        left_arr, right_arr = as_pair(left, right)
+        left_arr, right_arr = as_pair(left, right, channel_order=self._options.channel_order)
         shape = left_arr.shape[:2]
         disparity = np.empty(shape, dtype=np.float32)
         confidence = np.empty(shape, dtype=np.float32) if self._options.return_confidence else None
@@ -384,6 +457,7 @@ def block_match(
     speckle_range: float = DEFAULT_SPECKLE_RANGE,
     threads: int | None = None,
     return_confidence: bool = False,
+    channel_order: str = "rgb",
 ) -> np.ndarray | tuple[np.ndarray, np.ndarray]:
     """Dense disparity of the left image by block matching, natively.
 
@@ -391,7 +465,12 @@ def block_match(
     ----------
     left, right
         The rectified pair, the same shape and dtype: (H, W) uint8 or uint16 grey, or
-        (H, W, 3) uint8 RGB (turned into grey as OpenCV's ``COLOR_RGB2GRAY``).
+        (H, W, 3) uint8 colour, R, G, B unless ``channel_order`` says otherwise (turned into
+        grey as OpenCV's ``COLOR_RGB2GRAY``). A uint16 pair is first stretched from its joint
+        [min, max] to the scale of uint8 (to 0..65280 = 255 * 256 when its range is
+        narrower), so 12-bit (0..4095 or v * 16) and narrow-band (thermal) images keep their
+        detail: every cost and ``texture_threshold`` then see the grey levels of the pair's
+        min-max stretch to 0..255. The exact rule is step 1 of :mod:`stereodepth.matching`.
     num_disparities
         How many disparities to search, any integer in [1, 4096].
     min_disparity
@@ -410,8 +489,8 @@ def block_match(
         Percent by which every cost more than one disparity away must exceed the winner's;
         0 turns the check off.
     texture_threshold
-        Least mean clipped x-gradient per pixel of the block (grey levels); flatter blocks are
-        NaN. 0 turns the check off.
+        Least mean clipped x-gradient per pixel of the block (grey levels of 0..255; for uint16,
+        of the pair's min-max stretch); flatter blocks are NaN. 0 turns the check off.
     lr_max_diff
         Largest difference, in pixels, between the left disparity and the right image's own
         disparity at the matched pixel; None turns the check off.
@@ -423,6 +502,11 @@ def block_match(
         not depend on it.
     return_confidence
         Also return the confidence map (see below).
+    channel_order
+        The order of the channels of (H, W, 3) images: ``"rgb"`` (Pillow,
+        :func:`stereodepth.io.read_image`, imageio) or ``"bgr"`` (OpenCV's ``cv2.imread``,
+        ``cv2.VideoCapture``); with ``"bgr"`` the grey image is OpenCV's ``COLOR_BGR2GRAY``.
+        Grey images ignore it.
 
     Returns
     -------
@@ -435,6 +519,9 @@ def block_match(
     The GIL is released while the kernel runs. Each call sets up the matcher's buffers anew;
     for a stream of frames, a :class:`StereoMatcher` keeps them (about a quarter less time on a
     0.35 MP pair).
+
+    Raises TypeError for a wrong type or dtype (images, parameters) and ValueError for a wrong
+    value or shape, naming the parameter and what was received.
     """
     matcher = StereoMatcher(
         num_disparities=num_disparities,
@@ -449,6 +536,7 @@ def block_match(
         speckle_range=speckle_range,
         threads=threads,
         return_confidence=return_confidence,
+        channel_order=channel_order,
     )
     return matcher.compute(left, right)
 
