@@ -39,11 +39,11 @@ def grey(image: np.ndarray, *, channel_order: str = "rgb") -> np.ndarray:
 
 def stretched(gl: np.ndarray, gr: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """A uint16 pair's int32 grey on the scale of uint8: ``lo`` and ``hi`` over both images;
-    when ``0 < hi - lo < 65280`` every value ``v`` becomes
-    ``((v - lo) * 65280 + (hi - lo) // 2) // (hi - lo)``, else the pair is kept."""
+    every value ``v`` becomes ``((v - lo) * 65280 + (hi - lo) // 2) // (hi - lo)``; a constant
+    pair is kept."""
     lo = min(int(gl.min()), int(gr.min()))
     hi = max(int(gl.max()), int(gr.max()))
-    if not 0 < hi - lo < UINT16_STRETCH_TOP:
+    if hi == lo:
         return gl, gr
     span = np.int64(hi - lo)
 

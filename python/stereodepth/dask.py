@@ -82,10 +82,13 @@ def _depth_block(block: np.ndarray, *, options: dict[str, Any]) -> np.ndarray:
 
 def block_match(left: Any, right: Any, **params: Any) -> Any:
     """:func:`stereodepth.block_match` on dask arrays of image pairs: (H, W) or (N, H, W) grey,
-    or (H, W, 3) / (N, H, W, 3) RGB. Returns the float32 disparity, (H, W) or (N, H, W), NaN
+    or (H, W, 3) / (N, H, W, 3) colour (R, G, B, or B, G, R with ``channel_order="bgr"``, as
+    frames read by OpenCV are). Returns the float32 disparity, (H, W) or (N, H, W), NaN
     where invalid. Chunks are first made to hold whole frames (``left`` and ``right`` are
     rechunked alike); ``params`` are those of the numpy function, checked now
-    (``return_confidence`` is not accepted)."""
+    (``return_confidence`` is not accepted). Each frame is matched as the numpy function
+    matches it, so a uint16 pair is stretched over its own range (frame by frame, not over
+    the stack; see :mod:`stereodepth.matching`)."""
     from stereodepth.matching import BlockMatchOptions
 
     la, ra = _as_dask("left", left), _as_dask("right", right)

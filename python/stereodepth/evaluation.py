@@ -24,6 +24,9 @@ Methods
     otherwise.
     ``opencv-bm``: ``cv2.StereoBM_create(numDisparities, blockSize)`` (other parameters at
     OpenCV's defaults) on grey uint8 images (``cv2.COLOR_RGB2GRAY``); default block size 9.
+    Colour images are read as R, G, B (the order PNG stores); ``--channel-order bgr`` says
+    that the files hold B, G, R (an OpenCV array saved by a tool that expected RGB): every
+    method then converts to grey as ``cv2.COLOR_BGR2GRAY``.
     ``opencv-sgbm``: ``cv2.StereoSGBM_create(minDisparity=0, numDisparities, blockSize,
     P1=8*bs*bs, P2=32*bs*bs)`` (the usual penalties for one channel; mode ``MODE_SGBM`` and the
     other parameters at OpenCV's defaults) on the same grey images; default block size 5.
@@ -93,6 +96,7 @@ _RESERVED_OPTIONS = {
     "block_size": "use --block-size or METHOD:SIZE",
     "threads": "use --threads",
     "return_confidence": "eval scores the disparity only",
+    "channel_order": "use --channel-order",
 }
 _BEST_BY = (
     "bad_0_5",
@@ -274,7 +278,7 @@ Matcher = Callable[[np.ndarray, np.ndarray], np.ndarray]
 
 
 def _stereodepth_factory(
-    threads: int, options: dict[str, Any]
+    threads: int, options: dict[str, Any], channel_order: str = "rgb"
 ) -> Callable[[Variant, int], Matcher]:
     from stereodepth.matching import StereoMatcher
 
@@ -284,7 +288,11 @@ def _stereodepth_factory(
             kwargs["block_size"] = variant.block_size
         # Made once per scene and reused across the timed runs, as the OpenCV matchers are.
         matcher = StereoMatcher(
-            num_disparities=num_disparities, min_disparity=0, threads=threads, **kwargs
+            num_disparities=num_disparities,
+            min_disparity=0,
+            threads=threads,
+            channel_order=channel_order,
+            **kwargs,
         )
 
         def match(left: np.ndarray, right: np.ndarray) -> np.ndarray:
@@ -305,12 +313,16 @@ def _camel(key: str) -> str:
     return "".join(part[:1].upper() + part[1:] for part in key.split("_"))
 
 
-def _opencv_factory(cv2: Any, options: dict[str, Any]) -> Callable[[Variant, int], Matcher]:
+def _opencv_factory(
+    cv2: Any, options: dict[str, Any], channel_order: str = "rgb"
+) -> Callable[[Variant, int], Matcher]:
+    to_grey = cv2.COLOR_BGR2GRAY if channel_order == "bgr" else cv2.COLOR_RGB2GRAY
+
     def grey(img: np.ndarray, method: str) -> np.ndarray:
         if img.dtype != np.uint8:
             raise ValueError(f"{method} needs 8-bit images, got {img.dtype}")
         if img.ndim == 3:
-            return np.asarray(cv2.cvtColor(img, cv2.COLOR_RGB2GRAY))
+            return np.asarray(cv2.cvtColor(img, to_grey))
         return img
 
     def make(variant: Variant, num_disparities: int) -> Matcher:
@@ -749,6 +761,14 @@ def register(subparsers: Any) -> None:
         "SGBM as MODE_SGBM_3WAY)",
     )
     m.add_argument(
+        "--channel-order",
+        choices=("rgb", "bgr"),
+        default="rgb",
+        help="the order of the channels of colour images as read: rgb (default; PNG files "
+        "hold R, G, B) or bgr (files that hold an OpenCV array's B, G, R); every method "
+        "converts to grey accordingly",
+    )
+    m.add_argument(
         "--num-disparities",
         type=int,
         metavar="N",
@@ -881,12 +901,12 @@ def run(args: argparse.Namespace) -> int:
                     raise _usage_error(
                         f"--opencv-option {key}: no selected OpenCV matcher has set{_camel(key)}()"
                     )
-            factory = _opencv_factory(cv2, opencv_options)
+            factory = _opencv_factory(cv2, opencv_options, args.channel_order)
             factories["opencv-bm"] = factories["opencv-sgbm"] = factory
     elif opencv_options:
         raise _usage_error("--opencv-option needs an OpenCV method (--method opencv-bm ...)")
     if "stereodepth" in methods:
-        factories["stereodepth"] = _stereodepth_factory(threads, options)
+        factories["stereodepth"] = _stereodepth_factory(threads, options, args.channel_order)
     for note in notes:
         print(f"stereodepth eval: {note}", file=sys.stderr)
 
@@ -936,6 +956,7 @@ def run(args: argparse.Namespace) -> int:
             "threads": threads,
             "repeat": args.repeat,
             "best_by": args.best_by,
+            "channel_order": args.channel_order,
             "stereodepth_version": __version__,
             "opencv_version": None if cv2 is None else str(cv2.__version__),
             "notes": notes,

@@ -13,16 +13,18 @@ Steps, in the kernel and in the oracle alike:
    ``(9798 R + 19235 G + 3735 B + 16384) >> 15``, OpenCV's ``COLOR_RGB2GRAY`` bit for bit.
    The channels are taken as R, G, B unless ``channel_order="bgr"`` says they are B, G, R
    (OpenCV's ``cv2.imread`` order); the grey image is then OpenCV's ``COLOR_BGR2GRAY``.
-   uint16 grey images are first stretched from the pair's joint range to the scale of a
-   uint8 image: with ``lo`` and ``hi`` the least and the largest value of both images, a pair
-   with ``0 < hi - lo < 65280`` becomes ``((v - lo) * 65280 + (hi - lo) // 2) // (hi - lo)``
-   (integer arithmetic, exact, strictly increasing, ``lo`` -> 0 and ``hi`` -> 65280 =
-   255 * 256); a constant pair and a pair whose range is already 65280 or wider are used as
-   they are. The costs below depend only on differences and comparisons of grey values, so
-   a 12-bit image (0..4095, or v * 16), a narrow-band thermal image (7000 + 6 v) or 8-bit
-   values in uint16 are matched at the scale of their min-max stretch to 0..255; an affine
-   encoding ``a * v + b`` of a uint8 pair that spans 0..255 gives exactly the disparity of
-   the uint8 pair. The range is the pair's own, frame by frame.
+   uint16 grey images are first stretched from the pair's joint range onto the scale of a
+   uint8 image: with ``lo`` and ``hi`` the least and the largest value of both images, each
+   value ``v`` becomes ``((v - lo) * 65280 + (hi - lo) // 2) // (hi - lo)`` (integer
+   arithmetic, rounded to nearest, ``lo`` -> 0, ``hi`` -> 65280 = 255 * 256, monotone, and
+   strictly increasing when ``hi - lo <= 65280``: a full-range 16-bit pair merges one level
+   in 256); a constant pair is used as it is. After the 8-bit shift of step 2 the SAD
+   prefilter and the texture check see the grey levels of the pair's min-max stretch to
+   0..255, and census (which only compares) sees the same order. So a 12-bit image
+   (0..4095, or v * 16), a narrow-band thermal image (7000 + 6 v) or 8-bit values stored in
+   uint16 are matched at the scale of their min-max stretch, and an encoding ``a * v + b``
+   of a uint8 pair that spans 0..255 (v * 16, v * 256, v * 257, 7000 + 6 v, ...) gives
+   exactly the uint8 pair's disparity. The range is the pair's own, frame by frame.
 2. Pixel cost. ``cost="census"``: a census transform over the border of the 5x5 window
    (the 16 pixels two away from the centre, one bit each: "neighbour < centre"), compared by
    Hamming distance, 0..16 per pixel. On the shared scenes this ring is more accurate than
@@ -304,14 +306,14 @@ def check_pair(left: Any, right: Any) -> tuple[np.ndarray, np.ndarray]:
 
 def stretch_uint16_pair(left: np.ndarray, right: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """A uint16 pair on the scale of its min-max stretch to uint8 (step 1 of the module
-    docstring): from the joint range ``[lo, hi]`` onto ``0 .. 65280`` when
-    ``0 < hi - lo < 65280``, rounded to the nearest integer (halves up); otherwise the pair
-    itself. New arrays; the inputs are not modified."""
+    docstring): from the joint range ``[lo, hi]`` onto ``0 .. 65280``, rounded to the nearest
+    integer (halves up); a constant pair is returned as it is. New arrays otherwise; the
+    inputs are not modified."""
     lo = int(min(left.min(), right.min()))
     span = int(max(left.max(), right.max())) - lo
-    if span == 0 or span >= UINT16_STRETCH_TOP:
+    if span == 0:
         return left, right
-    # One table entry per value in [lo, hi]; 65280 * 65279 + 32639 fits in int64 easily.
+    # One table entry per value in [lo, hi]; 65535 * 65280 + 32767 fits in int64 easily.
     steps = np.arange(span + 1, dtype=np.int64)
     table = ((steps * UINT16_STRETCH_TOP + span // 2) // span).astype(np.uint16)
     return (
@@ -467,10 +469,10 @@ def block_match(
         The rectified pair, the same shape and dtype: (H, W) uint8 or uint16 grey, or
         (H, W, 3) uint8 colour, R, G, B unless ``channel_order`` says otherwise (turned into
         grey as OpenCV's ``COLOR_RGB2GRAY``). A uint16 pair is first stretched from its joint
-        [min, max] to the scale of uint8 (to 0..65280 = 255 * 256 when its range is
-        narrower), so 12-bit (0..4095 or v * 16) and narrow-band (thermal) images keep their
-        detail: every cost and ``texture_threshold`` then see the grey levels of the pair's
-        min-max stretch to 0..255. The exact rule is step 1 of :mod:`stereodepth.matching`.
+        [min, max] onto 0..65280 = 255 * 256, the scale of uint8, so 12-bit (0..4095 or
+        v * 16) and narrow-band (thermal) images keep their detail: every cost and
+        ``texture_threshold`` then see the grey levels of the pair's min-max stretch to
+        0..255. The exact rule is step 1 of :mod:`stereodepth.matching`.
     num_disparities
         How many disparities to search, any integer in [1, 4096].
     min_disparity
