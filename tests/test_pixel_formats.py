@@ -194,6 +194,47 @@ def test_texture_threshold_is_in_grey_levels_of_the_stretch() -> None:
     np.testing.assert_array_equal(sd.block_match(*u12, texture_threshold=28.0, **kw), u8)
 
 
+@pytest.mark.parametrize("cost", ["census", "sad"])
+def test_a_fixed_intensity_range_matches_the_oracle_and_clips(cost: str) -> None:
+    # 12-bit data with a few values outside the stated band (hot and cold pixels).
+    left, right = random_dots((21, 66), 4, seed=13, values=np.arange(800, 3300, dtype=np.uint16))
+    left[3, 10], right[7, 40], left[15, 50] = 0, 65535, 4095
+    kw: dict[str, Any] = {
+        "num_disparities": 10,
+        "cost": cost,
+        "texture_threshold": 3.0,
+        "return_confidence": True,
+        "intensity_range": (1000, 3000),
+    }
+    got = sd.block_match(left, right, **kw)
+    assert_agree(got, ref.block_match(left, right, **kw))
+    # Values outside the range count as its ends.
+    clipped = np.clip(left, 1000, 3000), np.clip(right, 1000, 3000)
+    assert_identical(sd.block_match(*clipped, **kw), got)
+    # The pair's own range, stated, is the default.
+    kw["intensity_range"] = (int(min(left.min(), right.min())), int(max(left.max(), right.max())))
+    auto = {k: v for k, v in kw.items() if k != "intensity_range"}
+    assert_identical(sd.block_match(left, right, **kw), sd.block_match(left, right, **auto))
+    m = sd.StereoMatcher(**kw)
+    assert m.params["intensity_range"] == kw["intensity_range"]
+    assert_identical(m.compute(left, right), sd.block_match(left, right, **auto))
+
+
+def test_a_fixed_intensity_range_gives_frames_one_scale() -> None:
+    # Two frames of a 12-bit stream, the second with a hot pixel: stretched over their own
+    # ranges they are matched at different scales; over the sensor's range at one.
+    left, right = random_dots((30, 80), 4, seed=14, values=np.arange(1000, 1400, dtype=np.uint16))
+    hot_l, hot_r = left.copy(), right.copy()
+    hot_l[0, -1] = hot_r[0, -1] = 4095
+    kw: dict[str, Any] = {"num_disparities": 8, "cost": "sad", "speckle_window": 0}
+    fixed = {**kw, "intensity_range": (0, 4095)}
+    a, b = sd.block_match(left, right, **fixed), sd.block_match(hot_l, hot_r, **fixed)
+    far = np.s_[5:, :-10]  # away from the hot pixel
+    np.testing.assert_array_equal(a[far], b[far])
+    own_a, own_b = sd.block_match(left, right, **kw), sd.block_match(hot_l, hot_r, **kw)
+    assert not np.array_equal(own_a[far], own_b[far], equal_nan=True)
+
+
 # ------------------------------------------------------------------------------------------
 # The shared scenes: every uint16 encoding as good as the uint8 min-max stretch
 
@@ -356,6 +397,48 @@ def test_rejected_channel_orders(value: Any, exc: type[Exception], match: str) -
         grey(left, channel_order=value)
 
 
+BAD_RANGES: list[tuple[Any, type[Exception], str]] = [
+    (
+        4095,
+        TypeError,
+        r"intensity_range must be None or two integers \(lo, hi\) with 0 <= lo "
+        r"< hi <= 65535, got int 4095",
+    ),
+    ((0, 4095, 1), TypeError, r"got tuple \(0, 4095, 1\)"),
+    ((0.0, 4095), TypeError, r"got \(0.0, 4095\) \(a float\)"),
+    ((True, 4095), TypeError, r"got \(True, 4095\) \(a bool\)"),
+    ((5, 5), ValueError, r"0 <= lo < hi <= 65535, got \(5, 5\)"),
+    ((-1, 10), ValueError, r"got \(-1, 10\)"),
+    ((0, 65536), ValueError, r"got \(0, 65536\)"),
+]
+
+
+@pytest.mark.parametrize(("value", "exc", "match"), BAD_RANGES)
+def test_rejected_intensity_ranges(value: Any, exc: type[Exception], match: str) -> None:
+    left, right = full_range_u8_pair((8, 20), 2, seed=60)
+    left16, right16 = left.astype(np.uint16), right.astype(np.uint16)
+    with pytest.raises(exc, match=match):
+        sd.block_match(left16, right16, num_disparities=4, intensity_range=value)
+    with pytest.raises(exc, match=match):
+        sd.StereoMatcher(num_disparities=4, intensity_range=value)
+    with pytest.raises(exc, match=match):
+        ref.block_match(left16, right16, num_disparities=4, intensity_range=value)
+    with pytest.raises(exc, match=match):
+        matching.as_pair(left16, right16, intensity_range=value)
+
+
+def test_intensity_range_is_refused_for_uint8_images() -> None:
+    left, right = full_range_u8_pair((8, 20), 2, seed=61)
+    message = (
+        r"intensity_range applies to uint16 images \(uint8 images are matched as they are\), "
+        r"got \(0, 255\) with uint8 images"
+    )
+    with pytest.raises(ValueError, match=message):
+        sd.block_match(left, right, num_disparities=4, intensity_range=(0, 255))
+    with pytest.raises(ValueError, match=message):
+        ref.block_match(left, right, num_disparities=4, intensity_range=(0, 255))
+
+
 # ------------------------------------------------------------------------------------------
 # stereodepth.dask and stereodepth eval
 
@@ -385,6 +468,18 @@ def test_dask_block_match_takes_the_channel_order_and_stretches_per_frame() -> N
     ).compute(scheduler="synchronous")
     for i, (a, b) in enumerate(u8):
         np.testing.assert_array_equal(got16[i], sd.block_match(a, b, num_disparities=8, cost="sad"))
+    # One scale for the whole stack: each frame as the numpy function with the same range.
+    fixed = sdd.block_match(
+        da.from_array(ul), da.from_array(ur), num_disparities=8, intensity_range=(0, 7255)
+    ).compute(scheduler="synchronous")
+    for i in range(2):
+        np.testing.assert_array_equal(
+            fixed[i], sd.block_match(ul[i], ur[i], num_disparities=8, intensity_range=(0, 7255))
+        )
+    with pytest.raises(ValueError, match="intensity_range applies to uint16 images"):
+        sdd.block_match(
+            da.from_array(left), da.from_array(right), num_disparities=8, intensity_range=(0, 9)
+        )
     with pytest.raises(ValueError, match="channel_order must be 'rgb' or 'bgr', got 'brg'"):
         sdd.block_match(
             da.from_array(left), da.from_array(right), num_disparities=8, channel_order="brg"

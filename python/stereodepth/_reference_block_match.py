@@ -37,18 +37,23 @@ def grey(image: np.ndarray, *, channel_order: str = "rgb") -> np.ndarray:
     return image.astype(np.int32)
 
 
-def stretched(gl: np.ndarray, gr: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """A uint16 pair's int32 grey on the scale of uint8: ``lo`` and ``hi`` over both images;
-    every value ``v`` becomes ``((v - lo) * 65280 + (hi - lo) // 2) // (hi - lo)``; a constant
-    pair is kept."""
-    lo = min(int(gl.min()), int(gr.min()))
-    hi = max(int(gl.max()), int(gr.max()))
-    if hi == lo:
-        return gl, gr
+def stretched(
+    gl: np.ndarray, gr: np.ndarray, intensity_range: tuple[int, int] | None = None
+) -> tuple[np.ndarray, np.ndarray]:
+    """A uint16 pair's int32 grey on the scale of uint8: ``lo`` and ``hi`` over both images
+    (or ``intensity_range``, every value first clipped to it); every value ``v`` becomes
+    ``((v - lo) * 65280 + (hi - lo) // 2) // (hi - lo)``; a constant pair is kept."""
+    if intensity_range is None:
+        lo = min(int(gl.min()), int(gr.min()))
+        hi = max(int(gl.max()), int(gr.max()))
+        if hi == lo:
+            return gl, gr
+    else:
+        lo, hi = intensity_range
     span = np.int64(hi - lo)
 
     def one(g: np.ndarray) -> np.ndarray:
-        v = (g.astype(np.int64) - lo) * UINT16_STRETCH_TOP + span // 2
+        v = (np.clip(g.astype(np.int64), lo, hi) - lo) * UINT16_STRETCH_TOP + span // 2
         out: np.ndarray = (v // span).astype(np.int32)
         return out
 
@@ -183,7 +188,12 @@ def block_match(
     gl = grey(left_arr, channel_order=o.channel_order)
     gr = grey(right_arr, channel_order=o.channel_order)
     if sixteen_bit:
-        gl, gr = stretched(gl, gr)
+        gl, gr = stretched(gl, gr, o.intensity_range)
+    elif o.intensity_range is not None:
+        raise ValueError(
+            f"intensity_range applies to uint16 images (uint8 images are matched as they are), "
+            f"got {o.intensity_range!r} with uint8 images"
+        )
     h, w = gl.shape
     nd, dmin, r = o.num_disparities, o.min_disparity, o.block_size // 2
     ks = np.arange(nd)

@@ -87,8 +87,9 @@ def block_match(left: Any, right: Any, **params: Any) -> Any:
     where invalid. Chunks are first made to hold whole frames (``left`` and ``right`` are
     rechunked alike); ``params`` are those of the numpy function, checked now
     (``return_confidence`` is not accepted). Each frame is matched as the numpy function
-    matches it, so a uint16 pair is stretched over its own range (frame by frame, not over
-    the stack; see :mod:`stereodepth.matching`)."""
+    matches it, so a uint16 pair is stretched over its own range, frame by frame (see
+    :mod:`stereodepth.matching`); ``intensity_range=(lo, hi)`` gives every frame of the stack
+    the same scale."""
     from stereodepth.matching import BlockMatchOptions
 
     la, ra = _as_dask("left", left), _as_dask("right", right)
@@ -103,6 +104,11 @@ def block_match(left: Any, right: Any, **params: Any) -> Any:
         raise TypeError(f"left and right must have the same dtype, got {la.dtype} and {ra.dtype}")
     if la.dtype not in (np.uint8, np.uint16):
         raise TypeError(f"left must be uint8 or uint16 images, got dtype {la.dtype}")
+    if la.dtype == np.uint8 and params.get("intensity_range") is not None:
+        raise ValueError(
+            "intensity_range applies to uint16 images (uint8 images are matched as they are), "
+            f"got {params['intensity_range']!r} with uint8 images"
+        )
     # (N, H, W, 3) and (H, W, 3) uint8 are RGB; (N, H, W) and (H, W) grey.
     rgb = la.ndim == 4 or (la.ndim == 3 and la.shape[-1] == 3 and la.dtype == np.uint8)
     frame_axes = 3 if rgb else 2

@@ -24,7 +24,9 @@ Steps, in the kernel and in the oracle alike:
    (0..4095, or v * 16), a narrow-band thermal image (7000 + 6 v) or 8-bit values stored in
    uint16 are matched at the scale of their min-max stretch, and an encoding ``a * v + b``
    of a uint8 pair that spans 0..255 (v * 16, v * 256, v * 257, 7000 + 6 v, ...) gives
-   exactly the uint8 pair's disparity. The range is the pair's own, frame by frame.
+   exactly the uint8 pair's disparity. The range is the pair's own, frame by frame, unless
+   ``intensity_range=(lo, hi)`` fixes it (a sensor's band, or one scale for every frame of a
+   stream): values below ``lo`` or above ``hi`` are then first clipped to it.
 2. Pixel cost. ``cost="census"``: a census transform over the border of the 5x5 window
    (the 16 pixels two away from the centre, one bit each: "neighbour < centre"), compared by
    Hamming distance, 0..16 per pixel. On the shared scenes this ring is more accurate than
@@ -139,6 +141,7 @@ class BlockMatchOptions:
         "block_size",
         "channel_order",
         "cost",
+        "intensity_range",
         "lr_max_diff",
         "min_disparity",
         "num_disparities",
@@ -169,6 +172,7 @@ class BlockMatchOptions:
         threads: Any = None,
         return_confidence: Any = False,
         channel_order: Any = "rgb",
+        intensity_range: Any = None,
     ) -> None:
         if not isinstance(cost, str):
             raise TypeError(f"cost must be 'census' or 'sad', got {type(cost).__name__} {cost!r}")
@@ -234,6 +238,7 @@ class BlockMatchOptions:
             )
         self.return_confidence = bool(return_confidence)
         self.channel_order = check_channel_order(channel_order)
+        self.intensity_range = check_intensity_range(intensity_range)
 
     def as_dict(self) -> dict[str, Any]:
         """The public parameters, resolved (``subpixel`` as the fit's name or None)."""
@@ -251,7 +256,33 @@ class BlockMatchOptions:
             "threads": self.threads,
             "return_confidence": self.return_confidence,
             "channel_order": self.channel_order,
+            "intensity_range": self.intensity_range,
         }
+
+
+_RANGE_RULE = "None or two integers (lo, hi) with 0 <= lo < hi <= 65535"
+
+
+def check_intensity_range(intensity_range: Any) -> tuple[int, int] | None:
+    """None, or ``(lo, hi)`` as two ints with ``0 <= lo < hi <= 65535``; TypeError /
+    ValueError naming ``intensity_range`` otherwise."""
+    if intensity_range is None:
+        return None
+    if not isinstance(intensity_range, (tuple, list)) or len(intensity_range) != 2:
+        raise TypeError(
+            f"intensity_range must be {_RANGE_RULE}, got {type(intensity_range).__name__} "
+            f"{intensity_range!r}"
+        )
+    for v in intensity_range:
+        if not isinstance(v, (int, np.integer)) or isinstance(v, (bool, np.bool_)):
+            raise TypeError(
+                f"intensity_range must be {_RANGE_RULE}, got {intensity_range!r} "
+                f"(a {type(v).__name__})"
+            )
+    lo, hi = int(intensity_range[0]), int(intensity_range[1])
+    if not 0 <= lo < hi <= 65535:
+        raise ValueError(f"intensity_range must be {_RANGE_RULE}, got {intensity_range!r}")
+    return lo, hi
 
 
 def check_channel_order(channel_order: Any) -> str:
@@ -304,15 +335,24 @@ def check_pair(left: Any, right: Any) -> tuple[np.ndarray, np.ndarray]:
     return left_arr, right_arr
 
 
-def stretch_uint16_pair(left: np.ndarray, right: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def stretch_uint16_pair(
+    left: np.ndarray, right: np.ndarray, intensity_range: tuple[int, int] | None = None
+) -> tuple[np.ndarray, np.ndarray]:
     """A uint16 pair on the scale of its min-max stretch to uint8 (step 1 of the module
-    docstring): from the joint range ``[lo, hi]`` onto ``0 .. 65280``, rounded to the nearest
-    integer (halves up); a constant pair is returned as it is. New arrays otherwise; the
-    inputs are not modified."""
-    lo = int(min(left.min(), right.min()))
-    span = int(max(left.max(), right.max())) - lo
-    if span == 0:
-        return left, right
+    docstring): from the joint range ``[lo, hi]`` (or the given ``intensity_range``, values
+    outside it clipped) onto ``0 .. 65280``, rounded to the nearest integer (halves up); a
+    constant pair without ``intensity_range`` is returned as it is. New arrays otherwise;
+    the inputs are not modified."""
+    if intensity_range is None:
+        lo = int(min(left.min(), right.min()))
+        span = int(max(left.max(), right.max())) - lo
+        if span == 0:
+            return left, right
+    else:
+        lo, hi = intensity_range
+        span = hi - lo
+        left = np.clip(left, lo, hi)
+        right = np.clip(right, lo, hi)
     # One table entry per value in [lo, hi]; 65535 * 65280 + 32767 fits in int64 easily.
     steps = np.arange(span + 1, dtype=np.int64)
     table = ((steps * UINT16_STRETCH_TOP + span // 2) // span).astype(np.uint16)
@@ -322,26 +362,40 @@ def stretch_uint16_pair(left: np.ndarray, right: np.ndarray) -> tuple[np.ndarray
     )
 
 
-def as_pair(left: Any, right: Any, *, channel_order: str = "rgb") -> tuple[np.ndarray, np.ndarray]:
+def as_pair(
+    left: Any,
+    right: Any,
+    *,
+    channel_order: str = "rgb",
+    intensity_range: tuple[int, int] | None = None,
+) -> tuple[np.ndarray, np.ndarray]:
     """The pair as every matcher's kernel takes it: checked (:func:`check_pair`), C-contiguous,
     (H, W, 3) images in R, G, B order (a reversed copy for ``channel_order="bgr"``; grey images
     have no channel order and ignore it) and uint16 pairs stretched to the scale of uint8
-    (:func:`stretch_uint16_pair`). The rules are step 1 of the module docstring."""
+    (:func:`stretch_uint16_pair`, over ``intensity_range`` when given). The rules are step 1
+    of the module docstring. Raises ValueError when ``intensity_range`` is given for uint8
+    images (they are matched as they are)."""
     order = check_channel_order(channel_order)
+    fixed = check_intensity_range(intensity_range)
     left_arr, right_arr = check_pair(left, right)
     if left_arr.ndim == 3 and order == "bgr":
         left_arr = np.ascontiguousarray(left_arr[..., ::-1])
         right_arr = np.ascontiguousarray(right_arr[..., ::-1])
     if left_arr.dtype == np.uint16:
-        left_arr, right_arr = stretch_uint16_pair(left_arr, right_arr)
+        left_arr, right_arr = stretch_uint16_pair(left_arr, right_arr, fixed)
+    elif fixed is not None:
+        raise ValueError(
+            f"intensity_range applies to uint16 images (uint8 images are matched as they are), "
+            f"got {fixed!r} with uint8 images"
+        )
     return left_arr, right_arr
 
 
 class StereoMatcher:
     """The block matcher as an object for per-frame use.
 
-    The parameters are those of :func:`block_match` (``return_confidence`` and
-    ``channel_order`` included), checked
+    The parameters are those of :func:`block_match` (``return_confidence``,
+    ``channel_order`` and ``intensity_range`` included), checked
     once here; :meth:`compute` then matches a pair, reusing the matcher's internal buffers from
     one frame to the next. Calls from several threads on one matcher are safe (they take turns);
     use one matcher per thread to match in parallel.
@@ -367,6 +421,7 @@ class StereoMatcher:
         threads: int | None = None,
         return_confidence: bool = False,
         channel_order: str = "rgb",
+        intensity_range: tuple[int, int] | None = None,
         isa: str = "auto",
     ) -> None:
         self._options = BlockMatchOptions(
@@ -383,6 +438,7 @@ class StereoMatcher:
             threads=threads,
             return_confidence=return_confidence,
             channel_order=channel_order,
+            intensity_range=intensity_range,
         )
         if not isinstance(isa, str):
             raise TypeError(f"isa must be a str, got {type(isa).__name__} {isa!r}")
@@ -414,7 +470,10 @@ class StereoMatcher:
     def compute(self, left: Any, right: Any) -> np.ndarray | tuple[np.ndarray, np.ndarray]:
         """The float32 disparity of ``left`` (and the confidence, if the matcher was made
         with ``return_confidence=True``); see :func:`block_match`."""
-        left_arr, right_arr = as_pair(left, right, channel_order=self._options.channel_order)
+        o = self._options
+        left_arr, right_arr = as_pair(
+            left, right, channel_order=o.channel_order, intensity_range=o.intensity_range
+        )
         shape = left_arr.shape[:2]
         disparity = np.empty(shape, dtype=np.float32)
         confidence = np.empty(shape, dtype=np.float32) if self._options.return_confidence else None
@@ -460,6 +519,7 @@ def block_match(
     threads: int | None = None,
     return_confidence: bool = False,
     channel_order: str = "rgb",
+    intensity_range: tuple[int, int] | None = None,
 ) -> np.ndarray | tuple[np.ndarray, np.ndarray]:
     """Dense disparity of the left image by block matching, natively.
 
@@ -509,6 +569,12 @@ def block_match(
         :func:`stereodepth.io.read_image`, imageio) or ``"bgr"`` (OpenCV's ``cv2.imread``,
         ``cv2.VideoCapture``); with ``"bgr"`` the grey image is OpenCV's ``COLOR_BGR2GRAY``.
         Grey images ignore it.
+    intensity_range
+        For uint16 images: None (default) stretches each pair from its own joint [min, max];
+        ``(lo, hi)``, integers with ``0 <= lo < hi <= 65535``, stretches every pair from that
+        range instead, values outside it clipped: a sensor's band (``(0, 4095)`` for 12 bits)
+        or one scale for every frame of a stream, so that ``texture_threshold`` and the SAD
+        costs mean the same from frame to frame. ValueError for uint8 images.
 
     Returns
     -------
@@ -539,6 +605,7 @@ def block_match(
         threads=threads,
         return_confidence=return_confidence,
         channel_order=channel_order,
+        intensity_range=intensity_range,
     )
     return matcher.compute(left, right)
 
