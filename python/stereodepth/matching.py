@@ -353,13 +353,17 @@ def stretch_uint16_pair(
         span = hi - lo
         left = np.clip(left, lo, hi)
         right = np.clip(right, lo, hi)
-    # One table entry per value in [lo, hi]; 65535 * 65280 + 32767 fits in int64 easily.
-    steps = np.arange(span + 1, dtype=np.int64)
-    table = ((steps * UINT16_STRETCH_TOP + span // 2) // span).astype(np.uint16)
-    return (
-        table[np.subtract(left, lo, dtype=np.uint16)],
-        table[np.subtract(right, lo, dtype=np.uint16)],
-    )
+
+    def one(image: np.ndarray) -> np.ndarray:
+        # In place, in uint32: 65535 * 65280 + 32767 < 2**32.
+        v = np.subtract(image, lo, dtype=np.uint32)
+        v *= UINT16_STRETCH_TOP
+        v += span // 2
+        v //= span
+        out: np.ndarray = v.astype(np.uint16)
+        return out
+
+    return one(left), one(right)
 
 
 def as_pair(
