@@ -195,7 +195,8 @@ def test_grey_conversion_is_opencvs() -> None:
 
 @pytest.mark.parametrize("cost", ["census", "sad"])
 def test_sixteen_bit_image_of_an_eight_bit_one_matches_the_same(cost: str) -> None:
-    # Census compares; SAD shifts the 16-bit Sobel response by 8 bits: x256 changes nothing.
+    # uint16 pairs are stretched from their joint range onto 0..65280 (= 255 * 256) and SAD
+    # shifts their Sobel response by 8 bits: x256 of a uint8 pair changes nothing.
     left, right = shifted_pair((18, 48), 3, seed=7)
     kw = {"num_disparities": 9, "cost": cost}
     a = sd.block_match(left, right, **kw)
