@@ -362,6 +362,8 @@ def test_cv2_imread_of_a_shared_scene_matches_as_its_grey_image(
     )
     got = sd.block_match(bgr_l, bgr_r, channel_order="bgr", **kw)
     assert_identical(got, want)
+    # Read as RGB (the default), BGR is another grey image and another disparity.
+    assert not np.array_equal(sd.block_match(bgr_l, bgr_r, **kw), want, equal_nan=True)
     # ... and as the same files read as RGB (Pillow): the order is the only difference.
     pytest.importorskip("PIL.Image", reason="reading the scenes needs Pillow (the batch extra)")
     from stereodepth.io import read_image
