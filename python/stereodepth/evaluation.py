@@ -27,11 +27,12 @@ Methods
     ``opencv-sgbm``: ``cv2.StereoSGBM_create(minDisparity=0, numDisparities, blockSize,
     P1=8*bs*bs, P2=32*bs*bs)`` (the usual penalties for one channel; mode ``MODE_SGBM`` and the
     other parameters at OpenCV's defaults) on the same grey images; default block size 5.
-    OpenCV's int16 output (disparity x 16) becomes float32 / 16 with its negative values
-    (no match) as NaN. OpenCV runs only when ``cv2`` imports; otherwise its methods are skipped
-    with a note. ``METHOD:9,15`` (or ``--block-size 9 15``) runs a method with each block size
-    and adds a ``best=`` row per scene: the block size with the lowest ``--best-by`` metric
-    (bad-2 by default).
+    OpenCV's int16 output (disparity x 16) becomes float32 / 16 with the values below
+    ``minDisparity * 16`` = 0 (no match; OpenCV writes ``(minDisparity - 1) * 16``) as NaN,
+    by :func:`stereodepth.from_opencv_disparity`. OpenCV runs only when ``cv2`` imports;
+    otherwise its methods are skipped with a note. ``METHOD:9,15`` (or ``--block-size 9 15``)
+    runs a method with each block size and adds a ``best=`` row per scene: the block size with
+    the lowest ``--best-by`` metric (bad-2 by default).
 
 Timing
     Each method is run once to warm up, then ``--repeat`` times (default 3); the time is the
@@ -68,6 +69,7 @@ import numpy as np
 
 from . import _validate as check
 from .cli import key_value_option
+from .depth import from_opencv_disparity
 from .metrics import DisparityMetrics, evaluate
 
 __all__ = [
@@ -348,9 +350,8 @@ def _opencv_factory(cv2: Any, options: dict[str, Any]) -> Callable[[Variant, int
                 raw = matcher.compute(grey(left, variant.method), grey(right, variant.method))
             except cv2.error as exc:
                 raise ValueError(f"{variant.method} failed: {_cv_message(exc)}") from exc
-            disparity: np.ndarray = raw.astype(np.float32) * np.float32(1 / 16)
-            disparity[raw < 0] = np.nan
-            return disparity
+            # eval searches from 0 (minDisparity=0): holes are the raw values below 0.
+            return from_opencv_disparity(raw, min_disparity=0)
 
         return match
 
@@ -873,6 +874,8 @@ def run(args: argparse.Namespace) -> int:
             notes.append(f"skipped {skipped}: OpenCV is not installed {how}")
         else:
             for key in opencv_options:
+                if key in ("num_disparities", "min_disparity", "block_size"):
+                    raise _usage_error(f"--opencv-option {key}: {_RESERVED_OPTIONS[key]}")
                 probes = [
                     cv2.StereoBM_create() if m == "opencv-bm" else cv2.StereoSGBM_create()
                     for m in methods & set(_OPENCV_METHODS)

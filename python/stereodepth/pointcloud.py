@@ -46,7 +46,7 @@ def q_matrix(
 class ReprojectOptions:
     """The checked, resolved options shared by the native kernel and the numpy oracle."""
 
-    __slots__ = ("Q", "invalid_value", "max_depth_m", "min_depth_m", "negative_invalid", "scale")
+    __slots__ = ("Q", "invalid_below", "invalid_value", "max_depth_m", "min_depth_m", "scale")
 
     def __init__(
         self,
@@ -62,6 +62,7 @@ class ReprojectOptions:
         min_depth_m: Any,
         max_depth_m: Any,
         invalid_value: Any,
+        min_disparity: Any = None,
     ) -> None:
         rig = {
             "focal_px": focal_px,
@@ -105,12 +106,13 @@ class ReprojectOptions:
             min_depth_m=min_depth_m,
             max_depth_m=max_depth_m,
             invalid_value=invalid_value,
+            min_disparity=min_disparity,
         )
         self.scale = o.scale
         self.min_depth_m = o.min_depth_m
         self.max_depth_m = o.max_depth_m
         self.invalid_value = o.invalid_value
-        self.negative_invalid = o.negative_invalid
+        self.invalid_below = o.invalid_below
 
 
 def _as_q(Q: Any) -> np.ndarray:
@@ -158,6 +160,7 @@ def reproject(
     min_depth_m: float | None = None,
     max_depth_m: float | None = None,
     invalid_value: float | None = None,
+    min_disparity: int | None = None,
     out: np.ndarray | None = None,
     threads: int | None = None,
 ) -> np.ndarray:
@@ -171,7 +174,9 @@ def reproject(
     ----------
     disparity
         (H, W) or (N, H, W) array of float16, float32, float64, int16 or uint16, with the
-        conventions of :func:`stereodepth.disparity_to_depth` (``scale``, ``invalid_value``).
+        conventions of :func:`stereodepth.disparity_to_depth` (``scale``, ``invalid_value``,
+        ``min_disparity``): for OpenCV's int16 output pass the matcher's ``minDisparity`` as
+        ``min_disparity`` (default 0), since raw values below ``min_disparity * 16`` are holes.
     Q
         OpenCV's 4x4 reprojection matrix (from ``cv2.stereoRectify``):
         [X Y Z W]^T = Q [x y d 1]^T. The points come out in the units of its translation.
@@ -204,6 +209,7 @@ def reproject(
         min_depth_m=min_depth_m,
         max_depth_m=max_depth_m,
         invalid_value=invalid_value,
+        min_disparity=min_disparity,
     )
     nthreads = check.threads(threads)
     result = prepare_points_out(out, arr)
@@ -223,7 +229,7 @@ def reproject(
         opts.min_depth_m,
         opts.max_depth_m,
         opts.invalid_value,
-        opts.negative_invalid,
+        opts.invalid_below,
         nthreads,
     )
     return result
