@@ -823,6 +823,45 @@ def _matcher_default_block_size() -> int:
     return default
 
 
+def _check_matcher_options(options: dict[str, Any]) -> None:
+    """Checks ``--option`` against stereodepth's matcher before any scene is read: an unknown
+    name, or a value the matcher refuses, is a usage error naming the option as typed."""
+    import inspect
+
+    from stereodepth import matching
+
+    if not options:
+        return
+    known: list[str] = []
+    for func in (matching.block_match, matching.StereoMatcher.__init__):
+        for name, param in inspect.signature(func).parameters.items():
+            if (
+                param.kind is inspect.Parameter.KEYWORD_ONLY
+                and name not in _RESERVED_OPTIONS
+                and name not in known
+            ):
+                known.append(name)
+    for key in options:
+        if key not in known:
+            raise _usage_error(
+                f"--option {key}: stereodepth's matcher has no option {key!r}; "
+                f"it takes {', '.join(known)}"
+            )
+    try:
+        matching.StereoMatcher(num_disparities=16, **options)
+    except (TypeError, ValueError) as exc:
+        message = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+        culprit = next((k for k in options if message.startswith(k)), None)
+
+        def as_typed(key: str) -> str:
+            value = options[key]
+            shown = str(value).lower() if value is None or isinstance(value, bool) else value
+            return f"{key}={shown}"
+
+        typed = as_typed(culprit) if culprit is not None else " ".join(map(as_typed, options))
+        raise _usage_error(f"--option {typed}: {message}") from None
+
+
 def _jsonable(value: Any) -> Any:
     if isinstance(value, float) and not math.isfinite(value):
         return None
@@ -859,6 +898,7 @@ def run(args: argparse.Namespace) -> int:
     methods = {v.method for v in variants}
     if options and "stereodepth" not in methods:
         raise _usage_error("--option is for stereodepth.block_match: add --method stereodepth")
+    _check_matcher_options(options)
     cv2: Any = None
     if methods & set(_OPENCV_METHODS):
         try:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import errno
 import os
 from typing import Any
 
@@ -273,9 +274,23 @@ def write_ply(
     the shape of ``points`` or grey without the last axis (the left image, for a point cloud
     from :func:`reproject`). Returns the number of points written.
 
-    Vertex properties: float x, y, z, and uchar red, green, blue when coloured."""
+    Vertex properties: float x, y, z, and uchar red, green, blue when coloured.
+
+    Raises TypeError for a ``path`` that is not a str or os.PathLike, FileNotFoundError
+    (naming ``path``) when its folder does not exist, before any work, and OSError naming
+    ``path`` when it cannot be written; ``path`` is then left as it was."""
     from .io import atomic_write
 
+    if not isinstance(path, (str, os.PathLike)):
+        raise TypeError(f"path must be a str or os.PathLike, got {type(path).__name__} {path!r}")
+    target = os.fspath(path)
+    folder = os.path.dirname(os.path.abspath(target))
+    if not os.path.isdir(folder):
+        raise FileNotFoundError(
+            errno.ENOENT, f"cannot write the PLY file: the folder {folder!r} does not exist", target
+        )
+    if os.path.isdir(target):
+        raise IsADirectoryError(errno.EISDIR, "cannot write the PLY file over a folder", target)
     if comment is not None and not (isinstance(comment, str) and comment.isascii()):
         raise ValueError(f"comment must be ASCII text (PLY headers are ASCII), got {comment!r}")
     pts = np.asarray(points)
@@ -299,7 +314,15 @@ def write_ply(
     if comment:
         header += [f"comment {line}" for line in comment.splitlines()]
     header += [f"element vertex {n}", *properties, "end_header"]
-    with atomic_write(path) as f:
-        f.write(("\n".join(header) + "\n").encode("ascii"))
-        f.write(vertex.tobytes())
+    try:
+        with atomic_write(target) as f:
+            f.write(("\n".join(header) + "\n").encode("ascii"))
+            f.write(vertex.tobytes())
+    except OSError as exc:
+        if exc.filename == target:
+            raise
+        # The error names our temporary file: name the user's path instead.
+        raise OSError(
+            exc.errno, f"cannot write the PLY file: {exc.strerror or exc}", target
+        ) from None
     return n
