@@ -86,11 +86,12 @@ def _run_block(line: int, code: str, folder: Path) -> dict[str, Any]:
     namespace: dict[str, Any] = {"__name__": "__readme__"}
     try:
         exec(compile(code, f"{README}:{line}", "exec"), namespace)
-    except ModuleNotFoundError as exc:
+    except ImportError as exc:  # ModuleNotFoundError, or our "pip install ..." hint
         name = exc.name or ""
         if name.split(".")[0] == "stereodepth":
             raise  # our own package: a broken example, never a skip
-        pytest.skip(f"README.md line {line} needs {name}, which is not installed")
+        what = name or str(exc)
+        pytest.skip(f"README.md line {line} needs {what}, which is not installed")
     except FileNotFoundError as exc:
         missing = Path(str(exc.filename or ""))
         if not (folder / missing.name).exists():

@@ -30,6 +30,8 @@ SUBMODULES = [
     "rig",
     "web",
 ]
+#: Submodules that need no optional extra: using them must not import one.
+CORE = ["calib", "charts", "depth", "io", "matching", "metrics", "pointcloud", "reference", "rig"]
 #: Optional extras that ``import stereodepth`` must not import.
 HEAVY = ["dask", "distributed", "matplotlib", "fastapi", "uvicorn", "plotly", "PIL", "cv2", "tqdm"]
 
@@ -46,11 +48,14 @@ def test_import_is_light_and_every_submodule_is_an_attribute() -> None:
         heavy = {HEAVY!r}
         before = sorted(m for m in heavy if m in sys.modules)
         listed = sorted(set({SUBMODULES!r}) - set(dir(sd)))
+        for name in {CORE!r}:
+            getattr(sd, name)
+        core = sorted(m for m in heavy if m in sys.modules)
         got = {{}}
         for name in {SUBMODULES!r}:
             module = getattr(sd, name)
             got[name] = module.__name__
-        print(json.dumps({{"before": before, "unlisted": listed, "got": got}}))
+        print(json.dumps({{"before": before, "core": core, "unlisted": listed, "got": got}}))
         """
     )
     env = dict(os.environ, PYTHONPATH=_package_path())
@@ -60,6 +65,7 @@ def test_import_is_light_and_every_submodule_is_an_attribute() -> None:
     assert done.returncode == 0, done.stderr
     report = json.loads(done.stdout)
     assert report["before"] == [], "import stereodepth loaded optional extras"
+    assert report["core"] == [], "a submodule without extras imported one"
     assert report["unlisted"] == []
     assert report["got"] == {name: f"stereodepth.{name}" for name in SUBMODULES}
 
