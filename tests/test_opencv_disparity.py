@@ -163,6 +163,22 @@ def test_bad_min_disparity_is_rejected(call: Any, exc: type, message: str) -> No
         call()
 
 
+def test_dask_wrappers_pass_min_disparity() -> None:
+    da = pytest.importorskip("dask.array", reason="dask (the batch extra) is not installed")
+    import stereodepth.dask as sdd
+
+    rng = np.random.default_rng(5)
+    d = np.stack([float_map(rng, 16, (9, 14)) for _ in range(3)])
+    raw = stereodepth.to_opencv_disparity(d, min_disparity=16)
+    lazy = da.from_array(raw, chunks=(1, 9, 14))
+    kw = {"focal_px": FOCAL_PX, "baseline_m": BASELINE_M, "min_disparity": 16}
+    assert_same(
+        sdd.disparity_to_depth(lazy, **kw).compute(), stereodepth.disparity_to_depth(raw, **kw)
+    )
+    assert_same(sdd.reproject(lazy, **kw).compute(), stereodepth.reproject(raw, **kw))
+    assert np.isnan(sdd.disparity_to_depth(lazy, **kw).compute()[np.isnan(d)]).all()
+
+
 # --- real OpenCV output ----------------------------------------------------------------------
 
 
