@@ -152,6 +152,13 @@ def test_metrics_read_opencv_output_with_its_min_disparity() -> None:
             "min_disparity must be an integer, got float 2.0",
         ),
         (
+            lambda: stereodepth.disparity_to_depth(
+                np.zeros((2, 2), np.float32), focal_px=1.0, baseline_m=1.0, min_disparity=10**40
+            ),
+            ValueError,
+            "min_disparity must be an integer <= 16777216, got 1" + "0" * 40,
+        ),
+        (
             lambda: evaluate(np.zeros((2, 2), np.int16), np.zeros((2, 2)), min_disparity=True),
             TypeError,
             "min_disparity must be an integer, got bool True",

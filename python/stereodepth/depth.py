@@ -11,6 +11,10 @@ from . import _validate as check
 
 __all__ = ["FLOAT32_MAX", "disparity_to_depth", "from_opencv_disparity"]
 
+#: The largest ``|min_disparity|`` accepted, in pixels: far beyond any image width, small
+#: enough that the raw threshold stays an exact float.
+MAX_ABS_MIN_DISPARITY = 1 << 24
+
 #: The default upper depth limit: the largest finite float32, so infinite depth is invalid.
 FLOAT32_MAX = float(np.finfo(np.float32).max)
 
@@ -80,7 +84,7 @@ class DepthOptions:
         # Which raw values mean "no disparity". OpenCV's int16 output marks holes with
         # (min_disparity - 1) * 16: every raw value below min_disparity * 16 is a hole, and
         # the rest are disparities, negative ones included. KITTI's uint16 uses 0.
-        md = None if min_disparity is None else check.integer("min_disparity", min_disparity)
+        md = None if min_disparity is None else check_min_disparity(min_disparity)
         if invalid_value is None:
             self.invalid_value: float | None = 0.0 if kind == np.uint16 else None
             if md is None and kind == np.int16:
@@ -89,6 +93,13 @@ class DepthOptions:
             self.invalid_value = check.real("invalid_value", invalid_value)
         # The raw threshold: raw < min_disparity / scale is a hole (exact for int16 x16).
         self.invalid_below: float | None = None if md is None else md / self.scale
+
+
+def check_min_disparity(value: Any) -> int:
+    """``min_disparity`` as an int in +-MAX_ABS_MIN_DISPARITY (TypeError, ValueError)."""
+    return check.integer(
+        "min_disparity", value, minimum=-MAX_ABS_MIN_DISPARITY, maximum=MAX_ABS_MIN_DISPARITY
+    )
 
 
 def as_disparity(disparity: Any, name: str = "disparity") -> np.ndarray:
@@ -239,7 +250,7 @@ def from_opencv_disparity(raw: Any, *, min_disparity: int = 0) -> np.ndarray:
     arr = raw if isinstance(raw, np.ndarray) else np.asarray(raw)
     if arr.dtype != np.int16:
         raise TypeError(f"raw must be OpenCV's int16 disparity (x16), got dtype {arr.dtype}")
-    md = check.integer("min_disparity", min_disparity)
+    md = check_min_disparity(min_disparity)
     out: np.ndarray = arr.astype(np.float32) * np.float32(1 / 16)  # exact: a power of two
     out[arr.astype(np.int32) < md * 16] = np.nan
     return out

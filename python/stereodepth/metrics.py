@@ -25,8 +25,7 @@ from typing import Any
 
 import numpy as np
 
-from . import _validate as check
-from .depth import from_opencv_disparity
+from .depth import check_min_disparity, from_opencv_disparity
 
 __all__ = ["BAD_THRESHOLDS_PX", "DisparityMetrics", "evaluate"]
 
@@ -142,7 +141,7 @@ def evaluate(
     truth, a non-bool mask or a non-integer ``min_disparity``, and ValueError for shapes that
     are not (H, W) or do not match.
     """
-    md = None if min_disparity is None else check.integer("min_disparity", min_disparity)
+    md = None if min_disparity is None else check_min_disparity(min_disparity)
     if md is not None and isinstance(disparity, np.ndarray) and disparity.dtype == np.int16:
         disparity = from_opencv_disparity(disparity, min_disparity=md)
     d = _float_map("disparity", disparity, "pixels, NaN for holes")
