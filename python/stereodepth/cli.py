@@ -17,7 +17,7 @@ import os
 import re
 import sys
 from collections.abc import Sequence
-from typing import Any
+from typing import Any, NoReturn
 
 from .rig import StereoRig
 
@@ -43,7 +43,7 @@ class ArgumentParser(argparse.ArgumentParser):
     """argparse, with usage errors in one line: ``PROG: error: MESSAGE (see PROG --help)``,
     exit status 2. Subcommand parsers inherit the class (add_subparsers uses the parent's)."""
 
-    def error(self, message: str) -> Any:  # argparse declares NoReturn
+    def error(self, message: str) -> NoReturn:
         self.exit(2, f"{self.prog}: error: {one_line(message)} (see {self.prog} --help)\n")
 
 
