@@ -322,7 +322,7 @@ def test_bad_pairs_are_reported_and_the_rest_complete(
 def test_grey_and_rgb_pair_is_matched_in_grey(tmp_path: Path) -> None:
     left, right = random_pair(5, 3)
     Image.fromarray(left).save(tmp_path / "left.png")
-    Image.fromarray(batch._to_grey(right)).save(tmp_path / "right.png")
+    Image.fromarray(batch.compute._to_grey(right)).save(tmp_path / "right.png")
     out = tmp_path / "out"
     assert (
         run_cli(
@@ -341,7 +341,7 @@ def test_grey_and_rgb_pair_is_matched_in_grey(tmp_path: Path) -> None:
         == 0
     )
     want = stereodepth.matching.block_match(
-        batch._to_grey(left), batch._to_grey(right), num_disparities=16
+        batch.compute._to_grey(left), batch.compute._to_grey(right), num_disparities=16
     )
     np.testing.assert_array_equal(np.load(out / f"{tmp_path.name}.disparity.npy"), want)
 
@@ -675,7 +675,7 @@ def test_ctrl_c_during_a_dask_job_sets_a_flag_and_a_second_one_raises() -> None:
     calls are not safe to interrupt); a second one raises KeyboardInterrupt; the default handler
     comes back afterwards. A handler the application installed is left alone."""
     assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
-    with batch._sigint_as_flag() as stop:
+    with batch.runners._sigint_as_flag() as stop:
         assert not stop.is_set()
         signal.raise_signal(signal.SIGINT)
         assert stop.is_set()
@@ -686,7 +686,7 @@ def test_ctrl_c_during_a_dask_job_sets_a_flag_and_a_second_one_raises() -> None:
     seen: list[int] = []
     previous = signal.signal(signal.SIGINT, lambda signum, frame: seen.append(signum))
     try:
-        with batch._sigint_as_flag() as stop:
+        with batch.runners._sigint_as_flag() as stop:
             signal.raise_signal(signal.SIGINT)
             assert not stop.is_set() and seen == [signal.SIGINT]
     finally:
