@@ -11,19 +11,24 @@ import numpy as np
 
 from .. import _validate as check
 from .job import BatchOptions, Pair
-from .records import file_stamp, jsonable, record_head, settings_of
-
-
-def _to_grey(rgb: np.ndarray) -> np.ndarray:
-    """OpenCV's COLOR_RGB2GRAY, as the matcher converts RGB internally."""
-    r, g, b = (rgb[..., i].astype(np.uint32) for i in range(3))
-    return ((4899 * r + 9617 * g + 1868 * b + 8192) >> 14).astype(np.uint8)
+from .records import (
+    earlier_outputs,
+    file_stamp,
+    jsonable,
+    record_head,
+    remove_files,
+    settings_of,
+)
 
 
 def _load_pair(pair: Pair) -> tuple[np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
-    """(left, right, colours, stamps): the pair made comparable for the matcher, the left image
-    as read for the point cloud's colours, and the files' size and time, taken before reading
-    them (so that a file changed meanwhile is redone next time)."""
+    """(left, right, colours, stamps): the pair for the matcher, the left image as read for the
+    point cloud's colours, and the files' size and time, taken before reading them (so that a
+    file changed meanwhile is redone next time).
+
+    The images are read by Pillow, which gives colour as RGB. Both must be colour or both
+    grey, of the same bit depth: the rule of :func:`stereodepth.block_match`, which refuses a
+    mixed pair too; the pair fails with a message that says which image is which."""
     from ..io import read_image
 
     if not pair.left.is_file():
@@ -38,9 +43,15 @@ def _load_pair(pair: Pair) -> tuple[np.ndarray, np.ndarray, np.ndarray, dict[str
             f"{right.shape[1]}x{right.shape[0]} px"
         )
     colours = left
-    if left.ndim != right.ndim:  # one RGB, one grey: match in grey
-        left = _to_grey(left) if left.ndim == 3 else left
-        right = _to_grey(right) if right.ndim == 3 else right
+    if left.ndim != right.ndim:
+
+        def kind(a: np.ndarray) -> str:
+            return "colour (RGB)" if a.ndim == 3 else "grey"
+
+        raise ValueError(
+            f"the left image is {kind(left)} and the right image {kind(right)}: both must be "
+            "colour or both grey (convert one of them; block_match refuses a mixed pair too)"
+        )
     if left.dtype != right.dtype:
         raise ValueError(f"left and right differ in bit depth: {left.dtype} and {right.dtype}")
     return left, right, colours, stamps
@@ -64,14 +75,21 @@ def process_pair(pair: Pair, options: BatchOptions, threads: int | None = None) 
 
     Returns the pair's record: ``stem``, ``left``, ``right``, ``status`` (``ok`` or
     ``failed``), ``error``, ``time_s``, ``density`` (the fraction of pixels with a
-    disparity), ``width``, ``height``, ``outputs`` and ``settings``. The record is also
-    written, last, as ``<stem>.json`` when the pair succeeds."""
+    disparity), ``width``, ``height``, ``outputs``, ``settings``, ``calibration_source``,
+    ``calibration_not_used`` and ``removed`` (the stale files of an earlier run removed). The
+    record is also written, last, as ``<stem>.record.json``, for a failed pair too.
+
+    The outputs of an earlier run of the pair (as its record lists them) that this run does
+    not write again are removed: all of them when the pair fails (its record then says
+    ``failed``), the ``.ply`` of a run with ``--ply`` when this one has none, the files of
+    another ``--format``."""
     from .. import __version__, disparity_to_depth
-    from ..io import atomic_write
     from ..pointcloud import reproject, write_ply
 
     t0 = time.perf_counter()
     record = record_head(pair, "failed")
+    earlier = earlier_outputs(pair, options)
+    written: set[Path] = set()
     try:
         if pair.problem:
             raise ValueError(pair.problem)
@@ -99,6 +117,7 @@ def process_pair(pair: Pair, options: BatchOptions, threads: int | None = None) 
             threads=threads,
         )
         paths = options.output_paths(pair.stem)
+        written.update(paths.values())
         _write_map(paths["disparity"], "disparity", disparity, options.format)
         _write_map(paths["depth"], "depth", depth, options.format)
         outputs: dict[str, Any] = {}
@@ -131,17 +150,33 @@ def process_pair(pair: Pair, options: BatchOptions, threads: int | None = None) 
         )
         if "ply_points" in outputs:
             record["outputs"]["ply"]["points"] = outputs["ply_points"]
+        # Stale files go before the new record is written: a job killed in between leaves the
+        # old record, which names a missing file, so the pair is redone next time.
+        record["removed"] = remove_files(earlier - set(paths.values()))
         record["time_s"] = time.perf_counter() - t0
-        with atomic_write(options.record_path(pair.stem), text=True) as fh:
-            json.dump(jsonable(record), fh, indent=2, allow_nan=False)
-            fh.write("\n")
+        _write_record(options.record_path(pair.stem), record)
     except Exception as exc:  # a bad pair is reported, never fatal
         known = (OSError, ValueError, TypeError, MemoryError)
         text = str(exc) if isinstance(exc, known) and str(exc) else f"{type(exc).__name__}: {exc}"
-        record.update(status="failed", error=text)
-        record["time_s"] = time.perf_counter() - t0
+        for key in ("width", "height", "inputs", "outputs", "settings"):
+            record.pop(key, None)
+        record.update(status="failed", error=text, density=None)
+        try:
+            record["removed"] = remove_files(earlier | written)
+            record["time_s"] = time.perf_counter() - t0
+            _write_record(options.record_path(pair.stem), record)
+        except OSError as exc2:  # OUTDIR itself fails: the report still has the record
+            record["error"] = f"{text}; and its record could not be written: {exc2}"
     result: dict[str, Any] = jsonable(record)
     return result
+
+
+def _write_record(path: Path, record: dict[str, Any]) -> None:
+    from ..io import atomic_write
+
+    with atomic_write(path, text=True) as fh:
+        json.dump(jsonable(record), fh, indent=2, allow_nan=False)
+        fh.write("\n")
 
 
 def _task_threads() -> int | None:

@@ -11,6 +11,9 @@ from ..calib import Calibration
 
 FORMATS = {"npy": "npy", "png16": "png", "pfm": "pfm"}
 STATUSES = ("ok", "skipped", "failed", "cancelled")
+#: A pair's record is ``<stem>.record.json``: no other file of a job ends so (the report is
+#: ``report.json`` by default), so a pair named ``report`` cannot overwrite the report.
+RECORD_SUFFIX = ".record.json"
 
 
 class UsageError(ValueError):
@@ -20,7 +23,9 @@ class UsageError(ValueError):
 @dataclass(frozen=True)
 class Pair:
     """One stereo pair to process. ``calib_file`` is the calibration found beside it (with the
-    KITTI cameras ``kitti_cams`` for a KITTI file); ``problem`` a reason it cannot run."""
+    KITTI cameras ``kitti_cams`` for a KITTI file); ``problem`` a reason it cannot run;
+    ``calib_file_unused`` says that a calibration from the command line replaced
+    ``calib_file``."""
 
     stem: str
     left: Path
@@ -30,6 +35,7 @@ class Pair:
     calibration: Calibration | None = None
     num_disparities: int | None = None
     problem: str | None = None
+    calib_file_unused: bool = False
 
 
 @dataclass(frozen=True)
@@ -55,4 +61,12 @@ class BatchOptions:
         return out
 
     def record_path(self, stem: str) -> Path:
-        return self.out_dir / f"{stem}.json"
+        return self.out_dir / f"{stem}{RECORD_SUFFIX}"
+
+    def owned_names(self, stem: str) -> set[str]:
+        """The names of every file a pair may write into OUTDIR, in any format, with or
+        without ``--ply``: the only files batch ever removes (when they are stale)."""
+        names = {
+            f"{stem}.{kind}.{ext}" for kind in ("disparity", "depth") for ext in FORMATS.values()
+        }
+        return names | {f"{stem}.ply", f"{stem}{RECORD_SUFFIX}"}

@@ -1,10 +1,11 @@
-"""Per-pair records (``<stem>.json``), resuming from them, and the job's report."""
+"""Per-pair records (``<stem>.record.json``), resuming from them, stale outputs, and the job's
+report."""
 
 from __future__ import annotations
 
 import json
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -87,7 +88,39 @@ def record_head(pair: Pair, status: str, error: str | None = None) -> dict[str, 
         "error": error,
         "time_s": None,
         "density": None,
+        "calibration_source": None if pair.calibration is None else pair.calibration.source,
+        "calibration_not_used": str(pair.calib_file) if pair.calib_file_unused else None,
     }
+
+
+def earlier_outputs(pair: Pair, options: BatchOptions) -> set[Path]:
+    """The files an earlier run of this pair wrote, as its record lists them: only names a
+    pair owns (:meth:`BatchOptions.owned_names`) inside OUTDIR count, whatever else a record
+    edited by hand may say."""
+    try:
+        record = json.loads(options.record_path(pair.stem).read_text(encoding="utf-8"))
+        listed = [Path(v["path"]) for v in record["outputs"].values()]
+    except (OSError, ValueError, KeyError, TypeError, AttributeError):
+        return set()
+    owned = options.owned_names(pair.stem)
+    out_dir = options.out_dir.resolve()
+    return {
+        options.out_dir / p.name
+        for p in listed
+        if p.name in owned and p.parent.resolve() == out_dir
+    }
+
+
+def remove_files(paths: set[Path]) -> list[str]:
+    """Removes the files that exist among ``paths``; returns their paths, sorted."""
+    removed = []
+    for p in sorted(paths):
+        try:
+            p.unlink()
+        except FileNotFoundError:
+            continue
+        removed.append(str(p))
+    return removed
 
 
 @dataclass
@@ -100,6 +133,7 @@ class BatchReport:
     interrupted: bool = False
     started: str = ""
     removed_temp_files: int = 0
+    notes: list[str] = field(default_factory=list)
 
     @property
     def counts(self) -> dict[str, int]:
@@ -127,6 +161,7 @@ class BatchReport:
                 "interrupted": self.interrupted,
                 "counts": self.counts,
                 "exit_status": self.exit_status,
+                "notes": self.notes,
                 "pairs": self.pairs,
             }
         )

@@ -17,6 +17,7 @@ from pathlib import Path
 from typing import Any
 
 from .. import _validate as check
+from .._extras import require
 from .compute import process_pair
 from .job import BatchOptions, Pair, UsageError
 from .records import BatchReport, completed_record, record_head
@@ -29,20 +30,38 @@ LOCK_NAME = ".stereodepth-batch.lock"
 
 @contextlib.contextmanager
 def _exclusive(out_dir: Path) -> Iterator[None]:
-    """Holds a lock on OUTDIR so that two jobs never write there at once."""
+    """Holds a lock on OUTDIR so that two jobs never write there at once; the lock file
+    (:data:`LOCK_NAME`) is removed when the job ends, however it ends (a job killed with
+    SIGKILL leaves it, unlocked: the next job takes it).
+
+    The file is removed while it is still locked, so a job that opened it just before must
+    find, once it holds the lock, that the file it locked is no longer the one at that path:
+    it then starts again with a new file."""
     try:
         import fcntl
     except ImportError:  # pragma: no cover - not POSIX
         yield
         return
-    fd = os.open(out_dir / LOCK_NAME, os.O_RDWR | os.O_CREAT, 0o666)
-    try:
+    path = out_dir / LOCK_NAME
+    while True:
+        fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o666)
         try:
             fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except BlockingIOError:
+            os.close(fd)
             raise UsageError(f"another stereodepth batch job is writing to {out_dir}") from None
+        try:
+            same = os.path.samestat(os.fstat(fd), os.stat(path))
+        except FileNotFoundError:
+            same = False
+        if same:
+            break
+        os.close(fd)  # removed by the job that held it: lock the new file instead
+    try:
         yield
     finally:
+        with contextlib.suppress(FileNotFoundError):
+            os.unlink(path)
         os.close(fd)
 
 
@@ -149,6 +168,28 @@ def _run_dask(
         done(i, record)
 
 
+def check_runner(
+    *,
+    scheduler: str | None = None,
+    workers: int | None = None,
+    threads: int | None = None,
+    progress: bool = False,
+) -> None:
+    """Raises UsageError for runner options that no pair can run with, and ImportError (one
+    line, with the install hint) when what they need is not installed: dask.distributed for
+    ``scheduler`` or ``workers``, tqdm for ``progress``."""
+    if scheduler is not None and workers is not None:
+        raise UsageError("give --scheduler or --workers, not both")
+    if workers is not None and workers < 1:
+        raise UsageError(f"--workers must be an integer >= 1, got {workers}")
+    if threads is not None and threads < 0:
+        raise UsageError(f"--threads must be an integer >= 0 (0: every core), got {threads}")
+    if scheduler is not None or workers is not None:
+        require("distributed", "running on Dask (--scheduler, --workers)")
+    if progress:
+        require("tqdm", "the progress bar (or give --quiet)")
+
+
 def run_batch(
     pairs: Sequence[Pair],
     options: BatchOptions,
@@ -158,6 +199,7 @@ def run_batch(
     threads: int | None = None,
     progress: bool = False,
     on_result: Callable[[dict[str, Any]], None] | None = None,
+    notes: Sequence[str] = (),
 ) -> BatchReport:
     """Runs a job: every pair not already done, on this machine (default), on a local Dask
     cluster of ``workers`` processes, or on the Dask cluster at ``scheduler``.
@@ -171,12 +213,7 @@ def run_batch(
     the caller writes the report."""
     from ..io import remove_temp_files
 
-    if scheduler is not None and workers is not None:
-        raise UsageError("give --scheduler or --workers, not both")
-    if workers is not None and workers < 1:
-        raise UsageError(f"--workers must be an integer >= 1, got {workers}")
-    if threads is not None and threads < 0:
-        raise UsageError(f"--threads must be an integer >= 0 (0: every core), got {threads}")
+    check_runner(scheduler=scheduler, workers=workers, threads=threads, progress=progress)
     out_dir = options.out_dir
     out_dir.mkdir(parents=True, exist_ok=True)
     started = _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")
@@ -241,6 +278,7 @@ def run_batch(
         interrupted=interrupted,
         started=started,
         removed_temp_files=removed,
+        notes=list(notes),
     )
 
 
