@@ -46,8 +46,7 @@ def register(subparsers: Any) -> None:
         help="the folder for the outputs (created if needed)",
     )
     c = p.add_argument_group(
-        "calibration (first of: --focal-px/--baseline-mm, --calib FILE, each pair's own "
-        "calib.txt or KITTI calib/)"
+        "calibration (the first given wins: these flags, --calib, each pair's own file)"
     )
     c.add_argument("--focal-px", type=float, help="focal length in pixels")
     c.add_argument("--baseline-mm", type=float, help="baseline in millimetres")
@@ -93,7 +92,8 @@ def register(subparsers: Any) -> None:
         "--num-disparities",
         type=int,
         metavar="N",
-        help="disparities searched (default: ndisp from calib.txt; else required)",
+        help="disparities searched (default: ndisp of the Middlebury calib.txt that gives the "
+        "rig; required with KITTI files and with --focal-px)",
     )
     m.add_argument("--min-disparity", type=int, metavar="D", help="smallest disparity searched")
     m.add_argument("--block-size", type=int, metavar="N", help="odd block side")
@@ -283,7 +283,7 @@ def _report_path(args: argparse.Namespace, out_dir: Path) -> Path:
     if report.is_dir():
         raise UsageError(f"--report must be a file, got the folder {report}")
     folder = report.parent
-    if folder.absolute() != out_dir.absolute():
+    if folder.resolve() != out_dir.resolve():
         if not folder.is_dir():
             raise UsageError(f"--report {report}: the folder {folder} does not exist")
         if not os.access(folder, os.W_OK | os.X_OK):

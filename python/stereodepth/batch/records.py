@@ -94,8 +94,8 @@ def record_head(pair: Pair, status: str, error: str | None = None) -> dict[str, 
 
 
 def earlier_outputs(pair: Pair, options: BatchOptions) -> set[Path]:
-    """The files an earlier run of this pair wrote, as its record lists them: only names a
-    pair owns (:meth:`BatchOptions.owned_names`) inside OUTDIR count, whatever else a record
+    """The files an earlier run of this pair wrote, as its record lists them, in OUTDIR: only
+    the names this pair owns (:meth:`BatchOptions.owned_names`) count, whatever else a record
     edited by hand may say."""
     try:
         record = json.loads(options.record_path(pair.stem).read_text(encoding="utf-8"))
@@ -103,12 +103,7 @@ def earlier_outputs(pair: Pair, options: BatchOptions) -> set[Path]:
     except (OSError, ValueError, KeyError, TypeError, AttributeError):
         return set()
     owned = options.owned_names(pair.stem)
-    out_dir = options.out_dir.resolve()
-    return {
-        options.out_dir / p.name
-        for p in listed
-        if p.name in owned and p.parent.resolve() == out_dir
-    }
+    return {options.out_dir / p.name for p in listed if p.name in owned}
 
 
 def remove_files(paths: set[Path]) -> list[str]:
