@@ -231,6 +231,22 @@ def test_a_changed_run_removes_the_outputs_it_no_longer_writes(
     assert (out / "teddy.disparity.pfm").read_bytes() == b"mine"
 
 
+def test_a_pair_whose_dask_worker_kept_dying_gets_a_failed_record(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """The Dask runner's failure without a result from the task (KilledWorker) is written the
+    same way as any other failure: the earlier outputs go, the record says failed."""
+    inp, out = tmp_path / "in", tmp_path / "out"
+    scene(inp / "teddy")
+    assert run(capsys, inp, "-o", out, "--ply", "--quiet")[0] == 0
+    pair = batch.resolve_calibration(batch.find_pairs(inp))[0]
+    head = batch.records.record_head(pair, "failed", "KilledWorker: the worker died 3 times")
+    rec = batch.compute.record_failure(pair, batch.BatchOptions(out_dir=out), head)
+    assert rec["status"] == "failed" and len(rec["removed"]) == 3
+    assert {p.name for p in out.glob("teddy.*")} == {"teddy.record.json"}
+    assert record_of(out, "teddy")["error"] == "KilledWorker: the worker died 3 times"
+
+
 # --- calibration precedence ---------------------------------------------------------------------
 def test_calibration_precedence_is_stated_per_pair_and_the_message_is_true(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]

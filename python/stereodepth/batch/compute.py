@@ -160,15 +160,25 @@ def process_pair(pair: Pair, options: BatchOptions, threads: int | None = None) 
         text = str(exc) if isinstance(exc, known) and str(exc) else f"{type(exc).__name__}: {exc}"
         for key in ("width", "height", "inputs", "outputs", "settings"):
             record.pop(key, None)
-        record.update(status="failed", error=text, density=None)
-        try:
-            record["removed"] = remove_files(earlier | written)
-            record["time_s"] = time.perf_counter() - t0
-            _write_record(options.record_path(pair.stem), record)
-        except OSError as exc2:  # OUTDIR itself fails: the report still has the record
-            record["error"] = f"{text}; and its record could not be written: {exc2}"
+        record.update(error=text, density=None, time_s=time.perf_counter() - t0)
+        record = record_failure(pair, options, record, written | earlier)
     result: dict[str, Any] = jsonable(record)
     return result
+
+
+def record_failure(
+    pair: Pair, options: BatchOptions, record: dict[str, Any], stale: set[Path] | None = None
+) -> dict[str, Any]:
+    """Makes ``record`` a failed pair's record on disk: removes the pair's outputs (``stale``,
+    else those its earlier record lists), lists them under ``removed`` and writes the record.
+    Returns the record; if OUTDIR cannot be written, its error says so too."""
+    record = {**record, "status": "failed"}
+    try:
+        record["removed"] = remove_files(earlier_outputs(pair, options) if stale is None else stale)
+        _write_record(options.record_path(pair.stem), record)
+    except OSError as exc:  # OUTDIR itself fails: the report still has the record
+        record["error"] = f"{record['error']}; and its record could not be written: {exc}"
+    return record
 
 
 def _write_record(path: Path, record: dict[str, Any]) -> None:

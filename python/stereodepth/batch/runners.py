@@ -18,9 +18,9 @@ from typing import Any
 
 from .. import _validate as check
 from .._extras import require
-from .compute import process_pair
+from .compute import process_pair, record_failure
 from .job import BatchOptions, Pair, UsageError
-from .records import BatchReport, completed_record, record_head
+from .records import BatchReport, completed_record, jsonable, record_head
 
 #: Pairs in flight in the embedded runner: decoding, writing and fsyncing some overlap the
 #: matching of another (which uses every core). See bench/README.md for 1, 2 and 3.
@@ -164,7 +164,8 @@ def _run_dask(
         try:
             record = f.result()
         except Exception as exc:  # the task itself never raises: a worker kept dying
-            record = record_head(pairs[i], "failed", f"{type(exc).__name__}: {exc}")
+            head = record_head(pairs[i], "failed", f"{type(exc).__name__}: {exc}")
+            record = jsonable(record_failure(pairs[i], options, head))
         done(i, record)
 
 
