@@ -894,6 +894,9 @@ def _jsonable(value: Any) -> Any:
 
 def run(args: argparse.Namespace) -> int:
     """Runs ``stereodepth eval``; returns the exit status."""
+    from ._extras import require
+
+    require("PIL.Image", "reading images")  # before any work: one line with the install hint
     if args.repeat < 1:
         raise ValueError(f"--repeat must be an integer >= 1, got {args.repeat}")
     if args.threads < 0:
