@@ -29,49 +29,97 @@ class MiddleburyCalib:
         return float(self.cam0[0, 0])
 
 
-def _matrix(text: str, key: str, path: Path) -> np.ndarray:
-    rows = [r.split() for r in text.strip().strip("[]").split(";")]
+_NUMBER = r"[-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?"
+_NUMBER_RE = re.compile(_NUMBER)
+_INTEGER_RE = re.compile(r"\d+")
+_LINE_RE = re.compile(r"([A-Za-z_][A-Za-z0-9_]*)[ \t]*=[ \t]*(.*?)[ \t]*")
+
+
+def _read_text(p: Path, what: str) -> str:
+    """A calibration file's text: UTF-8 (a byte-order mark is dropped), any line ends."""
+    if not p.is_file():
+        raise FileNotFoundError(f"{what} not found: {p}")
     try:
-        m = np.array([[float(v) for v in r] for r in rows], dtype=np.float64)
-    except ValueError as exc:
-        raise ValueError(f"{path}: {key} must be a 3x3 matrix, got {text!r}") from exc
-    if m.shape != (3, 3):
-        raise ValueError(f"{path}: {key} must be a 3x3 matrix, got {text!r}")
-    return m
+        return p.read_bytes().decode("utf-8-sig")
+    except UnicodeDecodeError as exc:
+        raise ValueError(f"{p}: not a text file ({what}): {exc}") from exc
+
+
+def _matrix(text: str, key: str, path: Path) -> np.ndarray:
+    """``[a b c; d e f; g h i]``: a 3x3 intrinsics matrix, finite, positive focal lengths,
+    last row 0 0 1."""
+    rule = f"{key} must be a 3x3 matrix [fx 0 cx; 0 fy cy; 0 0 1]"
+    m = re.fullmatch(r"\[(.*)\]", text)
+    rows = m.group(1).split(";") if m else []
+    cells = [r.split() for r in rows]
+    if len(cells) != 3 or any(len(r) != 3 for r in cells):
+        raise ValueError(f"{path}: {rule}, got {text!r}")
+    if not all(_NUMBER_RE.fullmatch(v) for r in cells for v in r):
+        raise ValueError(f"{path}: {rule} of numbers, got {text!r}")
+    k = np.array([[float(v) for v in r] for r in cells], dtype=np.float64)
+    if not np.isfinite(k).all():
+        raise ValueError(f"{path}: {key} must be finite, got {text!r}")
+    if not (k[0, 0] > 0 and k[1, 1] > 0):
+        raise ValueError(f"{path}: {key} focal lengths must be > 0, got {text!r}")
+    if k[2].tolist() != [0.0, 0.0, 1.0] or k[1, 0] != 0:
+        raise ValueError(f"{path}: {key}'s last row must be 0 0 1, got {text!r}")
+    return k
 
 
 def read_middlebury_calib(path: str | os.PathLike[str]) -> MiddleburyCalib:
-    """Parses a Middlebury ``calib.txt``: ``cam0=[f 0 cx; 0 f cy; 0 0 1]``, ``doffs=``,
-    ``baseline=`` (mm), ``width=``, ``height=``, ``ndisp=``. Raises ValueError naming the file
-    and the field when a required one is missing or malformed."""
+    """Parses a Middlebury ``calib.txt`` (the 2014 format, vision.middlebury.edu/stereo/data/
+    scenes2014): one ``key=value`` a line, ``cam0=[f 0 cx; 0 f cy; 0 0 1]``, ``cam1=``,
+    ``doffs=`` (px), ``baseline=`` (mm), ``width=``, ``height=``, ``ndisp=``, and keys this
+    reader does not use (``isint``, ``vmin``, ``vmax``, ``dyavg``, ``dymax``, ...).
+
+    Line ends LF, CR LF or CR; spaces around ``=`` and at line ends; blank lines. The format
+    has no comments: any other line is refused. ``cam0`` and ``baseline`` are required,
+    ``cam1`` defaults to ``cam0``, ``doffs`` to 0.
+
+    Raises FileNotFoundError for a missing file and ValueError naming the file and the field
+    (with the line number for a malformed line): a line that is not ``key=value``, a key
+    given twice, a missing required key, a matrix that is not 3x3 with finite numbers,
+    positive focal lengths and a last row 0 0 1, a baseline that is not a finite number
+    > 0, a non-finite doffs, a width, height or ndisp that is not a whole number > 0."""
     p = Path(path)
+    text = _read_text(p, "Middlebury calib.txt")
     fields: dict[str, str] = {}
-    for line in p.read_text().splitlines():
-        m = re.match(r"\s*([A-Za-z0-9_]+)\s*=\s*(.*?)\s*$", line)
-        if m:
-            fields[m.group(1)] = m.group(2)
+    for lineno, line in enumerate(text.splitlines(), start=1):
+        if not line.strip():
+            continue
+        m = _LINE_RE.fullmatch(line.strip(" \t"))
+        if m is None:
+            raise ValueError(
+                f"{p}: line {lineno} of a Middlebury calib.txt must be key=value, got {line!r}"
+            )
+        key, value = m.groups()
+        if key in fields:
+            raise ValueError(f"{p}: {key} is given twice (line {lineno})")
+        fields[key] = value
     for key in ("cam0", "baseline"):
         if key not in fields:
             raise ValueError(f"{p}: missing field {key!r} in Middlebury calib.txt")
 
-    def number(key: str, default: float | None = None) -> float | None:
-        if key not in fields:
-            return default
-        try:
-            return float(fields[key])
-        except ValueError as exc:
-            raise ValueError(f"{p}: {key} must be a number, got {fields[key]!r}") from exc
+    def number(key: str) -> float:
+        v = fields[key]
+        if _NUMBER_RE.fullmatch(v) is None or not np.isfinite(float(v)):
+            raise ValueError(f"{p}: {key} must be a finite number, got {v!r}")
+        return float(v)
 
     def whole(key: str) -> int | None:
-        v = number(key)
-        return None if v is None else int(v)
+        if key not in fields:
+            return None
+        v = fields[key]
+        if _INTEGER_RE.fullmatch(v) is None or int(v) <= 0:
+            raise ValueError(f"{p}: {key} must be a whole number > 0, got {v!r}")
+        return int(v)
 
     cam0 = _matrix(fields["cam0"], "cam0", p)
     cam1 = _matrix(fields["cam1"], "cam1", p) if "cam1" in fields else cam0.copy()
-    baseline = number("baseline", 0.0) or 0.0
+    baseline = number("baseline")
     if not baseline > 0:
         raise ValueError(f"{p}: baseline must be > 0 mm, got {fields['baseline']!r}")
-    doffs = number("doffs", 0.0) or 0.0
+    doffs = number("doffs") if "doffs" in fields else 0.0
     return MiddleburyCalib(
         cam0=cam0,
         cam1=cam1,
