@@ -199,13 +199,19 @@ def test_opencv_split_files_and_units(tmp_path: Path) -> None:
     )
     extr = write(tmp_path / "extrinsics.yml", opencv_yaml({k: e[k] for k in ("R", "T")}))
     for unit, scale in (("mm", 1e-3), ("cm", 1e-2), ("m", 1.0), ("in", 0.0254)):
-        c = read_stereo_calibration(intr, extr, translation_unit=unit, image_size=(640, 480))
+        c = read_stereo_calibration(
+            intr, second_path=extr, translation_unit=unit, image_size=(640, 480)
+        )
         np.testing.assert_allclose(c.T, T_MM * scale, rtol=1e-15)
     assert c.source == f"{intr} + {extr}"
+    c = read_stereo_calibration(extr, second_path=intr, image_size=(640, 480))  # either order
+    np.testing.assert_array_equal(c.K1, K1)
     with pytest.raises(ValueError, match=r"intrinsics\.yml \+ .*extrinsics\.yml: no image size"):
-        read_stereo_calibration(intr, extr)
+        read_stereo_calibration(intr, second_path=extr)
     with pytest.raises(ValueError, match=r"translation_unit must be one of 'm', .* got 'km'"):
-        read_stereo_calibration(intr, extr, translation_unit="km", image_size=(640, 480))
+        read_stereo_calibration(
+            intr, second_path=extr, translation_unit="km", image_size=(640, 480)
+        )
     write(tmp_path / "both.yml", opencv_yaml({"R": R}))
     with pytest.raises(ValueError, match=r"both\.yml: R is also given in .*extrinsics\.yml"):
         sc.read_opencv_stereo_calibration(extr, tmp_path / "both.yml")
@@ -306,6 +312,7 @@ def test_opencv_rejects(tmp_path: Path, changes: dict[str, Any], message: str, f
         ),
         ("%YAML:1.0\nM1: [1, 2\n", r"not valid YAML: while parsing"),
         ("%YAML:1.0\n- 1\n- 2\n", r"a calibration file must be a YAML mapping, got list"),
+        ("%YAML:1.0\n? [1, 2]\n: 3\n", r"keys must be names, got \[1, 2\]"),
         ("%YAML:1.0\nM1: !!python/object:os.system {}\n", r"not valid YAML: could not determine"),
         (
             "<?xml version='1.0'?>\n<opencv_storage>\n<M1 type_id='opencv-matrix'><rows>1</rows>"
@@ -408,7 +415,7 @@ def ros_pair(
 
 def test_ros_pair(tmp_path: Path) -> None:
     lp, rp = ros_pair(tmp_path)
-    c = read_stereo_calibration(lp, rp)
+    c = read_stereo_calibration(lp, second_path=rp)
     r1, r2 = rot(0.002, -0.01, 0.003), rot(-0.001, 0.004, 0.002)
     np.testing.assert_allclose(c.R, r2.T @ r1, atol=1e-15)
     np.testing.assert_allclose(c.T, r2.T @ np.array([-0.12, 0.0, 0.0]), atol=1e-15)
@@ -428,12 +435,12 @@ def test_ros_pair(tmp_path: Path) -> None:
         {"d": d8, "model": "rational_polynomial"},
         {"d": d8, "model": "rational_polynomial"},
     )
-    c = read_stereo_calibration(lp, rp)
+    c = read_stereo_calibration(lp, second_path=rp)
     assert c.distortion_model == "plumb_bob" and c.D1.shape == (8,)
     lp, rp = ros_pair(
         tmp_path, {"d": D1[:4], "model": "equidistant"}, {"d": D2[:4], "model": "equidistant"}
     )
-    assert read_stereo_calibration(lp, rp).distortion_model == "equidistant"
+    assert read_stereo_calibration(lp, second_path=rp).distortion_model == "equidistant"
 
 
 def test_ros_recovers_opencv_r_and_t(tmp_path: Path) -> None:
@@ -442,7 +449,7 @@ def test_ros_recovers_opencv_r_and_t(tmp_path: Path) -> None:
     for r, t in ((R, T_MM / 1000), (rot(-0.03, 0.01, 0.02), np.array([-0.5, 0.02, -0.01]))):
         r1, r2, p1, p2, _, _, _ = cv2.stereoRectify(K1, D1, K2, D2, (640, 480), r, t.reshape(3, 1))
         lp, rp = ros_pair(tmp_path, {"r": r1, "p": p1}, {"r": r2, "p": p2})
-        c = read_stereo_calibration(lp, rp)
+        c = read_stereo_calibration(lp, second_path=rp)
         np.testing.assert_allclose(c.R, r, atol=1e-12)
         np.testing.assert_allclose(c.T, t, atol=1e-12)
 
@@ -492,7 +499,7 @@ def test_ros_rejects(
 ) -> None:
     lp, rp = ros_pair(tmp_path, left, right)
     with pytest.raises(ValueError, match=r"^\S*" + bad + r"\.yaml: " + message):
-        read_stereo_calibration(lp, rp)
+        read_stereo_calibration(lp, second_path=rp)
 
 
 def test_ros_rejects_swapped_and_malformed(tmp_path: Path) -> None:
@@ -502,7 +509,7 @@ def test_ros_rejects_swapped_and_malformed(tmp_path: Path) -> None:
         match=r"left\.yaml: projection_matrix has no translation .*"
         r"\(are the files swapped\?\)",
     ):
-        read_stereo_calibration(rp, lp)
+        read_stereo_calibration(rp, second_path=lp)
     with pytest.raises(
         ValueError,
         match=r"left\.yaml: a ROS camera_info file holds one camera: "
@@ -530,11 +537,11 @@ def test_ros_rejects_swapped_and_malformed(tmp_path: Path) -> None:
     for content, message in cases:
         rp.write_text(content)
         with pytest.raises(ValueError, match=r"^\S*right\.yaml: " + message):
-            read_stereo_calibration(lp, rp)
+            read_stereo_calibration(lp, second_path=rp)
     p_swapped = np.hstack([P_LEFT[:, :3], np.array([[690.0 * 0.12], [0.0], [0.0]])])
     lp, rp = ros_pair(tmp_path, {}, {"p": p_swapped})
     with pytest.raises(ValueError, match=r"right\.yaml: projection_matrix Tx = 82\.8 > 0"):
-        read_stereo_calibration(lp, rp)
+        read_stereo_calibration(lp, second_path=rp)
 
 
 # --- Kalibr -----------------------------------------------------------------------------------
@@ -831,6 +838,8 @@ def test_direct_construction() -> None:
         ({"image_size": (True, 480)}, ValueError, r"image_size must be two whole numbers > 0"),
         ({"T": [0.0, 0.0, np.nan]}, ValueError, r"T must be finite"),
         ({"P2": np.zeros((3, 3))}, ValueError, r"P2 must have shape \(3, 4\)"),
+        ({"P1": np.zeros((3, 4))}, ValueError, r"P1\[:, :3\] focal lengths must be > 0"),
+        ({"image_size": "64"}, ValueError, r"image_size must be \(width, height\), got '64'"),
         (
             {"rectified": True},
             ValueError,

@@ -1,4 +1,6 @@
-"""Reading calibration files: Middlebury's calib.txt."""
+"""Reading calibration files: Middlebury's calib.txt, and every stereo calibration format
+(OpenCV FileStorage YAML/XML, ROS camera_info, Kalibr, Middlebury, KITTI) into one
+:class:`StereoCalibration`."""
 
 from __future__ import annotations
 
@@ -244,10 +246,11 @@ def _check_model(value: Any, where: str, key: str) -> str:
 
 
 def _check_image_size(value: Any, where: str, key: str) -> tuple[int, int]:
-    try:
-        w, h = value
-    except (TypeError, ValueError):
-        raise _fail(where, f"{key} must be (width, height), got {value!r}") from None
+    if isinstance(value, np.ndarray):
+        value = value.reshape(-1).tolist()
+    if not isinstance(value, list | tuple) or len(value) != 2:
+        raise _fail(where, f"{key} must be (width, height), got {value!r}")
+    w, h = value
     out = []
     for v in (w, h):
         f = _to_float(v)
@@ -349,6 +352,8 @@ class StereoCalibration:
                     if shape is None
                     else _check_array(value, where, key, shape)
                 )
+                if key in ("P1", "P2"):
+                    _check_intrinsics(fields[key][:, :3], where, f"{key}[:, :3]")
         if not isinstance(self.rectified, bool):
             raise TypeError(f"rectified must be a bool, got {self.rectified!r}")
         if not isinstance(self.source, str):
@@ -524,6 +529,8 @@ def _yaml_tree(p: Path, text: str) -> dict[str, Any]:
         out: dict[Any, Any] = {}
         for key_node, value_node in node.value:
             key = loader.construct_object(key_node, deep=True)
+            if not isinstance(key, str | int | float):
+                raise _fail(where, f"keys must be names, got {key!r}")
             if key in out:
                 raise _fail(where, f"{key} is given twice (line {key_node.start_mark.line + 1})")
             value = loader.construct_object(value_node, deep=True)
@@ -612,8 +619,6 @@ def _file_image_size(tree: dict[str, Any], where: str) -> tuple[int, int] | None
     hit = _lookup(tree, ("image_size", "imageSize", "img_size", "resolution"), where)
     if hit is not None:
         key, value = hit
-        if isinstance(value, np.ndarray):
-            value = value.reshape(-1).tolist()
         return _check_image_size(value, where, key)
     for wk, hk in (
         ("image_width", "image_height"),
@@ -1133,8 +1138,8 @@ def read_kitti_stereo_calibration(
 
 def read_stereo_calibration(
     path: str | os.PathLike[str],
-    second_path: str | os.PathLike[str] | None = None,
     *,
+    second_path: str | os.PathLike[str] | None = None,
     translation_unit: str = "m",
     image_size: tuple[int, int] | None = None,
     distortion_model: str | None = None,
@@ -1142,9 +1147,9 @@ def read_stereo_calibration(
 ) -> StereoCalibration:
     """A stereo calibration from any file this module reads, the format told by content:
 
-    - OpenCV FileStorage XML (``<opencv_storage>``) or YAML (``%YAML`` directive,
-      ``!!opencv-matrix`` tags, or K1/M1 keys): :func:`read_opencv_stereo_calibration`,
-      ``second_path`` the extrinsics file when the calibration is split in two;
+    - OpenCV FileStorage XML (``<opencv_storage>``) or YAML (keys such as M1, K1, R, T):
+      :func:`read_opencv_stereo_calibration`, ``second_path`` the second file when the
+      calibration is split in two (intrinsics and extrinsics);
     - ROS camera_info YAML (``camera_matrix``): :func:`read_ros_stereo_calibration`, the
       left camera's file, ``second_path`` the right camera's (required);
     - Kalibr camchain YAML (``cam0`` with ``intrinsics``):
@@ -1167,11 +1172,7 @@ def read_stereo_calibration(
             if value:
                 raise _fail(str(p), f"{name} does not apply to a {kind} file")
 
-    if (
-        head.startswith(("<?xml", "<opencv_storage"))
-        or re.match(r"%YAML", head)
-        or "!!opencv-matrix" in text
-    ):
+    def opencv() -> StereoCalibration:
         refuse("OpenCV", cameras=cameras)
         return read_opencv_stereo_calibration(
             p,
@@ -1180,6 +1181,9 @@ def read_stereo_calibration(
             image_size=image_size,
             distortion_model=distortion_model,
         )
+
+    if head.startswith(("<?xml", "<opencv_storage")):
+        return opencv()
     if re.search(r"^[ \t]*cam0[ \t]*=", text, flags=re.MULTILINE):
         refuse(
             "Middlebury",
@@ -1204,6 +1208,8 @@ def read_stereo_calibration(
     try:
         tree = _yaml_tree(p, text)
     except ValueError as exc:
+        if head.startswith("%YAML") or "!!opencv-" in text:
+            raise  # an OpenCV file with a fault: say which
         raise _fail(str(p), f"{known}; as YAML: {str(exc)[len(str(p)) + 2 :]}") from exc
     if "camera_matrix" in tree:
         refuse("ROS camera_info", distortion_model=distortion_model, cameras=cameras)
@@ -1221,13 +1227,6 @@ def read_stereo_calibration(
         return read_kalibr_stereo_calibration(
             p, cameras=cameras or (0, 1), translation_unit=translation_unit, image_size=image_size
         )
-    if any(n in tree for names in (_OPENCV_NAMES["K1"],) for n in names):
-        refuse("OpenCV", cameras=cameras)
-        return read_opencv_stereo_calibration(
-            p,
-            second_path,
-            translation_unit=translation_unit,
-            image_size=image_size,
-            distortion_model=distortion_model,
-        )
+    if any(n in tree for names in _OPENCV_NAMES.values() for n in names):
+        return opencv()
     raise _fail(str(p), known)
