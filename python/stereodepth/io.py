@@ -309,19 +309,17 @@ def _body(p: Path, data: bytes, token_end: int, size: int, desc: str) -> bytes:
     gap = data[token_end:start] if start >= token_end else b""
     if _HEADER_END_RE.fullmatch(gap) is not None:
         return data[start:]
-    # Count from the shortest header end (one LF) to say truncated or too long.
-    avail = len(data) - token_end - 1
-    if avail < size:
-        raise ValueError(f"{p}: truncated {desc}: needs {size} bytes of data, got {max(avail, 0)}")
-    if not gap or not gap.isspace():
-        m = _HEADER_END_RE.match(data, token_end)
-        extra = len(data) - size - (m.end() if m is not None else token_end + 1)
+    end = _HEADER_END_RE.match(data, token_end)
+    if end is None and token_end < len(data):
         raise ValueError(
-            f"{p}: {desc} has {extra} bytes more than its header and {size} bytes of data"
+            f"{p}: {desc}: the header must end with one line break (LF or CR LF), got "
+            f"{data[token_end : token_end + 4]!r}"
         )
+    avail = len(data) - (end.end() if end is not None else token_end)
+    if avail < size:
+        raise ValueError(f"{p}: truncated {desc}: needs {size} bytes of data, got {avail}")
     raise ValueError(
-        f"{p}: {desc}: the header must end with one line break (LF or CR LF) before the "
-        f"{size} bytes of data, got {gap!r} (or the file has extra bytes)"
+        f"{p}: {desc} has {avail - size} bytes more than its header and {size} bytes of data"
     )
 
 
