@@ -14,12 +14,12 @@ from stereodepth.calib import read_middlebury_calib
 
 # The layout of the 2014 files (values made up for the test).
 CALIB = (
-    "cam0=[3997.684 0 1176.728; 0 3997.684 1011.728; 0 0 1]\n"
-    "cam1=[3997.684 0 1307.839; 0 3997.684 1011.728; 0 0 1]\n"
-    "doffs=131.111\n"
-    "baseline=193.001\n"
-    "width=2964\n"
-    "height=1988\n"
+    "cam0=[3950.25 0 1180.5; 0 3950.25 1005.75; 0 0 1]\n"
+    "cam1=[3950.25 0 1310.125; 0 3950.25 1005.75; 0 0 1]\n"
+    "doffs=129.625\n"
+    "baseline=190.5\n"
+    "width=2900\n"
+    "height=1950\n"
     "ndisp=280\n"
     "isint=0\n"
     "vmin=31\n"
@@ -33,11 +33,11 @@ def check(c: object) -> None:
     from stereodepth.calib import MiddleburyCalib
 
     assert isinstance(c, MiddleburyCalib)
-    want0 = [[3997.684, 0, 1176.728], [0, 3997.684, 1011.728], [0, 0, 1]]
+    want0 = [[3950.25, 0, 1180.5], [0, 3950.25, 1005.75], [0, 0, 1]]
     np.testing.assert_array_equal(c.cam0, np.array(want0))
-    assert c.cam1[0, 2] == 1307.839
-    assert (c.doffs_px, c.baseline_mm, c.focal_px) == (131.111, 193.001, 3997.684)
-    assert (c.width_px, c.height_px, c.ndisp) == (2964, 1988, 280)
+    assert c.cam1[0, 2] == 1310.125
+    assert (c.doffs_px, c.baseline_mm, c.focal_px) == (129.625, 190.5, 3950.25)
+    assert (c.width_px, c.height_px, c.ndisp) == (2900, 1950, 280)
 
 
 @pytest.mark.parametrize(
@@ -57,7 +57,7 @@ def test_layouts(tmp_path: Path, transform: Callable[[str], str]) -> None:
     p.write_bytes(transform(CALIB).encode("utf-8"))
     check(read_middlebury_calib(p))
     rig = StereoRig.from_middlebury_calib(p)
-    assert (rig.baseline_mm, rig.focal_px, rig.doffs_px) == (193.001, 3997.684, 131.111)
+    assert (rig.baseline_mm, rig.focal_px, rig.doffs_px) == (190.5, 3950.25, 129.625)
 
 
 def test_minimal(tmp_path: Path) -> None:
@@ -84,7 +84,7 @@ def replace(key: str, value: str | None) -> str:
         (CALIB + "ndisp 280\n", r"line 13 of a Middlebury calib\.txt must be key=value"),
         (CALIB + "baseline=193\n", r"baseline is given twice \(line 13\)"),
         (replace("cam0", "[1 2 3]"), r"cam0 must be a 3x3 matrix \[fx 0 cx; 0 fy cy; 0 0 1\]"),
-        (replace("cam0", "3997 0 1176; 0 3997 1011; 0 0 1"), r"cam0 must be a 3x3 matrix"),
+        (replace("cam0", "3950 0 1180; 0 3950 1005; 0 0 1"), r"cam0 must be a 3x3 matrix"),
         (replace("cam1", "[1 0 1; 0 1 1; 0 0 1; 0 0 0]"), r"cam1 must be a 3x3 matrix"),
         (replace("cam1", "[1 0 1 0; 0 1 1; 0 0 1]"), r"cam1 must be a 3x3 matrix"),
         (replace("cam0", "[f 0 1; 0 1 1; 0 0 1]"), r"cam0 must be a 3x3 matrix .* of numbers"),
@@ -101,7 +101,7 @@ def replace(key: str, value: str | None) -> str:
         (replace("doffs", "nan"), r"doffs must be a finite number, got 'nan'"),
         (replace("doffs", ""), r"doffs must be a finite number, got ''"),
         (replace("width", "0"), r"width must be a whole number > 0, got '0'"),
-        (replace("height", "1988.5"), r"height must be a whole number > 0, got '1988\.5'"),
+        (replace("height", "1950.5"), r"height must be a whole number > 0, got '1950\.5'"),
         (replace("ndisp", "-280"), r"ndisp must be a whole number > 0, got '-280'"),
         (replace("ndisp", "lots"), r"ndisp must be a whole number > 0, got 'lots'"),
     ],

@@ -670,9 +670,9 @@ def test_kalibr_rejects_cameras(tmp_path: Path) -> None:
 
 # --- Middlebury and KITTI: already rectified ----------------------------------------------------
 MIDDLEBURY = (
-    "cam0=[3997.684 0 1176.728; 0 3997.684 1011.728; 0 0 1]\n"
-    "cam1=[3997.684 0 1307.839; 0 3997.684 1011.728; 0 0 1]\n"
-    "doffs=131.111\nbaseline=193.001\nwidth=2964\nheight=1988\nndisp=280\n"
+    "cam0=[3950.25 0 1180.5; 0 3950.25 1005.75; 0 0 1]\n"
+    "cam1=[3950.25 0 1310.125; 0 3950.25 1005.75; 0 0 1]\n"
+    "doffs=129.625\nbaseline=190.5\nwidth=2900\nheight=1950\nndisp=280\n"
 )
 
 
@@ -681,13 +681,11 @@ def test_middlebury(tmp_path: Path) -> None:
     c = read_stereo_calibration(path)
     assert c.rectified and c.distortion_model == "none" and c.D1.shape == (0,)
     np.testing.assert_array_equal(c.R, np.eye(3))
-    np.testing.assert_array_equal(c.T, [-0.193001, 0.0, 0.0])
-    assert c.image_size == (2964, 1988) and c.K2[0, 2] == 1307.839
+    np.testing.assert_array_equal(c.T, [-0.1905, 0.0, 0.0])
+    assert c.image_size == (2900, 1950) and c.K2[0, 2] == 1310.125
     rig = c.to_rig()
     want = StereoRig.from_middlebury_calib(path)
-    assert (
-        (rig.baseline_mm, rig.focal_px) == (want.baseline_mm, want.focal_px) == (193.001, 3997.684)
-    )
+    assert (rig.baseline_mm, rig.focal_px) == (want.baseline_mm, want.focal_px) == (190.5, 3950.25)
     assert rig.doffs_px == pytest.approx(want.doffs_px, rel=1e-14)  # cx1 - cx0 in floating point
     assert (rig.width_px, rig.height_px) == (want.width_px, want.height_px)
     # Q keeps doffs: Z = f B / (d + doffs), as the rig says
@@ -707,25 +705,25 @@ def test_middlebury(tmp_path: Path) -> None:
     ):
         read_stereo_calibration(small, translation_unit="mm", image_size=(600, 400))
     with pytest.raises(ValueError, match=r"calib\.txt: baseline must be > 0 mm"):
-        read_stereo_calibration(write(tmp_path / "calib.txt", MIDDLEBURY.replace("193.001", "0")))
+        read_stereo_calibration(write(tmp_path / "calib.txt", MIDDLEBURY.replace("190.5", "0")))
 
 
 P2_2012 = (
-    "7.215377e+02 0.000000e+00 6.095593e+02 4.485728e+01 0.000000e+00 7.215377e+02 "
-    "1.728540e+02 2.163791e-01 0.000000e+00 0.000000e+00 1.000000e+00 2.745884e-03"
+    "7.100000e+02 0.000000e+00 6.000000e+02 4.400000e+01 0.000000e+00 7.100000e+02 "
+    "1.750000e+02 2.000000e-01 0.000000e+00 0.000000e+00 1.000000e+00 2.500000e-03"
 )
 P3_2012 = (
-    "7.215377e+02 0.000000e+00 6.095593e+02 -3.395242e+02 0.000000e+00 7.215377e+02 "
-    "1.728540e+02 2.199936e+00 0.000000e+00 0.000000e+00 1.000000e+00 2.729905e-03"
+    "7.100000e+02 0.000000e+00 6.000000e+02 -3.400000e+02 0.000000e+00 7.100000e+02 "
+    "1.750000e+02 2.200000e+00 0.000000e+00 0.000000e+00 1.000000e+00 2.700000e-03"
 )
 P0_2012 = (
-    "7.215377e+02 0.000000e+00 6.095593e+02 0.000000e+00 0.000000e+00 7.215377e+02 "
-    "1.728540e+02 0.000000e+00 0.000000e+00 0.000000e+00 1.000000e+00 0.000000e+00"
+    "7.100000e+02 0.000000e+00 6.000000e+02 0.000000e+00 0.000000e+00 7.100000e+02 "
+    "1.750000e+02 0.000000e+00 0.000000e+00 0.000000e+00 1.000000e+00 0.000000e+00"
 )
 
 
 def kitti_2012() -> str:
-    p1 = P0_2012.replace("0.000000e+00 0.000000e+00 7", "-3.875744e+02 0.000000e+00 7", 1)
+    p1 = P0_2012.replace("0.000000e+00 0.000000e+00 7", "-3.800000e+02 0.000000e+00 7", 1)
     return (
         f"P0: {P0_2012}\nP1: {p1}\nP2: {P2_2012}\nP3: {P3_2012}\n"
         "R0_rect: 1 0 0 0 1 0 0 0 1\nTr_velo_to_cam: 1 0 0 0 0 1 0 0 0 0 1 0\n"
@@ -742,14 +740,14 @@ def test_kitti(tmp_path: Path) -> None:
         read_stereo_calibration(path)
     c = read_stereo_calibration(path, image_size=(1242, 375))
     assert c.rectified and c.distortion_model == "none" and c.image_size == (1242, 375)
-    baseline = (4.485728e01 + 3.395242e02) / 7.215377e02
+    baseline = (4.4e01 + 3.4e02) / 7.1e02
     np.testing.assert_array_equal(c.T, [-baseline, 0.0, 0.0])
     np.testing.assert_array_equal(c.K1, np.array(P2_2012.split(), float).reshape(3, 4)[:, :3])
     rig = c.to_rig()
-    assert (rig.focal_px, rig.doffs_px) == (721.5377, 0.0)
+    assert (rig.focal_px, rig.doffs_px) == (710.0, 0.0)
     assert rig.baseline_mm == pytest.approx(baseline * 1000, rel=1e-15)
     c01 = read_stereo_calibration(path, image_size=(1242, 375), cameras=(0, 1))
-    assert c01.to_rig().baseline_mm == pytest.approx(387.5744 / 721.5377 * 1000, rel=1e-15)
+    assert c01.to_rig().baseline_mm == pytest.approx(380.0 / 710.0 * 1000, rel=1e-15)
     # calib_cam_to_cam.txt of KITTI 2015: P_rect_0N and the image size S_rect_0N, CR LF
     text = (
         "calib_time: 09-Jan-2012 13:57:47\ncorner_dist: 9.950000e-02\n"
@@ -767,18 +765,18 @@ def test_kitti(tmp_path: Path) -> None:
         (kitti_2012().replace("P3:", "Q3:"), r"missing key P3 \(or P_rect_03\)"),
         (kitti_2012() + f"P_rect_02: {P2_2012}\n", r"both P2 and P_rect_02 are given"),
         (kitti_2012() + f"P2: {P2_2012}\n", r"P2 is given twice \(line 7\)"),
-        (kitti_2012().replace(" 2.745884e-03", ""), r"P2 \(line 3\) must be 12 numbers, got '7"),
-        (kitti_2012().replace("2.745884e-03", "x"), r"P2 \(line 3\) must be 12 numbers"),
-        (kitti_2012().replace("2.745884e-03", "nan"), r"P2 \(line 3\) must be 12 numbers"),
-        (kitti_2012().replace("2.745884e-03", "1e999"), r"P2 must be finite"),
+        (kitti_2012().replace(" 2.500000e-03", ""), r"P2 \(line 3\) must be 12 numbers, got '7"),
+        (kitti_2012().replace("2.500000e-03", "x"), r"P2 \(line 3\) must be 12 numbers"),
+        (kitti_2012().replace("2.500000e-03", "nan"), r"P2 \(line 3\) must be 12 numbers"),
+        (kitti_2012().replace("2.500000e-03", "1e999"), r"P2 must be finite"),
         (kitti_2012() + "just words\n", r"line 7 of a KITTI calibration must be key: value"),
         (
-            kitti_2012().replace(P3_2012, P3_2012.replace("-3.395242e+02", "3.395242e+02")),
+            kitti_2012().replace(P3_2012, P3_2012.replace("-3.400000e+02", "3.400000e+02")),
             r"camera 3 must be right of camera 2, got a baseline of -0\.4",
         ),
         (
-            kitti_2012().replace(P3_2012, P3_2012.replace("1.728540e+02", "1.7e+02")),
-            r"P2 and P3 must share cy \(a rectified pair\), got 172\.854 and 170\.0",
+            kitti_2012().replace(P3_2012, P3_2012.replace("1.750000e+02", "1.7e+02")),
+            r"P2 and P3 must share cy \(a rectified pair\), got 175\.0 and 170\.0",
         ),
         (
             kitti_2012().replace(
