@@ -762,33 +762,33 @@ def test_kitti(tmp_path: Path) -> None:
 @pytest.mark.parametrize(
     ("text", "message"),
     [
-        (kitti_2012().replace("P3:", "Q3:"), r"missing key P3 \(or P_rect_03\)"),
-        (kitti_2012() + f"P_rect_02: {P2_2012}\n", r"both P2 and P_rect_02 are given"),
-        (kitti_2012() + f"P2: {P2_2012}\n", r"P2 is given twice \(line 7\)"),
-        (kitti_2012().replace(" 2.500000e-03", ""), r"P2 \(line 3\) must be 12 numbers, got '7"),
-        (kitti_2012().replace("2.500000e-03", "x"), r"P2 \(line 3\) must be 12 numbers"),
-        (kitti_2012().replace("2.500000e-03", "nan"), r"P2 \(line 3\) must be 12 numbers"),
-        (kitti_2012().replace("2.500000e-03", "1e999"), r"P2 must be finite"),
-        (kitti_2012() + "just words\n", r"line 7 of a KITTI calibration must be key: value"),
+        (kitti_2012().replace("P3:", "Q3:"), r": missing P3 \(or P_rect_03\)"),
+        (kitti_2012() + f"P_rect_02: {P2_2012}\n", r":7: P_rect_02 gives camera 2 again \(first as P2 on line 3\)"),
+        (kitti_2012() + f"P2: {P2_2012}\n", r":7: P2 is given twice \(first on line 3\)"),
+        (kitti_2012().replace(" 2.500000e-03", ""), r":3: P2 must be 12 numbers, got 11"),
+        (kitti_2012().replace("2.500000e-03", "x"), r":3: P2 must be 12 numbers, got '7"),
+        (kitti_2012().replace("2.500000e-03", "nan"), r":3: P2 must be 12 finite numbers"),
+        (kitti_2012().replace("2.500000e-03", "1e999"), r":3: P2 must be 12 finite numbers"),
+        (kitti_2012() + "just words\n", r":7: expected 'NAME: values', got 'just words'"),
         (
             kitti_2012().replace(P3_2012, P3_2012.replace("-3.400000e+02", "3.400000e+02")),
-            r"camera 3 must be right of camera 2, got a baseline of -0\.4",
+            r": camera 3 must be right of camera 2, got a baseline of -0\.4",
         ),
         (
             kitti_2012().replace(P3_2012, P3_2012.replace("1.750000e+02", "1.7e+02")),
-            r"P2 and P3 must share cy \(a rectified pair\), got 175\.0 and 170\.0",
+            r": P2 and P3 are not a rectified pair: their principal point row cy differ \(175\.0 and 170\.0\)",
         ),
         (
             kitti_2012().replace(
                 P2_2012, P2_2012.replace("0.000000e+00 0.000000e+00 1.0", "0 1 1.0")
             ),
-            r"P2\[:, :3\] must be \[fx s cx; 0 fy cy; 0 0 1\]",
+            r": P2 must be a rectified projection \[fx 0 cx tx; 0 fy cy ty; 0 0 1 tz\]",
         ),
-        (kitti_2012() + "S_rect_02: 1242 0\n", r"S_rect_02 must be two whole numbers > 0"),
+        (kitti_2012() + "S_rect_02: 1242 0\n", r": S_rect_02 must be two whole numbers > 0"),
     ],
 )
 def test_kitti_rejects(tmp_path: Path, text: str, message: str) -> None:
-    with pytest.raises(ValueError, match=r"^\S*calib\.txt: " + message):
+    with pytest.raises(ValueError, match=r"^\S*calib\.txt" + message):
         sc.read_kitti_stereo_calibration(
             write(tmp_path / "calib.txt", text), image_size=(1242, 375)
         )
