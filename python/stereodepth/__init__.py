@@ -13,6 +13,7 @@ from __future__ import annotations
 from typing import Any
 
 from . import _core
+from .colormap import colorize, save_colorized
 from .depth import disparity_to_depth
 from .matching import StereoMatcher, block_match, to_opencv_disparity
 from .pointcloud import reproject, write_ply
@@ -27,8 +28,10 @@ __all__ = [
     "__version__",
     "block_match",
     "build_info",
+    "colorize",
     "disparity_to_depth",
     "reproject",
+    "save_colorized",
     "to_opencv_disparity",
     "write_ply",
 ]
