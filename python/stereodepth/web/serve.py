@@ -15,6 +15,9 @@ from typing import Any
 
 DEFAULT_HOST = "127.0.0.1"
 DEFAULT_PORT = 8000
+# The depth-map view's upload limits (stereodepth.web.depthmap's defaults).
+DEFAULT_MAX_UPLOAD_MB = 20.0
+DEFAULT_MAX_MEGAPIXELS = 4.0
 
 
 def register(subparsers: Any) -> None:
@@ -40,6 +43,20 @@ def register(subparsers: Any) -> None:
         help=f"TCP port (default {DEFAULT_PORT}; 0: any free port)",
     )
     p.add_argument("--open", action="store_true", help="open the page in a web browser")
+    p.add_argument(
+        "--max-upload-mb",
+        type=float,
+        default=DEFAULT_MAX_UPLOAD_MB,
+        help="depth-map view: largest image file accepted, in MB "
+        f"(default {DEFAULT_MAX_UPLOAD_MB:g})",
+    )
+    p.add_argument(
+        "--max-megapixels",
+        type=float,
+        default=DEFAULT_MAX_MEGAPIXELS,
+        help="depth-map view: largest image accepted, in megapixels "
+        f"(default {DEFAULT_MAX_MEGAPIXELS:g})",
+    )
     p.set_defaults(func=run)
 
 
@@ -99,6 +116,14 @@ def run(args: argparse.Namespace) -> int:
         )
         return 1
 
+    limits = {}
+    for flag, value, scale in (
+        ("--max-upload-mb", args.max_upload_mb, "max_upload_bytes"),
+        ("--max-megapixels", args.max_megapixels, "max_pixels"),
+    ):
+        if not (value > 0 and value <= 1e4):
+            raise ValueError(f"{flag} must be a number > 0 and <= 10000, got {value:g}")
+        limits[scale] = max(1, int(value * 1e6))
     sock = bind(args.host, args.port)
     url = url_of(sock)
     if not _is_loopback(args.host):
@@ -115,7 +140,9 @@ def run(args: argparse.Namespace) -> int:
         # The socket already listens, so the browser's first request waits in its backlog.
         threading.Thread(target=webbrowser.open, args=(url,), daemon=True).start()
 
-    config = uvicorn.Config(create_app(), log_level="warning", access_log=False, lifespan="off")
+    config = uvicorn.Config(
+        create_app(**limits), log_level="warning", access_log=False, lifespan="off"
+    )
     server = uvicorn.Server(config)
     try:
         # uvicorn shuts down gracefully on Ctrl+C or SIGTERM, then raises the signal again.
