@@ -141,6 +141,8 @@ def test_serve_open_opens_the_page(tmp_path: Path) -> None:
     [
         (["--port", "70000"], "--port must be an integer from 0 to 65535, got 70000"),
         (["--host", "no.such.host.invalid"], "--host must be an address of this machine"),
+        (["--max-upload-mb", "0"], "--max-upload-mb must be a number > 0 and <= 10000, got 0"),
+        (["--max-megapixels", "nan"], "--max-megapixels must be a number > 0 and <= 10000"),
     ],
 )
 def test_serve_rejects_bad_options(

@@ -24,11 +24,15 @@ def register(subparsers: Any) -> None:
     """Adds the ``serve`` subcommand."""
     p = subparsers.add_parser(
         "serve",
-        help="the calculator as a local web page with live results, table and charts",
+        help="the calculator and a depth-map view of a stereo pair as a local web page",
         description=(
             "Serves the stereo depth calculator as a web page: inputs, live results, the "
             "disparity-to-depth table and charts, all from the library's JSON API "
-            "(/api/calc; schema at /openapi.json). Needs the 'web' extra."
+            "(/api/calc; schema at /openapi.json); and a depth-map view that matches an "
+            "uploaded pair (or a built-in sample) and reads depth under the cursor "
+            "(/api/depthmap). Uploads are limited in size (--max-upload-mb, "
+            "--max-megapixels), decoded in memory and matched in worker threads. Needs the "
+            "'web' extra (and 'plot' for the colour maps)."
         ),
     )
     p.add_argument(

@@ -274,8 +274,9 @@
 
   function drawCloud() {
     const pts = result.points;
-    $("cloud-note").textContent = `${pts.count.toLocaleString("en-US")} points (every ${pts.step === 1 ? "" : pts.step + "th "}pixel` +
-      `${pts.step === 1 ? "" : " in each direction"}), coloured by the left image; camera at the origin, Z forward. Drag to turn.`;
+    const every = pts.step === 1 ? "every pixel" : `one pixel in ${pts.step} along each axis`;
+    $("cloud-note").textContent = `${pts.count.toLocaleString("en-US")} points (${every}), coloured by the left image; ` +
+      "the left camera at the origin, Z forward, −Y up. Drag to turn, scroll to zoom.";
     const draw = () => {
       const traces = [{
         type: "scatter3d", mode: "markers", name: "points",
@@ -299,7 +300,7 @@
         scene: {
           aspectmode: "data",
           xaxis: axis("X (m)"), yaxis: axis("Z (m)"), zaxis: axis("−Y (m)"),
-          camera: { eye: { x: -0.6, y: -1.6, z: 0.5 }, up: { x: 0, y: 0, z: 1 } },
+          camera: { eye: { x: -0.45, y: -1.25, z: 0.45 }, up: { x: 0, y: 0, z: 1 } },
         },
         paper_bgcolor: "#fff",
       }, { displaylogo: false, responsive: true });
