@@ -158,7 +158,12 @@ def test_sample_pair_and_mixed_inputs(client: TestClient, pair: Any) -> None:
     assert r.status_code == 200 and r.json()["sample"] is True
     s = sample_pair()
     got = f32(r.json()["arrays"]["disparity"], s.disparity.shape)
-    assert same(got, block_match(s.left, s.right, num_disparities=default_num_disparities(320)))
+    expected = block_match(s.left, s.right, num_disparities=default_num_disparities(320))
+    assert same(got, expected)
+    ok = np.isfinite(expected)
+    err = np.abs(expected[ok].astype(np.float64) - s.disparity[ok])
+    assert r.json()["truth"] == {"mean_abs_error_px": err.mean(), "bad_1": (err > 1).mean()}
+    assert r.json()["truth"]["bad_1"] < 0.01  # the sample is easy: the matcher finds it
     # A JPEG colour left and a grey PNG right: matched in grey.
     grey = np.asarray(Image.fromarray(pair.right).convert("L"))
     left_jpeg = encode(pair.left, "JPEG", quality=95)

@@ -224,6 +224,7 @@ class Job:
     block_size: int | None
     cost: str | None
     disparity_step_px: float
+    truth: np.ndarray | None = None  # the sample pair's true disparity
 
 
 _RIG_NAMES = ("baseline_mm", "focal_mm", "pixel_um", "focal_px", "doffs_px")
@@ -381,11 +382,12 @@ def parse_job(body: Any, limits: DepthMapLimits) -> Job:
         errors.append(BadInput(["body", "sample"], f"sample must be true or false, got {sample!r}"))
         sample = False
     left = right = None
+    truth = None
     if sample:
         from ..sample import sample_pair
 
         s = sample_pair()
-        left, right = s.left, s.right
+        left, right, truth = s.left, s.right, s.disparity
     else:
         images: dict[str, np.ndarray] = {}
         for field in ("left", "right"):
@@ -417,6 +419,7 @@ def parse_job(body: Any, limits: DepthMapLimits) -> Job:
         block_size=nums.get("block_size"),
         cost=cost,
         disparity_step_px=step,
+        truth=truth,
     )
 
 
@@ -486,6 +489,16 @@ def _cloud(points: np.ndarray, colours: np.ndarray) -> dict[str, Any]:
     }
 
 
+def _against_truth(disparity: np.ndarray, truth: np.ndarray) -> dict[str, float | None]:
+    """How the estimate compares with the true disparity (the sample pair): the mean absolute
+    error and the fraction off by more than 1 px, over the pixels with an estimate."""
+    ok = np.isfinite(disparity) & np.isfinite(truth)
+    if not ok.any():
+        return {"mean_abs_error_px": None, "bad_1": None}
+    err = np.abs(disparity[ok].astype(np.float64) - truth[ok])
+    return {"mean_abs_error_px": float(err.mean()), "bad_1": float((err > 1).mean())}
+
+
 def compute(job: Job) -> tuple[dict[str, Any], Stored]:
     """Runs the matcher and builds the answer (in a worker thread)."""
     from ..match_pair import match_pair
@@ -543,6 +556,7 @@ def compute(job: Job) -> tuple[dict[str, Any], Stored]:
             "confidence": None if result.confidence is None else _f32(result.confidence),
         },
         "points": _cloud(points, colours),
+        "truth": None if job.truth is None else _against_truth(result.disparity, job.truth),
     }
     stored = Stored(
         disparity=result.disparity,

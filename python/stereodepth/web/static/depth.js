@@ -257,6 +257,10 @@
       stat("Depth range", zr ? `${g(zr[0], 4)} to ${g(zr[1], 4)} m` : "—"),
       stat("Time", `${g(body.time_s * 1000, 3)} ms`),
     );
+    if (body.truth && body.truth.mean_abs_error_px !== null) {
+      $("depth-stats").append(stat("Against the true disparity",
+        `mean error ${g(body.truth.mean_abs_error_px, 3)} px, ${g(100 * body.truth.bad_1, 3)} % off by > 1 px`));
+    }
     $("ro-step-label").textContent = `${g(body.rig.disparity_step_px)} px`;
     for (const id of ["ro-x", "ro-y", "ro-disparity", "ro-depth", "ro-res1", "ro-resstep", "ro-confidence"]) $(id).textContent = "—";
     const links = Object.entries(body.downloads).map(([name, url]) => {
