@@ -123,8 +123,14 @@ def test_upload_gives_the_libraries_disparity_depth_and_points(
     assert pt["confidence"] == float(confidence[y, x])
     # The cloud: decimated valid points, coloured.
     cloud = body["points"]
-    assert cloud["count"] == len(cloud["x"]) == len(cloud["color"]) > 0
-    assert cloud["color"][0].startswith("rgb(")
+    assert cloud["count"] == len(cloud["x"]) == len(base64.b64decode(cloud["rgb"])) // 3 > 0
+    step = cloud["step"]
+    sub = points[::step, ::step]
+    kept = np.isfinite(sub).all(axis=-1)
+    assert cloud["count"] == int(kept.sum())
+    assert cloud["z"] == np.round(sub[kept][:, 2].astype(np.float64), 4).tolist()
+    rgb = np.frombuffer(base64.b64decode(cloud["rgb"]), np.uint8).reshape(-1, 3)
+    assert np.array_equal(rgb, pair.left[::step, ::step][kept])
 
 
 def test_downloads_are_the_libraries_files(client: TestClient, pair: Any, tmp_path: Any) -> None:

@@ -485,7 +485,8 @@ def _cloud(points: np.ndarray, colours: np.ndarray) -> dict[str, Any]:
         "x": np.round(p[:, 0], 4).tolist(),
         "y": np.round(p[:, 1], 4).tolist(),
         "z": np.round(p[:, 2], 4).tolist(),
-        "color": ["rgb({},{},{})".format(*map(int, rgb)) for rgb in cols],
+        # The points' colours: base64 of uint8 R, G, B per point, in order.
+        "rgb": base64.b64encode(np.ascontiguousarray(cols, dtype=np.uint8).tobytes()).decode(),
     }
 
 

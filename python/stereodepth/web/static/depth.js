@@ -276,8 +276,20 @@
     drawCloud();
   }
 
+  function cloudColours(pts) {
+    if (!pts.color) {
+      const bin = atob(pts.rgb);
+      pts.color = new Array(pts.count);
+      for (let i = 0; i < pts.count; i++) {
+        pts.color[i] = `rgb(${bin.charCodeAt(3 * i)},${bin.charCodeAt(3 * i + 1)},${bin.charCodeAt(3 * i + 2)})`;
+      }
+    }
+    return pts.color;
+  }
+
   function drawCloud() {
     const pts = result.points;
+    cloudColours(pts);
     const every = pts.step === 1 ? "every pixel" : `one pixel in ${pts.step} along each axis`;
     $("cloud-note").textContent = `${pts.count.toLocaleString("en-US")} points (${every}), coloured by the left image; ` +
       "the left camera at the origin, Z forward, −Y up. Drag to turn, scroll to zoom.";
