@@ -360,6 +360,18 @@ def test_limits_in_bytes_and_pixels(pair: Any) -> None:
     assert r.status_code == 422
     msg = r.json()["detail"][0]["msg"]
     assert msg.startswith("left: the image is 96x72 px") and "more than the limit" in msg
+    # An image beyond what Pillow opens safely (a decompression bomb) is too large too.
+    bomb = (
+        b"\x89PNG\r\n\x1a\n"
+        + png_chunk(b"IHDR", struct.pack(">IIBBBBB", 20000, 20000, 8, 0, 0, 0, 0))
+        + png_chunk(b"IDAT", zlib.compress(b""))
+        + png_chunk(b"IEND", b"")
+    )
+    huge = TestClient(create_app(max_pixels=10**9))
+    r = huge.post("/api/depthmap", json={"left": b64(bomb), "right": right, "rig": RIG})
+    assert r.status_code == 422
+    item = r.json()["detail"][0]
+    assert item["loc"] == ["body", "left"] and item["type"] == "too_large", item
     with pytest.raises(ValueError, match="max_pixels must be an integer >= 1, got 0"):
         create_app(max_pixels=0)
 

@@ -140,11 +140,14 @@ def decode_image(field: str, data: bytes, limits: DepthMapLimits) -> np.ndarray:
         warnings.simplefilter("error", Image.DecompressionBombWarning)
         try:
             im = Image.open(io.BytesIO(data))
-        except (
-            UnidentifiedImageError,
-            Image.DecompressionBombError,
-            Image.DecompressionBombWarning,
-        ):
+        except (Image.DecompressionBombError, Image.DecompressionBombWarning):
+            raise BadInput(
+                loc,
+                f"{field}: the image has more pixels than Pillow opens safely, more than the "
+                f"limit of {_mp(limits.max_pixels)}",
+                "too_large",
+            ) from None
+        except UnidentifiedImageError:
             raise BadInput(
                 loc, f"{field}: not an image Pillow can read; give a PNG or JPEG file"
             ) from None
@@ -319,6 +322,14 @@ def _int_field(body: dict[str, Any], name: str, lo: int, hi: int) -> int | None:
     if isinstance(v, bool) or not isinstance(v, int) or not lo <= v <= hi:
         raise BadInput(loc, f"{name} must be {rule}, got {value!r}")
     return v
+
+
+def _parse_request(data: bytes, limits: DepthMapLimits) -> Job:
+    try:
+        body = json.loads(data)
+    except (ValueError, UnicodeDecodeError):
+        raise BadInput(["body"], "the request must be JSON") from None
+    return parse_job(body, limits)
 
 
 def parse_job(body: Any, limits: DepthMapLimits) -> Job:
@@ -702,11 +713,8 @@ def make_router(limits: DepthMapLimits) -> APIRouter:
                 413,
             )
         try:
-            body = json.loads(data)
-        except (ValueError, UnicodeDecodeError):
-            return _error_response([BadInput(["body"], "the request must be JSON")])
-        try:
-            job = await anyio.to_thread.run_sync(parse_job, body, limits, limiter=jobs)
+            # Parsing tens of megabytes of JSON and decoding the images: in a worker thread.
+            job = await anyio.to_thread.run_sync(_parse_request, data, limits, limiter=jobs)
             answer, stored = await anyio.to_thread.run_sync(compute, job, limiter=jobs)
         except BadInput as e:
             return _error_response([e])
