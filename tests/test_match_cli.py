@@ -199,6 +199,47 @@ def test_sample_pair_without_a_rig_writes_the_disparity_only(
     assert "no rig: give --calib" in text
 
 
+def test_kitti_calib_file(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    s = sample_pair(128, 96, seed=2)
+    Image.fromarray(s.left).save(tmp_path / "l.png")
+    Image.fromarray(s.right).save(tmp_path / "r.png")
+    f, cx, cy, tx = 721.5377, 60.5, 45.25, -387.5744  # P3[0, 3] = -f * baseline
+    zeros = "0.000000e+00"
+    (tmp_path / "calib.txt").write_text(
+        "".join(
+            f"P{i}: {f} {zeros} {cx} {t} {zeros} {f} {cy} {zeros} {zeros} {zeros} 1 {zeros}\n"
+            for i, t in ((0, 0.0), (1, tx), (2, 0.0), (3, tx))
+        )
+    )
+    code, text, err = run(
+        capsys,
+        tmp_path / "l.png",
+        tmp_path / "r.png",
+        "--calib",
+        tmp_path / "calib.txt",
+        "-o",
+        tmp_path / "k-",
+        "--ply",
+        "--json",
+        "--no-preview",
+    )
+    assert code == 0, err
+    d = read_pfm(tmp_path / "k-disparity.pfm")
+    baseline_m = -tx / f
+    depth = disparity_to_depth(d, focal_px=f, baseline_m=baseline_m)
+    assert same(np.load(tmp_path / "k-depth.npy"), depth)
+    points = reproject(d, focal_px=f, baseline_m=baseline_m, cx_px=cx, cy_px=cy)
+    ok = np.isfinite(points).all(axis=-1)
+    data = (tmp_path / "k-points.ply").read_bytes()
+    assert f"element vertex {int(ok.sum())}\n".encode() in data[:300]
+    body = data[data.index(b"end_header\n") + len(b"end_header\n") :]
+    vertex = np.frombuffer(body, dtype=[("xyz", "<f4", 3), ("rgb", "u1", 3)])
+    assert np.array_equal(vertex["xyz"], points[ok])  # the calibration's cx, cy
+    assert np.array_equal(vertex["rgb"], s.left[ok])
+    rig = json.loads(text)["rig"]
+    assert rig == {"focal_px": f, "baseline_m": baseline_m, "doffs_px": 0.0}
+
+
 # --- bad input: one line, exit 2 ------------------------------------------------------------------
 @pytest.fixture
 def pair(tmp_path: Path) -> tuple[Path, Path]:

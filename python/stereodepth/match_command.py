@@ -68,9 +68,11 @@ def register(subparsers: Any) -> None:
     m.add_argument("--threads", type=int, metavar="N", help="threads (default: every core)")
     r = p.add_argument_group("the rig (for depth)")
     r.add_argument("--calib", metavar="FILE", help="Middlebury calib.txt or KITTI calib file")
-    r.add_argument("--focal-px", type=float, help="focal length in pixels")
-    r.add_argument("--baseline-mm", type=float, help="baseline in millimetres")
-    r.add_argument("--doffs-px", type=float, help="principal point offset in px (default 0)")
+    r.add_argument("--focal-px", type=float, metavar="PX", help="focal length in pixels")
+    r.add_argument("--baseline-mm", type=float, metavar="MM", help="baseline in millimetres")
+    r.add_argument(
+        "--doffs-px", type=float, metavar="PX", help="principal point offset in px (default 0)"
+    )
     o = p.add_argument_group("output")
     o.add_argument(
         "-o",
@@ -89,7 +91,9 @@ def register(subparsers: Any) -> None:
         help="npy or pfm: float32 m; png16: uint16 mm (default npy)",
     )
     o.add_argument("--no-preview", action="store_true", help="skip the colour previews")
-    o.add_argument("--cmap", default="turbo", help="colour map of the previews (matplotlib name)")
+    o.add_argument(
+        "--cmap", default="turbo", metavar="NAME", help="colour map of the previews (turbo)"
+    )
     o.add_argument("--ply", action="store_true", help="also write the point cloud as points.ply")
     o.add_argument("--json", action="store_true", help="print the summary as one JSON object")
     p.set_defaults(func=run)
