@@ -491,7 +491,13 @@ def _f32_text(v: float) -> str:
 
 
 def _check_depth_view(
-    page: Page, disparity: Any, depth: Any, rig: StereoRig, step: float, pixels: list[Any]
+    page: Page,
+    disparity: Any,
+    depth: Any,
+    rig: StereoRig,
+    step: float,
+    pixels: list[Any],
+    centre: tuple[float, float] | None = None,
 ) -> None:
     """The three maps drawn; under the cursor the library's numbers; pins and the last two's
     distance; the 3-D view drawn."""
@@ -534,7 +540,12 @@ def _check_depth_view(
         page.expect(p.locator("#pin-table tbody tr")).to_have_count(len(pins))
     # Two pins: their distance, from reproject's points.
     points = reproject(
-        disparity, focal_px=rig.focal_px, baseline_m=rig.baseline_mm / 1000, doffs_px=rig.doffs_px
+        disparity,
+        focal_px=rig.focal_px,
+        baseline_m=rig.baseline_mm / 1000,
+        doffs_px=rig.doffs_px,
+        cx_px=centre[0] if centre else None,
+        cy_px=centre[1] if centre else None,
     ).astype(np.float64)
     (xa, ya), (xb, yb) = pins[-2:]
     dist = float(np.sqrt(((points[ya, xa] - points[yb, xb]) ** 2).sum()))
@@ -611,7 +622,10 @@ def test_depth_view_shared_scene_with_calib(
     disparity = block_match(left, right, num_disparities=73)
     depth = disparity_to_depth(disparity, focal_px=713.189, baseline_m=0.178089, doffs_px=31.34)
     rig = StereoRig.from_pixels(178.089, 713.189, doffs_px=31.34)
-    _check_depth_view(page, disparity, depth, rig, 0.25, [(400, 300), (200, 400)])
+    # The 3-D points use the calib.txt's principal point (cam0's cx, cy).
+    _check_depth_view(
+        page, disparity, depth, rig, 0.25, [(400, 300), (200, 400)], (276.193, 242.587)
+    )
     page.screenshot("web-depth-piano.png")
 
 

@@ -159,6 +159,24 @@ def test_downloads_are_the_libraries_files(client: TestClient, pair: Any, tmp_pa
     assert r.status_code == 422 and r.json()["detail"][0]["loc"] == ["query", "x"]
 
 
+def test_principal_point_for_the_points(client: TestClient, pair: Any) -> None:
+    body = post(client, left=encode(pair.left), right=encode(pair.right), cx_px=30.5, cy_px=20)
+    assert body.status_code == 200, body.text
+    b = body.json()
+    assert (b["rig"]["cx_px"], b["rig"]["cy_px"]) == (30.5, 20.0)
+    h, w = pair.disparity.shape
+    disparity = f32(b["arrays"]["disparity"], (h, w))
+    points = reproject(disparity, focal_px=SAMPLE_FOCAL_PX, baseline_m=0.12, cx_px=30.5, cy_px=20)
+    y, x = np.argwhere(np.isfinite(disparity))[-1]
+    pt = client.get(f"/api/depthmap/{b['id']}/point", params={"x": int(x), "y": int(y)}).json()
+    assert pt["point_m"] == [float(v) for v in points[y, x]]
+    ply = client.get(b["downloads"]["points.ply"]).content
+    vertex = np.frombuffer(
+        ply[ply.index(b"end_header\n") + 11 :], dtype=[("xyz", "<f4", 3), ("rgb", "u1", 3)]
+    )
+    assert np.array_equal(vertex["xyz"], points[np.isfinite(points).all(axis=-1)])
+
+
 def test_sample_pair_and_mixed_inputs(client: TestClient, pair: Any) -> None:
     r = post(client, sample=True)
     assert r.status_code == 200 and r.json()["sample"] is True
@@ -203,6 +221,8 @@ def test_middlebury_calib_fills_the_rig(client: TestClient) -> None:
         "width_px": 1920,
         "height_px": 1080,
         "ndisp": 170,
+        "cx_px": 792.27,
+        "cy_px": 541.89,
     }
     for bad, msg in [
         ("baseline=1\n", "calib: calib.txt: missing field 'cam0'"),
@@ -309,6 +329,8 @@ def bad_cases(pair: Any) -> list[tuple[dict[str, Any], list[Any], str]]:
             "disparity_step_px must be a number > 0",
         ),
         ({"sample": "yes"}, ["body", "sample"], "sample must be true or false"),
+        ({"sample": True, "cx_px": "abc"}, ["body", "cx_px"], "cx_px must be a finite number"),
+        ({"sample": True, "cy_px": "inf"}, ["body", "cy_px"], "cy_px must be a finite number"),
     ]
 
 

@@ -10,7 +10,9 @@
   with ``doffs_px``, or ``focal_mm`` and ``pixel_um``);
 - ``method`` (``bm``, or ``sgm`` where the library has it), ``num_disparities`` (default: an
   eighth of the width rounded up to 16), ``block_size``, ``cost`` and ``disparity_step_px``
-  (for the depth resolution).
+  (for the depth resolution);
+- ``cx_px``, ``cy_px``: the left camera's principal point for the 3-D points (default: the
+  image centre; the page sends those of an uploaded calib.txt).
 
 The answer has the summary (size, density, time, ranges), the images as PNG data URLs (the
 left image, the colourised disparity and depth), the colour bars (limits and the colour table),
@@ -228,6 +230,8 @@ class Job:
     cost: str | None
     disparity_step_px: float
     truth: np.ndarray | None = None  # the sample pair's true disparity
+    cx_px: float | None = None  # the left camera's principal point; None: the image centre
+    cy_px: float | None = None
 
 
 _RIG_NAMES = ("baseline_mm", "focal_mm", "pixel_um", "focal_px", "doffs_px")
@@ -388,6 +392,16 @@ def parse_job(body: Any, limits: DepthMapLimits) -> Job:
     except BadInput as e:
         errors.append(e)
 
+    centre: dict[str, float | None] = {}
+    for name in ("cx_px", "cy_px"):
+        try:
+            v = _number(["body", name], name, body.get(name), "a finite number (px)")
+            if v is not None and not math.isfinite(v):
+                raise BadInput(["body", name], f"{name} must be a finite number (px), got {v!r}")
+            centre[name] = v
+        except BadInput as e:
+            errors.append(e)
+
     sample = body.get("sample", False)
     if not isinstance(sample, bool):
         errors.append(BadInput(["body", "sample"], f"sample must be true or false, got {sample!r}"))
@@ -431,6 +445,8 @@ def parse_job(body: Any, limits: DepthMapLimits) -> Job:
         cost=cost,
         disparity_step_px=step,
         truth=truth,
+        cx_px=centre.get("cx_px"),
+        cy_px=centre.get("cy_px"),
     )
 
 
@@ -446,6 +462,22 @@ class Stored:
     focal_px: float
     baseline_m: float
     doffs_px: float
+    cx_px: float
+    cy_px: float
+
+    def points(self, rows: int | None = None) -> np.ndarray:
+        """reproject of the disparity (its first ``rows`` rows) with the rig."""
+        from ..pointcloud import reproject
+
+        d = self.disparity if rows is None else self.disparity[:rows]
+        return reproject(
+            d,
+            focal_px=self.focal_px,
+            baseline_m=self.baseline_m,
+            doffs_px=self.doffs_px,
+            cx_px=self.cx_px,
+            cy_px=self.cy_px,
+        )
 
 
 def _display(image: np.ndarray) -> np.ndarray:
@@ -514,7 +546,6 @@ def _against_truth(disparity: np.ndarray, truth: np.ndarray) -> dict[str, float 
 def compute(job: Job) -> tuple[dict[str, Any], Stored]:
     """Runs the matcher and builds the answer (in a worker thread)."""
     from ..match_pair import match_pair
-    from ..pointcloud import reproject
 
     rig = job.rig
     focal_px = float(rig.focal_px)
@@ -535,9 +566,20 @@ def compute(job: Job) -> tuple[dict[str, Any], Stored]:
     colours = _display(job.left)
     from ..colormap import colorize
 
-    points = reproject(result.disparity, focal_px=focal_px, baseline_m=baseline_m, doffs_px=doffs)
-    summary = result.summary()
     h, w = result.disparity.shape
+    stored = Stored(
+        disparity=result.disparity,
+        depth=result.depth,
+        confidence=result.confidence,
+        colours=colours,
+        focal_px=focal_px,
+        baseline_m=baseline_m,
+        doffs_px=doffs,
+        cx_px=(w - 1) / 2.0 if job.cx_px is None else job.cx_px,
+        cy_px=(h - 1) / 2.0 if job.cy_px is None else job.cy_px,
+    )
+    points = stored.points()
+    summary = result.summary()
     answer: dict[str, Any] = {
         **summary,
         "sample": job.sample,
@@ -545,8 +587,8 @@ def compute(job: Job) -> tuple[dict[str, Any], Stored]:
             "focal_px": focal_px,
             "baseline_mm": rig.baseline_mm,
             "doffs_px": doffs,
-            "cx_px": (w - 1) / 2.0,
-            "cy_px": (h - 1) / 2.0,
+            "cx_px": stored.cx_px,
+            "cy_px": stored.cy_px,
             # B (m) x f (px), as StereoRig computes it: the page's depth resolution is
             # Z * Z * step / bf_m_px, StereoRig.depth_resolution_m's formula.
             "bf_m_px": rig.baseline_mm / 1000.0 * rig.focal_px,
@@ -570,15 +612,6 @@ def compute(job: Job) -> tuple[dict[str, Any], Stored]:
         "points": _cloud(points, colours),
         "truth": None if job.truth is None else _against_truth(result.disparity, job.truth),
     }
-    stored = Stored(
-        disparity=result.disparity,
-        depth=result.depth,
-        confidence=result.confidence,
-        colours=colours,
-        focal_px=focal_px,
-        baseline_m=baseline_m,
-        doffs_px=doffs,
-    )
     return answer, stored
 
 
@@ -597,7 +630,7 @@ def download_bytes(stored: Stored, name: str) -> bytes:
     """One download, written by the library's writers into a temporary folder."""
     from .. import io as sio
     from ..depth import disparity_to_depth
-    from ..pointcloud import reproject, write_ply
+    from ..pointcloud import write_ply
 
     with tempfile.TemporaryDirectory(prefix="stereodepth-web-") as tmp:
         path = Path(tmp) / name
@@ -619,12 +652,7 @@ def download_bytes(stored: Stored, name: str) -> bytes:
             )
             sio.write_png16(path, mm)
         else:
-            pts = reproject(
-                stored.disparity,
-                focal_px=stored.focal_px,
-                baseline_m=stored.baseline_m,
-                doffs_px=stored.doffs_px,
-            )
+            pts = stored.points()
             write_ply(path, pts, stored.colours, comment="stereodepth web")
         return path.read_bytes()
 
@@ -732,7 +760,6 @@ def make_router(limits: DepthMapLimits) -> APIRouter:
 
     @router.get("/api/depthmap/{key}/point", summary="One pixel's disparity, depth and 3-D point")
     def point(key: str, x: int, y: int) -> Response:
-        from ..pointcloud import reproject
 
         stored = results.get(key)
         if stored is None:
@@ -746,14 +773,7 @@ def make_router(limits: DepthMapLimits) -> APIRouter:
         if bad:
             return _error_response(bad)
         # The rows down to y, as reproject computes them for the whole map (same x, y, cx, cy).
-        p = reproject(
-            stored.disparity[: y + 1],
-            focal_px=stored.focal_px,
-            baseline_m=stored.baseline_m,
-            doffs_px=stored.doffs_px,
-            cx_px=(w - 1) / 2.0,
-            cy_px=(h - 1) / 2.0,
-        )[y, x]
+        p = stored.points(rows=y + 1)[y, x]
 
         def num(v: Any) -> float | None:
             f = float(v)
@@ -807,6 +827,8 @@ def parse_calib(text: Any) -> dict[str, Any]:
         "width_px": c.width_px,
         "height_px": c.height_px,
         "ndisp": c.ndisp,
+        "cx_px": float(c.cam0[0, 2]),
+        "cy_px": float(c.cam0[1, 2]),
     }
 
 

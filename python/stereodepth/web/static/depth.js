@@ -10,6 +10,7 @@
   let result = null;       // the last answer, with its arrays decoded
   let pins = [];           // pinned pixels, with the server's numbers
   let busy = false;
+  let centre = null;       // the principal point of an uploaded calib.txt
 
   // --- numbers -----------------------------------------------------------------------------
   // The shortest decimal that reads back as the same float32: numpy's repr of a float32.
@@ -132,6 +133,7 @@
       width_px: body.width_px === null ? undefined : body.width_px,
     });
     if (body.ndisp) $("num_disparities").value = String(body.ndisp);
+    centre = { cx_px: body.cx_px, cy_px: body.cy_px };
     $("calib-note").textContent = `Rig from ${file.name}: f = ${g(body.focal_px)} px, B = ${g(body.baseline_mm)} mm, doffs = ${g(body.doffs_px)} px` +
       (body.ndisp ? `, ndisp = ${body.ndisp}` : "");
   }
@@ -148,6 +150,7 @@
       cost: $("cost").value,
       disparity_step_px: $("disparity_step_px").value.trim() || null,
     };
+    if (centre && !sample) Object.assign(request, centre);
     if (sample) {
       request.sample = true;
     } else {
@@ -199,6 +202,9 @@
     const s = limits.sample;
     window.stereodepth.setRig({ baseline_mm: s.baseline_mm, focal_px: s.focal_px, doffs_px: s.doffs_px, width_px: s.width_px });
     $("num_disparities").value = "";
+    centre = null;
+    $("calib-file").value = "";
+    $("calib-note").textContent = "Middlebury calib.txt";
     await run(true);
   }
 
