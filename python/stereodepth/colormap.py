@@ -301,11 +301,10 @@ def save_colorized(
         if not isinstance(text, str):
             raise TypeError(f"{name} must be a str, got {type(text).__name__} {text!r}")
     label = f"{quantity} ({unit})" if unit else quantity
-    data = png_bytes(
-        preview_image(
-            values, label=label, cmap=cmap, vmin=vmin, vmax=vmax, invalid_color=invalid_color
-        )
+    image = preview_image(
+        values, label=label, cmap=cmap, vmin=vmin, vmax=vmax, invalid_color=invalid_color
     )
+    data = png_bytes(image, compress_level=1)  # a preview: 4x faster than level 6
     with atomic_write(out) as f:
         f.write(data)
     return out
