@@ -353,6 +353,19 @@ def test_sgm_where_missing(client: TestClient, pair: Any) -> None:
         assert r.json()["detail"][0]["loc"] == ["body", "method"]
 
 
+def test_without_matplotlib_a_clear_answer_not_500(
+    pair: Any, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    import sys
+
+    monkeypatch.setitem(sys.modules, "matplotlib", None)  # import matplotlib raises
+    r = TestClient(create_app()).post("/api/depthmap", json={"sample": True, "rig": RIG})
+    assert r.status_code == 503
+    assert r.json()["detail"][0]["msg"] == (
+        'colour maps need matplotlib: pip install "stereodepth[plot]"'
+    )
+
+
 def test_not_json_and_not_an_object(client: TestClient) -> None:
     r = client.post("/api/depthmap", content=b"{nope", headers={"content-type": "application/json"})
     assert r.status_code == 422 and r.json()["detail"][0]["msg"] == "the request must be JSON"

@@ -28,7 +28,8 @@ the request body is read up to what two such images need and no further (413 bey
 are decoded in memory and results kept in memory (the last few, under a random id); downloads
 are written to a temporary folder of the server's choosing. Matching runs in worker threads
 (at most two at once) so the server keeps answering. Every bad input answers 422 with
-``{"detail": [{"loc": ["body", field], "msg": ..., "type": ...}]}`` at its field; none 500.
+``{"detail": [{"loc": ["body", field], "msg": ..., "type": ...}]}`` at its field, a body
+too large 413, a missing extra (Pillow, matplotlib) 503 with the install hint; none 500.
 """
 
 from __future__ import annotations
@@ -748,6 +749,8 @@ def make_router(limits: DepthMapLimits) -> APIRouter:
             return _error_response([e])
         except ExceptionGroupLike as g:
             return _error_response(g.errors)
+        except ImportError as exc:  # an extra that is not installed: Pillow, matplotlib
+            return _error_response([BadInput(["body"], str(exc), "missing_extra")], 503)
         except (ValueError, TypeError) as exc:  # the library's parameter checks
             msg = str(exc)
             name = msg.split(" ", 1)[0]
