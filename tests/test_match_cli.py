@@ -289,6 +289,84 @@ def test_bad_input_one_line_exit_2(
     assert not list(Path.cwd().glob("disparity*"))  # nothing written for a bad command
 
 
+def test_sgm_path_with_a_stand_in_matcher(
+    pair: tuple[Path, Path],
+    tmp_path: Path,
+    capsys: pytest.CaptureFixture[str],
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """The options reach semi_global_match where it takes them, its (disparity, confidence) is
+    used as the block matcher's; an option it lacks is refused in one line."""
+    calls: list[dict[str, Any]] = []
+
+    def stand_in(
+        left: Any,
+        right: Any,
+        *,
+        num_disparities: int,
+        min_disparity: int = 0,
+        block_size: int = 5,
+        threads: int | None = None,
+        return_confidence: bool = False,
+    ) -> Any:
+        calls.append(
+            {
+                "num_disparities": num_disparities,
+                "min_disparity": min_disparity,
+                "block_size": block_size,
+                "threads": threads,
+                "return_confidence": return_confidence,
+            }
+        )
+        d = block_match(left, right, num_disparities=num_disparities, block_size=block_size)
+        return d, np.ones_like(d)
+
+    monkeypatch.setattr(stereodepth, "semi_global_match", stand_in, raising=False)
+    code, out, err = run(
+        capsys,
+        *pair,
+        "--method",
+        "sgm",
+        "--block-size",
+        "7",
+        "--num-disparities",
+        "32",
+        "--threads",
+        "1",
+        "-o",
+        f"{tmp_path}/s/",
+        "--json",
+        "--no-preview",
+    )
+    assert code == 0, err
+    assert calls == [
+        {
+            "num_disparities": 32,
+            "min_disparity": 0,
+            "block_size": 7,
+            "threads": 1,
+            "return_confidence": True,
+        }
+    ]
+    s = json.loads(out)
+    assert s["method"] == "sgm" and s["params"] == {
+        "num_disparities": 32,
+        "min_disparity": 0,
+        "block_size": 7,
+    }
+    left, right = read_image(pair[0]), read_image(pair[1])
+    assert same(
+        read_pfm(tmp_path / "s" / "disparity.pfm"),
+        block_match(left, right, num_disparities=32, block_size=7),
+    )
+    code, _, err = run(capsys, *pair, "--method", "sgm", "--cost", "sad", "-o", f"{tmp_path}/t/")
+    assert code == 2
+    assert err.strip() == (
+        "stereodepth match: error: cost is an option of method 'bm'; "
+        "method 'sgm' has no cost, got 'sad'"
+    )
+
+
 def test_sgm_without_the_semi_global_matcher(
     pair: tuple[Path, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:

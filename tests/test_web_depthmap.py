@@ -366,6 +366,37 @@ def test_without_matplotlib_a_clear_answer_not_500(
     )
 
 
+def test_sgm_with_a_stand_in_matcher(
+    client: TestClient, pair: Any, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    import stereodepth
+
+    def stand_in(left: Any, right: Any, *, num_disparities: int, min_disparity: int = 0) -> Any:
+        return block_match(left, right, num_disparities=num_disparities)
+
+    monkeypatch.setattr(stereodepth, "semi_global_match", stand_in, raising=False)
+    assert client.get("/api/depthmap/limits").json()["methods"] == ["bm", "sgm"]
+    r = post(
+        client,
+        left=encode(pair.left),
+        right=encode(pair.right),
+        method="sgm",
+        cost=None,
+        block_size=None,
+        num_disparities=24,
+    )
+    assert r.status_code == 200, r.text
+    b = r.json()
+    assert b["method"] == "sgm" and b["arrays"]["confidence"] is None
+    h, w = pair.disparity.shape
+    assert same(
+        f32(b["arrays"]["disparity"], (h, w)), stand_in(pair.left, pair.right, num_disparities=24)
+    )
+    r = post(client, left=encode(pair.left), right=encode(pair.right), method="sgm", block_size=5)
+    assert r.status_code == 422
+    assert r.json()["detail"][0]["loc"] == ["body", "block_size"]
+
+
 def test_not_json_and_not_an_object(client: TestClient) -> None:
     r = client.post("/api/depthmap", content=b"{nope", headers={"content-type": "application/json"})
     assert r.status_code == 422 and r.json()["detail"][0]["msg"] == "the request must be JSON"

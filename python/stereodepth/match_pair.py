@@ -10,6 +10,7 @@ the calibration has one, else :func:`default_num_disparities` of the width.
 
 from __future__ import annotations
 
+import inspect
 import math
 import os
 import time
@@ -187,8 +188,23 @@ def match_pair(
                 "library does not have; use method 'bm'"
             )
         sgm = stereodepth.semi_global_match  # type: ignore[attr-defined]
+        # The options it takes (block_size, threads, confidence) are passed where it has them.
+        accepted = inspect.signature(sgm).parameters
+        for name, value in (("block_size", block_size), ("cost", cost)):
+            if value is None:
+                continue
+            if name not in accepted:
+                raise ValueError(
+                    f"{name} is an option of method 'bm'; method 'sgm' has no {name}, got {value!r}"
+                )
+            params[name] = value
+        extra: dict[str, Any] = {}
+        if "threads" in accepted:
+            extra["threads"] = threads
+        if "return_confidence" in accepted:
+            extra["return_confidence"] = True
         t0 = time.perf_counter()
-        out = sgm(left, right, **params)
+        out = sgm(left, right, **params, **extra)
         elapsed = time.perf_counter() - t0
         if isinstance(out, tuple):
             disparity = out[0]
