@@ -21,6 +21,7 @@ import importlib
 from typing import Any
 
 from . import _core
+from .colormap import colorize, save_colorized
 from .depth import disparity_to_depth, from_opencv_disparity
 from .matching import StereoMatcher, block_match, to_opencv_disparity
 from .pointcloud import reproject, write_ply
@@ -35,9 +36,11 @@ __all__ = [
     "__version__",
     "block_match",
     "build_info",
+    "colorize",
     "disparity_to_depth",
     "from_opencv_disparity",
     "reproject",
+    "save_colorized",
     "to_opencv_disparity",
     "write_ply",
 ]
@@ -60,6 +63,7 @@ _SUBMODULES: frozenset[str] = frozenset(
         "batch",
         "calib",
         "charts",
+        "colormap",
         "cli",
         "dask",
         "depth",
@@ -71,6 +75,7 @@ _SUBMODULES: frozenset[str] = frozenset(
         "pointcloud",
         "reference",
         "rig",
+        "sample",
         "web",
     }
 )

@@ -27,6 +27,7 @@ _SUBCOMMAND_MODULES: tuple[str, ...] = (
     "stereodepth.evaluation",
     "stereodepth.web.serve",
     "stereodepth.batch",
+    "stereodepth.match_command",
 )
 
 
