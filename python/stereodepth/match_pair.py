@@ -187,7 +187,7 @@ def match_pair(
                 "method 'sgm' needs stereodepth.semi_global_match, which this version of the "
                 "library does not have; use method 'bm'"
             )
-        sgm = stereodepth.semi_global_match  # type: ignore[attr-defined]
+        sgm = stereodepth.semi_global_match
         # The options it takes (block_size, threads, confidence) are passed where it has them.
         accepted = inspect.signature(sgm).parameters
         for name, value in (("block_size", block_size), ("cost", cost)):
