@@ -282,6 +282,33 @@ def test_outputs_equal_the_direct_computation(tmp_path: Path, fmt: str) -> None:
     assert temp_files(out) == []
 
 
+@pytest.mark.parametrize("fmt", ["npy", "png16"])
+def test_preview_writes_the_colour_images_of_both_maps(tmp_path: Path, fmt: str) -> None:
+    pytest.importorskip("matplotlib")
+    from PIL import Image
+
+    names = middlebury_folder(tmp_path / "in", 1)
+    out = tmp_path / "out"
+    argv = ("batch", tmp_path / "in", "-o", out, "--format", fmt, "--quiet")
+    assert run_cli(*argv, "--preview") == 0
+    name = names[0]
+    disparity, depth = expected_maps(tmp_path / "in" / name, fmt)
+    depth_m = depth if fmt == "npy" else np.where(depth > 0, depth / 1000.0, np.nan)
+    record = json.loads((out / f"{name}.record.json").read_text())
+    for kind, values in (("disparity", disparity), ("depth", depth_m)):
+        path = out / f"{name}.{kind}.preview.png"
+        assert record["outputs"][f"{kind}_preview"]["path"] == str(path)
+        with Image.open(path) as im:
+            assert im.mode == "RGB" and im.width == disparity.shape[1]
+            shown = np.asarray(im)[: disparity.shape[0]]
+        # The top rows are the colourised map itself; the colour bar is below.
+        np.testing.assert_array_equal(shown, stereodepth.colorize(values))
+    # A run without --preview is a changed run: it recomputes and removes the stale previews.
+    assert run_cli(*argv) == 0
+    assert not (out / f"{name}.disparity.preview.png").exists()
+    assert not (out / f"{name}.depth.preview.png").exists()
+
+
 def test_bad_pairs_are_reported_and_the_rest_complete(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:

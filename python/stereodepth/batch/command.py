@@ -76,6 +76,12 @@ def register(subparsers: Any) -> None:
     o.add_argument(
         "--ply", action="store_true", help="also write a coloured binary PLY point cloud in metres"
     )
+    o.add_argument(
+        "--preview",
+        action="store_true",
+        help="also write colour previews of the disparity and the depth, with colour bars "
+        "(S.disparity.preview.png, S.depth.preview.png; needs matplotlib, the plot extra)",
+    )
     o.add_argument("--min-depth-m", type=float, help="depths nearer than this are invalid")
     o.add_argument("--max-depth-m", type=float, help="depths farther than this are invalid")
     o.add_argument(
@@ -359,6 +365,8 @@ def run(args: argparse.Namespace) -> int:
         scheduler=args.scheduler, workers=args.workers, threads=args.threads, progress=progress
     )
     require("PIL.Image", "reading images")
+    if args.preview:
+        require("matplotlib", "--preview")
     out_dir = Path(args.output)
     _writable_folder(out_dir, "OUTDIR")
     report_path = _report_path(args, out_dir)
@@ -374,6 +382,7 @@ def run(args: argparse.Namespace) -> int:
         out_dir=out_dir,
         format=args.format,
         ply=args.ply,
+        preview=args.preview,
         matcher=matcher,
         min_depth_m=args.min_depth_m,
         max_depth_m=args.max_depth_m,

@@ -138,6 +138,14 @@ def process_pair(pair: Pair, options: BatchOptions, threads: int | None = None) 
                 paths["ply"], points, colours, comment=f"stereodepth {__version__}: {stem}, metres"
             )
             outputs["ply_points"] = n
+        if "disparity_preview" in paths:
+            from ..colormap import save_colorized
+
+            depth_m = (
+                depth if depth.dtype != np.uint16 else np.where(depth > 0, depth / 1000.0, np.nan)
+            )
+            save_colorized(paths["disparity_preview"], disparity, quantity="disparity", unit="px")
+            save_colorized(paths["depth_preview"], depth_m, quantity="depth", unit="m")
         density = float(np.count_nonzero(np.isfinite(disparity))) / max(disparity.size, 1)
         record.update(
             status="ok",

@@ -45,6 +45,7 @@ class BatchOptions:
     out_dir: Path
     format: str = "npy"
     ply: bool = False
+    preview: bool = False  # colour PNGs of the disparity and the depth, with colour bars
     matcher: dict[str, Any] = field(default_factory=dict)  # block_match keyword arguments
     min_depth_m: float | None = None
     max_depth_m: float | None = None
@@ -58,6 +59,9 @@ class BatchOptions:
         }
         if self.ply:
             out["ply"] = self.out_dir / f"{stem}.ply"
+        if self.preview:
+            for kind in ("disparity", "depth"):
+                out[f"{kind}_preview"] = self.out_dir / f"{stem}.{kind}.preview.png"
         return out
 
     def record_path(self, stem: str) -> Path:
@@ -65,8 +69,10 @@ class BatchOptions:
 
     def owned_names(self, stem: str) -> set[str]:
         """The names of every file a pair may write into OUTDIR, in any format, with or
-        without ``--ply``: the only files batch ever removes (when they are stale)."""
+        without ``--ply`` or ``--preview``: the only files batch ever removes (when they are
+        stale)."""
         names = {
             f"{stem}.{kind}.{ext}" for kind in ("disparity", "depth") for ext in FORMATS.values()
         }
-        return names | {f"{stem}.ply", f"{stem}{RECORD_SUFFIX}"}
+        previews = {f"{stem}.{kind}.preview.png" for kind in ("disparity", "depth")}
+        return names | previews | {f"{stem}.ply", f"{stem}{RECORD_SUFFIX}"}

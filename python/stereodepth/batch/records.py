@@ -29,6 +29,7 @@ def settings_of(pair: Pair, options: BatchOptions) -> dict[str, Any]:
         "stereodepth": __version__,
         "format": options.format,
         "ply": options.ply,
+        "preview": options.preview,
         "min_depth_m": options.min_depth_m,
         "max_depth_m": options.max_depth_m,
         "num_disparities": pair.num_disparities,
