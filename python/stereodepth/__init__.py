@@ -5,6 +5,8 @@
 - :func:`block_match`, :class:`StereoMatcher`: native block-matching disparity (census or SAD,
   sub-pixel, validity checks); :func:`to_opencv_disparity` for OpenCV's int16 x16 format.
 - :func:`reproject`, :func:`write_ply`: disparity maps to XYZ point clouds and PLY files.
+- :class:`StereoRectifier`, :func:`stereo_rectify`, :func:`init_undistort_rectify_map`,
+  :func:`remap`: raw, distorted pairs to rectified pairs, natively.
 - :mod:`stereodepth.reference`: the pure-numpy oracle of every native kernel.
 """
 
@@ -16,6 +18,7 @@ from . import _core
 from .depth import disparity_to_depth
 from .matching import StereoMatcher, block_match, to_opencv_disparity
 from .pointcloud import reproject, write_ply
+from .rectify import StereoRectifier, init_undistort_rectify_map, remap, stereo_rectify
 from .rig import DepthTable, StereoRig
 
 __version__: str = _core.__version__
@@ -23,12 +26,16 @@ __version__: str = _core.__version__
 __all__ = [
     "DepthTable",
     "StereoMatcher",
+    "StereoRectifier",
     "StereoRig",
     "__version__",
     "block_match",
     "build_info",
     "disparity_to_depth",
+    "init_undistort_rectify_map",
+    "remap",
     "reproject",
+    "stereo_rectify",
     "to_opencv_disparity",
     "write_ply",
 ]

@@ -1,0 +1,200 @@
+// Per-row remap loops (the arithmetic is specified in stereodepth/remap.hpp). Compiled once
+// per instruction set (STEREODEPTH_ISA_NS); everything here stays inside that namespace.
+//
+// The scalar loop is the reference. With AVX2, eight output values are computed at once
+// wherever all their four neighbours are inside the image: two 32-bit gathers fetch the top
+// and bottom neighbour pairs, pmaddwd forms top and bot, and one 32-bit multiply blends them
+// as top * 1024 + (bot - top) * fy, which equals the specification's sum exactly.
+#include "remap_kernels.hpp"
+
+#include <cmath>
+#include <cstdint>
+#include <cstring>
+
+#if defined(__AVX2__)
+#include <immintrin.h>
+#endif
+
+#ifndef STEREODEPTH_ISA_NS
+#error "STEREODEPTH_ISA_NS must name the instruction set this file is compiled for"
+#endif
+
+namespace stereodepth::detail::STEREODEPTH_ISA_NS {
+namespace {
+
+constexpr int kOne = 1 << kRemapFractionBits;  // 1024
+constexpr int kShift = 2 * kRemapFractionBits;  // 20
+
+// Pixels [begin, end) of a row of T samples with CN interleaved channels, scalar.
+template <typename T, int CN>
+void remap_scalar(const RemapRowArgs& a, std::ptrdiff_t begin, std::ptrdiff_t end) {
+  using Acc = std::int32_t;  // uint8 only: at most 255 * 2^20
+  T* out = static_cast<T*>(a.dst);
+  const std::ptrdiff_t rows = a.src_rows, cols = a.src_cols;
+  for (std::ptrdiff_t j = begin; j < end; ++j) {
+    const std::ptrdiff_t x = a.xy[2 * j], y = a.xy[2 * j + 1];
+    const Acc fx = static_cast<Acc>(a.frac[j] & 0xffffu);
+    const Acc fy = static_cast<Acc>(a.frac[j] >> 16);
+    const bool x0 = x >= 0 && x < cols, x1 = x + 1 >= 0 && x + 1 < cols;
+    const bool y0 = y >= 0 && y < rows, y1 = y + 1 >= 0 && y + 1 < rows;
+    const T* r0 = reinterpret_cast<const T*>(a.src + (y0 ? y : 0) * a.src_stride);
+    const T* r1 = reinterpret_cast<const T*>(a.src + (y1 ? y + 1 : 0) * a.src_stride);
+    for (int c = 0; c < CN; ++c) {
+      const Acc p00 = (y0 && x0) ? static_cast<Acc>(r0[x * CN + c]) : 0;
+      const Acc p01 = (y0 && x1) ? static_cast<Acc>(r0[(x + 1) * CN + c]) : 0;
+      const Acc p10 = (y1 && x0) ? static_cast<Acc>(r1[x * CN + c]) : 0;
+      const Acc p11 = (y1 && x1) ? static_cast<Acc>(r1[(x + 1) * CN + c]) : 0;
+      const Acc top = p00 * (kOne - fx) + p01 * fx;
+      const Acc bot = p10 * (kOne - fx) + p11 * fx;
+      out[j * CN + c] =
+          static_cast<T>((top * (kOne - fy) + bot * fy + (Acc{1} << (kShift - 1))) >> kShift);
+    }
+  }
+}
+
+template <typename T, int CN>
+void remap_row_scalar(const RemapRowArgs& a) {
+  remap_scalar<T, CN>(a, 0, a.n);
+}
+
+// 16-bit grey from float positions, float64 arithmetic (remap.hpp).
+void remap_row_u16(const RemapRowArgs& a) {
+  auto* out = static_cast<std::uint16_t*>(a.dst);
+  const std::ptrdiff_t rows = a.src_rows, cols = a.src_cols;
+  for (std::ptrdiff_t j = 0; j < a.n; ++j) {
+    const double px = a.pos[2 * j], py = a.pos[2 * j + 1];
+    const double fx0 = std::floor(px), fy0 = std::floor(py);
+    const double fx = px - fx0, fy = py - fy0;
+    const std::ptrdiff_t x = static_cast<std::ptrdiff_t>(fx0), y = static_cast<std::ptrdiff_t>(fy0);
+    const bool x0 = x >= 0 && x < cols, x1 = x + 1 >= 0 && x + 1 < cols;
+    const bool y0 = y >= 0 && y < rows, y1 = y + 1 >= 0 && y + 1 < rows;
+    const auto* r0 = reinterpret_cast<const std::uint16_t*>(a.src + (y0 ? y : 0) * a.src_stride);
+    const auto* r1 =
+        reinterpret_cast<const std::uint16_t*>(a.src + (y1 ? y + 1 : 0) * a.src_stride);
+    const double p00 = (y0 && x0) ? r0[x] : 0.0, p01 = (y0 && x1) ? r0[x + 1] : 0.0;
+    const double p10 = (y1 && x0) ? r1[x] : 0.0, p11 = (y1 && x1) ? r1[x + 1] : 0.0;
+    const double top = p00 * (1.0 - fx) + p01 * fx;
+    const double bot = p10 * (1.0 - fx) + p11 * fx;
+    double v = std::nearbyint(top * (1.0 - fy) + bot * fy);
+    v = v < 65535.0 ? v : 65535.0;
+    out[j] = static_cast<std::uint16_t>(v);
+  }
+}
+
+#if defined(__AVX2__)
+
+// Eight uint8 results from element offsets `e` (of the top-left neighbour) and fractions `f`;
+// `pick` moves the two neighbours of each 32-bit gather into int16 pairs.
+inline __m128i blend8(const std::uint8_t* src, std::ptrdiff_t stride, __m256i e, __m256i f,
+                      __m256i pick) {
+  __m256i top = _mm256_i32gather_epi32(reinterpret_cast<const int*>(src), e, 1);
+  __m256i bot = _mm256_i32gather_epi32(reinterpret_cast<const int*>(src + stride), e, 1);
+  top = _mm256_shuffle_epi8(top, pick);
+  bot = _mm256_shuffle_epi8(bot, pick);
+  const __m256i fx = _mm256_and_si256(f, _mm256_set1_epi32(0xffff));
+  const __m256i wx = _mm256_or_si256(_mm256_sub_epi32(_mm256_set1_epi32(kOne), fx),
+                                     _mm256_slli_epi32(fx, 16));
+  const __m256i t = _mm256_madd_epi16(top, wx);
+  const __m256i b = _mm256_madd_epi16(bot, wx);
+  const __m256i fy = _mm256_srli_epi32(f, 16);
+  __m256i v = _mm256_add_epi32(_mm256_slli_epi32(t, kRemapFractionBits),
+                               _mm256_mullo_epi32(_mm256_sub_epi32(b, t), fy));
+  v = _mm256_srai_epi32(_mm256_add_epi32(v, _mm256_set1_epi32(1 << (kShift - 1))), kShift);
+  const __m128i w = _mm_packus_epi32(_mm256_castsi256_si128(v), _mm256_extracti128_si256(v, 1));
+  return _mm_packus_epi16(w, w);
+}
+
+// Bytes 4i + d0 and 4i + d1 of every dword as an int16 pair.
+inline __m256i pick_pattern(int d1) {
+  alignas(32) std::int8_t p[32];
+  for (int i = 0; i < 32; i += 4) {
+    p[i] = static_cast<std::int8_t>(i % 16);
+    p[i + 1] = -128;
+    p[i + 2] = static_cast<std::int8_t>(i % 16 + d1);
+    p[i + 3] = -128;
+  }
+  return _mm256_load_si256(reinterpret_cast<const __m256i*>(p));
+}
+
+// CN = 1 (grey) or 3 (RGB) uint8 channels.
+template <int CN>
+void remap_row_u8_avx2(const RemapRowArgs& a) {
+  const std::ptrdiff_t stride = a.src_stride;
+  std::ptrdiff_t j = 0;
+  // Whole-vector path needs every offset in int32 and the stride in int16.
+  const std::ptrdiff_t extent = (a.src_rows - 1) * stride + a.src_cols * CN;
+  if (stride <= 32767 && extent < (std::ptrdiff_t{1} << 30) && a.src_rows >= 2 &&
+      a.src_cols >= 2) {
+    const __m256i mul = _mm256_set1_epi32((static_cast<std::int32_t>(stride) << 16) | CN);
+    // Inside: 0 <= x <= cols - 2 and 0 <= y <= rows - 2, tested on the int16 pairs.
+    const __m256i lim = _mm256_set1_epi32(
+        (static_cast<std::int32_t>(a.src_rows - 2) << 16) |
+        static_cast<std::int32_t>(static_cast<std::uint16_t>(a.src_cols - 2)));
+    // A 4-byte gather of the bottom row at offset e + CN - 1 must stay inside the image.
+    const __m256i elim =
+        _mm256_set1_epi32(static_cast<std::int32_t>(extent - stride - 4 - (CN - 1)));
+    const __m256i pick = pick_pattern(CN);
+    const __m256i zero = _mm256_setzero_si256();
+    std::uint8_t* out = static_cast<std::uint8_t*>(a.dst);
+    for (; j + 8 <= a.n; j += 8) {
+      const __m256i xy = _mm256_loadu_si256(reinterpret_cast<const __m256i*>(a.xy + 2 * j));
+      const __m256i f = _mm256_loadu_si256(reinterpret_cast<const __m256i*>(a.frac + j));
+      const __m256i ofs = _mm256_madd_epi16(xy, mul);
+      const __m256i bad = _mm256_or_si256(
+          _mm256_or_si256(_mm256_cmpgt_epi16(xy, lim), _mm256_cmpgt_epi16(zero, xy)),
+          _mm256_cmpgt_epi32(ofs, elim));
+      if (!_mm256_testz_si256(bad, bad)) {
+        remap_scalar<std::uint8_t, CN>(a, j, j + 8);
+        continue;
+      }
+      if constexpr (CN == 1) {
+        _mm_storel_epi64(reinterpret_cast<__m128i*>(out + j), blend8(a.src, stride, ofs, f, pick));
+      } else {
+        // 8 pixels = 24 values: spread the pixels' offsets and fractions over three vectors.
+        const __m256i i0 = _mm256_setr_epi32(0, 0, 0, 1, 1, 1, 2, 2);
+        const __m256i i1 = _mm256_setr_epi32(2, 3, 3, 3, 4, 4, 4, 5);
+        const __m256i i2 = _mm256_setr_epi32(5, 5, 6, 6, 6, 7, 7, 7);
+        const __m256i c0 = _mm256_setr_epi32(0, 1, 2, 0, 1, 2, 0, 1);
+        const __m256i c1 = _mm256_setr_epi32(2, 0, 1, 2, 0, 1, 2, 0);
+        const __m256i c2 = _mm256_setr_epi32(1, 2, 0, 1, 2, 0, 1, 2);
+        std::uint8_t* o = out + 3 * j;
+        const __m128i v0 = blend8(a.src, stride,
+                                  _mm256_add_epi32(_mm256_permutevar8x32_epi32(ofs, i0), c0),
+                                  _mm256_permutevar8x32_epi32(f, i0), pick);
+        const __m128i v1 = blend8(a.src, stride,
+                                  _mm256_add_epi32(_mm256_permutevar8x32_epi32(ofs, i1), c1),
+                                  _mm256_permutevar8x32_epi32(f, i1), pick);
+        const __m128i v2 = blend8(a.src, stride,
+                                  _mm256_add_epi32(_mm256_permutevar8x32_epi32(ofs, i2), c2),
+                                  _mm256_permutevar8x32_epi32(f, i2), pick);
+        _mm_storel_epi64(reinterpret_cast<__m128i*>(o), v0);
+        _mm_storel_epi64(reinterpret_cast<__m128i*>(o + 8), v1);
+        _mm_storel_epi64(reinterpret_cast<__m128i*>(o + 16), v2);
+      }
+    }
+  }
+  remap_scalar<std::uint8_t, CN>(a, j, a.n);
+}
+
+#endif
+
+}  // namespace
+
+const RemapKernels& remap_kernels() {
+#if defined(__AVX2__)
+  static const RemapKernels kernels = {{
+      &remap_row_u8_avx2<1>,
+      &remap_row_u16,
+      &remap_row_u8_avx2<3>,
+  }};
+#else
+  static const RemapKernels kernels = {{
+      &remap_row_scalar<std::uint8_t, 1>,
+      &remap_row_u16,
+      &remap_row_scalar<std::uint8_t, 3>,
+  }};
+#endif
+  return kernels;
+}
+
+}  // namespace stereodepth::detail::STEREODEPTH_ISA_NS
