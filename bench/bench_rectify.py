@@ -67,9 +67,7 @@ def test_stereodepth(benchmark: Any, impl: Any, case: dict[str, Any], rectifier:
     group(benchmark, case)
     impl("stereodepth")
     outs = (np.empty_like(case["left"]), np.empty_like(case["right"]))
-    benchmark(
-        rectifier.rectify, case["left"], case["right"], out_left=outs[0], out_right=outs[1]
-    )
+    benchmark(rectifier.rectify, case["left"], case["right"], out_left=outs[0], out_right=outs[1])
     for got, want in zip(outs, case["want"], strict=True):
         np.testing.assert_array_equal(got, want)
 

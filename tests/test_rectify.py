@@ -146,6 +146,66 @@ def test_new_image_size_matches_opencv(cv2: Any, new_size: tuple[int, int], alph
         assert_rel(a, b)
 
 
+def fisheye_rig(seed: int) -> Rig:
+    r = np.random.default_rng(seed)
+
+    def k() -> np.ndarray:
+        return np.array(
+            [[420 + r.normal() * 5, 0, 640 + r.normal() * 3],
+             [0, 421 + r.normal() * 5, 400 + r.normal() * 3], [0, 0, 1]]
+        )  # fmt: skip
+
+    d = np.array([0.05, -0.01, 0.003, -0.0006])
+    return Rig(
+        f"fisheye{seed}", k(), d * (1 + 0.1 * r.normal()), k(), d * (1 + 0.1 * r.normal()),
+        (1280, 800), rotation(r.normal(size=3) * 0.02),
+        np.array([-0.1, 0.002, 0.001]) + r.normal(size=3) * 1e-3, "equidistant",
+    )  # fmt: skip
+
+
+@pytest.mark.parametrize("new_size", [None, (800, 500)])
+@pytest.mark.parametrize("zero_disparity", [True, False], ids=["zero-disp", "free-cx"])
+@pytest.mark.parametrize(("balance", "fov_scale"), [(0.0, 1.0), (0.5, 1.0), (1.0, 1.3)])
+@pytest.mark.parametrize("seed", [0, 1])
+def test_fisheye_stereo_rectify_matches_opencv(
+    cv2: Any,
+    seed: int,
+    balance: float,
+    fov_scale: float,
+    zero_disparity: bool,
+    new_size: tuple[int, int] | None,
+) -> None:
+    rig = fisheye_rig(seed)
+    want = cv2.fisheye.stereoRectify(
+        rig.K1, rig.D1, rig.K2, rig.D2, rig.size, rig.R, rig.T.reshape(3, 1),
+        cv2.CALIB_ZERO_DISPARITY if zero_disparity else 0, newImageSize=new_size or (0, 0),
+        balance=balance, fov_scale=fov_scale,
+    )  # fmt: skip
+    got = stereo_rectify(
+        rig.K1, rig.D1, rig.K2, rig.D2, rig.size, rig.R, rig.T, new_image_size=new_size,
+        zero_disparity=zero_disparity, distortion_model="equidistant", balance=balance,
+        fov_scale=fov_scale,
+    )  # fmt: skip
+    for a, b in zip(got[:5], want, strict=True):
+        assert_rel(a, b)
+    assert got.roi1 == got.roi2 == (0, 0, *(new_size or rig.size))
+
+
+def test_fisheye_rectifier_maps_match_opencv(cv2: Any) -> None:
+    rig = fisheye_rig(2)
+    rect = StereoRectifier.from_calibration(calib_of(rig), balance=0.3)
+    want = cv2.fisheye.stereoRectify(
+        rig.K1, rig.D1, rig.K2, rig.D2, rig.size, rig.R, rig.T.reshape(3, 1),
+        cv2.CALIB_ZERO_DISPARITY, balance=0.3,
+    )  # fmt: skip
+    want_x, want_y = cv2.fisheye.initUndistortRectifyMap(
+        rig.K2, rig.D2, want[1], want[3], rig.size, cv2.CV_32FC1
+    )
+    got_x, got_y = rect.maps("right")
+    assert np.abs(got_x - want_x).max() <= 1e-3
+    assert np.abs(got_y - want_y).max() <= 1e-3
+
+
 def test_rectified_cameras_are_row_aligned() -> None:
     """Property of any rectification: a 3-D point projects to the same row in both images."""
     rig = RIGS[0]
@@ -531,6 +591,14 @@ def good_args() -> dict[str, Any]:
         ({"distortion_model": 5}, TypeError, "distortion_model must be a str"),
         ({"distortion_model": "equidistant"}, ValueError, "D1 must have 4 coefficients"),
         ({"distortion_model": "none"}, ValueError, "D1 must be empty or zero"),
+        ({"balance": 0.5}, ValueError, "balance and fov_scale apply to equidistant"),
+        ({"balance": 2.0}, ValueError, r"balance must be in \[0, 1\]"),
+        ({"fov_scale": 0.0}, ValueError, "fov_scale must be a finite number > 0"),
+        (
+            {"distortion_model": "equidistant", "D1": np.zeros(4), "D2": np.zeros(4), "alpha": 0.0},
+            ValueError,
+            "alpha applies to pinhole models",
+        ),
     ],
 )
 def test_stereo_rectify_rejects(change: dict[str, Any], exc: type, match: str) -> None:

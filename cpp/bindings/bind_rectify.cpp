@@ -92,6 +92,38 @@ py::dict stereo_rectify_py(const Doubles& K1, const Doubles& D1, const Doubles& 
   return out;
 }
 
+py::dict fisheye_stereo_rectify_py(const Doubles& K1, const Doubles& D1, const Doubles& K2,
+                                   const Doubles& D2, int width, int height, const Doubles& R,
+                                   const Doubles& T, double balance, double fov_scale,
+                                   int new_width, int new_height, bool zero_disparity) {
+  const CameraModel c1 = camera(K1, D1, "equidistant", "K1");
+  const CameraModel c2 = camera(K2, D2, "equidistant", "K2");
+  const Eigen::Matrix3d Rm = mat3(R, "R");
+  if (T.size() != 3) throw py::value_error("T must have 3 entries, got " + shape_str(T));
+  const Eigen::Vector3d Tv(T.data()[0], T.data()[1], T.data()[2]);
+  FisheyeRectifyParams p;
+  p.balance = balance;
+  p.fov_scale = fov_scale;
+  p.new_width = new_width;
+  p.new_height = new_height;
+  p.zero_disparity = zero_disparity;
+  StereoRectification r;
+  {
+    py::gil_scoped_release release;
+    r = fisheye_stereo_rectify(c1, c2, width, height, Rm, Tv, p);
+  }
+  py::dict out;
+  out["R1"] = to_numpy(r.R1);
+  out["R2"] = to_numpy(r.R2);
+  out["P1"] = to_numpy(r.P1);
+  out["P2"] = to_numpy(r.P2);
+  out["Q"] = to_numpy(r.Q);
+  out["roi1"] = rect_tuple(r.roi1);
+  out["roi2"] = rect_tuple(r.roi2);
+  out["vertical"] = false;
+  return out;
+}
+
 py::array_t<double> undistort_points_py(const Doubles& K, const Doubles& D,
                                         const std::string& model, const Doubles& points) {
   const CameraModel cam = camera(K, D, model, "K");
@@ -181,6 +213,11 @@ void bind_rectify(py::module_& m) {
         py::arg("D2"), py::arg("model"), py::arg("width"), py::arg("height"), py::arg("R"),
         py::arg("T"), py::arg("alpha"), py::arg("new_width"), py::arg("new_height"),
         py::arg("zero_disparity"), "Low-level kernel behind stereodepth.stereo_rectify.");
+  m.def("fisheye_stereo_rectify", &fisheye_stereo_rectify_py, py::arg("K1"), py::arg("D1"),
+        py::arg("K2"), py::arg("D2"), py::arg("width"), py::arg("height"), py::arg("R"),
+        py::arg("T"), py::arg("balance"), py::arg("fov_scale"), py::arg("new_width"),
+        py::arg("new_height"), py::arg("zero_disparity"),
+        "Low-level kernel behind stereodepth.stereo_rectify for equidistant cameras.");
   m.def("undistort_points", &undistort_points_py, py::arg("K"), py::arg("D"), py::arg("model"),
         py::arg("points"), "Distorted pixels (N, 2) to ideal normalized coordinates (N, 2).");
   m.def("init_undistort_rectify_map", &init_undistort_rectify_map_py, py::arg("K"), py::arg("D"),

@@ -406,6 +406,123 @@ StereoRectification stereo_rectify(const CameraModel& cam1, const CameraModel& c
   return out;
 }
 
+namespace {
+
+// cv::fisheye::estimateNewCameraMatrixForUndistortRectify: focal length and principal point
+// from the undistorted, rotated midpoints of the four image sides.
+void fisheye_new_camera(const CameraModel& cam, int w, int h, const Eigen::Matrix3d& R,
+                        const FisheyeRectifyParams& p, double& f_out, double& cx, double& cy) {
+  const double balance = std::min(std::max(p.balance, 0.0), 1.0);
+  const double pts[4][2] = {{static_cast<double>(w / 2), 0.0},
+                            {static_cast<double>(w), static_cast<double>(h / 2)},
+                            {static_cast<double>(w / 2), static_cast<double>(h)},
+                            {0.0, static_cast<double>(h / 2)}};
+  double q[4][2];
+  double sx = 0, sy = 0;
+  for (int i = 0; i < 4; ++i) {
+    double x = 0, y = 0;
+    const Eigen::Vector2d n = undistort_point(cam, pts[i][0], pts[i][1]);
+    if (n.x() == -1e6 && n.y() == -1e6) {
+      x = y = -1e6;
+    } else {
+      const double X = R(0, 0) * n.x() + R(0, 1) * n.y() + R(0, 2);
+      const double Y = R(1, 0) * n.x() + R(1, 1) * n.y() + R(1, 2);
+      const double Z = R(2, 0) * n.x() + R(2, 1) * n.y() + R(2, 2);
+      x = X / Z;
+      y = Y / Z;
+    }
+    q[i][0] = x;
+    q[i][1] = y;
+    sx += x;
+    sy += y;
+  }
+  double cn0 = sx / 4, cn1 = sy / 4;
+  const double ar = cam.K(0, 0) / cam.K(1, 1);
+  cn1 *= ar;
+  double minx = DBL_MAX, miny = DBL_MAX, maxx = -DBL_MAX, maxy = -DBL_MAX;
+  for (auto& pt : q) {
+    pt[1] *= ar;
+    miny = std::min(miny, pt[1]);
+    maxy = std::max(maxy, pt[1]);
+    minx = std::min(minx, pt[0]);
+    maxx = std::max(maxx, pt[0]);
+  }
+  const double f1 = w * 0.5 / (cn0 - minx);
+  const double f2 = w * 0.5 / (maxx - cn0);
+  const double f3 = h * 0.5 * ar / (cn1 - miny);
+  const double f4 = h * 0.5 * ar / (maxy - cn1);
+  const double fmin = std::min(f1, std::min(f2, std::min(f3, f4)));
+  const double fmax = std::max(f1, std::max(f2, std::max(f3, f4)));
+  double f = balance * fmin + (1.0 - balance) * fmax;
+  f *= p.fov_scale > 0 ? 1.0 / p.fov_scale : 1.0;
+  double fx = f, fy = f;
+  double ncx = -cn0 * f + w * 0.5;
+  double ncy = -cn1 * f + h * ar * 0.5;
+  fy /= ar;
+  ncy /= ar;
+  if (p.new_width > 0 && p.new_height > 0) {
+    const double rx = p.new_width / static_cast<double>(w);
+    const double ry = p.new_height / static_cast<double>(h);
+    fx *= rx;
+    fy *= ry;
+    ncx *= rx;
+    ncy *= ry;
+  }
+  (void)fx;
+  f_out = fy;  // stereoRectify takes newK(1, 1)
+  cx = ncx;
+  cy = ncy;
+}
+
+}  // namespace
+
+StereoRectification fisheye_stereo_rectify(const CameraModel& cam1, const CameraModel& cam2,
+                                           int width, int height, const Eigen::Matrix3d& Rm,
+                                           const Eigen::Vector3d& T,
+                                           const FisheyeRectifyParams& params) {
+  validate(cam1, "K1");
+  validate(cam2, "K2");
+  if (width < 1 || height < 1) fail("image_size must be positive");
+  if (!finite(Rm) || !finite(T)) fail("R and T must be finite");
+  if (!std::isfinite(params.balance) || !std::isfinite(params.fov_scale)) {
+    fail("balance and fov_scale must be finite");
+  }
+  const Eigen::Vector3d om = rotation_vector(Rm) * -0.5;
+  const Eigen::Matrix3d r_r = rotation_matrix(om);
+  const Eigen::Vector3d t = mul(r_r, T);
+  const double nt = std::sqrt(t(0) * t(0) + t(1) * t(1) + t(2) * t(2));
+  if (!(nt > 0.0)) fail("T must not be zero: the cameras need a baseline");
+  const Eigen::Vector3d uu(t(0) > 0 ? 1 : -1, 0, 0);
+  Eigen::Vector3d ww(t(1) * uu(2) - t(2) * uu(1), t(2) * uu(0) - t(0) * uu(2),
+                     t(0) * uu(1) - t(1) * uu(0));
+  const double nw = std::sqrt(ww(0) * ww(0) + ww(1) * ww(1) + ww(2) * ww(2));
+  if (nw > 0.0) ww *= std::acos(std::fabs(t(0)) / nt) / nw;
+  const Eigen::Matrix3d wr = rotation_matrix(ww);
+
+  StereoRectification out;
+  out.R1 = mul(wr, Eigen::Matrix3d(r_r.transpose()));
+  out.R2 = mul(wr, r_r);
+  const Eigen::Vector3d tnew = mul(out.R2, T);
+
+  double f1, cx1, cy1, f2, cx2, cy2;
+  fisheye_new_camera(cam1, width, height, out.R1, params, f1, cx1, cy1);
+  fisheye_new_camera(cam2, width, height, out.R2, params, f2, cx2, cy2);
+  const double fc = std::min(f1, f2);
+  if (params.zero_disparity) {
+    cx1 = cx2 = (cx1 + cx2) * 0.5;
+    cy1 = cy2 = (cy1 + cy2) * 0.5;
+  } else {
+    cy1 = cy2 = (cy1 + cy2) * 0.5;
+  }
+  out.P1 << fc, 0, cx1, 0, 0, fc, cy1, 0, 0, 0, 1, 0;
+  out.P2 << fc, 0, cx2, tnew(0) * fc, 0, fc, cy2, 0, 0, 0, 1, 0;
+  out.Q << 1, 0, 0, -cx1, 0, 1, 0, -cy1, 0, 0, 0, fc, 0, 0, -1. / tnew(0), (cx1 - cx2) / tnew(0);
+  const int ow = params.new_width > 0 && params.new_height > 0 ? params.new_width : width;
+  const int oh = params.new_width > 0 && params.new_height > 0 ? params.new_height : height;
+  out.roi1 = out.roi2 = Rect{0, 0, ow, oh};
+  return out;
+}
+
 void init_undistort_rectify_map(const CameraModel& cam, const Eigen::Matrix3d& R,
                                 const Eigen::Matrix3d& P, const ImageView<float>& map_x,
                                 const ImageView<float>& map_y, int threads) {

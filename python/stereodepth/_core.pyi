@@ -75,6 +75,21 @@ def stereo_rectify(
     new_height: int,
     zero_disparity: bool,
 ) -> dict[str, Any]: ...
+def fisheye_stereo_rectify(
+    K1: np.ndarray,
+    D1: np.ndarray,
+    K2: np.ndarray,
+    D2: np.ndarray,
+    width: int,
+    height: int,
+    R: np.ndarray,
+    T: np.ndarray,
+    balance: float,
+    fov_scale: float,
+    new_width: int,
+    new_height: int,
+    zero_disparity: bool,
+) -> dict[str, Any]: ...
 def undistort_points(
     K: np.ndarray, D: np.ndarray, model: str, points: np.ndarray
 ) -> np.ndarray: ...

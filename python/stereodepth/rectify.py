@@ -190,6 +190,8 @@ def stereo_rectify(
     new_image_size: tuple[int, int] | None = None,
     zero_disparity: bool = True,
     distortion_model: str = "plumb_bob",
+    balance: float = 0.0,
+    fov_scale: float = 1.0,
 ) -> Rectification:
     """The rectifying transforms of a calibrated stereo rig (Bouguet's method).
 
@@ -216,15 +218,23 @@ def stereo_rectify(
         ``CALIB_ZERO_DISPARITY``), so points at infinity have disparity 0. When False, only
         the coordinate across the baseline is shared.
     distortion_model
-        ``"none"``, ``"plumb_bob"`` or ``"equidistant"`` for both cameras. For
-        ``"equidistant"`` the same Bouguet construction is used, with fisheye undistortion of
-        the image border (``cv2.fisheye.stereoRectify`` picks the focal length differently).
+        ``"none"``, ``"plumb_bob"`` or ``"equidistant"`` for both cameras. Equidistant
+        (fisheye) rigs are rectified as ``cv2.fisheye.stereoRectify`` does: the same rotations
+        (always a horizontal rig), then the focal length and principal points from the
+        undistorted midpoints of the image sides, chosen by ``balance`` and ``fov_scale``
+        instead of ``alpha`` (which must stay -1); their ROIs are the whole image.
+    balance
+        Equidistant only, in [0, 1]: 0 the largest focal length (crop), 1 the smallest (keep
+        the whole field of view).
+    fov_scale
+        Equidistant only, > 0: the focal length is divided by it.
 
     Returns
     -------
     Rectification
-        ``(R1, R2, P1, P2, Q, roi1, roi2)``, equal to ``cv2.stereoRectify``'s results to about
-        1e-13 relative (OpenCV 5.0), computed natively in Eigen.
+        ``(R1, R2, P1, P2, Q, roi1, roi2)``, equal to ``cv2.stereoRectify``'s (or
+        ``cv2.fisheye.stereoRectify``'s) results to about 1e-12 relative (OpenCV 5.0),
+        computed natively in Eigen.
 
     Raises
     ------
@@ -246,9 +256,28 @@ def stereo_rectify(
     new_w, new_h = (0, 0) if new_image_size is None else _size("new_image_size", new_image_size)
     if not isinstance(zero_disparity, bool):
         raise TypeError(f"zero_disparity must be a bool, got {type(zero_disparity).__name__}")
-    r = _core.stereo_rectify(
-        k1, d1, k2, d2, model, width, height, rot, t, a, new_w, new_h, zero_disparity
-    )
+    b = check.finite("balance", balance)
+    if not 0 <= b <= 1:
+        raise ValueError(f"balance must be in [0, 1], got {balance!r}")
+    fov = check.positive("fov_scale", fov_scale)
+    if model == "equidistant":
+        if a != -1:
+            raise ValueError(
+                "alpha applies to pinhole models; equidistant rigs take balance and fov_scale, "
+                f"got alpha={alpha!r}"
+            )
+        r = _core.fisheye_stereo_rectify(
+            k1, d1, k2, d2, width, height, rot, t, b, fov, new_w, new_h, zero_disparity
+        )
+    else:
+        if b != 0.0 or fov != 1.0:
+            raise ValueError(
+                "balance and fov_scale apply to equidistant rigs; use alpha, got "
+                f"balance={balance!r}, fov_scale={fov_scale!r}"
+            )
+        r = _core.stereo_rectify(
+            k1, d1, k2, d2, model, width, height, rot, t, a, new_w, new_h, zero_disparity
+        )
     return Rectification(
         r["R1"], r["R2"], r["P1"], r["P2"], r["Q"], tuple(r["roi1"]), tuple(r["roi2"])
     )
@@ -432,6 +461,8 @@ class StereoRectifier:
         alpha: float = -1.0,
         new_image_size: tuple[int, int] | None = None,
         zero_disparity: bool = True,
+        balance: float = 0.0,
+        fov_scale: float = 1.0,
         threads: int | None = None,
     ) -> None:
         """Computes the transforms with :func:`stereo_rectify` (same parameters; T in
@@ -449,6 +480,8 @@ class StereoRectifier:
             new_image_size=new_image_size,
             zero_disparity=zero_disparity,
             distortion_model=distortion_model,
+            balance=balance,
+            fov_scale=fov_scale,
         )
         self._setup(
             K1=_camera_matrix("K1", K1),
@@ -519,16 +552,19 @@ class StereoRectifier:
         alpha: float | None = None,
         new_image_size: tuple[int, int] | None = None,
         zero_disparity: bool = True,
+        balance: float | None = None,
+        fov_scale: float = 1.0,
         threads: int | None = None,
     ) -> StereoRectifier:
         """A rectifier for a :class:`stereodepth.calib.StereoCalibration`.
 
         When the calibration holds rectifying transforms (R1, R2, P1, P2, as OpenCV's stereo
-        YAML or ROS camera_info files do) and neither ``alpha`` nor ``new_image_size`` is
-        given, those are used as they are; otherwise they are computed with
-        :func:`stereo_rectify` (``alpha`` None means -1). A calibration of images that are
-        already rectified (``calib.rectified``: Middlebury, KITTI) gives a rectifier whose
-        :meth:`rectify` returns its inputs unchanged. Raises TypeError or ValueError naming
+        YAML or ROS camera_info files do) and none of ``alpha``, ``balance`` and
+        ``new_image_size`` is given, those are used as they are; otherwise they are computed
+        with :func:`stereo_rectify` (``alpha`` None means -1, ``balance`` None means 0; the
+        latter and ``fov_scale`` for equidistant calibrations only). A calibration of images
+        that are already rectified (``calib.rectified``: Middlebury, KITTI) gives a rectifier
+        whose :meth:`rectify` returns its inputs unchanged. Raises TypeError or ValueError naming
         the field at fault.
         """
         for field in ("K1", "D1", "K2", "D2", "R", "T", "image_size", "distortion_model"):
@@ -565,7 +601,8 @@ class StereoRectifier:
             self._from_rectified(calib)
             return self
         stored = [getattr(calib, f, None) for f in ("R1", "R2", "P1", "P2")]
-        if alpha is None and new_image_size is None and all(m is not None for m in stored):
+        asked = alpha is not None or balance is not None or new_image_size is not None
+        if not asked and all(m is not None for m in stored):
             R1 = _rotation("calib.R1", stored[0])
             R2 = _rotation("calib.R2", stored[1])
             P1 = _real_matrix("calib.P1", stored[2], (3, 4))
@@ -587,6 +624,8 @@ class StereoRectifier:
                 new_image_size=new_image_size,
                 zero_disparity=zero_disparity,
                 distortion_model=model,
+                balance=0.0 if balance is None else balance,
+                fov_scale=fov_scale,
             )
         self._setup(
             K1=K1,

@@ -78,6 +78,24 @@ StereoRectification stereo_rectify(const CameraModel& cam1, const CameraModel& c
                                    int height, const Eigen::Matrix3d& R,
                                    const Eigen::Vector3d& T, const StereoRectifyParams& params);
 
+struct FisheyeRectifyParams {
+  double balance = 0.0;    // [0, 1]: 0 the largest focal length (crop), 1 the smallest
+  double fov_scale = 1.0;  // the focal length is divided by it (when > 0)
+  int new_width = 0;       // 0: the input size
+  int new_height = 0;
+  bool zero_disparity = true;
+};
+
+// The rectification of cv::fisheye::stereoRectify (OpenCV 5), for equidistant cameras: the
+// same rotations as Bouguet's (always a horizontal rig), then each camera's new focal length
+// and principal point from cv::fisheye::estimateNewCameraMatrixForUndistortRectify (the
+// undistorted midpoints of the four image sides), the smaller focal length for both.
+// roi1 and roi2 are the whole output image (OpenCV computes none).
+StereoRectification fisheye_stereo_rectify(const CameraModel& cam1, const CameraModel& cam2,
+                                           int width, int height, const Eigen::Matrix3d& R,
+                                           const Eigen::Vector3d& T,
+                                           const FisheyeRectifyParams& params);
+
 // The maps of cv::initUndistortRectifyMap (CV_32FC1): for each pixel of the rectified image,
 // where to sample the raw image. `P` is the new 3x3 camera matrix (or the left 3x3 of P1/P2),
 // `R` the rectifying rotation. Computed in float64 per pixel (not incrementally), rounded
