@@ -653,3 +653,47 @@ def test_maps_and_rectifier_reject() -> None:
         rect.rectify(img, img[1:])
     with pytest.raises(ValueError, match="side must be 'left' or 'right'"):
         rect.maps("middle")
+
+
+def guarded_image(shape: tuple[int, ...], dtype: type, keep: list[Any]) -> np.ndarray:
+    """An array whose last byte is the last byte before a PROT_NONE page: reading past the
+    image faults. ``keep`` holds the mapping alive."""
+    import ctypes
+    import mmap
+
+    page = mmap.PAGESIZE
+    nbytes = int(np.prod(shape)) * np.dtype(dtype).itemsize
+    data_pages = (nbytes + page - 1) // page
+    buf = mmap.mmap(-1, (data_pages + 1) * page)
+    libc = ctypes.CDLL(None, use_errno=True)
+    addr = ctypes.addressof(ctypes.c_char.from_buffer(buf))
+    libc.mprotect.argtypes = [ctypes.c_void_p, ctypes.c_size_t, ctypes.c_int]
+    if libc.mprotect(ctypes.c_void_p(addr + data_pages * page), page, 0) != 0:
+        pytest.skip("mprotect is not available")
+    keep.append(buf)
+    arr = np.frombuffer(buf, dtype=dtype, count=int(np.prod(shape)),
+                        offset=data_pages * page - nbytes)  # fmt: skip
+    return arr.reshape(shape)
+
+
+@pytest.mark.skipif(not hasattr(np, "frombuffer"), reason="numpy without frombuffer")
+@pytest.mark.parametrize("fmt", FORMATS, ids=FORMAT_IDS)
+@pytest.mark.parametrize("shape", [(5, 9), (2, 33), (17, 2), (64, 64)])
+def test_remap_never_reads_past_the_image(
+    fmt: tuple[tuple[int, ...], type], shape: tuple[int, int]
+) -> None:
+    """The vector path gathers 4 bytes per neighbour pair: at the last row and column it must
+    fall back rather than read beyond the image (which here ends at an unreadable page)."""
+    if not hasattr(__import__("os"), "sysconf"):
+        pytest.skip("needs a POSIX system")
+    extra, dtype = fmt
+    keep: list[Any] = []
+    img = guarded_image(shape + extra, dtype, keep)
+    rng = np.random.default_rng(9)
+    img[...] = random_image(rng, shape + extra, dtype)
+    h, w = shape
+    # Every position near the bottom-right corner, on and between the last pixels.
+    ys, xs = np.meshgrid(np.linspace(h - 3, h, 41), np.linspace(w - 3, w, 43), indexing="ij")
+    mx, my = xs.astype(np.float32), ys.astype(np.float32)
+    got = stereodepth.remap(img, mx, my)
+    np.testing.assert_array_equal(got, reference.remap(np.array(img), mx, my))
