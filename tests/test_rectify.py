@@ -623,6 +623,7 @@ def test_stereo_rectify_rejects(change: dict[str, Any], exc: type, match: str) -
         ({"out": np.zeros((2, 2), np.uint16)}, TypeError, "out must have dtype uint8"),
         ({"out": np.zeros((2, 3), np.uint8)}, ValueError, r"out must have shape \(2, 2\)"),
         ({"threads": -1}, ValueError, "threads must be an integer >= 0"),
+        ({"out": "image"}, ValueError, "out must not overlap the image"),
     ],
 )
 def test_remap_rejects(kwargs: dict[str, Any], exc: type, match: str) -> None:
@@ -632,6 +633,8 @@ def test_remap_rejects(kwargs: dict[str, Any], exc: type, match: str) -> None:
         "map_y": np.zeros((2, 2), np.float32),
     }
     args.update(kwargs)
+    if isinstance(args.get("out"), str):  # the image's first 4 pixels, as a 2 x 2 array
+        args["out"] = args["image"].reshape(-1)[:4].reshape(2, 2)
     with pytest.raises(exc, match=match):
         stereodepth.remap(**args)
 
@@ -654,6 +657,16 @@ def test_maps_and_rectifier_reject() -> None:
         rect.rectify(img, img[1:])
     with pytest.raises(ValueError, match="side must be 'left' or 'right'"):
         rect.maps("middle")
+    with pytest.raises(ValueError, match="out_right must not overlap the image"):
+        rect.rectify(img, img, out_right=img)
+
+
+def test_plumb_bob_without_coefficients_is_the_pinhole_model() -> None:
+    rig = RIGS[5]  # pinhole
+    a = stereo_rectify(rig.K1, None, rig.K2, [], rig.size, rig.R, rig.T)
+    b = stereo_rectify(rig.K1, None, rig.K2, None, rig.size, rig.R, rig.T, distortion_model="none")
+    for x, y in zip(a[:5], b[:5], strict=True):
+        np.testing.assert_array_equal(x, y)
 
 
 def guarded_image(shape: tuple[int, ...], dtype: type, keep: list[Any]) -> np.ndarray:

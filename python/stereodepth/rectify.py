@@ -131,6 +131,8 @@ def _distortion(name: str, value: Any, model: str) -> np.ndarray:
         raise ValueError(f"{name} must be empty or zero for distortion_model 'none', got {arr}")
     if model == "none":
         arr = np.zeros(0)
+    elif model == "plumb_bob" and arr.size == 0:  # OpenCV's empty D: no distortion
+        arr = np.zeros(4)
     allowed = _COEFFICIENTS[model]
     if arr.size not in allowed:
         raise ValueError(
@@ -355,18 +357,24 @@ def _as_maps(map_x: Any, map_y: Any) -> tuple[np.ndarray, np.ndarray]:
     return mx, my
 
 
-def _prepare_out(out: Any, shape: tuple[int, ...], dtype: np.dtype) -> np.ndarray:
+def _prepare_out(
+    out: Any, shape: tuple[int, ...], dtype: np.dtype, image: np.ndarray, name: str = "out"
+) -> np.ndarray:
+    """A new output, or the caller's checked: dtype, shape, C order, writeable, no overlap
+    with the image it is sampled from."""
     if out is None:
         return np.empty(shape, dtype)
-    arr = _array_arg("out", out)
+    arr = _array_arg(name, out)
     if arr.dtype != dtype:
-        raise TypeError(f"out must have dtype {dtype} (the image's), got {arr.dtype}")
+        raise TypeError(f"{name} must have dtype {dtype} (the image's), got {arr.dtype}")
     if arr.shape != shape:
-        raise ValueError(f"out must have shape {shape}, got {arr.shape}")
+        raise ValueError(f"{name} must have shape {shape}, got {arr.shape}")
     if not arr.flags.c_contiguous:
-        raise TypeError("out must be C-contiguous")
+        raise TypeError(f"{name} must be C-contiguous")
     if not arr.flags.writeable:
-        raise ValueError("out must be writeable")
+        raise ValueError(f"{name} must be writeable")
+    if np.shares_memory(arr, image):
+        raise ValueError(f"{name} must not overlap the image it is sampled from")
     return arr
 
 
@@ -416,7 +424,7 @@ def remap(
     img = _as_image("image", image)
     mx, my = _as_maps(map_x, map_y)
     nthreads = check.threads(threads)
-    result = _prepare_out(out, mx.shape + img.shape[2:], img.dtype)
+    result = _prepare_out(out, mx.shape + img.shape[2:], img.dtype, img)
     if mx.size == 0:
         return result
     table = _core.RemapTable(mx, my, img.shape[0], img.shape[1], _precision(img), nthreads)
@@ -694,8 +702,8 @@ class StereoRectifier:
         w, h = self._output_size
         shape = (h, w, *imgs[0].shape[2:])
         outs = (
-            _prepare_out(out_left, shape, imgs[0].dtype),
-            _prepare_out(out_right, shape, imgs[1].dtype),
+            _prepare_out(out_left, shape, imgs[0].dtype, imgs[0], "out_left"),
+            _prepare_out(out_right, shape, imgs[1].dtype, imgs[1], "out_right"),
         )
         for table, img, out in zip(self._table_pair(_precision(imgs[0])), imgs, outs, strict=True):
             table.apply(img, out, self._threads)

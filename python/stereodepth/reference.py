@@ -279,7 +279,7 @@ def remap(
     img = _as_image("image", image)
     mx, my = _as_maps(map_x, map_y)
     check.threads(threads)
-    result = _prepare_out(out, mx.shape + img.shape[2:], img.dtype)
+    result = _prepare_out(out, mx.shape + img.shape[2:], img.dtype, img)
     rows, cols = img.shape[:2]
     src = img.astype(np.int64 if img.dtype == np.uint8 else np.float64)
     if src.ndim == 2:
