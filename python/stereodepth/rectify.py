@@ -649,25 +649,66 @@ class StereoRectifier:
         return self
 
     def _from_rectified(self, calib: Any) -> None:
-        """P2 and Q of an already rectified pair: the second camera shifted along x by T."""
+        """P1, P2 and Q of an already rectified pair: the calibration's where it has them,
+        else the cameras with the second shifted along x by T."""
         t = _real_matrix("calib.T", calib.T, (3,))
         K1, K2 = self._cameras[0][0], self._cameras[1][0]
-        self._P2 = np.hstack([K2, (K2[0, 0] * t[0]) * np.eye(3)[:, :1]])
-        self._P1 = np.hstack([K1, np.zeros((3, 1))])
-        self._Q = _q_from_projections(self._P1, self._P2)
+        P1, P2, Q = (getattr(calib, f, None) for f in ("P1", "P2", "Q"))
+        self._P1 = (
+            np.hstack([K1, np.zeros((3, 1))])
+            if P1 is None
+            else _real_matrix("calib.P1", P1, (3, 4))
+        )
+        self._P2 = (
+            np.hstack([K2, (K2[0, 0] * t[0]) * np.eye(3)[:, :1]])
+            if P2 is None
+            else _real_matrix("calib.P2", P2, (3, 4))
+        )
+        self._Q = (
+            _q_from_projections(self._P1, self._P2)
+            if Q is None
+            else _real_matrix("calib.Q", Q, (4, 4))
+        )
 
     @classmethod
-    def from_file(cls, path: str | os.PathLike[str], **options: Any) -> StereoRectifier:
-        """A rectifier from a calibration file: reads it with
+    def from_file(
+        cls,
+        path: str | os.PathLike[str],
+        *,
+        second_path: str | os.PathLike[str] | None = None,
+        alpha: float | None = None,
+        new_image_size: tuple[int, int] | None = None,
+        zero_disparity: bool = True,
+        balance: float | None = None,
+        fov_scale: float = 1.0,
+        threads: int | None = None,
+        **read_options: Any,
+    ) -> StereoRectifier:
+        """A rectifier from a calibration file: read with
         :func:`stereodepth.calib.read_stereo_calibration` (OpenCV YAML/XML, ROS camera_info,
-        Kalibr camchain, Middlebury, KITTI), then :meth:`from_calibration` with ``options``."""
+        Kalibr camchain, Middlebury, KITTI; ``second_path`` for the right camera's file where
+        the format splits them, ``read_options`` such as ``image_size`` or
+        ``translation_unit`` go to the reader), then :meth:`from_calibration` with the
+        rectification options. The reader raises FileNotFoundError and ValueError naming the
+        file and key."""
         try:
-            from .calib import read_stereo_calibration  # type: ignore[attr-defined]
+            from .calib import read_stereo_calibration  # type: ignore[attr-defined,unused-ignore]
         except ImportError as exc:  # the readers live in stereodepth.calib
             raise ImportError(
                 "StereoRectifier.from_file needs stereodepth.calib.read_stereo_calibration"
             ) from exc
-        return cls.from_calibration(read_stereo_calibration(path), **options)
+        if second_path is not None:
+            read_options["second_path"] = second_path
+        calib = read_stereo_calibration(path, **read_options)
+        return cls.from_calibration(
+            calib,
+            alpha=alpha,
+            new_image_size=new_image_size,
+            zero_disparity=zero_disparity,
+            balance=balance,
+            fov_scale=fov_scale,
+            threads=threads,
+        )
 
     # --- per frame ------------------------------------------------------------------------------
     def rectify(
