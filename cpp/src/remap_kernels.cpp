@@ -1,10 +1,11 @@
 // Per-row remap loops (the arithmetic is specified in stereodepth/remap.hpp). Compiled once
 // per instruction set (STEREODEPTH_ISA_NS); everything here stays inside that namespace.
 //
-// The scalar loop is the reference. With AVX2, eight output values are computed at once
-// wherever all their four neighbours are inside the image: two 32-bit gathers fetch the top
-// and bottom neighbour pairs, pmaddwd forms top and bot, and one 32-bit multiply blends them
-// as top * 1024 + (bot - top) * fy, which equals the specification's sum exactly.
+// The scalar loop is the reference. With AVX2, eight output pixels are computed at once
+// wherever all their four neighbours are inside the image: 32-bit gathers fetch the top and
+// bottom neighbour pairs (two for grey, four for RGB), pmaddwd forms top and bot, and one
+// 32-bit multiply blends them as top * 1024 + (bot - top) * fy, which equals the
+// specification's sum exactly.
 #include "remap_kernels.hpp"
 
 #include <cmath>
@@ -83,7 +84,7 @@ void remap_row_u16(const RemapRowArgs& a) {
 
 #if defined(__AVX2__)
 
-// Eight uint8 results from element offsets `e` (of the top-left neighbour) and fractions `f`;
+// Eight grey uint8 results from the offsets `e` of the top-left neighbours and fractions `f`;
 // `pick` moves the two neighbours of each 32-bit gather into int16 pairs.
 inline __m128i blend8(const std::uint8_t* src, std::ptrdiff_t stride, __m256i e, __m256i f,
                       __m256i pick) {
@@ -104,16 +105,68 @@ inline __m128i blend8(const std::uint8_t* src, std::ptrdiff_t stride, __m256i e,
   return _mm_packus_epi16(w, w);
 }
 
-// Bytes 4i + d0 and 4i + d1 of every dword as an int16 pair.
-inline __m256i pick_pattern(int d1) {
-  alignas(32) std::int8_t p[32];
-  for (int i = 0; i < 32; i += 4) {
-    p[i] = static_cast<std::int8_t>(i % 16);
-    p[i + 1] = -128;
-    p[i + 2] = static_cast<std::int8_t>(i % 16 + d1);
-    p[i + 3] = -128;
+// Bytes 4i and 4i + 1 of every dword as an int16 pair.
+inline __m256i pick_pattern() {
+  return _mm256_setr_epi8(0, -128, 1, -128, 4, -128, 5, -128, 8, -128, 9, -128, 12, -128, 13,
+                          -128, 0, -128, 1, -128, 4, -128, 5, -128, 8, -128, 9, -128, 12, -128,
+                          13, -128);
+}
+
+// Eight RGB pixels from the offsets `ofs` of their top-left neighbours: four gathers (the
+// left and right neighbours, each 4 bytes from its first, in the top and bottom rows), byte
+// pairs (left, right) per channel blended by pmaddwd, then the rows as in blend8. Writes 24
+// bytes at `o`; with `room`, 4 more that later pixels overwrite.
+inline void blend_rgb8(const std::uint8_t* src, std::ptrdiff_t stride, __m256i ofs, __m256i f,
+                       std::uint8_t* o, bool room) {
+  const int* top = reinterpret_cast<const int*>(src);
+  const int* bottom = reinterpret_cast<const int*>(src + stride);
+  const __m256i ofs3 = _mm256_add_epi32(ofs, _mm256_set1_epi32(3));
+  const __m256i tl = _mm256_i32gather_epi32(top, ofs, 1);
+  const __m256i tr = _mm256_i32gather_epi32(top, ofs3, 1);
+  const __m256i bl = _mm256_i32gather_epi32(bottom, ofs, 1);
+  const __m256i br = _mm256_i32gather_epi32(bottom, ofs3, 1);
+  // Per 128-bit lane, unpacklo holds pixels 0, 1 (4, 5) and unpackhi pixels 2, 3 (6, 7).
+  const __m256i t_lo = _mm256_unpacklo_epi8(tl, tr), t_hi = _mm256_unpackhi_epi8(tl, tr);
+  const __m256i b_lo = _mm256_unpacklo_epi8(bl, br), b_hi = _mm256_unpackhi_epi8(bl, br);
+  const __m256i fx = _mm256_and_si256(f, _mm256_set1_epi32(0xffff));
+  const __m256i wx = _mm256_or_si256(_mm256_sub_epi32(_mm256_set1_epi32(kOne), fx),
+                                     _mm256_slli_epi32(fx, 16));
+  const __m256i fy = _mm256_srli_epi32(f, 16);
+  // R G B and a discarded fourth value of pixels p and p + 1.
+  auto two = [&](__m128i t_pairs, __m128i b_pairs, int p) {
+    const __m256i sel = _mm256_setr_epi32(p, p, p, p, p + 1, p + 1, p + 1, p + 1);
+    const __m256i w = _mm256_permutevar8x32_epi32(wx, sel);
+    const __m256i t = _mm256_madd_epi16(_mm256_cvtepu8_epi16(t_pairs), w);
+    const __m256i b = _mm256_madd_epi16(_mm256_cvtepu8_epi16(b_pairs), w);
+    const __m256i y = _mm256_permutevar8x32_epi32(fy, sel);
+    const __m256i v = _mm256_add_epi32(_mm256_slli_epi32(t, kRemapFractionBits),
+                                       _mm256_mullo_epi32(_mm256_sub_epi32(b, t), y));
+    return _mm256_srai_epi32(_mm256_add_epi32(v, _mm256_set1_epi32(1 << (kShift - 1))), kShift);
+  };
+  const __m256i v01 = two(_mm256_castsi256_si128(t_lo), _mm256_castsi256_si128(b_lo), 0);
+  const __m256i v23 = two(_mm256_castsi256_si128(t_hi), _mm256_castsi256_si128(b_hi), 2);
+  const __m256i v45 =
+      two(_mm256_extracti128_si256(t_lo, 1), _mm256_extracti128_si256(b_lo, 1), 4);
+  const __m256i v67 =
+      two(_mm256_extracti128_si256(t_hi, 1), _mm256_extracti128_si256(b_hi, 1), 6);
+  // Bytes: lane 0 holds pixels 0 2 4 6, lane 1 pixels 1 3 5 7; put them in order, then drop
+  // every fourth byte in each lane.
+  const __m256i bytes = _mm256_packus_epi16(_mm256_packus_epi32(v01, v23),
+                                            _mm256_packus_epi32(v45, v67));
+  const __m256i ordered =
+      _mm256_permutevar8x32_epi32(bytes, _mm256_setr_epi32(0, 4, 1, 5, 2, 6, 3, 7));
+  const __m256i packed = _mm256_shuffle_epi8(
+      ordered, _mm256_setr_epi8(0, 1, 2, 4, 5, 6, 8, 9, 10, 12, 13, 14, -1, -1, -1, -1, 0, 1, 2,
+                                4, 5, 6, 8, 9, 10, 12, 13, 14, -1, -1, -1, -1));
+  const __m128i lo = _mm256_castsi256_si128(packed), hi = _mm256_extracti128_si256(packed, 1);
+  _mm_storeu_si128(reinterpret_cast<__m128i*>(o), lo);  // bytes 12..15 are rewritten below
+  if (room) {
+    _mm_storeu_si128(reinterpret_cast<__m128i*>(o + 12), hi);
+  } else {
+    _mm_storel_epi64(reinterpret_cast<__m128i*>(o + 12), hi);
+    const std::int32_t last = _mm_extract_epi32(hi, 2);
+    std::memcpy(o + 20, &last, sizeof last);
   }
-  return _mm256_load_si256(reinterpret_cast<const __m256i*>(p));
 }
 
 // CN = 1 (grey) or 3 (RGB) uint8 channels.
@@ -130,10 +183,11 @@ void remap_row_u8_avx2(const RemapRowArgs& a) {
     const __m256i lim = _mm256_set1_epi32(
         (static_cast<std::int32_t>(a.src_rows - 2) << 16) |
         static_cast<std::int32_t>(static_cast<std::uint16_t>(a.src_cols - 2)));
-    // A 4-byte gather of the bottom row at offset e + CN - 1 must stay inside the image.
+    // The 4-byte gathers of the bottom row (at the offset, and for RGB also 3 bytes on) must
+    // stay inside the image.
     const __m256i elim =
-        _mm256_set1_epi32(static_cast<std::int32_t>(extent - stride - 4 - (CN - 1)));
-    const __m256i pick = pick_pattern(CN);
+        _mm256_set1_epi32(static_cast<std::int32_t>(extent - stride - (CN == 1 ? 4 : 7)));
+    const __m256i pick = pick_pattern();
     const __m256i zero = _mm256_setzero_si256();
     std::uint8_t* out = static_cast<std::uint8_t*>(a.dst);
     for (; j + 8 <= a.n; j += 8) {
@@ -150,26 +204,7 @@ void remap_row_u8_avx2(const RemapRowArgs& a) {
       if constexpr (CN == 1) {
         _mm_storel_epi64(reinterpret_cast<__m128i*>(out + j), blend8(a.src, stride, ofs, f, pick));
       } else {
-        // 8 pixels = 24 values: spread the pixels' offsets and fractions over three vectors.
-        const __m256i i0 = _mm256_setr_epi32(0, 0, 0, 1, 1, 1, 2, 2);
-        const __m256i i1 = _mm256_setr_epi32(2, 3, 3, 3, 4, 4, 4, 5);
-        const __m256i i2 = _mm256_setr_epi32(5, 5, 6, 6, 6, 7, 7, 7);
-        const __m256i c0 = _mm256_setr_epi32(0, 1, 2, 0, 1, 2, 0, 1);
-        const __m256i c1 = _mm256_setr_epi32(2, 0, 1, 2, 0, 1, 2, 0);
-        const __m256i c2 = _mm256_setr_epi32(1, 2, 0, 1, 2, 0, 1, 2);
-        std::uint8_t* o = out + 3 * j;
-        const __m128i v0 = blend8(a.src, stride,
-                                  _mm256_add_epi32(_mm256_permutevar8x32_epi32(ofs, i0), c0),
-                                  _mm256_permutevar8x32_epi32(f, i0), pick);
-        const __m128i v1 = blend8(a.src, stride,
-                                  _mm256_add_epi32(_mm256_permutevar8x32_epi32(ofs, i1), c1),
-                                  _mm256_permutevar8x32_epi32(f, i1), pick);
-        const __m128i v2 = blend8(a.src, stride,
-                                  _mm256_add_epi32(_mm256_permutevar8x32_epi32(ofs, i2), c2),
-                                  _mm256_permutevar8x32_epi32(f, i2), pick);
-        _mm_storel_epi64(reinterpret_cast<__m128i*>(o), v0);
-        _mm_storel_epi64(reinterpret_cast<__m128i*>(o + 8), v1);
-        _mm_storel_epi64(reinterpret_cast<__m128i*>(o + 16), v2);
+        blend_rgb8(a.src, stride, ofs, f, out + 3 * j, j + 10 <= a.n);
       }
     }
   }
