@@ -2,9 +2,9 @@
 // per instruction set (STEREODEPTH_ISA_NS); everything here stays inside that namespace.
 //
 // The scalar loop is the reference. With AVX2, eight output pixels are computed at once
-// wherever all their four neighbours are inside the image: 32-bit gathers fetch the top and
-// bottom neighbour pairs (two for grey, four for RGB), pmaddwd forms top and bot, and one
-// 32-bit multiply blends them as top * 1024 + (bot - top) * fy, which equals the
+// wherever all their four neighbours are inside the image: gathers fetch the top and bottom
+// neighbour pairs (two 32-bit ones for grey, four 64-bit ones for RGB), pmaddwd forms top and
+// bot, and one 32-bit multiply blends them as top * 1024 + (bot - top) * fy, which equals the
 // specification's sum exactly.
 #include "remap_kernels.hpp"
 
@@ -112,22 +112,23 @@ inline __m256i pick_pattern() {
                           13, -128);
 }
 
-// Eight RGB pixels from the offsets `ofs` of their top-left neighbours: four gathers (the
-// left and right neighbours, each 4 bytes from its first, in the top and bottom rows), byte
-// pairs (left, right) per channel blended by pmaddwd, then the rows as in blend8. Writes 24
-// bytes at `o`; with `room`, 4 more that later pixels overwrite.
+// Eight RGB pixels from the offsets `ofs` of their top-left neighbours: four 64-bit gathers
+// (8 bytes from each top-left neighbour, holding both neighbours' R G B, in the top and bottom
+// rows, four pixels per gather), byte pairs (left, right) per channel blended by pmaddwd, then
+// the rows as in blend8. Writes 24 bytes at `o`; with `room`, 4 more that later pixels
+// overwrite.
 inline void blend_rgb8(const std::uint8_t* src, std::ptrdiff_t stride, __m256i ofs, __m256i f,
                        std::uint8_t* o, bool room) {
-  const int* top = reinterpret_cast<const int*>(src);
-  const int* bottom = reinterpret_cast<const int*>(src + stride);
-  const __m256i ofs3 = _mm256_add_epi32(ofs, _mm256_set1_epi32(3));
-  const __m256i tl = _mm256_i32gather_epi32(top, ofs, 1);
-  const __m256i tr = _mm256_i32gather_epi32(top, ofs3, 1);
-  const __m256i bl = _mm256_i32gather_epi32(bottom, ofs, 1);
-  const __m256i br = _mm256_i32gather_epi32(bottom, ofs3, 1);
-  // Per 128-bit lane, unpacklo holds pixels 0, 1 (4, 5) and unpackhi pixels 2, 3 (6, 7).
-  const __m256i t_lo = _mm256_unpacklo_epi8(tl, tr), t_hi = _mm256_unpackhi_epi8(tl, tr);
-  const __m256i b_lo = _mm256_unpacklo_epi8(bl, br), b_hi = _mm256_unpackhi_epi8(bl, br);
+  const auto* top = reinterpret_cast<const long long*>(src);
+  const auto* bottom = reinterpret_cast<const long long*>(src + stride);
+  const __m128i o03 = _mm256_castsi256_si128(ofs), o47 = _mm256_extracti128_si256(ofs, 1);
+  // (left, right) byte pairs per channel, two pixels per 128-bit lane.
+  const __m256i pairs = _mm256_setr_epi8(0, 3, 1, 4, 2, 5, 6, 7, 8, 11, 9, 12, 10, 13, 14, 15,
+                                         0, 3, 1, 4, 2, 5, 6, 7, 8, 11, 9, 12, 10, 13, 14, 15);
+  const __m256i t03 = _mm256_shuffle_epi8(_mm256_i32gather_epi64(top, o03, 1), pairs);
+  const __m256i t47 = _mm256_shuffle_epi8(_mm256_i32gather_epi64(top, o47, 1), pairs);
+  const __m256i b03 = _mm256_shuffle_epi8(_mm256_i32gather_epi64(bottom, o03, 1), pairs);
+  const __m256i b47 = _mm256_shuffle_epi8(_mm256_i32gather_epi64(bottom, o47, 1), pairs);
   const __m256i fx = _mm256_and_si256(f, _mm256_set1_epi32(0xffff));
   const __m256i wx = _mm256_or_si256(_mm256_sub_epi32(_mm256_set1_epi32(kOne), fx),
                                      _mm256_slli_epi32(fx, 16));
@@ -143,12 +144,10 @@ inline void blend_rgb8(const std::uint8_t* src, std::ptrdiff_t stride, __m256i o
                                        _mm256_mullo_epi32(_mm256_sub_epi32(b, t), y));
     return _mm256_srai_epi32(_mm256_add_epi32(v, _mm256_set1_epi32(1 << (kShift - 1))), kShift);
   };
-  const __m256i v01 = two(_mm256_castsi256_si128(t_lo), _mm256_castsi256_si128(b_lo), 0);
-  const __m256i v23 = two(_mm256_castsi256_si128(t_hi), _mm256_castsi256_si128(b_hi), 2);
-  const __m256i v45 =
-      two(_mm256_extracti128_si256(t_lo, 1), _mm256_extracti128_si256(b_lo, 1), 4);
-  const __m256i v67 =
-      two(_mm256_extracti128_si256(t_hi, 1), _mm256_extracti128_si256(b_hi, 1), 6);
+  const __m256i v01 = two(_mm256_castsi256_si128(t03), _mm256_castsi256_si128(b03), 0);
+  const __m256i v23 = two(_mm256_extracti128_si256(t03, 1), _mm256_extracti128_si256(b03, 1), 2);
+  const __m256i v45 = two(_mm256_castsi256_si128(t47), _mm256_castsi256_si128(b47), 4);
+  const __m256i v67 = two(_mm256_extracti128_si256(t47, 1), _mm256_extracti128_si256(b47, 1), 6);
   // Bytes: lane 0 holds pixels 0 2 4 6, lane 1 pixels 1 3 5 7; put them in order, then drop
   // every fourth byte in each lane.
   const __m256i bytes = _mm256_packus_epi16(_mm256_packus_epi32(v01, v23),
@@ -183,10 +182,9 @@ void remap_row_u8_avx2(const RemapRowArgs& a) {
     const __m256i lim = _mm256_set1_epi32(
         (static_cast<std::int32_t>(a.src_rows - 2) << 16) |
         static_cast<std::int32_t>(static_cast<std::uint16_t>(a.src_cols - 2)));
-    // The 4-byte gathers of the bottom row (at the offset, and for RGB also 3 bytes on) must
-    // stay inside the image.
+    // The gathers of the bottom row (4 bytes for grey, 8 for RGB) must stay inside the image.
     const __m256i elim =
-        _mm256_set1_epi32(static_cast<std::int32_t>(extent - stride - (CN == 1 ? 4 : 7)));
+        _mm256_set1_epi32(static_cast<std::int32_t>(extent - stride - (CN == 1 ? 4 : 8)));
     const __m256i pick = pick_pattern();
     const __m256i zero = _mm256_setzero_si256();
     std::uint8_t* out = static_cast<std::uint8_t*>(a.dst);
