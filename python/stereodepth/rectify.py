@@ -146,7 +146,7 @@ def _distortion(name: str, value: Any, model: str) -> np.ndarray:
 
 def _size(name: str, value: Any) -> tuple[int, int]:
     """(width, height), both integers >= 1."""
-    if not isinstance(value, (tuple, list)) or len(value) != 2:
+    if not isinstance(value, (tuple, list, np.ndarray)) or len(value) != 2:
         raise TypeError(f"{name} must be a (width, height) pair of integers, got {value!r}")
     w = check.integer(f"{name}[0] (width)", value[0], minimum=1)
     h = check.integer(f"{name}[1] (height)", value[1], minimum=1)
