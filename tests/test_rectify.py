@@ -208,6 +208,51 @@ def test_fisheye_rectifier_maps_match_opencv(cv2: Any) -> None:
     assert np.abs(got_y - want_y).max() <= 1e-3
 
 
+@pytest.mark.parametrize("alpha", ALPHAS)
+@pytest.mark.parametrize("rig", RIGS, ids=lambda r: r.name)
+def test_stereo_rectify_matches_oracle(rig: Rig, alpha: float) -> None:
+    """Native against the numpy oracle (no OpenCV needed), both principal-point rules."""
+    for zero_disparity in (True, False):
+        for new_size in (None, (800, 500)):
+            kw = {"alpha": alpha, "zero_disparity": zero_disparity,
+                  "new_image_size": new_size, "distortion_model": rig.model}  # fmt: skip
+            args = (rig.K1, rig.D1, rig.K2, rig.D2, rig.size, rig.R, rig.T)
+            got = stereo_rectify(*args, **kw)
+            want = reference.stereo_rectify(*args, **kw)
+            for a, b in zip(got[:5], want[:5], strict=True):
+                assert_rel(a, b, 1e-12)
+            for a, b in ((got.roi1, want.roi1), (got.roi2, want.roi2)):
+                assert np.abs(np.array(a) - np.array(b)).max() <= 1, (a, b)
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_fisheye_stereo_rectify_matches_oracle(seed: int) -> None:
+    rig = fisheye_rig(seed)
+    args = (rig.K1, rig.D1, rig.K2, rig.D2, rig.size, rig.R, rig.T)
+    for balance, fov_scale, zd, new_size in [(0.0, 1.0, True, None), (0.6, 1.2, False, (900, 600))]:
+        kw = {"distortion_model": "equidistant", "balance": balance, "fov_scale": fov_scale,
+              "zero_disparity": zd, "new_image_size": new_size}  # fmt: skip
+        got, want = stereo_rectify(*args, **kw), reference.stereo_rectify(*args, **kw)
+        for a, b in zip(got, want, strict=True):
+            if isinstance(a, tuple):
+                assert a == b
+            else:
+                assert_rel(a, b, 1e-12)
+
+
+def test_undistort_points_matches_oracle() -> None:
+    rng = np.random.default_rng(6)
+    pts = rng.random((300, 2)) * [640, 480] - [20, 20]
+    for rig in RIGS:
+        got = _core.undistort_points(rig.K1, rig.D1, rig.model, pts)
+        np.testing.assert_allclose(got, reference.undistort_points(pts, rig.K1, rig.D1, rig.model),
+                                   rtol=0, atol=1e-14)  # fmt: skip
+    K, D = fisheye_camera()
+    got = _core.undistort_points(K, D, "equidistant", pts)
+    want = reference.undistort_points(pts, K, D, "equidistant")
+    np.testing.assert_allclose(got, want, rtol=0, atol=1e-14)
+
+
 def test_rectified_cameras_are_row_aligned() -> None:
     """Property of any rectification: a 3-D point projects to the same row in both images."""
     rig = RIGS[0]
