@@ -8,8 +8,8 @@ camera relative to the first) is rectified in three steps, each of which OpenCV 
    matrix Q: Bouguet's method, computed as ``cv2.stereoRectify`` does (OpenCV 5.0).
 2. :func:`init_undistort_rectify_map`: per rectified pixel, where to sample the raw image
    (``cv2.initUndistortRectifyMap`` with float32 maps).
-3. :func:`stereodepth.remap.remap`: bilinear sampling through the maps, natively and
-   threaded, in exactly specified arithmetic (``stereodepth.reference.remap`` is its oracle).
+3. :func:`remap`: bilinear sampling through the maps, natively and threaded, in exactly
+   specified arithmetic (``stereodepth.reference.remap`` is its oracle).
 
 :class:`StereoRectifier` does all three once and then rectifies frame after frame.
 
@@ -41,7 +41,7 @@ import numpy as np
 
 from . import _core
 from . import _validate as check
-from .remap import _as_image, _precision, _prepare_out, remap
+from ._remap import _as_image, _precision, _prepare_out, remap
 from .rig import StereoRig
 
 __all__ = [

@@ -276,7 +276,7 @@ def remap(
 ) -> np.ndarray:
     """Oracle of :func:`stereodepth.remap`: the rules of its docstring, in int64 for 8-bit
     images and float64 for 16-bit ones (``threads`` is checked, then unused)."""
-    from .remap import _as_image, _as_maps, _prepare_out
+    from ._remap import _as_image, _as_maps, _prepare_out
 
     img = _as_image("image", image)
     mx, my = _as_maps(map_x, map_y)

@@ -2,8 +2,10 @@
 constant 0 border), natively: exact fixed point for 8-bit images, float64 for 16-bit ones.
 
 The rules are in :func:`remap`; ``cpp/include/stereodepth/remap.hpp`` holds the same, and
-``stereodepth.reference.remap`` is the numpy oracle. :class:`stereodepth.StereoRectifier`
-keeps the maps in the kernels' form and calls the same kernel per frame.
+``stereodepth.reference.remap`` is the numpy oracle. The public name is
+:func:`stereodepth.remap` (also ``stereodepth.rectify.remap``): this module is private so
+that the name stays the function's. :class:`stereodepth.StereoRectifier` keeps the maps in
+the kernels' form and calls the same kernel per frame.
 """
 
 from __future__ import annotations
