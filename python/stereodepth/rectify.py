@@ -334,9 +334,10 @@ class StereoRectifier:
     reads) or the constructor (arrays). Then :meth:`rectify` each pair.
 
     Attributes: ``R1``, ``R2`` (3, 3), ``P1``, ``P2`` (3, 4), ``Q`` (4, 4) as
-    :func:`stereo_rectify`; ``roi1``, ``roi2``; ``image_size`` (raw) and ``output_size``
-    (rectified), both ``(width, height)``; ``vertical`` (the baseline is along y: our matchers
-    search along x, so such pairs need transposing before matching); :attr:`rig`.
+    :func:`stereo_rectify`; ``roi1``, ``roi2`` (the whole image when a calibration's own
+    transforms are used); ``image_size`` (raw) and ``output_size`` (rectified), both
+    ``(width, height)``; ``vertical`` (the baseline is along y: our matchers search along x,
+    so such pairs need transposing before matching); :attr:`rig`.
 
     The rectified images are those of the rectified cameras P1, P2: depth computed from their
     disparity (with :attr:`rig` or :attr:`Q`) is in the rectified left camera's frame, which
