@@ -173,7 +173,15 @@ def test_sample_pair_without_a_rig_writes_the_disparity_only(
 ) -> None:
     s = sample_pair(160, 120)
     Image.fromarray(s.left).save(tmp_path / "l.png")
-    Image.fromarray(s.right).convert("L").save(tmp_path / "r.png")  # grey with RGB: in grey
+    Image.fromarray(s.right).convert("L").save(tmp_path / "r.png")
+    # A colour left with a grey right is refused, as block_match and batch refuse it.
+    code, _, err = run(capsys, tmp_path / "l.png", tmp_path / "r.png", "-o", f"{tmp_path}/x/")
+    assert code == 2
+    assert err.strip().endswith(
+        "right must be colour (RGB) as left is, got a grey image "
+        "(convert one of them: both colour or both grey)"
+    )
+    Image.fromarray(s.left).convert("L").save(tmp_path / "l.png")
     code, text, err = run(
         capsys,
         tmp_path / "l.png",
@@ -189,10 +197,7 @@ def test_sample_pair_without_a_rig_writes_the_disparity_only(
         "disparity.npy",
     ]
     d = np.load(tmp_path / "o" / "disparity.npy")
-    grey = read_image(tmp_path / "r.png")
-    from stereodepth.match_pair import prepare_pair
-
-    lg, rg = prepare_pair(s.left, grey)
+    lg, rg = read_image(tmp_path / "l.png"), read_image(tmp_path / "r.png")
     assert same(d, block_match(lg, rg, num_disparities=default_num_disparities(160)))
     ok = np.isfinite(d)
     assert np.mean(np.abs(d[ok] - s.disparity[ok]) <= 1) > 0.95  # the known disparity

@@ -188,16 +188,15 @@ def test_sample_pair_and_mixed_inputs(client: TestClient, pair: Any) -> None:
     err = np.abs(expected[ok].astype(np.float64) - s.disparity[ok])
     assert r.json()["truth"] == {"mean_abs_error_px": err.mean(), "bad_1": (err > 1).mean()}
     assert r.json()["truth"]["bad_1"] < 0.01  # the sample is easy: the matcher finds it
-    # A JPEG colour left and a grey PNG right: matched in grey.
+    # A JPEG colour left and a grey PNG right: refused at the right image's field, the rule of
+    # block_match and batch (both colour or both grey).
     grey = np.asarray(Image.fromarray(pair.right).convert("L"))
     left_jpeg = encode(pair.left, "JPEG", quality=95)
     r = post(client, left="data:image/jpeg;base64," + left_jpeg, right=encode(grey))
-    assert r.status_code == 200, r.text
-    with Image.open(io.BytesIO(base64.b64decode(left_jpeg))) as im:
-        left = np.asarray(im.convert("RGB"))
-    lg, rg = prepare_pair(left, grey)
-    got = f32(r.json()["arrays"]["disparity"], grey.shape)
-    assert same(got, block_match(lg, rg, num_disparities=default_num_disparities(96)))
+    assert r.status_code == 422, r.text
+    assert "right must be colour (RGB) as left is, got a grey image" in r.text
+    with pytest.raises(ValueError, match=r"^right must be colour \(RGB\) as left is"):
+        prepare_pair(pair.left, grey)
     # 16-bit grey pairs are matched as 16-bit; an opaque alpha channel is dropped.
     l16 = (np.asarray(Image.fromarray(pair.left).convert("L"), np.uint16) * 257).astype(np.uint16)
     r16 = (grey.astype(np.uint16) * 257).astype(np.uint16)
@@ -277,7 +276,7 @@ def bad_cases(pair: Any) -> list[tuple[dict[str, Any], list[Any], str]]:
             "left: must be a PNG or JPEG image, got GIF",
         ),
         (
-            {"left": encode(l16), "right": right},
+            {"left": encode(l16), "right": encode(pair.right[..., 1].copy())},
             ["body", "right"],
             "right must have the bit depth of left (16-bit), got 8-bit",
         ),
@@ -459,17 +458,18 @@ def test_two_uploads_at_once_both_complete_and_the_server_keeps_answering(
     monkeypatch.setattr(depthmap, "compute", slow_compute)
     left, right = encode(pair.left), encode(pair.right)
     grey_left = encode(np.asarray(Image.fromarray(pair.left).convert("L")))
+    grey_right = encode(np.asarray(Image.fromarray(pair.right).convert("L")))
     answers: dict[int, Any] = {}
     with TestClient(create_app()) as c:
 
-        def upload(i: int, left_b64: str) -> None:
+        def upload(i: int, left_b64: str, right_b64: str) -> None:
             answers[i] = c.post(
-                "/api/depthmap", json={"left": left_b64, "right": right, "rig": RIG}
+                "/api/depthmap", json={"left": left_b64, "right": right_b64, "rig": RIG}
             )
 
         threads = [
-            threading.Thread(target=upload, args=(0, left)),
-            threading.Thread(target=upload, args=(1, grey_left)),
+            threading.Thread(target=upload, args=(0, left, right)),
+            threading.Thread(target=upload, args=(1, grey_left, grey_right)),
         ]
         for t in threads:
             t.start()

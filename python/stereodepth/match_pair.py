@@ -2,9 +2,8 @@
 page's depth view: make the pair comparable, run the chosen matcher, convert to depth with
 the rig, and sum the result up.
 
-Rules where images differ: an RGB and a grey image are matched in grey (the RGB one turned
-grey with the matcher's own formula, OpenCV's ``COLOR_RGB2GRAY``); images of different sizes
-or bit depths are rejected. The default number of disparities is a Middlebury ``ndisp`` when
+Rules where images differ, the same as :func:`stereodepth.block_match` and ``stereodepth batch``:
+a colour and a grey image, images of different sizes or of different bit depths are refused. The default number of disparities is a Middlebury ``ndisp`` when
 the calibration has one, else :func:`default_num_disparities` of the width.
 """
 
@@ -60,23 +59,24 @@ def read_calibration_file(path: str | os.PathLike[str]) -> Any:
     return reader(path)
 
 
-def _grey(rgb: np.ndarray) -> np.ndarray:
-    """The matcher's RGB to grey: (9798 R + 19235 G + 3735 B + 16384) >> 15."""
-    r, g, b = (rgb[..., i].astype(np.uint32) for i in range(3))
-    return ((9798 * r + 19235 * g + 3735 * b + 16384) >> 15).astype(np.uint8)
-
-
 def prepare_pair(left: np.ndarray, right: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """The pair as the matcher takes it: the same size required, RGB with grey matched in grey,
-    the same bit depth required. Raises ValueError naming ``right`` (the one compared)."""
+    """The pair as the matcher takes it, checked by the rule :func:`stereodepth.block_match`
+    and ``stereodepth batch`` follow: the same size, both colour or both grey, the same bit
+    depth. Raises ValueError naming ``right`` (the one compared)."""
     if left.shape[:2] != right.shape[:2]:
         raise ValueError(
             f"right must have the size of left, {left.shape[1]}x{left.shape[0]} px, got "
             f"{right.shape[1]}x{right.shape[0]} px"
         )
     if left.ndim != right.ndim:
-        left = _grey(left) if left.ndim == 3 else left
-        right = _grey(right) if right.ndim == 3 else right
+
+        def kind(a: np.ndarray) -> str:
+            return "colour (RGB)" if a.ndim == 3 else "grey"
+
+        raise ValueError(
+            f"right must be {kind(left)} as left is, got a {kind(right)} image (convert one "
+            "of them: both colour or both grey)"
+        )
     if left.dtype != right.dtype:
         bits = {np.dtype(np.uint8): "8-bit", np.dtype(np.uint16): "16-bit"}
         raise ValueError(
