@@ -2,9 +2,10 @@
 page's depth view: make the pair comparable, run the chosen matcher, convert to depth with
 the rig, and sum the result up.
 
-Rules where images differ, the same as :func:`stereodepth.block_match` and ``stereodepth batch``:
-a colour and a grey image, images of different sizes or of different bit depths are refused. The default number of disparities is a Middlebury ``ndisp`` when
-the calibration has one, else :func:`default_num_disparities` of the width.
+Rules where images differ, the same as :func:`stereodepth.block_match` and ``stereodepth
+batch``: a colour and a grey image, images of different sizes or of different bit depths are
+refused. The default number of disparities is a Middlebury ``ndisp`` when the calibration has
+one, else :func:`default_num_disparities` of the width.
 """
 
 from __future__ import annotations
