@@ -7,14 +7,7 @@
 
 namespace stereodepth::bindings {
 
-namespace {
-
-MatchCost parse_cost(const std::string& name) {
-  if (name == "census") return MatchCost::kCensus;
-  if (name == "sad") return MatchCost::kSad;
-  throw py::value_error("cost must be 'census' or 'sad', got '" + name + "'");
-}
-
+// Shared with bind_semi_global.cpp (declared in bind_common.hpp).
 SubpixelFit parse_subpixel(const std::string& name) {
   if (name == "none") return SubpixelFit::kNone;
   if (name == "parabola") return SubpixelFit::kParabola;
@@ -63,6 +56,14 @@ ImageView<float> output_view(py::array& a, const char* name) {
   }
   return ImageView<float>{static_cast<float*>(a.mutable_data()), a.shape(0), a.shape(1),
                           a.shape(1)};
+}
+
+namespace {
+
+MatchCost parse_cost(const std::string& name) {
+  if (name == "census") return MatchCost::kCensus;
+  if (name == "sad") return MatchCost::kSad;
+  throw py::value_error("cost must be 'census' or 'sad', got '" + name + "'");
 }
 
 void compute_py(BlockMatcher& self, const py::array& left, const py::array& right,

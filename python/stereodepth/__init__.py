@@ -4,6 +4,7 @@
 - :func:`disparity_to_depth`: native, threaded disparity-map to depth-map conversion.
 - :func:`block_match`, :class:`StereoMatcher`: native block-matching disparity (census or SAD,
   sub-pixel, validity checks); :func:`to_opencv_disparity` for OpenCV's int16 x16 format.
+- :func:`semi_global_match`, :class:`SemiGlobalMatcher`: native semi-global matching.
 - :func:`reproject`, :func:`write_ply`: disparity maps to XYZ point clouds and PLY files.
 - :mod:`stereodepth.reference`: the pure-numpy oracle of every native kernel.
 """
@@ -17,11 +18,13 @@ from .depth import disparity_to_depth
 from .matching import StereoMatcher, block_match, to_opencv_disparity
 from .pointcloud import reproject, write_ply
 from .rig import DepthTable, StereoRig
+from .semi_global import SemiGlobalMatcher, semi_global_match
 
 __version__: str = _core.__version__
 
 __all__ = [
     "DepthTable",
+    "SemiGlobalMatcher",
     "StereoMatcher",
     "StereoRig",
     "__version__",
@@ -29,6 +32,7 @@ __all__ = [
     "build_info",
     "disparity_to_depth",
     "reproject",
+    "semi_global_match",
     "to_opencv_disparity",
     "write_ply",
 ]

@@ -13,9 +13,10 @@ import numpy as np
 
 from . import _validate as check
 from ._reference_block_match import block_match  # the oracle's body lives there
+from ._reference_semi_global import semi_global_match
 from .depth import DepthOptions, as_disparity, prepare_out
 
-__all__ = ["block_match", "disparity_to_depth", "reproject"]
+__all__ = ["block_match", "disparity_to_depth", "reproject", "semi_global_match"]
 
 
 def disparity_to_depth(

@@ -1,0 +1,295 @@
+// Semi-global matching kernels. Compiled once per instruction set (STEREODEPTH_ISA_NS);
+// everything here stays inside that namespace (see dispatch.hpp). The loops run over the
+// disparities of one pixel with 16-bit lanes and no dependence between lanes, written so the
+// compiler vectorises them for each build (SSE2, AVX2, AVX-512BW); every build computes the
+// same integers, and the floating-point steps use the same IEEE operations, in the same order,
+// as the numpy oracle.
+#include "semi_global_kernels.hpp"
+
+#include <cmath>
+#include <cstdint>
+#include <cstring>
+#include <limits>
+#include <utility>
+
+#include "stereodepth/block_match.hpp"
+
+#ifndef STEREODEPTH_ISA_NS
+#error "STEREODEPTH_ISA_NS must name the instruction set this file is compiled for"
+#endif
+
+namespace stereodepth::detail::STEREODEPTH_ISA_NS {
+namespace {
+
+using std::int16_t;
+using std::ptrdiff_t;
+using std::uint16_t;
+using std::uint32_t;
+using std::uint8_t;
+
+inline ptrdiff_t clamp_index(ptrdiff_t v, ptrdiff_t lo, ptrdiff_t hi) {
+  return v < lo ? lo : (v > hi ? hi : v);
+}
+
+inline int16_t min16(int16_t a, int16_t b) { return a < b ? a : b; }
+
+// Set bits of a 16-bit census difference, in 16-bit lanes (vectorises without popcnt).
+inline uint16_t popcount16(uint16_t v) {
+  v = static_cast<uint16_t>(v - ((v >> 1) & 0x5555u));
+  v = static_cast<uint16_t>((v & 0x3333u) + ((v >> 2) & 0x3333u));
+  v = static_cast<uint16_t>((v + (v >> 4)) & 0x0F0Fu);
+  return static_cast<uint16_t>((v + (v >> 8)) & 0x001Fu);
+}
+
+// ------------------------------------------------------------------------------------------
+// Costs.
+
+void cost_row(const uint16_t* const* lrows, const uint16_t* const* rrows, int radius,
+              ptrdiff_t cols, int nd, int min_d, int cmax, uint16_t* rev, uint16_t* colraw,
+              uint8_t* out) {
+  const int n = 2 * radius + 1;
+  const ptrdiff_t rl = cols + nd;
+  // rev_i[u] = right_i[clamp(cols - 1 - min_d - u)]: the right pixel of column x and index k
+  // is rev_i[cols - 1 - x + k], rising with k.
+  for (int i = 0; i < n; ++i) {
+    uint16_t* rv = rev + i * rl;
+    for (ptrdiff_t u = 0; u < rl; ++u) {
+      rv[u] = rrows[i][clamp_index(cols - 1 - min_d - u, 0, cols - 1)];
+    }
+  }
+  for (ptrdiff_t x = 0; x < cols; ++x) {
+    uint16_t* __restrict cr = colraw + x * nd;
+    {
+      const uint16_t l = lrows[0][x];
+      const uint16_t* __restrict rv = rev + (cols - 1 - x);
+      for (int k = 0; k < nd; ++k) cr[k] = popcount16(static_cast<uint16_t>(l ^ rv[k]));
+    }
+    for (int i = 1; i < n; ++i) {
+      const uint16_t l = lrows[i][x];
+      const uint16_t* __restrict rv = rev + i * rl + (cols - 1 - x);
+      for (int k = 0; k < nd; ++k) {
+        cr[k] = static_cast<uint16_t>(cr[k] + popcount16(static_cast<uint16_t>(l ^ rv[k])));
+      }
+    }
+  }
+  for (ptrdiff_t x = 0; x < cols; ++x) {
+    uint8_t* __restrict o = out + x * nd;
+    if (radius == 0) {
+      const uint16_t* __restrict a = colraw + x * nd;
+      for (int k = 0; k < nd; ++k) o[k] = static_cast<uint8_t>(a[k]);
+    } else {
+      const uint16_t* __restrict a = colraw + clamp_index(x - 1, 0, cols - 1) * nd;
+      const uint16_t* __restrict b = colraw + x * nd;
+      const uint16_t* __restrict c = colraw + clamp_index(x + 1, 0, cols - 1) * nd;
+      for (int k = 0; k < nd; ++k) o[k] = static_cast<uint8_t>(a[k] + b[k] + c[k]);
+    }
+    // Candidates whose right pixel x - min_d - k leaves the image cost the most.
+    const ptrdiff_t khi = x - min_d;             // right pixel >= 0
+    const ptrdiff_t klo = x - min_d - cols + 1;  // right pixel <= cols - 1
+    for (ptrdiff_t k = clamp_index(khi + 1, 0, nd); k < nd; ++k) o[k] = static_cast<uint8_t>(cmax);
+    for (ptrdiff_t k = 0, e = clamp_index(klo, 0, nd); k < e; ++k) {
+      o[k] = static_cast<uint8_t>(cmax);
+    }
+  }
+}
+
+// ------------------------------------------------------------------------------------------
+// Paths.
+
+inline int p2_for(const PathParams& p, int gp, int gq) {
+  if (p.p2_step <= 0) return p.p2;
+  const int s = gp > gq ? gp - gq : gq - gp;
+  const long long v = static_cast<long long>(p.p2) * p.p2_step / (p.p2_step + s);
+  return v > p.p1 ? static_cast<int>(v) : p.p1;
+}
+
+enum class SumMode { kWrite, kAdd };
+
+// A path's first pixel: L = C. Returns min L.
+template <SumMode kMode>
+inline int16_t path_start(const uint8_t* __restrict c, int16_t* __restrict out, int nd,
+                          uint16_t* __restrict s) {
+  int16_t mn = std::numeric_limits<int16_t>::max();
+  for (int d = 0; d < nd; ++d) {
+    const int16_t v = static_cast<int16_t>(c[d]);
+    out[d + 1] = v;
+    mn = min16(mn, v);
+    if constexpr (kMode == SumMode::kWrite) {
+      s[d] = static_cast<uint16_t>(v);
+    } else {
+      s[d] = static_cast<uint16_t>(s[d] + static_cast<uint16_t>(v));
+    }
+  }
+  return mn;
+}
+
+// L(p, d) = C(p, d) + min(L(q, d), L(q, d -+ 1) + P1, m + P2') - m, from prev (L(q, .), with
+// sentinels); returns min L(p, .).
+template <SumMode kMode>
+inline int16_t path_step(const int16_t* __restrict prev, const uint8_t* __restrict c,
+                         int16_t* __restrict out, int nd, int p1, int p2, int m,
+                         uint16_t* __restrict s) {
+  const int16_t vp1 = static_cast<int16_t>(p1);
+  const int16_t mp2 = static_cast<int16_t>(m + p2);
+  const int16_t vm = static_cast<int16_t>(m);
+  int16_t mn = std::numeric_limits<int16_t>::max();
+  for (int d = 0; d < nd; ++d) {
+    const int16_t a = prev[d + 1];
+    const int16_t b = static_cast<int16_t>(prev[d] + vp1);
+    const int16_t e = static_cast<int16_t>(prev[d + 2] + vp1);
+    const int16_t v = min16(min16(a, mp2), min16(b, e));
+    const int16_t o = static_cast<int16_t>(static_cast<int16_t>(c[d]) + v - vm);
+    out[d + 1] = o;
+    mn = min16(mn, o);
+    if constexpr (kMode == SumMode::kWrite) {
+      s[d] = static_cast<uint16_t>(o);
+    } else {
+      s[d] = static_cast<uint16_t>(s[d] + static_cast<uint16_t>(o));
+    }
+  }
+  return mn;
+}
+
+void horizontal_row(const PathParams& p, const uint8_t* c, const uint8_t* g, ptrdiff_t cols,
+                    uint16_t* s, int16_t* tmp) {
+  const int nd = p.nd, ls = p.ls;
+  int16_t* a = tmp;
+  int16_t* b = tmp + ls;
+  a[0] = a[nd + 1] = b[0] = b[nd + 1] = kSentinel;
+  // From the left: writes the sums.
+  int m = path_start<SumMode::kWrite>(c, a, nd, s);
+  for (ptrdiff_t x = 1; x < cols; ++x) {
+    const int p2 = p2_for(p, g[x], g[x - 1]);
+    m = path_step<SumMode::kWrite>(a, c + x * nd, b, nd, p.p1, p2, m, s + x * nd);
+    std::swap(a, b);
+  }
+  // From the right: adds.
+  const ptrdiff_t last = cols - 1;
+  m = path_start<SumMode::kAdd>(c + last * nd, a, nd, s + last * nd);
+  for (ptrdiff_t x = last - 1; x >= 0; --x) {
+    const int p2 = p2_for(p, g[x], g[x + 1]);
+    m = path_step<SumMode::kAdd>(a, c + x * nd, b, nd, p.p1, p2, m, s + x * nd);
+    std::swap(a, b);
+  }
+}
+
+void path_row(const PathParams& p, const uint8_t* c, const uint8_t* g, const uint8_t* gprev,
+              const int16_t* prev, int16_t* cur, ptrdiff_t cols, ptrdiff_t x0, ptrdiff_t x1,
+              int dx, uint16_t* s) {
+  const int nd = p.nd, ls = p.ls;
+  for (ptrdiff_t x = x0; x < x1; ++x) {
+    const ptrdiff_t xq = x - dx;
+    int16_t* out = cur + x * ls;
+    int16_t mn;
+    if (prev == nullptr || xq < 0 || xq >= cols) {
+      mn = path_start<SumMode::kAdd>(c + x * nd, out, nd, s + x * nd);
+    } else {
+      const int16_t* q = prev + xq * ls;
+      const int p2 = p2_for(p, g[x], gprev[xq]);
+      mn = path_step<SumMode::kAdd>(q, c + x * nd, out, nd, p.p1, p2, q[nd + 2], s + x * nd);
+    }
+    out[nd + 2] = mn;  // the pixel's least path cost, for the next row
+  }
+}
+
+// ------------------------------------------------------------------------------------------
+// Winner, checks, sub-pixel step.
+
+void decide_row(const DecideArgs& a, const uint16_t* s, float* disp, float* conf, uint32_t* rmin,
+                uint16_t* rarg) {
+  const ptrdiff_t cols = a.cols;
+  const int nd = a.nd;
+  const ptrdiff_t dmin = a.min_d;
+  const bool lr_on = a.lr_max_diff >= 0;
+  constexpr uint32_t kNone = 0x10000u;  // above every sum
+  auto range = [&](ptrdiff_t x, ptrdiff_t& klo, ptrdiff_t& khi) {
+    klo = clamp_index(x - dmin - cols + 1, 0, nd);
+    khi = clamp_index(x - dmin, -1, nd - 1);
+  };
+  if (lr_on) {
+    // The right image's winners: right column xr = x - dmin - k at j = cols - 1 - xr, rising
+    // with k; x rises, so k does for each j, and a strict < keeps the lowest.
+    for (ptrdiff_t j = 0; j < cols; ++j) rmin[j] = kNone;
+    for (ptrdiff_t x = 0; x < cols; ++x) {
+      ptrdiff_t klo, khi;
+      range(x, klo, khi);
+      const uint16_t* sx = s + x * nd;
+      const ptrdiff_t base = cols - 1 - x + dmin;
+      for (ptrdiff_t k = klo; k <= khi; ++k) {
+        if (sx[k] < rmin[base + k]) {
+          rmin[base + k] = sx[k];
+          rarg[base + k] = static_cast<uint16_t>(k);
+        }
+      }
+    }
+  }
+  const float nan = std::numeric_limits<float>::quiet_NaN();
+  for (ptrdiff_t x = 0; x < cols; ++x) {
+    ptrdiff_t klo, khi;
+    range(x, klo, khi);
+    const uint16_t* sx = s + x * nd;
+    bool ok = klo <= khi;
+    if (!a.clip_border) ok = ok && x - dmin - nd + 1 >= 0 && x - dmin <= cols - 1;
+    if (!ok) {
+      disp[x] = nan;
+      if (conf) conf[x] = 0.0f;
+      continue;
+    }
+    uint32_t best = kNone;
+    for (ptrdiff_t k = klo; k <= khi; ++k) best = sx[k] < best ? sx[k] : best;
+    ptrdiff_t kb = klo;
+    while (sx[kb] != best) ++kb;
+    uint32_t second = kNone;
+    for (ptrdiff_t k = klo; k <= kb - 2; ++k) second = sx[k] < second ? sx[k] : second;
+    for (ptrdiff_t k = kb + 2; k <= khi; ++k) second = sx[k] < second ? sx[k] : second;
+    const bool has2 = second != kNone;
+    if (a.uniqueness_factor > 0 && has2) {
+      ok = static_cast<double>(second) * 100.0 > static_cast<double>(best) * a.uniqueness_factor;
+    }
+    if (ok && lr_on) {
+      const ptrdiff_t j = cols - 1 - (x - dmin - kb);
+      const ptrdiff_t kr = rarg[j];
+      const ptrdiff_t diff = kb > kr ? kb - kr : kr - kb;
+      ok = static_cast<double>(diff) <= a.lr_max_diff;
+    }
+    if (!ok) {
+      disp[x] = nan;
+      if (conf) conf[x] = 0.0f;
+      continue;
+    }
+    float d = static_cast<float>(dmin + kb);
+    if (a.subpixel != static_cast<int>(SubpixelFit::kNone) && kb - 1 >= klo && kb + 1 <= khi) {
+      const int32_t c0 = sx[kb - 1];
+      const int32_t c1 = static_cast<int32_t>(best);
+      const int32_t c2 = sx[kb + 1];
+      const float num = static_cast<float>(c0 - c2);
+      float den;
+      if (a.subpixel == static_cast<int>(SubpixelFit::kParabola)) {
+        den = static_cast<float>(2 * (c0 + c2 - 2 * c1));
+      } else {
+        den = static_cast<float>(2 * (c0 - c1 > c2 - c1 ? c0 - c1 : c2 - c1));
+      }
+      if (den > 0.0f) d = d + num / den;
+    }
+    disp[x] = d;
+    if (conf) {
+      conf[x] = !has2        ? 1.0f
+                : second > 0 ? static_cast<float>(second - best) / static_cast<float>(second)
+                             : 0.0f;
+    }
+  }
+}
+
+}  // namespace
+
+const SemiGlobalKernels& semi_global_kernels() {
+  static const SemiGlobalKernels kernels = {
+      &cost_row,
+      &horizontal_row,
+      &path_row,
+      &decide_row,
+  };
+  return kernels;
+}
+
+}  // namespace stereodepth::detail::STEREODEPTH_ISA_NS

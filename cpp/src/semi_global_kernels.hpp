@@ -1,0 +1,71 @@
+// Internal: the semi-global matching kernels, compiled once per instruction set.
+//
+// Layouts: costs C (uint8) and sums S (uint16) hold `nd` values per pixel, disparity index k
+// (disparity min_d + k) rising. Path costs L (int16) hold `ls` values per pixel: a sentinel
+// at 0, the nd values at 1 .. nd, a sentinel at nd + 1 (kSentinel, above every path cost, so
+// the neighbours d - 1 and d + 1 of the ends never win), then padding.
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+
+namespace stereodepth::detail {
+
+// Path costs stay <= 16 * block_size^2 + p2 <= 65535 / 4 < kSentinel; kSentinel + p1 and
+// m + p2 stay below 2^15.
+inline constexpr std::int16_t kSentinel = 16384;
+
+struct PathParams {
+  int nd;       // disparities
+  int ls;       // int16 per pixel in path rows (>= nd + 2)
+  int p1, p2, p2_step;
+};
+
+// The cost row of one image row, all columns: lrows/rrows are the 2r + 1 census rows
+// (uint16 codes) y - r .. y + r, clamped to the image. rev: (2r + 1) * (cols + nd) scratch,
+// colraw: cols * nd scratch. out: cols * nd.
+using CostRowFn = void (*)(const std::uint16_t* const* lrows, const std::uint16_t* const* rrows,
+                           int radius, std::ptrdiff_t cols, int nd, int min_d, int cmax,
+                           std::uint16_t* rev, std::uint16_t* colraw, std::uint8_t* out);
+// The paths from the left and from the right along one row: s[x * nd + k] = L_lr + L_rl.
+// g: the row's grey levels (8-bit scale). tmp: 4 * ls int16 scratch.
+using HorizontalRowFn = void (*)(const PathParams& p, const std::uint8_t* c,
+                                 const std::uint8_t* g, std::ptrdiff_t cols, std::uint16_t* s,
+                                 std::int16_t* tmp);
+// One row of a vertical or diagonal path, columns x0 .. x1 - 1: cur[x] from prev[x - dx]
+// (the previous row; null on the path's first row, and a path starts where x - dx leaves the
+// image). Adds L into s (the row's sums).
+using PathRowFn = void (*)(const PathParams& p, const std::uint8_t* c, const std::uint8_t* g,
+                           const std::uint8_t* gprev, const std::int16_t* prev,
+                           std::int16_t* cur, std::ptrdiff_t cols, std::ptrdiff_t x0,
+                           std::ptrdiff_t x1, int dx, std::uint16_t* s);
+
+struct DecideArgs {
+  std::ptrdiff_t cols;
+  int nd, min_d;
+  int subpixel;              // SubpixelFit
+  double uniqueness_factor;  // 0: off
+  double lr_max_diff;        // negative: off
+  bool clip_border;
+};
+// The winner, checks and sub-pixel step of one row of sums. rmin, rarg: cols elements of scratch.
+using DecideRowFn = void (*)(const DecideArgs& a, const std::uint16_t* s, float* disp,
+                             float* conf, std::uint32_t* rmin, std::uint16_t* rarg);
+
+struct SemiGlobalKernels {
+  CostRowFn cost_row;
+  HorizontalRowFn horizontal_row;
+  PathRowFn path_row;
+  DecideRowFn decide_row;
+};
+
+#define STEREODEPTH_DECLARE_SEMI_GLOBAL_KERNELS(ns) \
+  namespace ns {                                    \
+  const SemiGlobalKernels& semi_global_kernels();   \
+  }
+STEREODEPTH_DECLARE_SEMI_GLOBAL_KERNELS(baseline)
+STEREODEPTH_DECLARE_SEMI_GLOBAL_KERNELS(avx2)
+STEREODEPTH_DECLARE_SEMI_GLOBAL_KERNELS(avx512)
+#undef STEREODEPTH_DECLARE_SEMI_GLOBAL_KERNELS
+
+}  // namespace stereodepth::detail
