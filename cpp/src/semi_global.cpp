@@ -344,8 +344,8 @@ void SemiGlobalMatcher::compute(const StereoImage& left, const StereoImage& righ
   da.clip_border = p.clip_border;
   run_bands(nt, [&](std::ptrdiff_t b) {
     const auto c = static_cast<std::size_t>(cols);
-    auto* rmin = aligned<std::uint32_t>(ws.scratch[static_cast<std::size_t>(b)], 2 * c);
-    auto* rarg = reinterpret_cast<std::uint16_t*>(rmin + c);
+    auto* rmin = aligned<std::uint16_t>(ws.scratch[static_cast<std::size_t>(b)], 2 * c);
+    std::uint16_t* rarg = rmin + c;
     for (std::ptrdiff_t y = band(rows, nt, b); y < band(rows, nt, b + 1); ++y) {
       float* drow = pre ? pre + y * cols : disparity.row(y);
       k.decide_row(da, sums + static_cast<std::size_t>(y) * c * static_cast<std::size_t>(nd),
@@ -356,34 +356,12 @@ void SemiGlobalMatcher::compute(const StereoImage& left, const StereoImage& righ
   // 4. The 3x3 median of the valid disparities (the lower median; NaN stays NaN).
   if (pre) {
     run_bands(nt, [&](std::ptrdiff_t b) {
+      auto* flags = aligned<std::uint8_t>(ws.scratch[static_cast<std::size_t>(b)],
+                                          static_cast<std::size_t>(cols));
       for (std::ptrdiff_t y = band(rows, nt, b); y < band(rows, nt, b + 1); ++y) {
-        float* out = disparity.row(y);
-        const float* mid = pre + y * cols;
-        for (std::ptrdiff_t x = 0; x < cols; ++x) {
-          if (std::isnan(mid[x])) {
-            out[x] = mid[x];
-            continue;
-          }
-          float v[9];
-          int n = 0;
-          for (std::ptrdiff_t yy = std::max<std::ptrdiff_t>(0, y - 1);
-               yy <= std::min<std::ptrdiff_t>(rows - 1, y + 1); ++yy) {
-            const float* row = pre + yy * cols;
-            for (std::ptrdiff_t xx = std::max<std::ptrdiff_t>(0, x - 1);
-                 xx <= std::min<std::ptrdiff_t>(cols - 1, x + 1); ++xx) {
-              const float f = row[xx];
-              if (f == f) {
-                int j = n++;
-                while (j > 0 && v[j - 1] > f) {
-                  v[j] = v[j - 1];
-                  --j;
-                }
-                v[j] = f;
-              }
-            }
-          }
-          out[x] = v[(n - 1) / 2];
-        }
+        k.median_row(y > 0 ? pre + (y - 1) * cols : nullptr, pre + y * cols,
+                     y + 1 < rows ? pre + (y + 1) * cols : nullptr, disparity.row(y), flags,
+                     cols);
       }
     });
   }

@@ -195,7 +195,7 @@ void path_row(const PathParams& p, const uint8_t* c, const uint8_t* g, const uin
 // ------------------------------------------------------------------------------------------
 // Winner, checks, sub-pixel step.
 
-void decide_row(const DecideArgs& a, const uint16_t* s, float* disp, float* conf, uint32_t* rmin,
+void decide_row(const DecideArgs& a, const uint16_t* s, float* disp, float* conf, uint16_t* rmin,
                 uint16_t* rarg) {
   const ptrdiff_t cols = a.cols;
   const int nd = a.nd;
@@ -208,18 +208,27 @@ void decide_row(const DecideArgs& a, const uint16_t* s, float* disp, float* conf
   };
   if (lr_on) {
     // The right image's winners: right column xr = x - dmin - k at j = cols - 1 - xr, rising
-    // with k; x rises, so k does for each j, and a strict < keeps the lowest.
-    for (ptrdiff_t j = 0; j < cols; ++j) rmin[j] = kNone;
+    // with k; x rises, so k does for each j, and a strict < keeps the lowest. Each column
+    // starts at the least cost (0xFFFF) with its first candidate, so a column whose sums are
+    // all 0xFFFF keeps that one, as the oracle's argmin does.
+    for (ptrdiff_t j = 0; j < cols; ++j) {
+      const ptrdiff_t xr = cols - 1 - j;
+      rmin[j] = 0xFFFFu;
+      rarg[j] = static_cast<uint16_t>(clamp_index(-dmin - xr, 0, nd - 1));
+    }
     for (ptrdiff_t x = 0; x < cols; ++x) {
       ptrdiff_t klo, khi;
       range(x, klo, khi);
-      const uint16_t* sx = s + x * nd;
-      const ptrdiff_t base = cols - 1 - x + dmin;
-      for (ptrdiff_t k = klo; k <= khi; ++k) {
-        if (sx[k] < rmin[base + k]) {
-          rmin[base + k] = sx[k];
-          rarg[base + k] = static_cast<uint16_t>(k);
-        }
+      const uint16_t* __restrict sx = s + x * nd;
+      uint16_t* __restrict rm = rmin + (cols - 1 - x + dmin + klo);
+      uint16_t* __restrict ra = rarg + (cols - 1 - x + dmin + klo);
+      const ptrdiff_t n = khi - klo + 1;
+      if (n <= 0) continue;
+      for (ptrdiff_t i = 0; i < n; ++i) {
+        const uint16_t v = sx[klo + i], r = rm[i];
+        const bool lt = v < r;
+        rm[i] = lt ? v : r;
+        ra[i] = lt ? static_cast<uint16_t>(klo + i) : ra[i];
       }
     }
   }
@@ -227,7 +236,7 @@ void decide_row(const DecideArgs& a, const uint16_t* s, float* disp, float* conf
   for (ptrdiff_t x = 0; x < cols; ++x) {
     ptrdiff_t klo, khi;
     range(x, klo, khi);
-    const uint16_t* sx = s + x * nd;
+    const uint16_t* __restrict sx = s + x * nd;
     bool ok = klo <= khi;
     if (!a.clip_border) ok = ok && x - dmin - nd + 1 >= 0 && x - dmin <= cols - 1;
     if (!ok) {
@@ -235,13 +244,21 @@ void decide_row(const DecideArgs& a, const uint16_t* s, float* disp, float* conf
       if (conf) conf[x] = 0.0f;
       continue;
     }
-    uint32_t best = kNone;
-    for (ptrdiff_t k = klo; k <= khi; ++k) best = sx[k] < best ? sx[k] : best;
-    ptrdiff_t kb = klo;
-    while (sx[kb] != best) ++kb;
+    // The least sum and its lowest index at once: the least of sum << 16 | k.
+    uint32_t key = 0xFFFFFFFFu;
+    for (ptrdiff_t k = klo; k <= khi; ++k) {
+      const uint32_t v = (static_cast<uint32_t>(sx[k]) << 16) | static_cast<uint32_t>(k);
+      key = v < key ? v : key;
+    }
+    const uint32_t best = key >> 16;
+    const ptrdiff_t kb = static_cast<ptrdiff_t>(key & 0xFFFFu);
     uint32_t second = kNone;
-    for (ptrdiff_t k = klo; k <= kb - 2; ++k) second = sx[k] < second ? sx[k] : second;
-    for (ptrdiff_t k = kb + 2; k <= khi; ++k) second = sx[k] < second ? sx[k] : second;
+    const int kb32 = static_cast<int>(kb), khi32 = static_cast<int>(khi);
+    for (int k = static_cast<int>(klo); k <= khi32; ++k) {
+      const unsigned dk = static_cast<unsigned>(k - kb32 + 1);  // > 2: more than one away
+      const uint32_t v = dk > 2u ? sx[k] : kNone;
+      second = v < second ? v : second;
+    }
     const bool has2 = second != kNone;
     if (a.uniqueness_factor > 0 && has2) {
       ok = static_cast<double>(second) * 100.0 > static_cast<double>(best) * a.uniqueness_factor;
@@ -280,6 +297,79 @@ void decide_row(const DecideArgs& a, const uint16_t* s, float* disp, float* conf
   }
 }
 
+// ------------------------------------------------------------------------------------------
+// The 3x3 median of the valid disparities.
+
+// The lower median of the valid values of a window (n <= 9), by insertion.
+inline float median_slow(const float* const* rows, int nrows, ptrdiff_t x, ptrdiff_t cols) {
+  float v[9];
+  int n = 0;
+  for (int i = 0; i < nrows; ++i) {
+    for (ptrdiff_t xx = x > 0 ? x - 1 : 0; xx <= x + 1 && xx < cols; ++xx) {
+      const float f = rows[i][xx];
+      if (f == f) {
+        int j = n++;
+        while (j > 0 && v[j - 1] > f) {
+          v[j] = v[j - 1];
+          --j;
+        }
+        v[j] = f;
+      }
+    }
+  }
+  return v[(n - 1) / 2];
+}
+
+inline void order(float& a, float& b) {
+  const float lo = a < b ? a : b;
+  const float hi = a < b ? b : a;
+  a = lo;
+  b = hi;
+}
+
+void median_row(const float* up, const float* mid, const float* down, float* out,
+                std::uint8_t* flags, ptrdiff_t cols) {
+  const float* rows[3];
+  int nrows = 0;
+  if (up) rows[nrows++] = up;
+  rows[nrows++] = mid;
+  if (down) rows[nrows++] = down;
+  ptrdiff_t x0 = 0, x1 = 0;  // columns done by the network
+  if (up && down && cols >= 3) {
+    x0 = 1;
+    x1 = cols - 1;
+    // Nine valid values: the median by a fixed network of 19 compare-exchanges (min/max
+    // pick one of the values, so the result is that value exactly), across columns.
+    for (ptrdiff_t x = x0; x < x1; ++x) {
+      float p0 = up[x - 1], p1 = up[x], p2 = up[x + 1];
+      float p3 = mid[x - 1], p4 = mid[x], p5 = mid[x + 1];
+      float p6 = down[x - 1], p7 = down[x], p8 = down[x + 1];
+      order(p1, p2); order(p4, p5); order(p7, p8);
+      order(p0, p1); order(p3, p4); order(p6, p7);
+      order(p1, p2); order(p4, p5); order(p7, p8);
+      order(p0, p3); order(p5, p8); order(p4, p7);
+      order(p3, p6); order(p1, p4); order(p2, p5);
+      order(p4, p7); order(p4, p2); order(p6, p4);
+      order(p4, p2);
+      out[x] = p4;
+      // Whether any of the nine is NaN (then the slow path decides).
+      const bool all = (p0 == p0) & (up[x] == up[x]) & (up[x + 1] == up[x + 1]) &
+                       (mid[x - 1] == mid[x - 1]) & (mid[x] == mid[x]) &
+                       (mid[x + 1] == mid[x + 1]) & (down[x - 1] == down[x - 1]) &
+                       (down[x] == down[x]) & (down[x + 1] == down[x + 1]) &
+                       (up[x - 1] == up[x - 1]);
+      flags[x] = all ? 1 : 0;
+    }
+  }
+  for (ptrdiff_t x = 0; x < cols; ++x) {
+    if (mid[x] != mid[x]) {
+      out[x] = mid[x];
+    } else if (x < x0 || x >= x1 || !flags[x]) {
+      out[x] = median_slow(rows, nrows, x, cols);
+    }
+  }
+}
+
 }  // namespace
 
 const SemiGlobalKernels& semi_global_kernels() {
@@ -288,6 +378,7 @@ const SemiGlobalKernels& semi_global_kernels() {
       &horizontal_row,
       &path_row,
       &decide_row,
+      &median_row,
   };
   return kernels;
 }

@@ -50,13 +50,20 @@ struct DecideArgs {
 };
 // The winner, checks and sub-pixel step of one row of sums. rmin, rarg: cols elements of scratch.
 using DecideRowFn = void (*)(const DecideArgs& a, const std::uint16_t* s, float* disp,
-                             float* conf, std::uint32_t* rmin, std::uint16_t* rarg);
+                             float* conf, std::uint16_t* rmin, std::uint16_t* rarg);
+
+// The 3x3 median of row `mid` (up/down: the rows above and below, null outside the image):
+// each valid pixel becomes the lower median of the valid pixels of its window; NaN stays.
+// flags: cols bytes of scratch.
+using MedianRowFn = void (*)(const float* up, const float* mid, const float* down, float* out,
+                             std::uint8_t* flags, std::ptrdiff_t cols);
 
 struct SemiGlobalKernels {
   CostRowFn cost_row;
   HorizontalRowFn horizontal_row;
   PathRowFn path_row;
   DecideRowFn decide_row;
+  MedianRowFn median_row;
 };
 
 #define STEREODEPTH_DECLARE_SEMI_GLOBAL_KERNELS(ns) \

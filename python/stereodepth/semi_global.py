@@ -82,8 +82,8 @@ _SUBPIXEL_MODES = ("parabola", "equiangular")
 
 # Defaults, chosen by measuring on the shared scenes (bench/README.md).
 DEFAULT_BLOCK_SIZE = 3
-DEFAULT_P1 = 6
-DEFAULT_P2 = 96
+DEFAULT_P1 = 40
+DEFAULT_P2 = 500
 DEFAULT_P2_STEP = 16
 DEFAULT_PATHS = 4
 DEFAULT_UNIQUENESS_RATIO = 2.0
