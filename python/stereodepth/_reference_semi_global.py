@@ -21,7 +21,7 @@ __all__ = ["semi_global_match"]
 
 #: The path directions (dy, dx): the previous pixel on the path is (y - dy, x - dx).
 PATHS_4 = ((0, 1), (0, -1), (1, 0), (-1, 0))
-PATHS_8 = PATHS_4 + ((1, 1), (1, -1), (-1, 1), (-1, -1))
+PATHS_8 = (*PATHS_4, (1, 1), (1, -1), (-1, 1), (-1, -1))
 
 
 def candidate_inside(w: int, min_disparity: int, num_disparities: int) -> np.ndarray:
@@ -65,9 +65,7 @@ def _step(
     return out
 
 
-def path_costs(
-    c: np.ndarray, g: np.ndarray, dy: int, dx: int, o: SemiGlobalOptions
-) -> np.ndarray:
+def path_costs(c: np.ndarray, g: np.ndarray, dy: int, dx: int, o: SemiGlobalOptions) -> np.ndarray:
     """L_r for the direction (dy, dx), in scan order (int64, like c)."""
     h, w, _ = c.shape
     lr = np.empty_like(c)

@@ -87,6 +87,7 @@ DEFAULT_P2 = 500
 DEFAULT_P2_STEP = 16
 DEFAULT_PATHS = 4
 DEFAULT_UNIQUENESS_RATIO = 2.0
+DEFAULT_LR_MAX_DIFF = 2.0
 DEFAULT_SPECKLE_WINDOW = 100
 DEFAULT_SPECKLE_RANGE = 1.0
 DEFAULT_MAX_MEMORY_MB = 2048.0
@@ -133,7 +134,7 @@ class SemiGlobalOptions:
         paths: Any = DEFAULT_PATHS,
         subpixel: Any = True,
         uniqueness_ratio: Any = DEFAULT_UNIQUENESS_RATIO,
-        lr_max_diff: Any = 1.0,
+        lr_max_diff: Any = DEFAULT_LR_MAX_DIFF,
         median: Any = True,
         speckle_window: Any = DEFAULT_SPECKLE_WINDOW,
         speckle_range: Any = DEFAULT_SPECKLE_RANGE,
@@ -175,7 +176,7 @@ class SemiGlobalOptions:
                 f"must fit in 16 bits), got {p2v}"
             )
         self.p2 = p2v
-        self.p2_step = check.integer("p2_step", p2_step, minimum=0)
+        self.p2_step = check.integer("p2_step", p2_step, minimum=0, maximum=65535)
         if isinstance(subpixel, (bool, np.bool_)):
             self.subpixel: str | None = "parabola" if subpixel else None
         elif isinstance(subpixel, str):
@@ -271,7 +272,7 @@ class SemiGlobalMatcher:
         paths: int = DEFAULT_PATHS,
         subpixel: bool | str = True,
         uniqueness_ratio: float = DEFAULT_UNIQUENESS_RATIO,
-        lr_max_diff: float | None = 1.0,
+        lr_max_diff: float | None = DEFAULT_LR_MAX_DIFF,
         median: bool = True,
         speckle_window: int = DEFAULT_SPECKLE_WINDOW,
         speckle_range: float = DEFAULT_SPECKLE_RANGE,
@@ -363,7 +364,7 @@ def semi_global_match(
     paths: int = DEFAULT_PATHS,
     subpixel: bool | str = True,
     uniqueness_ratio: float = DEFAULT_UNIQUENESS_RATIO,
-    lr_max_diff: float | None = 1.0,
+    lr_max_diff: float | None = DEFAULT_LR_MAX_DIFF,
     median: bool = True,
     speckle_window: int = DEFAULT_SPECKLE_WINDOW,
     speckle_range: float = DEFAULT_SPECKLE_RANGE,
