@@ -90,7 +90,7 @@ void bind_block_match(py::module_& m) {
                        const std::string& cost, const std::string& subpixel,
                        double uniqueness_ratio, double texture_threshold, double lr_max_diff,
                        int speckle_window, double speckle_range, int threads,
-                       const std::string& isa) {
+                       const std::string& isa, bool clip_border) {
              BlockMatchParams p;
              p.num_disparities = num_disparities;
              p.min_disparity = min_disparity;
@@ -102,12 +102,14 @@ void bind_block_match(py::module_& m) {
              p.lr_max_diff = lr_max_diff;
              p.speckle_window = speckle_window;
              p.speckle_range = speckle_range;
+             p.clip_border = clip_border;
              return std::make_unique<BlockMatcher>(p, threads, resolve_isa(isa));
            }),
            py::arg("num_disparities"), py::arg("min_disparity"), py::arg("block_size"),
            py::arg("cost"), py::arg("subpixel"), py::arg("uniqueness_ratio"),
            py::arg("texture_threshold"), py::arg("lr_max_diff"), py::arg("speckle_window"),
-           py::arg("speckle_range"), py::arg("threads"), py::arg("isa") = "auto")
+           py::arg("speckle_range"), py::arg("threads"), py::arg("isa") = "auto",
+           py::arg("clip_border") = true)
       .def("compute", &compute_py, py::arg("left"), py::arg("right"), py::arg("disparity"),
            py::arg("confidence") = py::none(),
            "Writes the disparity (and the confidence, unless None) of left.")

@@ -339,6 +339,7 @@ void BlockMatcher::compute(const StereoImage& left, const StereoImage& right,
   common.unique_min = unique_min_.empty() ? nullptr : unique_min_.data();
   common.texture_sum_min = p.texture_threshold * static_cast<double>(p.block_size * p.block_size);
   common.lr_max_diff = p.lr_max_diff;
+  common.clip_border = p.clip_border;
   common.disp = disparity.data;
   common.disp_stride = disparity.row_stride;
   common.conf = confidence.data;

@@ -64,7 +64,7 @@ import numpy as np
 
 from . import _core
 from . import _validate as check
-from .matching import MAX_ABS_MIN_DISPARITY, MAX_NUM_DISPARITIES, as_pair
+from .matching import MAX_ABS_MIN_DISPARITY, MAX_NUM_DISPARITIES, as_pair, check_border
 
 __all__ = [
     "SemiGlobalMatcher",
@@ -77,7 +77,6 @@ CENSUS_BITS = 16
 #: The box sizes of the pixel cost (costs are stored in 8 bits: 16 * 3**2 = 144).
 BLOCK_SIZES = (1, 3)
 PATH_COUNTS = (4, 8)
-BORDER_MODES = ("clip", "opencv")
 _SUBPIXEL_MODES = ("parabola", "equiangular")
 
 # Defaults, chosen by measuring on the shared scenes (bench/README.md).
@@ -199,13 +198,7 @@ class SemiGlobalOptions:
         self.median = _flag("median", median)
         self.speckle_window = check.integer("speckle_window", speckle_window, minimum=0)
         self.speckle_range = check.non_negative("speckle_range", speckle_range)
-        if not isinstance(border, str):
-            raise TypeError(
-                f"border must be 'clip' or 'opencv', got {type(border).__name__} {border!r}"
-            )
-        if border not in BORDER_MODES:
-            raise ValueError(f"border must be 'clip' or 'opencv', got {border!r}")
-        self.border = border
+        self.border = check_border(border)
         self.max_memory_mb = check.positive("max_memory_mb", max_memory_mb)
         self.threads = check.threads(threads)
         self.return_confidence = _flag("return_confidence", return_confidence)
