@@ -47,6 +47,7 @@ class BlockMatcher:
         speckle_range: float,
         threads: int,
         isa: str = "auto",
+        clip_border: bool = True,
     ) -> None: ...
     def compute(
         self,
