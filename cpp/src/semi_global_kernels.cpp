@@ -14,6 +14,10 @@
 
 #include "stereodepth/block_match.hpp"
 
+#if defined(__AVX2__)
+#include <immintrin.h>
+#endif
+
 #ifndef STEREODEPTH_ISA_NS
 #error "STEREODEPTH_ISA_NS must name the instruction set this file is compiled for"
 #endif
@@ -195,13 +199,90 @@ void path_row(const PathParams& p, const uint8_t* c, const uint8_t* g, const uin
 // ------------------------------------------------------------------------------------------
 // Winner, checks, sub-pixel step.
 
+constexpr uint32_t kNone = 0x10000u;  // "no second-best"; above every sum (sums <= 65532)
+
+// The least sum over indices lo .. hi, its lowest index, and the least sum more than one
+// index away from it (kNone when there is none).
+inline void winner_of(const uint16_t* __restrict sx, ptrdiff_t lo, ptrdiff_t hi, uint32_t& best,
+                      ptrdiff_t& kb, uint32_t& second) {
+  // The least of sum << 16 | k: the least sum and its lowest index at once.
+  uint32_t key = 0xFFFFFFFFu;
+  for (ptrdiff_t k = lo; k <= hi; ++k) {
+    const uint32_t v = (static_cast<uint32_t>(sx[k]) << 16) | static_cast<uint32_t>(k);
+    key = v < key ? v : key;
+  }
+  best = key >> 16;
+  kb = static_cast<ptrdiff_t>(key & 0xFFFFu);
+  second = kNone;
+  const int kb32 = static_cast<int>(kb), hi32 = static_cast<int>(hi);
+  for (int k = static_cast<int>(lo); k <= hi32; ++k) {
+    const unsigned dk = static_cast<unsigned>(k - kb32 + 1);  // > 2: more than one away
+    const uint32_t sk = sx[k];
+    const uint32_t v = dk > 2u ? sk : kNone;
+    second = v < second ? v : second;
+  }
+}
+
+#if defined(__AVX2__)
+inline uint32_t hmin_epu16(__m256i v) {
+  const __m128i m = _mm_min_epu16(_mm256_castsi256_si128(v), _mm256_extracti128_si256(v, 1));
+  return static_cast<uint32_t>(_mm_cvtsi128_si32(_mm_minpos_epu16(m)) & 0xFFFF);
+}
+
+// winner_of over the whole range 0 .. nd - 1, 16 lanes at a time (the same results).
+inline void winner_full(const uint16_t* __restrict sx, int nd, uint32_t& best, ptrdiff_t& kb,
+                        uint32_t& second) {
+  const int nv = nd / 16;
+  if (nv == 0) {
+    winner_of(sx, 0, nd - 1, best, kb, second);
+    return;
+  }
+  auto load = [&](int i) {
+    return _mm256_loadu_si256(reinterpret_cast<const __m256i*>(sx + 16 * i));
+  };
+  __m256i m = load(0);
+  for (int i = 1; i < nv; ++i) m = _mm256_min_epu16(m, load(i));
+  uint32_t b = hmin_epu16(m);
+  for (int k = 16 * nv; k < nd; ++k) b = sx[k] < b ? sx[k] : b;
+  const __m256i bv = _mm256_set1_epi16(static_cast<short>(b));
+  int k0 = -1;
+  for (int i = 0; i < nv; ++i) {
+    const unsigned mask =
+        static_cast<unsigned>(_mm256_movemask_epi8(_mm256_cmpeq_epi16(load(i), bv)));
+    if (mask) {
+      k0 = 16 * i + __builtin_ctz(mask) / 2;
+      break;
+    }
+  }
+  if (k0 < 0) {
+    k0 = 16 * nv;
+    while (sx[k0] != b) ++k0;
+  }
+  // The least sum with the lanes k0 - 1 .. k0 + 1 set to 0xFFFF (above every sum).
+  const __m256i iota = _mm256_setr_epi16(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15);
+  const __m256i two = _mm256_set1_epi16(2);
+  __m256i s2 = _mm256_set1_epi16(-1);
+  for (int i = 0; i < nv; ++i) {
+    const __m256i rel = _mm256_sub_epi16(iota, _mm256_set1_epi16(static_cast<short>(k0 - 1 - 16 * i)));
+    const __m256i ex = _mm256_cmpeq_epi16(_mm256_min_epu16(rel, two), rel);
+    s2 = _mm256_min_epu16(s2, _mm256_or_si256(load(i), ex));
+  }
+  uint32_t sec = hmin_epu16(s2);
+  for (int k = 16 * nv; k < nd; ++k) {
+    if ((k < k0 - 1 || k > k0 + 1) && sx[k] < sec) sec = sx[k];
+  }
+  best = b;
+  kb = k0;
+  second = sec == 0xFFFFu ? kNone : sec;
+}
+#endif
+
 void decide_row(const DecideArgs& a, const uint16_t* s, float* disp, float* conf, uint16_t* rmin,
                 uint16_t* rarg) {
   const ptrdiff_t cols = a.cols;
   const int nd = a.nd;
   const ptrdiff_t dmin = a.min_d;
   const bool lr_on = a.lr_max_diff >= 0;
-  constexpr uint32_t kNone = 0x10000u;  // above every sum
   auto range = [&](ptrdiff_t x, ptrdiff_t& klo, ptrdiff_t& khi) {
     klo = clamp_index(x - dmin - cols + 1, 0, nd);
     khi = clamp_index(x - dmin, -1, nd - 1);
@@ -244,21 +325,17 @@ void decide_row(const DecideArgs& a, const uint16_t* s, float* disp, float* conf
       if (conf) conf[x] = 0.0f;
       continue;
     }
-    // The least sum and its lowest index at once: the least of sum << 16 | k.
-    uint32_t key = 0xFFFFFFFFu;
-    for (ptrdiff_t k = klo; k <= khi; ++k) {
-      const uint32_t v = (static_cast<uint32_t>(sx[k]) << 16) | static_cast<uint32_t>(k);
-      key = v < key ? v : key;
+    uint32_t best, second;
+    ptrdiff_t kb;
+#if defined(__AVX2__)
+    if (klo == 0 && khi == nd - 1) {
+      winner_full(sx, nd, best, kb, second);
+    } else {
+      winner_of(sx, klo, khi, best, kb, second);
     }
-    const uint32_t best = key >> 16;
-    const ptrdiff_t kb = static_cast<ptrdiff_t>(key & 0xFFFFu);
-    uint32_t second = kNone;
-    const int kb32 = static_cast<int>(kb), khi32 = static_cast<int>(khi);
-    for (int k = static_cast<int>(klo); k <= khi32; ++k) {
-      const unsigned dk = static_cast<unsigned>(k - kb32 + 1);  // > 2: more than one away
-      const uint32_t v = dk > 2u ? sx[k] : kNone;
-      second = v < second ? v : second;
-    }
+#else
+    winner_of(sx, klo, khi, best, kb, second);
+#endif
     const bool has2 = second != kNone;
     if (a.uniqueness_factor > 0 && has2) {
       ok = static_cast<double>(second) * 100.0 > static_cast<double>(best) * a.uniqueness_factor;
