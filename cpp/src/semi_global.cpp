@@ -271,7 +271,14 @@ void SemiGlobalMatcher::compute(const StereoImage& left, const StereoImage& righ
     }
   });
 
-  detail::PathParams pp{nd, ls, p.p1, p.p2, p.p2_step};
+  // P2' = max(P1, P2 * k // (k + step)) for each intensity step (k = p2_step; 0: P2).
+  std::int16_t p2_table[256];
+  for (int step = 0; step < 256; ++step) {
+    const long long v = p.p2_step > 0 ? static_cast<long long>(p.p2) * p.p2_step / (p.p2_step + step)
+                                      : p.p2;
+    p2_table[step] = static_cast<std::int16_t>(std::max<long long>(v, p.p1));
+  }
+  detail::PathParams pp{nd, ls, p.p1, p2_table};
 
   // 1. Costs and the horizontal paths (rows split between the threads).
   run_bands(nt, [&](std::ptrdiff_t b) {

@@ -101,10 +101,7 @@ void cost_row(const uint16_t* const* lrows, const uint16_t* const* rrows, int ra
 // Paths.
 
 inline int p2_for(const PathParams& p, int gp, int gq) {
-  if (p.p2_step <= 0) return p.p2;
-  const int s = gp > gq ? gp - gq : gq - gp;
-  const long long v = static_cast<long long>(p.p2) * p.p2_step / (p.p2_step + s);
-  return v > p.p1 ? static_cast<int>(v) : p.p1;
+  return p.p2[gp > gq ? gp - gq : gq - gp];
 }
 
 enum class SumMode { kWrite, kAdd };

@@ -16,9 +16,10 @@ namespace stereodepth::detail {
 inline constexpr std::int16_t kSentinel = 16384;
 
 struct PathParams {
-  int nd;       // disparities
-  int ls;       // int16 per pixel in path rows (>= nd + 2)
-  int p1, p2, p2_step;
+  int nd;  // disparities
+  int ls;  // int16 per pixel in path rows (>= nd + 3)
+  int p1;
+  const std::int16_t* p2;  // 256 entries: P2' for each intensity step 0 .. 255
 };
 
 // The cost row of one image row, all columns: lrows/rrows are the 2r + 1 census rows
