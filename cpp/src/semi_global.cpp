@@ -148,7 +148,7 @@ std::size_t semi_global_memory(std::ptrdiff_t rows, std::ptrdiff_t cols, int nd,
   const double t = std::max(1, threads);
   double bytes = h * w * d * 3.0;  // 16-bit sums, 8-bit costs
   bytes += h * w * 13.0;           // census (2 x 2), grey (3), disparity before the median (4)
-  bytes += t * (w * d * 2.0 + 3.0 * (w + d) * 2.0 + 4.0 * ls * 2.0 + w * 14.0);  // per thread
+  bytes += t * (w * d * 4.0 + 3.0 * (w + d) * 2.0 + 4.0 * ls * 2.0 + w * 14.0);  // per thread
   bytes += vertical_paths(paths) * 2.0 * w * ls * 2.0;                           // path rows
   return static_cast<std::size_t>(std::min(bytes, 1.8e19));
 }
@@ -280,67 +280,6 @@ void SemiGlobalMatcher::compute(const StereoImage& left, const StereoImage& righ
   }
   detail::PathParams pp{nd, ls, p.p1, p2_table};
 
-  // 1. Costs and the horizontal paths (rows split between the threads).
-  run_bands(nt, [&](std::ptrdiff_t b) {
-    std::vector<std::uint8_t>& sc = ws.scratch[static_cast<std::size_t>(b)];
-    const auto c = static_cast<std::size_t>(cols);
-    const std::size_t n_rev = 3 * (c + static_cast<std::size_t>(nd));
-    const std::size_t n_col = c * static_cast<std::size_t>(nd);
-    auto* base = aligned<std::uint16_t>(sc, n_rev + n_col + 4 * static_cast<std::size_t>(ls) + 32);
-    std::uint16_t* rev = base;
-    std::uint16_t* colraw = base + n_rev;
-    auto* tmp = reinterpret_cast<std::int16_t*>(colraw + n_col);
-    for (std::ptrdiff_t y = band(rows, nt, b); y < band(rows, nt, b + 1); ++y) {
-      const std::uint16_t* lr[3];
-      const std::uint16_t* rr[3];
-      for (int i = 0; i < 2 * r + 1; ++i) {
-        const std::ptrdiff_t yy = std::clamp<std::ptrdiff_t>(y + i - r, 0, rows - 1);
-        lr[i] = lcen + yy * cols;
-        rr[i] = rcen + yy * cols;
-      }
-      std::uint8_t* crow = costs + static_cast<std::size_t>(y) * n_col;
-      k.cost_row(lr, rr, r, cols, nd, p.min_disparity, cmax, rev, colraw, crow);
-      k.horizontal_row(pp, crow, pgrey + y * cols, cols,
-                       sums + static_cast<std::size_t>(y) * n_col, tmp);
-    }
-  });
-
-  // 2. Vertical (and diagonal) paths, down then up: columns split between the threads.
-  {
-    const std::ptrdiff_t nb =
-        std::max<std::ptrdiff_t>(1, std::min<std::ptrdiff_t>(threads_, cols / 16));
-    const int nv = vertical_paths(p.paths);
-    const auto row_len = static_cast<std::size_t>(cols) * static_cast<std::size_t>(ls);
-    auto* prow = aligned<std::int16_t>(ws.path_rows, 2 * static_cast<std::size_t>(nv) * row_len);
-    for (std::size_t i = 0; i < 2 * static_cast<std::size_t>(nv) * static_cast<std::size_t>(cols); ++i) {
-      prow[i * static_cast<std::size_t>(ls)] = detail::kSentinel;
-      prow[i * static_cast<std::size_t>(ls) + static_cast<std::size_t>(nd) + 1] = detail::kSentinel;
-    }
-    const int dxs[3] = {0, 1, -1};
-    const auto n_col = static_cast<std::size_t>(cols) * static_cast<std::size_t>(nd);
-    for (int dy : {1, -1}) {
-      Barrier barrier(nb);
-      run_bands(nb, [&](std::ptrdiff_t b) {
-        const std::ptrdiff_t x0 = band(cols, nb, b), x1 = band(cols, nb, b + 1);
-        int flip = 0;
-        for (std::ptrdiff_t i = 0; i < rows; ++i) {
-          const std::ptrdiff_t y = dy > 0 ? i : rows - 1 - i;
-          const std::ptrdiff_t yq = y - dy;
-          for (int v = 0; v < nv; ++v) {
-            std::int16_t* cur = prow + (2 * static_cast<std::size_t>(v) + static_cast<std::size_t>(flip)) * row_len;
-            std::int16_t* prev = prow + (2 * static_cast<std::size_t>(v) + static_cast<std::size_t>(1 - flip)) * row_len;
-            k.path_row(pp, costs + static_cast<std::size_t>(y) * n_col, pgrey + y * cols,
-                       i > 0 ? pgrey + yq * cols : nullptr, i > 0 ? prev : nullptr, cur, cols,
-                       x0, x1, dxs[v], sums + static_cast<std::size_t>(y) * n_col);
-          }
-          flip = 1 - flip;
-          if (nv > 1 && nb > 1) barrier.wait();
-        }
-      });
-    }
-  }
-
-  // 3. Winner, checks and sub-pixel step (rows split between the threads).
   detail::DecideArgs da{};
   da.cols = cols;
   da.nd = nd;
@@ -349,14 +288,83 @@ void SemiGlobalMatcher::compute(const StereoImage& left, const StereoImage& righ
   da.uniqueness_factor = p.uniqueness_ratio > 0 ? 100.0 + p.uniqueness_ratio : 0.0;
   da.lr_max_diff = p.lr_max_diff;
   da.clip_border = p.clip_border;
+
+  // 1. Downward, then upward: the costs (computed on the way down) and the vertical and
+  //    diagonal paths; the columns are split between the threads, which meet at every row
+  //    when the diagonals read the previous row across band edges. The way down writes the
+  //    sums, the way up adds to them.
+  const auto n_col = static_cast<std::size_t>(cols) * static_cast<std::size_t>(nd);
+  {
+    const std::ptrdiff_t nb =
+        std::max<std::ptrdiff_t>(1, std::min<std::ptrdiff_t>(threads_, cols / 16));
+    if (ws.scratch.size() < static_cast<std::size_t>(nb)) {
+      ws.scratch.resize(static_cast<std::size_t>(nb));
+    }
+    const int nv = vertical_paths(p.paths);
+    const auto row_len = static_cast<std::size_t>(cols) * static_cast<std::size_t>(ls);
+    auto* prow = aligned<std::int16_t>(ws.path_rows, 2 * static_cast<std::size_t>(nv) * row_len);
+    for (std::size_t i = 0; i < 2 * static_cast<std::size_t>(nv) * static_cast<std::size_t>(cols);
+         ++i) {
+      prow[i * static_cast<std::size_t>(ls)] = detail::kSentinel;
+      prow[i * static_cast<std::size_t>(ls) + static_cast<std::size_t>(nd) + 1] = detail::kSentinel;
+    }
+    const int dxs[3] = {0, 1, -1};
+    for (int dy : {1, -1}) {
+      Barrier barrier(nb);
+      run_bands(nb, [&](std::ptrdiff_t b) {
+        const std::ptrdiff_t x0 = band(cols, nb, b), x1 = band(cols, nb, b + 1);
+        std::uint16_t* rev = nullptr;
+        std::uint16_t* colraw = nullptr;
+        if (dy > 0) {
+          const std::size_t n_rev = 3 * (static_cast<std::size_t>(cols) + static_cast<std::size_t>(nd));
+          const std::size_t n_raw = static_cast<std::size_t>(x1 - x0 + 2) * static_cast<std::size_t>(nd);
+          rev = aligned<std::uint16_t>(ws.scratch[static_cast<std::size_t>(b)], n_rev + n_raw);
+          colraw = rev + n_rev;
+        }
+        int flip = 0;
+        for (std::ptrdiff_t i = 0; i < rows; ++i) {
+          const std::ptrdiff_t y = dy > 0 ? i : rows - 1 - i;
+          const std::ptrdiff_t yq = y - dy;
+          std::uint8_t* crow = costs + static_cast<std::size_t>(y) * n_col;
+          if (dy > 0) {
+            const std::uint16_t* lr[3];
+            const std::uint16_t* rr[3];
+            for (int j = 0; j < 2 * r + 1; ++j) {
+              const std::ptrdiff_t yy = std::clamp<std::ptrdiff_t>(y + j - r, 0, rows - 1);
+              lr[j] = lcen + yy * cols;
+              rr[j] = rcen + yy * cols;
+            }
+            k.cost_row(lr, rr, r, cols, x0, x1, nd, p.min_disparity, cmax, rev, colraw, crow);
+          }
+          for (int v = 0; v < nv; ++v) {
+            std::int16_t* cur = prow + (2 * static_cast<std::size_t>(v) + static_cast<std::size_t>(flip)) * row_len;
+            std::int16_t* prev = prow + (2 * static_cast<std::size_t>(v) + static_cast<std::size_t>(1 - flip)) * row_len;
+            k.path_row(pp, crow, pgrey + y * cols, i > 0 ? pgrey + yq * cols : nullptr,
+                       i > 0 ? prev : nullptr, cur, cols, x0, x1, dxs[v],
+                       sums + static_cast<std::size_t>(y) * n_col, dy > 0 && v == 0);
+          }
+          flip = 1 - flip;
+          if (nv > 1 && nb > 1) barrier.wait();
+        }
+      });
+    }
+  }
+
+  // 2. Row by row (the rows split between the threads): the horizontal paths added to a copy
+  //    of the row's sums, then the winner, checks and sub-pixel step on that copy.
   run_bands(nt, [&](std::ptrdiff_t b) {
     const auto c = static_cast<std::size_t>(cols);
-    auto* rmin = aligned<std::uint16_t>(ws.scratch[static_cast<std::size_t>(b)], 2 * c);
+    auto* total = aligned<std::uint16_t>(ws.scratch[static_cast<std::size_t>(b)],
+                                         n_col + 2 * c + 2 * static_cast<std::size_t>(ls) + 32);
+    std::uint16_t* rmin = total + n_col;
     std::uint16_t* rarg = rmin + c;
+    auto* tmp = reinterpret_cast<std::int16_t*>(rarg + c);
     for (std::ptrdiff_t y = band(rows, nt, b); y < band(rows, nt, b + 1); ++y) {
+      std::memcpy(total, sums + static_cast<std::size_t>(y) * n_col, n_col * sizeof(std::uint16_t));
+      k.horizontal_row(pp, costs + static_cast<std::size_t>(y) * n_col, pgrey + y * cols, cols,
+                       total, tmp);
       float* drow = pre ? pre + y * cols : disparity.row(y);
-      k.decide_row(da, sums + static_cast<std::size_t>(y) * c * static_cast<std::size_t>(nd),
-                   drow, confidence.data ? confidence.row(y) : nullptr, rmin, rarg);
+      k.decide_row(da, total, drow, confidence.data ? confidence.row(y) : nullptr, rmin, rarg);
     }
   });
 

@@ -49,8 +49,8 @@ inline uint16_t popcount16(uint16_t v) {
 // Costs.
 
 void cost_row(const uint16_t* const* lrows, const uint16_t* const* rrows, int radius,
-              ptrdiff_t cols, int nd, int min_d, int cmax, uint16_t* rev, uint16_t* colraw,
-              uint8_t* out) {
+              ptrdiff_t cols, ptrdiff_t x0, ptrdiff_t x1, int nd, int min_d, int cmax,
+              uint16_t* rev, uint16_t* colraw, uint8_t* out) {
   const int n = 2 * radius + 1;
   const ptrdiff_t rl = cols + nd;
   // rev_i[u] = right_i[clamp(cols - 1 - min_d - u)]: the right pixel of column x and index k
@@ -61,8 +61,11 @@ void cost_row(const uint16_t* const* lrows, const uint16_t* const* rrows, int ra
       rv[u] = rrows[i][clamp_index(cols - 1 - min_d - u, 0, cols - 1)];
     }
   }
-  for (ptrdiff_t x = 0; x < cols; ++x) {
-    uint16_t* __restrict cr = colraw + x * nd;
+  // colraw[j] holds the column sums of column clamp(x0 - radius + j).
+  const ptrdiff_t nraw = x1 - x0 + 2 * radius;
+  for (ptrdiff_t j = 0; j < nraw; ++j) {
+    const ptrdiff_t x = clamp_index(x0 - radius + j, 0, cols - 1);
+    uint16_t* __restrict cr = colraw + j * nd;
     {
       const uint16_t l = lrows[0][x];
       const uint16_t* __restrict rv = rev + (cols - 1 - x);
@@ -76,15 +79,16 @@ void cost_row(const uint16_t* const* lrows, const uint16_t* const* rrows, int ra
       }
     }
   }
-  for (ptrdiff_t x = 0; x < cols; ++x) {
+  for (ptrdiff_t x = x0; x < x1; ++x) {
     uint8_t* __restrict o = out + x * nd;
+    const ptrdiff_t j = x - x0 + radius;
     if (radius == 0) {
-      const uint16_t* __restrict a = colraw + x * nd;
+      const uint16_t* __restrict a = colraw + j * nd;
       for (int k = 0; k < nd; ++k) o[k] = static_cast<uint8_t>(a[k]);
     } else {
-      const uint16_t* __restrict a = colraw + clamp_index(x - 1, 0, cols - 1) * nd;
-      const uint16_t* __restrict b = colraw + x * nd;
-      const uint16_t* __restrict c = colraw + clamp_index(x + 1, 0, cols - 1) * nd;
+      const uint16_t* __restrict a = colraw + (j - 1) * nd;
+      const uint16_t* __restrict b = colraw + j * nd;
+      const uint16_t* __restrict c = colraw + (j + 1) * nd;
       for (int k = 0; k < nd; ++k) o[k] = static_cast<uint8_t>(a[k] + b[k] + c[k]);
     }
     // Candidates whose right pixel x - min_d - k leaves the image cost the most.
@@ -157,14 +161,14 @@ void horizontal_row(const PathParams& p, const uint8_t* c, const uint8_t* g, ptr
   int16_t* a = tmp;
   int16_t* b = tmp + ls;
   a[0] = a[nd + 1] = b[0] = b[nd + 1] = kSentinel;
-  // From the left: writes the sums.
-  int m = path_start<SumMode::kWrite>(c, a, nd, s);
+  // From the left.
+  int m = path_start<SumMode::kAdd>(c, a, nd, s);
   for (ptrdiff_t x = 1; x < cols; ++x) {
     const int p2 = p2_for(p, g[x], g[x - 1]);
-    m = path_step<SumMode::kWrite>(a, c + x * nd, b, nd, p.p1, p2, m, s + x * nd);
+    m = path_step<SumMode::kAdd>(a, c + x * nd, b, nd, p.p1, p2, m, s + x * nd);
     std::swap(a, b);
   }
-  // From the right: adds.
+  // From the right.
   const ptrdiff_t last = cols - 1;
   m = path_start<SumMode::kAdd>(c + last * nd, a, nd, s + last * nd);
   for (ptrdiff_t x = last - 1; x >= 0; --x) {
@@ -174,22 +178,33 @@ void horizontal_row(const PathParams& p, const uint8_t* c, const uint8_t* g, ptr
   }
 }
 
-void path_row(const PathParams& p, const uint8_t* c, const uint8_t* g, const uint8_t* gprev,
-              const int16_t* prev, int16_t* cur, ptrdiff_t cols, ptrdiff_t x0, ptrdiff_t x1,
-              int dx, uint16_t* s) {
+template <SumMode kMode>
+void path_row_impl(const PathParams& p, const uint8_t* c, const uint8_t* g, const uint8_t* gprev,
+                   const int16_t* prev, int16_t* cur, ptrdiff_t cols, ptrdiff_t x0, ptrdiff_t x1,
+                   int dx, uint16_t* s) {
   const int nd = p.nd, ls = p.ls;
   for (ptrdiff_t x = x0; x < x1; ++x) {
     const ptrdiff_t xq = x - dx;
     int16_t* out = cur + x * ls;
     int16_t mn;
     if (prev == nullptr || xq < 0 || xq >= cols) {
-      mn = path_start<SumMode::kAdd>(c + x * nd, out, nd, s + x * nd);
+      mn = path_start<kMode>(c + x * nd, out, nd, s + x * nd);
     } else {
       const int16_t* q = prev + xq * ls;
       const int p2 = p2_for(p, g[x], gprev[xq]);
-      mn = path_step<SumMode::kAdd>(q, c + x * nd, out, nd, p.p1, p2, q[nd + 2], s + x * nd);
+      mn = path_step<kMode>(q, c + x * nd, out, nd, p.p1, p2, q[nd + 2], s + x * nd);
     }
     out[nd + 2] = mn;  // the pixel's least path cost, for the next row
+  }
+}
+
+void path_row(const PathParams& p, const uint8_t* c, const uint8_t* g, const uint8_t* gprev,
+              const int16_t* prev, int16_t* cur, ptrdiff_t cols, ptrdiff_t x0, ptrdiff_t x1,
+              int dx, uint16_t* s, bool write) {
+  if (write) {
+    path_row_impl<SumMode::kWrite>(p, c, g, gprev, prev, cur, cols, x0, x1, dx, s);
+  } else {
+    path_row_impl<SumMode::kAdd>(p, c, g, gprev, prev, cur, cols, x0, x1, dx, s);
   }
 }
 

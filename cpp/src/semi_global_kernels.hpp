@@ -22,24 +22,25 @@ struct PathParams {
   const std::int16_t* p2;  // 256 entries: P2' for each intensity step 0 .. 255
 };
 
-// The cost row of one image row, all columns: lrows/rrows are the 2r + 1 census rows
+// The costs of columns x0 .. x1 - 1 of one image row: lrows/rrows are the 2r + 1 census rows
 // (uint16 codes) y - r .. y + r, clamped to the image. rev: (2r + 1) * (cols + nd) scratch,
-// colraw: cols * nd scratch. out: cols * nd.
+// colraw: (x1 - x0 + 2r) * nd scratch. out: the row's cols * nd costs.
 using CostRowFn = void (*)(const std::uint16_t* const* lrows, const std::uint16_t* const* rrows,
-                           int radius, std::ptrdiff_t cols, int nd, int min_d, int cmax,
-                           std::uint16_t* rev, std::uint16_t* colraw, std::uint8_t* out);
-// The paths from the left and from the right along one row: s[x * nd + k] = L_lr + L_rl.
-// g: the row's grey levels (8-bit scale). tmp: 4 * ls int16 scratch.
+                           int radius, std::ptrdiff_t cols, std::ptrdiff_t x0, std::ptrdiff_t x1,
+                           int nd, int min_d, int cmax, std::uint16_t* rev, std::uint16_t* colraw,
+                           std::uint8_t* out);
+// The paths from the left and from the right along one row, added to s (s[x * nd + k] +=
+// L_lr + L_rl). g: the row's grey levels (8-bit scale). tmp: 2 * ls int16 scratch.
 using HorizontalRowFn = void (*)(const PathParams& p, const std::uint8_t* c,
                                  const std::uint8_t* g, std::ptrdiff_t cols, std::uint16_t* s,
                                  std::int16_t* tmp);
 // One row of a vertical or diagonal path, columns x0 .. x1 - 1: cur[x] from prev[x - dx]
 // (the previous row; null on the path's first row, and a path starts where x - dx leaves the
-// image). Adds L into s (the row's sums).
+// image). Writes L into s (the row's sums) when `write`, adds it otherwise.
 using PathRowFn = void (*)(const PathParams& p, const std::uint8_t* c, const std::uint8_t* g,
                            const std::uint8_t* gprev, const std::int16_t* prev,
                            std::int16_t* cur, std::ptrdiff_t cols, std::ptrdiff_t x0,
-                           std::ptrdiff_t x1, int dx, std::uint16_t* s);
+                           std::ptrdiff_t x1, int dx, std::uint16_t* s, bool write);
 
 struct DecideArgs {
   std::ptrdiff_t cols;
