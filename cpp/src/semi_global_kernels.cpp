@@ -140,10 +140,9 @@ inline int16_t path_step(const int16_t* __restrict prev, const uint8_t* __restri
   int16_t mn = std::numeric_limits<int16_t>::max();
   for (int d = 0; d < nd; ++d) {
     const int16_t a = prev[d + 1];
-    const int16_t b = static_cast<int16_t>(prev[d] + vp1);
-    const int16_t e = static_cast<int16_t>(prev[d + 2] + vp1);
-    const int16_t v = min16(min16(a, mp2), min16(b, e));
-    const int16_t o = static_cast<int16_t>(static_cast<int16_t>(c[d]) + v - vm);
+    const int16_t be = static_cast<int16_t>(min16(prev[d], prev[d + 2]) + vp1);
+    const int16_t v = min16(min16(a, mp2), be);
+    const int16_t o = static_cast<int16_t>(static_cast<int16_t>(c[d]) + (v - vm));
     out[d + 1] = o;
     mn = min16(mn, o);
     if constexpr (kMode == SumMode::kWrite) {
