@@ -116,6 +116,7 @@ CONFIGS: list[dict[str, Any]] = [
     {"block_size": 1, "p1": 3, "p2": 30, "subpixel": "equiangular"},
     {"p2_step": 0, "uniqueness_ratio": 15, "lr_max_diff": 0},
     {"border": "opencv", "paths": 8, "return_confidence": True},
+    {"paths": 3, "return_confidence": True},
     {"p1": 0, "p2": 0, "median": False, "speckle_window": 20, "speckle_range": 0.5},
     {"p2_step": 1, "p1": 10, "p2": 2000, "lr_max_diff": 1.5, "return_confidence": True},
 ]
@@ -186,7 +187,7 @@ def test_scene_crops_match_oracle(stereo_scenes: list[Any]) -> None:
         y0, x0 = h // 3, w // 4
         crop_l = np.ascontiguousarray(left[y0 : y0 + 40, x0 : x0 + 90])
         crop_r = np.ascontiguousarray(right[y0 : y0 + 40, x0 : x0 + 90])
-        for paths in (4, 8):
+        for paths in (3, 4, 8):
             kw: dict[str, Any] = {"num_disparities": 32, "paths": paths, "return_confidence": True}
             assert_agree(
                 sd.semi_global_match(crop_l, crop_r, threads=3, **kw),
@@ -209,7 +210,7 @@ def test_scene_crops_match_oracle(stereo_scenes: list[Any]) -> None:
         ((5, 30), 200, -100),
     ],
 )
-@pytest.mark.parametrize("paths", [4, 8])
+@pytest.mark.parametrize("paths", [3, 4, 8])
 def test_odd_shapes_match_oracle(shape: tuple[int, int], nd: int, md: int, paths: int) -> None:
     left, right = shifted_pair(shape, 1, seed=sum(shape) + nd)
     kw: dict[str, Any] = {
@@ -223,7 +224,19 @@ def test_odd_shapes_match_oracle(shape: tuple[int, int], nd: int, md: int, paths
         assert_agree(native, ref.semi_global_match(left, right, **kw), subpixel=True)
 
 
-@pytest.mark.parametrize("paths", [4, 8])
+@pytest.mark.parametrize("threads", [1, 2, 3])
+def test_single_pass_stripes_match_oracle(threads: int) -> None:
+    # paths=3 restarts the path from above every 64 rows: three stripes here.
+    left, right, _ = slanted_pair((150, 50), d0=5.0, dx=0.04, dy=0.03, seed=16)
+    kw: dict[str, Any] = {"num_disparities": 16, "paths": 3, "return_confidence": True}
+    assert_agree(
+        sd.semi_global_match(left, right, threads=threads, **kw),
+        ref.semi_global_match(left, right, **kw),
+        subpixel=True,
+    )
+
+
+@pytest.mark.parametrize("paths", [3, 4, 8])
 def test_largest_p2_and_many_disparities_do_not_overflow(paths: int) -> None:
     # Sums reach paths * (144 + p2) <= 65535 on a pair that matches nowhere.
     rng = np.random.default_rng(9)
@@ -261,7 +274,7 @@ def test_largest_num_disparities_on_a_tiny_image() -> None:
 # What it finds
 
 
-@pytest.mark.parametrize("paths", [4, 8])
+@pytest.mark.parametrize("paths", [3, 4, 8])
 def test_step_in_random_dots_is_recovered_exactly(paths: int) -> None:
     left, right, truth = step_pair((60, 120), 14, 5, seed=11)
     d = sd.semi_global_match(left, right, num_disparities=24, paths=paths, subpixel=False)
@@ -325,7 +338,7 @@ def test_candidates_outside_the_image_never_win() -> None:
 
 
 @pytest.mark.parametrize("isa", SUPPORTED_ISAS)
-@pytest.mark.parametrize("paths", [4, 8])
+@pytest.mark.parametrize("paths", [3, 4, 8])
 def test_each_isa_matches_the_scalar_path(isa: str, paths: int) -> None:
     left, right, _ = slanted_pair((64, 150), d0=9.0, dx=0.1, dy=-0.03, seed=14)
     for nd in (7, 16, 33, 64, 100):
@@ -343,7 +356,7 @@ def test_unknown_isa_is_rejected() -> None:
         sd.SemiGlobalMatcher(num_disparities=8, isa=3)  # type: ignore[arg-type]
 
 
-@pytest.mark.parametrize("paths", [4, 8])
+@pytest.mark.parametrize("paths", [3, 4, 8])
 def test_thread_counts_give_identical_output(paths: int) -> None:
     left, right, _ = slanted_pair((70, 161), d0=10.0, dx=0.07, dy=0.04, seed=15)
     kw: dict[str, Any] = {"num_disparities": 32, "paths": paths, "return_confidence": True}
@@ -404,6 +417,9 @@ def test_memory_estimate_and_refusal() -> None:
 
     est = memory_estimate((1080, 1920), num_disparities=256)
     assert 3 * 1080 * 1920 * 256 <= est < 3.2 * 1080 * 1920 * 256
+    # One pass: a few MB per thread above 13 bytes per pixel.
+    one = memory_estimate((1080, 1920), num_disparities=256, paths=3, threads=2)
+    assert one < 1080 * 1920 * 13 + 2 * 8 * 2**20
     left, right = shifted_pair((100, 200), 3, seed=31)
     with pytest.raises(
         ValueError,
@@ -431,7 +447,7 @@ GOOD = shifted_pair((8, 20), 2, seed=40)
         ),
         ({"num_disparities": 8, "block_size": 5}, ValueError, "block_size must be 1 or 3 .*got 5"),
         ({"num_disparities": 8, "block_size": 3.0}, TypeError, "block_size must be an integer"),
-        ({"num_disparities": 8, "paths": 5}, ValueError, "paths must be 4 or 8, got 5"),
+        ({"num_disparities": 8, "paths": 5}, ValueError, "paths must be 3, 4 or 8, got 5"),
         ({"num_disparities": 8, "paths": "8"}, TypeError, "paths must be an integer, got str"),
         ({"num_disparities": 8, "p1": -1}, ValueError, "p1 must be an integer >= 0, got -1"),
         ({"num_disparities": 8, "p1": 2.0}, TypeError, "p1 must be an integer, got float"),

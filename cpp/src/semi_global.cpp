@@ -59,6 +59,9 @@ int path_stride(int nd) { return (nd + 3 + 15) / 16 * 16; }
 
 int vertical_paths(int paths) { return paths == 8 ? 3 : 1; }
 
+// paths == 3: the rows of a stripe, whose path from above starts at its first row.
+constexpr std::ptrdiff_t kStripeRows = 64;
+
 // Threads meet at every row (the diagonal paths read the previous row across band edges).
 class Barrier {
  public:
@@ -113,7 +116,7 @@ void validate(const SemiGlobalParams& p) {
   if (p.block_size != 1 && p.block_size != 3) {
     fail("block_size must be 1 or 3 (box costs are stored in 8 bits)", p.block_size);
   }
-  if (p.paths != 4 && p.paths != 8) fail("paths must be 4 or 8", p.paths);
+  if (p.paths != 3 && p.paths != 4 && p.paths != 8) fail("paths must be 3, 4 or 8", p.paths);
   if (p.p1 < 0) fail("p1 must be an integer >= 0", p.p1);
   const int limit = 65535 / p.paths - cost_max(p.block_size);
   if (p.p2 < p.p1 || p.p2 > limit) {
@@ -146,10 +149,14 @@ std::size_t semi_global_memory(std::ptrdiff_t rows, std::ptrdiff_t cols, int nd,
   const double h = static_cast<double>(rows), w = static_cast<double>(cols), d = nd;
   const double ls = path_stride(nd);
   const double t = std::max(1, threads);
-  double bytes = h * w * d * 3.0;  // 16-bit sums, 8-bit costs
-  bytes += h * w * 13.0;           // census (2 x 2), grey (3), disparity before the median (4)
+  double bytes = h * w * 13.0;  // census (2 x 2), grey (3), disparity before the median (4)
   bytes += t * (w * d * 4.0 + 3.0 * (w + d) * 2.0 + 4.0 * ls * 2.0 + w * 14.0);  // per thread
-  bytes += vertical_paths(paths) * 2.0 * w * ls * 2.0;                           // path rows
+  if (paths == 3) {
+    bytes += t * (w * d * 1.0 + 2.0 * w * ls * 2.0);  // a cost row and two path rows
+  } else {
+    bytes += h * w * d * 3.0;                              // 16-bit sums, 8-bit costs
+    bytes += vertical_paths(paths) * 2.0 * w * ls * 2.0;  // path rows
+  }
   return static_cast<std::size_t>(std::min(bytes, 1.8e19));
 }
 
@@ -212,8 +219,9 @@ void SemiGlobalMatcher::compute(const StereoImage& left, const StereoImage& righ
   const std::size_t vol = npix * static_cast<std::size_t>(nd);
   const int ls = path_stride(nd);
 
-  auto* sums = aligned<std::uint16_t>(ws.sums, vol);
-  auto* costs = aligned<std::uint8_t>(ws.costs, vol);
+  const bool single_pass = p.paths == 3;
+  auto* sums = aligned<std::uint16_t>(ws.sums, single_pass ? 0 : vol);
+  auto* costs = aligned<std::uint8_t>(ws.costs, single_pass ? 0 : vol);
   auto* lcen = aligned<std::uint16_t>(ws.census_l, npix);
   auto* rcen = aligned<std::uint16_t>(ws.census_r, npix);
   auto* grey = aligned<std::uint8_t>(ws.grey, rgb ? 2 * npix : 0);
@@ -289,84 +297,142 @@ void SemiGlobalMatcher::compute(const StereoImage& left, const StereoImage& righ
   da.lr_max_diff = p.lr_max_diff;
   da.clip_border = p.clip_border;
 
-  // 1. Downward, then upward: the costs (computed on the way down) and the vertical and
-  //    diagonal paths; the columns are split between the threads, which meet at every row
-  //    when the diagonals read the previous row across band edges. The way down writes the
-  //    sums, the way up adds to them.
   const auto n_col = static_cast<std::size_t>(cols) * static_cast<std::size_t>(nd);
-  {
-    const std::ptrdiff_t nb =
-        std::max<std::ptrdiff_t>(1, std::min<std::ptrdiff_t>(threads_, cols / 16));
-    if (ws.scratch.size() < static_cast<std::size_t>(nb)) {
-      ws.scratch.resize(static_cast<std::size_t>(nb));
-    }
-    const int nv = vertical_paths(p.paths);
-    const auto row_len = static_cast<std::size_t>(cols) * static_cast<std::size_t>(ls);
-    auto* prow = aligned<std::int16_t>(ws.path_rows, 2 * static_cast<std::size_t>(nv) * row_len);
-    for (std::size_t i = 0; i < 2 * static_cast<std::size_t>(nv) * static_cast<std::size_t>(cols);
-         ++i) {
-      prow[i * static_cast<std::size_t>(ls)] = detail::kSentinel;
-      prow[i * static_cast<std::size_t>(ls) + static_cast<std::size_t>(nd) + 1] = detail::kSentinel;
-    }
-    const int dxs[3] = {0, 1, -1};
-    for (int dy : {1, -1}) {
-      Barrier barrier(nb);
-      run_bands(nb, [&](std::ptrdiff_t b) {
-        const std::ptrdiff_t x0 = band(cols, nb, b), x1 = band(cols, nb, b + 1);
-        std::uint16_t* rev = nullptr;
-        std::uint16_t* colraw = nullptr;
-        if (dy > 0) {
-          const std::size_t n_rev = 3 * (static_cast<std::size_t>(cols) + static_cast<std::size_t>(nd));
-          const std::size_t n_raw = static_cast<std::size_t>(x1 - x0 + 2) * static_cast<std::size_t>(nd);
-          rev = aligned<std::uint16_t>(ws.scratch[static_cast<std::size_t>(b)], n_rev + n_raw);
-          colraw = rev + n_rev;
-        }
+  if (single_pass) {
+    // paths == 3, one pass: stripes of kStripeRows rows (the last one shorter), each matched
+    // top to bottom by one thread with the path from above restarting at its first row, so
+    // the output does not depend on the number of threads; per row, the costs, the path from
+    // above, the paths along the row and the decision, all in row buffers.
+    const std::ptrdiff_t stripes = (rows + kStripeRows - 1) / kStripeRows;
+    const std::ptrdiff_t ns = std::min<std::ptrdiff_t>(nt, stripes);
+    run_bands(ns, [&](std::ptrdiff_t b) {
+      const auto c = static_cast<std::size_t>(cols);
+      const auto lsz = static_cast<std::size_t>(ls);
+      const std::size_t n_rev = 3 * (c + static_cast<std::size_t>(nd));
+      const std::size_t n_raw = (c + 2) * static_cast<std::size_t>(nd);
+      const std::size_t n_row = c * lsz;
+      std::vector<std::uint8_t>& sc = ws.scratch[static_cast<std::size_t>(b)];
+      // uint16 pieces: rev, colraw, total, rmin, rarg, cost row (as bytes), two path rows,
+      // horizontal scratch
+      const std::size_t n16 = n_rev + n_raw + n_col + 2 * c + (n_col + 1) / 2 + 2 * n_row +
+                              2 * lsz + 64;
+      auto* rev = aligned<std::uint16_t>(sc, n16);
+      std::uint16_t* colraw = rev + n_rev;
+      std::uint16_t* total = colraw + n_raw;
+      std::uint16_t* rmin = total + n_col;
+      std::uint16_t* rarg = rmin + c;
+      auto* crow = reinterpret_cast<std::uint8_t*>(rarg + c);
+      auto* rows16 = reinterpret_cast<std::int16_t*>(rarg + c + (n_col + 1) / 2);
+      std::int16_t* prow[2] = {rows16, rows16 + n_row};
+      std::int16_t* tmp = rows16 + 2 * n_row;
+      for (std::size_t i = 0; i < 2 * c; ++i) {
+        rows16[i * lsz] = detail::kSentinel;
+        rows16[i * lsz + static_cast<std::size_t>(nd) + 1] = detail::kSentinel;
+      }
+      for (std::ptrdiff_t st = band(stripes, ns, b); st < band(stripes, ns, b + 1); ++st) {
+        const std::ptrdiff_t y0 = st * kStripeRows;
+        const std::ptrdiff_t y1 = std::min<std::ptrdiff_t>(rows, y0 + kStripeRows);
         int flip = 0;
-        for (std::ptrdiff_t i = 0; i < rows; ++i) {
-          const std::ptrdiff_t y = dy > 0 ? i : rows - 1 - i;
-          const std::ptrdiff_t yq = y - dy;
-          std::uint8_t* crow = costs + static_cast<std::size_t>(y) * n_col;
-          if (dy > 0) {
-            const std::uint16_t* lr[3];
-            const std::uint16_t* rr[3];
-            for (int j = 0; j < 2 * r + 1; ++j) {
-              const std::ptrdiff_t yy = std::clamp<std::ptrdiff_t>(y + j - r, 0, rows - 1);
-              lr[j] = lcen + yy * cols;
-              rr[j] = rcen + yy * cols;
-            }
-            k.cost_row(lr, rr, r, cols, x0, x1, nd, p.min_disparity, cmax, rev, colraw, crow);
+        for (std::ptrdiff_t y = y0; y < y1; ++y) {
+          const std::uint16_t* lr[3];
+          const std::uint16_t* rr[3];
+          for (int j = 0; j < 2 * r + 1; ++j) {
+            const std::ptrdiff_t yy = std::clamp<std::ptrdiff_t>(y + j - r, 0, rows - 1);
+            lr[j] = lcen + yy * cols;
+            rr[j] = rcen + yy * cols;
           }
-          for (int v = 0; v < nv; ++v) {
-            std::int16_t* cur = prow + (2 * static_cast<std::size_t>(v) + static_cast<std::size_t>(flip)) * row_len;
-            std::int16_t* prev = prow + (2 * static_cast<std::size_t>(v) + static_cast<std::size_t>(1 - flip)) * row_len;
-            k.path_row(pp, crow, pgrey + y * cols, i > 0 ? pgrey + yq * cols : nullptr,
-                       i > 0 ? prev : nullptr, cur, cols, x0, x1, dxs[v],
-                       sums + static_cast<std::size_t>(y) * n_col, dy > 0 && v == 0);
-          }
+          k.cost_row(lr, rr, r, cols, 0, cols, nd, p.min_disparity, cmax, rev, colraw, crow);
+          const bool first = y == y0;
+          k.path_row(pp, crow, pgrey + y * cols, first ? nullptr : pgrey + (y - 1) * cols,
+                     first ? nullptr : prow[1 - flip], prow[flip], cols, 0, cols, 0, total, true);
+          k.horizontal_row(pp, crow, pgrey + y * cols, cols, total, tmp);
+          float* drow = pre ? pre + y * cols : disparity.row(y);
+          k.decide_row(da, total, drow, confidence.data ? confidence.row(y) : nullptr, rmin,
+                       rarg);
           flip = 1 - flip;
-          if (nv > 1 && nb > 1) barrier.wait();
         }
-      });
+      }
+    });
+  } else {
+  // 1. Downward, then upward: the costs (computed on the way down) and the vertical and
+    //    diagonal paths; the columns are split between the threads, which meet at every row
+    //    when the diagonals read the previous row across band edges. The way down writes the
+    //    sums, the way up adds to them.
+    {
+      const std::ptrdiff_t nb =
+          std::max<std::ptrdiff_t>(1, std::min<std::ptrdiff_t>(threads_, cols / 16));
+      if (ws.scratch.size() < static_cast<std::size_t>(nb)) {
+        ws.scratch.resize(static_cast<std::size_t>(nb));
+      }
+      const int nv = vertical_paths(p.paths);
+      const auto row_len = static_cast<std::size_t>(cols) * static_cast<std::size_t>(ls);
+      auto* prow = aligned<std::int16_t>(ws.path_rows, 2 * static_cast<std::size_t>(nv) * row_len);
+      for (std::size_t i = 0; i < 2 * static_cast<std::size_t>(nv) * static_cast<std::size_t>(cols);
+           ++i) {
+        prow[i * static_cast<std::size_t>(ls)] = detail::kSentinel;
+        prow[i * static_cast<std::size_t>(ls) + static_cast<std::size_t>(nd) + 1] = detail::kSentinel;
+      }
+      const int dxs[3] = {0, 1, -1};
+      for (int dy : {1, -1}) {
+        Barrier barrier(nb);
+        run_bands(nb, [&](std::ptrdiff_t b) {
+          const std::ptrdiff_t x0 = band(cols, nb, b), x1 = band(cols, nb, b + 1);
+          std::uint16_t* rev = nullptr;
+          std::uint16_t* colraw = nullptr;
+          if (dy > 0) {
+            const std::size_t n_rev = 3 * (static_cast<std::size_t>(cols) + static_cast<std::size_t>(nd));
+            const std::size_t n_raw = static_cast<std::size_t>(x1 - x0 + 2) * static_cast<std::size_t>(nd);
+            rev = aligned<std::uint16_t>(ws.scratch[static_cast<std::size_t>(b)], n_rev + n_raw);
+            colraw = rev + n_rev;
+          }
+          int flip = 0;
+          for (std::ptrdiff_t i = 0; i < rows; ++i) {
+            const std::ptrdiff_t y = dy > 0 ? i : rows - 1 - i;
+            const std::ptrdiff_t yq = y - dy;
+            std::uint8_t* crow = costs + static_cast<std::size_t>(y) * n_col;
+            if (dy > 0) {
+              const std::uint16_t* lr[3];
+              const std::uint16_t* rr[3];
+              for (int j = 0; j < 2 * r + 1; ++j) {
+                const std::ptrdiff_t yy = std::clamp<std::ptrdiff_t>(y + j - r, 0, rows - 1);
+                lr[j] = lcen + yy * cols;
+                rr[j] = rcen + yy * cols;
+              }
+              k.cost_row(lr, rr, r, cols, x0, x1, nd, p.min_disparity, cmax, rev, colraw, crow);
+            }
+            for (int v = 0; v < nv; ++v) {
+              std::int16_t* cur = prow + (2 * static_cast<std::size_t>(v) + static_cast<std::size_t>(flip)) * row_len;
+              std::int16_t* prev = prow + (2 * static_cast<std::size_t>(v) + static_cast<std::size_t>(1 - flip)) * row_len;
+              k.path_row(pp, crow, pgrey + y * cols, i > 0 ? pgrey + yq * cols : nullptr,
+                         i > 0 ? prev : nullptr, cur, cols, x0, x1, dxs[v],
+                         sums + static_cast<std::size_t>(y) * n_col, dy > 0 && v == 0);
+            }
+            flip = 1 - flip;
+            if (nv > 1 && nb > 1) barrier.wait();
+          }
+        });
+      }
     }
+  
+    // 2. Row by row (the rows split between the threads): the horizontal paths added to a copy
+    //    of the row's sums, then the winner, checks and sub-pixel step on that copy.
+    run_bands(nt, [&](std::ptrdiff_t b) {
+      const auto c = static_cast<std::size_t>(cols);
+      auto* total = aligned<std::uint16_t>(ws.scratch[static_cast<std::size_t>(b)],
+                                           n_col + 2 * c + 2 * static_cast<std::size_t>(ls) + 32);
+      std::uint16_t* rmin = total + n_col;
+      std::uint16_t* rarg = rmin + c;
+      auto* tmp = reinterpret_cast<std::int16_t*>(rarg + c);
+      for (std::ptrdiff_t y = band(rows, nt, b); y < band(rows, nt, b + 1); ++y) {
+        std::memcpy(total, sums + static_cast<std::size_t>(y) * n_col, n_col * sizeof(std::uint16_t));
+        k.horizontal_row(pp, costs + static_cast<std::size_t>(y) * n_col, pgrey + y * cols, cols,
+                         total, tmp);
+        float* drow = pre ? pre + y * cols : disparity.row(y);
+        k.decide_row(da, total, drow, confidence.data ? confidence.row(y) : nullptr, rmin, rarg);
+      }
+    });
+  
   }
-
-  // 2. Row by row (the rows split between the threads): the horizontal paths added to a copy
-  //    of the row's sums, then the winner, checks and sub-pixel step on that copy.
-  run_bands(nt, [&](std::ptrdiff_t b) {
-    const auto c = static_cast<std::size_t>(cols);
-    auto* total = aligned<std::uint16_t>(ws.scratch[static_cast<std::size_t>(b)],
-                                         n_col + 2 * c + 2 * static_cast<std::size_t>(ls) + 32);
-    std::uint16_t* rmin = total + n_col;
-    std::uint16_t* rarg = rmin + c;
-    auto* tmp = reinterpret_cast<std::int16_t*>(rarg + c);
-    for (std::ptrdiff_t y = band(rows, nt, b); y < band(rows, nt, b + 1); ++y) {
-      std::memcpy(total, sums + static_cast<std::size_t>(y) * n_col, n_col * sizeof(std::uint16_t));
-      k.horizontal_row(pp, costs + static_cast<std::size_t>(y) * n_col, pgrey + y * cols, cols,
-                       total, tmp);
-      float* drow = pre ? pre + y * cols : disparity.row(y);
-      k.decide_row(da, total, drow, confidence.data ? confidence.row(y) : nullptr, rmin, rarg);
-    }
-  });
 
   // 4. The 3x3 median of the valid disparities (the lower median; NaN stays NaN).
   if (pre) {

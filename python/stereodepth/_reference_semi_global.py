@@ -15,12 +15,13 @@ import numpy as np
 
 from ._reference_block_match import box_sum, census, grey, popcount, speckle_filter
 from .matching import as_pair
-from .semi_global import SemiGlobalOptions, cost_max
+from .semi_global import STRIPE_ROWS, SemiGlobalOptions, cost_max
 
 __all__ = ["semi_global_match"]
 
 #: The path directions (dy, dx): the previous pixel on the path is (y - dy, x - dx).
-PATHS_4 = ((0, 1), (0, -1), (1, 0), (-1, 0))
+PATHS_3 = ((0, 1), (0, -1), (1, 0))
+PATHS_4 = (*PATHS_3, (-1, 0))
 PATHS_8 = (*PATHS_4, (1, 1), (1, -1), (-1, 1), (-1, -1))
 
 
@@ -65,8 +66,11 @@ def _step(
     return out
 
 
-def path_costs(c: np.ndarray, g: np.ndarray, dy: int, dx: int, o: SemiGlobalOptions) -> np.ndarray:
-    """L_r for the direction (dy, dx), in scan order (int64, like c)."""
+def path_costs(
+    c: np.ndarray, g: np.ndarray, dy: int, dx: int, o: SemiGlobalOptions, stripe: int = 0
+) -> np.ndarray:
+    """L_r for the direction (dy, dx), in scan order (int64, like c); with ``stripe`` > 0 (a
+    downward path only), the path starts again at every row y with y % stripe == 0."""
     h, w, _ = c.shape
     lr = np.empty_like(c)
     if dy == 0:
@@ -82,7 +86,7 @@ def path_costs(c: np.ndarray, g: np.ndarray, dy: int, dx: int, o: SemiGlobalOpti
     has = (xq >= 0) & (xq <= w - 1)
     xqc = np.clip(xq, 0, w - 1)
     for i, y in enumerate(ys):
-        if i == 0:
+        if i == 0 or (stripe > 0 and y % stripe == 0):
             lr[y] = c[y]
             continue
         q = y - dy
@@ -126,10 +130,11 @@ def semi_global_match(
     d_of_k = dmin + ks
 
     c = costs(gl, gr, o)
-    dirs = PATHS_4 if o.paths == 4 else PATHS_8
+    dirs = {3: PATHS_3, 4: PATHS_4, 8: PATHS_8}[o.paths]
+    stripe = STRIPE_ROWS if o.paths == 3 else 0
     s = np.zeros_like(c)
     for dy, dx in dirs:
-        s += path_costs(c, ig, dy, dx, o)
+        s += path_costs(c, ig, dy, dx, o, stripe)
 
     inside = np.broadcast_to(candidate_inside(w, dmin, nd)[None], (h, w, nd))
     sentinel = np.int64(1) << np.int64(40)

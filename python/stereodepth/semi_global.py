@@ -27,7 +27,9 @@ Steps, in the kernel and in the oracle alike:
    whose full search range leaves the right image NaN, as OpenCV does (the leftmost
    ``min_disparity + num_disparities - 1`` columns).
 4. Paths: for each direction r (``paths=4``: from the left, the right, above and below;
-   ``paths=8`` adds the four diagonals), in scan order,
+   ``paths=8`` adds the four diagonals; ``paths=3``, one pass over the image: from the left,
+   the right and above, the path from above starting again every 64 rows, at rows
+   ``y % 64 == 0``, so that stripes of 64 rows can be matched in parallel), in scan order,
    ``L_r(p, d) = C(p, d) + min(L_r(q, d), L_r(q, d - 1) + P1, L_r(q, d + 1) + P1,
    m + P2') - m`` where ``q = p - r`` is the previous pixel on the path and ``m`` the least
    ``L_r(q, .)``; at the first pixel of a path ``L_r(p, d) = C(p, d)``. ``P2'`` adapts to the
@@ -47,13 +49,15 @@ Steps, in the kernel and in the oracle alike:
    its 3x3 window (inside the image); invalid pixels stay NaN.
 7. Speckle filter, as the block matcher's.
 
-Memory: the sums ``S`` (2 bytes per pixel and disparity) and the costs (1 byte per pixel and
-disparity), plus a few rows per thread; :func:`memory_estimate` gives the figure, and the
-matcher refuses with ValueError above ``max_memory_mb``.
+Memory: ``paths`` 4 and 8 keep the sums ``S`` (2 bytes per pixel and disparity) and the
+costs (1 byte per pixel and disparity), plus a few rows per thread; ``paths=3`` keeps only a
+few rows of ``W * num_disparities`` per thread (O(W D), about 5 MB per thread at W = 1920,
+D = 256), beside 13 bytes per pixel for the images. :func:`memory_estimate` gives the figure,
+and the matcher refuses with ValueError above ``max_memory_mb``.
 
 Threads: the horizontal paths and the final steps split the rows, the vertical and diagonal
-paths split the columns (threads meet at every row for the diagonals); the output does not
-depend on the number of threads.
+paths split the columns (threads meet at every row for the diagonals); ``paths=3`` splits the
+stripes. The output does not depend on the number of threads.
 """
 
 from __future__ import annotations
@@ -76,7 +80,9 @@ __all__ = [
 CENSUS_BITS = 16
 #: The box sizes of the pixel cost (costs are stored in 8 bits: 16 * 3**2 = 144).
 BLOCK_SIZES = (1, 3)
-PATH_COUNTS = (4, 8)
+PATH_COUNTS = (3, 4, 8)
+#: paths=3 (one pass): the path from above starts again every STRIPE_ROWS rows.
+STRIPE_ROWS = 64
 _SUBPIXEL_MODES = ("parabola", "equiangular")
 
 # Defaults, chosen by measuring on the shared scenes (bench/README.md).
@@ -163,7 +169,7 @@ class SemiGlobalOptions:
         self.block_size = bs
         pc = check.integer("paths", paths)
         if pc not in PATH_COUNTS:
-            raise ValueError(f"paths must be 4 or 8, got {pc}")
+            raise ValueError(f"paths must be 3, 4 or 8, got {pc}")
         self.paths = pc
         self.p1 = check.integer("p1", p1, minimum=0)
         p2v = check.integer("p2", p2)
@@ -235,9 +241,10 @@ def _flag(name: str, value: Any) -> bool:
 def memory_estimate(
     shape: tuple[int, int], *, num_disparities: int, paths: int = DEFAULT_PATHS, threads: int = 1
 ) -> int:
-    """Bytes the native matcher needs for an image of ``shape`` (H, W): 3 bytes per pixel and
-    disparity (16-bit sums, 8-bit costs), 10 per pixel (grey and census images, outputs), and
-    per thread or per column a few rows of path costs."""
+    """Bytes the native matcher needs for an image of ``shape`` (H, W): for ``paths`` 4 and 8,
+    3 bytes per pixel and disparity (16-bit sums, 8-bit costs); 13 per pixel (grey and census
+    images, the disparity before the median); and per thread a few rows of costs and path
+    costs."""
     return int(_core.semi_global_memory(shape[0], shape[1], num_disparities, paths, threads))
 
 
@@ -387,6 +394,7 @@ def semi_global_match(
         Grey levels of intensity step between neighbours that halve ``p2``
         (``P2' = max(p1, p2 * p2_step // (p2_step + step))``); 0 keeps ``p2`` everywhere.
     paths
+        3 (one pass: along the row and from above, restarting every 64 rows; least memory),
         4 (horizontal and vertical) or 8 (and the diagonals).
     subpixel
         ``True`` or ``"parabola"``, ``"equiangular"``, or ``False`` for integers.
