@@ -238,11 +238,12 @@ def test_single_pass_stripes_match_oracle(threads: int) -> None:
 
 @pytest.mark.parametrize("paths", [3, 4, 8])
 def test_largest_p2_and_many_disparities_do_not_overflow(paths: int) -> None:
-    # Sums reach paths * (144 + p2) <= 65535 on a pair that matches nowhere.
+    # Path costs reach 144 + p2 < 2**14 and sums paths * (144 + p2) <= 65535 on a pair that
+    # matches nowhere.
     rng = np.random.default_rng(9)
     left = rng.integers(0, 256, (12, 40)).astype(np.uint8)
     right = rng.integers(0, 256, (12, 40)).astype(np.uint8)
-    p2 = 65535 // paths - 144
+    p2 = min(65535 // paths, 16383) - 144
     kw: dict[str, Any] = {
         "num_disparities": 300,
         "min_disparity": -150,
@@ -415,7 +416,7 @@ def test_confidence_is_in_unit_interval_and_zero_on_holes() -> None:
 def test_memory_estimate_and_refusal() -> None:
     from stereodepth.semi_global import memory_estimate
 
-    est = memory_estimate((1080, 1920), num_disparities=256)
+    est = memory_estimate((1080, 1920), num_disparities=256, paths=4)
     assert 3 * 1080 * 1920 * 256 <= est < 3.2 * 1080 * 1920 * 256
     # One pass: a few MB per thread above 13 bytes per pixel.
     one = memory_estimate((1080, 1920), num_disparities=256, paths=3, threads=2)
@@ -423,10 +424,10 @@ def test_memory_estimate_and_refusal() -> None:
     left, right = shifted_pair((100, 200), 3, seed=31)
     with pytest.raises(
         ValueError,
-        match=r"semi-global matching of a 100x200 pair with num_disparities=512 needs about "
-        r"\d+ MiB .* above max_memory_mb=5; lower num_disparities, match a smaller",
+        match=r"semi-global matching of a 100x200 pair with num_disparities=512 and paths=4 "
+        r"needs about \d+ MiB, above max_memory_mb=5; lower num_disparities, use paths=3 ",
     ):
-        sd.semi_global_match(left, right, num_disparities=512, max_memory_mb=5)
+        sd.semi_global_match(left, right, num_disparities=512, paths=4, max_memory_mb=5)
 
 
 # ------------------------------------------------------------------------------------------
@@ -454,7 +455,7 @@ GOOD = shifted_pair((8, 20), 2, seed=40)
         (
             {"num_disparities": 8, "p1": 50, "p2": 40},
             ValueError,
-            r"p2 must be an integer in \[p1, 16239\] = \[50, 16239\] for paths=4 and "
+            r"p2 must be an integer in \[p1, 16239\] = \[50, 16239\] for paths=3 and "
             r"block_size=3 .*got 40",
         ),
         (

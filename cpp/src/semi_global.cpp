@@ -118,7 +118,7 @@ void validate(const SemiGlobalParams& p) {
   }
   if (p.paths != 3 && p.paths != 4 && p.paths != 8) fail("paths must be 3, 4 or 8", p.paths);
   if (p.p1 < 0) fail("p1 must be an integer >= 0", p.p1);
-  const int limit = 65535 / p.paths - cost_max(p.block_size);
+  const int limit = std::min(65535 / p.paths, 16383) - cost_max(p.block_size);
   if (p.p2 < p.p1 || p.p2 > limit) {
     fail("p2 must be an integer in [p1, " + std::to_string(limit) +
              "] (the sum over the paths must fit in 16 bits)",
@@ -200,9 +200,10 @@ void SemiGlobalMatcher::compute(const StereoImage& left, const StereoImage& righ
     std::ostringstream msg;
     msg.precision(0);
     msg << std::fixed << "semi-global matching of a " << rows << "x" << cols
-        << " pair with num_disparities=" << nd << " needs about " << need_mb
-        << " MiB (3 bytes per pixel and disparity), above max_memory_mb=" << p.max_memory_mb
-        << "; lower num_disparities, match a smaller (cropped or downscaled) pair, or raise "
+        << " pair with num_disparities=" << nd << " and paths=" << p.paths << " needs about "
+        << need_mb << " MiB, above max_memory_mb=" << p.max_memory_mb
+        << "; lower num_disparities, use paths=3 (a few rows per thread instead of 3 bytes per "
+           "pixel and disparity), match a smaller (cropped or downscaled) pair, or raise "
            "max_memory_mb";
     throw std::invalid_argument(msg.str());
   }

@@ -36,8 +36,9 @@ Steps, in the kernel and in the oracle alike:
    intensity step between the two pixels, ``s = |I(p) - I(q)|`` in grey levels (uint16:
    shifted right by 8): ``P2' = max(P1, (P2 * k) // (k + s))`` with ``k = p2_step`` (the step
    that halves P2; 0 turns the adaptation off, ``P2' = P2``). The subtraction of ``m`` keeps
-   ``L_r <= C_max + P2``, so each path fits 16 bits and their sum ``S(p, d) = sum_r L_r(p, d)``
-   fits in 16 bits when ``paths * (16 * block_size**2 + p2) <= 65535`` (checked).
+   ``L_r <= C_max + P2``, so each path fits 16 bits (``C_max + P2 < 2**14``, checked) and
+   their sum ``S(p, d) = sum_r L_r(p, d)`` fits in 16 bits when
+   ``paths * (16 * block_size**2 + p2) <= 65535`` (checked).
 5. Winner, uniqueness, left-right check, sub-pixel fit and confidence on ``S`` by the block
    matcher's rules (:mod:`stereodepth.matching`, steps 4-6), over the candidates inside the
    image: the least sum, the lowest disparity on a tie; every sum more than one disparity
@@ -90,7 +91,7 @@ DEFAULT_BLOCK_SIZE = 3
 DEFAULT_P1 = 40
 DEFAULT_P2 = 500
 DEFAULT_P2_STEP = 16
-DEFAULT_PATHS = 4
+DEFAULT_PATHS = 3
 DEFAULT_UNIQUENESS_RATIO = 2.0
 DEFAULT_LR_MAX_DIFF = 2.0
 DEFAULT_SPECKLE_WINDOW = 100
@@ -173,12 +174,13 @@ class SemiGlobalOptions:
         self.paths = pc
         self.p1 = check.integer("p1", p1, minimum=0)
         p2v = check.integer("p2", p2)
-        limit = 65535 // pc - cost_max(bs)
+        limit = min(65535 // pc, 16383) - cost_max(bs)
         if not self.p1 <= p2v <= limit:
             raise ValueError(
                 f"p2 must be an integer in [p1, {limit}] = [{self.p1}, {limit}] for paths={pc} "
-                f"and block_size={bs} (the sum over the paths, paths * ({cost_max(bs)} + p2), "
-                f"must fit in 16 bits), got {p2v}"
+                f"and block_size={bs} (a path cost, {cost_max(bs)} + p2, must stay below 2**14 "
+                f"and the sum over the paths, paths * ({cost_max(bs)} + p2), fit in 16 bits), "
+                f"got {p2v}"
             )
         self.p2 = p2v
         self.p2_step = check.integer("p2_step", p2_step, minimum=0, maximum=65535)
@@ -389,7 +391,7 @@ def semi_global_match(
     p1, p2
         Path penalties (integers, in units of the box cost, 0..16 * block_size**2) for a
         change of one disparity and for a larger jump between neighbours;
-        ``0 <= p1 <= p2 <= 65535 // paths - 16 * block_size**2``.
+        ``0 <= p1 <= p2 <= min(65535 // paths, 16383) - 16 * block_size**2``.
     p2_step
         Grey levels of intensity step between neighbours that halve ``p2``
         (``P2' = max(p1, p2 * p2_step // (p2_step + step))``); 0 keeps ``p2`` everywhere.

@@ -19,13 +19,13 @@ struct SemiGlobalParams {
   int num_disparities = 64;  // [1, kMaxNumDisparities]
   int min_disparity = 0;     // [-kMaxAbsMinDisparity, kMaxAbsMinDisparity]
   int block_size = 3;        // 1 or 3: the box the census costs are summed over
-  int p1 = 6;                // penalty of a one-disparity change along a path, >= 0
-  int p2 = 96;               // penalty of a jump, p1 <= p2 <= 65535 / paths - 16 * block_size^2
+  int p1 = 40;               // penalty of a one-disparity change along a path, >= 0
+  int p2 = 500;  // penalty of a jump, p1 <= p2 <= min(65535 / paths, 16383) - 16 * block_size^2
   int p2_step = 16;          // grey step that halves p2; 0 = no adaptation
-  int paths = 4;             // 4 or 8
+  int paths = 3;             // 3 (one pass), 4 or 8
   SubpixelFit subpixel = SubpixelFit::kParabola;
   double uniqueness_ratio = 2.0;  // percent; 0 turns the check off
-  double lr_max_diff = 1.0;       // pixels; negative turns the check off
+  double lr_max_diff = 2.0;       // pixels; negative turns the check off
   bool median = true;             // 3x3 median of the valid disparities
   int speckle_window = 100;       // 0 = off
   double speckle_range = 1.0;
