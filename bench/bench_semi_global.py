@@ -132,7 +132,7 @@ def test_scene(benchmark: Any, impl: Any, scene_dir: Path, impl_name: str) -> No
 
 
 # ------------------------------------------------------------------------------------------
-# 1280x720, ndisp 128: the speed targets (default mode vs 3WAY, 8 paths vs HH), thread
+# 1280x720, ndisp 128: the speed targets (the default paths=3 vs 3WAY, 8 paths vs HH), thread
 # scaling and the instruction sets, one group per mode
 
 
@@ -146,7 +146,7 @@ HD_IMPLS = [
 
 
 @pytest.mark.parametrize("impl_name", HD_IMPLS)
-@pytest.mark.parametrize("paths", [4, 8])
+@pytest.mark.parametrize("paths", [3, 4, 8])
 def test_hd(benchmark: Any, impl: Any, paths: int, impl_name: str) -> None:
     left, right = hd_pair()
     nd = 128

@@ -93,6 +93,42 @@ void run_bands(std::ptrdiff_t n, Fn fn) {
   });
 }
 
+// The pixel costs of the last census rows a thread used (raw_row), so that each image row
+// computes one new census row's costs rather than the box's 2r + 1.
+struct RawRows {
+  std::uint16_t* slot[3] = {nullptr, nullptr, nullptr};
+  std::ptrdiff_t row[3] = {-1, -1, -1};
+
+  // The costs of the census rows y - r .. y + r (clamped) into raws.
+  void get(const detail::SemiGlobalKernels& k, const std::uint16_t* lcen, const std::uint16_t* rcen,
+           std::ptrdiff_t rows, std::ptrdiff_t cols, std::ptrdiff_t x0, std::ptrdiff_t x1, int r,
+           int nd, int min_d, std::ptrdiff_t y, std::uint16_t* rev, const std::uint16_t** raws) {
+    std::ptrdiff_t need[3];
+    for (int i = 0; i < 2 * r + 1; ++i) need[i] = std::clamp<std::ptrdiff_t>(y + i - r, 0, rows - 1);
+    auto needed = [&](std::ptrdiff_t yy) {
+      for (int i = 0; i < 2 * r + 1; ++i) {
+        if (need[i] == yy) return true;
+      }
+      return false;
+    };
+    for (int i = 0; i < 2 * r + 1; ++i) {
+      int at = -1;
+      for (int s = 0; s < 3; ++s) {
+        if (row[s] == need[i]) at = s;
+      }
+      if (at < 0) {
+        for (int s = 0; s < 3 && at < 0; ++s) {
+          if (row[s] < 0 || !needed(row[s])) at = s;
+        }
+        k.raw_row(lcen + need[i] * cols, rcen + need[i] * cols, cols, x0, x1, r, nd, min_d, rev,
+                  slot[at]);
+        row[at] = need[i];
+      }
+      raws[i] = slot[at];
+    }
+  }
+};
+
 template <typename T>
 T* aligned(std::vector<std::uint8_t>& v, std::size_t count) {
   const std::size_t bytes = count * sizeof(T) + 64;
@@ -150,7 +186,7 @@ std::size_t semi_global_memory(std::ptrdiff_t rows, std::ptrdiff_t cols, int nd,
   const double ls = path_stride(nd);
   const double t = std::max(1, threads);
   double bytes = h * w * 13.0;  // census (2 x 2), grey (3), disparity before the median (4)
-  bytes += t * (w * d * 4.0 + 3.0 * (w + d) * 2.0 + 4.0 * ls * 2.0 + w * 14.0);  // per thread
+  bytes += t * (w * d * 10.0 + (w + d) * 2.0 + 4.0 * ls * 2.0 + w * 14.0);  // per thread
   if (paths == 3) {
     bytes += t * (w * d * 1.0 + 2.0 * w * ls * 2.0);  // a cost row and two path rows
   } else {
@@ -309,8 +345,8 @@ void SemiGlobalMatcher::compute(const StereoImage& left, const StereoImage& righ
     run_bands(ns, [&](std::ptrdiff_t b) {
       const auto c = static_cast<std::size_t>(cols);
       const auto lsz = static_cast<std::size_t>(ls);
-      const std::size_t n_rev = 3 * (c + static_cast<std::size_t>(nd));
-      const std::size_t n_raw = (c + 2) * static_cast<std::size_t>(nd);
+      const std::size_t n_rev = c + static_cast<std::size_t>(nd);
+      const std::size_t n_raw = 4 * (c + 2) * static_cast<std::size_t>(nd);  // 3 rows, a sum
       const std::size_t n_row = c * lsz;
       std::vector<std::uint8_t>& sc = ws.scratch[static_cast<std::size_t>(b)];
       // uint16 pieces: rev, colraw, total, rmin, rarg, cost row (as bytes), two path rows,
@@ -319,6 +355,8 @@ void SemiGlobalMatcher::compute(const StereoImage& left, const StereoImage& righ
                               2 * lsz + 64;
       auto* rev = aligned<std::uint16_t>(sc, n16);
       std::uint16_t* colraw = rev + n_rev;
+      RawRows raw;
+      for (int i = 0; i < 3; ++i) raw.slot[i] = colraw + static_cast<std::size_t>(i + 1) * (c + 2) * static_cast<std::size_t>(nd);
       std::uint16_t* total = colraw + n_raw;
       std::uint16_t* rmin = total + n_col;
       std::uint16_t* rarg = rmin + c;
@@ -335,14 +373,9 @@ void SemiGlobalMatcher::compute(const StereoImage& left, const StereoImage& righ
         const std::ptrdiff_t y1 = std::min<std::ptrdiff_t>(rows, y0 + kStripeRows);
         int flip = 0;
         for (std::ptrdiff_t y = y0; y < y1; ++y) {
-          const std::uint16_t* lr[3];
-          const std::uint16_t* rr[3];
-          for (int j = 0; j < 2 * r + 1; ++j) {
-            const std::ptrdiff_t yy = std::clamp<std::ptrdiff_t>(y + j - r, 0, rows - 1);
-            lr[j] = lcen + yy * cols;
-            rr[j] = rcen + yy * cols;
-          }
-          k.cost_row(lr, rr, r, cols, 0, cols, nd, p.min_disparity, cmax, rev, colraw, crow);
+          const std::uint16_t* raws[3];
+          raw.get(k, lcen, rcen, rows, cols, 0, cols, r, nd, p.min_disparity, y, rev, raws);
+          k.box_row(raws, r, cols, 0, cols, nd, p.min_disparity, cmax, colraw, crow);
           const bool first = y == y0;
           k.path_row(pp, crow, pgrey + y * cols, first ? nullptr : pgrey + (y - 1) * cols,
                      first ? nullptr : prow[1 - flip], prow[flip], cols, 0, cols, 0, total, true);
@@ -380,11 +413,13 @@ void SemiGlobalMatcher::compute(const StereoImage& left, const StereoImage& righ
           const std::ptrdiff_t x0 = band(cols, nb, b), x1 = band(cols, nb, b + 1);
           std::uint16_t* rev = nullptr;
           std::uint16_t* colraw = nullptr;
+          RawRows raw;
           if (dy > 0) {
-            const std::size_t n_rev = 3 * (static_cast<std::size_t>(cols) + static_cast<std::size_t>(nd));
+            const std::size_t n_rev = static_cast<std::size_t>(cols) + static_cast<std::size_t>(nd);
             const std::size_t n_raw = static_cast<std::size_t>(x1 - x0 + 2) * static_cast<std::size_t>(nd);
-            rev = aligned<std::uint16_t>(ws.scratch[static_cast<std::size_t>(b)], n_rev + n_raw);
+            rev = aligned<std::uint16_t>(ws.scratch[static_cast<std::size_t>(b)], n_rev + 4 * n_raw);
             colraw = rev + n_rev;
+            for (int j = 0; j < 3; ++j) raw.slot[j] = colraw + static_cast<std::size_t>(j + 1) * n_raw;
           }
           int flip = 0;
           for (std::ptrdiff_t i = 0; i < rows; ++i) {
@@ -392,14 +427,9 @@ void SemiGlobalMatcher::compute(const StereoImage& left, const StereoImage& righ
             const std::ptrdiff_t yq = y - dy;
             std::uint8_t* crow = costs + static_cast<std::size_t>(y) * n_col;
             if (dy > 0) {
-              const std::uint16_t* lr[3];
-              const std::uint16_t* rr[3];
-              for (int j = 0; j < 2 * r + 1; ++j) {
-                const std::ptrdiff_t yy = std::clamp<std::ptrdiff_t>(y + j - r, 0, rows - 1);
-                lr[j] = lcen + yy * cols;
-                rr[j] = rcen + yy * cols;
-              }
-              k.cost_row(lr, rr, r, cols, x0, x1, nd, p.min_disparity, cmax, rev, colraw, crow);
+              const std::uint16_t* raws[3];
+              raw.get(k, lcen, rcen, rows, cols, x0, x1, r, nd, p.min_disparity, y, rev, raws);
+              k.box_row(raws, r, cols, x0, x1, nd, p.min_disparity, cmax, colraw, crow);
             }
             for (int v = 0; v < nv; ++v) {
               std::int16_t* cur = prow + (2 * static_cast<std::size_t>(v) + static_cast<std::size_t>(flip)) * row_len;

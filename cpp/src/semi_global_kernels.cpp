@@ -48,47 +48,44 @@ inline uint16_t popcount16(uint16_t v) {
 // ------------------------------------------------------------------------------------------
 // Costs.
 
-void cost_row(const uint16_t* const* lrows, const uint16_t* const* rrows, int radius,
-              ptrdiff_t cols, ptrdiff_t x0, ptrdiff_t x1, int nd, int min_d, int cmax,
-              uint16_t* rev, uint16_t* colraw, uint8_t* out) {
-  const int n = 2 * radius + 1;
+void raw_row(const uint16_t* lrow, const uint16_t* rrow, ptrdiff_t cols, ptrdiff_t x0,
+             ptrdiff_t x1, int radius, int nd, int min_d, uint16_t* rev, uint16_t* out) {
+  // rev[u] = right[clamp(cols - 1 - min_d - u)]: the right pixel of column x and index k is
+  // rev[cols - 1 - x + k], rising with k.
   const ptrdiff_t rl = cols + nd;
-  // rev_i[u] = right_i[clamp(cols - 1 - min_d - u)]: the right pixel of column x and index k
-  // is rev_i[cols - 1 - x + k], rising with k.
-  for (int i = 0; i < n; ++i) {
-    uint16_t* rv = rev + i * rl;
-    for (ptrdiff_t u = 0; u < rl; ++u) {
-      rv[u] = rrows[i][clamp_index(cols - 1 - min_d - u, 0, cols - 1)];
-    }
-  }
-  // colraw[j] holds the column sums of column clamp(x0 - radius + j).
-  const ptrdiff_t nraw = x1 - x0 + 2 * radius;
-  for (ptrdiff_t j = 0; j < nraw; ++j) {
+  for (ptrdiff_t u = 0; u < rl; ++u) rev[u] = rrow[clamp_index(cols - 1 - min_d - u, 0, cols - 1)];
+  const ptrdiff_t n = x1 - x0 + 2 * radius;
+  for (ptrdiff_t j = 0; j < n; ++j) {
     const ptrdiff_t x = clamp_index(x0 - radius + j, 0, cols - 1);
-    uint16_t* __restrict cr = colraw + j * nd;
-    {
-      const uint16_t l = lrows[0][x];
-      const uint16_t* __restrict rv = rev + (cols - 1 - x);
-      for (int k = 0; k < nd; ++k) cr[k] = popcount16(static_cast<uint16_t>(l ^ rv[k]));
-    }
-    for (int i = 1; i < n; ++i) {
-      const uint16_t l = lrows[i][x];
-      const uint16_t* __restrict rv = rev + i * rl + (cols - 1 - x);
-      for (int k = 0; k < nd; ++k) {
-        cr[k] = static_cast<uint16_t>(cr[k] + popcount16(static_cast<uint16_t>(l ^ rv[k])));
-      }
-    }
+    uint16_t* __restrict o = out + j * nd;
+    const uint16_t l = lrow[x];
+    const uint16_t* __restrict rv = rev + (cols - 1 - x);
+    for (int k = 0; k < nd; ++k) o[k] = popcount16(static_cast<uint16_t>(l ^ rv[k]));
+  }
+}
+
+void box_row(const uint16_t* const* raws, int radius, ptrdiff_t cols, ptrdiff_t x0, ptrdiff_t x1,
+             int nd, int min_d, int cmax, uint16_t* colsum, uint8_t* out) {
+  const ptrdiff_t n = (x1 - x0 + 2 * radius) * nd;
+  if (radius == 0) {
+    colsum = const_cast<uint16_t*>(raws[0]);
+  } else {
+    const uint16_t* __restrict a = raws[0];
+    const uint16_t* __restrict b = raws[1];
+    const uint16_t* __restrict c = raws[2];
+    for (ptrdiff_t i = 0; i < n; ++i) colsum[i] = static_cast<uint16_t>(a[i] + b[i] + c[i]);
   }
   for (ptrdiff_t x = x0; x < x1; ++x) {
     uint8_t* __restrict o = out + x * nd;
     const ptrdiff_t j = x - x0 + radius;
     if (radius == 0) {
-      const uint16_t* __restrict a = colraw + j * nd;
+      const uint16_t* __restrict a = colsum + j * nd;
       for (int k = 0; k < nd; ++k) o[k] = static_cast<uint8_t>(a[k]);
     } else {
-      const uint16_t* __restrict a = colraw + (j - 1) * nd;
-      const uint16_t* __restrict b = colraw + j * nd;
-      const uint16_t* __restrict c = colraw + (j + 1) * nd;
+      // Columns x - 1 and x + 1 clamped to the image: the raw rows repeat the edge columns.
+      const uint16_t* __restrict a = colsum + (j - 1) * nd;
+      const uint16_t* __restrict b = colsum + j * nd;
+      const uint16_t* __restrict c = colsum + (j + 1) * nd;
       for (int k = 0; k < nd; ++k) o[k] = static_cast<uint8_t>(a[k] + b[k] + c[k]);
     }
     // Candidates whose right pixel x - min_d - k leaves the image cost the most.
@@ -462,7 +459,8 @@ void median_row(const float* up, const float* mid, const float* down, float* out
 
 const SemiGlobalKernels& semi_global_kernels() {
   static const SemiGlobalKernels kernels = {
-      &cost_row,
+      &raw_row,
+      &box_row,
       &horizontal_row,
       &path_row,
       &decide_row,

@@ -22,13 +22,18 @@ struct PathParams {
   const std::int16_t* p2;  // 256 entries: P2' for each intensity step 0 .. 255
 };
 
-// The costs of columns x0 .. x1 - 1 of one image row: lrows/rrows are the 2r + 1 census rows
-// (uint16 codes) y - r .. y + r, clamped to the image. rev: (2r + 1) * (cols + nd) scratch,
-// colraw: (x1 - x0 + 2r) * nd scratch. out: the row's cols * nd costs.
-using CostRowFn = void (*)(const std::uint16_t* const* lrows, const std::uint16_t* const* rrows,
-                           int radius, std::ptrdiff_t cols, std::ptrdiff_t x0, std::ptrdiff_t x1,
-                           int nd, int min_d, int cmax, std::uint16_t* rev, std::uint16_t* colraw,
-                           std::uint8_t* out);
+// The pixel costs (census Hamming distances) of one census row pair for the columns
+// clamp(x0 - r) .. clamp(x1 - 1 + r): out[j * nd + k] for column clamp(x0 - r + j).
+// rev: cols + nd scratch.
+using RawRowFn = void (*)(const std::uint16_t* lrow, const std::uint16_t* rrow,
+                          std::ptrdiff_t cols, std::ptrdiff_t x0, std::ptrdiff_t x1, int radius,
+                          int nd, int min_d, std::uint16_t* rev, std::uint16_t* out);
+// The box costs of columns x0 .. x1 - 1 of one image row from the raw rows of the 2r + 1
+// census rows y - r .. y + r (clamped; RawRowFn's layout), candidates outside the right image
+// at cmax. colsum: (x1 - x0 + 2r) * nd scratch. out: the row's cols * nd costs.
+using BoxRowFn = void (*)(const std::uint16_t* const* raws, int radius, std::ptrdiff_t cols,
+                          std::ptrdiff_t x0, std::ptrdiff_t x1, int nd, int min_d, int cmax,
+                          std::uint16_t* colsum, std::uint8_t* out);
 // The paths from the left and from the right along one row, added to s (s[x * nd + k] +=
 // L_lr + L_rl). g: the row's grey levels (8-bit scale). tmp: 2 * ls int16 scratch.
 using HorizontalRowFn = void (*)(const PathParams& p, const std::uint8_t* c,
@@ -61,7 +66,8 @@ using MedianRowFn = void (*)(const float* up, const float* mid, const float* dow
                              std::uint8_t* flags, std::ptrdiff_t cols);
 
 struct SemiGlobalKernels {
-  CostRowFn cost_row;
+  RawRowFn raw_row;
+  BoxRowFn box_row;
   HorizontalRowFn horizontal_row;
   PathRowFn path_row;
   DecideRowFn decide_row;

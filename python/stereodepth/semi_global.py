@@ -52,7 +52,7 @@ Steps, in the kernel and in the oracle alike:
 
 Memory: ``paths`` 4 and 8 keep the sums ``S`` (2 bytes per pixel and disparity) and the
 costs (1 byte per pixel and disparity), plus a few rows per thread; ``paths=3`` keeps only a
-few rows of ``W * num_disparities`` per thread (O(W D), about 5 MB per thread at W = 1920,
+few rows of ``W * num_disparities`` per thread (O(W D), about 8 MB per thread at W = 1920,
 D = 256), beside 13 bytes per pixel for the images. :func:`memory_estimate` gives the figure,
 and the matcher refuses with ValueError above ``max_memory_mb``.
 
