@@ -533,3 +533,37 @@ def test_rejected_parameters(kwargs: dict[str, Any], exc: type[Exception], match
 def test_rejected_images(left: Any, right: Any, exc: type[Exception], match: str) -> None:
     with pytest.raises(exc, match=match):
         sd.semi_global_match(left, right, num_disparities=8)
+
+
+# ------------------------------------------------------------------------------------------
+# stereodepth eval
+
+
+@pytest.mark.data
+def test_eval_runs_sgm_and_opencvs_sgbm_modes(
+    stereo_data_dir: Any, capsys: pytest.CaptureFixture[str]
+) -> None:
+    import json
+
+    from stereodepth import cli
+    from stereodepth.metrics import evaluate
+
+    pytest.importorskip("PIL.Image")
+    pytest.importorskip("cv2")
+    scene = "mb2001-tsukuba"
+    argv = ["eval", str(stereo_data_dir), "--scene", scene, "--repeat", "1", "--json"]
+    methods = ["sgm", "opencv-sgbm", "opencv-sgbm-3way", "opencv-sgbm-hh"]
+    assert cli.main([*argv, "--method", *methods, "--threads", "2"]) == 0
+    report = json.loads(capsys.readouterr().out)
+    by_method = {r["method"]: r for r in report["results"]}
+    assert set(by_method) == set(methods)
+    folder = stereo_data_dir / scene
+    left, right = read_image(folder / "left.png"), read_image(folder / "right.png")
+    gt = np.load(folder / "disp_gt.npy")
+    mask = np.load(folder / "mask_nonocc.npy")
+    nd = by_method["sgm"]["num_disparities"]
+    expected = evaluate(sd.semi_global_match(left, right, num_disparities=nd), gt, mask)
+    assert by_method["sgm"]["metrics"]["bad_2"] == pytest.approx(expected.bad_2)
+    assert all(r["metrics"]["density"] > 0.9 for r in by_method.values())
+    assert cli.main([*argv, "--method", "sgm:5"]) == 2
+    assert "block size of sgm must be 1 or 3, got 5" in capsys.readouterr().err
