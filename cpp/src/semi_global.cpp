@@ -104,7 +104,9 @@ struct RawRows {
            std::ptrdiff_t rows, std::ptrdiff_t cols, std::ptrdiff_t x0, std::ptrdiff_t x1, int r,
            int nd, int min_d, std::ptrdiff_t y, std::uint16_t* rev, const std::uint16_t** raws) {
     std::ptrdiff_t need[3];
-    for (int i = 0; i < 2 * r + 1; ++i) need[i] = std::clamp<std::ptrdiff_t>(y + i - r, 0, rows - 1);
+    for (int i = 0; i < 2 * r + 1; ++i) {
+      need[i] = std::clamp<std::ptrdiff_t>(y + i - r, 0, rows - 1);
+    }
     auto needed = [&](std::ptrdiff_t yy) {
       for (int i = 0; i < 2 * r + 1; ++i) {
         if (need[i] == yy) return true;
@@ -160,7 +162,9 @@ void validate(const SemiGlobalParams& p) {
              "] (the sum over the paths must fit in 16 bits)",
          p.p2);
   }
-  if (p.p2_step < 0 || p.p2_step > 65535) fail("p2_step must be an integer in [0, 65535]", p.p2_step);
+  if (p.p2_step < 0 || p.p2_step > 65535) {
+    fail("p2_step must be an integer in [0, 65535]", p.p2_step);
+  }
   if (p.subpixel != SubpixelFit::kNone && p.subpixel != SubpixelFit::kParabola &&
       p.subpixel != SubpixelFit::kEquiangular) {
     fail("subpixel must be none, parabola or equiangular", static_cast<int>(p.subpixel));
@@ -266,8 +270,11 @@ void SemiGlobalMatcher::compute(const StereoImage& left, const StereoImage& righ
   float* pre = p.median ? aligned<float>(ws.pre_median, npix) : nullptr;
 
   const std::ptrdiff_t nt = std::max<std::ptrdiff_t>(1, std::min<std::ptrdiff_t>(threads_, rows));
-  if (ws.scratch.size() < static_cast<std::size_t>(nt)) ws.scratch.resize(static_cast<std::size_t>(nt));
-  auto band = [](std::ptrdiff_t n, std::ptrdiff_t parts, std::ptrdiff_t b) { return n * b / parts; };
+  const auto unt = static_cast<std::size_t>(nt);
+  if (ws.scratch.size() < unt) ws.scratch.resize(unt);
+  auto band = [](std::ptrdiff_t n, std::ptrdiff_t parts, std::ptrdiff_t b) {
+    return n * b / parts;
+  };
 
   // 0. Grey and census rows (rows split between the threads).
   const StereoImage* images[2] = {&left, &right};
@@ -319,8 +326,8 @@ void SemiGlobalMatcher::compute(const StereoImage& left, const StereoImage& righ
   // P2' = max(P1, P2 * k // (k + step)) for each intensity step (k = p2_step; 0: P2).
   std::int16_t p2_table[256];
   for (int step = 0; step < 256; ++step) {
-    const long long v = p.p2_step > 0 ? static_cast<long long>(p.p2) * p.p2_step / (p.p2_step + step)
-                                      : p.p2;
+    const long long v =
+        p.p2_step > 0 ? static_cast<long long>(p.p2) * p.p2_step / (p.p2_step + step) : p.p2;
     p2_table[step] = static_cast<std::int16_t>(std::max<long long>(v, p.p1));
   }
   detail::PathParams pp{nd, ls, p.p1, p2_table};
@@ -356,7 +363,8 @@ void SemiGlobalMatcher::compute(const StereoImage& left, const StereoImage& righ
       auto* rev = aligned<std::uint16_t>(sc, n16);
       std::uint16_t* colraw = rev + n_rev;
       RawRows raw;
-      for (int i = 0; i < 3; ++i) raw.slot[i] = colraw + static_cast<std::size_t>(i + 1) * (c + 2) * static_cast<std::size_t>(nd);
+      const std::size_t raw_len = (c + 2) * static_cast<std::size_t>(nd);
+      for (int i = 0; i < 3; ++i) raw.slot[i] = colraw + static_cast<std::size_t>(i + 1) * raw_len;
       std::uint16_t* total = colraw + n_raw;
       std::uint16_t* rmin = total + n_col;
       std::uint16_t* rarg = rmin + c;
@@ -404,7 +412,8 @@ void SemiGlobalMatcher::compute(const StereoImage& left, const StereoImage& righ
       for (std::size_t i = 0; i < 2 * static_cast<std::size_t>(nv) * static_cast<std::size_t>(cols);
            ++i) {
         prow[i * static_cast<std::size_t>(ls)] = detail::kSentinel;
-        prow[i * static_cast<std::size_t>(ls) + static_cast<std::size_t>(nd) + 1] = detail::kSentinel;
+        prow[i * static_cast<std::size_t>(ls) + static_cast<std::size_t>(nd) + 1] =
+            detail::kSentinel;
       }
       const int dxs[3] = {0, 1, -1};
       for (int dy : {1, -1}) {
@@ -416,10 +425,14 @@ void SemiGlobalMatcher::compute(const StereoImage& left, const StereoImage& righ
           RawRows raw;
           if (dy > 0) {
             const std::size_t n_rev = static_cast<std::size_t>(cols) + static_cast<std::size_t>(nd);
-            const std::size_t n_raw = static_cast<std::size_t>(x1 - x0 + 2) * static_cast<std::size_t>(nd);
-            rev = aligned<std::uint16_t>(ws.scratch[static_cast<std::size_t>(b)], n_rev + 4 * n_raw);
+            const std::size_t n_raw =
+                static_cast<std::size_t>(x1 - x0 + 2) * static_cast<std::size_t>(nd);
+            rev = aligned<std::uint16_t>(ws.scratch[static_cast<std::size_t>(b)],
+                                         n_rev + 4 * n_raw);
             colraw = rev + n_rev;
-            for (int j = 0; j < 3; ++j) raw.slot[j] = colraw + static_cast<std::size_t>(j + 1) * n_raw;
+            for (int j = 0; j < 3; ++j) {
+              raw.slot[j] = colraw + static_cast<std::size_t>(j + 1) * n_raw;
+            }
           }
           int flip = 0;
           for (std::ptrdiff_t i = 0; i < rows; ++i) {
@@ -432,8 +445,9 @@ void SemiGlobalMatcher::compute(const StereoImage& left, const StereoImage& righ
               k.box_row(raws, r, cols, x0, x1, nd, p.min_disparity, cmax, colraw, crow);
             }
             for (int v = 0; v < nv; ++v) {
-              std::int16_t* cur = prow + (2 * static_cast<std::size_t>(v) + static_cast<std::size_t>(flip)) * row_len;
-              std::int16_t* prev = prow + (2 * static_cast<std::size_t>(v) + static_cast<std::size_t>(1 - flip)) * row_len;
+              const auto pair = 2 * static_cast<std::size_t>(v);
+              std::int16_t* cur = prow + (pair + static_cast<std::size_t>(flip)) * row_len;
+              std::int16_t* prev = prow + (pair + static_cast<std::size_t>(1 - flip)) * row_len;
               k.path_row(pp, crow, pgrey + y * cols, i > 0 ? pgrey + yq * cols : nullptr,
                          i > 0 ? prev : nullptr, cur, cols, x0, x1, dxs[v],
                          sums + static_cast<std::size_t>(y) * n_col, dy > 0 && v == 0);
@@ -455,7 +469,8 @@ void SemiGlobalMatcher::compute(const StereoImage& left, const StereoImage& righ
       std::uint16_t* rarg = rmin + c;
       auto* tmp = reinterpret_cast<std::int16_t*>(rarg + c);
       for (std::ptrdiff_t y = band(rows, nt, b); y < band(rows, nt, b + 1); ++y) {
-        std::memcpy(total, sums + static_cast<std::size_t>(y) * n_col, n_col * sizeof(std::uint16_t));
+        std::memcpy(total, sums + static_cast<std::size_t>(y) * n_col,
+                    n_col * sizeof(std::uint16_t));
         k.horizontal_row(pp, costs + static_cast<std::size_t>(y) * n_col, pgrey + y * cols, cols,
                          total, tmp);
         float* drow = pre ? pre + y * cols : disparity.row(y);
@@ -481,7 +496,7 @@ void SemiGlobalMatcher::compute(const StereoImage& left, const StereoImage& righ
   // 5. The speckle filter (the block matcher's).
   if (p.speckle_window > 0) {
     const float rf = detail::speckle_range_f(p.speckle_range);
-    if (ws.speckle.size() < static_cast<std::size_t>(nt)) ws.speckle.resize(static_cast<std::size_t>(nt));
+    if (ws.speckle.size() < unt) ws.speckle.resize(unt);
     run_bands(nt, [&](std::ptrdiff_t b) {
       detail::speckle_band(bk, disparity, band(rows, nt, b), band(rows, nt, b + 1), rf,
                            ws.speckle[static_cast<std::size_t>(b)]);

@@ -271,7 +271,8 @@ inline void winner_full(const uint16_t* __restrict sx, int nd, uint32_t& best, p
   const __m256i two = _mm256_set1_epi16(2);
   __m256i s2 = _mm256_set1_epi16(-1);
   for (int i = 0; i < nv; ++i) {
-    const __m256i rel = _mm256_sub_epi16(iota, _mm256_set1_epi16(static_cast<short>(k0 - 1 - 16 * i)));
+    const __m256i first = _mm256_set1_epi16(static_cast<short>(k0 - 1 - 16 * i));
+    const __m256i rel = _mm256_sub_epi16(iota, first);
     const __m256i ex = _mm256_cmpeq_epi16(_mm256_min_epu16(rel, two), rel);
     s2 = _mm256_min_epu16(s2, _mm256_or_si256(load(i), ex));
   }
