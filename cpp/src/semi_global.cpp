@@ -357,9 +357,9 @@ void SemiGlobalMatcher::compute(const StereoImage& left, const StereoImage& righ
       const std::size_t n_row = c * lsz;
       std::vector<std::uint8_t>& sc = ws.scratch[static_cast<std::size_t>(b)];
       // uint16 pieces: rev, colraw, total, rmin, rarg, cost row (as bytes), two path rows,
-      // horizontal scratch
+      // horizontal scratch, winners (as uint32)
       const std::size_t n16 = n_rev + n_raw + n_col + 2 * c + (n_col + 1) / 2 + 2 * n_row +
-                              2 * lsz + 64;
+                              2 * lsz + 2 * c + 64;
       auto* rev = aligned<std::uint16_t>(sc, n16);
       std::uint16_t* colraw = rev + n_rev;
       RawRows raw;
@@ -372,6 +372,8 @@ void SemiGlobalMatcher::compute(const StereoImage& left, const StereoImage& righ
       auto* rows16 = reinterpret_cast<std::int16_t*>(rarg + c + (n_col + 1) / 2);
       std::int16_t* prow[2] = {rows16, rows16 + n_row};
       std::int16_t* tmp = rows16 + 2 * n_row;
+      auto* winners = reinterpret_cast<std::uint32_t*>(
+          (reinterpret_cast<std::uintptr_t>(tmp + 2 * lsz) + 3) & ~std::uintptr_t{3});
       for (std::size_t i = 0; i < 2 * c; ++i) {
         rows16[i * lsz] = detail::kSentinel;
         rows16[i * lsz + static_cast<std::size_t>(nd) + 1] = detail::kSentinel;
@@ -390,7 +392,7 @@ void SemiGlobalMatcher::compute(const StereoImage& left, const StereoImage& righ
           k.horizontal_row(pp, crow, pgrey + y * cols, cols, total, tmp);
           float* drow = pre ? pre + y * cols : disparity.row(y);
           k.decide_row(da, total, drow, confidence.data ? confidence.row(y) : nullptr, rmin,
-                       rarg);
+                       rarg, winners);
           flip = 1 - flip;
         }
       }
@@ -463,18 +465,22 @@ void SemiGlobalMatcher::compute(const StereoImage& left, const StereoImage& righ
     //    of the row's sums, then the winner, checks and sub-pixel step on that copy.
     run_bands(nt, [&](std::ptrdiff_t b) {
       const auto c = static_cast<std::size_t>(cols);
-      auto* total = aligned<std::uint16_t>(ws.scratch[static_cast<std::size_t>(b)],
-                                           n_col + 2 * c + 2 * static_cast<std::size_t>(ls) + 32);
+      auto* total = aligned<std::uint16_t>(
+          ws.scratch[static_cast<std::size_t>(b)],
+          n_col + 4 * c + 2 * static_cast<std::size_t>(ls) + 32);
       std::uint16_t* rmin = total + n_col;
       std::uint16_t* rarg = rmin + c;
       auto* tmp = reinterpret_cast<std::int16_t*>(rarg + c);
+      auto* winners = reinterpret_cast<std::uint32_t*>(
+          (reinterpret_cast<std::uintptr_t>(tmp + 2 * ls) + 3) & ~std::uintptr_t{3});
       for (std::ptrdiff_t y = band(rows, nt, b); y < band(rows, nt, b + 1); ++y) {
         std::memcpy(total, sums + static_cast<std::size_t>(y) * n_col,
                     n_col * sizeof(std::uint16_t));
         k.horizontal_row(pp, costs + static_cast<std::size_t>(y) * n_col, pgrey + y * cols, cols,
                          total, tmp);
         float* drow = pre ? pre + y * cols : disparity.row(y);
-        k.decide_row(da, total, drow, confidence.data ? confidence.row(y) : nullptr, rmin, rarg);
+        k.decide_row(da, total, drow, confidence.data ? confidence.row(y) : nullptr, rmin, rarg,
+                     winners);
       }
     });
   

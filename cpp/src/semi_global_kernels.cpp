@@ -284,10 +284,57 @@ inline void winner_full(const uint16_t* __restrict sx, int nd, uint32_t& best, p
   kb = k0;
   second = sec == 0xFFFFu ? kNone : sec;
 }
+
+// The least sum more than one index away from k0 over 0 .. nd - 1 (nd a multiple of 16).
+inline uint32_t second_full(const uint16_t* __restrict sx, int nd, int k0) {
+  const __m256i iota = _mm256_setr_epi16(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15);
+  const __m256i two = _mm256_set1_epi16(2);
+  __m256i s2 = _mm256_set1_epi16(-1);
+  for (int i = 0; i < nd / 16; ++i) {
+    const __m256i first = _mm256_set1_epi16(static_cast<short>(k0 - 1 - 16 * i));
+    const __m256i rel = _mm256_sub_epi16(iota, first);
+    const __m256i ex = _mm256_cmpeq_epi16(_mm256_min_epu16(rel, two), rel);
+    const __m256i v = _mm256_loadu_si256(reinterpret_cast<const __m256i*>(sx + 16 * i));
+    s2 = _mm256_min_epu16(s2, _mm256_or_si256(v, ex));
+  }
+  const uint32_t sec = hmin_epu16(s2);
+  return sec == 0xFFFFu ? kNone : sec;
+}
+
+// For a pixel with the whole range (nd a multiple of 16): the right winners' update of
+// decide_row and the pixel's own least sum and its lowest index, in one sweep. Returns
+// best << 16 | kb.
+inline uint32_t right_update_and_winner(const uint16_t* __restrict sx, int nd,
+                                        uint16_t* __restrict rm, uint16_t* __restrict ra) {
+  const __m256i iota = _mm256_setr_epi16(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15);
+  __m256i mv = _mm256_set1_epi16(-1);  // per lane: the least sum so far and its first index
+  __m256i iv = _mm256_setzero_si256();
+  for (int i = 0; i < nd / 16; ++i) {
+    const __m256i k = _mm256_add_epi16(iota, _mm256_set1_epi16(static_cast<short>(16 * i)));
+    const __m256i v = _mm256_loadu_si256(reinterpret_cast<const __m256i*>(sx + 16 * i));
+    __m256i* rp = reinterpret_cast<__m256i*>(rm + 16 * i);
+    __m256i* ap = reinterpret_cast<__m256i*>(ra + 16 * i);
+    const __m256i r = _mm256_loadu_si256(rp);
+    const __m256i m = _mm256_min_epu16(r, v);
+    const __m256i keep = _mm256_cmpeq_epi16(m, r);  // r <= v: no strict improvement
+    _mm256_storeu_si256(rp, m);
+    _mm256_storeu_si256(ap, _mm256_blendv_epi8(k, _mm256_loadu_si256(ap), keep));
+    const __m256i mm = _mm256_min_epu16(mv, v);
+    iv = _mm256_blendv_epi8(k, iv, _mm256_cmpeq_epi16(mm, mv));
+    mv = mm;
+  }
+  const uint32_t best = hmin_epu16(mv);
+  // The lowest index among the lanes holding the least sum.
+  const __m256i at = _mm256_or_si256(
+      iv, _mm256_xor_si256(_mm256_cmpeq_epi16(mv, _mm256_set1_epi16(static_cast<short>(best))),
+                           _mm256_set1_epi16(-1)));
+  const uint32_t kb = hmin_epu16(at);
+  return (best << 16) | kb;
+}
 #endif
 
 void decide_row(const DecideArgs& a, const uint16_t* s, float* disp, float* conf, uint16_t* rmin,
-                uint16_t* rarg) {
+                uint16_t* rarg, uint32_t* winners) {
   const ptrdiff_t cols = a.cols;
   const int nd = a.nd;
   const ptrdiff_t dmin = a.min_d;
@@ -296,6 +343,8 @@ void decide_row(const DecideArgs& a, const uint16_t* s, float* disp, float* conf
     klo = clamp_index(x - dmin - cols + 1, 0, nd);
     khi = clamp_index(x - dmin, -1, nd - 1);
   };
+  // winners[x]: best << 16 | kb when the right winners' sweep found it, else 0xFFFFFFFF.
+  for (ptrdiff_t x = 0; x < cols; ++x) winners[x] = 0xFFFFFFFFu;
   if (lr_on) {
     // The right image's winners: right column xr = x - dmin - k at j = cols - 1 - xr, rising
     // with k; x rises, so k does for each j, and a strict < keeps the lowest. Each column
@@ -314,6 +363,12 @@ void decide_row(const DecideArgs& a, const uint16_t* s, float* disp, float* conf
       uint16_t* __restrict ra = rarg + (cols - 1 - x + dmin + klo);
       const ptrdiff_t n = khi - klo + 1;
       if (n <= 0) continue;
+#if defined(__AVX2__)
+      if (n == nd && nd % 16 == 0) {
+        winners[x] = right_update_and_winner(sx, nd, rm, ra);
+        continue;
+      }
+#endif
       for (ptrdiff_t i = 0; i < n; ++i) {
         const uint16_t v = sx[klo + i], r = rm[i];
         const bool lt = v < r;
@@ -337,7 +392,11 @@ void decide_row(const DecideArgs& a, const uint16_t* s, float* disp, float* conf
     uint32_t best, second;
     ptrdiff_t kb;
 #if defined(__AVX2__)
-    if (klo == 0 && khi == nd - 1) {
+    if (winners[x] != 0xFFFFFFFFu) {
+      best = winners[x] >> 16;
+      kb = static_cast<ptrdiff_t>(winners[x] & 0xFFFFu);
+      second = second_full(sx, nd, static_cast<int>(kb));
+    } else if (klo == 0 && khi == nd - 1) {
       winner_full(sx, nd, best, kb, second);
     } else {
       winner_of(sx, klo, khi, best, kb, second);

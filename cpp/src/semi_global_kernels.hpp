@@ -55,9 +55,11 @@ struct DecideArgs {
   double lr_max_diff;        // negative: off
   bool clip_border;
 };
-// The winner, checks and sub-pixel step of one row of sums. rmin, rarg: cols elements of scratch.
+// The winner, checks and sub-pixel step of one row of sums. rmin, rarg: cols elements of
+// scratch each; winners: cols.
 using DecideRowFn = void (*)(const DecideArgs& a, const std::uint16_t* s, float* disp,
-                             float* conf, std::uint16_t* rmin, std::uint16_t* rarg);
+                             float* conf, std::uint16_t* rmin, std::uint16_t* rarg,
+                             std::uint32_t* winners);
 
 // The 3x3 median of row `mid` (up/down: the rows above and below, null outside the image):
 // each valid pixel becomes the lower median of the valid pixels of its window; NaN stays.
