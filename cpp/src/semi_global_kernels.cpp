@@ -55,12 +55,33 @@ void raw_row(const uint16_t* lrow, const uint16_t* rrow, ptrdiff_t cols, ptrdiff
   const ptrdiff_t rl = cols + nd;
   for (ptrdiff_t u = 0; u < rl; ++u) rev[u] = rrow[clamp_index(cols - 1 - min_d - u, 0, cols - 1)];
   const ptrdiff_t n = x1 - x0 + 2 * radius;
+#if defined(__AVX2__)
+  // Set bits of 16 lanes at a time: a nibble lookup (vpshufb), then the two bytes' sum.
+  const __m256i table = _mm256_setr_epi8(0, 1, 1, 2, 1, 2, 2, 3, 1, 2, 2, 3, 2, 3, 3, 4, 0, 1, 1,
+                                         2, 1, 2, 2, 3, 1, 2, 2, 3, 2, 3, 3, 4);
+  const __m256i low4 = _mm256_set1_epi8(0x0F);
+  const __m256i low8 = _mm256_set1_epi16(0x00FF);
+  const int nv = nd / 16;
+#endif
   for (ptrdiff_t j = 0; j < n; ++j) {
     const ptrdiff_t x = clamp_index(x0 - radius + j, 0, cols - 1);
     uint16_t* __restrict o = out + j * nd;
     const uint16_t l = lrow[x];
     const uint16_t* __restrict rv = rev + (cols - 1 - x);
-    for (int k = 0; k < nd; ++k) o[k] = popcount16(static_cast<uint16_t>(l ^ rv[k]));
+    int k = 0;
+#if defined(__AVX2__)
+    const __m256i lv = _mm256_set1_epi16(static_cast<short>(l));
+    for (int i = 0; i < nv; ++i, k += 16) {
+      const __m256i d = _mm256_xor_si256(
+          lv, _mm256_loadu_si256(reinterpret_cast<const __m256i*>(rv + k)));
+      const __m256i c = _mm256_add_epi8(
+          _mm256_shuffle_epi8(table, _mm256_and_si256(d, low4)),
+          _mm256_shuffle_epi8(table, _mm256_and_si256(_mm256_srli_epi16(d, 4), low4)));
+      _mm256_storeu_si256(reinterpret_cast<__m256i*>(o + k),
+                          _mm256_add_epi16(_mm256_and_si256(c, low8), _mm256_srli_epi16(c, 8)));
+    }
+#endif
+    for (; k < nd; ++k) o[k] = popcount16(static_cast<uint16_t>(l ^ rv[k]));
   }
 }
 
