@@ -117,6 +117,7 @@ CONFIGS: list[dict[str, Any]] = [
     {"p2_step": 0, "uniqueness_ratio": 15, "lr_max_diff": 0},
     {"border": "opencv", "paths": 8, "return_confidence": True},
     {"paths": 3, "return_confidence": True},
+    {"fill": True, "return_confidence": True},
     {"p1": 0, "p2": 0, "median": False, "speckle_window": 20, "speckle_range": 0.5},
     {"p2_step": 1, "p1": 10, "p2": 2000, "lr_max_diff": 1.5, "return_confidence": True},
 ]
@@ -318,6 +319,34 @@ def test_border_band_is_matched_over_the_disparities_inside_the_image() -> None:
     assert np.isnan(clip[:, 0]).all() or (clip[:, 0][np.isfinite(clip[:, 0])] == 0).all()
 
 
+def test_fill_takes_the_background_along_the_row() -> None:
+    from stereodepth.semi_global import fill_background
+
+    nan = np.float32(np.nan)
+    d = np.array(
+        [
+            [nan, 3.0, nan, nan, 7.0, nan],
+            [nan, nan, nan, nan, nan, nan],
+            [5.0, nan, 2.5, 2.5, nan, nan],
+        ],
+        dtype=np.float32,
+    )
+    out = fill_background(d.copy())
+    expected = np.array(
+        [[3.0, 3.0, 3.0, 3.0, 7.0, 7.0], [nan] * 6, [5.0, 2.5, 2.5, 2.5, 2.5, 2.5]],
+        dtype=np.float32,
+    )
+    np.testing.assert_array_equal(out, expected)
+    left, right = shifted_pair((30, 60), 4, seed=17)
+    filled, conf = sd.semi_global_match(
+        left, right, num_disparities=16, fill=True, return_confidence=True
+    )
+    plain, conf0 = sd.semi_global_match(left, right, num_disparities=16, return_confidence=True)
+    assert np.isfinite(filled).all()
+    np.testing.assert_array_equal(filled[np.isfinite(plain)], plain[np.isfinite(plain)])
+    np.testing.assert_array_equal(conf, conf0)  # filled pixels keep confidence 0
+
+
 def test_candidates_outside_the_image_never_win() -> None:
     left, right = shifted_pair((20, 50), 3, seed=13)
     d = sd.semi_global_match(
@@ -482,6 +511,7 @@ GOOD = shifted_pair((8, 20), 2, seed=40)
             "lr_max_diff must be a finite number >= 0, got nan",
         ),
         ({"num_disparities": 8, "median": 1}, TypeError, "median must be a bool, got int 1"),
+        ({"num_disparities": 8, "fill": "yes"}, TypeError, "fill must be a bool, got str 'yes'"),
         (
             {"num_disparities": 8, "speckle_window": -1},
             ValueError,

@@ -15,7 +15,7 @@ import numpy as np
 
 from ._reference_block_match import box_sum, census, grey, popcount, speckle_filter
 from .matching import as_pair
-from .semi_global import STRIPE_ROWS, SemiGlobalOptions, cost_max
+from .semi_global import STRIPE_ROWS, SemiGlobalOptions, cost_max, fill_background
 
 __all__ = ["semi_global_match"]
 
@@ -187,11 +187,14 @@ def semi_global_match(
         disp = median3(disp)
     if o.speckle_window > 0:
         disp = speckle_filter(disp, o.speckle_window, o.speckle_range)
+    conf_valid = np.isfinite(disp)
+    if o.fill:
+        disp = fill_background(disp.copy())
 
     if not o.return_confidence:
         return np.asarray(disp)
     with np.errstate(divide="ignore", invalid="ignore"):
         ratio = (second - best).astype(np.float32) / second.astype(np.float32)
     conf = np.where(has_second, np.where(second > 0, ratio, np.float32(0)), np.float32(1))
-    conf = np.where(np.isfinite(disp), conf, np.float32(0)).astype(np.float32)
+    conf = np.where(conf_valid, conf, np.float32(0)).astype(np.float32)
     return np.asarray(disp), conf

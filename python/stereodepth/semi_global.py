@@ -49,6 +49,11 @@ Steps, in the kernel and in the oracle alike:
 6. Median (``median=True``): each valid pixel becomes the lower median of the valid pixels in
    its 3x3 window (inside the image); invalid pixels stay NaN.
 7. Speckle filter, as the block matcher's.
+8. Fill (``fill=True``; off by default): each pixel still NaN takes the smaller of the nearest
+   valid disparities to its left and to its right on its row (the background, the way
+   Hirschmüller 2008 interpolates occlusions), or the one that exists; a row without any
+   valid pixel stays NaN. Its confidence stays 0. This step runs in numpy after the kernel
+   (:func:`fill_background`).
 
 Memory: ``paths`` 4 and 8 keep the sums ``S`` (2 bytes per pixel and disparity) and the
 costs (1 byte per pixel and disparity), plus a few rows per thread; ``paths=3`` keeps only a
@@ -73,6 +78,7 @@ from .matching import MAX_ABS_MIN_DISPARITY, MAX_NUM_DISPARITIES, as_pair, check
 
 __all__ = [
     "SemiGlobalMatcher",
+    "fill_background",
     "memory_estimate",
     "semi_global_match",
 ]
@@ -110,6 +116,7 @@ class SemiGlobalOptions:
     __slots__ = (
         "block_size",
         "border",
+        "fill",
         "lr_max_diff",
         "max_memory_mb",
         "median",
@@ -145,6 +152,7 @@ class SemiGlobalOptions:
         speckle_window: Any = DEFAULT_SPECKLE_WINDOW,
         speckle_range: Any = DEFAULT_SPECKLE_RANGE,
         border: Any = "clip",
+        fill: Any = False,
         max_memory_mb: Any = DEFAULT_MAX_MEMORY_MB,
         threads: Any = None,
         return_confidence: Any = False,
@@ -207,6 +215,7 @@ class SemiGlobalOptions:
         self.speckle_window = check.integer("speckle_window", speckle_window, minimum=0)
         self.speckle_range = check.non_negative("speckle_range", speckle_range)
         self.border = check_border(border)
+        self.fill = _flag("fill", fill)
         self.max_memory_mb = check.positive("max_memory_mb", max_memory_mb)
         self.threads = check.threads(threads)
         self.return_confidence = _flag("return_confidence", return_confidence)
@@ -228,6 +237,7 @@ class SemiGlobalOptions:
             "speckle_window": self.speckle_window,
             "speckle_range": self.speckle_range,
             "border": self.border,
+            "fill": self.fill,
             "max_memory_mb": self.max_memory_mb,
             "threads": self.threads,
             "return_confidence": self.return_confidence,
@@ -238,6 +248,26 @@ def _flag(name: str, value: Any) -> bool:
     if not isinstance(value, (bool, np.bool_)):
         raise TypeError(f"{name} must be a bool, got {type(value).__name__} {value!r}")
     return bool(value)
+
+
+def fill_background(disparity: np.ndarray) -> np.ndarray:
+    """Fills the NaN pixels of a float disparity map in place along each row with the smaller
+    of the nearest valid values to the left and to the right (the one that exists at the row's
+    ends; rows without a valid pixel stay NaN); returns the map. Step 8 of
+    :mod:`stereodepth.semi_global`."""
+    h, w = disparity.shape
+    valid = np.isfinite(disparity)
+    cols = np.broadcast_to(np.arange(w), (h, w))
+    left_idx = np.maximum.accumulate(np.where(valid, cols, -1), axis=1)
+    right_idx = np.minimum.accumulate(np.where(valid, cols, w)[:, ::-1], axis=1)[:, ::-1]
+    rows = np.arange(h)[:, None]
+    inf = np.float32(np.inf)
+    left_val = np.where(left_idx >= 0, disparity[rows, np.clip(left_idx, 0, w - 1)], inf)
+    right_val = np.where(right_idx < w, disparity[rows, np.clip(right_idx, 0, w - 1)], inf)
+    filled = np.minimum(left_val, right_val)
+    todo = ~valid & np.isfinite(filled)
+    disparity[todo] = filled[todo]
+    return disparity
 
 
 def memory_estimate(
@@ -279,6 +309,7 @@ class SemiGlobalMatcher:
         speckle_window: int = DEFAULT_SPECKLE_WINDOW,
         speckle_range: float = DEFAULT_SPECKLE_RANGE,
         border: str = "clip",
+        fill: bool = False,
         max_memory_mb: float = DEFAULT_MAX_MEMORY_MB,
         threads: int | None = None,
         return_confidence: bool = False,
@@ -299,6 +330,7 @@ class SemiGlobalMatcher:
             speckle_window=speckle_window,
             speckle_range=speckle_range,
             border=border,
+            fill=fill,
             max_memory_mb=max_memory_mb,
             threads=threads,
             return_confidence=return_confidence,
@@ -348,6 +380,8 @@ class SemiGlobalMatcher:
         disparity = np.empty(shape, dtype=np.float32)
         confidence = np.empty(shape, dtype=np.float32) if self._options.return_confidence else None
         self._native.compute(left_arr, right_arr, disparity, confidence)
+        if self._options.fill:
+            fill_background(disparity)
         if confidence is not None:
             return disparity, confidence
         return disparity
@@ -371,6 +405,7 @@ def semi_global_match(
     speckle_window: int = DEFAULT_SPECKLE_WINDOW,
     speckle_range: float = DEFAULT_SPECKLE_RANGE,
     border: str = "clip",
+    fill: bool = False,
     max_memory_mb: float = DEFAULT_MAX_MEMORY_MB,
     threads: int | None = None,
     return_confidence: bool = False,
@@ -414,6 +449,9 @@ def semi_global_match(
     border
         ``"clip"``: pixels near the image's left edge are matched over the disparities whose
         right pixel lies in the image; ``"opencv"``: those pixels are NaN, as OpenCV's.
+    fill
+        Fill the pixels left NaN with the smaller of the nearest valid disparities to their
+        left and right on the row (background interpolation; off by default).
     max_memory_mb
         Refuse (ValueError) when the matcher would need more than this many MiB.
     threads
@@ -455,6 +493,7 @@ def semi_global_match(
         speckle_window=speckle_window,
         speckle_range=speckle_range,
         border=border,
+        fill=fill,
         max_memory_mb=max_memory_mb,
         threads=threads,
         return_confidence=return_confidence,
