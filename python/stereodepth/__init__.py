@@ -4,7 +4,6 @@
 - :func:`disparity_to_depth`: native, threaded disparity-map to depth-map conversion.
 - :func:`block_match`, :class:`StereoMatcher`: native block-matching disparity (census or SAD,
   sub-pixel, validity checks); :func:`to_opencv_disparity` for OpenCV's int16 x16 format.
-- :func:`semi_global_match`, :class:`SemiGlobalMatcher`: native semi-global matching.
 - :func:`reproject`, :func:`write_ply`: disparity maps to XYZ point clouds and PLY files.
 - :mod:`stereodepth.reference`: the pure-numpy oracle of every native kernel.
 """
