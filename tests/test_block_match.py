@@ -257,26 +257,59 @@ def test_many_disparities_take_the_generic_path() -> None:
     )
 
 
-def test_width_smaller_than_num_disparities_is_all_nan() -> None:
+def test_width_smaller_than_num_disparities_is_all_nan_with_opencvs_border() -> None:
     left, right = shifted_pair((10, 12), 2, seed=10)
-    assert np.isnan(sd.block_match(left, right, num_disparities=13)).all()
+    assert np.isnan(sd.block_match(left, right, num_disparities=13, border="opencv")).all()
+    # Clipped, every column has candidates inside the image: matched.
+    d = sd.block_match(left, right, num_disparities=13, subpixel=False)
+    assert np.isfinite(d[3:-3, 4:-2]).all()
 
 
-def test_search_range_leaving_the_image_is_nan() -> None:
+def test_search_range_leaving_the_image_is_nan_with_opencvs_border() -> None:
     left, right = shifted_pair((16, 60), 5, seed=11)
-    d = sd.block_match(
-        left,
-        right,
-        num_disparities=10,
-        min_disparity=-4,
-        subpixel=False,
-        uniqueness_ratio=0,
-        lr_max_diff=None,
-    )
+    kw: dict[str, Any] = {
+        "num_disparities": 10,
+        "min_disparity": -4,
+        "subpixel": False,
+        "uniqueness_ratio": 0,
+        "lr_max_diff": None,
+    }
+    d = sd.block_match(left, right, border="opencv", **kw)
     # x - d must lie in [0, 60) for every d in [-4, 5]: columns 5 .. 55.
     assert np.isnan(d[:, :5]).all()
     assert np.isnan(d[:, 56:]).all()
     assert np.isfinite(d[:, 5:56]).all()
+    np.testing.assert_array_equal(d, ref.block_match(left, right, border="opencv", **kw))
+
+
+@pytest.mark.parametrize("isa", SUPPORTED_ISAS)
+@pytest.mark.parametrize("cfg", CONFIGS, ids=config_id)
+def test_border_band_is_matched_over_the_disparities_inside_the_image(
+    isa: str, cfg: dict[str, Any]
+) -> None:
+    # The default border="clip": the left columns are matched over the candidates whose right
+    # pixel lies in the image; here the shift 5 is among them from column 5 on.
+    left, right = shifted_pair((24, 70), 5, seed=12)
+    kw: dict[str, Any] = {"num_disparities": 24, "min_disparity": -2, **cfg}
+    native = sd.StereoMatcher(isa=isa, **kw).compute(left, right)
+    assert_agree(native, ref.block_match(left, right, **kw), subpixel=subpixel_of(cfg))
+    d = native[0] if isinstance(native, tuple) else native
+    opencv = sd.StereoMatcher(isa=isa, border="opencv", **kw).compute(left, right)
+    d_cv = opencv[0] if isinstance(opencv, tuple) else opencv
+    assert np.isnan(d_cv[:, :21]).all()
+    np.testing.assert_array_equal(d[:, 21:68], d_cv[:, 21:68])
+    if cfg.get("subpixel", True) is False and not cfg.get("texture_threshold"):
+        assert (d[6:-6, 9:21] == 5).mean() > 0.9
+    # No winner ever lies outside the image.
+    x = np.arange(70)
+    assert (d[np.isfinite(d)] <= np.broadcast_to(x, d.shape)[np.isfinite(d)] + 2).all()
+
+
+def test_border_is_rejected_when_unknown() -> None:
+    with pytest.raises(ValueError, match="border must be 'clip' or 'opencv', got 'zero'"):
+        sd.block_match(*shifted_pair((8, 20), 2, seed=1), num_disparities=4, border="zero")
+    with pytest.raises(TypeError, match="border must be 'clip' or 'opencv', got int 0"):
+        sd.StereoMatcher(num_disparities=4, border=0)  # type: ignore[arg-type]
 
 
 @settings(max_examples=25, deadline=None, suppress_health_check=[HealthCheck.too_slow])

@@ -31,6 +31,7 @@ SUBMODULES = [
     "reference",
     "rig",
     "sample",
+    "semi_global",
     "web",
 ]
 #: Submodules that need no optional extra: using them must not import one.
@@ -47,6 +48,7 @@ CORE = [
     "reference",
     "rig",
     "sample",
+    "semi_global",
 ]
 #: Optional extras that ``import stereodepth`` must not import.
 HEAVY = ["dask", "distributed", "matplotlib", "fastapi", "uvicorn", "plotly", "PIL", "cv2", "tqdm"]

@@ -7,14 +7,7 @@
 
 namespace stereodepth::bindings {
 
-namespace {
-
-MatchCost parse_cost(const std::string& name) {
-  if (name == "census") return MatchCost::kCensus;
-  if (name == "sad") return MatchCost::kSad;
-  throw py::value_error("cost must be 'census' or 'sad', got '" + name + "'");
-}
-
+// Shared with bind_semi_global.cpp (declared in bind_common.hpp).
 SubpixelFit parse_subpixel(const std::string& name) {
   if (name == "none") return SubpixelFit::kNone;
   if (name == "parabola") return SubpixelFit::kParabola;
@@ -65,6 +58,14 @@ ImageView<float> output_view(py::array& a, const char* name) {
                           a.shape(1)};
 }
 
+namespace {
+
+MatchCost parse_cost(const std::string& name) {
+  if (name == "census") return MatchCost::kCensus;
+  if (name == "sad") return MatchCost::kSad;
+  throw py::value_error("cost must be 'census' or 'sad', got '" + name + "'");
+}
+
 void compute_py(BlockMatcher& self, const py::array& left, const py::array& right,
                 py::array& disparity, const py::object& confidence) {
   const StereoImage l = image_view(left, "left");
@@ -89,7 +90,7 @@ void bind_block_match(py::module_& m) {
                        const std::string& cost, const std::string& subpixel,
                        double uniqueness_ratio, double texture_threshold, double lr_max_diff,
                        int speckle_window, double speckle_range, int threads,
-                       const std::string& isa) {
+                       const std::string& isa, bool clip_border) {
              BlockMatchParams p;
              p.num_disparities = num_disparities;
              p.min_disparity = min_disparity;
@@ -101,12 +102,14 @@ void bind_block_match(py::module_& m) {
              p.lr_max_diff = lr_max_diff;
              p.speckle_window = speckle_window;
              p.speckle_range = speckle_range;
+             p.clip_border = clip_border;
              return std::make_unique<BlockMatcher>(p, threads, resolve_isa(isa));
            }),
            py::arg("num_disparities"), py::arg("min_disparity"), py::arg("block_size"),
            py::arg("cost"), py::arg("subpixel"), py::arg("uniqueness_ratio"),
            py::arg("texture_threshold"), py::arg("lr_max_diff"), py::arg("speckle_window"),
-           py::arg("speckle_range"), py::arg("threads"), py::arg("isa") = "auto")
+           py::arg("speckle_range"), py::arg("threads"), py::arg("isa") = "auto",
+           py::arg("clip_border") = true)
       .def("compute", &compute_py, py::arg("left"), py::arg("right"), py::arg("disparity"),
            py::arg("confidence") = py::none(),
            "Writes the disparity (and the confidence, unless None) of left.")

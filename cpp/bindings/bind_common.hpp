@@ -6,6 +6,7 @@
 
 #include <string>
 
+#include "stereodepth/block_match.hpp"
 #include "stereodepth/dispatch.hpp"
 #include "stereodepth/image_view.hpp"
 
@@ -64,5 +65,11 @@ StackView<T> writable_stack(py::array& out, const char* name) {
   return StackView<T>{static_cast<T*>(out.mutable_data()), s.frames, s.rows, s.cols,
                       s.frame_stride, s.row_stride};
 }
+
+// The matchers' shared checks (bind_block_match.cpp): an input image as a StereoImage, a
+// float32 output as a view, the sub-pixel fit by name.
+StereoImage image_view(const py::array& a, const char* name);
+ImageView<float> output_view(py::array& a, const char* name);
+SubpixelFit parse_subpixel(const std::string& name);
 
 }  // namespace stereodepth::bindings

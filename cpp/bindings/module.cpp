@@ -16,6 +16,7 @@
 namespace stereodepth::bindings {
 void bind_depth(py::module_& m);
 void bind_block_match(py::module_& m);
+void bind_semi_global(py::module_& m);
 void bind_reproject(py::module_& m);
 void bind_rectify(py::module_& m);
 }  // namespace stereodepth::bindings
@@ -75,6 +76,7 @@ PYBIND11_MODULE(_core, m) {
 
   bindings::bind_depth(m);
   bindings::bind_block_match(m);
+  bindings::bind_semi_global(m);
   bindings::bind_reproject(m);
   bindings::bind_rectify(m);
 }

@@ -12,6 +12,7 @@
 #include <vector>
 
 #include "block_match_kernels.hpp"
+#include "speckle.hpp"
 #include "stereodepth/parallel.hpp"
 
 #if defined(__SANITIZE_ADDRESS__)
@@ -25,6 +26,12 @@
 
 namespace stereodepth {
 namespace {
+
+using detail::SpeckleBand;
+using detail::SpeckleRun;
+using detail::speckle_band;
+using detail::speckle_finish;
+using detail::speckle_range_f;
 
 const detail::BlockMatchKernels& kernels_for(Isa isa) {
   switch (isa) {
@@ -98,187 +105,6 @@ detail::BandScratch carve_band(Arena& arena, std::ptrdiff_t cols, int dp, std::s
   s.records = arena.take<detail::WinnerRecord>(c + 16);
   s.recent = arena.take<std::uint16_t>(detail::recent_size(lanes, dp));
   return s;
-}
-
-// The speckle filter, in two steps: each band of rows labels its own pixels (in the band's
-// thread, right after matching it), then one pass joins the bands and clears small regions.
-//
-// Two 4-neighbours are linked when both are valid and differ by at most `range` (as OpenCV's
-// filterSpeckles). Each row is cut into runs of horizontally linked pixels; vertical links
-// unite runs (union-find, the lower index becoming the root). Rows are handled as bit masks
-// (the kernels' speckle_links): a run starts at every valid pixel not linked to its left
-// neighbour, and the run holding column i is found by counting the starts up to i.
-
-struct SpeckleRun {
-  std::int32_t parent;  // union-find link; a root links to itself
-  std::int32_t y, x0, x1;
-};
-
-// A row's run starts, as bits, with the count of starts before each word and the index of
-// the row's first run: the run holding column i is base + (starts up to and including i) - 1.
-struct RowStarts {
-  std::vector<std::uint64_t> bits;
-  std::vector<std::int32_t> before;
-  std::int32_t base = 0;
-
-  void set(const std::uint64_t* valid, const std::uint64_t* left, std::size_t words,
-           std::int32_t first_run) {
-    bits.resize(words);
-    before.resize(words);
-    base = first_run;
-    std::int32_t n = 0;
-    for (std::size_t w = 0; w < words; ++w) {
-      bits[w] = valid[w] & ~left[w];
-      before[w] = n;
-      n += __builtin_popcountll(bits[w]);
-    }
-  }
-  std::int32_t run_at(std::ptrdiff_t i) const {
-    const auto w = static_cast<std::size_t>(i >> 6);
-    const int b = static_cast<int>(i & 63);
-    const std::uint64_t upto = b == 63 ? ~std::uint64_t{0} : (std::uint64_t{2} << b) - 1;
-    return base + before[w] + __builtin_popcountll(bits[w] & upto) - 1;
-  }
-};
-
-// One band's labelling.
-struct SpeckleBand {
-  std::vector<SpeckleRun> runs;  // parents are indices into this vector
-  std::vector<std::uint64_t> valid, left, up;
-  RowStarts cur, prev;  // after labelling, prev holds the band's last row
-  RowStarts first;      // the band's first row
-};
-
-// |a - b| <= range for a float difference is |a - b| <= the largest float not above range.
-float speckle_range_f(double range) {
-  float rf = static_cast<float>(range);
-  if (static_cast<double>(rf) > range) rf = std::nextafter(rf, 0.0f);
-  return rf;
-}
-
-std::int32_t find_root(std::vector<SpeckleRun>& runs, std::int32_t i) {
-  while (runs[static_cast<std::size_t>(i)].parent != i) {
-    SpeckleRun& r = runs[static_cast<std::size_t>(i)];
-    r.parent = runs[static_cast<std::size_t>(r.parent)].parent;  // path halving
-    i = r.parent;
-  }
-  return i;
-}
-
-void unite(std::vector<SpeckleRun>& runs, std::int32_t a, std::int32_t b) {
-  const std::int32_t ra = find_root(runs, a), rb = find_root(runs, b);
-  if (ra < rb) {
-    runs[static_cast<std::size_t>(rb)].parent = ra;
-  } else if (rb < ra) {
-    runs[static_cast<std::size_t>(ra)].parent = rb;
-  }
-}
-
-// Calls fn(i) for each column i with a vertical link whose pair of runs (below, above)
-// differs from column i - 1's: the link begins there, or a run begins in either row.
-template <typename Fn>
-void each_new_link(const std::uint64_t* up, const RowStarts& below, const RowStarts& above,
-                   std::size_t words, Fn fn) {
-  std::uint64_t carry = 0;  // up bit 63 of the previous word
-  for (std::size_t w = 0; w < words; ++w) {
-    const std::uint64_t shifted = (up[w] << 1) | carry;
-    carry = up[w] >> 63;
-    std::uint64_t marks = up[w] & (~shifted | below.bits[w] | above.bits[w]);
-    while (marks) {
-      fn(static_cast<std::ptrdiff_t>(w * 64) + __builtin_ctzll(marks));
-      marks &= marks - 1;
-    }
-  }
-}
-
-// Labels rows y0 .. y1 - 1 (runs, and unions inside the band).
-void speckle_band(const detail::BlockMatchKernels& k, const ImageView<float>& disp,
-                  std::ptrdiff_t y0, std::ptrdiff_t y1, float rf, SpeckleBand& b) {
-  const std::ptrdiff_t cols = disp.cols;
-  const auto words = static_cast<std::size_t>((cols + 63) / 64);
-  b.runs.clear();
-  b.valid.resize(words);
-  b.left.resize(words);
-  b.up.resize(words);
-  for (std::ptrdiff_t y = y0; y < y1; ++y) {
-    k.speckle_links(disp.row(y), y > y0 ? disp.row(y - 1) : nullptr, cols, rf, b.valid.data(),
-                    b.left.data(), b.up.data());
-    b.cur.set(b.valid.data(), b.left.data(), words, static_cast<std::int32_t>(b.runs.size()));
-    for (std::size_t w = 0; w < words; ++w) {
-      std::uint64_t starts = b.cur.bits[w];
-      while (starts) {
-        const std::ptrdiff_t x0 = static_cast<std::ptrdiff_t>(w * 64) + __builtin_ctzll(starts);
-        starts &= starts - 1;
-        // The run ends at the first column after x0 not linked to its left neighbour.
-        std::ptrdiff_t x1 = x0 + 1;
-        std::size_t ww = static_cast<std::size_t>(x1 >> 6);
-        if (ww < words) {
-          std::uint64_t open = ~b.left[ww] & (~std::uint64_t{0} << (x1 & 63));
-          while (!open && ++ww < words) open = ~b.left[ww];
-          x1 = ww < words ? static_cast<std::ptrdiff_t>(ww * 64) + __builtin_ctzll(open) : cols;
-        }
-        x1 = std::min(x1, cols);
-        const auto id = static_cast<std::int32_t>(b.runs.size());
-        b.runs.push_back({id, static_cast<std::int32_t>(y), static_cast<std::int32_t>(x0),
-                          static_cast<std::int32_t>(x1)});
-      }
-    }
-    if (y > y0) {
-      each_new_link(b.up.data(), b.cur, b.prev, words, [&](std::ptrdiff_t i) {
-        unite(b.runs, b.cur.run_at(i), b.prev.run_at(i));
-      });
-    } else {
-      b.first = b.cur;
-    }
-    std::swap(b.cur, b.prev);
-  }
-}
-
-// Joins the labellings (bands[i]: rows starts[i] .. starts[i + 1] - 1) and clears the
-// regions of at most `window` pixels.
-void speckle_finish(const detail::BlockMatchKernels& k, const ImageView<float>& disp,
-                    const ImageView<float>& conf, int window, float rf,
-                    const std::vector<SpeckleBand*>& bands,
-                    const std::vector<std::ptrdiff_t>& starts, std::vector<SpeckleRun>& all,
-                    std::vector<std::int64_t>& sizes) {
-  const std::ptrdiff_t cols = disp.cols;
-  const auto words = static_cast<std::size_t>((cols + 63) / 64);
-  const std::size_t nb = starts.size() - 1;
-  std::vector<std::int32_t> offset(nb + 1, 0);
-  for (std::size_t i = 0; i < nb; ++i) {
-    offset[i + 1] = offset[i] + static_cast<std::int32_t>(bands[i]->runs.size());
-  }
-  all.resize(static_cast<std::size_t>(offset[nb]));
-  for (std::size_t i = 0; i < nb; ++i) {
-    for (std::size_t j = 0; j < bands[i]->runs.size(); ++j) {
-      SpeckleRun r = bands[i]->runs[j];
-      r.parent += offset[i];
-      all[static_cast<std::size_t>(offset[i]) + j] = r;
-    }
-  }
-  for (std::size_t i = 1; i < nb; ++i) {
-    SpeckleBand& b = *bands[i];
-    const std::ptrdiff_t y = starts[i];
-    k.speckle_links(disp.row(y), disp.row(y - 1), cols, rf, b.valid.data(), b.left.data(),
-                    b.up.data());
-    const RowStarts& below = b.first;
-    const RowStarts& above = bands[i - 1]->prev;
-    each_new_link(b.up.data(), below, above, words, [&](std::ptrdiff_t x) {
-      unite(all, offset[i] + below.run_at(x), offset[i - 1] + above.run_at(x));
-    });
-  }
-  sizes.assign(all.size(), 0);
-  for (std::size_t i = 0; i < all.size(); ++i) {
-    const std::int32_t root = find_root(all, static_cast<std::int32_t>(i));
-    all[i].parent = root;  // now every run links to its root directly
-    sizes[static_cast<std::size_t>(root)] += all[i].x1 - all[i].x0;
-  }
-  const float nan = std::numeric_limits<float>::quiet_NaN();
-  for (const SpeckleRun& run : all) {
-    if (sizes[static_cast<std::size_t>(run.parent)] > window) continue;
-    std::fill(disp.row(run.y) + run.x0, disp.row(run.y) + run.x1, nan);
-    if (conf.data) std::fill(conf.row(run.y) + run.x0, conf.row(run.y) + run.x1, 0.0f);
-  }
 }
 
 }  // namespace
@@ -513,6 +339,7 @@ void BlockMatcher::compute(const StereoImage& left, const StereoImage& right,
   common.unique_min = unique_min_.empty() ? nullptr : unique_min_.data();
   common.texture_sum_min = p.texture_threshold * static_cast<double>(p.block_size * p.block_size);
   common.lr_max_diff = p.lr_max_diff;
+  common.clip_border = p.clip_border;
   common.disp = disparity.data;
   common.disp_stride = disparity.row_stride;
   common.conf = confidence.data;

@@ -396,6 +396,7 @@ struct RowCtx {
   int dp, nd, qpad, radius, min_d;
   SubpixelFit subpixel;
   bool lr_on, need_second;
+  bool clip_border;  // match the border columns (see border_band)
   // Fixed-size SIMD first pass without confidence: `second` holds, instead of the
   // second-best cost, how many lanes cost less than the uniqueness threshold
   // unique_min[best]; the second pass subtracts the winner and its two neighbours (see
@@ -1459,6 +1460,102 @@ void decide_avx2(const RowCtx& c) {
 
 #endif
 
+// The border band (clip_border): the columns outside xlo..xhi, whose search range leaves the
+// right image and which the passes above leave NaN, matched over the disparities whose right
+// pixel lies inside the image (the others never win), by decide_generic's rules; the winner
+// moves by the sub-pixel step only when both neighbours are inside too. Runs after the first
+// pass, when the column sums and the right winners of the row are complete.
+void border_band(const RowCtx& c) {
+  const ptrdiff_t cols = c.cols;
+  const int dp = c.dp, r = c.radius, nd = c.nd;
+  const float nan = std::numeric_limits<float>::quiet_NaN();
+  uint16_t* acc = c.acc;
+  uint32_t tsum = 0;
+  bool started = false;
+  for (ptrdiff_t x = 0; x < cols; ++x) {
+    if (x >= c.xlo && x <= c.xhi) {
+      started = false;
+      x = c.xhi;  // jump to the right band
+      continue;
+    }
+    const ptrdiff_t klo = clamp_index(x - c.min_d - cols + 1, 0, nd);
+    const ptrdiff_t khi = clamp_index(x - c.min_d, -1, nd - 1);
+    if (klo > khi) {
+      started = false;
+      continue;  // no candidate inside the image: stays NaN
+    }
+    if (!started) {
+      std::memset(acc, 0, sizeof(uint16_t) * static_cast<size_t>(dp));
+      tsum = 0;
+      for (ptrdiff_t dx = -r; dx <= r; ++dx) {
+        const ptrdiff_t xx = clamp_index(x + dx, 0, cols - 1);
+        const uint16_t* col = c.colsum + xx * dp;
+        for (int q = 0; q < dp; ++q) acc[q] = static_cast<uint16_t>(acc[q] + col[q]);
+        if (c.texcol) tsum += c.texcol[xx];
+      }
+      started = true;
+    } else {
+      const ptrdiff_t xp = clamp_index(x + r, 0, cols - 1);
+      const ptrdiff_t xm = clamp_index(x - r - 1, 0, cols - 1);
+      const uint16_t* plus = c.colsum + xp * dp;
+      const uint16_t* minus = c.colsum + xm * dp;
+      for (int q = 0; q < dp; ++q) acc[q] = static_cast<uint16_t>(acc[q] + plus[q] - minus[q]);
+      if (c.texcol) tsum += c.texcol[xp] - c.texcol[xm];
+    }
+    // Disparity index k is lane dp - 1 - k.
+    uint32_t b = 0x10000u;
+    ptrdiff_t kb = klo;
+    for (ptrdiff_t k = klo; k <= khi; ++k) {
+      const uint32_t v = acc[dp - 1 - k];
+      if (v < b) {
+        b = v;
+        kb = k;
+      }
+    }
+    uint32_t s2 = kNone;
+    for (ptrdiff_t k = klo; k <= khi; ++k) {
+      if ((k < kb - 1 || k > kb + 1) && acc[dp - 1 - k] < s2) s2 = acc[dp - 1 - k];
+    }
+    const bool has2 = s2 != kNone;
+    bool ok = true;
+    if (c.texcol) ok = !(static_cast<double>(tsum) < c.texture_sum_min);
+    if (ok && c.uniqueness_factor > 0 && has2) {
+      ok = static_cast<double>(s2) * 100.0 > static_cast<double>(b) * c.uniqueness_factor;
+    }
+    if (ok && c.lr_on) {
+      const ptrdiff_t i = x + (dp - 1 - kb);
+      const int kr = static_cast<uint16_t>(c.rarg[i] - i + dp - 1);
+      const ptrdiff_t diff = kb > kr ? kb - kr : kr - kb;
+      ok = static_cast<double>(diff) <= c.lr_max_diff;
+    }
+    if (!ok) {
+      c.drow[x] = nan;
+      if (c.crow) c.crow[x] = 0.0f;
+      continue;
+    }
+    float d = static_cast<float>(c.min_d + kb);
+    if (c.subpixel != SubpixelFit::kNone && kb - 1 >= klo && kb + 1 <= khi) {
+      const int32_t c0 = acc[dp - kb];      // index kb - 1
+      const int32_t c1 = static_cast<int32_t>(b);
+      const int32_t c2 = acc[dp - 2 - kb];  // index kb + 1
+      const float num = static_cast<float>(c0 - c2);
+      float den;
+      if (c.subpixel == SubpixelFit::kParabola) {
+        den = static_cast<float>(2 * (c0 + c2 - 2 * c1));
+      } else {
+        den = static_cast<float>(2 * (c0 - c1 > c2 - c1 ? c0 - c1 : c2 - c1));
+      }
+      if (den > 0.0f) d = d + num / den;
+    }
+    c.drow[x] = d;
+    if (c.crow) {
+      c.crow[x] = !has2 ? 1.0f
+                  : s2 > 0 ? static_cast<float>(s2 - b) / static_cast<float>(s2)
+                           : 0.0f;
+    }
+  }
+}
+
 // Whether this build's first pass updates the column sums itself for this dp.
 inline bool fuses_update(int dp) {
 #if defined(STEREODEPTH_BM_AVX512) || defined(STEREODEPTH_BM_AVX2)
@@ -1490,6 +1587,7 @@ void row_pass(const RowCtx& c) {
   winners_generic(c);
   decide_generic(c);
 #endif
+  if (c.clip_border) border_band(c);
 }
 
 // ------------------------------------------------------------------------------------------
@@ -1543,6 +1641,7 @@ void match_band_impl(const MatchArgs& a, const BandScratch& s, ptrdiff_t y0, ptr
   c.subpixel = a.subpixel;
   c.lr_on = a.lr_max_diff >= 0;
   c.need_second = a.uniqueness_factor > 0 || a.conf != nullptr;
+  c.clip_border = a.clip_border;
   c.texture_sum_min = a.texture_sum_min;
   c.uniqueness_factor = a.uniqueness_factor;
   c.lr_max_diff = a.lr_max_diff;

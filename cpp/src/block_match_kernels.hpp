@@ -36,6 +36,9 @@ struct MatchArgs {
   const std::uint32_t* unique_min;
   double texture_sum_min;    // texture_threshold * block_size^2, or 0 when off
   double lr_max_diff;        // negative when off
+  // Pixels whose search range leaves the right image: matched over the disparities inside
+  // it (true) or NaN (false, OpenCV's rule).
+  bool clip_border;
   float* disp;
   std::ptrdiff_t disp_stride;
   float* conf;  // may be null

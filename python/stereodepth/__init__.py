@@ -29,11 +29,13 @@ from .matching import StereoMatcher, block_match, to_opencv_disparity
 from .pointcloud import reproject, write_ply
 from .rectify import StereoRectifier, init_undistort_rectify_map, remap, stereo_rectify
 from .rig import DepthTable, StereoRig
+from .semi_global import SemiGlobalMatcher, semi_global_match
 
 __version__: str = _core.__version__
 
 __all__ = [
     "DepthTable",
+    "SemiGlobalMatcher",
     "StereoMatcher",
     "StereoRectifier",
     "StereoRig",
@@ -47,6 +49,7 @@ __all__ = [
     "remap",
     "reproject",
     "save_colorized",
+    "semi_global_match",
     "stereo_rectify",
     "to_opencv_disparity",
     "write_ply",
@@ -84,6 +87,7 @@ _SUBMODULES: frozenset[str] = frozenset(
         "rectify",
         "rig",
         "sample",
+        "semi_global",
         "web",
     }
 )

@@ -47,6 +47,7 @@ class BlockMatcher:
         speckle_range: float,
         threads: int,
         isa: str = "auto",
+        clip_border: bool = True,
     ) -> None: ...
     def compute(
         self,
@@ -123,3 +124,40 @@ class RemapTable:
     def source_shape(self) -> tuple[int, int]: ...
     @property
     def precision(self) -> str: ...
+
+class SemiGlobalMatcher:
+    def __init__(
+        self,
+        num_disparities: int,
+        min_disparity: int,
+        block_size: int,
+        p1: int,
+        p2: int,
+        p2_step: int,
+        paths: int,
+        subpixel: str,
+        uniqueness_ratio: float,
+        lr_max_diff: float,
+        median: bool,
+        speckle_window: int,
+        speckle_range: float,
+        clip_border: bool,
+        max_memory_mb: float,
+        threads: int,
+        isa: str = "auto",
+    ) -> None: ...
+    def compute(
+        self,
+        left: np.ndarray,
+        right: np.ndarray,
+        disparity: np.ndarray,
+        confidence: np.ndarray | None = None,
+    ) -> None: ...
+    @property
+    def threads(self) -> int: ...
+    @property
+    def isa(self) -> str: ...
+
+def semi_global_memory(
+    rows: int, cols: int, num_disparities: int, paths: int, threads: int
+) -> int: ...

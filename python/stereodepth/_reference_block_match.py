@@ -201,22 +201,28 @@ def block_match(
 
     agg = box_sum(pixel_costs(gl, gr, o, sixteen_bit=sixteen_bit), r)  # (h, w, nd) int64
 
-    # Winner: the least cost, the lowest disparity on a tie (argmin takes the first).
-    kbest = np.argmin(agg, axis=2)
-    best = np.take_along_axis(agg, kbest[..., None], axis=2)[..., 0]
-
-    # The search range must lie in the right image.
+    # Candidates whose right pixel x - d lies in the image; the others never win.
     x = np.arange(w)
-    ok = np.broadcast_to(((x - (dmin + nd - 1)) >= 0) & ((x - dmin) <= w - 1), (h, w)).copy()
+    xr_of = x[:, None] - d_of_k[None, :]
+    cand_in = np.broadcast_to(((xr_of >= 0) & (xr_of <= w - 1))[None], (h, w, nd))
+    sentinel = np.int64(1) << np.int64(62)
+    agg_in = np.where(cand_in, agg, sentinel)
+
+    # Winner: the least cost, the lowest disparity on a tie (argmin takes the first).
+    kbest = np.argmin(agg_in, axis=2)
+    best = np.take_along_axis(agg_in, kbest[..., None], axis=2)[..., 0]
+    ok = best < sentinel  # some candidate inside the image
+    if o.border == "opencv":
+        # The whole search range must lie in the right image.
+        ok &= ((x - (dmin + nd - 1)) >= 0) & ((x - dmin) <= w - 1)
 
     if o.texture_threshold > 0:
         grad = np.minimum(np.abs(sobel_x(gl, sixteen_bit=sixteen_bit)), PREFILTER_CAP)
         ok &= box_sum(grad, r).astype(np.float64) >= o.texture_sum_min
 
     # The least cost more than one disparity away from the winner (sentinel: none).
-    sentinel = np.int64(1) << np.int64(62)
     far = np.abs(ks[None, None, :] - kbest[..., None]) > 1
-    second = np.where(far, agg, sentinel).min(axis=2)
+    second = np.where(far, agg_in, sentinel).min(axis=2)
     has_second = second < sentinel
     if o.uniqueness_factor > 0:
         ok &= ~has_second | (
@@ -236,14 +242,18 @@ def block_match(
 
     disp = (dmin + kbest).astype(np.float32)
     if o.subpixel is not None and nd >= 3:
-        interior = (kbest >= 1) & (kbest <= nd - 2)
+        # both neighbours are candidates inside the image
+        lo_in = np.take_along_axis(cand_in, np.clip(kbest - 1, 0, nd - 1)[..., None], axis=2)
+        hi_in = np.take_along_axis(cand_in, np.clip(kbest + 1, 0, nd - 1)[..., None], axis=2)
+        interior = (kbest >= 1) & (kbest <= nd - 2) & lo_in[..., 0] & hi_in[..., 0]
         c0 = np.take_along_axis(agg, np.clip(kbest - 1, 0, nd - 1)[..., None], axis=2)[..., 0]
         c2 = np.take_along_axis(agg, np.clip(kbest + 1, 0, nd - 1)[..., None], axis=2)[..., 0]
+        b = np.where(ok, best, 0)  # no sentinel arithmetic where there is no candidate
         num = (c0 - c2).astype(np.float32)
         if o.subpixel == "parabola":
-            den = (2 * (c0 + c2 - 2 * best)).astype(np.float32)
+            den = (2 * (c0 + c2 - 2 * b)).astype(np.float32)
         else:
-            den = (2 * np.maximum(c0 - best, c2 - best)).astype(np.float32)
+            den = (2 * np.maximum(c0 - b, c2 - b)).astype(np.float32)
         use = interior & (den > 0)
         with np.errstate(divide="ignore", invalid="ignore"):
             delta = np.where(use, num / np.where(use, den, np.float32(1)), np.float32(0))

@@ -22,6 +22,8 @@ Methods
     ``stereodepth``: :func:`stereodepth.block_match` on the images as read (RGB or grey; the
     matcher converts), with its own defaults unless ``--block-size`` / ``--option`` say
     otherwise.
+    ``sgm``: :func:`stereodepth.semi_global_match` with its defaults (``--block-size`` 1 or 3;
+    ``--option`` is for ``stereodepth`` only).
     ``opencv-bm``: ``cv2.StereoBM_create(numDisparities, blockSize)`` (other parameters at
     OpenCV's defaults) on grey uint8 images (``cv2.COLOR_RGB2GRAY``); default block size 9.
     Colour images are read as R, G, B (the order PNG stores); ``--channel-order bgr`` says
@@ -30,6 +32,8 @@ Methods
     ``opencv-sgbm``: ``cv2.StereoSGBM_create(minDisparity=0, numDisparities, blockSize,
     P1=8*bs*bs, P2=32*bs*bs)`` (the usual penalties for one channel; mode ``MODE_SGBM`` and the
     other parameters at OpenCV's defaults) on the same grey images; default block size 5.
+    ``opencv-sgbm-3way`` and ``opencv-sgbm-hh``: the same in ``MODE_SGBM_3WAY`` and
+    ``MODE_HH``.
     OpenCV's int16 output (disparity x 16) becomes float32 / 16 with the values below
     ``minDisparity * 16`` = 0 (no match; OpenCV writes ``(minDisparity - 1) * 16``) as NaN,
     by :func:`stereodepth.from_opencv_disparity`. OpenCV runs only when ``cv2`` imports;
@@ -89,8 +93,15 @@ __all__ = [
 
 #: The matchers ``stereodepth eval`` knows, and the block size each uses when none is given
 #: (None: the matcher's own default).
-METHODS: dict[str, int | None] = {"stereodepth": None, "opencv-bm": 9, "opencv-sgbm": 5}
-_OPENCV_METHODS = ("opencv-bm", "opencv-sgbm")
+METHODS: dict[str, int | None] = {
+    "stereodepth": None,
+    "sgm": None,
+    "opencv-bm": 9,
+    "opencv-sgbm": 5,
+    "opencv-sgbm-3way": 5,
+    "opencv-sgbm-hh": 5,
+}
+_OPENCV_METHODS = ("opencv-bm", "opencv-sgbm", "opencv-sgbm-3way", "opencv-sgbm-hh")
 #: Options of stereodepth.block_match that eval sets itself.
 _RESERVED_OPTIONS = {
     "num_disparities": "set per scene from the ground truth; use --num-disparities",
@@ -283,13 +294,15 @@ def _stereodepth_factory(
     threads: int, options: dict[str, Any], channel_order: str = "rgb"
 ) -> Callable[[Variant, int], Matcher]:
     from stereodepth.matching import StereoMatcher
+    from stereodepth.semi_global import SemiGlobalMatcher
 
     def make(variant: Variant, num_disparities: int) -> Matcher:
-        kwargs = dict(options)
+        kwargs = dict(options) if variant.method == "stereodepth" else {}
         if variant.block_size is not None:
             kwargs["block_size"] = variant.block_size
         # Made once per scene and reused across the timed runs, as the OpenCV matchers are.
-        matcher = StereoMatcher(
+        cls = SemiGlobalMatcher if variant.method == "sgm" else StereoMatcher
+        matcher = cls(
             num_disparities=num_disparities,
             min_disparity=0,
             threads=threads,
@@ -335,12 +348,18 @@ def _opencv_factory(
             if variant.method == "opencv-bm":
                 matcher = cv2.StereoBM_create(numDisparities=num_disparities, blockSize=bs)
             else:
+                modes = {
+                    "opencv-sgbm": cv2.STEREO_SGBM_MODE_SGBM,
+                    "opencv-sgbm-3way": cv2.STEREO_SGBM_MODE_SGBM_3WAY,
+                    "opencv-sgbm-hh": cv2.STEREO_SGBM_MODE_HH,
+                }
                 matcher = cv2.StereoSGBM_create(
                     minDisparity=0,
                     numDisparities=num_disparities,
                     blockSize=bs,
                     P1=8 * bs * bs,
                     P2=32 * bs * bs,
+                    mode=modes[variant.method],
                 )
         except cv2.error as exc:
             raise ValueError(
@@ -376,8 +395,10 @@ def _check_block_size(variant: Variant) -> None:
         return
     if variant.method == "opencv-bm" and not (bs % 2 == 1 and 5 <= bs <= 255):
         raise ValueError(f"block size of opencv-bm must be an odd integer in 5..255, got {bs}")
-    if variant.method == "opencv-sgbm" and not (bs % 2 == 1 and bs >= 1):
-        raise ValueError(f"block size of opencv-sgbm must be an odd integer >= 1, got {bs}")
+    if variant.method.startswith("opencv-sgbm") and not (bs % 2 == 1 and bs >= 1):
+        raise ValueError(f"block size of {variant.method} must be an odd integer >= 1, got {bs}")
+    if variant.method == "sgm" and bs not in (1, 3):
+        raise ValueError(f"block size of sgm must be 1 or 3, got {bs}")
 
 
 # --------------------------------------------------------------------------------------------
@@ -723,7 +744,8 @@ def register(subparsers: Any) -> None:
         type=_method_spec,
         default=None,
         metavar="METHOD[:SIZES]",
-        help="stereodepth, opencv-bm, opencv-sgbm, each optionally with its own block sizes "
+        help="stereodepth (block matching), sgm (semi-global matching), opencv-bm, opencv-sgbm, "
+        "opencv-sgbm-3way, opencv-sgbm-hh, each optionally with its own block sizes "
         "(opencv-bm:9,15); default: stereodepth. OpenCV methods are skipped with a note when "
         "cv2 does not import",
     )
@@ -948,11 +970,13 @@ def run(args: argparse.Namespace) -> int:
                         f"--opencv-option {key}: no selected OpenCV matcher has set{_camel(key)}()"
                     )
             factory = _opencv_factory(cv2, opencv_options, args.channel_order)
-            factories["opencv-bm"] = factories["opencv-sgbm"] = factory
+            for name in _OPENCV_METHODS:
+                factories[name] = factory
     elif opencv_options:
         raise _usage_error("--opencv-option needs an OpenCV method (--method opencv-bm ...)")
-    if "stereodepth" in methods:
-        factories["stereodepth"] = _stereodepth_factory(threads, options, args.channel_order)
+    for name in ("stereodepth", "sgm"):
+        if name in methods:
+            factories[name] = _stereodepth_factory(threads, options, args.channel_order)
     for note in notes:
         print(f"stereodepth eval: {note}", file=sys.stderr)
 

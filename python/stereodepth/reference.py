@@ -13,6 +13,7 @@ import numpy as np
 
 from . import _validate as check
 from ._reference_block_match import block_match  # the oracle's body lives there
+from ._reference_semi_global import semi_global_match
 from .depth import DepthOptions, as_disparity, prepare_out
 
 __all__ = [
@@ -21,6 +22,7 @@ __all__ = [
     "init_undistort_rectify_map",
     "remap",
     "reproject",
+    "semi_global_match",
     "stereo_rectify",
     "undistort_points",
 ]

@@ -42,6 +42,9 @@ struct BlockMatchParams {
   double lr_max_diff = 1.0;        // pixels; negative turns the check off
   int speckle_window = 0;          // largest region removed, in pixels; 0 = off
   double speckle_range = 1.0;      // largest step between neighbours within a region, pixels
+  // Pixels whose search range leaves the right image are matched over the disparities that
+  // stay inside it (true), or NaN as OpenCV's (false).
+  bool clip_border = true;
 };
 
 // Throws std::invalid_argument naming the parameter, the rule and the value received.

@@ -1,0 +1,522 @@
+#include "stereodepth/semi_global.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <condition_variable>
+#include <cstdint>
+#include <cstring>
+#include <limits>
+#include <sstream>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+#include "block_match_kernels.hpp"
+#include "semi_global_kernels.hpp"
+#include "speckle.hpp"
+#include "stereodepth/parallel.hpp"
+
+namespace stereodepth {
+namespace {
+
+const detail::BlockMatchKernels& shared_kernels(Isa isa) {
+  switch (isa) {
+#if defined(STEREODEPTH_HAVE_X86_ISAS)
+    case Isa::kAvx512:
+      return detail::avx512::block_match_kernels();
+    case Isa::kAvx2:
+      return detail::avx2::block_match_kernels();
+#endif
+    default:
+      return detail::baseline::block_match_kernels();
+  }
+}
+
+const detail::SemiGlobalKernels& sgm_kernels(Isa isa) {
+  switch (isa) {
+#if defined(STEREODEPTH_HAVE_X86_ISAS)
+    case Isa::kAvx512:
+      return detail::avx512::semi_global_kernels();
+    case Isa::kAvx2:
+      return detail::avx2::semi_global_kernels();
+#endif
+    default:
+      return detail::baseline::semi_global_kernels();
+  }
+}
+
+template <typename T>
+[[noreturn]] void fail(const std::string& rule, T got) {
+  std::ostringstream msg;
+  msg << rule << ", got " << got;
+  throw std::invalid_argument(msg.str());
+}
+
+int cost_max(int block_size) { return 16 * block_size * block_size; }
+
+// int16 per pixel in path rows: sentinel, nd costs, sentinel, least cost; rounded up to 16.
+int path_stride(int nd) { return (nd + 3 + 15) / 16 * 16; }
+
+int vertical_paths(int paths) { return paths == 8 ? 3 : 1; }
+
+// paths == 3: the rows of a stripe, whose path from above starts at its first row.
+constexpr std::ptrdiff_t kStripeRows = 64;
+
+// Threads meet at every row (the diagonal paths read the previous row across band edges).
+class Barrier {
+ public:
+  explicit Barrier(std::ptrdiff_t n) : n_(n) {}
+  void wait() {
+    std::unique_lock<std::mutex> lock(m_);
+    const std::uint64_t gen = gen_;
+    if (++count_ == n_) {
+      count_ = 0;
+      ++gen_;
+      cv_.notify_all();
+    } else {
+      cv_.wait(lock, [&] { return gen != gen_; });
+    }
+  }
+
+ private:
+  std::mutex m_;
+  std::condition_variable cv_;
+  std::ptrdiff_t n_, count_ = 0;
+  std::uint64_t gen_ = 0;
+};
+
+// Runs fn(b) for b in [0, n), each on its own thread (the caller's is the first).
+template <typename Fn>
+void run_bands(std::ptrdiff_t n, Fn fn) {
+  parallel_for_rows(n, static_cast<int>(n), 1, [&](std::ptrdiff_t b0, std::ptrdiff_t b1) {
+    for (std::ptrdiff_t b = b0; b < b1; ++b) fn(b);
+  });
+}
+
+// The pixel costs of the last census rows a thread used (raw_row), so that each image row
+// computes one new census row's costs rather than the box's 2r + 1.
+struct RawRows {
+  std::uint16_t* slot[3] = {nullptr, nullptr, nullptr};
+  std::ptrdiff_t row[3] = {-1, -1, -1};
+
+  // The costs of the census rows y - r .. y + r (clamped) into raws.
+  void get(const detail::SemiGlobalKernels& k, const std::uint16_t* lcen, const std::uint16_t* rcen,
+           std::ptrdiff_t rows, std::ptrdiff_t cols, std::ptrdiff_t x0, std::ptrdiff_t x1, int r,
+           int nd, int min_d, std::ptrdiff_t y, std::uint16_t* rev, const std::uint16_t** raws) {
+    std::ptrdiff_t need[3];
+    for (int i = 0; i < 2 * r + 1; ++i) {
+      need[i] = std::clamp<std::ptrdiff_t>(y + i - r, 0, rows - 1);
+    }
+    auto needed = [&](std::ptrdiff_t yy) {
+      for (int i = 0; i < 2 * r + 1; ++i) {
+        if (need[i] == yy) return true;
+      }
+      return false;
+    };
+    for (int i = 0; i < 2 * r + 1; ++i) {
+      int at = -1;
+      for (int s = 0; s < 3; ++s) {
+        if (row[s] == need[i]) at = s;
+      }
+      if (at < 0) {
+        for (int s = 0; s < 3 && at < 0; ++s) {
+          if (row[s] < 0 || !needed(row[s])) at = s;
+        }
+        k.raw_row(lcen + need[i] * cols, rcen + need[i] * cols, cols, x0, x1, r, nd, min_d, rev,
+                  slot[at]);
+        row[at] = need[i];
+      }
+      raws[i] = slot[at];
+    }
+  }
+};
+
+template <typename T>
+T* aligned(std::vector<std::uint8_t>& v, std::size_t count) {
+  const std::size_t bytes = count * sizeof(T) + 64;
+  if (v.size() < bytes) v.resize(bytes);
+  const auto addr = reinterpret_cast<std::uintptr_t>(v.data());
+  return reinterpret_cast<T*>(v.data() + (64 - addr % 64) % 64);
+}
+
+}  // namespace
+
+void validate(const SemiGlobalParams& p) {
+  if (p.num_disparities < 1 || p.num_disparities > kMaxNumDisparities) {
+    fail("num_disparities must be an integer in [1, " + std::to_string(kMaxNumDisparities) + "]",
+         p.num_disparities);
+  }
+  if (p.min_disparity < -kMaxAbsMinDisparity || p.min_disparity > kMaxAbsMinDisparity) {
+    fail("min_disparity must be an integer in [-" + std::to_string(kMaxAbsMinDisparity) + ", " +
+             std::to_string(kMaxAbsMinDisparity) + "]",
+         p.min_disparity);
+  }
+  if (p.block_size != 1 && p.block_size != 3) {
+    fail("block_size must be 1 or 3 (box costs are stored in 8 bits)", p.block_size);
+  }
+  if (p.paths != 3 && p.paths != 4 && p.paths != 8) fail("paths must be 3, 4 or 8", p.paths);
+  if (p.p1 < 0) fail("p1 must be an integer >= 0", p.p1);
+  const int limit = std::min(65535 / p.paths, 16383) - cost_max(p.block_size);
+  if (p.p2 < p.p1 || p.p2 > limit) {
+    fail("p2 must be an integer in [p1, " + std::to_string(limit) +
+             "] (the sum over the paths must fit in 16 bits)",
+         p.p2);
+  }
+  if (p.p2_step < 0 || p.p2_step > 65535) {
+    fail("p2_step must be an integer in [0, 65535]", p.p2_step);
+  }
+  if (p.subpixel != SubpixelFit::kNone && p.subpixel != SubpixelFit::kParabola &&
+      p.subpixel != SubpixelFit::kEquiangular) {
+    fail("subpixel must be none, parabola or equiangular", static_cast<int>(p.subpixel));
+  }
+  if (!(std::isfinite(p.uniqueness_ratio) && p.uniqueness_ratio >= 0)) {
+    fail("uniqueness_ratio must be a finite number >= 0", p.uniqueness_ratio);
+  }
+  if (!std::isfinite(p.lr_max_diff)) {
+    fail("lr_max_diff must be a finite number (negative: off)", p.lr_max_diff);
+  }
+  if (p.speckle_window < 0) fail("speckle_window must be an integer >= 0", p.speckle_window);
+  if (!(std::isfinite(p.speckle_range) && p.speckle_range >= 0)) {
+    fail("speckle_range must be a finite number >= 0", p.speckle_range);
+  }
+  if (!(std::isfinite(p.max_memory_mb) && p.max_memory_mb > 0)) {
+    fail("max_memory_mb must be a finite number > 0", p.max_memory_mb);
+  }
+}
+
+std::size_t semi_global_memory(std::ptrdiff_t rows, std::ptrdiff_t cols, int nd, int paths,
+                               int threads) {
+  const double h = static_cast<double>(rows), w = static_cast<double>(cols), d = nd;
+  const double ls = path_stride(nd);
+  const double t = std::max(1, threads);
+  double bytes = h * w * 13.0;  // census (2 x 2), grey (3), disparity before the median (4)
+  bytes += t * (w * d * 10.0 + (w + d) * 2.0 + 4.0 * ls * 2.0 + w * 14.0);  // per thread
+  if (paths == 3) {
+    bytes += t * (w * d * 1.0 + 2.0 * w * ls * 2.0);  // a cost row and two path rows
+  } else {
+    bytes += h * w * d * 3.0;                              // 16-bit sums, 8-bit costs
+    bytes += vertical_paths(paths) * 2.0 * w * ls * 2.0;  // path rows
+  }
+  return static_cast<std::size_t>(std::min(bytes, 1.8e19));
+}
+
+struct SemiGlobalMatcher::Workspace {
+  std::vector<std::uint8_t> sums, costs, census_l, census_r, grey, pgrey, pre_median, path_rows;
+  std::vector<std::vector<std::uint8_t>> scratch;  // per thread
+  std::vector<detail::SpeckleBand> speckle;
+  std::vector<detail::SpeckleRun> speckle_runs;
+  std::vector<std::int64_t> speckle_sizes;
+};
+
+SemiGlobalMatcher::SemiGlobalMatcher(const SemiGlobalParams& params, int threads, Isa isa)
+    : params_(params), threads_(resolve_threads(threads)), isa_(isa),
+      workspace_(std::make_unique<Workspace>()) {
+  validate(params_);
+}
+
+SemiGlobalMatcher::~SemiGlobalMatcher() = default;
+
+void SemiGlobalMatcher::compute(const StereoImage& left, const StereoImage& right,
+                                const ImageView<float>& disparity,
+                                const ImageView<float>& confidence) {
+  const SemiGlobalParams& p = params_;
+  if (left.rows < 1 || left.cols < 1) {
+    throw std::invalid_argument("left must have at least one row and one column");
+  }
+  if (left.rows != right.rows || left.cols != right.cols || left.format != right.format) {
+    throw std::invalid_argument("left and right must have the same shape and pixel format");
+  }
+  if (disparity.rows != left.rows || disparity.cols != left.cols) {
+    throw std::invalid_argument("disparity must have the shape of the images");
+  }
+  if (confidence.data && (confidence.rows != left.rows || confidence.cols != left.cols)) {
+    throw std::invalid_argument("confidence must have the shape of the images");
+  }
+  const std::ptrdiff_t rows = left.rows, cols = left.cols;
+  const int nd = p.num_disparities;
+  const std::size_t need = semi_global_memory(rows, cols, nd, p.paths, threads_);
+  const double need_mb = static_cast<double>(need) / 1048576.0;
+  if (need_mb > p.max_memory_mb) {
+    std::ostringstream msg;
+    msg.precision(0);
+    msg << std::fixed << "semi-global matching of a " << rows << "x" << cols
+        << " pair with num_disparities=" << nd << " and paths=" << p.paths << " needs about "
+        << need_mb << " MiB, above max_memory_mb=" << p.max_memory_mb
+        << "; lower num_disparities, use paths=3 (a few rows per thread instead of 3 bytes per "
+           "pixel and disparity), match a smaller (cropped or downscaled) pair, or raise "
+           "max_memory_mb";
+    throw std::invalid_argument(msg.str());
+  }
+
+  std::lock_guard<std::mutex> lock(mutex_);
+  Workspace& ws = *workspace_;
+  const detail::BlockMatchKernels& bk = shared_kernels(isa_);
+  const detail::SemiGlobalKernels& k = sgm_kernels(isa_);
+  const bool sixteen = left.format == PixelFormat::kGrey16;
+  const bool rgb = left.format == PixelFormat::kRgb8;
+  const int r = p.block_size / 2;
+  const int cmax = cost_max(p.block_size);
+  const auto npix = static_cast<std::size_t>(rows * cols);
+  const std::size_t vol = npix * static_cast<std::size_t>(nd);
+  const int ls = path_stride(nd);
+
+  const bool single_pass = p.paths == 3;
+  auto* sums = aligned<std::uint16_t>(ws.sums, single_pass ? 0 : vol);
+  auto* costs = aligned<std::uint8_t>(ws.costs, single_pass ? 0 : vol);
+  auto* lcen = aligned<std::uint16_t>(ws.census_l, npix);
+  auto* rcen = aligned<std::uint16_t>(ws.census_r, npix);
+  auto* grey = aligned<std::uint8_t>(ws.grey, rgb ? 2 * npix : 0);
+  auto* pgrey = aligned<std::uint8_t>(ws.pgrey, npix);  // grey levels for P2', 8-bit scale
+  float* pre = p.median ? aligned<float>(ws.pre_median, npix) : nullptr;
+
+  const std::ptrdiff_t nt = std::max<std::ptrdiff_t>(1, std::min<std::ptrdiff_t>(threads_, rows));
+  const auto unt = static_cast<std::size_t>(nt);
+  if (ws.scratch.size() < unt) ws.scratch.resize(unt);
+  auto band = [](std::ptrdiff_t n, std::ptrdiff_t parts, std::ptrdiff_t b) {
+    return n * b / parts;
+  };
+
+  // 0. Grey and census rows (rows split between the threads).
+  const StereoImage* images[2] = {&left, &right};
+  std::uint16_t* census[2] = {lcen, rcen};
+  if (rgb) {
+    run_bands(nt, [&](std::ptrdiff_t b) {
+      for (int im = 0; im < 2; ++im) {
+        for (std::ptrdiff_t y = band(rows, nt, b); y < band(rows, nt, b + 1); ++y) {
+          bk.rgb_to_grey(static_cast<const std::uint8_t*>(images[im]->data) +
+                             y * images[im]->row_stride,
+                         grey + static_cast<std::size_t>(im) * npix + y * cols, cols);
+        }
+      }
+    });
+  }
+  run_bands(nt, [&](std::ptrdiff_t b) {
+    auto* tmp = aligned<std::uint32_t>(ws.scratch[static_cast<std::size_t>(b)],
+                                       static_cast<std::size_t>(cols));
+    for (int im = 0; im < 2; ++im) {
+      const StereoImage& src = *images[im];
+      auto row_ptr = [&](std::ptrdiff_t y) -> const void* {
+        y = std::clamp<std::ptrdiff_t>(y, 0, rows - 1);
+        if (rgb) return grey + static_cast<std::size_t>(im) * npix + y * cols;
+        return static_cast<const std::uint8_t*>(src.data) + y * src.row_stride;
+      };
+      for (std::ptrdiff_t y = band(rows, nt, b); y < band(rows, nt, b + 1); ++y) {
+        const void* r5[5];
+        for (int i = 0; i < 5; ++i) r5[i] = row_ptr(y + i - 2);
+        if (sixteen) {
+          bk.census_row16(reinterpret_cast<const std::uint16_t* const*>(r5), tmp, cols);
+        } else {
+          bk.census_row8(reinterpret_cast<const std::uint8_t* const*>(r5), tmp, cols);
+        }
+        std::uint16_t* out = census[im] + y * cols;
+        for (std::ptrdiff_t x = 0; x < cols; ++x) out[x] = static_cast<std::uint16_t>(tmp[x]);
+        if (im == 0) {
+          std::uint8_t* g = pgrey + y * cols;
+          if (sixteen) {
+            const auto* s16 = static_cast<const std::uint16_t*>(row_ptr(y));
+            for (std::ptrdiff_t x = 0; x < cols; ++x) g[x] = static_cast<std::uint8_t>(s16[x] >> 8);
+          } else {
+            std::memcpy(g, row_ptr(y), static_cast<std::size_t>(cols));
+          }
+        }
+      }
+    }
+  });
+
+  // P2' = max(P1, P2 * k // (k + step)) for each intensity step (k = p2_step; 0: P2).
+  std::int16_t p2_table[256];
+  for (int step = 0; step < 256; ++step) {
+    const long long v =
+        p.p2_step > 0 ? static_cast<long long>(p.p2) * p.p2_step / (p.p2_step + step) : p.p2;
+    p2_table[step] = static_cast<std::int16_t>(std::max<long long>(v, p.p1));
+  }
+  detail::PathParams pp{nd, ls, p.p1, p2_table};
+
+  detail::DecideArgs da{};
+  da.cols = cols;
+  da.nd = nd;
+  da.min_d = p.min_disparity;
+  da.subpixel = static_cast<int>(p.subpixel);
+  da.uniqueness_factor = p.uniqueness_ratio > 0 ? 100.0 + p.uniqueness_ratio : 0.0;
+  da.lr_max_diff = p.lr_max_diff;
+  da.clip_border = p.clip_border;
+
+  const auto n_col = static_cast<std::size_t>(cols) * static_cast<std::size_t>(nd);
+  if (single_pass) {
+    // paths == 3, one pass: stripes of kStripeRows rows (the last one shorter), each matched
+    // top to bottom by one thread with the path from above restarting at its first row, so
+    // the output does not depend on the number of threads; per row, the costs, the path from
+    // above, the paths along the row and the decision, all in row buffers.
+    const std::ptrdiff_t stripes = (rows + kStripeRows - 1) / kStripeRows;
+    const std::ptrdiff_t ns = std::min<std::ptrdiff_t>(nt, stripes);
+    run_bands(ns, [&](std::ptrdiff_t b) {
+      const auto c = static_cast<std::size_t>(cols);
+      const auto lsz = static_cast<std::size_t>(ls);
+      const std::size_t n_rev = c + static_cast<std::size_t>(nd);
+      const std::size_t n_raw = 4 * (c + 2) * static_cast<std::size_t>(nd);  // 3 rows, a sum
+      const std::size_t n_row = c * lsz;
+      std::vector<std::uint8_t>& sc = ws.scratch[static_cast<std::size_t>(b)];
+      // uint16 pieces: rev, colraw, total, rmin, rarg, cost row (as bytes), two path rows,
+      // horizontal scratch, winners (as uint32)
+      const std::size_t n16 = n_rev + n_raw + n_col + 2 * c + (n_col + 1) / 2 + 2 * n_row +
+                              2 * lsz + 2 * c + 64;
+      auto* rev = aligned<std::uint16_t>(sc, n16);
+      std::uint16_t* colraw = rev + n_rev;
+      RawRows raw;
+      const std::size_t raw_len = (c + 2) * static_cast<std::size_t>(nd);
+      for (int i = 0; i < 3; ++i) raw.slot[i] = colraw + static_cast<std::size_t>(i + 1) * raw_len;
+      std::uint16_t* total = colraw + n_raw;
+      std::uint16_t* rmin = total + n_col;
+      std::uint16_t* rarg = rmin + c;
+      auto* crow = reinterpret_cast<std::uint8_t*>(rarg + c);
+      auto* rows16 = reinterpret_cast<std::int16_t*>(rarg + c + (n_col + 1) / 2);
+      std::int16_t* prow[2] = {rows16, rows16 + n_row};
+      std::int16_t* tmp = rows16 + 2 * n_row;
+      auto* winners = reinterpret_cast<std::uint32_t*>(
+          (reinterpret_cast<std::uintptr_t>(tmp + 2 * lsz) + 3) & ~std::uintptr_t{3});
+      for (std::size_t i = 0; i < 2 * c; ++i) {
+        rows16[i * lsz] = detail::kSentinel;
+        rows16[i * lsz + static_cast<std::size_t>(nd) + 1] = detail::kSentinel;
+      }
+      for (std::ptrdiff_t st = band(stripes, ns, b); st < band(stripes, ns, b + 1); ++st) {
+        const std::ptrdiff_t y0 = st * kStripeRows;
+        const std::ptrdiff_t y1 = std::min<std::ptrdiff_t>(rows, y0 + kStripeRows);
+        int flip = 0;
+        for (std::ptrdiff_t y = y0; y < y1; ++y) {
+          const std::uint16_t* raws[3];
+          raw.get(k, lcen, rcen, rows, cols, 0, cols, r, nd, p.min_disparity, y, rev, raws);
+          k.box_row(raws, r, cols, 0, cols, nd, p.min_disparity, cmax, colraw, crow);
+          const bool first = y == y0;
+          k.path_row(pp, crow, pgrey + y * cols, first ? nullptr : pgrey + (y - 1) * cols,
+                     first ? nullptr : prow[1 - flip], prow[flip], cols, 0, cols, 0, total, true);
+          k.horizontal_row(pp, crow, pgrey + y * cols, cols, total, tmp);
+          float* drow = pre ? pre + y * cols : disparity.row(y);
+          k.decide_row(da, total, drow, confidence.data ? confidence.row(y) : nullptr, rmin,
+                       rarg, winners);
+          flip = 1 - flip;
+        }
+      }
+    });
+  } else {
+  // 1. Downward, then upward: the costs (computed on the way down) and the vertical and
+    //    diagonal paths; the columns are split between the threads, which meet at every row
+    //    when the diagonals read the previous row across band edges. The way down writes the
+    //    sums, the way up adds to them.
+    {
+      const std::ptrdiff_t nb =
+          std::max<std::ptrdiff_t>(1, std::min<std::ptrdiff_t>(threads_, cols / 16));
+      if (ws.scratch.size() < static_cast<std::size_t>(nb)) {
+        ws.scratch.resize(static_cast<std::size_t>(nb));
+      }
+      const int nv = vertical_paths(p.paths);
+      const auto row_len = static_cast<std::size_t>(cols) * static_cast<std::size_t>(ls);
+      auto* prow = aligned<std::int16_t>(ws.path_rows, 2 * static_cast<std::size_t>(nv) * row_len);
+      for (std::size_t i = 0; i < 2 * static_cast<std::size_t>(nv) * static_cast<std::size_t>(cols);
+           ++i) {
+        prow[i * static_cast<std::size_t>(ls)] = detail::kSentinel;
+        prow[i * static_cast<std::size_t>(ls) + static_cast<std::size_t>(nd) + 1] =
+            detail::kSentinel;
+      }
+      const int dxs[3] = {0, 1, -1};
+      for (int dy : {1, -1}) {
+        Barrier barrier(nb);
+        run_bands(nb, [&](std::ptrdiff_t b) {
+          const std::ptrdiff_t x0 = band(cols, nb, b), x1 = band(cols, nb, b + 1);
+          std::uint16_t* rev = nullptr;
+          std::uint16_t* colraw = nullptr;
+          RawRows raw;
+          if (dy > 0) {
+            const std::size_t n_rev = static_cast<std::size_t>(cols) + static_cast<std::size_t>(nd);
+            const std::size_t n_raw =
+                static_cast<std::size_t>(x1 - x0 + 2) * static_cast<std::size_t>(nd);
+            rev = aligned<std::uint16_t>(ws.scratch[static_cast<std::size_t>(b)],
+                                         n_rev + 4 * n_raw);
+            colraw = rev + n_rev;
+            for (int j = 0; j < 3; ++j) {
+              raw.slot[j] = colraw + static_cast<std::size_t>(j + 1) * n_raw;
+            }
+          }
+          int flip = 0;
+          for (std::ptrdiff_t i = 0; i < rows; ++i) {
+            const std::ptrdiff_t y = dy > 0 ? i : rows - 1 - i;
+            const std::ptrdiff_t yq = y - dy;
+            std::uint8_t* crow = costs + static_cast<std::size_t>(y) * n_col;
+            if (dy > 0) {
+              const std::uint16_t* raws[3];
+              raw.get(k, lcen, rcen, rows, cols, x0, x1, r, nd, p.min_disparity, y, rev, raws);
+              k.box_row(raws, r, cols, x0, x1, nd, p.min_disparity, cmax, colraw, crow);
+            }
+            for (int v = 0; v < nv; ++v) {
+              const auto pair = 2 * static_cast<std::size_t>(v);
+              std::int16_t* cur = prow + (pair + static_cast<std::size_t>(flip)) * row_len;
+              std::int16_t* prev = prow + (pair + static_cast<std::size_t>(1 - flip)) * row_len;
+              k.path_row(pp, crow, pgrey + y * cols, i > 0 ? pgrey + yq * cols : nullptr,
+                         i > 0 ? prev : nullptr, cur, cols, x0, x1, dxs[v],
+                         sums + static_cast<std::size_t>(y) * n_col, dy > 0 && v == 0);
+            }
+            flip = 1 - flip;
+            if (nv > 1 && nb > 1) barrier.wait();
+          }
+        });
+      }
+    }
+  
+    // 2. Row by row (the rows split between the threads): the horizontal paths added to a copy
+    //    of the row's sums, then the winner, checks and sub-pixel step on that copy.
+    run_bands(nt, [&](std::ptrdiff_t b) {
+      const auto c = static_cast<std::size_t>(cols);
+      auto* total = aligned<std::uint16_t>(
+          ws.scratch[static_cast<std::size_t>(b)],
+          n_col + 4 * c + 2 * static_cast<std::size_t>(ls) + 32);
+      std::uint16_t* rmin = total + n_col;
+      std::uint16_t* rarg = rmin + c;
+      auto* tmp = reinterpret_cast<std::int16_t*>(rarg + c);
+      auto* winners = reinterpret_cast<std::uint32_t*>(
+          (reinterpret_cast<std::uintptr_t>(tmp + 2 * ls) + 3) & ~std::uintptr_t{3});
+      for (std::ptrdiff_t y = band(rows, nt, b); y < band(rows, nt, b + 1); ++y) {
+        std::memcpy(total, sums + static_cast<std::size_t>(y) * n_col,
+                    n_col * sizeof(std::uint16_t));
+        k.horizontal_row(pp, costs + static_cast<std::size_t>(y) * n_col, pgrey + y * cols, cols,
+                         total, tmp);
+        float* drow = pre ? pre + y * cols : disparity.row(y);
+        k.decide_row(da, total, drow, confidence.data ? confidence.row(y) : nullptr, rmin, rarg,
+                     winners);
+      }
+    });
+  
+  }
+
+  // 4. The 3x3 median of the valid disparities (the lower median; NaN stays NaN).
+  if (pre) {
+    run_bands(nt, [&](std::ptrdiff_t b) {
+      auto* flags = aligned<std::uint8_t>(ws.scratch[static_cast<std::size_t>(b)],
+                                          static_cast<std::size_t>(cols));
+      for (std::ptrdiff_t y = band(rows, nt, b); y < band(rows, nt, b + 1); ++y) {
+        k.median_row(y > 0 ? pre + (y - 1) * cols : nullptr, pre + y * cols,
+                     y + 1 < rows ? pre + (y + 1) * cols : nullptr, disparity.row(y), flags,
+                     cols);
+      }
+    });
+  }
+
+  // 5. The speckle filter (the block matcher's).
+  if (p.speckle_window > 0) {
+    const float rf = detail::speckle_range_f(p.speckle_range);
+    if (ws.speckle.size() < unt) ws.speckle.resize(unt);
+    run_bands(nt, [&](std::ptrdiff_t b) {
+      detail::speckle_band(bk, disparity, band(rows, nt, b), band(rows, nt, b + 1), rf,
+                           ws.speckle[static_cast<std::size_t>(b)]);
+    });
+    std::vector<detail::SpeckleBand*> labels;
+    std::vector<std::ptrdiff_t> starts;
+    for (std::ptrdiff_t b = 0; b < nt; ++b) {
+      labels.push_back(&ws.speckle[static_cast<std::size_t>(b)]);
+      starts.push_back(band(rows, nt, b));
+    }
+    starts.push_back(rows);
+    detail::speckle_finish(bk, disparity, confidence, p.speckle_window, rf, labels, starts,
+                           ws.speckle_runs, ws.speckle_sizes);
+  }
+}
+
+}  // namespace stereodepth

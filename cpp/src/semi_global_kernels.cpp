@@ -1,0 +1,553 @@
+// Semi-global matching kernels. Compiled once per instruction set (STEREODEPTH_ISA_NS);
+// everything here stays inside that namespace (see dispatch.hpp). The loops run over the
+// disparities of one pixel with 16-bit lanes and no dependence between lanes, written so the
+// compiler vectorises them for each build (SSE2, AVX2, AVX-512BW); every build computes the
+// same integers, and the floating-point steps use the same IEEE operations, in the same order,
+// as the numpy oracle.
+#include "semi_global_kernels.hpp"
+
+#include <cmath>
+#include <cstdint>
+#include <cstring>
+#include <limits>
+#include <utility>
+
+#include "stereodepth/block_match.hpp"
+
+#if defined(__AVX2__)
+#include <immintrin.h>
+#endif
+
+#ifndef STEREODEPTH_ISA_NS
+#error "STEREODEPTH_ISA_NS must name the instruction set this file is compiled for"
+#endif
+
+namespace stereodepth::detail::STEREODEPTH_ISA_NS {
+namespace {
+
+using std::int16_t;
+using std::ptrdiff_t;
+using std::uint16_t;
+using std::uint32_t;
+using std::uint8_t;
+
+inline ptrdiff_t clamp_index(ptrdiff_t v, ptrdiff_t lo, ptrdiff_t hi) {
+  return v < lo ? lo : (v > hi ? hi : v);
+}
+
+inline int16_t min16(int16_t a, int16_t b) { return a < b ? a : b; }
+
+// Set bits of a 16-bit census difference, in 16-bit lanes (vectorises without popcnt).
+inline uint16_t popcount16(uint16_t v) {
+  v = static_cast<uint16_t>(v - ((v >> 1) & 0x5555u));
+  v = static_cast<uint16_t>((v & 0x3333u) + ((v >> 2) & 0x3333u));
+  v = static_cast<uint16_t>((v + (v >> 4)) & 0x0F0Fu);
+  return static_cast<uint16_t>((v + (v >> 8)) & 0x001Fu);
+}
+
+// ------------------------------------------------------------------------------------------
+// Costs.
+
+void raw_row(const uint16_t* lrow, const uint16_t* rrow, ptrdiff_t cols, ptrdiff_t x0,
+             ptrdiff_t x1, int radius, int nd, int min_d, uint16_t* rev, uint16_t* out) {
+  // rev[u] = right[clamp(cols - 1 - min_d - u)]: the right pixel of column x and index k is
+  // rev[cols - 1 - x + k], rising with k.
+  const ptrdiff_t rl = cols + nd;
+  for (ptrdiff_t u = 0; u < rl; ++u) rev[u] = rrow[clamp_index(cols - 1 - min_d - u, 0, cols - 1)];
+  const ptrdiff_t n = x1 - x0 + 2 * radius;
+#if defined(__AVX2__)
+  // Set bits of 16 lanes at a time: a nibble lookup (vpshufb), then the two bytes' sum.
+  const __m256i table = _mm256_setr_epi8(0, 1, 1, 2, 1, 2, 2, 3, 1, 2, 2, 3, 2, 3, 3, 4, 0, 1, 1,
+                                         2, 1, 2, 2, 3, 1, 2, 2, 3, 2, 3, 3, 4);
+  const __m256i low4 = _mm256_set1_epi8(0x0F);
+  const __m256i low8 = _mm256_set1_epi16(0x00FF);
+  const int nv = nd / 16;
+#endif
+  for (ptrdiff_t j = 0; j < n; ++j) {
+    const ptrdiff_t x = clamp_index(x0 - radius + j, 0, cols - 1);
+    uint16_t* __restrict o = out + j * nd;
+    const uint16_t l = lrow[x];
+    const uint16_t* __restrict rv = rev + (cols - 1 - x);
+    int k = 0;
+#if defined(__AVX2__)
+    const __m256i lv = _mm256_set1_epi16(static_cast<short>(l));
+    for (int i = 0; i < nv; ++i, k += 16) {
+      const __m256i d = _mm256_xor_si256(
+          lv, _mm256_loadu_si256(reinterpret_cast<const __m256i*>(rv + k)));
+      const __m256i c = _mm256_add_epi8(
+          _mm256_shuffle_epi8(table, _mm256_and_si256(d, low4)),
+          _mm256_shuffle_epi8(table, _mm256_and_si256(_mm256_srli_epi16(d, 4), low4)));
+      _mm256_storeu_si256(reinterpret_cast<__m256i*>(o + k),
+                          _mm256_add_epi16(_mm256_and_si256(c, low8), _mm256_srli_epi16(c, 8)));
+    }
+#endif
+    for (; k < nd; ++k) o[k] = popcount16(static_cast<uint16_t>(l ^ rv[k]));
+  }
+}
+
+void box_row(const uint16_t* const* raws, int radius, ptrdiff_t cols, ptrdiff_t x0, ptrdiff_t x1,
+             int nd, int min_d, int cmax, uint16_t* colsum, uint8_t* out) {
+  const ptrdiff_t n = (x1 - x0 + 2 * radius) * nd;
+  if (radius == 0) {
+    colsum = const_cast<uint16_t*>(raws[0]);
+  } else {
+    const uint16_t* __restrict a = raws[0];
+    const uint16_t* __restrict b = raws[1];
+    const uint16_t* __restrict c = raws[2];
+    for (ptrdiff_t i = 0; i < n; ++i) colsum[i] = static_cast<uint16_t>(a[i] + b[i] + c[i]);
+  }
+  for (ptrdiff_t x = x0; x < x1; ++x) {
+    uint8_t* __restrict o = out + x * nd;
+    const ptrdiff_t j = x - x0 + radius;
+    if (radius == 0) {
+      const uint16_t* __restrict a = colsum + j * nd;
+      for (int k = 0; k < nd; ++k) o[k] = static_cast<uint8_t>(a[k]);
+    } else {
+      // Columns x - 1 and x + 1 clamped to the image: the raw rows repeat the edge columns.
+      const uint16_t* __restrict a = colsum + (j - 1) * nd;
+      const uint16_t* __restrict b = colsum + j * nd;
+      const uint16_t* __restrict c = colsum + (j + 1) * nd;
+      for (int k = 0; k < nd; ++k) o[k] = static_cast<uint8_t>(a[k] + b[k] + c[k]);
+    }
+    // Candidates whose right pixel x - min_d - k leaves the image cost the most.
+    const ptrdiff_t khi = x - min_d;             // right pixel >= 0
+    const ptrdiff_t klo = x - min_d - cols + 1;  // right pixel <= cols - 1
+    for (ptrdiff_t k = clamp_index(khi + 1, 0, nd); k < nd; ++k) o[k] = static_cast<uint8_t>(cmax);
+    for (ptrdiff_t k = 0, e = clamp_index(klo, 0, nd); k < e; ++k) {
+      o[k] = static_cast<uint8_t>(cmax);
+    }
+  }
+}
+
+// ------------------------------------------------------------------------------------------
+// Paths.
+
+inline int p2_for(const PathParams& p, int gp, int gq) {
+  return p.p2[gp > gq ? gp - gq : gq - gp];
+}
+
+enum class SumMode { kWrite, kAdd };
+
+// A path's first pixel: L = C. Returns min L.
+template <SumMode kMode>
+inline int16_t path_start(const uint8_t* __restrict c, int16_t* __restrict out, int nd,
+                          uint16_t* __restrict s) {
+  int16_t mn = std::numeric_limits<int16_t>::max();
+  for (int d = 0; d < nd; ++d) {
+    const int16_t v = static_cast<int16_t>(c[d]);
+    out[d + 1] = v;
+    mn = min16(mn, v);
+    if constexpr (kMode == SumMode::kWrite) {
+      s[d] = static_cast<uint16_t>(v);
+    } else {
+      s[d] = static_cast<uint16_t>(s[d] + static_cast<uint16_t>(v));
+    }
+  }
+  return mn;
+}
+
+// L(p, d) = C(p, d) + min(L(q, d), L(q, d -+ 1) + P1, m + P2') - m, from prev (L(q, .), with
+// sentinels); returns min L(p, .).
+template <SumMode kMode>
+inline int16_t path_step(const int16_t* __restrict prev, const uint8_t* __restrict c,
+                         int16_t* __restrict out, int nd, int p1, int p2, int m,
+                         uint16_t* __restrict s) {
+  const int16_t vp1 = static_cast<int16_t>(p1);
+  const int16_t mp2 = static_cast<int16_t>(m + p2);
+  const int16_t vm = static_cast<int16_t>(m);
+  int16_t mn = std::numeric_limits<int16_t>::max();
+  for (int d = 0; d < nd; ++d) {
+    const int16_t a = prev[d + 1];
+    const int16_t be = static_cast<int16_t>(min16(prev[d], prev[d + 2]) + vp1);
+    const int16_t v = min16(min16(a, mp2), be);
+    const int16_t o = static_cast<int16_t>(static_cast<int16_t>(c[d]) + (v - vm));
+    out[d + 1] = o;
+    mn = min16(mn, o);
+    if constexpr (kMode == SumMode::kWrite) {
+      s[d] = static_cast<uint16_t>(o);
+    } else {
+      s[d] = static_cast<uint16_t>(s[d] + static_cast<uint16_t>(o));
+    }
+  }
+  return mn;
+}
+
+void horizontal_row(const PathParams& p, const uint8_t* c, const uint8_t* g, ptrdiff_t cols,
+                    uint16_t* s, int16_t* tmp) {
+  const int nd = p.nd, ls = p.ls;
+  int16_t* a = tmp;
+  int16_t* b = tmp + ls;
+  a[0] = a[nd + 1] = b[0] = b[nd + 1] = kSentinel;
+  // From the left.
+  int m = path_start<SumMode::kAdd>(c, a, nd, s);
+  for (ptrdiff_t x = 1; x < cols; ++x) {
+    const int p2 = p2_for(p, g[x], g[x - 1]);
+    m = path_step<SumMode::kAdd>(a, c + x * nd, b, nd, p.p1, p2, m, s + x * nd);
+    std::swap(a, b);
+  }
+  // From the right.
+  const ptrdiff_t last = cols - 1;
+  m = path_start<SumMode::kAdd>(c + last * nd, a, nd, s + last * nd);
+  for (ptrdiff_t x = last - 1; x >= 0; --x) {
+    const int p2 = p2_for(p, g[x], g[x + 1]);
+    m = path_step<SumMode::kAdd>(a, c + x * nd, b, nd, p.p1, p2, m, s + x * nd);
+    std::swap(a, b);
+  }
+}
+
+template <SumMode kMode>
+void path_row_impl(const PathParams& p, const uint8_t* c, const uint8_t* g, const uint8_t* gprev,
+                   const int16_t* prev, int16_t* cur, ptrdiff_t cols, ptrdiff_t x0, ptrdiff_t x1,
+                   int dx, uint16_t* s) {
+  const int nd = p.nd, ls = p.ls;
+  for (ptrdiff_t x = x0; x < x1; ++x) {
+    const ptrdiff_t xq = x - dx;
+    int16_t* out = cur + x * ls;
+    int16_t mn;
+    if (prev == nullptr || xq < 0 || xq >= cols) {
+      mn = path_start<kMode>(c + x * nd, out, nd, s + x * nd);
+    } else {
+      const int16_t* q = prev + xq * ls;
+      const int p2 = p2_for(p, g[x], gprev[xq]);
+      mn = path_step<kMode>(q, c + x * nd, out, nd, p.p1, p2, q[nd + 2], s + x * nd);
+    }
+    out[nd + 2] = mn;  // the pixel's least path cost, for the next row
+  }
+}
+
+void path_row(const PathParams& p, const uint8_t* c, const uint8_t* g, const uint8_t* gprev,
+              const int16_t* prev, int16_t* cur, ptrdiff_t cols, ptrdiff_t x0, ptrdiff_t x1,
+              int dx, uint16_t* s, bool write) {
+  if (write) {
+    path_row_impl<SumMode::kWrite>(p, c, g, gprev, prev, cur, cols, x0, x1, dx, s);
+  } else {
+    path_row_impl<SumMode::kAdd>(p, c, g, gprev, prev, cur, cols, x0, x1, dx, s);
+  }
+}
+
+// ------------------------------------------------------------------------------------------
+// Winner, checks, sub-pixel step.
+
+constexpr uint32_t kNone = 0x10000u;  // "no second-best"; above every sum (sums <= 65532)
+
+// The least sum over indices lo .. hi, its lowest index, and the least sum more than one
+// index away from it (kNone when there is none).
+inline void winner_of(const uint16_t* __restrict sx, ptrdiff_t lo, ptrdiff_t hi, uint32_t& best,
+                      ptrdiff_t& kb, uint32_t& second) {
+  // The least of sum << 16 | k: the least sum and its lowest index at once.
+  uint32_t key = 0xFFFFFFFFu;
+  for (ptrdiff_t k = lo; k <= hi; ++k) {
+    const uint32_t v = (static_cast<uint32_t>(sx[k]) << 16) | static_cast<uint32_t>(k);
+    key = v < key ? v : key;
+  }
+  best = key >> 16;
+  kb = static_cast<ptrdiff_t>(key & 0xFFFFu);
+  second = kNone;
+  const int kb32 = static_cast<int>(kb), hi32 = static_cast<int>(hi);
+  for (int k = static_cast<int>(lo); k <= hi32; ++k) {
+    const unsigned dk = static_cast<unsigned>(k - kb32 + 1);  // > 2: more than one away
+    const uint32_t sk = sx[k];
+    const uint32_t v = dk > 2u ? sk : kNone;
+    second = v < second ? v : second;
+  }
+}
+
+#if defined(__AVX2__)
+inline uint32_t hmin_epu16(__m256i v) {
+  const __m128i m = _mm_min_epu16(_mm256_castsi256_si128(v), _mm256_extracti128_si256(v, 1));
+  return static_cast<uint32_t>(_mm_cvtsi128_si32(_mm_minpos_epu16(m)) & 0xFFFF);
+}
+
+// winner_of over the whole range 0 .. nd - 1, 16 lanes at a time (the same results).
+inline void winner_full(const uint16_t* __restrict sx, int nd, uint32_t& best, ptrdiff_t& kb,
+                        uint32_t& second) {
+  const int nv = nd / 16;
+  if (nv == 0) {
+    winner_of(sx, 0, nd - 1, best, kb, second);
+    return;
+  }
+  auto load = [&](int i) {
+    return _mm256_loadu_si256(reinterpret_cast<const __m256i*>(sx + 16 * i));
+  };
+  __m256i m = load(0);
+  for (int i = 1; i < nv; ++i) m = _mm256_min_epu16(m, load(i));
+  uint32_t b = hmin_epu16(m);
+  for (int k = 16 * nv; k < nd; ++k) b = sx[k] < b ? sx[k] : b;
+  const __m256i bv = _mm256_set1_epi16(static_cast<short>(b));
+  int k0 = -1;
+  for (int i = 0; i < nv; ++i) {
+    const unsigned mask =
+        static_cast<unsigned>(_mm256_movemask_epi8(_mm256_cmpeq_epi16(load(i), bv)));
+    if (mask) {
+      k0 = 16 * i + __builtin_ctz(mask) / 2;
+      break;
+    }
+  }
+  if (k0 < 0) {
+    k0 = 16 * nv;
+    while (sx[k0] != b) ++k0;
+  }
+  // The least sum with the lanes k0 - 1 .. k0 + 1 set to 0xFFFF (above every sum).
+  const __m256i iota = _mm256_setr_epi16(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15);
+  const __m256i two = _mm256_set1_epi16(2);
+  __m256i s2 = _mm256_set1_epi16(-1);
+  for (int i = 0; i < nv; ++i) {
+    const __m256i first = _mm256_set1_epi16(static_cast<short>(k0 - 1 - 16 * i));
+    const __m256i rel = _mm256_sub_epi16(iota, first);
+    const __m256i ex = _mm256_cmpeq_epi16(_mm256_min_epu16(rel, two), rel);
+    s2 = _mm256_min_epu16(s2, _mm256_or_si256(load(i), ex));
+  }
+  uint32_t sec = hmin_epu16(s2);
+  for (int k = 16 * nv; k < nd; ++k) {
+    if ((k < k0 - 1 || k > k0 + 1) && sx[k] < sec) sec = sx[k];
+  }
+  best = b;
+  kb = k0;
+  second = sec == 0xFFFFu ? kNone : sec;
+}
+
+// The least sum more than one index away from k0 over 0 .. nd - 1 (nd a multiple of 16).
+inline uint32_t second_full(const uint16_t* __restrict sx, int nd, int k0) {
+  const __m256i iota = _mm256_setr_epi16(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15);
+  const __m256i two = _mm256_set1_epi16(2);
+  __m256i s2 = _mm256_set1_epi16(-1);
+  for (int i = 0; i < nd / 16; ++i) {
+    const __m256i first = _mm256_set1_epi16(static_cast<short>(k0 - 1 - 16 * i));
+    const __m256i rel = _mm256_sub_epi16(iota, first);
+    const __m256i ex = _mm256_cmpeq_epi16(_mm256_min_epu16(rel, two), rel);
+    const __m256i v = _mm256_loadu_si256(reinterpret_cast<const __m256i*>(sx + 16 * i));
+    s2 = _mm256_min_epu16(s2, _mm256_or_si256(v, ex));
+  }
+  const uint32_t sec = hmin_epu16(s2);
+  return sec == 0xFFFFu ? kNone : sec;
+}
+
+// For a pixel with the whole range (nd a multiple of 16): the right winners' update of
+// decide_row and the pixel's own least sum and its lowest index, in one sweep. Returns
+// best << 16 | kb.
+inline uint32_t right_update_and_winner(const uint16_t* __restrict sx, int nd,
+                                        uint16_t* __restrict rm, uint16_t* __restrict ra) {
+  const __m256i iota = _mm256_setr_epi16(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15);
+  __m256i mv = _mm256_set1_epi16(-1);  // per lane: the least sum so far and its first index
+  __m256i iv = _mm256_setzero_si256();
+  for (int i = 0; i < nd / 16; ++i) {
+    const __m256i k = _mm256_add_epi16(iota, _mm256_set1_epi16(static_cast<short>(16 * i)));
+    const __m256i v = _mm256_loadu_si256(reinterpret_cast<const __m256i*>(sx + 16 * i));
+    __m256i* rp = reinterpret_cast<__m256i*>(rm + 16 * i);
+    __m256i* ap = reinterpret_cast<__m256i*>(ra + 16 * i);
+    const __m256i r = _mm256_loadu_si256(rp);
+    const __m256i m = _mm256_min_epu16(r, v);
+    const __m256i keep = _mm256_cmpeq_epi16(m, r);  // r <= v: no strict improvement
+    _mm256_storeu_si256(rp, m);
+    _mm256_storeu_si256(ap, _mm256_blendv_epi8(k, _mm256_loadu_si256(ap), keep));
+    const __m256i mm = _mm256_min_epu16(mv, v);
+    iv = _mm256_blendv_epi8(k, iv, _mm256_cmpeq_epi16(mm, mv));
+    mv = mm;
+  }
+  const uint32_t best = hmin_epu16(mv);
+  // The lowest index among the lanes holding the least sum.
+  const __m256i at = _mm256_or_si256(
+      iv, _mm256_xor_si256(_mm256_cmpeq_epi16(mv, _mm256_set1_epi16(static_cast<short>(best))),
+                           _mm256_set1_epi16(-1)));
+  const uint32_t kb = hmin_epu16(at);
+  return (best << 16) | kb;
+}
+#endif
+
+void decide_row(const DecideArgs& a, const uint16_t* s, float* disp, float* conf, uint16_t* rmin,
+                uint16_t* rarg, uint32_t* winners) {
+  const ptrdiff_t cols = a.cols;
+  const int nd = a.nd;
+  const ptrdiff_t dmin = a.min_d;
+  const bool lr_on = a.lr_max_diff >= 0;
+  auto range = [&](ptrdiff_t x, ptrdiff_t& klo, ptrdiff_t& khi) {
+    klo = clamp_index(x - dmin - cols + 1, 0, nd);
+    khi = clamp_index(x - dmin, -1, nd - 1);
+  };
+  // winners[x]: best << 16 | kb when the right winners' sweep found it, else 0xFFFFFFFF.
+  for (ptrdiff_t x = 0; x < cols; ++x) winners[x] = 0xFFFFFFFFu;
+  if (lr_on) {
+    // The right image's winners: right column xr = x - dmin - k at j = cols - 1 - xr, rising
+    // with k; x rises, so k does for each j, and a strict < keeps the lowest. Each column
+    // starts at the least cost (0xFFFF) with its first candidate, so a column whose sums are
+    // all 0xFFFF keeps that one, as the oracle's argmin does.
+    for (ptrdiff_t j = 0; j < cols; ++j) {
+      const ptrdiff_t xr = cols - 1 - j;
+      rmin[j] = 0xFFFFu;
+      rarg[j] = static_cast<uint16_t>(clamp_index(-dmin - xr, 0, nd - 1));
+    }
+    for (ptrdiff_t x = 0; x < cols; ++x) {
+      ptrdiff_t klo, khi;
+      range(x, klo, khi);
+      const uint16_t* __restrict sx = s + x * nd;
+      uint16_t* __restrict rm = rmin + (cols - 1 - x + dmin + klo);
+      uint16_t* __restrict ra = rarg + (cols - 1 - x + dmin + klo);
+      const ptrdiff_t n = khi - klo + 1;
+      if (n <= 0) continue;
+#if defined(__AVX2__)
+      if (n == nd && nd % 16 == 0) {
+        winners[x] = right_update_and_winner(sx, nd, rm, ra);
+        continue;
+      }
+#endif
+      for (ptrdiff_t i = 0; i < n; ++i) {
+        const uint16_t v = sx[klo + i], r = rm[i];
+        const bool lt = v < r;
+        rm[i] = lt ? v : r;
+        ra[i] = lt ? static_cast<uint16_t>(klo + i) : ra[i];
+      }
+    }
+  }
+  const float nan = std::numeric_limits<float>::quiet_NaN();
+  for (ptrdiff_t x = 0; x < cols; ++x) {
+    ptrdiff_t klo, khi;
+    range(x, klo, khi);
+    const uint16_t* __restrict sx = s + x * nd;
+    bool ok = klo <= khi;
+    if (!a.clip_border) ok = ok && x - dmin - nd + 1 >= 0 && x - dmin <= cols - 1;
+    if (!ok) {
+      disp[x] = nan;
+      if (conf) conf[x] = 0.0f;
+      continue;
+    }
+    uint32_t best, second;
+    ptrdiff_t kb;
+#if defined(__AVX2__)
+    if (winners[x] != 0xFFFFFFFFu) {
+      best = winners[x] >> 16;
+      kb = static_cast<ptrdiff_t>(winners[x] & 0xFFFFu);
+      second = second_full(sx, nd, static_cast<int>(kb));
+    } else if (klo == 0 && khi == nd - 1) {
+      winner_full(sx, nd, best, kb, second);
+    } else {
+      winner_of(sx, klo, khi, best, kb, second);
+    }
+#else
+    winner_of(sx, klo, khi, best, kb, second);
+#endif
+    const bool has2 = second != kNone;
+    if (a.uniqueness_factor > 0 && has2) {
+      ok = static_cast<double>(second) * 100.0 > static_cast<double>(best) * a.uniqueness_factor;
+    }
+    if (ok && lr_on) {
+      const ptrdiff_t j = cols - 1 - (x - dmin - kb);
+      const ptrdiff_t kr = rarg[j];
+      const ptrdiff_t diff = kb > kr ? kb - kr : kr - kb;
+      ok = static_cast<double>(diff) <= a.lr_max_diff;
+    }
+    if (!ok) {
+      disp[x] = nan;
+      if (conf) conf[x] = 0.0f;
+      continue;
+    }
+    float d = static_cast<float>(dmin + kb);
+    if (a.subpixel != static_cast<int>(SubpixelFit::kNone) && kb - 1 >= klo && kb + 1 <= khi) {
+      const int32_t c0 = sx[kb - 1];
+      const int32_t c1 = static_cast<int32_t>(best);
+      const int32_t c2 = sx[kb + 1];
+      const float num = static_cast<float>(c0 - c2);
+      float den;
+      if (a.subpixel == static_cast<int>(SubpixelFit::kParabola)) {
+        den = static_cast<float>(2 * (c0 + c2 - 2 * c1));
+      } else {
+        den = static_cast<float>(2 * (c0 - c1 > c2 - c1 ? c0 - c1 : c2 - c1));
+      }
+      if (den > 0.0f) d = d + num / den;
+    }
+    disp[x] = d;
+    if (conf) {
+      conf[x] = !has2        ? 1.0f
+                : second > 0 ? static_cast<float>(second - best) / static_cast<float>(second)
+                             : 0.0f;
+    }
+  }
+}
+
+// ------------------------------------------------------------------------------------------
+// The 3x3 median of the valid disparities.
+
+// The lower median of the valid values of a window (n <= 9), by insertion.
+inline float median_slow(const float* const* rows, int nrows, ptrdiff_t x, ptrdiff_t cols) {
+  float v[9];
+  int n = 0;
+  for (int i = 0; i < nrows; ++i) {
+    for (ptrdiff_t xx = x > 0 ? x - 1 : 0; xx <= x + 1 && xx < cols; ++xx) {
+      const float f = rows[i][xx];
+      if (f == f) {
+        int j = n++;
+        while (j > 0 && v[j - 1] > f) {
+          v[j] = v[j - 1];
+          --j;
+        }
+        v[j] = f;
+      }
+    }
+  }
+  return v[(n - 1) / 2];
+}
+
+inline void order(float& a, float& b) {
+  const float lo = a < b ? a : b;
+  const float hi = a < b ? b : a;
+  a = lo;
+  b = hi;
+}
+
+void median_row(const float* up, const float* mid, const float* down, float* out,
+                std::uint8_t* flags, ptrdiff_t cols) {
+  const float* rows[3];
+  int nrows = 0;
+  if (up) rows[nrows++] = up;
+  rows[nrows++] = mid;
+  if (down) rows[nrows++] = down;
+  ptrdiff_t x0 = 0, x1 = 0;  // columns done by the network
+  if (up && down && cols >= 3) {
+    x0 = 1;
+    x1 = cols - 1;
+    // Nine valid values: the median by a fixed network of 19 compare-exchanges (min/max
+    // pick one of the values, so the result is that value exactly), across columns.
+    for (ptrdiff_t x = x0; x < x1; ++x) {
+      float p0 = up[x - 1], p1 = up[x], p2 = up[x + 1];
+      float p3 = mid[x - 1], p4 = mid[x], p5 = mid[x + 1];
+      float p6 = down[x - 1], p7 = down[x], p8 = down[x + 1];
+      order(p1, p2); order(p4, p5); order(p7, p8);
+      order(p0, p1); order(p3, p4); order(p6, p7);
+      order(p1, p2); order(p4, p5); order(p7, p8);
+      order(p0, p3); order(p5, p8); order(p4, p7);
+      order(p3, p6); order(p1, p4); order(p2, p5);
+      order(p4, p7); order(p4, p2); order(p6, p4);
+      order(p4, p2);
+      out[x] = p4;
+      // Whether any of the nine is NaN (then the slow path decides).
+      const bool all = (p0 == p0) & (up[x] == up[x]) & (up[x + 1] == up[x + 1]) &
+                       (mid[x - 1] == mid[x - 1]) & (mid[x] == mid[x]) &
+                       (mid[x + 1] == mid[x + 1]) & (down[x - 1] == down[x - 1]) &
+                       (down[x] == down[x]) & (down[x + 1] == down[x + 1]) &
+                       (up[x - 1] == up[x - 1]);
+      flags[x] = all ? 1 : 0;
+    }
+  }
+  for (ptrdiff_t x = 0; x < cols; ++x) {
+    if (mid[x] != mid[x]) {
+      out[x] = mid[x];
+    } else if (x < x0 || x >= x1 || !flags[x]) {
+      out[x] = median_slow(rows, nrows, x, cols);
+    }
+  }
+}
+
+}  // namespace
+
+const SemiGlobalKernels& semi_global_kernels() {
+  static const SemiGlobalKernels kernels = {
+      &raw_row,
+      &box_row,
+      &horizontal_row,
+      &path_row,
+      &decide_row,
+      &median_row,
+  };
+  return kernels;
+}
+
+}  // namespace stereodepth::detail::STEREODEPTH_ISA_NS

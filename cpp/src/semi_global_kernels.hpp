@@ -1,0 +1,88 @@
+// Internal: the semi-global matching kernels, compiled once per instruction set.
+//
+// Layouts: costs C (uint8) and sums S (uint16) hold `nd` values per pixel, disparity index k
+// (disparity min_d + k) rising. Path costs L (int16) hold `ls` values per pixel: a sentinel
+// at 0, the nd values at 1 .. nd, a sentinel at nd + 1 (kSentinel, above every path cost, so
+// the neighbours d - 1 and d + 1 of the ends never win), then padding.
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+
+namespace stereodepth::detail {
+
+// Path costs stay <= 16 * block_size^2 + p2 <= 65535 / 4 < kSentinel; kSentinel + p1 and
+// m + p2 stay below 2^15.
+inline constexpr std::int16_t kSentinel = 16384;
+
+struct PathParams {
+  int nd;  // disparities
+  int ls;  // int16 per pixel in path rows (>= nd + 3)
+  int p1;
+  const std::int16_t* p2;  // 256 entries: P2' for each intensity step 0 .. 255
+};
+
+// The pixel costs (census Hamming distances) of one census row pair for the columns
+// clamp(x0 - r) .. clamp(x1 - 1 + r): out[j * nd + k] for column clamp(x0 - r + j).
+// rev: cols + nd scratch.
+using RawRowFn = void (*)(const std::uint16_t* lrow, const std::uint16_t* rrow,
+                          std::ptrdiff_t cols, std::ptrdiff_t x0, std::ptrdiff_t x1, int radius,
+                          int nd, int min_d, std::uint16_t* rev, std::uint16_t* out);
+// The box costs of columns x0 .. x1 - 1 of one image row from the raw rows of the 2r + 1
+// census rows y - r .. y + r (clamped; RawRowFn's layout), candidates outside the right image
+// at cmax. colsum: (x1 - x0 + 2r) * nd scratch. out: the row's cols * nd costs.
+using BoxRowFn = void (*)(const std::uint16_t* const* raws, int radius, std::ptrdiff_t cols,
+                          std::ptrdiff_t x0, std::ptrdiff_t x1, int nd, int min_d, int cmax,
+                          std::uint16_t* colsum, std::uint8_t* out);
+// The paths from the left and from the right along one row, added to s (s[x * nd + k] +=
+// L_lr + L_rl). g: the row's grey levels (8-bit scale). tmp: 2 * ls int16 scratch.
+using HorizontalRowFn = void (*)(const PathParams& p, const std::uint8_t* c,
+                                 const std::uint8_t* g, std::ptrdiff_t cols, std::uint16_t* s,
+                                 std::int16_t* tmp);
+// One row of a vertical or diagonal path, columns x0 .. x1 - 1: cur[x] from prev[x - dx]
+// (the previous row; null on the path's first row, and a path starts where x - dx leaves the
+// image). Writes L into s (the row's sums) when `write`, adds it otherwise.
+using PathRowFn = void (*)(const PathParams& p, const std::uint8_t* c, const std::uint8_t* g,
+                           const std::uint8_t* gprev, const std::int16_t* prev,
+                           std::int16_t* cur, std::ptrdiff_t cols, std::ptrdiff_t x0,
+                           std::ptrdiff_t x1, int dx, std::uint16_t* s, bool write);
+
+struct DecideArgs {
+  std::ptrdiff_t cols;
+  int nd, min_d;
+  int subpixel;              // SubpixelFit
+  double uniqueness_factor;  // 0: off
+  double lr_max_diff;        // negative: off
+  bool clip_border;
+};
+// The winner, checks and sub-pixel step of one row of sums. rmin, rarg: cols elements of
+// scratch each; winners: cols.
+using DecideRowFn = void (*)(const DecideArgs& a, const std::uint16_t* s, float* disp,
+                             float* conf, std::uint16_t* rmin, std::uint16_t* rarg,
+                             std::uint32_t* winners);
+
+// The 3x3 median of row `mid` (up/down: the rows above and below, null outside the image):
+// each valid pixel becomes the lower median of the valid pixels of its window; NaN stays.
+// flags: cols bytes of scratch.
+using MedianRowFn = void (*)(const float* up, const float* mid, const float* down, float* out,
+                             std::uint8_t* flags, std::ptrdiff_t cols);
+
+struct SemiGlobalKernels {
+  RawRowFn raw_row;
+  BoxRowFn box_row;
+  HorizontalRowFn horizontal_row;
+  PathRowFn path_row;
+  DecideRowFn decide_row;
+  MedianRowFn median_row;
+};
+
+#define STEREODEPTH_DECLARE_SEMI_GLOBAL_KERNELS(ns) \
+  namespace ns {                                    \
+  const SemiGlobalKernels& semi_global_kernels();   \
+  }
+STEREODEPTH_DECLARE_SEMI_GLOBAL_KERNELS(baseline)
+STEREODEPTH_DECLARE_SEMI_GLOBAL_KERNELS(avx2)
+STEREODEPTH_DECLARE_SEMI_GLOBAL_KERNELS(avx512)
+#undef STEREODEPTH_DECLARE_SEMI_GLOBAL_KERNELS
+
+}  // namespace stereodepth::detail

@@ -1,0 +1,77 @@
+// Internal: the speckle filter shared by the matchers (block matching, semi-global matching).
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+#include <vector>
+
+#include "block_match_kernels.hpp"
+#include "stereodepth/image_view.hpp"
+
+namespace stereodepth::detail {
+
+// The speckle filter, in two steps: each band of rows labels its own pixels (in the band's
+// thread, right after matching it), then one pass joins the bands and clears small regions.
+//
+// Two 4-neighbours are linked when both are valid and differ by at most `range` (as OpenCV's
+// filterSpeckles). Each row is cut into runs of horizontally linked pixels; vertical links
+// unite runs (union-find, the lower index becoming the root). Rows are handled as bit masks
+// (the kernels' speckle_links): a run starts at every valid pixel not linked to its left
+// neighbour, and the run holding column i is found by counting the starts up to i.
+
+struct SpeckleRun {
+  std::int32_t parent;  // union-find link; a root links to itself
+  std::int32_t y, x0, x1;
+};
+
+// A row's run starts, as bits, with the count of starts before each word and the index of
+// the row's first run: the run holding column i is base + (starts up to and including i) - 1.
+struct RowStarts {
+  std::vector<std::uint64_t> bits;
+  std::vector<std::int32_t> before;
+  std::int32_t base = 0;
+
+  void set(const std::uint64_t* valid, const std::uint64_t* left, std::size_t words,
+           std::int32_t first_run) {
+    bits.resize(words);
+    before.resize(words);
+    base = first_run;
+    std::int32_t n = 0;
+    for (std::size_t w = 0; w < words; ++w) {
+      bits[w] = valid[w] & ~left[w];
+      before[w] = n;
+      n += __builtin_popcountll(bits[w]);
+    }
+  }
+  std::int32_t run_at(std::ptrdiff_t i) const {
+    const auto w = static_cast<std::size_t>(i >> 6);
+    const int b = static_cast<int>(i & 63);
+    const std::uint64_t upto = b == 63 ? ~std::uint64_t{0} : (std::uint64_t{2} << b) - 1;
+    return base + before[w] + __builtin_popcountll(bits[w] & upto) - 1;
+  }
+};
+
+// One band's labelling.
+struct SpeckleBand {
+  std::vector<SpeckleRun> runs;  // parents are indices into this vector
+  std::vector<std::uint64_t> valid, left, up;
+  RowStarts cur, prev;  // after labelling, prev holds the band's last row
+  RowStarts first;      // the band's first row
+};
+
+// |a - b| <= range for a float difference is |a - b| <= the largest float not above range.
+float speckle_range_f(double range);
+
+// Labels rows y0 .. y1 - 1 (runs, and unions inside the band).
+void speckle_band(const BlockMatchKernels& k, const ImageView<float>& disp, std::ptrdiff_t y0,
+                  std::ptrdiff_t y1, float rf, SpeckleBand& b);
+
+// Joins the labellings (bands[i]: rows starts[i] .. starts[i + 1] - 1) and clears the
+// regions of at most `window` pixels (NaN, and 0 in conf when conf.data is not null).
+void speckle_finish(const BlockMatchKernels& k, const ImageView<float>& disp,
+                    const ImageView<float>& conf, int window, float rf,
+                    const std::vector<SpeckleBand*>& bands,
+                    const std::vector<std::ptrdiff_t>& starts, std::vector<SpeckleRun>& all,
+                    std::vector<std::int64_t>& sizes);
+
+}  // namespace stereodepth::detail

@@ -1,0 +1,631 @@
+"""stereodepth.semi_global_match / SemiGlobalMatcher against the numpy oracle, and its rules.
+
+The oracle (stereodepth.reference.semi_global_match) follows the documented steps with full
+(H, W, D) volumes; the kernel must agree exactly on integer disparities and validity, and
+within 1e-3 px after the sub-pixel step. Images are small so the oracle stays fast.
+"""
+
+from __future__ import annotations
+
+import threading
+from concurrent.futures import ThreadPoolExecutor
+from typing import Any
+
+import numpy as np
+import pytest
+
+import stereodepth as sd
+from stereodepth import reference as ref
+from stereodepth._reference_block_match import grey
+from stereodepth.io import read_image
+
+SUPPORTED_ISAS: list[str] = list(sd.build_info()["supported_isas"])
+
+
+def shifted_pair(
+    shape: tuple[int, int], shift: int, *, seed: int, dtype: Any = np.uint8, rgb: bool = False
+) -> tuple[np.ndarray, np.ndarray]:
+    """A random-dot stereogram: left[y, x] = right[y, x - shift]."""
+    rng = np.random.default_rng(seed)
+    h, w = shape
+    top = 65536 if dtype == np.uint16 else 256
+    extra = abs(shift)
+    size = (h, w + extra, 3) if rgb else (h, w + extra)
+    canvas = rng.integers(0, top, size=size).astype(dtype)
+    m = max(0, -shift)
+    left = canvas[:, m : m + w]
+    right = canvas[:, m + shift : m + shift + w]
+    return np.ascontiguousarray(left), np.ascontiguousarray(right)
+
+
+def slanted_pair(
+    shape: tuple[int, int], *, d0: float, dx: float, dy: float, seed: int
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A textured slanted plane: disparity d0 + dx * x + dy * y, left sampled from the right
+    image by linear interpolation along each row."""
+    rng = np.random.default_rng(seed)
+    h, w = shape
+    base = rng.random((h, w + 8)) * 255
+    base = (base + np.roll(base, 1, axis=1) + np.roll(base, 1, axis=0)) / 3
+    right = base[:, :w]
+    ys, xs = np.mgrid[0:h, 0:w].astype(np.float64)
+    disp = d0 + dx * xs + dy * ys
+    left = np.empty((h, w))
+    cols = np.arange(w + 8, dtype=np.float64)
+    for y in range(h):
+        left[y] = np.interp(xs[y] - disp[y], cols, base[y])
+    return left.round().astype(np.uint8), right.round().astype(np.uint8), disp.astype(np.float32)
+
+
+def step_pair(
+    shape: tuple[int, int], near: int, far: int, *, seed: int
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A random-dot stereogram of a near square over a far background: the true disparity
+    (NaN where the left pixel is occluded in the right image)."""
+    rng = np.random.default_rng(seed)
+    h, w = shape
+    right = rng.integers(0, 256, size=(h, w)).astype(np.uint8)
+    left = np.empty_like(right)
+    truth = np.full((h, w), np.nan, np.float32)
+    xs = np.arange(w)
+    y0, y1, x0, x1 = h // 4, 3 * h // 4, w // 3, 2 * w // 3
+    square = rng.integers(0, 256, size=(h, w + near)).astype(np.uint8)
+    for y in range(h):
+        src = np.clip(xs - far, 0, w - 1)
+        left[y] = right[y, src]
+        truth[y] = np.where(xs - far >= 0, far, np.nan)
+        if y0 <= y < y1:
+            left[y, x0:x1] = square[y, x0:x1]
+            truth[y, x0:x1] = near
+            # the right image shows the square near px to the left
+            right[y, x0 - near : x1 - near] = square[y, x0:x1]
+    # left pixels whose background point is hidden behind the square in the right image
+    for y in range(y0, y1):
+        hidden = (xs - far >= x0 - near) & (xs - far < x1 - near) & ((xs < x0) | (xs >= x1))
+        truth[y, hidden] = np.nan
+    return left, right, truth
+
+
+def assert_agree(native: Any, oracle: Any, *, subpixel: bool) -> None:
+    """The same NaNs; equal disparities (within 1e-3 px after the sub-pixel step)."""
+    if isinstance(oracle, tuple):
+        assert isinstance(native, tuple)
+        assert_agree(native[0], oracle[0], subpixel=subpixel)
+        np.testing.assert_allclose(native[1], oracle[1], rtol=0, atol=1e-6)
+        return
+    assert native.dtype == np.float32
+    assert native.shape == oracle.shape
+    np.testing.assert_array_equal(np.isnan(native), np.isnan(oracle))
+    if subpixel:
+        np.testing.assert_allclose(native, oracle, rtol=0, atol=1e-3)
+    else:
+        np.testing.assert_array_equal(native, oracle)
+
+
+CONFIGS: list[dict[str, Any]] = [
+    {
+        "subpixel": False,
+        "uniqueness_ratio": 0,
+        "lr_max_diff": None,
+        "median": False,
+        "speckle_window": 0,
+    },
+    {"subpixel": False},
+    {},
+    {"paths": 8, "return_confidence": True},
+    {"block_size": 1, "p1": 3, "p2": 30, "subpixel": "equiangular"},
+    {"p2_step": 0, "uniqueness_ratio": 15, "lr_max_diff": 0},
+    {"border": "opencv", "paths": 8, "return_confidence": True},
+    {"paths": 3, "return_confidence": True},
+    {"fill": True, "return_confidence": True},
+    {"p1": 0, "p2": 0, "median": False, "speckle_window": 20, "speckle_range": 0.5},
+    {"p2_step": 1, "p1": 10, "p2": 2000, "lr_max_diff": 1.5, "return_confidence": True},
+]
+
+
+def config_id(cfg: dict[str, Any]) -> str:
+    return ",".join(f"{k}={v}" for k, v in cfg.items()) or "defaults"
+
+
+def subpixel_of(cfg: dict[str, Any]) -> bool:
+    return cfg.get("subpixel", True) is not False
+
+
+# ------------------------------------------------------------------------------------------
+# Native against the oracle
+
+
+@pytest.mark.parametrize("isa", SUPPORTED_ISAS)
+@pytest.mark.parametrize("cfg", CONFIGS, ids=config_id)
+def test_random_dots_match_oracle(cfg: dict[str, Any], isa: str) -> None:
+    left, right = shifted_pair((29, 71), 6, seed=1)
+    left[5:15, 20:40] = 128  # flat: ties
+    right[5:15, 14:34] = 128
+    kw = {"num_disparities": 21, "min_disparity": -3, **cfg}
+    native = sd.SemiGlobalMatcher(isa=isa, threads=2, **kw).compute(left, right)
+    assert_agree(native, ref.semi_global_match(left, right, **kw), subpixel=subpixel_of(cfg))
+
+
+@pytest.mark.parametrize("cfg", CONFIGS, ids=config_id)
+def test_slanted_plane_matches_oracle(cfg: dict[str, Any]) -> None:
+    left, right, _ = slanted_pair((26, 90), d0=4.3, dx=0.09, dy=0.05, seed=2)
+    kw = {"num_disparities": 19, **cfg}
+    assert_agree(
+        sd.semi_global_match(left, right, **kw),
+        ref.semi_global_match(left, right, **kw),
+        subpixel=subpixel_of(cfg),
+    )
+
+
+@pytest.mark.parametrize("dtype", [np.uint8, np.uint16])
+def test_dtypes_match_oracle(dtype: Any) -> None:
+    left, right = shifted_pair((20, 60), 4, seed=4, dtype=dtype)
+    kw = {"num_disparities": 12, "return_confidence": True, "paths": 8}
+    assert_agree(
+        sd.semi_global_match(left, right, **kw),
+        ref.semi_global_match(left, right, **kw),
+        subpixel=True,
+    )
+
+
+def test_rgb_matches_oracle_and_is_matched_as_its_grey() -> None:
+    left, right = shifted_pair((20, 50), 5, seed=5, rgb=True)
+    kw: dict[str, Any] = {"num_disparities": 10, "return_confidence": True}
+    native = sd.semi_global_match(left, right, **kw)
+    assert_agree(native, ref.semi_global_match(left, right, **kw), subpixel=True)
+    gl, gr = grey(left).astype(np.uint8), grey(right).astype(np.uint8)
+    grey_result = sd.semi_global_match(gl, gr, **kw)
+    np.testing.assert_array_equal(native[0], grey_result[0])
+    np.testing.assert_array_equal(native[1], grey_result[1])
+
+
+@pytest.mark.data
+def test_scene_crops_match_oracle(stereo_scenes: list[Any]) -> None:
+    for scene in stereo_scenes[:4]:
+        left = read_image(scene.left_path)
+        right = read_image(scene.right_path)
+        h, w = left.shape[:2]
+        y0, x0 = h // 3, w // 4
+        crop_l = np.ascontiguousarray(left[y0 : y0 + 40, x0 : x0 + 90])
+        crop_r = np.ascontiguousarray(right[y0 : y0 + 40, x0 : x0 + 90])
+        for paths in (3, 4, 8):
+            kw: dict[str, Any] = {"num_disparities": 32, "paths": paths, "return_confidence": True}
+            assert_agree(
+                sd.semi_global_match(crop_l, crop_r, threads=3, **kw),
+                ref.semi_global_match(crop_l, crop_r, **kw),
+                subpixel=True,
+            )
+
+
+@pytest.mark.parametrize(
+    ("shape", "nd", "md"),
+    [
+        ((1, 1), 1, 0),
+        ((1, 1), 5, -2),
+        ((7, 1), 4, 0),
+        ((1, 9), 3, 0),
+        ((3, 2), 8, -4),
+        ((9, 7), 40, 0),
+        ((2, 33), 64, -10),
+        ((13, 17), 3, 2),
+        ((5, 30), 200, -100),
+    ],
+)
+@pytest.mark.parametrize("paths", [3, 4, 8])
+def test_odd_shapes_match_oracle(shape: tuple[int, int], nd: int, md: int, paths: int) -> None:
+    left, right = shifted_pair(shape, 1, seed=sum(shape) + nd)
+    kw: dict[str, Any] = {
+        "num_disparities": nd,
+        "min_disparity": md,
+        "paths": paths,
+        "return_confidence": True,
+    }
+    for isa in SUPPORTED_ISAS:
+        native = sd.SemiGlobalMatcher(isa=isa, threads=3, **kw).compute(left, right)
+        assert_agree(native, ref.semi_global_match(left, right, **kw), subpixel=True)
+
+
+@pytest.mark.parametrize("threads", [1, 2, 3])
+def test_single_pass_stripes_match_oracle(threads: int) -> None:
+    # paths=3 restarts the path from above every 64 rows: three stripes here.
+    left, right, _ = slanted_pair((150, 50), d0=5.0, dx=0.04, dy=0.03, seed=16)
+    kw: dict[str, Any] = {"num_disparities": 16, "paths": 3, "return_confidence": True}
+    assert_agree(
+        sd.semi_global_match(left, right, threads=threads, **kw),
+        ref.semi_global_match(left, right, **kw),
+        subpixel=True,
+    )
+
+
+@pytest.mark.parametrize("paths", [3, 4, 8])
+def test_largest_p2_and_many_disparities_do_not_overflow(paths: int) -> None:
+    # Path costs reach 144 + p2 < 2**14 and sums paths * (144 + p2) <= 65535 on a pair that
+    # matches nowhere.
+    rng = np.random.default_rng(9)
+    left = rng.integers(0, 256, (12, 40)).astype(np.uint8)
+    right = rng.integers(0, 256, (12, 40)).astype(np.uint8)
+    p2 = min(65535 // paths, 16383) - 144
+    kw: dict[str, Any] = {
+        "num_disparities": 300,
+        "min_disparity": -150,
+        "p1": p2,
+        "p2": p2,
+        "p2_step": 0,
+        "paths": paths,
+        "uniqueness_ratio": 0,
+        "return_confidence": True,
+    }
+    assert_agree(
+        sd.semi_global_match(left, right, **kw),
+        ref.semi_global_match(left, right, **kw),
+        subpixel=True,
+    )
+
+
+def test_largest_num_disparities_on_a_tiny_image() -> None:
+    left, right = shifted_pair((4, 6), 2, seed=10)
+    kw: dict[str, Any] = {"num_disparities": 4096, "min_disparity": -2048, "paths": 8}
+    assert_agree(
+        sd.semi_global_match(left, right, **kw),
+        ref.semi_global_match(left, right, **kw),
+        subpixel=True,
+    )
+
+
+# ------------------------------------------------------------------------------------------
+# What it finds
+
+
+@pytest.mark.parametrize("paths", [3, 4, 8])
+def test_step_in_random_dots_is_recovered_exactly(paths: int) -> None:
+    left, right, truth = step_pair((60, 120), 14, 5, seed=11)
+    d = sd.semi_global_match(left, right, num_disparities=24, paths=paths, subpixel=False)
+    known = np.isfinite(truth)
+    # Away from the square's edges and the occlusions (the box's and the median's reach, and
+    # two more columns), every pixel is exact.
+    inner = known.copy()
+    for dy in range(-2, 3):
+        for dx in range(-4, 5):
+            moved = np.roll(np.roll(truth, dy, axis=0), dx, axis=1)
+            inner &= np.isfinite(moved) & (moved == truth)
+    inner[:2] = inner[-2:] = False
+    inner[:, :2] = inner[:, -2:] = False
+    np.testing.assert_array_equal(d[inner], truth[inner])
+    assert inner.sum() > 0.7 * known.sum()
+
+
+def test_slanted_plane_is_recovered_to_subpixel_accuracy() -> None:
+    left, right, disp = slanted_pair((40, 120), d0=6.2, dx=0.05, dy=0.02, seed=3)
+    est = sd.semi_global_match(left, right, num_disparities=24)
+    good = np.isfinite(est)
+    assert good.mean() > 0.8
+    err = np.abs(est - disp)[good]
+    assert np.median(err) < 0.25
+    assert (err < 1).mean() > 0.95
+
+
+def test_border_band_is_matched_over_the_disparities_inside_the_image() -> None:
+    left, right = shifted_pair((30, 80), 5, seed=12)
+    kw: dict[str, Any] = {"num_disparities": 32, "subpixel": False}
+    clip = sd.semi_global_match(left, right, **kw)
+    opencv = sd.semi_global_match(left, right, border="opencv", **kw)
+    # OpenCV's rule: the left num_disparities - 1 columns are NaN.
+    assert np.isnan(opencv[:, :31]).all()
+    assert np.isfinite(opencv[3:-3, 31:-3]).all()
+    # Clipped: the band is matched where the true disparity lies inside the image; columns
+    # left of the shift (whose match is outside the right image) cannot be right.
+    np.testing.assert_array_equal(clip[3:-3, 8:31], 5.0)
+    np.testing.assert_array_equal(clip[:, 31:], opencv[:, 31:])
+    assert np.isnan(clip[:, 0]).all() or (clip[:, 0][np.isfinite(clip[:, 0])] == 0).all()
+
+
+def test_fill_takes_the_background_along_the_row() -> None:
+    from stereodepth.semi_global import fill_background
+
+    nan = np.float32(np.nan)
+    d = np.array(
+        [
+            [nan, 3.0, nan, nan, 7.0, nan],
+            [nan, nan, nan, nan, nan, nan],
+            [5.0, nan, 2.5, 2.5, nan, nan],
+        ],
+        dtype=np.float32,
+    )
+    out = fill_background(d.copy())
+    expected = np.array(
+        [[3.0, 3.0, 3.0, 3.0, 7.0, 7.0], [nan] * 6, [5.0, 2.5, 2.5, 2.5, 2.5, 2.5]],
+        dtype=np.float32,
+    )
+    np.testing.assert_array_equal(out, expected)
+    left, right = shifted_pair((30, 60), 4, seed=17)
+    filled, conf = sd.semi_global_match(
+        left, right, num_disparities=16, fill=True, return_confidence=True
+    )
+    plain, conf0 = sd.semi_global_match(left, right, num_disparities=16, return_confidence=True)
+    assert np.isfinite(filled).all()
+    np.testing.assert_array_equal(filled[np.isfinite(plain)], plain[np.isfinite(plain)])
+    np.testing.assert_array_equal(conf, conf0)  # filled pixels keep confidence 0
+
+
+def test_candidates_outside_the_image_never_win() -> None:
+    left, right = shifted_pair((20, 50), 3, seed=13)
+    d = sd.semi_global_match(
+        left,
+        right,
+        num_disparities=40,
+        subpixel=False,
+        lr_max_diff=None,
+        uniqueness_ratio=0,
+        median=False,
+        speckle_window=0,
+    )
+    x = np.arange(50)
+    assert (d <= x[None, :]).all()
+
+
+# ------------------------------------------------------------------------------------------
+# Instruction sets and threads
+
+
+@pytest.mark.parametrize("isa", SUPPORTED_ISAS)
+@pytest.mark.parametrize("paths", [3, 4, 8])
+def test_each_isa_matches_the_scalar_path(isa: str, paths: int) -> None:
+    left, right, _ = slanted_pair((64, 150), d0=9.0, dx=0.1, dy=-0.03, seed=14)
+    for nd in (7, 16, 33, 64, 100):
+        kw: dict[str, Any] = {"num_disparities": nd, "paths": paths, "return_confidence": True}
+        a = sd.SemiGlobalMatcher(isa="baseline", **kw).compute(left, right)
+        b = sd.SemiGlobalMatcher(isa=isa, **kw).compute(left, right)
+        np.testing.assert_array_equal(a[0], b[0])
+        np.testing.assert_array_equal(a[1], b[1])
+
+
+def test_unknown_isa_is_rejected() -> None:
+    with pytest.raises(ValueError, match="isa must be one of"):
+        sd.SemiGlobalMatcher(num_disparities=8, isa="sse9")
+    with pytest.raises(TypeError, match="isa must be a str, got int 3"):
+        sd.SemiGlobalMatcher(num_disparities=8, isa=3)  # type: ignore[arg-type]
+
+
+@pytest.mark.parametrize("paths", [3, 4, 8])
+def test_thread_counts_give_identical_output(paths: int) -> None:
+    left, right, _ = slanted_pair((70, 161), d0=10.0, dx=0.07, dy=0.04, seed=15)
+    kw: dict[str, Any] = {"num_disparities": 32, "paths": paths, "return_confidence": True}
+    one = sd.semi_global_match(left, right, threads=1, **kw)
+    for threads in (2, 3, 7):
+        many = sd.semi_global_match(left, right, threads=threads, **kw)
+        np.testing.assert_array_equal(one[0], many[0])
+        np.testing.assert_array_equal(one[1], many[1])
+
+
+def test_concurrent_calls_from_python_threads() -> None:
+    pairs = [shifted_pair((40, 90), s, seed=20 + s) for s in range(1, 7)]
+    kw: dict[str, Any] = {"num_disparities": 16, "threads": 2}
+    expected = [sd.semi_global_match(left, right, **kw) for left, right in pairs]
+    shared = sd.SemiGlobalMatcher(**kw)
+    barrier = threading.Barrier(6)
+
+    def run(i: int) -> tuple[np.ndarray, np.ndarray]:
+        barrier.wait()
+        left, right = pairs[i]
+        own = sd.semi_global_match(left, right, **kw)
+        common = shared.compute(left, right)
+        assert isinstance(own, np.ndarray) and isinstance(common, np.ndarray)
+        return own, common
+
+    with ThreadPoolExecutor(6) as pool:
+        results = list(pool.map(run, range(6)))
+    for (own, common), exp in zip(results, expected, strict=True):
+        np.testing.assert_array_equal(own, exp)
+        np.testing.assert_array_equal(common, exp)
+
+
+def test_matcher_reuses_its_buffers_across_sizes_and_reports_params() -> None:
+    m = sd.SemiGlobalMatcher(num_disparities=12, paths=8)
+    for shape in [(30, 60), (10, 20), (31, 61)]:
+        left, right = shifted_pair(shape, 3, seed=shape[0])
+        np.testing.assert_array_equal(
+            m.compute(left, right), sd.semi_global_match(left, right, num_disparities=12, paths=8)
+        )
+    assert m.params["paths"] == 8 and m.params["subpixel"] == "parabola"
+    assert repr(m).startswith("SemiGlobalMatcher(num_disparities=12, ")
+    assert m.isa in SUPPORTED_ISAS
+
+
+def test_confidence_is_in_unit_interval_and_zero_on_holes() -> None:
+    left, right = shifted_pair((30, 70), 4, seed=30)
+    d, c = sd.semi_global_match(left, right, num_disparities=16, return_confidence=True)
+    assert c.dtype == np.float32 and ((c >= 0) & (c <= 1)).all()
+    assert (c[np.isnan(d)] == 0).all()
+
+
+# ------------------------------------------------------------------------------------------
+# Memory
+
+
+def test_memory_estimate_and_refusal() -> None:
+    from stereodepth.semi_global import memory_estimate
+
+    est = memory_estimate((1080, 1920), num_disparities=256, paths=4)
+    assert 3 * 1080 * 1920 * 256 <= est < 3.2 * 1080 * 1920 * 256
+    # One pass: a few MB per thread above 13 bytes per pixel.
+    one = memory_estimate((1080, 1920), num_disparities=256, paths=3, threads=2)
+    assert one < 1080 * 1920 * 13 + 2 * 8 * 2**20
+    left, right = shifted_pair((100, 200), 3, seed=31)
+    with pytest.raises(
+        ValueError,
+        match=r"semi-global matching of a 100x200 pair with num_disparities=512 and paths=4 "
+        r"needs about \d+ MiB, above max_memory_mb=5; lower num_disparities, use paths=3 ",
+    ):
+        sd.semi_global_match(left, right, num_disparities=512, paths=4, max_memory_mb=5)
+
+
+# ------------------------------------------------------------------------------------------
+# Rejected input: one test per rule
+
+GOOD = shifted_pair((8, 20), 2, seed=40)
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "exc", "match"),
+    [
+        ({"num_disparities": 0}, ValueError, r"num_disparities must be an integer in \[1, 4096\]"),
+        ({"num_disparities": 1.5}, TypeError, "num_disparities must be an integer, got float"),
+        (
+            {"num_disparities": 8, "min_disparity": 40000},
+            ValueError,
+            r"min_disparity must be an integer in \[-32768, 32768\], got 40000",
+        ),
+        ({"num_disparities": 8, "block_size": 5}, ValueError, "block_size must be 1 or 3 .*got 5"),
+        ({"num_disparities": 8, "block_size": 3.0}, TypeError, "block_size must be an integer"),
+        ({"num_disparities": 8, "paths": 5}, ValueError, "paths must be 3, 4 or 8, got 5"),
+        ({"num_disparities": 8, "paths": "8"}, TypeError, "paths must be an integer, got str"),
+        ({"num_disparities": 8, "p1": -1}, ValueError, "p1 must be an integer >= 0, got -1"),
+        ({"num_disparities": 8, "p1": 2.0}, TypeError, "p1 must be an integer, got float"),
+        (
+            {"num_disparities": 8, "p1": 50, "p2": 40},
+            ValueError,
+            r"p2 must be an integer in \[p1, 16239\] = \[50, 16239\] for paths=3 and "
+            r"block_size=3 .*got 40",
+        ),
+        (
+            {"num_disparities": 8, "paths": 8, "p2": 8100},
+            ValueError,
+            r"p2 must be an integer in \[p1, 8047\].*got 8100",
+        ),
+        ({"num_disparities": 8, "p2_step": -1}, ValueError, "p2_step must be an integer >= 0"),
+        ({"num_disparities": 8, "p2_step": 70000}, ValueError, "p2_step must be an integer <="),
+        (
+            {"num_disparities": 8, "subpixel": "cubic"},
+            ValueError,
+            "subpixel must be True, False, 'parabola' or 'equiangular', got 'cubic'",
+        ),
+        ({"num_disparities": 8, "subpixel": 1}, TypeError, "subpixel must be True, False"),
+        (
+            {"num_disparities": 8, "uniqueness_ratio": -1},
+            ValueError,
+            "uniqueness_ratio must be a finite number >= 0, got -1",
+        ),
+        (
+            {"num_disparities": 8, "lr_max_diff": float("nan")},
+            ValueError,
+            "lr_max_diff must be a finite number >= 0, got nan",
+        ),
+        ({"num_disparities": 8, "median": 1}, TypeError, "median must be a bool, got int 1"),
+        ({"num_disparities": 8, "fill": "yes"}, TypeError, "fill must be a bool, got str 'yes'"),
+        (
+            {"num_disparities": 8, "speckle_window": -1},
+            ValueError,
+            "speckle_window must be an integer >= 0, got -1",
+        ),
+        (
+            {"num_disparities": 8, "speckle_range": float("inf")},
+            ValueError,
+            "speckle_range must be a finite number >= 0, got inf",
+        ),
+        (
+            {"num_disparities": 8, "border": "wrap"},
+            ValueError,
+            "border must be 'clip' or 'opencv', got 'wrap'",
+        ),
+        ({"num_disparities": 8, "border": None}, TypeError, "border must be 'clip' or 'opencv'"),
+        (
+            {"num_disparities": 8, "max_memory_mb": 0},
+            ValueError,
+            "max_memory_mb must be a finite number > 0, got 0",
+        ),
+        ({"num_disparities": 8, "threads": -1}, ValueError, "threads must be an integer >= 0"),
+        (
+            {"num_disparities": 8, "return_confidence": "yes"},
+            TypeError,
+            "return_confidence must be a bool, got str 'yes'",
+        ),
+    ],
+)
+def test_rejected_parameters(kwargs: dict[str, Any], exc: type[Exception], match: str) -> None:
+    left, right = GOOD
+    with pytest.raises(exc, match=match):
+        sd.semi_global_match(left, right, **kwargs)
+    with pytest.raises(exc, match=match):
+        ref.semi_global_match(left, right, **kwargs)
+
+
+@pytest.mark.parametrize(
+    ("left", "right", "exc", "match"),
+    [
+        ([[1, 2]], GOOD[1], TypeError, "left must be a numpy.ndarray"),
+        (GOOD[0].astype(np.float32), GOOD[1], TypeError, "left must be .* got dtype float32"),
+        (GOOD[0], GOOD[1][:, :-1], ValueError, "left and right must have the same shape"),
+        (GOOD[0], GOOD[1].astype(np.uint16), TypeError, "left and right must have the same dtype"),
+        (np.zeros((0, 4), np.uint8), np.zeros((0, 4), np.uint8), ValueError, "at least one row"),
+        (np.zeros((4, 4, 4), np.uint8), np.zeros((4, 4, 4), np.uint8), ValueError, "got shape"),
+    ],
+)
+def test_rejected_images(left: Any, right: Any, exc: type[Exception], match: str) -> None:
+    with pytest.raises(exc, match=match):
+        sd.semi_global_match(left, right, num_disparities=8)
+
+
+# ------------------------------------------------------------------------------------------
+# stereodepth eval
+
+
+@pytest.mark.data
+def test_eval_runs_sgm_and_opencvs_sgbm_modes(
+    stereo_data_dir: Any, capsys: pytest.CaptureFixture[str]
+) -> None:
+    import json
+
+    from stereodepth import cli
+    from stereodepth.metrics import evaluate
+
+    pytest.importorskip("PIL.Image")
+    pytest.importorskip("cv2")
+    scene = "mb2001-tsukuba"
+    argv = ["eval", str(stereo_data_dir), "--scene", scene, "--repeat", "1", "--json"]
+    methods = ["sgm", "opencv-sgbm", "opencv-sgbm-3way", "opencv-sgbm-hh"]
+    assert cli.main([*argv, "--method", *methods, "--threads", "2"]) == 0
+    report = json.loads(capsys.readouterr().out)
+    by_method = {r["method"]: r for r in report["results"]}
+    assert set(by_method) == set(methods)
+    folder = stereo_data_dir / scene
+    left, right = read_image(folder / "left.png"), read_image(folder / "right.png")
+    gt = np.load(folder / "disp_gt.npy")
+    mask = np.load(folder / "mask_nonocc.npy")
+    nd = by_method["sgm"]["num_disparities"]
+    expected = evaluate(sd.semi_global_match(left, right, num_disparities=nd), gt, mask)
+    assert by_method["sgm"]["metrics"]["bad_2"] == pytest.approx(expected.bad_2)
+    assert all(r["metrics"]["density"] > 0.9 for r in by_method.values())
+    assert cli.main([*argv, "--method", "sgm:5"]) == 2
+    assert "block size of sgm must be 1 or 3, got 5" in capsys.readouterr().err
+
+
+def test_channel_order_and_intensity_range_as_the_block_matcher() -> None:
+    """BGR frames give the disparity of the same frames in RGB; a uint16 pair is stretched from
+    its joint range (or intensity_range) like the block matcher's, in the kernel and the oracle."""
+    rng = np.random.default_rng(7)
+    rgb = rng.integers(0, 256, (40, 64, 3), dtype=np.uint8)
+    right = np.roll(rgb, -5, axis=1)
+    want = sd.semi_global_match(rgb, right, num_disparities=16)
+    got = sd.semi_global_match(
+        rgb[..., ::-1], right[..., ::-1], num_disparities=16, channel_order="bgr"
+    )
+    np.testing.assert_array_equal(got, want)
+    oracle = sd.reference.semi_global_match(
+        rgb[..., ::-1], right[..., ::-1], num_disparities=16, channel_order="bgr"
+    )
+    np.testing.assert_allclose(oracle, want, atol=1e-3, equal_nan=True)
+    # Without the order, the BGR frames are another grey image: another disparity.
+    assert not np.array_equal(
+        sd.semi_global_match(rgb[..., ::-1], right[..., ::-1], num_disparities=16),
+        want,
+        equal_nan=True,
+    )
+    grey = rgb[..., 1]
+    g16 = (7000 + 6 * grey.astype(np.uint16)).astype(np.uint16)
+    r16 = np.roll(g16, -5, axis=1)
+    native = sd.semi_global_match(g16, r16, num_disparities=16, intensity_range=(7000, 8530))
+    np.testing.assert_array_equal(
+        native, sd.semi_global_match(grey, np.roll(grey, -5, axis=1), num_disparities=16)
+    )
+    with pytest.raises(ValueError, match="channel_order must be 'rgb' or 'bgr', got 'rbg'"):
+        sd.SemiGlobalMatcher(num_disparities=16, channel_order="rbg")
