@@ -156,10 +156,59 @@ inline void census_block(const T* const* rows, ptrdiff_t x, uint32_t* out) {
 }
 #endif
 
+#if defined(STEREODEPTH_BM_AVX2)
+// The census codes of the 32 interior 8-bit pixels from x: each neighbour's comparison sets
+// its bit in one of two byte planes (bits 8-15, 0-7), interleaved into 16-bit codes and
+// widened to 32 bits.
+inline void census_block_avx2(const uint8_t* const* rows, ptrdiff_t x, uint32_t* out) {
+  auto load = [](const uint8_t* p) {
+    return _mm256_loadu_si256(reinterpret_cast<const __m256i*>(p));
+  };
+  const __m256i c = load(rows[2] + x);
+  __m256i plane[2] = {_mm256_setzero_si256(), _mm256_setzero_si256()};
+  int bit = 15;
+  for (int dy = 0; dy < 5; ++dy) {
+    for (int dx = -2; dx <= 2; ++dx) {
+      if (!on_ring(dy, dx)) continue;
+      const __m256i v = load(rows[dy] + x + dx);
+      // v >= c (unsigned) where max(v, c) == v; the bit is set where v < c.
+      const __m256i ge = _mm256_cmpeq_epi8(_mm256_max_epu8(v, c), v);
+      const int p = 1 - bit / 8;  // plane 0: bits 8-15
+      plane[p] = _mm256_or_si256(
+          plane[p], _mm256_andnot_si256(ge, _mm256_set1_epi8(static_cast<char>(1 << (bit % 8)))));
+      --bit;
+    }
+  }
+  // Pixels 0-7 and 16-23 (lo), 8-15 and 24-31 (hi) as 16-bit codes.
+  const __m256i lo = _mm256_unpacklo_epi8(plane[1], plane[0]);
+  const __m256i hi = _mm256_unpackhi_epi8(plane[1], plane[0]);
+  auto put = [&](ptrdiff_t at, __m128i codes) {
+    _mm256_storeu_si256(reinterpret_cast<__m256i*>(out + x + at), _mm256_cvtepu16_epi32(codes));
+  };
+  put(0, _mm256_castsi256_si128(lo));
+  put(8, _mm256_castsi256_si128(hi));
+  put(16, _mm256_extracti128_si256(lo, 1));
+  put(24, _mm256_extracti128_si256(hi, 1));
+}
+#endif
+
 template <typename T>
 void census_row(const T* const* rows, uint32_t* out, ptrdiff_t cols) {
   ptrdiff_t x = 0;
   for (; x < cols && x < 2; ++x) out[x] = census_at(rows, x, cols);
+#if defined(STEREODEPTH_BM_AVX2)
+  if constexpr (sizeof(T) == 1) {
+    constexpr ptrdiff_t kBlock = 32;
+    if (cols - 4 >= kBlock) {
+      for (; x + kBlock <= cols - 2; x += kBlock) census_block_avx2(rows, x, out);
+      // The tail: one more block ending at the last interior column (see below).
+      if (x < cols - 2) {
+        census_block_avx2(rows, cols - 2 - kBlock, out);
+        x = cols - 2;
+      }
+    }
+  }
+#endif
 #if defined(STEREODEPTH_BM_AVX512)
   constexpr ptrdiff_t kBlock = sizeof(T) == 1 ? 64 : 32;
   if (cols - 4 >= kBlock) {
@@ -401,6 +450,7 @@ struct RowCtx {
   // unique_min[best]; the second pass subtracts the winner and its two neighbours (see
   // decide_avx512).
   bool count_low;
+  bool first_pass_only;  // diagnostics: skip the second pass (see MatchArgs)
   double texture_sum_min, uniqueness_factor, lr_max_diff;
   uint16_t* acc;   // dp lanes of scratch (generic pass)
   uint16_t* rmin;  // generic pass
@@ -1065,6 +1115,22 @@ void winners_avx2(const RowCtx& c) {
   }
   const __m256i iota = lane_iota16();
   const __m256i two = _mm256_set1_epi16(2);
+  // c0 | c2 << 16 of the group of pixels x - t .. x: lanes qb + 1 and qb - 1 (disparity
+  // index kb - 1 and kb + 1) of their costs in `recent`. Beyond the lanes `recent` holds
+  // 0xFFFF where the other passes store 0: the second pass reads neither (it needs
+  // 1 <= kb <= nd - 2). Once per group rather than per pixel: the lane is known late, and
+  // a load that soon after the store of the costs stalls the pixel's chain.
+  auto fill_around = [&](ptrdiff_t x, int t) {
+    const ptrdiff_t x0 = x - t;
+    const ptrdiff_t lo = x0 > xlo ? x0 : xlo;
+    const ptrdiff_t hi = x < xhi ? x : xhi;
+    for (ptrdiff_t xx = lo; xx <= hi; ++xx) {
+      WinnerRecord* rec = records + xx;
+      const int qb = dp - 1 - rec->kbest;
+      const uint16_t* row = recent + (xx - x0) * kRow + 16;
+      rec->around = static_cast<uint32_t>(row[qb + 1]) | (static_cast<uint32_t>(row[qb - 1]) << 16);
+    }
+  };
 
   for (ptrdiff_t x = 0; x < cols; ++x) {
     if (x > 0) {
@@ -1082,9 +1148,11 @@ void winners_avx2(const RowCtx& c) {
     if (keep) {
       for (int i = 0; i < NC; ++i) _mm256_store_si256(reinterpret_cast<__m256i*>(row) + i, A[i]);
     }
-    if (lr_on && (t == 15 || x == cols - 1)) right_group<NC>(recent, rmin, rarg, x - t, t + 1);
+    const bool group_end = t == 15 || x == cols - 1;
+    if (lr_on && group_end) right_group<NC>(recent, rmin, rarg, x - t, t + 1);
     if (x < xlo || x > xhi) {
       record_none(c, x);
+      if (around && group_end) fill_around(x, t);
       continue;
     }
     // The least cost, in four chains of minima (a quarter of one chain's latency).
@@ -1140,13 +1208,8 @@ void winners_avx2(const RowCtx& c) {
     rec->second = static_cast<uint16_t>(second);
     rec->kbest = dp - 1 - qb;
     rec->tsum = tsum;
-    // c0 | c2 << 16: lanes qb + 1 and qb - 1 (disparity index kb - 1 and kb + 1). Beyond the
-    // lanes `recent` holds 0xFFFF where the other passes store 0: the second pass reads
-    // neither (it needs 1 <= kb <= nd - 2).
     rec->around = 0;
-    if (around) {
-      rec->around = static_cast<uint32_t>(row[qb + 1]) | (static_cast<uint32_t>(row[qb - 1]) << 16);
-    }
+    if (around && group_end) fill_around(x, t);
   }
 }
 
@@ -1481,14 +1544,14 @@ void row_pass(const RowCtx& c) {
     RowCtx counted = c;
     counted.count_low = c.unique_min != nullptr && c.crow == nullptr;
     winners_fixed<1, Cost>(counted);
-    decide(counted);
+    if (!c.first_pass_only) decide(counted);
   } else {
     winners_generic(c);
-    decide(c);
+    if (!c.first_pass_only) decide(c);
   }
 #else
   winners_generic(c);
-  decide_generic(c);
+  if (!c.first_pass_only) decide_generic(c);
 #endif
 }
 
@@ -1552,6 +1615,7 @@ void match_band_impl(const MatchArgs& a, const BandScratch& s, ptrdiff_t y0, ptr
   c.recent = s.recent;
   c.rec = static_cast<WinnerRecord*>(s.records);
   c.unique_min = a.unique_min;
+  c.first_pass_only = a.first_pass_only;
 
   const bool fused = fuses_update(dp);
   for (ptrdiff_t y = y0; y < y1; ++y) {
@@ -1647,6 +1711,38 @@ void speckle_links(const float* d, const float* u, ptrdiff_t cols, float rf, std
     }
     // The first 16 columns' left links (column 0 has none).
     for (ptrdiff_t j = 1; j < 16; ++j) {
+      if (std::fabs(d[j] - d[j - 1]) <= rf) left[0] |= std::uint64_t{1} << j;
+    }
+  }
+#elif defined(STEREODEPTH_BM_AVX2)
+  // 32 columns at a time, four movemasks of 8 per 32-bit half word (|a - b| is a - b with
+  // the sign bit cleared, as fabs; a NaN compares false); column 0 has no left neighbour.
+  auto* v32 = reinterpret_cast<uint32_t*>(valid);
+  auto* l32 = reinterpret_cast<uint32_t*>(left);
+  auto* u32 = reinterpret_cast<uint32_t*>(up);
+  const __m256 r = _mm256_set1_ps(rf);
+  const __m256 magnitude = _mm256_castsi256_ps(_mm256_set1_epi32(0x7FFFFFFF));
+  auto near = [&](__m256 a, __m256 b) {
+    return static_cast<uint32_t>(_mm256_movemask_ps(
+        _mm256_cmp_ps(_mm256_and_ps(_mm256_sub_ps(a, b), magnitude), r, _CMP_LE_OQ)));
+  };
+  if (cols > 32) {
+    for (; i + 32 <= cols; i += 32) {
+      uint32_t vb = 0, lb = 0, ub = 0;
+      for (int k = 0; k < 4; ++k) {
+        const ptrdiff_t j = i + 8 * k;
+        const __m256 dj = _mm256_loadu_ps(d + j);
+        vb |= static_cast<uint32_t>(_mm256_movemask_ps(_mm256_cmp_ps(dj, dj, _CMP_ORD_Q)))
+              << (8 * k);
+        if (j > 0) lb |= near(dj, _mm256_loadu_ps(d + j - 1)) << (8 * k);
+        if (u) ub |= near(dj, _mm256_loadu_ps(u + j)) << (8 * k);
+      }
+      v32[i / 32] = vb;
+      l32[i / 32] = lb;
+      u32[i / 32] = ub;
+    }
+    // The first 8 columns' left links (column 0 has none).
+    for (ptrdiff_t j = 1; j < 8; ++j) {
       if (std::fabs(d[j] - d[j - 1]) <= rf) left[0] |= std::uint64_t{1} << j;
     }
   }

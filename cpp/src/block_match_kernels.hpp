@@ -40,6 +40,9 @@ struct MatchArgs {
   std::ptrdiff_t disp_stride;
   float* conf;  // may be null
   std::ptrdiff_t conf_stride;
+  // Diagnostics only (BlockMatcher::stage_times): run the first pass of each row and skip
+  // the second, leaving the outputs unwritten.
+  bool first_pass_only = false;
 };
 
 // One pixel's winner, written by the first pass of a row and read by the second.
