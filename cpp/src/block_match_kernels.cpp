@@ -1036,29 +1036,41 @@ void winners_avx2(const RowCtx& c) {
   const uint16_t* in16 = static_cast<const uint16_t*>(c.in_quad);
   const uint16_t* out16 = static_cast<const uint16_t*>(c.out_quad);
   const ptrdiff_t nib = c.nibble_stride;  // from the low nibbles to the high ones
+  // Census: the left codes' nibbles of column j, entering and leaving, broadcast.
+  struct CensusLeft {
+    __m256i in0, in1, out0, out1;
+  };
+  auto census_left = [&](ptrdiff_t j) {
+    const uint32_t li = static_cast<uint32_t>(in_l[j]), lo = static_cast<uint32_t>(out_l[j]);
+    return CensusLeft{_mm256_set1_epi16(static_cast<short>(li & 0x0F0Fu)),
+                      _mm256_set1_epi16(static_cast<short>((li >> 4) & 0x0F0Fu)),
+                      _mm256_set1_epi16(static_cast<short>(lo & 0x0F0Fu)),
+                      _mm256_set1_epi16(static_cast<short>((lo >> 4) & 0x0F0Fu))};
+  };
+  // Census: vector i of column j updated, stored and returned (so the running sum need not
+  // load it back: a store forwarded to a load adds its latency to the sum's chain).
+  auto census_update = [&](const CensusLeft& l, ptrdiff_t j, int i) {
+    const __m256i lut = nibble_popcounts();
+    // Set bits of each byte of (l ^ r): the counts of its two nibbles.
+    auto count = [&](__m256i l0, __m256i l1, const uint16_t* p) {
+      const __m256i r0 = _mm256_loadu_si256(reinterpret_cast<const __m256i*>(p));
+      const __m256i r1 = _mm256_loadu_si256(reinterpret_cast<const __m256i*>(p + nib));
+      return _mm256_add_epi8(_mm256_shuffle_epi8(lut, _mm256_xor_si256(l0, r0)),
+                             _mm256_shuffle_epi8(lut, _mm256_xor_si256(l1, r1)));
+    };
+    auto* s = reinterpret_cast<__m256i*>(S + j * dp) + i;
+    const __m256i pin = count(l.in0, l.in1, in16 + j + 16 * i);
+    const __m256i pout = count(l.out0, l.out1, out16 + j + 16 * i);
+    const __m256i d = _mm256_maddubs_epi16(_mm256_set1_epi8(1), _mm256_sub_epi8(pin, pout));
+    const __m256i v = _mm256_add_epi16(_mm256_load_si256(s), d);
+    _mm256_store_si256(s, v);
+    return v;
+  };
   auto update_col = [&](ptrdiff_t j) {
     auto* s = reinterpret_cast<__m256i*>(S + j * dp);
     if constexpr (sizeof(F) == 4) {
-      const uint32_t li = in_l[j], lo = out_l[j];
-      const __m256i li0 = _mm256_set1_epi16(static_cast<short>(li & 0x0F0Fu));
-      const __m256i li1 = _mm256_set1_epi16(static_cast<short>((li >> 4) & 0x0F0Fu));
-      const __m256i lo0 = _mm256_set1_epi16(static_cast<short>(lo & 0x0F0Fu));
-      const __m256i lo1 = _mm256_set1_epi16(static_cast<short>((lo >> 4) & 0x0F0Fu));
-      const __m256i lut = nibble_popcounts();
-      const __m256i byte_ones = _mm256_set1_epi8(1);
-      // Set bits of each byte of (l ^ r): the counts of its two nibbles.
-      auto count = [&](__m256i l0, __m256i l1, const uint16_t* p) {
-        const __m256i r0 = _mm256_loadu_si256(reinterpret_cast<const __m256i*>(p));
-        const __m256i r1 = _mm256_loadu_si256(reinterpret_cast<const __m256i*>(p + nib));
-        return _mm256_add_epi8(_mm256_shuffle_epi8(lut, _mm256_xor_si256(l0, r0)),
-                               _mm256_shuffle_epi8(lut, _mm256_xor_si256(l1, r1)));
-      };
-      for (int i = 0; i < NC; ++i) {
-        const __m256i pin = count(li0, li1, in16 + j + 16 * i);
-        const __m256i pout = count(lo0, lo1, out16 + j + 16 * i);
-        const __m256i d = _mm256_maddubs_epi16(byte_ones, _mm256_sub_epi8(pin, pout));
-        _mm256_store_si256(s + i, _mm256_add_epi16(_mm256_load_si256(s + i), d));
-      }
+      const CensusLeft l = census_left(j);
+      for (int i = 0; i < NC; ++i) census_update(l, j, i);
     } else {
       // SAD, 32 lanes of bytes at a time: |l - r| = max - min, and the entering row's cost
       // minus the leaving row's (-62 .. 62) fits a signed byte, widened for the sums. (With
@@ -1101,13 +1113,10 @@ void winners_avx2(const RowCtx& c) {
 
   // The winner's neighbours serve the sub-pixel step and the counted uniqueness check.
   const bool around = c.subpixel != SubpixelFit::kNone || count_low;
-  const bool keep = lr_on || around;  // whether the costs go to `recent`
-  if (keep) {
-    for (ptrdiff_t t = 0; t < 16; ++t) {
-      for (int j = 0; j < 16; ++j) {
-        recent[t * kRow + j] = 0xFFFF;
-        recent[t * kRow + 16 + dp + j] = 0xFFFF;
-      }
+  for (ptrdiff_t t = 0; t < 16; ++t) {
+    for (int j = 0; j < 16; ++j) {
+      recent[t * kRow + j] = 0xFFFF;
+      recent[t * kRow + 16 + dp + j] = 0xFFFF;
     }
   }
   if (lr_on) {
@@ -1115,101 +1124,126 @@ void winners_avx2(const RowCtx& c) {
   }
   const __m256i iota = lane_iota16();
   const __m256i two = _mm256_set1_epi16(2);
-  // c0 | c2 << 16 of the group of pixels x - t .. x: lanes qb + 1 and qb - 1 (disparity
-  // index kb - 1 and kb + 1) of their costs in `recent`. Beyond the lanes `recent` holds
-  // 0xFFFF where the other passes store 0: the second pass reads neither (it needs
-  // 1 <= kb <= nd - 2). Once per group rather than per pixel: the lane is known late, and
-  // a load that soon after the store of the costs stalls the pixel's chain.
-  auto fill_around = [&](ptrdiff_t x, int t) {
-    const ptrdiff_t x0 = x - t;
-    const ptrdiff_t lo = x0 > xlo ? x0 : xlo;
-    const ptrdiff_t hi = x < xhi ? x : xhi;
-    for (ptrdiff_t xx = lo; xx <= hi; ++xx) {
-      WinnerRecord* rec = records + xx;
-      const int qb = dp - 1 - rec->kbest;
-      const uint16_t* row = recent + (xx - x0) * kRow + 16;
-      rec->around = static_cast<uint32_t>(row[qb + 1]) | (static_cast<uint32_t>(row[qb - 1]) << 16);
+  uint32_t tsums[16];  // the block texture sums of the group's pixels
+
+  // The winners of the group of pixels x0 .. x1 (at most 16) from their costs in `recent`.
+  // Apart from the running sums, one pixel's work does not depend on another's, but its
+  // chain (least cost, its lane, the uniqueness count) is long: in a loop of its own, over
+  // costs already in L1, the chains of many pixels overlap, where interleaved with the
+  // column-sum update the processor's window held about two pixels and waited on each.
+  auto group_winners = [&](ptrdiff_t x0, ptrdiff_t x1) {
+    for (ptrdiff_t x = x0; x <= x1; ++x) {
+      if (x < xlo || x > xhi) {
+        record_none(c, x);
+        continue;
+      }
+      const uint16_t* const row = recent + (x - x0) * kRow + 16;
+      __m256i V[NC];
+      for (int i = 0; i < NC; ++i) V[i] = _mm256_load_si256(reinterpret_cast<const __m256i*>(row) + i);
+      // The least cost, in four chains of minima (a quarter of one chain's latency).
+      __m256i mins[4] = {ones, ones, ones, ones};
+      for (int i = 0; i < NC; ++i) mins[i & 3] = _mm256_min_epu16(mins[i & 3], V[i]);
+      const __m128i m8 = [&] {
+        const __m256i m = _mm256_min_epu16(_mm256_min_epu16(mins[0], mins[1]),
+                                           _mm256_min_epu16(mins[2], mins[3]));
+        return _mm_minpos_epu16(
+            _mm_min_epu16(_mm256_castsi256_si128(m), _mm256_extracti128_si256(m, 1)));
+      }();
+      const uint32_t best = static_cast<uint32_t>(_mm_cvtsi128_si32(m8)) & 0xFFFFu;
+      const __m256i bv = _mm256_broadcastw_epi16(m8);  // not through a general register
+      // The winner: the highest lane holding the least cost (the lowest disparity on a tie),
+      // branch-free (see winners_avx512). vpmovmskb gives two bits per 16-bit lane.
+      int qb = 0;
+      for (int i = 0; i < NC; i += 2) {
+        auto eq = [&](int k) {
+          return static_cast<std::uint64_t>(
+              static_cast<uint32_t>(_mm256_movemask_epi8(_mm256_cmpeq_epi16(V[k], bv))));
+        };
+        std::uint64_t w = eq(i);
+        if (i + 1 < NC) w |= eq(i + 1) << 32;
+        const int top = 16 * i + (63 - __builtin_clzll(w | 1u)) / 2;
+        const int found = -static_cast<int>(w != 0);  // all ones when this pair holds the least
+        qb ^= (qb ^ top) & found;
+      }
+      uint32_t second = kNone;
+      if (count_low) {
+        // How many lanes cost less than the uniqueness threshold (see winners_avx512): the
+        // lanes >= it are those with min(a, thr) == thr; two vectors' masks packed to bytes
+        // give one bit per lane.
+        const __m256i thr = _mm256_set1_epi32(static_cast<int>(unique_min[best]));
+        auto at_least = [&](int k) {
+          return _mm256_cmpeq_epi16(_mm256_min_epu16(V[k], thr), thr);
+        };
+        uint32_t high = 0;
+        for (int i = 0; i < NC; i += 2) {
+          const __m256i m = _mm256_packs_epi16(at_least(i), i + 1 < NC ? at_least(i + 1) : ones);
+          high += static_cast<uint32_t>(__builtin_popcount(
+              static_cast<uint32_t>(_mm256_movemask_epi8(m))));
+        }
+        second = static_cast<uint32_t>(16 * (NC + (NC & 1))) - high;
+      } else if (need_second) {
+        // The exact second-best cost, for the confidence: lanes qb - 1 .. qb + 1 are those
+        // with (lane - (qb - 1)) <= 2, unsigned.
+        __m256i m2 = ones;
+        for (int i = 0; i < NC; ++i) {
+          const __m256i rel =
+              _mm256_sub_epi16(iota, _mm256_set1_epi16(static_cast<short>(qb - 1 - 16 * i)));
+          const __m256i ex = _mm256_cmpeq_epi16(_mm256_min_epu16(rel, two), rel);
+          m2 = _mm256_min_epu16(m2, _mm256_or_si256(V[i], ex));
+        }
+        second = hmin_epu16(m2);
+      }
+      WinnerRecord* rec = records + x;
+      rec->best = static_cast<uint16_t>(best);
+      rec->second = static_cast<uint16_t>(second);
+      rec->kbest = dp - 1 - qb;
+      rec->tsum = tsums[x - x0];
+      // c0 | c2 << 16: lanes qb + 1 and qb - 1 (disparity index kb - 1 and kb + 1). Beyond
+      // the lanes `recent` holds 0xFFFF where the other passes store 0: the second pass reads
+      // neither (it needs 1 <= kb <= nd - 2).
+      rec->around = 0;
+      if (around) {
+        rec->around =
+            static_cast<uint32_t>(row[qb + 1]) | (static_cast<uint32_t>(row[qb - 1]) << 16);
+      }
     }
   };
 
+  // Along the row: the block sums of each pixel go to `recent`; every 16 pixels, the right
+  // winners and the winners of those pixels.
   for (ptrdiff_t x = 0; x < cols; ++x) {
     if (x > 0) {
-      if (fused && x + r < cols) update_col(x + r);
       const ptrdiff_t xp = clamp_index(x + r, 0, cols - 1);
       const ptrdiff_t xm = clamp_index(x - r - 1, 0, cols - 1);
-      for (int i = 0; i < NC; ++i) {
-        A[i] = _mm256_sub_epi16(_mm256_add_epi16(A[i], column(xp, i)), column(xm, i));
+      if constexpr (sizeof(F) == 4) {
+        if (fused && x + r < cols) {
+          const CensusLeft l = census_left(x + r);
+          for (int i = 0; i < NC; ++i) {
+            A[i] = _mm256_sub_epi16(_mm256_add_epi16(A[i], census_update(l, x + r, i)),
+                                    column(xm, i));
+          }
+        } else {
+          for (int i = 0; i < NC; ++i) {
+            A[i] = _mm256_sub_epi16(_mm256_add_epi16(A[i], column(xp, i)), column(xm, i));
+          }
+        }
+      } else {
+        if (fused && x + r < cols) update_col(x + r);
+        for (int i = 0; i < NC; ++i) {
+          A[i] = _mm256_sub_epi16(_mm256_add_epi16(A[i], column(xp, i)), column(xm, i));
+        }
       }
       A[0] = _mm256_or_si256(A[0], padv);
       if (texcol) tsum += texcol[xp] - texcol[xm];
     }
     const int t = static_cast<int>(x & 15);
     uint16_t* const row = recent + t * kRow + 16;
-    if (keep) {
-      for (int i = 0; i < NC; ++i) _mm256_store_si256(reinterpret_cast<__m256i*>(row) + i, A[i]);
+    for (int i = 0; i < NC; ++i) _mm256_store_si256(reinterpret_cast<__m256i*>(row) + i, A[i]);
+    tsums[t] = tsum;
+    if (t == 15 || x == cols - 1) {
+      if (lr_on) right_group<NC>(recent, rmin, rarg, x - t, t + 1);
+      group_winners(x - t, x);
     }
-    const bool group_end = t == 15 || x == cols - 1;
-    if (lr_on && group_end) right_group<NC>(recent, rmin, rarg, x - t, t + 1);
-    if (x < xlo || x > xhi) {
-      record_none(c, x);
-      if (around && group_end) fill_around(x, t);
-      continue;
-    }
-    // The least cost, in four chains of minima (a quarter of one chain's latency).
-    __m256i mins[4] = {ones, ones, ones, ones};
-    for (int i = 0; i < NC; ++i) mins[i & 3] = _mm256_min_epu16(mins[i & 3], A[i]);
-    const uint32_t best = hmin_epu16(
-        _mm256_min_epu16(_mm256_min_epu16(mins[0], mins[1]), _mm256_min_epu16(mins[2], mins[3])));
-    const __m256i bv = _mm256_set1_epi16(static_cast<short>(best));
-    // The winner: the highest lane holding the least cost (the lowest disparity on a tie),
-    // branch-free (see winners_avx512). vpmovmskb gives two bits per 16-bit lane.
-    int qb = 0;
-    for (int i = 0; i < NC; i += 2) {
-      auto eq = [&](int k) {
-        return static_cast<std::uint64_t>(
-            static_cast<uint32_t>(_mm256_movemask_epi8(_mm256_cmpeq_epi16(A[k], bv))));
-      };
-      std::uint64_t w = eq(i);
-      if (i + 1 < NC) w |= eq(i + 1) << 32;
-      const int top = 16 * i + (63 - __builtin_clzll(w | 1u)) / 2;
-      const int found = -static_cast<int>(w != 0);  // all ones when this pair holds the least
-      qb ^= (qb ^ top) & found;
-    }
-    uint32_t second = kNone;
-    if (count_low) {
-      // How many lanes cost less than the uniqueness threshold (see winners_avx512): the
-      // lanes >= it are those with min(a, thr) == thr; two vectors' masks packed to bytes
-      // give one bit per lane.
-      const __m256i thr = _mm256_set1_epi32(static_cast<int>(unique_min[best]));
-      auto at_least = [&](int k) {
-        return _mm256_cmpeq_epi16(_mm256_min_epu16(A[k], thr), thr);
-      };
-      uint32_t high = 0;
-      for (int i = 0; i < NC; i += 2) {
-        const __m256i m = _mm256_packs_epi16(at_least(i), i + 1 < NC ? at_least(i + 1) : ones);
-        high += static_cast<uint32_t>(__builtin_popcount(
-            static_cast<uint32_t>(_mm256_movemask_epi8(m))));
-      }
-      second = static_cast<uint32_t>(16 * (NC + (NC & 1))) - high;
-    } else if (need_second) {
-      // The exact second-best cost, for the confidence: lanes qb - 1 .. qb + 1 are those with
-      // (lane - (qb - 1)) <= 2, unsigned.
-      __m256i m2 = ones;
-      for (int i = 0; i < NC; ++i) {
-        const __m256i rel =
-            _mm256_sub_epi16(iota, _mm256_set1_epi16(static_cast<short>(qb - 1 - 16 * i)));
-        const __m256i ex = _mm256_cmpeq_epi16(_mm256_min_epu16(rel, two), rel);
-        m2 = _mm256_min_epu16(m2, _mm256_or_si256(A[i], ex));
-      }
-      second = hmin_epu16(m2);
-    }
-    WinnerRecord* rec = records + x;
-    rec->best = static_cast<uint16_t>(best);
-    rec->second = static_cast<uint16_t>(second);
-    rec->kbest = dp - 1 - qb;
-    rec->tsum = tsum;
-    rec->around = 0;
-    if (around && group_end) fill_around(x, t);
   }
 }
 
