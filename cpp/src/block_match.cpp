@@ -682,9 +682,18 @@ void BlockMatcher::compute(const StereoImage& left, const StereoImage& right,
       if (!stole) return;
     }
   };
+  // A thread runs its own worker, then any worker that no thread has started: on a busy
+  // machine a thread that starts late finds its band done rather than holding the call up.
+  std::vector<std::atomic<bool>> started(nw);
+  for (auto& f : started) f.store(false);
   parallel_for_rows(static_cast<std::ptrdiff_t>(nw), static_cast<int>(nw), 1,
                     [&](std::ptrdiff_t b, std::ptrdiff_t e) {
-                      for (std::ptrdiff_t w = b; w < e; ++w) run_worker(static_cast<std::size_t>(w));
+                      for (std::ptrdiff_t first = b; first < e; ++first) {
+                        for (std::size_t k = 0; k < nw; ++k) {
+                          const std::size_t w = (static_cast<std::size_t>(first) + k) % nw;
+                          if (!started[w].exchange(true)) run_worker(w);
+                        }
+                      }
                     });
 
   // 3. The speckle filter: join the segments, clear the small regions.
