@@ -1542,14 +1542,22 @@ void decide_avx2(const RowCtx& c) {
       d = _mm256_blendv_ps(d, _mm256_add_ps(d, _mm256_div_ps(num, den)), use);
     }
     const __m256 okf = _mm256_castsi256_ps(ok);
-    _mm256_maskstore_ps(c.drow + x, lanes, _mm256_blendv_ps(nan, d, okf));
+    // A masked store only for the row's tail: vmaskmovps is microcoded on AMD processors.
+    auto store = [&](float* p, __m256 v) {
+      if (n == 8) {
+        _mm256_storeu_ps(p, v);
+      } else {
+        _mm256_maskstore_ps(p, lanes, v);
+      }
+    };
+    store(c.drow + x, _mm256_blendv_ps(nan, d, okf));
     if (c.crow) {
       const __m256 ratio = _mm256_div_ps(_mm256_cvtepi32_ps(_mm256_sub_epi32(s2, b)),
                                          _mm256_cvtepi32_ps(s2));
       const __m256 pos = _mm256_castsi256_ps(_mm256_cmpgt_epi32(s2, zero));
       const __m256 conf = _mm256_blendv_ps(_mm256_set1_ps(1.0f), _mm256_and_ps(ratio, pos),
                                            _mm256_castsi256_ps(has2));
-      _mm256_maskstore_ps(c.crow + x, lanes, _mm256_and_ps(conf, okf));
+      store(c.crow + x, _mm256_and_ps(conf, okf));
     }
   }
 }
