@@ -267,7 +267,7 @@ def test_outputs_equal_the_direct_computation(tmp_path: Path, fmt: str) -> None:
         np.testing.assert_array_equal(got_d, disparity, strict=True)
         np.testing.assert_array_equal(got_z, depth, strict=True)
         assert np.isfinite(disparity).mean() > 0.5  # the matcher found the shift
-        record = json.loads((out / f"{name}.json").read_text())
+        record = json.loads((out / f"{name}.record.json").read_text())
         assert record["status"] == "ok"
         assert record["density"] == pytest.approx(
             np.count_nonzero(np.isfinite(expected_maps(tmp_path / "in" / name)[0])) / disparity.size
@@ -280,6 +280,33 @@ def test_outputs_equal_the_direct_computation(tmp_path: Path, fmt: str) -> None:
     assert report["exit_status"] == 0
     assert [p["stem"] for p in report["pairs"]] == names
     assert temp_files(out) == []
+
+
+@pytest.mark.parametrize("fmt", ["npy", "png16"])
+def test_preview_writes_the_colour_images_of_both_maps(tmp_path: Path, fmt: str) -> None:
+    pytest.importorskip("matplotlib")
+    from PIL import Image
+
+    names = middlebury_folder(tmp_path / "in", 1)
+    out = tmp_path / "out"
+    argv = ("batch", tmp_path / "in", "-o", out, "--format", fmt, "--quiet")
+    assert run_cli(*argv, "--preview") == 0
+    name = names[0]
+    disparity, depth = expected_maps(tmp_path / "in" / name, fmt)
+    depth_m = depth if fmt == "npy" else np.where(depth > 0, depth / 1000.0, np.nan)
+    record = json.loads((out / f"{name}.record.json").read_text())
+    for kind, values in (("disparity", disparity), ("depth", depth_m)):
+        path = out / f"{name}.{kind}.preview.png"
+        assert record["outputs"][f"{kind}_preview"]["path"] == str(path)
+        with Image.open(path) as im:
+            assert im.mode == "RGB" and im.width == disparity.shape[1]
+            shown = np.asarray(im)[: disparity.shape[0]]
+        # The top rows are the colourised map itself; the colour bar is below.
+        np.testing.assert_array_equal(shown, stereodepth.colorize(values))
+    # A run without --preview is a changed run: it recomputes and removes the stale previews.
+    assert run_cli(*argv) == 0
+    assert not (out / f"{name}.disparity.preview.png").exists()
+    assert not (out / f"{name}.depth.preview.png").exists()
 
 
 def test_bad_pairs_are_reported_and_the_rest_complete(
@@ -309,9 +336,11 @@ def test_bad_pairs_are_reported_and_the_rest_complete(
     assert "6 pairs: 2 done, 4 failed" in printed
     for n in names[1:5]:
         assert f"failed {n}:" in printed
-        assert not list(out.glob(f"{n}.*"))
+        # a failed pair leaves its record, which says so, and no output
+        assert [p.name for p in out.glob(f"{n}.*")] == [f"{n}.record.json"]
+        assert json.loads((out / f"{n}.record.json").read_text())["status"] == "failed"
     for n in (names[0], names[5]):
-        assert (out / f"{n}.depth.npy").is_file() and (out / f"{n}.json").is_file()
+        assert (out / f"{n}.depth.npy").is_file() and (out / f"{n}.record.json").is_file()
     # fix the missing image: the next run does that pair only
     Image.fromarray(random_pair(2, 4)[1]).save(inp / names[2] / "im1.png")
     assert run_cli("batch", inp, "-o", out, "--quiet") == 1
@@ -319,31 +348,25 @@ def test_bad_pairs_are_reported_and_the_rest_complete(
     assert counts == {"ok": 1, "skipped": 2, "failed": 3, "cancelled": 0}
 
 
-def test_grey_and_rgb_pair_is_matched_in_grey(tmp_path: Path) -> None:
+def test_a_colour_and_a_grey_image_are_refused_as_block_match_does(tmp_path: Path) -> None:
+    """One rule for batch and block_match: both images colour or both grey. block_match
+    raises; batch fails the pair with a message saying which image is which."""
     left, right = random_pair(5, 3)
+    grey_right = right[..., 1].copy()
+    with pytest.raises((TypeError, ValueError)):
+        stereodepth.block_match(left, grey_right, num_disparities=16)
     Image.fromarray(left).save(tmp_path / "left.png")
-    Image.fromarray(batch._to_grey(right)).save(tmp_path / "right.png")
+    Image.fromarray(grey_right).save(tmp_path / "right.png")
     out = tmp_path / "out"
-    assert (
-        run_cli(
-            "batch",
-            tmp_path,
-            "-o",
-            out,
-            "--focal-px",
-            700,
-            "--baseline-mm",
-            100,
-            "--num-disparities",
-            16,
-            "--quiet",
-        )
-        == 0
+    argv = ["--focal-px", 700, "--baseline-mm", 100, "--num-disparities", 16, "--quiet"]
+    assert run_cli("batch", tmp_path, "-o", out, *argv) == 1
+    rec = report_of(out)["pairs"][0]
+    assert rec["status"] == "failed"
+    assert rec["error"] == (
+        "the left image is colour (RGB) and the right image grey: both must be colour or both "
+        "grey (convert one of them; block_match refuses a mixed pair too)"
     )
-    want = stereodepth.matching.block_match(
-        batch._to_grey(left), batch._to_grey(right), num_disparities=16
-    )
-    np.testing.assert_array_equal(np.load(out / f"{tmp_path.name}.disparity.npy"), want)
+    assert not (out / f"{tmp_path.name}.disparity.npy").exists()
 
 
 def test_resume_skips_complete_pairs_and_redoes_changed_ones(tmp_path: Path) -> None:
@@ -408,7 +431,7 @@ def test_ctrl_c_stops_cleanly_and_the_next_run_resumes(tmp_path: Path) -> None:
     names = middlebury_folder(inp, 12)
     with cli_process(["batch", str(inp), "-o", str(out)], SLOW_MATCHER.format(delay=0.3)) as proc:
         try:
-            wait_for(lambda: out.is_dir() and any(out.glob("*.json")))
+            wait_for(lambda: out.is_dir() and any(out.glob("*.record.json")))
         finally:
             proc.send_signal(signal.SIGINT)
             stdout, stderr = proc.communicate(timeout=60)
@@ -422,7 +445,8 @@ def test_ctrl_c_stops_cleanly_and_the_next_run_resumes(tmp_path: Path) -> None:
     assert counts["ok"] + counts["cancelled"] == 12
     assert temp_files(out) == []
     done = [p["stem"] for p in report["pairs"] if p["status"] == "ok"]
-    assert sorted(p.stem for p in out.glob("*.json") if p.name != "report.json") == sorted(done)
+    records = sorted(p.name.removesuffix(".record.json") for p in out.glob("*.record.json"))
+    assert records == sorted(done)
     assert run_cli("batch", inp, "-o", out, "--quiet") == 0
     again = report_of(out)["counts"]
     assert again == {"ok": 12 - len(done), "skipped": len(done), "failed": 0, "cancelled": 0}
@@ -469,7 +493,7 @@ def test_kill_leaves_no_partial_file_and_the_next_run_completes(tmp_path: Path) 
     assert any(t.startswith(".scene03.depth.npy.stereodepth-") for t in left_over)
     assert all(t.startswith(".") and ".stereodepth-" in t for t in left_over)
     # everything under a final name is complete
-    records = {p.stem for p in out.glob("*.json")}
+    records = {p.name.removesuffix(".record.json") for p in out.glob("*.record.json")}
     assert "scene03" not in records
     for f in out.glob("*.npy"):
         stem, kind = f.name.split(".")[:2]
@@ -530,9 +554,9 @@ def test_a_second_job_on_the_same_outdir_is_refused(tmp_path: Path) -> None:
             True,
             "--option num_disparities: use --num-disparities",
         ),
-        (["--option", "colour=1"], True, "matcher options: .*colour"),
+        (["--option", "colour=1"], True, "--option colour: the matcher has no option 'colour'"),
         (["--num-disparities", "0"], True, "--num-disparities must be an integer >= 1, got 0"),
-        (["--max-depth-m", "nan"], True, "--max-depth-m must be a finite number >= 0"),
+        (["--max-depth-m", "nan"], True, "--max-depth-m must be a finite number > 0, got nan"),
         (["--calib", "nowhere.txt"], True, "--calib: calibration file not found"),
     ],
 )
@@ -675,7 +699,7 @@ def test_ctrl_c_during_a_dask_job_sets_a_flag_and_a_second_one_raises() -> None:
     calls are not safe to interrupt); a second one raises KeyboardInterrupt; the default handler
     comes back afterwards. A handler the application installed is left alone."""
     assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
-    with batch._sigint_as_flag() as stop:
+    with batch.runners._sigint_as_flag() as stop:
         assert not stop.is_set()
         signal.raise_signal(signal.SIGINT)
         assert stop.is_set()
@@ -686,7 +710,7 @@ def test_ctrl_c_during_a_dask_job_sets_a_flag_and_a_second_one_raises() -> None:
     seen: list[int] = []
     previous = signal.signal(signal.SIGINT, lambda signum, frame: seen.append(signum))
     try:
-        with batch._sigint_as_flag() as stop:
+        with batch.runners._sigint_as_flag() as stop:
             signal.raise_signal(signal.SIGINT)
             assert not stop.is_set() and seen == [signal.SIGINT]
     finally:

@@ -78,19 +78,22 @@ def test_markdown_table(capsys: pytest.CaptureFixture[str]) -> None:
     [
         (
             ["--baseline-mm", "-150", "--focal-mm", "6", "--pixel-um", "2.8"],
-            "baseline_mm must be a finite number > 0, got -150.0",
+            "--baseline-mm must be a finite number > 0, got -150.0",
         ),
         (
             ["--baseline-mm", "150", "--focal-mm", "6", "--pixel-um", "0"],
-            "pixel_um must be a finite number > 0, got 0.0",
+            "--pixel-um must be a finite number > 0, got 0.0",
         ),
         (["--baseline-mm", "150", "--focal-mm", "6"], "give --focal-mm and --pixel-um"),
         (
             ["--baseline-mm", "150", "--focal-mm", "6", "--pixel-um", "2", "--focal-px", "9"],
             "not both",
         ),
-        ([*ARM, "--disparity-px", "nan"], "disparity_px must be finite and >= 0, got nan"),
-        ([*ARM, "--subpixel-px", "-0.1"], "disparity_step_px must be a finite number > 0"),
+        ([*ARM, "--disparity-px", "nan"], "--disparity-px must be finite and >= 0, got nan"),
+        (
+            [*ARM, "--subpixel-px", "-0.1"],
+            "--subpixel-px must be the matcher's disparity step, a number > 0",
+        ),
     ],
 )
 def test_bad_input_is_one_line_and_status_2(args: list[str], message: str) -> None:

@@ -53,8 +53,8 @@ def test_plot_with_json_keeps_stdout_json(
 @pytest.mark.parametrize(
     ("name", "message"),
     [
-        ("charts.txt", "the chart file must end in .png, .svg, .pdf, got"),
-        ("missing/charts.png", "the chart file's folder must exist, got"),
+        ("charts.txt", "--plot must name a .png, .svg or .pdf file, got"),
+        ("missing/charts.png", "--plot: the folder "),
     ],
 )
 def test_bad_plot_path_is_one_line_and_status_2(

@@ -8,11 +8,14 @@ import re
 import signal
 import subprocess
 import sys
+import tempfile
 import textwrap
 from pathlib import Path
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from stereodepth import io
 
@@ -217,22 +220,246 @@ def test_pfm_layout_on_disk(tmp_path: Path) -> None:
     np.testing.assert_array_equal(io.read_pfm(tmp_path / "be.pfm"), a, strict=True)
 
 
-def test_read_pfm_rejects(tmp_path: Path) -> None:
-    with pytest.raises(FileNotFoundError, match="PFM file not found"):
+def pfm_bytes(a: np.ndarray, header: bytes) -> bytes:
+    """A PFM file with the given header and ``a``'s rows bottom to top, little-endian."""
+    return header + np.ascontiguousarray(a[::-1], dtype="<f4").tobytes()
+
+
+def float_starting_with(prefix: bytes) -> np.float32:
+    """A float32 whose little-endian bytes start with ``prefix``."""
+    return np.frombuffer(prefix + b"\x01\x02\x20\x3f"[len(prefix) :], "<f4")[0]
+
+
+@pytest.mark.parametrize("prefix", [b"\r", b"\n", b"\r\n", b"\n\r", b"\n\n", b" \t"])
+@pytest.mark.parametrize("shape", [(1, 1), (2, 3), (2, 2, 3)])
+def test_pfm_round_trip_data_looking_like_line_ends(
+    tmp_path: Path, prefix: bytes, shape: tuple[int, ...]
+) -> None:
+    """The first data bytes 0x0D / 0x0A (the bottom row's first value on disk) are data."""
+    a = np.full(shape, 0.5, np.float32)
+    a[-1].flat[0] = float_starting_with(prefix)
+    io.write_pfm(tmp_path / "a.pfm", a)
+    header = f"{'Pf' if a.ndim == 2 else 'PF'}\n{shape[1]} {shape[0]}\n-1.0\n".encode()
+    assert (tmp_path / "a.pfm").read_bytes().startswith(header + prefix)
+    np.testing.assert_array_equal(io.read_pfm(tmp_path / "a.pfm"), a, strict=True)
+
+
+@pytest.mark.parametrize(
+    "header",
+    [
+        b"Pf\r\n3 2\r\n-1\r\n",  # Windows line ends
+        b"Pf\r\n3 2\r\n-1.000000\r\n",
+        b"Pf \n3 2 \n-1 \n",  # trailing spaces
+        b"Pf\t\r\n3\t2\t\r\n-1\t \r\n",
+        b"Pf 3 2 -1\n",  # one line
+        b"Pf\n\n3\n2\n-1\n",  # blank lines and a field a line
+    ],
+)
+@pytest.mark.parametrize("prefix", [b"\n", b"\r", b"\r\n", b"1"])
+def test_pfm_header_layouts(tmp_path: Path, header: bytes, prefix: bytes) -> None:
+    a = np.arange(6, dtype=np.float32).reshape(2, 3)
+    a[1, 0] = float_starting_with(prefix)  # the first value on disk
+    (tmp_path / "a.pfm").write_bytes(pfm_bytes(a, header))
+    np.testing.assert_array_equal(io.read_pfm(tmp_path / "a.pfm"), a, strict=True)
+
+
+def test_pfm_crlf_header_was_read_one_byte_off(tmp_path: Path) -> None:
+    """Issue 10 item 2: a CR LF header used to shift the data by one byte, with no error."""
+    a = np.array([[1.5, -2.25], [3.0, 1e-3]], np.float32)
+    (tmp_path / "w.pfm").write_bytes(pfm_bytes(a, b"Pf\r\n2 2\r\n-1.0\r\n"))
+    np.testing.assert_array_equal(io.read_pfm(tmp_path / "w.pfm"), a, strict=True)
+
+
+A23 = np.arange(6, dtype=np.float32).reshape(2, 3)
+
+
+@pytest.mark.parametrize(
+    ("content", "message"),
+    [
+        (b"", r"not a PFM file: it must start with 'PF' or 'Pf', got b''"),
+        (b"P6\n3 2\n255\n" + bytes(18), r"not a PFM file: .*got b'P6\\n3"),
+        (b"pf\n3 2\n-1\n" + bytes(24), "not a PFM file"),
+        (b"Pfx\n3 2\n-1\n" + bytes(24), "not a PFM file"),
+        (b"Pf\n3 2\n", r"incomplete PFM header: expected 3 fields after the magic, got 2"),
+        (b"Pf\n# by a tool\n3 2\n-1\n" + bytes(24), r"PFM headers have no comments, got a '#'"),
+        (b"Pf\n3 2\n# x\n-1\n" + bytes(24), "PFM headers have no comments"),
+        (b"Pf\nthree 2\n-1\n" + bytes(24), r"PFM width must be a whole number > 0, got 'three'"),
+        (b"Pf\n3 -2\n-1\n" + bytes(24), r"PFM height must be a whole number > 0, got '-2'"),
+        (b"Pf\n0 2\n-1\n", r"PFM width must be a whole number > 0, got '0'"),
+        (b"Pf\n3 0\n-1\n", r"PFM height must be a whole number > 0, got '0'"),
+        (b"Pf\n3.0 2\n-1\n" + bytes(24), r"PFM width must be a whole number > 0, got '3.0'"),
+        (b"Pf\n3 2\n0\n" + bytes(24), r"bad PFM scale '0': it must be finite and not 0"),
+        (b"Pf\n3 2\n-0.0\n" + bytes(24), r"bad PFM scale '-0.0'"),
+        (b"Pf\n3 2\n-1e999\n" + bytes(24), r"bad PFM scale '-1e999'"),
+        (b"Pf\n3 2\nnan\n" + bytes(24), r"PFM scale must be a number, got 'nan'"),
+        (b"Pf\n3 2\n-1x\n" + bytes(24), r"PFM scale must be a number, got '-1x'"),
+        (b"PF\n3 2\n-1\n" + bytes(40), r"truncated 3x2x3 PFM: needs 72 bytes of data, got 40"),
+        (b"Pf\n3 2\n-1\n", r"truncated 3x2x1 PFM: needs 24 bytes of data, got 0"),
+        (b"Pf\n3 2\n-1", r"truncated 3x2x1 PFM: needs 24 bytes of data, got 0"),
+        (b"Pf\n3 2\n-1\n" + bytes(23), r"truncated 3x2x1 PFM: needs 24 bytes of data, got 23"),
+        # a CR LF header one byte short must not be read as a header ending in a lone CR
+        (
+            pfm_bytes(A23, b"Pf\r\n3 2\r\n-1\r\n")[:-1],
+            r"truncated 3x2x1 PFM: needs 24 bytes of data, got 23",
+        ),
+        (
+            pfm_bytes(A23, b"Pf\n3 2\n-1 \n")[:-1],
+            r"truncated 3x2x1 PFM: needs 24 bytes of data, got 23",
+        ),
+        (
+            b"Pf\n3 2\n-1\r" + bytes(24),
+            r"header must end with one line break \(LF or CR LF\), got b'\\r\\x00",
+        ),
+        (
+            b"Pf 3 2 -1 " + bytes(24),
+            r"header must end with one line break \(LF or CR LF\), got b' \\x00",
+        ),
+        (b"Pf\n3 2\n-1\n" + bytes(25), r"3x2x1 PFM has 1 bytes more than its header and 24 bytes"),
+        (b"Pf\r\n3 2\r\n-1\r\n" + bytes(30), r"has 6 bytes more than its header and 24 bytes"),
+        (b"Pf\n3 2\n-1\n\n" + bytes(24), r"3x2x1 PFM has 1 bytes more than its header and 24"),
+    ],
+)
+def test_read_pfm_rejects(tmp_path: Path, content: bytes, message: str) -> None:
+    (tmp_path / "bad.pfm").write_bytes(content)
+    with pytest.raises(ValueError, match=r"^\S*bad\.pfm: (.* )?" + message):
+        io.read_pfm(tmp_path / "bad.pfm")
+
+
+def test_read_pfm_missing(tmp_path: Path) -> None:
+    with pytest.raises(FileNotFoundError, match=r"PFM file not found: .*nope\.pfm"):
         io.read_pfm(tmp_path / "nope.pfm")
-    (tmp_path / "magic.pfm").write_bytes(b"P6\n3 2\n255\n" + bytes(18))
-    with pytest.raises(ValueError, match=r"magic\.pfm: not a PFM file"):
-        io.read_pfm(tmp_path / "magic.pfm")
-    (tmp_path / "cut.pfm").write_bytes(b"PF\n3 2\n-1\n" + bytes(40))
-    with pytest.raises(
-        ValueError,
-        match=r"cut.pfm: truncated PFM: 3x2x3 needs 72 bytes of data, "
-        r"got 40",
-    ):
-        io.read_pfm(tmp_path / "cut.pfm")
-    (tmp_path / "zero.pfm").write_bytes(b"Pf\n1 1\n0\n" + bytes(4))
-    with pytest.raises(ValueError, match=r"zero\.pfm: bad PFM scale 0"):
-        io.read_pfm(tmp_path / "zero.pfm")
+
+
+def test_pfm_writer_is_read_by_opencv(tmp_path: Path) -> None:
+    """Byte compatibility of write_pfm with another reader (OpenCV's), where installed."""
+    cv2 = pytest.importorskip("cv2", reason="opencv-python-headless is not installed")
+    a = np.random.default_rng(3).normal(size=(5, 7)).astype(np.float32)
+    a[4, 0] = float_starting_with(b"\r\n")
+    io.write_pfm(tmp_path / "a.pfm", a)
+    np.testing.assert_array_equal(
+        cv2.imread(str(tmp_path / "a.pfm"), cv2.IMREAD_UNCHANGED), a, strict=True
+    )
+
+
+# --- PBM / PGM / PPM --------------------------------------------------------------------------
+def pgm(header: bytes, a: np.ndarray) -> bytes:
+    return (
+        header + np.ascontiguousarray(a).astype(">u2" if a.dtype == np.uint16 else "u1").tobytes()
+    )
+
+
+@pytest.mark.parametrize(
+    ("header", "a"),
+    [
+        (b"P5\n2 1\n255\n", np.array([[10, 13]], np.uint8)),
+        (b"P5\r\n2 1\r\n255\r\n", np.array([[10, 13]], np.uint8)),  # Pillow and OpenCV: 10, 10
+        (b"P5\r\n2 1\r\n255\r\n", np.array([[13, 10]], np.uint8)),
+        (b"P5 \n# made by hand\r\n# two comments\n2 1 \n255 \n", np.array([[10, 10]], np.uint8)),
+        (b"P5 2#width\n1 255\n", np.array([[10, 13]], np.uint8)),
+        (b"P5\n3 2\n4095\n", np.array([[0, 4095, 2560], [13, 10, 3338]], np.uint16)),  # 12-bit
+        (b"P5\r\n3 1\r\n65535\r\n", np.array([[3338, 65535, 0]], np.uint16)),
+        (b"P5\n2 1\n15\n", np.array([[10, 15]], np.uint8)),  # not stretched to 255
+        (b"P6\n2 1\n255\n", np.array([[[10, 13, 10], [1, 2, 3]]], np.uint8)),
+        (b"P6\r\n1 1\r\n4095\r\n", np.array([[[3338, 4095, 0]]], np.uint16)),
+    ],
+)
+def test_pnm_binary(tmp_path: Path, header: bytes, a: np.ndarray) -> None:
+    (tmp_path / "a.pnm").write_bytes(pgm(header, a))
+    np.testing.assert_array_equal(io.read_pnm(tmp_path / "a.pnm"), a, strict=True)
+    np.testing.assert_array_equal(io.read_image(tmp_path / "a.pnm"), a, strict=True)
+
+
+def test_pnm_agrees_with_opencv_on_lf_headers(tmp_path: Path) -> None:
+    cv2 = pytest.importorskip("cv2", reason="opencv-python-headless is not installed")
+    rng = np.random.default_rng(4)
+    for header, a in [
+        (b"P5\n7 3\n255\n", rng.integers(0, 256, (3, 7), dtype=np.uint8)),
+        (b"P5\n7 3\n4095\n", rng.integers(0, 4096, (3, 7), dtype=np.uint16)),
+        (b"P6\n5 2\n255\n", rng.integers(0, 256, (2, 5, 3), dtype=np.uint8)),
+    ]:
+        a.flat[0] = 10
+        (tmp_path / "a.pnm").write_bytes(pgm(header, a))
+        theirs = cv2.imread(str(tmp_path / "a.pnm"), cv2.IMREAD_UNCHANGED)
+        if a.ndim == 3:
+            theirs = theirs[..., ::-1]  # OpenCV gives BGR
+        np.testing.assert_array_equal(io.read_pnm(tmp_path / "a.pnm"), theirs, strict=True)
+
+
+def test_pnm_plain_and_bitmaps(tmp_path: Path) -> None:
+    cases = [
+        (
+            b"P2\r\n# plain\r\n3 2\r\n300\r\n0 1 2\r\n300 4 5\r\n",
+            [[0, 1, 2], [300, 4, 5]],
+            np.uint16,
+        ),
+        (b"P2 2 1 9 9 0", [[9, 0]], np.uint8),
+        (b"P3\n1 2\n255\n1 2 3\n4 5 6\n", [[[1, 2, 3]], [[4, 5, 6]]], np.uint8),
+        (b"P1\n# a bitmap\n3 2\n101\r\n0 1 0\n", [[0, 255, 0], [255, 0, 255]], np.uint8),
+        (b"P4\n3 2\n\xa0\x40", [[0, 255, 0], [255, 0, 255]], np.uint8),
+        (b"P4\r\n9 1\r\n\x0a\x80", [[255] * 4 + [0, 255, 0, 255, 0]], np.uint8),
+    ]
+    for content, want, dtype in cases:
+        (tmp_path / "a.pnm").write_bytes(content)
+        got = io.read_pnm(tmp_path / "a.pnm")
+        np.testing.assert_array_equal(got, np.array(want, dtype), strict=True)
+
+
+@pytest.mark.parametrize(
+    ("content", "message"),
+    [
+        (b"P7\nWIDTH 1\n", r"not a PBM/PGM/PPM file: it must start with P1 to P6, got b'P7"),
+        (b"P5x 1 1 255\n\x00", "not a PBM/PGM/PPM file"),
+        (b"P5\n2 1\n", r"incomplete PGM header: expected 3 fields after the magic, got 2"),
+        (b"P5\n2 1 # no maxval\n", "incomplete PGM header"),
+        (b"P5\ntwo 1\n255\n\x00\x00", r"PGM width must be a whole number > 0, got 'two'"),
+        (b"P5\n2 0\n255\n", r"PGM height must be a whole number > 0, got '0'"),
+        (b"P5\n2 1\n0\n\x00\x00", r"PGM maxval must be a whole number > 0, got '0'"),
+        (b"P5\n2 1\n-255\n\x00\x00", r"PGM maxval must be a whole number > 0, got '-255'"),
+        (b"P5\n2 1\n65536\n" + bytes(4), r"PGM maxval must be at most 65535, got 65536"),
+        (b"P5\n2 1\n255\n\x00", r"truncated 2x1 PGM with maxval 255: needs 2 bytes of data, got 1"),
+        (b"P6\n2 1\n1000\n" + bytes(11), r"truncated 2x1 PPM with maxval 1000: needs 12 bytes"),
+        # a CR LF header one byte short, and a header ending with a lone space (netpbm allows
+        # it, but then a body one byte short reads shifted): refused
+        (
+            b"P5\r\n2 1\r\n255\r\n\x0a",
+            r"truncated 2x1 PGM with maxval 255: needs 2 bytes of data, got 1",
+        ),
+        (
+            b"P5 2 1 255 \x0a\x0d",
+            r"truncated 2x1 PGM with maxval 255: needs 2 bytes of data, got 1",
+        ),
+        (
+            b"P5 2 1 255 \x01\x0d",
+            r"the header must end with one line break \(LF or CR LF\), got b' \\x01",
+        ),
+        (b"P5\n2 1\n255\r\x01\x0d", r"the header must end with one line break .*got b'\\r\\x01"),
+        (b"P5\n2 1\n255\n\x00\x00\x00", r"2x1 PGM with maxval 255 has 1 bytes more than its"),
+        (b"P5\n2 1\n15\n\x10\x00", r"2x1 PGM with maxval 15 has a sample 16 above the maxval"),
+        (b"P5\n1 1\n4095\n\x10\x00", r"has a sample 4096 above the maxval"),
+        (b"P4\n9 2\n\x00\x00\x00", r"truncated 9x2 PBM: needs 4 bytes of data, got 3"),
+        (b"P2\n2 2\n255\n1 2 3\n", r"2x2 PGM with maxval 255 needs 4 samples, got 3"),
+        (b"P2\n2 1\n255\n1 2 3\n", r"needs 2 samples, got 3"),
+        (b"P2\n2 1\n255\n1 # two\n", r"PGM samples must be whole numbers, got b'#'"),
+        (b"P2\n2 1\n255\n1 -2\n", r"PGM samples must be whole numbers, got b'-2'"),
+        (b"P2\n2 1\n255\n1 256\n", r"has a sample 256 above the maxval"),
+        (b"P2\n1 1\n255\n" + b"9" * 40, r"has a sample above the maxval"),
+        (b"P2\n1 1\n255#c\n1", r"PGM header must end with whitespace, got b'#c"),
+        (b"P1\n2 1\n0 2\n", r"PBM samples must be 0 or 1, got b'2'"),
+        (b"P1\n2 1\n0\n", r"2x1 PBM needs 2 samples, got 1"),
+    ],
+)
+def test_read_pnm_rejects(tmp_path: Path, content: bytes, message: str) -> None:
+    (tmp_path / "bad.pgm").write_bytes(content)
+    with pytest.raises(ValueError, match=r"^\S*bad\.pgm: (.* )?" + message):
+        io.read_pnm(tmp_path / "bad.pgm")
+    if content.startswith((b"P1", b"P2", b"P3", b"P4", b"P5", b"P6")):
+        with pytest.raises(ValueError, match=r"^\S*bad\.pgm: (.* )?" + message):
+            io.read_image(tmp_path / "bad.pgm")
+
+
+def test_read_pnm_missing(tmp_path: Path) -> None:
+    with pytest.raises(FileNotFoundError, match=r"PNM file not found: .*nope\.pgm"):
+        io.read_pnm(tmp_path / "nope.pgm")
 
 
 @pytest.mark.parametrize(
@@ -259,3 +486,87 @@ def test_write_pfm_rejects(
     with pytest.raises(exc, match=message):
         io.write_pfm(tmp_path / "x.pfm", array, **kwargs)
     assert names(tmp_path) == []
+
+
+# --- exact or refused, for any data: property tests --------------------------------------------
+LINE_ENDS = st.sampled_from(["\n", "\r\n", " \n", "\t\r\n"])
+
+
+@settings(max_examples=150, deadline=None)
+@given(
+    width=st.integers(1, 9),
+    height=st.integers(1, 5),
+    colour=st.booleans(),
+    ends=st.lists(LINE_ENDS, min_size=3, max_size=3),
+    little=st.booleans(),
+    data=st.data(),
+)
+def test_pfm_any_bytes_any_layout(
+    width: int, height: int, colour: bool, ends: list[str], little: bool, data: st.DataObject
+) -> None:
+    """Every body, whatever its bytes (0x0A, 0x0D, NaN payloads), under every header layout,
+    reads back bit for bit; one byte less or more is refused."""
+    channels = 3 if colour else 1
+    body = data.draw(
+        st.binary(min_size=width * height * channels * 4, max_size=width * height * channels * 4)
+    )
+    header = (
+        f"{'PF' if colour else 'Pf'}{ends[0]}{width} {height}{ends[1]}"
+        f"{'-1.0' if little else '1.0'}{ends[2]}"
+    ).encode()
+    with tempfile.TemporaryDirectory() as d:
+        path = Path(d) / "a.pfm"
+        path.write_bytes(header + body)
+        got = io.read_pfm(path)
+        shape = (height, width, 3) if colour else (height, width)
+        want = np.frombuffer(body, "<f4" if little else ">f4").reshape(shape)[::-1]
+        assert got.shape == shape
+        np.testing.assert_array_equal(got.view(np.uint32), want.astype(np.float32).view(np.uint32))
+        for cut in (header + body[:-1], header + body + body[:1]):
+            path.write_bytes(cut)
+            with pytest.raises(ValueError, match=r"a\.pfm: "):
+                io.read_pfm(path)
+
+
+@settings(max_examples=150, deadline=None)
+@given(
+    width=st.integers(1, 9),
+    height=st.integers(1, 5),
+    kind=st.sampled_from(["P5", "P6"]),
+    maxval=st.sampled_from([1, 15, 255, 256, 4095, 65535]),
+    ends=st.lists(LINE_ENDS, min_size=3, max_size=3),
+    comment=st.sampled_from(["", "# a comment\n", "# crlf comment\r\n"]),
+    data=st.data(),
+)
+def test_pnm_any_samples_any_layout(
+    width: int,
+    height: int,
+    kind: str,
+    maxval: int,
+    ends: list[str],
+    comment: str,
+    data: st.DataObject,
+) -> None:
+    samples = 3 if kind == "P6" else 1
+    shape = (height, width, 3) if samples == 3 else (height, width)
+    dtype = np.uint8 if maxval < 256 else np.uint16
+    values = np.array(
+        data.draw(
+            st.lists(
+                st.integers(0, maxval),
+                min_size=width * height * samples,
+                max_size=width * height * samples,
+            )
+        ),
+        dtype=dtype,
+    ).reshape(shape)
+    header = f"{kind}{ends[0]}{comment}{width} {height}{ends[1]}{maxval}{ends[2]}".encode()
+    body = values.astype(">u2" if dtype == np.uint16 else "u1").tobytes()
+    with tempfile.TemporaryDirectory() as d:
+        path = Path(d) / "a.pnm"
+        path.write_bytes(header + body)
+        np.testing.assert_array_equal(io.read_image(path), values, strict=True)
+        for cut in (header + body[:-1], header + body + body[:1]):
+            path.write_bytes(cut)
+            with pytest.raises(ValueError, match=r"a\.pnm: "):
+                io.read_pnm(path)

@@ -200,7 +200,8 @@ def test_rejects_int16_disparity_with_conversion_hint() -> None:
     with pytest.raises(
         TypeError,
         match=r"disparity must be a floating-point .* got dtype int16; "
-        r"OpenCV's fixed-point output must be converted first",
+        r"for OpenCV's fixed-point output \(x16\) pass the matcher's minDisparity as "
+        r"min_disparity",
     ):
         evaluate(np.zeros((2, 2), np.int16), np.zeros((2, 2), np.float32))
 

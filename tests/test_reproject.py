@@ -104,6 +104,8 @@ def test_native_matches_oracle(in_dtype: type, shape: tuple[int, ...], isa: str)
     d = random_disparity(rng, in_dtype, shape) if 0 not in shape else np.zeros(shape, in_dtype)
     for kw in (dict(RIG), dict(MB_RIG), {"Q": random_q(rng)}):
         kw["scale"] = default_scale(in_dtype)
+        if "Q" in kw:
+            kw["min_disparity"] = -2  # a hole threshold below zero, in pixels
         want = reference.reproject(d, **kw)
         assert_same(stereodepth.reproject(d, **kw), want)
         if d.size == 0:
@@ -122,6 +124,7 @@ def test_native_matches_oracle(in_dtype: type, shape: tuple[int, ...], isa: str)
             min_depth_m=None,
             max_depth_m=None,
             invalid_value=None,
+            min_disparity=kw.get("min_disparity"),
         )
         out = np.empty((*d.shape, 3), np.float32)
         _core.reproject(
@@ -132,7 +135,7 @@ def test_native_matches_oracle(in_dtype: type, shape: tuple[int, ...], isa: str)
             opts.min_depth_m,
             opts.max_depth_m,
             opts.invalid_value,
-            opts.negative_invalid,
+            opts.invalid_below,
             0,
             isa,
         )
@@ -436,20 +439,20 @@ def test_kernel_rejects_what_the_wrapper_never_sends() -> None:
     with pytest.raises(
         TypeError, match="disparity must have dtype float32, float64, int16 or uint16, got float16"
     ):
-        _core.reproject(np.ones((2, 3), np.float16), out, np.eye(4), 1.0, 0.0, 1.0, None, False, 1)
+        _core.reproject(np.ones((2, 3), np.float16), out, np.eye(4), 1.0, 0.0, 1.0, None, None, 1)
     with pytest.raises(ValueError, match="Q must be finite"):
         _core.reproject(
-            np.ones((2, 3), np.float32), out, np.full((4, 4), np.inf), 1.0, 0.0, 1.0, None, False, 1
+            np.ones((2, 3), np.float32), out, np.full((4, 4), np.inf), 1.0, 0.0, 1.0, None, None, 1
         )
     with pytest.raises(ValueError, match="Q must be a 4x4 float64 array"):
-        _core.reproject(np.ones((2, 3), np.float32), out, np.eye(3), 1.0, 0.0, 1.0, None, False, 1)
+        _core.reproject(np.ones((2, 3), np.float32), out, np.eye(3), 1.0, 0.0, 1.0, None, None, 1)
     with pytest.raises(ValueError, match=r"out must have shape \(2, 3\) \+ \(3,\)"):
         _core.reproject(
-            np.ones((2, 3), np.float32), out[:1], np.eye(4), 1.0, 0.0, 1.0, None, False, 1
+            np.ones((2, 3), np.float32), out[:1], np.eye(4), 1.0, 0.0, 1.0, None, None, 1
         )
     with pytest.raises(ValueError, match="isa must be one of"):
         _core.reproject(
-            np.ones((2, 3), np.float32), out, np.eye(4), 1.0, 0.0, 1.0, None, False, 1, "sse9"
+            np.ones((2, 3), np.float32), out, np.eye(4), 1.0, 0.0, 1.0, None, None, 1, "sse9"
         )
 
 

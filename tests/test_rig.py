@@ -224,7 +224,8 @@ def test_rejected_rig(kwargs, exc, match) -> None:
         (
             lambda r: StereoRig.from_pixels(100, 700, doffs_px=-5).min_depth_m(3),
             ValueError,
-            "max_disparity_px must be finite and >= 5, got 3.0",
+            r"max_disparity_px must be finite and >= 5 \(with doffs_px -5, a disparity below 5 px "
+            r"puts the point behind the cameras\), got 3.0",
         ),
         (lambda r: r.required_baseline_mm(10, 0), ValueError, "depth_resolution_m .* got 0"),
         (lambda r: r.table([]), ValueError, "disparities_px must be a non-empty 1-D sequence"),

@@ -286,7 +286,8 @@ def test_rule_matches_the_schema_range() -> None:
         pytest.param(
             {"baseline_mm": 150, "focal_px": 2000, "doffs_px": -0.5, "disparity_px": 0.2},
             "disparity_px",
-            "disparity_px must be finite and >= 0.5, got 0.2",
+            "disparity_px must be finite and >= 0.5 (with doffs_px -0.5, a disparity below 0.5 px "
+            "puts the point behind the cameras), got 0.2",
             id="library-rule-doffs",
         ),
         pytest.param(

@@ -141,6 +141,8 @@ def test_serve_open_opens_the_page(tmp_path: Path) -> None:
     [
         (["--port", "70000"], "--port must be an integer from 0 to 65535, got 70000"),
         (["--host", "no.such.host.invalid"], "--host must be an address of this machine"),
+        (["--max-upload-mb", "0"], "--max-upload-mb must be a number > 0 and <= 10000, got 0"),
+        (["--max-megapixels", "nan"], "--max-megapixels must be a number > 0 and <= 10000"),
     ],
 )
 def test_serve_rejects_bad_options(
@@ -462,3 +464,191 @@ def test_page_digits_are_printfs(page: Page) -> None:
     ]
     got = page.page.evaluate("vs => vs.map(v => window.stereodepth.formatG(v))", values)
     assert got == [f"{v:.6g}" for v in values]
+
+
+# --- the depth-map view --------------------------------------------------------------------------
+def _hover(p: Any, selector: str, x: int, y: int, width: int, height: int) -> tuple[int, int]:
+    """Moves the mouse to a whole CSS pixel inside image pixel (x, y) of the drawn map and
+    returns the pixel the page computes there (Chromium's mouse events are whole CSS pixels)."""
+    import math
+
+    p.locator(selector).scroll_into_view_if_needed()
+    box = p.locator(selector).bounding_box()
+    cx = math.floor(box["x"] + (x + 0.5) * box["width"] / width)
+    cy = math.floor(box["y"] + (y + 0.5) * box["height"] / height)
+    p.mouse.move(cx, cy)
+    # The page's own arithmetic: floor((clientX - left) * W / width).
+    return (
+        math.floor((cx - box["x"]) * width / box["width"]),
+        math.floor((cy - box["y"]) * height / box["height"]),
+    )
+
+
+def _f32_text(v: float) -> str:
+    import numpy as np
+
+    return np.format_float_positional(np.float32(v), unique=True, trim="-")
+
+
+def _check_depth_view(
+    page: Page,
+    disparity: Any,
+    depth: Any,
+    rig: StereoRig,
+    step: float,
+    pixels: list[Any],
+    centre: tuple[float, float] | None = None,
+) -> None:
+    """The three maps drawn; under the cursor the library's numbers; pins and the last two's
+    distance; the 3-D view drawn."""
+    import numpy as np
+
+    from stereodepth import reproject
+
+    p = page.page
+    h, w = disparity.shape
+    for key in ("left", "disparity", "depth"):
+        img = p.locator(f"#img-{key}")
+        page.expect(img).to_be_visible()
+        size = p.evaluate(
+            f"() => {{ const i = document.getElementById('img-{key}');"
+            " return [i.complete, i.naturalWidth, i.naturalHeight]; }"
+        )
+        assert size == [True, w, h], key
+    for cb in ("#cb-disparity .bar", "#cb-depth .bar"):
+        page.expect(p.locator(cb)).to_be_visible()
+    page.expect(p.locator("#cb-depth .ticks")).to_contain_text("m")
+
+    pins = []
+    for x0, y0 in pixels:
+        x, y = _hover(p, "#img-depth", x0, y0, w, h)
+        # Within one CSS pixel of the aim (a CSS pixel spans w / drawn width image pixels).
+        reach = 1 + w / p.locator("#img-depth").bounding_box()["width"]
+        assert abs(x - x0) <= reach and abs(y - y0) <= reach
+        page.expect(p.locator("#ro-x")).to_have_text(str(x))
+        page.expect(p.locator("#ro-y")).to_have_text(str(y))
+        z = float(depth[y, x])
+        assert np.isfinite(z), (x, y)
+        # The depth shown is disparity_to_depth's float32, to the last digit.
+        assert p.inner_text("#ro-depth") == _f32_text(z)
+        assert p.inner_text("#ro-disparity") == _f32_text(float(disparity[y, x]))
+        assert p.inner_text("#ro-res1") == f"{rig.depth_resolution_m(z, 1.0):.6g}"
+        assert p.inner_text("#ro-resstep") == f"{rig.depth_resolution_m(z, step):.6g}"
+        p.mouse.down()
+        p.mouse.up()
+        pins.append((x, y))
+        page.expect(p.locator("#pin-table tbody tr")).to_have_count(len(pins))
+    # Two pins: their distance, from reproject's points.
+    points = reproject(
+        disparity,
+        focal_px=rig.focal_px,
+        baseline_m=rig.baseline_mm / 1000,
+        doffs_px=rig.doffs_px,
+        cx_px=centre[0] if centre else None,
+        cy_px=centre[1] if centre else None,
+    ).astype(np.float64)
+    (xa, ya), (xb, yb) = pins[-2:]
+    dist = float(np.sqrt(((points[ya, xa] - points[yb, xb]) ** 2).sum()))
+    page.expect(p.locator("#distance-value")).to_have_text(f"{dist:.6g}")
+    rows = p.locator("#pin-table tbody tr")
+    for k, (x, y) in enumerate(pins):
+        assert rows.nth(k).locator("td").all_inner_texts()[1:5] == [
+            str(x),
+            str(y),
+            _f32_text(float(disparity[y, x])),
+            _f32_text(float(depth[y, x])),
+        ]
+    # The 3-D view: plotly drew the decimated cloud (WebGL canvas) with the two pins.
+    page.expect(p.locator("#cloud .gl-container canvas").first).to_be_attached()
+    drawn = p.evaluate("() => document.getElementById('cloud').data.map(t => [t.type, t.x.length])")
+    assert drawn[0][0] == "scatter3d" and drawn[0][1] > 1000
+    assert drawn[1] == ["scatter3d", len(pins)]  # the pinned points
+
+
+@pytest.mark.browser
+def test_depth_view_sample_pair(page: Page) -> None:
+    from stereodepth import block_match, disparity_to_depth
+    from stereodepth.sample import sample_pair
+
+    p = page.page
+    p.click("#tab-depth")
+    page.expect(p.locator("#view-depth")).to_be_visible()
+    page.expect(p.locator("#view-calc")).to_be_hidden()
+    p.click("#use-sample")
+    page.expect(p.locator("#depth-status")).to_contain_text("Done: 320\u00d7240 px", timeout=60_000)
+    # The rig is the sample's, in the shared inputs.
+    assert p.input_value("#focal_px") == "700" and p.input_value("#baseline_mm") == "120"
+    s = sample_pair()
+    disparity = block_match(s.left, s.right, num_disparities=48)
+    depth = disparity_to_depth(disparity, focal_px=700.0, baseline_m=0.12)
+    rig = StereoRig.from_pixels(120, 700)
+    # The box (disparity 30), the wall (10) and the disc (20).
+    _check_depth_view(page, disparity, depth, rig, 0.25, [(205, 140), (60, 200), (105, 110)])
+    page.screenshot("web-depth-sample.png")
+    # Back to the calculator: the rig is the one the depth view used.
+    p.click("#tab-calc")
+    page.expect(p.locator("#out-focal_px .value")).to_have_text("700")
+
+
+@pytest.mark.browser
+@pytest.mark.data
+def test_depth_view_shared_scene_with_calib(
+    page: Page, tmp_path: Path, stereo_data_dir: Path
+) -> None:
+    from stereodepth import block_match, disparity_to_depth
+    from stereodepth.io import read_image
+
+    scene = stereo_data_dir / "mb2014q-piano"
+    if not (scene / "left.png").is_file():
+        pytest.skip(f"the shared scene mb2014q-piano is not at {scene}")
+    left, right = read_image(scene / "left.png"), read_image(scene / "right.png")
+    h, w = left.shape[:2]
+    calib = tmp_path / "calib.txt"
+    calib.write_text(
+        "cam0=[713.189 0 276.193; 0 713.189 242.587; 0 0 1]\ndoffs=31.34\nbaseline=178.089\n"
+        f"width={w}\nheight={h}\nndisp=73\n"
+    )
+    p = page.page
+    p.click("#tab-depth")
+    p.set_input_files("#calib-file", str(calib))
+    page.expect(p.locator("#calib-note")).to_contain_text("f = 713.189 px")
+    assert p.input_value("#num_disparities") == "73" and p.input_value("#doffs_px") == "31.34"
+    p.set_input_files("#left-file", str(scene / "left.png"))
+    p.set_input_files("#right-file", str(scene / "right.png"))
+    p.click("#run-depth")
+    page.expect(p.locator("#depth-status")).to_contain_text(
+        f"Done: {w}\u00d7{h} px", timeout=60_000
+    )
+    disparity = block_match(left, right, num_disparities=73)
+    depth = disparity_to_depth(disparity, focal_px=713.189, baseline_m=0.178089, doffs_px=31.34)
+    rig = StereoRig.from_pixels(178.089, 713.189, doffs_px=31.34)
+    # The 3-D points use the calib.txt's principal point (cam0's cx, cy).
+    _check_depth_view(
+        page, disparity, depth, rig, 0.25, [(400, 300), (200, 400)], (276.193, 242.587)
+    )
+    page.screenshot("web-depth-piano.png")
+
+
+@pytest.mark.browser
+def test_depth_view_bad_upload_shows_a_message_at_the_field(page: Page, tmp_path: Path) -> None:
+    p = page.page
+    p.click("#tab-depth")
+    not_image = tmp_path / "notes.png"
+    not_image.write_text("not an image")
+    from PIL import Image
+
+    Image.new("RGB", (64, 48)).save(tmp_path / "right.png")
+    p.set_input_files("#left-file", str(not_image))
+    p.set_input_files("#right-file", str(tmp_path / "right.png"))
+    p.click("#run-depth")
+    error = p.locator("#left-error")
+    page.expect(error).to_be_visible()
+    page.expect(error).to_have_text("left: not an image Pillow can read; give a PNG or JPEG file")
+    page.expect(p.locator("#depth-status")).to_contain_text("Not computed")
+    page.expect(p.locator("#right-error")).to_be_hidden()
+    # A bad rig value is shown at the rig's input.
+    p.fill("#baseline_mm", "-3")
+    p.set_input_files("#left-file", str(tmp_path / "right.png"))
+    p.click("#run-depth")
+    page.expect(p.locator("#baseline_mm-error")).to_contain_text("must be a number > 0")
+    page.screenshot("web-depth-error.png")

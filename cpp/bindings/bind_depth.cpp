@@ -28,7 +28,7 @@ DisparityType disparity_type(const py::array& a) {
 void disparity_to_depth_py(const py::array& disparity, py::array& out, double focal_px,
                            double baseline_m, double doffs_px, double scale, double min_depth_m,
                            double max_depth_m, std::optional<double> invalid_value,
-                           bool negative_invalid, int threads, const std::string& isa) {
+                           std::optional<double> invalid_below, int threads, const std::string& isa) {
   DepthParams p;
   p.focal_px = focal_px;
   p.baseline_m = baseline_m;
@@ -38,7 +38,8 @@ void disparity_to_depth_py(const py::array& disparity, py::array& out, double fo
   p.max_depth_m = max_depth_m;
   p.has_invalid_value = invalid_value.has_value();
   p.invalid_value = invalid_value.value_or(0.0);
-  p.negative_invalid = negative_invalid;
+  p.has_invalid_below = invalid_below.has_value();
+  p.invalid_below = invalid_below.value_or(0.0);
 
   const Strides s = row_strides(disparity, "disparity");
   DisparityStack in{disparity.data(), disparity_type(disparity), s.frames, s.rows,
@@ -69,7 +70,7 @@ void bind_depth(py::module_& m) {
   m.def("disparity_to_depth", &disparity_to_depth_py, py::arg("disparity"), py::arg("out"),
         py::arg("focal_px"), py::arg("baseline_m"), py::arg("doffs_px"), py::arg("scale"),
         py::arg("min_depth_m"), py::arg("max_depth_m"), py::arg("invalid_value"),
-        py::arg("negative_invalid"), py::arg("threads"), py::arg("isa") = "auto",
+        py::arg("invalid_below"), py::arg("threads"), py::arg("isa") = "auto",
         "Low-level kernel behind stereodepth.disparity_to_depth; writes into `out`.");
 }
 

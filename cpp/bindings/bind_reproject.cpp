@@ -27,7 +27,7 @@ DisparityType reproject_input_type(const py::array& a) {
 
 void reproject_py(const py::array& disparity, py::array& out, const py::array& q, double scale,
                   double min_depth, double max_depth, std::optional<double> invalid_value,
-                  bool negative_invalid, int threads, const std::string& isa) {
+                  std::optional<double> invalid_below, int threads, const std::string& isa) {
   ReprojectParams p;
   if (!q.dtype().equal(py::dtype::of<double>()) || q.ndim() != 2 || q.shape(0) != 4 ||
       q.shape(1) != 4) {
@@ -43,7 +43,8 @@ void reproject_py(const py::array& disparity, py::array& out, const py::array& q
   p.max_depth = max_depth;
   p.has_invalid_value = invalid_value.has_value();
   p.invalid_value = invalid_value.value_or(0.0);
-  p.negative_invalid = negative_invalid;
+  p.has_invalid_below = invalid_below.has_value();
+  p.invalid_below = invalid_below.value_or(0.0);
 
   const Strides s = row_strides(disparity, "disparity");
   const DisparityStack in{disparity.data(), reproject_input_type(disparity), s.frames, s.rows,
@@ -73,7 +74,7 @@ void reproject_py(const py::array& disparity, py::array& out, const py::array& q
 void bind_reproject(py::module_& m) {
   m.def("reproject", &reproject_py, py::arg("disparity"), py::arg("out"), py::arg("q"),
         py::arg("scale"), py::arg("min_depth"), py::arg("max_depth"), py::arg("invalid_value"),
-        py::arg("negative_invalid"), py::arg("threads"), py::arg("isa") = "auto",
+        py::arg("invalid_below"), py::arg("threads"), py::arg("isa") = "auto",
         "Low-level kernel behind stereodepth.reproject; writes into `out`.");
 }
 

@@ -43,9 +43,11 @@ detail::DepthRowParams row_params(const DepthParams& p) {
   r.doffs_f = static_cast<float>(r.doffs);
   r.min_f = static_cast<float>(r.min);
   r.max_f = static_cast<float>(r.max);
+  r.below = p.invalid_below;
   r.invalid_f = static_cast<float>(r.invalid);
+  r.below_f = static_cast<float>(r.below);
   r.has_invalid = p.has_invalid_value;
-  r.negative_invalid = p.negative_invalid;
+  r.has_below = p.has_invalid_below;
   return r;
 }
 
@@ -81,6 +83,7 @@ void validate(const DepthParams& p) {
   if (!(std::isfinite(p.min_depth_m) && p.min_depth_m >= 0)) fail("min_depth_m must be finite and >= 0", p.min_depth_m);
   if (!(p.max_depth_m > 0)) fail("max_depth_m must be > 0", p.max_depth_m);
   if (!(p.max_depth_m >= p.min_depth_m)) fail("max_depth_m must be >= min_depth_m", p.max_depth_m);
+  if (p.has_invalid_below && std::isnan(p.invalid_below)) fail("invalid_below must not be NaN", p.invalid_below);
 }
 
 template <typename Out, typename RowFn>

@@ -42,8 +42,8 @@ void row_to_f32(const void* vin, float* out, std::ptrdiff_t n, const DepthRowPar
   const In* in = static_cast<const In*>(vin);
   const float nan = std::numeric_limits<float>::quiet_NaN();
   const float k = p.k_f, scale = p.scale_f, doffs = p.doffs_f, zmin = p.min_f, zmax = p.max_f;
-  const float invalid = p.invalid_f;
-  const bool has_invalid = p.has_invalid, negative_invalid = p.negative_invalid;
+  const float invalid = p.invalid_f, below = p.below_f;
+  const bool has_invalid = p.has_invalid, has_below = p.has_below;
   for (std::ptrdiff_t i = 0; i < n; ++i) {
     float d;
     if constexpr (std::is_same_v<Tag, Half>) {
@@ -55,7 +55,7 @@ void row_to_f32(const void* vin, float* out, std::ptrdiff_t n, const DepthRowPar
     const float z = k / den;
     bool ok = (den > 0.0f) & (z >= zmin) & (z <= zmax);
     if (has_invalid) ok &= (d != invalid);
-    if (negative_invalid) ok &= (d >= 0.0f);
+    if (has_below) ok &= (d >= below);
     out[i] = ok ? z : nan;
   }
 }
@@ -71,7 +71,7 @@ void row_f64_to_f32(const void* vin, float* out, std::ptrdiff_t n, const DepthRo
     const float zf = static_cast<float>(z);
     bool ok = (den > 0.0) & (zf >= p.min_f) & (zf <= p.max_f);
     if (p.has_invalid) ok &= (d != p.invalid);
-    if (p.negative_invalid) ok &= (d >= 0.0);
+    if (p.has_below) ok &= (d >= p.below);
     out[i] = ok ? zf : nan;
   }
 }
@@ -92,7 +92,7 @@ void row_to_u16(const void* vin, std::uint16_t* out, std::ptrdiff_t n,
     const double z = p.k / den;
     bool ok = (den > 0.0) & (z >= p.min) & (z <= p.max);
     if (p.has_invalid) ok &= (d != p.invalid);
-    if (p.negative_invalid) ok &= (d >= 0.0);
+    if (p.has_below) ok &= (d >= p.below);
     // Round half to even (the default rounding mode), clamp to the format's range.
     double mm = std::nearbyint(z * 1000.0);
     mm = mm < 65535.0 ? mm : 65535.0;

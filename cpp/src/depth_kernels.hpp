@@ -10,9 +10,9 @@ namespace stereodepth::detail {
 
 // DepthParams pre-converted for the inner loop, in both working precisions.
 struct DepthRowParams {
-  float k_f, scale_f, doffs_f, min_f, max_f, invalid_f;
-  double k, scale, doffs, min, max, invalid;
-  bool has_invalid, negative_invalid;
+  float k_f, scale_f, doffs_f, min_f, max_f, invalid_f, below_f;
+  double k, scale, doffs, min, max, invalid, below;
+  bool has_invalid, has_below;
 };
 
 using DepthRowToF32 = void (*)(const void* in, float* out, std::ptrdiff_t n,

@@ -60,6 +60,7 @@ void validate(const ReprojectParams& p) {
   }
   if (!(p.max_depth > 0)) fail("max_depth must be > 0", p.max_depth);
   if (!(p.max_depth >= p.min_depth)) fail("max_depth must be >= min_depth", p.max_depth);
+  if (p.has_invalid_below && std::isnan(p.invalid_below)) fail("invalid_below must not be NaN", p.invalid_below);
 }
 
 void reproject(const DisparityStack& in, const StackView<float>& out,
@@ -92,7 +93,8 @@ void reproject(const DisparityStack& in, const StackView<float>& out,
   base.zmin = static_cast<float>(params.min_depth);
   base.zmax = static_cast<float>(params.max_depth);
   base.has_invalid = params.has_invalid_value;
-  base.negative_invalid = params.negative_invalid;
+  base.below = params.invalid_below;
+  base.has_below = params.has_invalid_below;
 
   static constexpr std::ptrdiff_t kSize[] = {2, 4, 8, 2, 2};  // by DisparityType
   const std::ptrdiff_t elem = kSize[static_cast<int>(in.type)];

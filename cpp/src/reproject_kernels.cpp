@@ -27,7 +27,8 @@ void row(const void* vin, float* __restrict out, std::ptrdiff_t n_, const Reproj
   const double rx = p.row_x, ry = p.row_y, rz = p.row_z, rw = p.row_w, scale = p.scale;
   const float zmin = p.zmin, zmax = p.zmax;
   const float nan = std::numeric_limits<float>::quiet_NaN();
-  const bool has_invalid = p.has_invalid, negative_invalid = p.negative_invalid;
+  const bool has_invalid = p.has_invalid, has_below = p.has_below;
+  const double below = p.below;
   // Raw values are compared with invalid_value in float32 (float64 for float64 input), as
   // disparity_to_depth does.
   using Cmp = std::conditional_t<std::is_same_v<In, double>, double, float>;
@@ -45,7 +46,7 @@ void row(const void* vin, float* __restrict out, std::ptrdiff_t n_, const Reproj
     const bool ok = (std::fabs(px) <= kFloatMax) & (std::fabs(py) <= kFloatMax) &
                     (pz > 0.0f) & (pz >= zmin) & (pz <= zmax) &
                     (!has_invalid | (static_cast<Cmp>(in[i]) != invalid)) &
-                    (!negative_invalid | (raw >= 0.0));
+                    (!has_below | (raw >= below));
     out[3 * i + 0] = ok ? px : nan;
     out[3 * i + 1] = ok ? py : nan;
     out[3 * i + 2] = ok ? pz : nan;

@@ -12,9 +12,9 @@ namespace stereodepth::detail {
 struct ReprojectRowParams {
   double q00, q02, q10, q12, q20, q22, q30, q32;
   double row_x, row_y, row_z, row_w;
-  double scale, invalid;
+  double scale, invalid, below;
   float zmin, zmax;
-  bool has_invalid, negative_invalid;
+  bool has_invalid, has_below;
 };
 
 using ReprojectRow = void (*)(const void* in, float* out, std::ptrdiff_t n,

@@ -4,16 +4,25 @@
 - :func:`disparity_to_depth`: native, threaded disparity-map to depth-map conversion.
 - :func:`block_match`, :class:`StereoMatcher`: native block-matching disparity (census or SAD,
   sub-pixel, validity checks); :func:`to_opencv_disparity` for OpenCV's int16 x16 format.
+- :func:`from_opencv_disparity`: OpenCV's int16 x16 output back to float pixels with NaN holes.
 - :func:`reproject`, :func:`write_ply`: disparity maps to XYZ point clouds and PLY files.
 - :mod:`stereodepth.reference`: the pure-numpy oracle of every native kernel.
+
+Every public submodule is an attribute of the package, imported on first use (PEP 562), so
+``import stereodepth`` stays light and optional extras load only when their module is used:
+``stereodepth.reference``, ``io``, ``metrics``, ``dask`` (the ``batch`` extra), ``calib``,
+``matching``, ``rig``, ``depth``, ``pointcloud``, ``evaluation``, ``batch``, ``plotting``
+(``plot``), ``charts``, ``web`` (``web``) and ``cli``.
 """
 
 from __future__ import annotations
 
+import importlib
 from typing import Any
 
 from . import _core
-from .depth import disparity_to_depth
+from .colormap import colorize, save_colorized
+from .depth import disparity_to_depth, from_opencv_disparity
 from .matching import StereoMatcher, block_match, to_opencv_disparity
 from .pointcloud import reproject, write_ply
 from .rig import DepthTable, StereoRig
@@ -27,8 +36,11 @@ __all__ = [
     "__version__",
     "block_match",
     "build_info",
+    "colorize",
     "disparity_to_depth",
+    "from_opencv_disparity",
     "reproject",
+    "save_colorized",
     "to_opencv_disparity",
     "write_ply",
 ]
@@ -43,3 +55,39 @@ def build_info() -> dict[str, Any]:
     ``pybind11`` and ``sanitizers``.
     """
     return dict(_core.build_info())
+
+
+#: The public submodules, reachable as attributes and imported on first access.
+_SUBMODULES: frozenset[str] = frozenset(
+    {
+        "batch",
+        "calib",
+        "charts",
+        "colormap",
+        "cli",
+        "dask",
+        "depth",
+        "evaluation",
+        "io",
+        "matching",
+        "metrics",
+        "plotting",
+        "pointcloud",
+        "reference",
+        "rig",
+        "sample",
+        "web",
+    }
+)
+
+
+def __getattr__(name: str) -> Any:
+    """Imports a public submodule on first access (PEP 562): ``stereodepth.reference``."""
+    if name in _SUBMODULES:
+        # import_module also binds the module as an attribute: this runs once per name.
+        return importlib.import_module(f"{__name__}.{name}")
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | _SUBMODULES)

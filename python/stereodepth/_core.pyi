@@ -15,7 +15,7 @@ def disparity_to_depth(
     min_depth_m: float,
     max_depth_m: float,
     invalid_value: float | None,
-    negative_invalid: bool,
+    invalid_below: float | None,
     threads: int,
     isa: str = "auto",
 ) -> None: ...
@@ -27,7 +27,7 @@ def reproject(
     min_depth: float,
     max_depth: float,
     invalid_value: float | None,
-    negative_invalid: bool,
+    invalid_below: float | None,
     threads: int,
     isa: str = "auto",
 ) -> None: ...

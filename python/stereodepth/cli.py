@@ -1,7 +1,10 @@
 """The ``stereodepth`` command: ``calc`` here; other subcommands register from their modules.
 
-Bad input prints one line, ``stereodepth <command>: error: ...``, and exits with status 2; a
-missing optional extra (matplotlib for ``--plot``, say) prints one line and exits with 1.
+Bad input prints one line, ``stereodepth <command>: error: ...``, and exits with status 2:
+the message names the option as the user typed it (``--subpixel-px``, not the library's
+``disparity_step_px``), and usage mistakes that argparse finds end with a pointer to
+``--help`` instead of the whole usage text. A missing optional extra (matplotlib for
+``--plot``, say) or a file that cannot be written prints one line and exits with 1.
 """
 
 from __future__ import annotations
@@ -14,7 +17,7 @@ import os
 import re
 import sys
 from collections.abc import Sequence
-from typing import Any
+from typing import Any, NoReturn
 
 from .rig import StereoRig
 
@@ -24,11 +27,47 @@ _SUBCOMMAND_MODULES: tuple[str, ...] = (
     "stereodepth.evaluation",
     "stereodepth.web.serve",
     "stereodepth.batch",
+    "stereodepth.match_command",
 )
 
 
 class UsageError(Exception):
     """Bad input on the command line: reported in one line, exit status 2."""
+
+
+def one_line(text: object) -> str:
+    """A message on one line: its lines joined with "; "."""
+    return "; ".join(line.strip() for line in str(text).strip().splitlines() if line.strip())
+
+
+class ArgumentParser(argparse.ArgumentParser):
+    """argparse, with usage errors in one line: ``PROG: error: MESSAGE (see PROG --help)``,
+    exit status 2. Subcommand parsers inherit the class (add_subparsers uses the parent's)."""
+
+    def error(self, message: str) -> NoReturn:
+        self.exit(2, f"{self.prog}: error: {one_line(message)} (see {self.prog} --help)\n")
+
+
+#: calc's options by the names the library gives them in its messages.
+_CALC_FLAGS: dict[str, str] = {
+    "baseline_mm": "--baseline-mm",
+    "focal_mm": "--focal-mm",
+    "pixel_um": "--pixel-um",
+    "focal_px": "--focal-px",
+    "doffs_px": "--doffs-px",
+    "width_px": "--width-px",
+    "height_px": "--height-px",
+    "disparity_px": "--disparity-px",
+    "disparity_step_px": "--subpixel-px",
+    "max_disparity_px": "--max-disparity-px",
+    "disparities_px": "--table-disparities-px",
+}
+_CALC_NAMES = re.compile(r"\b(" + "|".join(sorted(_CALC_FLAGS, key=len, reverse=True)) + r")\b")
+
+
+def _as_flags(message: str) -> str:
+    """A library message with calc's parameter names replaced by its options."""
+    return _CALC_NAMES.sub(lambda m: _CALC_FLAGS[m[1]], message)
 
 
 def key_value_option(text: str) -> tuple[str, Any]:
@@ -78,7 +117,7 @@ def _rig_from_args(args: argparse.Namespace) -> StereoRig:
 
 
 def _fmt(value: Any, unit: str = "", digits: int = 6) -> str:
-    if value is None:
+    if value is None:  # not applicable: the rig lacks what it needs (pixel size, width)
         return "-"
     if isinstance(value, float):
         if math.isinf(value):
@@ -158,15 +197,53 @@ def _add_calc(sub: Any) -> None:
         help="disparities for the table (default: 1 to 256 px)",
     )
     o = p.add_argument_group("output")
-    o.add_argument("--json", action="store_true", help="print one JSON object")
-    o.add_argument("--markdown", action="store_true", help="print the table as Markdown")
+    fmt = o.add_mutually_exclusive_group()
+    fmt.add_argument(
+        "--json",
+        action="store_true",
+        help="print one JSON object; JSON has no infinity, so an infinite value (the depth "
+        "at disparity 0) is null there, as is a value the rig cannot give (disparity_mm "
+        "without --pixel-um, the field of view without --width-px)",
+    )
+    fmt.add_argument("--markdown", action="store_true", help="print the table as Markdown")
     o.add_argument(
-        "--plot", metavar="PNG", help="write the two charts to this image (needs the 'plot' extra)"
+        "--plot",
+        metavar="FILE",
+        help="write the two charts to this file: PNG, SVG or PDF by its suffix (.png, .svg, "
+        ".pdf; needs the 'plot' extra)",
     )
     p.set_defaults(func=_run_calc)
+    p.epilog = (
+        "In the text output and the table an infinite value (the depth at disparity 0) is "
+        "inf and a value the rig cannot give is -; --json writes both as null."
+    )
 
 
 def _run_calc(args: argparse.Namespace) -> int:
+    try:
+        return _calc(args)
+    except (ValueError, TypeError) as exc:
+        raise UsageError(_as_flags(one_line(exc))) from exc
+
+
+def _calc(args: argparse.Namespace) -> int:
+    if not (math.isfinite(args.subpixel_px) and args.subpixel_px > 0):
+        raise UsageError(
+            "--subpixel-px must be the matcher's disparity step, a number > 0 (1 for a "
+            f"whole-pixel matcher, 0.25 for a quarter pixel), got {args.subpixel_px:g}"
+        )
+    if args.plot:
+        from pathlib import Path
+
+        from .plotting import FORMATS
+
+        out = Path(args.plot)
+        if out.suffix.lower() not in FORMATS:
+            raise UsageError(f"--plot must name a .png, .svg or .pdf file, got {args.plot!r}")
+        if not out.parent.is_dir():
+            raise UsageError(
+                f"--plot: the folder {str(out.parent)!r} does not exist, got {args.plot!r}"
+            )
     rig = _rig_from_args(args)
     summary = rig.summary(
         args.disparity_px,
@@ -187,7 +264,16 @@ def _run_calc(args: argparse.Namespace) -> int:
     if args.json:
         print(json.dumps(summary, indent=2, allow_nan=False))
         return 0
-    _print_summary(rig, summary)
+    _print_summary(
+        rig,
+        rig.summary(
+            args.disparity_px,
+            disparity_step_px=args.subpixel_px,
+            max_disparity_px=args.max_disparity_px,
+            table_disparities_px=args.table_disparities_px,
+            finite_only=False,
+        ),
+    )
     table = rig.table(args.table_disparities_px, disparity_step_px=args.subpixel_px)
     print()
     print(table.to_markdown() if args.markdown else table.to_text())
@@ -199,7 +285,7 @@ def _run_calc(args: argparse.Namespace) -> int:
 def build_parser() -> argparse.ArgumentParser:
     from . import __version__
 
-    parser = argparse.ArgumentParser(
+    parser = ArgumentParser(
         prog="stereodepth", description="Stereo depth, fast: calculator and tools."
     )
     parser.add_argument("--version", action="version", version=f"stereodepth {__version__}")
@@ -210,16 +296,26 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def _subparser(parser: argparse.ArgumentParser, command: str) -> argparse.ArgumentParser:
+    for action in parser._actions:  # argparse keeps its subcommands here
+        if isinstance(action, argparse._SubParsersAction) and command in action.choices:
+            found: argparse.ArgumentParser = action.choices[command]
+            return found
+    return parser
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     parser = build_parser()
-    args = parser.parse_args(argv)
+    args, extras = parser.parse_known_args(argv)
+    if extras:  # name the subcommand whose options these are not
+        _subparser(parser, args.command).error(f"unrecognized arguments: {' '.join(extras)}")
     try:
         return int(args.func(args))
     except (UsageError, ValueError, TypeError) as exc:
-        print(f"stereodepth {args.command}: error: {exc}", file=sys.stderr)
+        print(f"stereodepth {args.command}: error: {one_line(exc)}", file=sys.stderr)
         return 2
     except ImportError as exc:  # an optional extra that is not installed
-        print(f"stereodepth {args.command}: error: {exc}", file=sys.stderr)
+        print(f"stereodepth {args.command}: error: {one_line(exc)}", file=sys.stderr)
         return 1
     except KeyboardInterrupt:
         print(f"stereodepth {args.command}: interrupted", file=sys.stderr)
@@ -229,6 +325,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         # Python from failing again when it flushes stdout at exit.
         devnull = os.open(os.devnull, os.O_WRONLY)
         os.dup2(devnull, sys.stdout.fileno())
+        return 1
+    except OSError as exc:  # a file that cannot be read or written
+        print(f"stereodepth {args.command}: error: {one_line(exc)}", file=sys.stderr)
         return 1
 
 

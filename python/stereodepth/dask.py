@@ -57,7 +57,8 @@ def disparity_to_depth(disparity: Any, **options: Any) -> Any:
     """:func:`stereodepth.disparity_to_depth` on a dask array of disparity maps, (H, W) or
     (N, H, W) (any chunking: the conversion is per pixel). ``options`` are those of the numpy
     function (``focal_px``, ``baseline_m``, ``doffs_px``, ``scale``, ``dtype``, limits,
-    ``invalid_value``, ``threads``), checked now; ``out`` is not accepted."""
+    ``invalid_value``, ``min_disparity`` for OpenCV's int16, ``threads``), checked now;
+    ``out`` is not accepted."""
     import stereodepth
 
     d = _as_dask("disparity", disparity)

@@ -9,7 +9,11 @@ import numpy as np
 from . import _core
 from . import _validate as check
 
-__all__ = ["FLOAT32_MAX", "disparity_to_depth"]
+__all__ = ["FLOAT32_MAX", "disparity_to_depth", "from_opencv_disparity"]
+
+#: The largest ``|min_disparity|`` accepted, in pixels: far beyond any image width, small
+#: enough that the raw threshold stays an exact float.
+MAX_ABS_MIN_DISPARITY = 1 << 24
 
 #: The default upper depth limit: the largest finite float32, so infinite depth is invalid.
 FLOAT32_MAX = float(np.finfo(np.float32).max)
@@ -25,10 +29,10 @@ class DepthOptions:
         "doffs_px",
         "dtype",
         "focal_px",
+        "invalid_below",
         "invalid_value",
         "max_depth_m",
         "min_depth_m",
-        "negative_invalid",
         "scale",
     )
 
@@ -44,6 +48,7 @@ class DepthOptions:
         min_depth_m: Any,
         max_depth_m: Any,
         invalid_value: Any,
+        min_disparity: Any = None,
     ) -> None:
         self.focal_px = check.positive("focal_px", focal_px)
         self.baseline_m = check.positive("baseline_m", baseline_m)
@@ -76,14 +81,25 @@ class DepthOptions:
                     f"max_depth_m must be >= min_depth_m ({self.min_depth_m!r}), "
                     f"got {max_depth_m!r}"
                 )
-        # Which raw values mean "no disparity": OpenCV's int16 output marks holes with
-        # (min_disparity - 1) * 16, negative for min_disparity <= 0; KITTI's uint16 uses 0.
-        self.negative_invalid = False
+        # Which raw values mean "no disparity". OpenCV's int16 output marks holes with
+        # (min_disparity - 1) * 16: every raw value below min_disparity * 16 is a hole, and
+        # the rest are disparities, negative ones included. KITTI's uint16 uses 0.
+        md = None if min_disparity is None else check_min_disparity(min_disparity)
         if invalid_value is None:
             self.invalid_value: float | None = 0.0 if kind == np.uint16 else None
-            self.negative_invalid = kind == np.int16
+            if md is None and kind == np.int16:
+                md = 0  # OpenCV's default minDisparity
         else:
             self.invalid_value = check.real("invalid_value", invalid_value)
+        # The raw threshold: raw < min_disparity / scale is a hole (exact for int16 x16).
+        self.invalid_below: float | None = None if md is None else md / self.scale
+
+
+def check_min_disparity(value: Any) -> int:
+    """``min_disparity`` as an int in +-MAX_ABS_MIN_DISPARITY (TypeError, ValueError)."""
+    return check.integer(
+        "min_disparity", value, minimum=-MAX_ABS_MIN_DISPARITY, maximum=MAX_ABS_MIN_DISPARITY
+    )
 
 
 def as_disparity(disparity: Any, name: str = "disparity") -> np.ndarray:
@@ -134,6 +150,7 @@ def disparity_to_depth(
     min_depth_m: float | None = None,
     max_depth_m: float | None = None,
     invalid_value: float | None = None,
+    min_disparity: int | None = None,
     out: np.ndarray | None = None,
     threads: int | None = None,
 ) -> np.ndarray:
@@ -143,8 +160,9 @@ def disparity_to_depth(
     ----------
     disparity
         (H, W) or (N, H, W) array of float16, float32, float64, int16 or uint16.
-        int16 is read as OpenCV's fixed point (``scale`` defaults to 1/16, negative raw values
-        are holes); uint16 needs ``scale`` (1/256 for KITTI) and 0 is a hole.
+        int16 is read as OpenCV's fixed point (``scale`` defaults to 1/16; raw values below
+        ``min_disparity * 16`` are holes); uint16 needs ``scale`` (1/256 for KITTI) and 0 is
+        a hole.
     focal_px, baseline_m, doffs_px
         The rig: focal length in pixels, baseline in metres, and the difference of the two
         cameras' principal points in pixels (Middlebury's ``doffs``; 0 for most rigs).
@@ -157,7 +175,16 @@ def disparity_to_depth(
     min_depth_m, max_depth_m
         Depths outside this range are invalid. By default only non-finite depths are.
     invalid_value
-        A raw value that marks holes, replacing the per-dtype default above.
+        A raw value that marks holes, replacing the per-dtype default above (for int16, the
+        ``min_disparity`` rule then applies only when ``min_disparity`` is given too).
+    min_disparity
+        The smallest disparity the matcher searched, in pixels (OpenCV's ``minDisparity``):
+        raw values below ``min_disparity / scale`` are holes. OpenCV's StereoBM and
+        StereoSGBM write holes as ``(minDisparity - 1) * 16``, so for int16 input this must be
+        the matcher's ``minDisparity``; it defaults to 0, OpenCV's default. With a principal
+        point offset (``doffs_px > 0``) negative disparities are valid: pass the negative
+        ``min_disparity`` the matcher used. Other dtypes have no lower limit unless it is
+        given. Raises TypeError unless it is an integer.
     out
         A preallocated C-contiguous array of ``dtype`` and the input's shape to write into.
         It may be the input itself when the item sizes match (float32 in place).
@@ -182,6 +209,7 @@ def disparity_to_depth(
         min_depth_m=min_depth_m,
         max_depth_m=max_depth_m,
         invalid_value=invalid_value,
+        min_disparity=min_disparity,
     )
     nthreads = check.threads(threads)
     result = prepare_out(out, arr, opts.dtype)
@@ -201,7 +229,28 @@ def disparity_to_depth(
         opts.min_depth_m,
         opts.max_depth_m,
         opts.invalid_value,
-        opts.negative_invalid,
+        opts.invalid_below,
         nthreads,
     )
     return result
+
+
+def from_opencv_disparity(raw: Any, *, min_disparity: int = 0) -> np.ndarray:
+    """OpenCV's StereoBM / StereoSGBM output as float32 disparity in pixels, NaN for holes.
+
+    ``raw`` is the int16 map that ``compute`` returns (disparity x 16, 4 fractional bits);
+    ``min_disparity`` is the matcher's ``minDisparity`` (default 0, OpenCV's default). OpenCV
+    marks holes with ``(minDisparity - 1) * 16``: every raw value below ``min_disparity * 16``
+    becomes NaN, every other value ``raw / 16`` (negative disparities included, as a
+    negative ``minDisparity`` produces). The inverse of
+    :func:`stereodepth.to_opencv_disparity` with the same ``min_disparity``.
+
+    Raises TypeError unless ``raw`` is an int16 array and ``min_disparity`` an integer.
+    """
+    arr = raw if isinstance(raw, np.ndarray) else np.asarray(raw)
+    if arr.dtype != np.int16:
+        raise TypeError(f"raw must be OpenCV's int16 disparity (x16), got dtype {arr.dtype}")
+    md = check_min_disparity(min_disparity)
+    out: np.ndarray = arr.astype(np.float32) * np.float32(1 / 16)  # exact: a power of two
+    out[arr.astype(np.int32) < md * 16] = np.nan
+    return out

@@ -30,11 +30,12 @@ Methods
     ``opencv-sgbm``: ``cv2.StereoSGBM_create(minDisparity=0, numDisparities, blockSize,
     P1=8*bs*bs, P2=32*bs*bs)`` (the usual penalties for one channel; mode ``MODE_SGBM`` and the
     other parameters at OpenCV's defaults) on the same grey images; default block size 5.
-    OpenCV's int16 output (disparity x 16) becomes float32 / 16 with its negative values
-    (no match) as NaN. OpenCV runs only when ``cv2`` imports; otherwise its methods are skipped
-    with a note. ``METHOD:9,15`` (or ``--block-size 9 15``) runs a method with each block size
-    and adds a ``best=`` row per scene: the block size with the lowest ``--best-by`` metric
-    (bad-2 by default).
+    OpenCV's int16 output (disparity x 16) becomes float32 / 16 with the values below
+    ``minDisparity * 16`` = 0 (no match; OpenCV writes ``(minDisparity - 1) * 16``) as NaN,
+    by :func:`stereodepth.from_opencv_disparity`. OpenCV runs only when ``cv2`` imports;
+    otherwise its methods are skipped with a note. ``METHOD:9,15`` (or ``--block-size 9 15``)
+    runs a method with each block size and adds a ``best=`` row per scene: the block size with
+    the lowest ``--best-by`` metric (bad-2 by default).
 
 Timing
     Each method is run once to warm up, then ``--repeat`` times (default 3); the time is the
@@ -71,6 +72,7 @@ import numpy as np
 
 from . import _validate as check
 from .cli import key_value_option
+from .depth import from_opencv_disparity
 from .metrics import DisparityMetrics, evaluate
 
 __all__ = [
@@ -360,9 +362,8 @@ def _opencv_factory(
                 raw = matcher.compute(grey(left, variant.method), grey(right, variant.method))
             except cv2.error as exc:
                 raise ValueError(f"{variant.method} failed: {_cv_message(exc)}") from exc
-            disparity: np.ndarray = raw.astype(np.float32) * np.float32(1 / 16)
-            disparity[raw < 0] = np.nan
-            return disparity
+            # eval searches from 0 (minDisparity=0): holes are the raw values below 0.
+            return from_opencv_disparity(raw, min_disparity=0)
 
         return match
 
@@ -842,6 +843,45 @@ def _matcher_default_block_size() -> int:
     return default
 
 
+def _check_matcher_options(options: dict[str, Any]) -> None:
+    """Checks ``--option`` against stereodepth's matcher before any scene is read: an unknown
+    name, or a value the matcher refuses, is a usage error naming the option as typed."""
+    import inspect
+
+    from stereodepth import matching
+
+    if not options:
+        return
+    known: list[str] = []
+    for func in (matching.block_match, matching.StereoMatcher.__init__):
+        for name, param in inspect.signature(func).parameters.items():
+            if (
+                param.kind is inspect.Parameter.KEYWORD_ONLY
+                and name not in _RESERVED_OPTIONS
+                and name not in known
+            ):
+                known.append(name)
+    for key in options:
+        if key not in known:
+            raise _usage_error(
+                f"--option {key}: stereodepth's matcher has no option {key!r}; "
+                f"it takes {', '.join(known)}"
+            )
+    try:
+        matching.StereoMatcher(num_disparities=16, **options)
+    except (TypeError, ValueError) as exc:
+        message = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+        culprit = next((k for k in options if message.startswith(k)), None)
+
+        def as_typed(key: str) -> str:
+            value = options[key]
+            shown = str(value).lower() if value is None or isinstance(value, bool) else value
+            return f"{key}={shown}"
+
+        typed = as_typed(culprit) if culprit is not None else " ".join(map(as_typed, options))
+        raise _usage_error(f"--option {typed}: {message}") from None
+
+
 def _jsonable(value: Any) -> Any:
     if isinstance(value, float) and not math.isfinite(value):
         return None
@@ -854,6 +894,9 @@ def _jsonable(value: Any) -> Any:
 
 def run(args: argparse.Namespace) -> int:
     """Runs ``stereodepth eval``; returns the exit status."""
+    from ._extras import require
+
+    require("PIL.Image", "reading images")  # before any work: one line with the install hint
     if args.repeat < 1:
         raise ValueError(f"--repeat must be an integer >= 1, got {args.repeat}")
     if args.threads < 0:
@@ -878,6 +921,7 @@ def run(args: argparse.Namespace) -> int:
     methods = {v.method for v in variants}
     if options and "stereodepth" not in methods:
         raise _usage_error("--option is for stereodepth.block_match: add --method stereodepth")
+    _check_matcher_options(options)
     cv2: Any = None
     if methods & set(_OPENCV_METHODS):
         try:
@@ -893,6 +937,8 @@ def run(args: argparse.Namespace) -> int:
             notes.append(f"skipped {skipped}: OpenCV is not installed {how}")
         else:
             for key in opencv_options:
+                if key in ("num_disparities", "min_disparity", "block_size"):
+                    raise _usage_error(f"--opencv-option {key}: {_RESERVED_OPTIONS[key]}")
                 probes = [
                     cv2.StereoBM_create() if m == "opencv-bm" else cv2.StereoSGBM_create()
                     for m in methods & set(_OPENCV_METHODS)

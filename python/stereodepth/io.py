@@ -1,6 +1,8 @@
-"""Reading and writing images and maps: PNG (8/16-bit), PFM, and atomic writes.
+"""Reading and writing images and maps: PNG (8/16-bit), PFM, PBM/PGM/PPM, and atomic writes.
 
-Needs Pillow for PNG (the ``batch`` extra): ``pip install "stereodepth[batch]"``.
+PFM and netpbm headers are parsed exactly (see :func:`read_pfm`, :func:`read_pnm`): a file
+whose header or size does not add up is refused, never read shifted. Needs Pillow for PNG
+(the ``batch`` extra): ``pip install "stereodepth[batch]"``.
 """
 
 from __future__ import annotations
@@ -20,6 +22,7 @@ __all__ = [
     "atomic_write",
     "read_image",
     "read_pfm",
+    "read_pnm",
     "remove_temp_files",
     "write_disparity_png16",
     "write_npy",
@@ -42,12 +45,18 @@ def _pil() -> Any:
 def read_image(path: str | os.PathLike[str]) -> np.ndarray:
     """An image file as a numpy array: (H, W) uint8 or uint16 grey, or (H, W, 3) uint8 RGB.
 
-    Palette and grey-alpha images become grey or RGB; an alpha channel is dropped. Raises
-    FileNotFoundError for a missing file and ValueError naming the file when it cannot be
-    decoded."""
+    PBM, PGM and PPM files (netpbm P1 to P6, told by their first two bytes) are read by
+    :func:`read_pnm`, exactly, with their samples as stored (a 16-bit PPM gives (H, W, 3)
+    uint16); every other format by Pillow. Palette and grey-alpha images become grey or RGB;
+    an alpha channel is dropped. Raises FileNotFoundError for a missing file and ValueError
+    naming the file when it cannot be decoded."""
     p = Path(path)
     if not p.is_file():
         raise FileNotFoundError(f"image not found: {p}")
+    with p.open("rb") as f:
+        magic = f.read(2)
+    if magic in _PNM_KINDS:
+        return read_pnm(p)
     Image = _pil()
     try:
         with Image.open(p) as im:
@@ -209,33 +218,196 @@ def write_pfm(path: str | os.PathLike[str], array: np.ndarray, *, scale: float =
 def read_pfm(path: str | os.PathLike[str]) -> np.ndarray:
     """A PFM file as float32 (H, W) or (H, W, 3), rows top to bottom, in native byte order.
 
-    Raises FileNotFoundError for a missing file and ValueError naming the file when its
-    header or size is wrong."""
+    The format (Paul Debevec's, as Middlebury and netpbm write it): ``PF`` (colour) or ``Pf``
+    (grey), the width and the height, the scale (its sign gives the byte order: negative
+    little-endian, positive big-endian), separated by whitespace, then exactly
+    width * height * channels float32 values, rows bottom to top. The header is parsed
+    exactly: line breaks LF or CR LF, trailing spaces or tabs on a line; its last line must
+    end with LF or CR LF, so that a data byte 0x0D or 0x0A right after it stays data, and
+    the body must have exactly the size the header gives. PFM has no comments: a ``#`` in
+    the header is refused.
+
+    Raises FileNotFoundError for a missing file and ValueError naming the file and the fault:
+    a bad magic, a non-numeric, zero or negative width or height, a non-numeric, zero or
+    non-finite scale, a comment, a truncated body or extra bytes."""
     p = Path(path)
     if not p.is_file():
         raise FileNotFoundError(f"PFM file not found: {p}")
     data = p.read_bytes()
-    # The header: three whitespace-separated tokens after the magic, each writer laying out
-    # the line breaks a little differently; one whitespace byte ends it.
-    m = re.match(rb"(P[Ff])\s+(\d+)\s+(\d+)\s+([-+0-9.eE]+)\s", data)
-    if m is None:
-        raise ValueError(f"{p}: not a PFM file (header {data[:32]!r})")
-    channels = 3 if m.group(1) == b"PF" else 1
-    width, height = int(m.group(2)), int(m.group(3))
-    try:
-        scale = float(m.group(4))
-    except ValueError as exc:
-        raise ValueError(f"{p}: bad PFM scale {m.group(4)!r}") from exc
-    if scale == 0:
-        raise ValueError(f"{p}: bad PFM scale 0 (its sign gives the byte order)")
-    dtype = np.dtype("<f4" if scale < 0 else ">f4")
-    count = width * height * channels
-    body = data[m.end() :]
-    if len(body) < count * 4:
+    if data[:2] not in (b"PF", b"Pf") or not data[2:3].isspace():
+        raise ValueError(f"{p}: not a PFM file: it must start with 'PF' or 'Pf', got {data[:8]!r}")
+    channels = 3 if data[:2] == b"PF" else 1
+    tokens, end = _header_tokens(p, data, 3, comments=False, what="PFM")
+    width = _size(p, tokens[0], "width", "PFM")
+    height = _size(p, tokens[1], "height", "PFM")
+    if _FLOAT_RE.fullmatch(tokens[2]) is None:
+        raise ValueError(f"{p}: PFM scale must be a number, got {tokens[2]!r}")
+    scale = float(tokens[2])
+    if scale == 0 or not np.isfinite(scale):
         raise ValueError(
-            f"{p}: truncated PFM: {width}x{height}x{channels} needs {count * 4} bytes of data, "
-            f"got {len(body)}"
+            f"{p}: bad PFM scale {tokens[2]!r}: it must be finite and not 0 (its sign gives "
+            "the byte order)"
         )
-    a = np.frombuffer(body, dtype=dtype, count=count)
+    count = width * height * channels
+    desc = f"{width}x{height}x{channels} PFM"
+    body = _body(p, data, end, count * 4, desc)
+    a = np.frombuffer(body, dtype="<f4" if scale < 0 else ">f4", count=count)
     shape = (height, width) if channels == 1 else (height, width, 3)
     return a.reshape(shape)[::-1].astype(np.float32)  # native order, top to bottom, a copy
+
+
+# --- exact headers: PFM and PNM ---------------------------------------------------------------
+_FLOAT_RE = re.compile(r"[-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?")
+#: What may lie between a header's last token and its data: spaces or tabs, then LF or CR LF.
+#: No proper prefix of one of these is another, so a body one byte short is never read as a
+#: header ending in a lone CR or space.
+_HEADER_END_RE = re.compile(rb"[ \t]*\r?\n")
+#: Between header tokens: whitespace and, where the format allows them, # comments to the end
+#: of the line (CR or LF).
+_SEP_RE = re.compile(rb"\s+")
+_SEP_COMMENTS_RE = re.compile(rb"(?:\s|#[^\r\n]*)+")
+_TOKEN_RE = re.compile(rb"[^\s#]+")
+
+
+def _header_tokens(
+    p: Path, data: bytes, count: int, *, comments: bool, what: str
+) -> tuple[list[str], int]:
+    """The ``count`` header tokens after the 2-byte magic and the offset where the last ends."""
+    sep = _SEP_COMMENTS_RE if comments else _SEP_RE
+    pos = 2
+    tokens: list[str] = []
+    for _ in range(count):
+        m = sep.match(data, pos)
+        if m is None:
+            break
+        pos = m.end()
+        if not comments and data[pos : pos + 1] == b"#":
+            raise ValueError(f"{p}: {what} headers have no comments, got a '#' at byte {pos}")
+        t = _TOKEN_RE.match(data, pos)
+        if t is None:
+            break
+        tokens.append(t.group().decode("latin-1"))
+        pos = t.end()
+    if len(tokens) < count:
+        raise ValueError(
+            f"{p}: incomplete {what} header: expected {count} fields after the magic, got "
+            f"{len(tokens)} ({data[:40]!r})"
+        )
+    return tokens, pos
+
+
+def _size(p: Path, token: str, name: str, what: str) -> int:
+    if not token.isdigit() or not token.isascii() or int(token) <= 0:
+        raise ValueError(f"{p}: {what} {name} must be a whole number > 0, got {token!r}")
+    return int(token)
+
+
+def _body(p: Path, data: bytes, token_end: int, size: int, desc: str) -> bytes:
+    """The last ``size`` bytes of ``data``, after checking that what lies between the
+    header's last token (ending at ``token_end``) and them is one header line end."""
+    start = len(data) - size
+    gap = data[token_end:start] if start >= token_end else b""
+    if _HEADER_END_RE.fullmatch(gap) is not None:
+        return data[start:]
+    end = _HEADER_END_RE.match(data, token_end)
+    if end is None and token_end < len(data):
+        raise ValueError(
+            f"{p}: {desc}: the header must end with one line break (LF or CR LF), got "
+            f"{data[token_end : token_end + 4]!r}"
+        )
+    avail = len(data) - (end.end() if end is not None else token_end)
+    if avail < size:
+        raise ValueError(f"{p}: truncated {desc}: needs {size} bytes of data, got {avail}")
+    raise ValueError(
+        f"{p}: {desc} has {avail - size} bytes more than its header and {size} bytes of data"
+    )
+
+
+#: PNM magic numbers: (name, samples per pixel, plain (ASCII) raster, has a maxval).
+_PNM_KINDS = {
+    b"P1": ("PBM", 1, True, False),
+    b"P2": ("PGM", 1, True, True),
+    b"P3": ("PPM", 3, True, True),
+    b"P4": ("PBM", 1, False, False),
+    b"P5": ("PGM", 1, False, True),
+    b"P6": ("PPM", 3, False, True),
+}
+
+
+def read_pnm(path: str | os.PathLike[str]) -> np.ndarray:
+    """A netpbm PBM, PGM or PPM file (P1 to P6) as a numpy array, the samples as stored.
+
+    PGM gives (H, W) and PPM (H, W, 3) RGB, uint8 when the maxval is below 256 and uint16
+    otherwise (big-endian on disk), never rescaled to the maxval: a 12-bit image with maxval
+    4095 reads as 0..4095, as ``cv2.imread(path, cv2.IMREAD_UNCHANGED)`` reads it (Pillow
+    stretches it to 0..65535). PBM gives (H, W) uint8, 0 for black (1 in the file) and 255
+    for white.
+
+    The header follows the netpbm specification (netpbm.sourceforge.net/doc/pgm.html):
+    whitespace-separated fields with ``#`` comments to the end of a line; line breaks LF or
+    CR LF. The one deviation: a binary file's header must end with LF or CR LF (after
+    optional spaces or tabs), not with a lone space or CR, so that a data byte 0x0D or 0x0A
+    right after the header stays data and a body one byte short is refused rather than read
+    shifted. The body must have exactly the size the header gives; a plain (ASCII) raster
+    exactly width * height * samples values.
+
+    Raises FileNotFoundError for a missing file and ValueError naming the file and the fault:
+    a bad magic (PAM, P7, is not read), non-numeric, zero or negative width, height or
+    maxval, a maxval above 65535, a sample above the maxval, a truncated body or extra
+    bytes."""
+    p = Path(path)
+    if not p.is_file():
+        raise FileNotFoundError(f"PNM file not found: {p}")
+    data = p.read_bytes()
+    kind = _PNM_KINDS.get(data[:2])
+    if kind is None or not (data[2:3].isspace() or data[2:3] == b"#"):
+        raise ValueError(
+            f"{p}: not a PBM/PGM/PPM file: it must start with P1 to P6, got {data[:8]!r}"
+        )
+    name, samples, plain, has_maxval = kind
+    tokens, end = _header_tokens(p, data, 3 if has_maxval else 2, comments=True, what=name)
+    width = _size(p, tokens[0], "width", name)
+    height = _size(p, tokens[1], "height", name)
+    maxval = _size(p, tokens[2], "maxval", name) if has_maxval else 1
+    if maxval > 65535:
+        raise ValueError(f"{p}: {name} maxval must be at most 65535, got {maxval}")
+    dtype = np.dtype(np.uint8 if maxval < 256 else np.uint16)
+    count = width * height * samples
+    desc = f"{width}x{height} {name}" + (f" with maxval {maxval}" if has_maxval else "")
+    shape = (height, width) if samples == 1 else (height, width, samples)
+    if plain:
+        rest = data[end:]
+        if rest[:1] and not rest[:1].isspace():
+            raise ValueError(f"{p}: {name} header must end with whitespace, got {rest[:8]!r}")
+        if not has_maxval:  # P1: one character per pixel, whitespace anywhere
+            raster = bytes(rest.translate(None, b" \t\r\n\v\f"))
+            bad = raster.translate(None, b"01")
+            if bad:
+                raise ValueError(f"{p}: PBM samples must be 0 or 1, got {bad[:8]!r}")
+            values = np.frombuffer(raster, np.uint8) - ord("0")
+        else:
+            words = rest.split()
+            if not all(w.isdigit() for w in words):
+                first = next(w for w in words if not w.isdigit())
+                raise ValueError(f"{p}: {name} samples must be whole numbers, got {first[:16]!r}")
+            if len(words) != count:
+                raise ValueError(f"{p}: {desc} needs {count} samples, got {len(words)}")
+            if max(len(w.lstrip(b"0")) for w in words) > 5:  # keeps int64 from overflowing
+                raise ValueError(f"{p}: {desc} has a sample above the maxval")
+            values = np.array([int(w) for w in words], dtype=np.int64)
+        if len(values) != count:
+            raise ValueError(f"{p}: {desc} needs {count} samples, got {len(values)}")
+    elif not has_maxval:  # P4: rows of bits, each row padded to a whole byte
+        row_bytes = (width + 7) // 8
+        body = _body(p, data, end, row_bytes * height, desc)
+        bits = np.unpackbits(np.frombuffer(body, np.uint8).reshape(height, row_bytes), axis=1)
+        values = bits[:, :width]
+    else:
+        body = _body(p, data, end, count * dtype.itemsize, desc)
+        values = np.frombuffer(body, dtype.newbyteorder(">"), count=count)
+    if not has_maxval:
+        return np.ascontiguousarray(np.where(values.reshape(shape) == 1, 0, 255).astype(np.uint8))
+    top = int(values.max())
+    if top > maxval:
+        raise ValueError(f"{p}: {desc} has a sample {top} above the maxval")
+    return values.astype(dtype).reshape(shape)

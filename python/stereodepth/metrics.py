@@ -6,7 +6,9 @@ The convention is the one of the Middlebury stereo evaluation, also used by our 
 - The *evaluated* pixels are those whose ground truth is finite and, when a mask is given,
   where the mask is true (typically the non-occluded pixels).
 - An evaluated pixel has an *estimate* when its disparity is finite; NaN (or any non-finite
-  value) is a hole.
+  value) is a hole. OpenCV's int16 output (disparity x 16) is read with the matcher's
+  ``min_disparity``: raw values below ``min_disparity * 16`` are holes (OpenCV writes
+  ``(minDisparity - 1) * 16``), the rest are disparities, negative ones included.
 - ``bad_t`` is the fraction of evaluated pixels whose estimate is missing or off by more than
   ``t`` pixels: holes count as bad. ``bad_t_est`` is the same fraction among the evaluated
   pixels that have an estimate (holes left out).
@@ -22,6 +24,8 @@ from dataclasses import asdict, dataclass
 from typing import Any
 
 import numpy as np
+
+from .depth import check_min_disparity, from_opencv_disparity
 
 __all__ = ["BAD_THRESHOLDS_PX", "DisparityMetrics", "evaluate"]
 
@@ -86,8 +90,9 @@ def _float_map(name: str, value: Any, what: str) -> np.ndarray:
         hint = ""
         if name == "disparity" and arr.dtype == np.int16:
             hint = (
-                "; OpenCV's fixed-point output must be converted first: "
-                "d = raw.astype(np.float32) / 16 with d[raw < 0] = np.nan"
+                "; for OpenCV's fixed-point output (x16) pass the matcher's minDisparity as "
+                "min_disparity (its holes are the values below min_disparity * 16), or convert "
+                "with stereodepth.from_opencv_disparity(raw, min_disparity=...)"
             )
         elif name == "disparity" and arr.dtype == np.uint16:
             hint = (
@@ -102,32 +107,47 @@ def _float_map(name: str, value: Any, what: str) -> np.ndarray:
     return arr
 
 
-def evaluate(disparity: Any, gt: Any, mask: Any = None) -> DisparityMetrics:
+def evaluate(
+    disparity: Any, gt: Any, mask: Any = None, *, min_disparity: int | None = None
+) -> DisparityMetrics:
     """Scores an estimated disparity map against the ground truth.
 
     Parameters
     ----------
     disparity
         (H, W) float16/32/64 disparity of the left image in pixels, NaN where there is no
-        estimate (the output of :func:`stereodepth.block_match`). Integer encodings are
-        rejected: convert OpenCV's int16 (x16) output with ``raw.astype(np.float32) / 16`` and
-        its negative values to NaN, KITTI's uint16 (x256) with ``/ 256`` and 0 to NaN.
+        estimate (the output of :func:`stereodepth.block_match`), or OpenCV's int16 (x16)
+        output as ``StereoBM`` / ``StereoSGBM`` return it, with ``min_disparity``. KITTI's
+        uint16 (x256) is rejected: convert it with ``/ 256`` and 0 to NaN.
     gt
         (H, W) floating-point ground-truth disparity; non-finite values (NaN, or inf as in
         Middlebury's PFM files) mark unknown pixels, which are not evaluated.
     mask
         Optional (H, W) bool array: only pixels where it is true are evaluated (for example
         the non-occluded pixels).
+    min_disparity
+        The smallest disparity the matcher searched, in pixels; disparities below it are
+        holes. int16 input needs it: it is OpenCV's ``minDisparity``, and raw values below
+        ``min_disparity * 16`` are holes, as :func:`stereodepth.from_opencv_disparity` decodes
+        them (the score must not guess the hole marker, so there is no default here). For
+        float input there is no lower limit unless it is given.
 
     Returns
     -------
     DisparityMetrics
         Density, bad-pixel rates with and without holes, mean and RMS error.
 
-    Raises TypeError for a non-float disparity or ground truth or a non-bool mask, and
-    ValueError for shapes that are not (H, W) or do not match.
+    Raises TypeError for a disparity that is neither float nor int16, a non-float ground
+    truth, a non-bool mask or a non-integer ``min_disparity``, and ValueError for shapes that
+    are not (H, W) or do not match.
     """
+    md = None if min_disparity is None else check_min_disparity(min_disparity)
+    if md is not None and isinstance(disparity, np.ndarray) and disparity.dtype == np.int16:
+        disparity = from_opencv_disparity(disparity, min_disparity=md)
     d = _float_map("disparity", disparity, "pixels, NaN for holes")
+    if md is not None:
+        with np.errstate(invalid="ignore"):
+            d = np.where(d < md, np.nan, d)
     g = _float_map("gt", gt, "pixels, NaN where unknown")
     if g.shape != d.shape:
         raise ValueError(f"gt must have the shape of disparity {d.shape}, got {g.shape}")

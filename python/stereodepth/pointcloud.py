@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import errno
 import os
 from typing import Any
 
@@ -46,7 +47,7 @@ def q_matrix(
 class ReprojectOptions:
     """The checked, resolved options shared by the native kernel and the numpy oracle."""
 
-    __slots__ = ("Q", "invalid_value", "max_depth_m", "min_depth_m", "negative_invalid", "scale")
+    __slots__ = ("Q", "invalid_below", "invalid_value", "max_depth_m", "min_depth_m", "scale")
 
     def __init__(
         self,
@@ -62,6 +63,7 @@ class ReprojectOptions:
         min_depth_m: Any,
         max_depth_m: Any,
         invalid_value: Any,
+        min_disparity: Any = None,
     ) -> None:
         rig = {
             "focal_px": focal_px,
@@ -105,12 +107,13 @@ class ReprojectOptions:
             min_depth_m=min_depth_m,
             max_depth_m=max_depth_m,
             invalid_value=invalid_value,
+            min_disparity=min_disparity,
         )
         self.scale = o.scale
         self.min_depth_m = o.min_depth_m
         self.max_depth_m = o.max_depth_m
         self.invalid_value = o.invalid_value
-        self.negative_invalid = o.negative_invalid
+        self.invalid_below = o.invalid_below
 
 
 def _as_q(Q: Any) -> np.ndarray:
@@ -158,6 +161,7 @@ def reproject(
     min_depth_m: float | None = None,
     max_depth_m: float | None = None,
     invalid_value: float | None = None,
+    min_disparity: int | None = None,
     out: np.ndarray | None = None,
     threads: int | None = None,
 ) -> np.ndarray:
@@ -171,7 +175,9 @@ def reproject(
     ----------
     disparity
         (H, W) or (N, H, W) array of float16, float32, float64, int16 or uint16, with the
-        conventions of :func:`stereodepth.disparity_to_depth` (``scale``, ``invalid_value``).
+        conventions of :func:`stereodepth.disparity_to_depth` (``scale``, ``invalid_value``,
+        ``min_disparity``): for OpenCV's int16 output pass the matcher's ``minDisparity`` as
+        ``min_disparity`` (default 0), since raw values below ``min_disparity * 16`` are holes.
     Q
         OpenCV's 4x4 reprojection matrix (from ``cv2.stereoRectify``):
         [X Y Z W]^T = Q [x y d 1]^T. The points come out in the units of its translation.
@@ -204,6 +210,7 @@ def reproject(
         min_depth_m=min_depth_m,
         max_depth_m=max_depth_m,
         invalid_value=invalid_value,
+        min_disparity=min_disparity,
     )
     nthreads = check.threads(threads)
     result = prepare_points_out(out, arr)
@@ -223,7 +230,7 @@ def reproject(
         opts.min_depth_m,
         opts.max_depth_m,
         opts.invalid_value,
-        opts.negative_invalid,
+        opts.invalid_below,
         nthreads,
     )
     return result
@@ -267,9 +274,23 @@ def write_ply(
     the shape of ``points`` or grey without the last axis (the left image, for a point cloud
     from :func:`reproject`). Returns the number of points written.
 
-    Vertex properties: float x, y, z, and uchar red, green, blue when coloured."""
+    Vertex properties: float x, y, z, and uchar red, green, blue when coloured.
+
+    Raises TypeError for a ``path`` that is not a str or os.PathLike, FileNotFoundError
+    (naming ``path``) when its folder does not exist, before any work, and OSError naming
+    ``path`` when it cannot be written; ``path`` is then left as it was."""
     from .io import atomic_write
 
+    if not isinstance(path, (str, os.PathLike)):
+        raise TypeError(f"path must be a str or os.PathLike, got {type(path).__name__} {path!r}")
+    target = os.fspath(path)
+    folder = os.path.dirname(os.path.abspath(target))
+    if not os.path.isdir(folder):
+        raise FileNotFoundError(
+            errno.ENOENT, f"cannot write the PLY file: the folder {folder!r} does not exist", target
+        )
+    if os.path.isdir(target):
+        raise IsADirectoryError(errno.EISDIR, "cannot write the PLY file over a folder", target)
     if comment is not None and not (isinstance(comment, str) and comment.isascii()):
         raise ValueError(f"comment must be ASCII text (PLY headers are ASCII), got {comment!r}")
     pts = np.asarray(points)
@@ -293,7 +314,15 @@ def write_ply(
     if comment:
         header += [f"comment {line}" for line in comment.splitlines()]
     header += [f"element vertex {n}", *properties, "end_header"]
-    with atomic_write(path) as f:
-        f.write(("\n".join(header) + "\n").encode("ascii"))
-        f.write(vertex.tobytes())
+    try:
+        with atomic_write(target) as f:
+            f.write(("\n".join(header) + "\n").encode("ascii"))
+            f.write(vertex.tobytes())
+    except OSError as exc:
+        if exc.filename == target:
+            raise
+        # The error names our temporary file: name the user's path instead.
+        raise OSError(
+            exc.errno, f"cannot write the PLY file: {exc.strerror or exc}", target
+        ) from None
     return n

@@ -29,6 +29,7 @@ def disparity_to_depth(
     min_depth_m: float | None = None,
     max_depth_m: float | None = None,
     invalid_value: float | None = None,
+    min_disparity: int | None = None,
     out: np.ndarray | None = None,
     threads: int | None = None,
 ) -> np.ndarray:
@@ -44,6 +45,7 @@ def disparity_to_depth(
         min_depth_m=min_depth_m,
         max_depth_m=max_depth_m,
         invalid_value=invalid_value,
+        min_disparity=min_disparity,
     )
     check.threads(threads)
     result = prepare_out(out, arr, o.dtype)
@@ -58,8 +60,8 @@ def disparity_to_depth(
             ok = (den > 0) & (z >= np.float32(o.min_depth_m)) & (z <= np.float32(o.max_depth_m))
             if o.invalid_value is not None:
                 ok &= d != np.float32(o.invalid_value)
-            if o.negative_invalid:
-                ok &= d >= 0
+            if o.invalid_below is not None:
+                ok &= d >= np.float32(o.invalid_below)
             depth = np.where(ok, z, np.float32(np.nan))
         else:
             # float64 arithmetic (float64 input, or millimetre output).
@@ -77,8 +79,8 @@ def disparity_to_depth(
                 ok = (den > 0) & (z >= o.min_depth_m) & (z <= o.max_depth_m)
             if o.invalid_value is not None:
                 ok &= d != o.invalid_value
-            if o.negative_invalid:
-                ok &= d >= 0
+            if o.invalid_below is not None:
+                ok &= d >= o.invalid_below
             if o.dtype == np.float32:
                 depth = np.where(ok, zf, np.float32(np.nan))
             else:
@@ -101,6 +103,7 @@ def reproject(
     min_depth_m: float | None = None,
     max_depth_m: float | None = None,
     invalid_value: float | None = None,
+    min_disparity: int | None = None,
     out: np.ndarray | None = None,
     threads: int | None = None,
 ) -> np.ndarray:
@@ -120,6 +123,7 @@ def reproject(
         min_depth_m=min_depth_m,
         max_depth_m=max_depth_m,
         invalid_value=invalid_value,
+        min_disparity=min_disparity,
     )
     check.threads(threads)
     result = prepare_points_out(out, arr)
@@ -151,8 +155,8 @@ def reproject(
             ok &= raw != o.invalid_value
         else:
             ok &= arr.astype(np.float32) != np.float32(o.invalid_value)
-    if o.negative_invalid:
-        ok &= raw >= 0
+    if o.invalid_below is not None:
+        ok &= raw >= o.invalid_below
     for i, c in enumerate(xyz):
         result[..., i] = np.where(ok, c, np.float32(np.nan))
     return result

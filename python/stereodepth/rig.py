@@ -233,6 +233,7 @@ class StereoRig:
         return self._doffs_px
 
     def __repr__(self) -> str:
+        """The Python call that builds this rig, ``eval``-able with StereoRig in scope."""
         if self._focal_mm is not None:
             core = (
                 f"baseline_mm={self._baseline_mm!r}, focal_mm={self._focal_mm!r}, "
@@ -246,7 +247,9 @@ class StereoRig:
             core += f", width_px={self._width_px!r}"
         if self._height_px is not None:
             core += f", height_px={self._height_px!r}"
-        return f"StereoRig({core})"
+        # The call that builds this rig: a rig in pixels comes from from_pixels.
+        maker = "StereoRig" if self._focal_mm is not None else "StereoRig.from_pixels"
+        return f"{maker}({core})"
 
     @property
     def _bf_m_px(self) -> float:
@@ -261,6 +264,11 @@ class StereoRig:
         if np.any(bad):
             first = d[bad].flat[0] if d.ndim else d
             rule = f"finite and >= {max(0.0, -self._doffs_px):g}"
+            if self._doffs_px < 0:
+                rule += (
+                    f" (with doffs_px {self._doffs_px:g}, a disparity below "
+                    f"{-self._doffs_px:g} px puts the point behind the cameras)"
+                )
             raise ValueError(f"{name} must be {rule}, got {float(first)!r}")
         return d
 
@@ -423,10 +431,13 @@ class StereoRig:
         disparity_step_px: float = 1.0,
         max_disparity_px: float | None = None,
         table_disparities_px: Sequence[float] | np.ndarray | None = None,
+        finite_only: bool = True,
     ) -> dict[str, Any]:
         """Every result of the calculator as one JSON-ready dict: what the CLI prints and the
         web page shows. Values that need something the rig lacks (the pixel size, the image
-        width, a disparity) and non-finite values are None.
+        width, a disparity) are None. So are infinite values (the depth at disparity 0, and
+        its depth resolution), since JSON has no infinity; with ``finite_only=False`` they
+        stay ``inf`` (for display: the CLI's text output and table show ``inf``).
 
         Keys: ``focal_px``, ``max_depth_m``, ``hfov_deg``, ``vfov_deg``, ``disparity_px``,
         ``depth_m``, ``disparity_mm``, ``depth_resolution_m`` (1 px step, first order),
@@ -459,17 +470,26 @@ class StereoRig:
                 out["depth_resolution_m"] = float(self.depth_resolution_m(z))
                 out["depth_resolution_exact_m"] = float(self.depth_resolution_m(z, exact=True))
                 out["depth_resolution_subpx_m"] = float(self.depth_resolution_m(z, step))
+            elif z == math.inf:  # at infinity every disparity error is an infinite depth error
+                out["depth_resolution_m"] = math.inf
+                out["depth_resolution_exact_m"] = math.inf
+                out["depth_resolution_subpx_m"] = math.inf
         if max_disparity_px is not None:
             out["max_disparity_px"] = check.positive("max_disparity_px", max_disparity_px)
             out["min_depth_m"] = self.min_depth_m(max_disparity_px)
+        if not isinstance(finite_only, bool):
+            raise TypeError(
+                f"finite_only must be a bool, got {type(finite_only).__name__} {finite_only!r}"
+            )
         table = self.table(table_disparities_px, disparity_step_px=step)
-        out["table"] = [
-            {k: (v if math.isfinite(v) else None) for k, v in row.items()} for row in table
-        ]
-        for key, value in out.items():
-            if isinstance(value, float) and not math.isfinite(value):
-                out[key] = None
-        return out
+
+        def shown(v: Any) -> Any:
+            if isinstance(v, float) and not math.isfinite(v) and (finite_only or math.isnan(v)):
+                return None
+            return v
+
+        out["table"] = [{k: shown(v) for k, v in row.items()} for row in table]
+        return {k: (v if k == "table" else shown(v)) for k, v in out.items()}
 
     # --- maps ------------------------------------------------------------------------------
     def depth_map(self, disparity: Any, **options: Any) -> np.ndarray:

@@ -21,8 +21,11 @@ struct DepthParams {
   // Raw values equal to `invalid_value` are invalid (when has_invalid_value).
   bool has_invalid_value = false;
   double invalid_value = 0.0;
-  // Raw values below zero are invalid (OpenCV's int16 disparities mark holes with negatives).
-  bool negative_invalid = false;
+  // Raw values below `invalid_below` are invalid (when has_invalid_below): OpenCV's int16
+  // disparities mark holes with (minDisparity - 1) * 16, below minDisparity * 16; compared in
+  // float32, or float64 for float64 input (and for uint16 output).
+  bool has_invalid_below = false;
+  double invalid_below = 0.0;
 };
 
 // Throws std::invalid_argument when a parameter is out of range.

@@ -37,6 +37,7 @@ from pydantic import Field as PydanticField
 from .. import __version__
 from ..charts import chart_data
 from ..rig import StereoRig
+from .depthmap import DEFAULT_MAX_PIXELS, DEFAULT_MAX_UPLOAD_BYTES, DepthMapLimits, make_router
 
 __all__ = ["FIELDS", "create_app"]
 
@@ -483,8 +484,13 @@ def _plotly_js() -> Path:
     return Path(str(resources.files("plotly") / "package_data" / "plotly.min.js"))
 
 
-def create_app() -> FastAPI:
-    """The web calculator's app: the page at ``/``, the API under ``/api``."""
+def create_app(
+    *, max_upload_bytes: int = DEFAULT_MAX_UPLOAD_BYTES, max_pixels: int = DEFAULT_MAX_PIXELS
+) -> FastAPI:
+    """The web calculator's app: the page at ``/``, the API under ``/api``, with the depth-map
+    view's upload limits (bytes per image file, pixels per image; see
+    :mod:`stereodepth.web.depthmap`)."""
+    limits = DepthMapLimits(max_upload_bytes=max_upload_bytes, max_pixels=max_pixels)
     app = FastAPI(
         title="stereodepth calculator",
         version=__version__,
@@ -509,6 +515,7 @@ def create_app() -> FastAPI:
         return _unprocessable([_request_error(e) for e in exc.errors()])
 
     app.include_router(_api)
+    app.include_router(make_router(limits))
 
     plotly_js = _plotly_js()
 

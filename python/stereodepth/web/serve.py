@@ -15,17 +15,24 @@ from typing import Any
 
 DEFAULT_HOST = "127.0.0.1"
 DEFAULT_PORT = 8000
+# The depth-map view's upload limits (stereodepth.web.depthmap's defaults).
+DEFAULT_MAX_UPLOAD_MB = 20.0
+DEFAULT_MAX_MEGAPIXELS = 4.0
 
 
 def register(subparsers: Any) -> None:
     """Adds the ``serve`` subcommand."""
     p = subparsers.add_parser(
         "serve",
-        help="the calculator as a local web page with live results, table and charts",
+        help="the calculator and a depth-map view of a stereo pair as a local web page",
         description=(
             "Serves the stereo depth calculator as a web page: inputs, live results, the "
             "disparity-to-depth table and charts, all from the library's JSON API "
-            "(/api/calc; schema at /openapi.json). Needs the 'web' extra."
+            "(/api/calc; schema at /openapi.json); and a depth-map view that matches an "
+            "uploaded pair (or a built-in sample) and reads depth under the cursor "
+            "(/api/depthmap). Uploads are limited in size (--max-upload-mb, "
+            "--max-megapixels), decoded in memory and matched in worker threads. Needs the "
+            "'web' extra (and 'plot' for the colour maps)."
         ),
     )
     p.add_argument(
@@ -40,6 +47,20 @@ def register(subparsers: Any) -> None:
         help=f"TCP port (default {DEFAULT_PORT}; 0: any free port)",
     )
     p.add_argument("--open", action="store_true", help="open the page in a web browser")
+    p.add_argument(
+        "--max-upload-mb",
+        type=float,
+        default=DEFAULT_MAX_UPLOAD_MB,
+        help="depth-map view: largest image file accepted, in MB "
+        f"(default {DEFAULT_MAX_UPLOAD_MB:g})",
+    )
+    p.add_argument(
+        "--max-megapixels",
+        type=float,
+        default=DEFAULT_MAX_MEGAPIXELS,
+        help="depth-map view: largest image accepted, in megapixels "
+        f"(default {DEFAULT_MAX_MEGAPIXELS:g})",
+    )
     p.set_defaults(func=run)
 
 
@@ -99,6 +120,14 @@ def run(args: argparse.Namespace) -> int:
         )
         return 1
 
+    limits = {}
+    for flag, value, scale in (
+        ("--max-upload-mb", args.max_upload_mb, "max_upload_bytes"),
+        ("--max-megapixels", args.max_megapixels, "max_pixels"),
+    ):
+        if not (value > 0 and value <= 1e4):
+            raise ValueError(f"{flag} must be a number > 0 and <= 10000, got {value:g}")
+        limits[scale] = max(1, int(value * 1e6))
     sock = bind(args.host, args.port)
     url = url_of(sock)
     if not _is_loopback(args.host):
@@ -115,7 +144,9 @@ def run(args: argparse.Namespace) -> int:
         # The socket already listens, so the browser's first request waits in its backlog.
         threading.Thread(target=webbrowser.open, args=(url,), daemon=True).start()
 
-    config = uvicorn.Config(create_app(), log_level="warning", access_log=False, lifespan="off")
+    config = uvicorn.Config(
+        create_app(**limits), log_level="warning", access_log=False, lifespan="off"
+    )
     server = uvicorn.Server(config)
     try:
         # uvicorn shuts down gracefully on Ctrl+C or SIGTERM, then raises the signal again.

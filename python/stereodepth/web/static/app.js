@@ -8,7 +8,7 @@
     car: { focal_mode: "mm", baseline_mm: "250", focal_mm: "12", pixel_um: "4.2", width_px: "2048", disparity_px: "35" },
   };
   const INPUTS = [
-    "baseline_mm", "focal_mm", "pixel_um", "focal_px", "width_px", "disparity_px",
+    "baseline_mm", "focal_mm", "pixel_um", "focal_px", "doffs_px", "width_px", "disparity_px",
     "disparity_step_px", "max_disparity_px", "inverse_depth_m", "inverse_depth_resolution_m",
   ];
   const RESULTS = [
@@ -393,7 +393,37 @@
     update();
   }
 
-  window.stereodepth = { formatG };  // for tests
+  // The rig as the inputs give it (the calculator's names), for the depth-map view.
+  function rigValues() {
+    const rig = {};
+    for (const name of ["baseline_mm", "focal_mm", "pixel_um", "focal_px", "doffs_px"]) {
+      if (activeInputs().includes(name)) {
+        const text = $(name).value.trim();
+        if (text !== "") rig[name] = text;
+      }
+    }
+    return rig;
+  }
+
+  // Sets rig inputs (focal length in pixels when focal_px is given) and recalculates.
+  function setRig(values) {
+    if (values.focal_px !== undefined) {
+      document.querySelector('input[name="focal_mode"][value="px"]').checked = true;
+      applyMode();
+    }
+    for (const [name, value] of Object.entries(values)) {
+      if (value !== null && value !== undefined && $(name)) $(name).value = String(value);
+    }
+    update();
+  }
+
+  // Errors of the depth-map request located at rig inputs: shown at those inputs.
+  function showRigErrors(detail) {
+    clearErrors();
+    return showErrors(detail);
+  }
+
+  window.stereodepth = { formatG, rigValues, setRig, showRigErrors };  // also for tests
   if (document.readyState === "loading") document.addEventListener("DOMContentLoaded", start);
   else start();
 })();

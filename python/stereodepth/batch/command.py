@@ -1,0 +1,430 @@
+"""The ``stereodepth batch`` command: its arguments, their checks, and the summary."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import sys
+from collections.abc import Callable, Sequence
+from pathlib import Path
+from typing import Any, NoReturn
+
+from .. import _validate as check
+from .._extras import require
+from ..calib import Calibration
+from ..cli import key_value_option
+from .calibration import COMMAND_LINE, calibration_note, resolve_calibration
+from .discovery import check_pair_names, discover
+from .job import FORMATS, BatchOptions, Pair, UsageError
+from .records import BatchReport
+from .runners import LOCK_NAME, check_runner, run_batch
+
+
+def register(subparsers: Any) -> None:
+    """Adds ``stereodepth batch`` to the command's subparsers."""
+    p = subparsers.add_parser(
+        "batch",
+        help="disparity, depth and point clouds for many stereo pairs (here or on Dask)",
+        description=(
+            "Computes the disparity and depth (and with --ply a coloured point cloud) of every "
+            "stereo pair in INPUT: KITTI image_2/image_3 folders, Middlebury scene folders "
+            "(im0, im1, calib.txt), pairs named left/right, or a CSV list of left,right[,stem]. "
+            "Pairs that fail are reported and skipped; outputs are written atomically; "
+            "running the same command again resumes. Exit status 1 when a pair failed."
+        ),
+    )
+    # One line for an argparse error too, like every other error of the command.
+    p.error = _one_line_error(p)
+    p.add_argument("input", metavar="INPUT", help="a folder of pairs or a CSV list")
+    p.add_argument(
+        "-o",
+        "--output",
+        required=True,
+        metavar="OUTDIR",
+        help="the folder for the outputs (created if needed)",
+    )
+    c = p.add_argument_group(
+        "calibration (the first given wins: these flags, --calib, each pair's own file)"
+    )
+    c.add_argument("--focal-px", type=float, help="focal length in pixels")
+    c.add_argument("--baseline-mm", type=float, help="baseline in millimetres")
+    c.add_argument(
+        "--doffs-px",
+        type=float,
+        default=0.0,
+        help="principal point offset cx_right - cx_left in px (Middlebury doffs)",
+    )
+    c.add_argument(
+        "--cx-px", type=float, help="left principal point x for --ply (default: the image centre)"
+    )
+    c.add_argument("--cy-px", type=float, help="left principal point y for --ply")
+    c.add_argument(
+        "--calib",
+        metavar="FILE",
+        help="one calibration for every pair: Middlebury calib.txt or KITTI calib",
+    )
+    o = p.add_argument_group("output")
+    o.add_argument(
+        "--format",
+        choices=sorted(FORMATS),
+        default="npy",
+        help="npy: float32 (NaN invalid); png16: depth in mm and disparity x 256 "
+        "(0 invalid); pfm: float32 (default npy)",
+    )
+    o.add_argument(
+        "--ply", action="store_true", help="also write a coloured binary PLY point cloud in metres"
+    )
+    o.add_argument(
+        "--preview",
+        action="store_true",
+        help="also write colour previews of the disparity and the depth, with colour bars "
+        "(S.disparity.preview.png, S.depth.preview.png; needs matplotlib, the plot extra)",
+    )
+    o.add_argument("--min-depth-m", type=float, help="depths nearer than this are invalid")
+    o.add_argument("--max-depth-m", type=float, help="depths farther than this are invalid")
+    o.add_argument(
+        "--report",
+        metavar="FILE",
+        help="the JSON report (default OUTDIR/report.json); its folder must exist",
+    )
+    o.add_argument(
+        "--force", action="store_true", help="recompute pairs whose outputs are already complete"
+    )
+    o.add_argument("--quiet", action="store_true", help="no progress bar and no summary")
+    m = p.add_argument_group("matcher (stereodepth.block_match)")
+    m.add_argument(
+        "--num-disparities",
+        type=int,
+        metavar="N",
+        help="disparities searched (default: ndisp of the Middlebury calib.txt that gives the "
+        "rig; required with KITTI files and with --focal-px)",
+    )
+    m.add_argument("--min-disparity", type=int, metavar="D", help="smallest disparity searched")
+    m.add_argument("--block-size", type=int, metavar="N", help="odd block side")
+    m.add_argument("--cost", choices=("census", "sad"), help="matching cost")
+    m.add_argument(
+        "--option",
+        action="append",
+        type=key_value_option,
+        default=[],
+        metavar="KEY=VALUE",
+        help="other keyword argument of stereodepth.block_match, repeatable "
+        "(e.g. uniqueness_ratio=15, subpixel=false)",
+    )
+    m.add_argument(
+        "--channel-order",
+        choices=("rgb", "bgr"),
+        help="the order of the colour channels as read: Pillow reads image files as RGB, so "
+        "bgr only for files whose channels were stored swapped (default rgb)",
+    )
+    m.add_argument(
+        "--pair-names",
+        nargs=2,
+        metavar=("LEFT", "RIGHT"),
+        help="the tokens that name a left and a right image (default: im0 im1, left right)",
+    )
+    r = p.add_argument_group("where it runs (default: this process)")
+    r.add_argument(
+        "--scheduler",
+        metavar="ADDRESS",
+        help="an existing dask.distributed scheduler, tcp://HOST:PORT",
+    )
+    r.add_argument(
+        "--workers", type=int, metavar="N", help="start a local Dask cluster of N worker processes"
+    )
+    r.add_argument(
+        "--threads",
+        type=int,
+        metavar="N",
+        help="matcher threads per pair (default: every core; with --workers N, "
+        "the cores / N; on a --scheduler cluster, a worker's cores / its threads)",
+    )
+    p.set_defaults(func=run)
+
+
+#: --option keys that have their own flag, or (None) that batch does not offer.
+_RESERVED: dict[str, str | None] = {
+    "num_disparities": "--num-disparities",
+    "min_disparity": "--min-disparity",
+    "block_size": "--block-size",
+    "cost": "--cost",
+    "threads": "--threads",
+    "channel_order": "--channel-order",
+    "return_confidence": None,
+    "isa": None,
+}
+_FLAGS = {"min_disparity": "--min-disparity", "block_size": "--block-size", "cost": "--cost"}
+
+
+def _one_line_error(parser: argparse.ArgumentParser) -> Callable[[str], NoReturn]:
+    """argparse's error(), in one line (``stereodepth batch: error: ...``, exit status 2)
+    without the usage block."""
+
+    def error(message: str) -> NoReturn:
+        parser.exit(2, f"{parser.prog}: error: {message}\n")
+
+    return error
+
+
+def _matcher_keywords() -> list[str]:
+    """The keyword options of the matcher (:class:`stereodepth.StereoMatcher`)."""
+    import inspect
+
+    from ..matching import StereoMatcher
+
+    params = inspect.signature(StereoMatcher.__init__).parameters
+    return [n for n, prm in params.items() if prm.kind is inspect.Parameter.KEYWORD_ONLY]
+
+
+def _matcher_options(args: argparse.Namespace) -> dict[str, Any]:
+    """The matcher's keyword arguments from --option and the matcher flags, each checked now,
+    before any pair runs, with an error that names what the user typed."""
+    import inspect
+
+    from ..matching import BlockMatchOptions, StereoMatcher
+
+    known = _matcher_keywords()
+    opts: dict[str, Any] = {}
+    typed: dict[str, str] = {}
+    for key, value in args.option:
+        if key in _RESERVED:
+            flag = _RESERVED[key]
+            raise UsageError(
+                f"--option {key}: use {flag}" if flag else f"--option {key}: not available in batch"
+            )
+        if key not in known:
+            names = ", ".join(k for k in known if k not in _RESERVED)
+            raise UsageError(
+                f"--option {key}: the matcher has no option {key!r} (its options: {names})"
+            )
+        opts[key] = value
+        typed[key] = f"--option {key}"
+    for key, flag in _FLAGS.items():
+        if getattr(args, key) is not None:
+            opts[key] = getattr(args, key)
+            typed[key] = f"{flag} {getattr(args, key)}"
+    nd = args.num_disparities or 16
+    try:
+        BlockMatchOptions(num_disparities=nd)
+    except (TypeError, ValueError) as exc:
+        raise UsageError(f"--num-disparities {nd}: {exc}") from exc
+    checked = set(inspect.signature(BlockMatchOptions.__init__).parameters)
+    cost = {"cost": opts["cost"]} if "cost" in opts else {}
+    for key in sorted(opts, key=lambda k: k != "cost"):  # the cost first: limits depend on it
+        if key in checked:
+            try:
+                BlockMatchOptions(num_disparities=nd, **{**cost, key: opts[key]})
+            except (TypeError, ValueError) as exc:
+                raise UsageError(f"{typed[key]}: {exc}") from exc
+    if args.channel_order is not None:
+        if "channel_order" not in known:
+            raise UsageError("--channel-order: this version of the matcher has no channel_order")
+        opts["channel_order"] = args.channel_order
+    try:  # all together, as each pair will make its matcher
+        StereoMatcher(num_disparities=nd, threads=1, **opts)
+    except (TypeError, ValueError) as exc:
+        raise UsageError(f"matcher options: {exc}") from exc
+    return opts
+
+
+def _given_calibration(args: argparse.Namespace) -> Calibration | None:
+    if args.focal_px is None and args.baseline_mm is None:
+        for name in ("cx_px", "cy_px"):
+            if getattr(args, name) is not None:
+                raise UsageError(
+                    f"--{name.replace('_', '-')} goes with --focal-px and --baseline-mm"
+                )
+        if args.doffs_px:
+            raise UsageError("--doffs-px goes with --focal-px and --baseline-mm")
+        return None
+    if args.focal_px is None or args.baseline_mm is None:
+        raise UsageError("give both --focal-px and --baseline-mm")
+    if args.calib is not None:
+        raise UsageError("give --focal-px and --baseline-mm, or --calib, not both")
+    return Calibration(
+        focal_px=check.positive("--focal-px", args.focal_px),
+        baseline_m=check.positive("--baseline-mm", args.baseline_mm) / 1000.0,
+        doffs_px=check.finite("--doffs-px", args.doffs_px),
+        cx_px=None if args.cx_px is None else check.finite("--cx-px", args.cx_px),
+        cy_px=None if args.cy_px is None else check.finite("--cy-px", args.cy_px),
+        source=COMMAND_LINE,
+    )
+
+
+def _check_depth_range(args: argparse.Namespace) -> None:
+    """The rule of :func:`stereodepth.disparity_to_depth`, in the flags' names."""
+    lo, hi = args.min_depth_m, args.max_depth_m
+    if lo is not None and not (math.isfinite(lo) and lo >= 0):
+        raise UsageError(f"--min-depth-m must be a finite number >= 0, got {lo}")
+    if hi is not None and not (math.isfinite(hi) and hi > 0):
+        raise UsageError(f"--max-depth-m must be a finite number > 0, got {hi}")
+    if lo is not None and hi is not None and hi < lo:
+        raise UsageError(
+            f"--max-depth-m must be >= --min-depth-m, got --min-depth-m {lo:g} and "
+            f"--max-depth-m {hi:g}"
+        )
+
+
+def _writable_folder(path: Path, what: str) -> None:
+    """Raises UsageError unless ``path`` is, or can be created as, a folder we may write in."""
+    if path.exists() and not path.is_dir():
+        raise UsageError(f"{what} must be a folder, got the file {path}")
+    existing = path.absolute()
+    while not existing.exists():
+        existing = existing.parent
+    if not existing.is_dir():
+        raise UsageError(f"{what} {path} cannot be created: {existing} is a file")
+    if not os.access(existing, os.W_OK | os.X_OK):
+        raise UsageError(f"{what} {path}: cannot write in {existing}")
+
+
+def _report_path(args: argparse.Namespace, out_dir: Path) -> Path:
+    """Where the report goes, checked before any work: OUTDIR/report.json, or --report FILE
+    in a folder that exists (or in OUTDIR)."""
+    if args.report is None:
+        return out_dir / "report.json"
+    report = Path(args.report)
+    if report.is_dir():
+        raise UsageError(f"--report must be a file, got the folder {report}")
+    folder = report.parent
+    if folder.resolve() != out_dir.resolve():
+        if not folder.is_dir():
+            raise UsageError(f"--report {report}: the folder {folder} does not exist")
+        if not os.access(folder, os.W_OK | os.X_OK):
+            raise UsageError(f"--report {report}: cannot write in {folder}")
+    return report
+
+
+def _check_report_is_its_own(report: Path, pairs: Sequence[Pair], options: BatchOptions) -> None:
+    """The report must not be a file a pair reads or writes, nor the lock."""
+    r = report.resolve()
+    in_out_dir = r.parent == options.out_dir.resolve()
+    if in_out_dir and r.name == LOCK_NAME:
+        raise UsageError(f"--report {report}: that is the lock file of batch jobs")
+    for p in pairs:
+        if in_out_dir and r.name in options.owned_names(p.stem):
+            raise UsageError(
+                f"--report {report}: pair {p.stem!r} writes that file; give the report another name"
+            )
+        for f in (p.left, p.right, p.calib_file):
+            if f is not None and f.resolve() == r:
+                raise UsageError(f"--report {report}: that is an input of pair {p.stem!r}")
+
+
+def print_summary(report: BatchReport, report_path: Path, file: Any = None) -> None:
+    out = file or sys.stdout
+    c = report.counts
+    n = len(report.pairs)
+    words = [f"{c['ok']} done"]
+    if c["skipped"]:
+        words.append(f"{c['skipped']} already done")
+    if c["failed"]:
+        words.append(f"{c['failed']} failed")
+    if c["cancelled"]:
+        words.append(f"{c['cancelled']} cancelled")
+    rate = f"{c['ok'] / report.elapsed_s:.2f} pairs/s, " if c["ok"] and report.elapsed_s else ""
+    print(
+        f"{n} pair{'s' if n != 1 else ''}: {', '.join(words)} in {report.elapsed_s:.1f} s "
+        f"({rate}{report.runner})",
+        file=out,
+    )
+    if report.interrupted:
+        print("interrupted: run the same command again to resume", file=out)
+    for rec in report.failed:
+        print(f"  failed {rec['stem']}: {rec['error']}", file=out)
+    removed = sum(len(rec.get("removed") or ()) for rec in report.pairs)
+    if removed:
+        print(
+            f"  removed {removed} stale output file{'s' if removed != 1 else ''} of earlier "
+            "runs (listed in the pairs' records)",
+            file=out,
+        )
+    print(f"report: {report_path}", file=out)
+
+
+def run(args: argparse.Namespace) -> int:
+    """Runs ``stereodepth batch``; returns the exit status.
+
+    Everything that no pair could get past is checked first, before any pair runs or any
+    file is written: the options, the optional extras, the output locations, then the pairs
+    and their calibration."""
+    from ..io import atomic_write
+
+    if args.num_disparities is not None and args.num_disparities < 1:
+        raise UsageError(f"--num-disparities must be an integer >= 1, got {args.num_disparities}")
+    given = _given_calibration(args)
+    matcher = _matcher_options(args)
+    _check_depth_range(args)
+    pair_names = [tuple(args.pair_names)] if args.pair_names else None
+    if pair_names:
+        check_pair_names(pair_names, "--pair-names")
+    progress = not args.quiet and sys.stderr.isatty()
+    check_runner(
+        scheduler=args.scheduler, workers=args.workers, threads=args.threads, progress=progress
+    )
+    require("PIL.Image", "reading images")
+    if args.preview:
+        require("matplotlib", "--preview")
+    out_dir = Path(args.output)
+    _writable_folder(out_dir, "OUTDIR")
+    report_path = _report_path(args, out_dir)
+
+    found = discover(args.input, pair_names=pair_names, exclude=[out_dir])
+    pairs = resolve_calibration(
+        found.pairs,
+        given=given,
+        calib_file=Path(args.calib) if args.calib else None,
+        num_disparities=args.num_disparities,
+    )
+    options = BatchOptions(
+        out_dir=out_dir,
+        format=args.format,
+        ply=args.ply,
+        preview=args.preview,
+        matcher=matcher,
+        min_depth_m=args.min_depth_m,
+        max_depth_m=args.max_depth_m,
+        force=args.force,
+    )
+    _check_report_is_its_own(report_path, pairs, options)
+    notes = found.skipped_text(limit=len(found.skipped))
+    calib_note = calibration_note(pairs)
+    if calib_note:
+        notes.append(calib_note)
+    if not args.quiet:
+        shown = found.skipped_text() + ([calib_note] if calib_note else [])
+        for note in shown:
+            print(f"stereodepth batch: note: {note}", file=sys.stderr)
+    report = run_batch(
+        pairs,
+        options,
+        scheduler=args.scheduler,
+        workers=args.workers,
+        threads=args.threads,
+        progress=progress,
+        notes=notes,
+    )
+    data = report.as_dict()
+    data["input"] = str(args.input)
+    data["output"] = str(out_dir)
+    try:
+        with atomic_write(report_path, text=True) as fh:
+            json.dump(data, fh, indent=2, allow_nan=False)
+            fh.write("\n")
+    except OSError as exc:
+        print(
+            f"stereodepth batch: error: cannot write the report {report_path}: "
+            f"{exc.strerror or exc} (the pairs' records are in {out_dir})",
+            file=sys.stderr,
+        )
+        return 1
+    if not args.quiet:
+        print_summary(report, report_path)
+    elif report.failed:
+        for rec in report.failed:
+            print(f"stereodepth batch: failed {rec['stem']}: {rec['error']}", file=sys.stderr)
+    if report.interrupted:
+        print("stereodepth batch: interrupted", file=sys.stderr)
+    return report.exit_status

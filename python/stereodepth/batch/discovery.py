@@ -1,0 +1,328 @@
+"""Finding the stereo pairs of a folder or a CSV list (see :mod:`stereodepth.batch`).
+
+A folder is searched down to :data:`SEARCH_DEPTH` levels below INPUT; what is not used is
+listed with the reason (:attr:`Discovery.skipped`), so that no pair goes missing silently.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from .job import Pair, UsageError
+
+IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".ppm", ".pgm", ".pnm", ".bmp", ".tif", ".tiff", ".webp")
+#: Left/right sub-folders, in the order they are tried, with their KITTI camera numbers.
+FOLDER_PAIRS: tuple[tuple[str, str, tuple[int, int] | None], ...] = (
+    ("image_2", "image_3", (2, 3)),
+    ("image_0", "image_1", (0, 1)),
+    ("left", "right", None),
+)
+#: Tokens that name the left and right image of a pair, in the order they are tried.
+PAIR_NAMES: tuple[tuple[str, str], ...] = (
+    ("im0", "im1"),
+    ("left", "right"),
+    ("Left", "Right"),
+    ("LEFT", "RIGHT"),
+)
+#: How many levels of folders below INPUT are searched for pairs (INPUT itself is level 0).
+SEARCH_DEPTH = 3
+
+
+@dataclass(frozen=True)
+class Discovery:
+    """What :func:`discover` found: the pairs in order, and ``skipped``, the folders that hold
+    images but gave no pair or were not searched, each with the reason."""
+
+    pairs: list[Pair]
+    skipped: list[tuple[Path, str]] = field(default_factory=list)
+
+    def skipped_text(self, limit: int = 5) -> list[str]:
+        """One line per skipped folder (at most ``limit``, then how many more)."""
+        lines = [f"skipped {path}: {why}" for path, why in self.skipped[:limit]]
+        if len(self.skipped) > limit:
+            lines.append(f"... and {len(self.skipped) - limit} more folders skipped")
+        return lines
+
+
+def check_pair_names(names: Sequence[tuple[str, str]], what: str = "pair_names") -> None:
+    """Raises UsageError unless each (left, right) is two different non-empty tokens, neither
+    part of the other (else a right image would be taken for a left one, or for itself), with
+    no path separator."""
+    for left, right in names:
+        if not (isinstance(left, str) and isinstance(right, str)) or not left or not right:
+            raise UsageError(f"{what}: two non-empty names are needed, got {left!r} and {right!r}")
+        for tok in (left, right):
+            if "/" in tok or "\\" in tok:
+                raise UsageError(f"{what}: a name cannot hold a path separator, got {tok!r}")
+        if left == right:
+            raise UsageError(
+                f"{what}: the left and right names must differ, got {left!r} twice "
+                "(each image would be paired with itself)"
+            )
+        if left in right or right in left:
+            raise UsageError(
+                f"{what}: neither name may be part of the other, got {left!r} and {right!r} "
+                "(a right image would also be taken for a left one)"
+            )
+
+
+def _is_image(p: Path) -> bool:
+    return p.suffix.lower() in IMAGE_SUFFIXES and not p.name.startswith(".")
+
+
+def _safe_stem(text: str) -> str:
+    stem = re.sub(r"[\\/\x00-\x1f]+", "_", text).strip(" .")
+    return stem or "pair"
+
+
+def _token_split(stem: str, names: Sequence[tuple[str, str]]) -> tuple[str, str, str] | None:
+    """(left token, right token, the stem without the token) for a left image's stem."""
+    for left_tok, right_tok in names:
+        i = stem.rfind(left_tok)
+        if i >= 0:
+            rest = stem[:i].rstrip("_-. ") + "_" + stem[i + len(left_tok) :].lstrip("_-. ")
+            return left_tok, right_tok, rest.strip("_")
+    return None
+
+
+def _images(d: Path) -> list[Path]:
+    try:
+        return sorted(p for p in d.iterdir() if p.is_file() and _is_image(p))
+    except OSError:
+        return []
+
+
+def _subfolders(d: Path) -> list[Path]:
+    try:
+        return sorted(p for p in d.iterdir() if p.is_dir() and not p.name.startswith("."))
+    except OSError:
+        return []
+
+
+def _scene_pairs(d: Path, names: Sequence[tuple[str, str]], *, prefix: str | None) -> list[Pair]:
+    pairs = []
+    for f in _images(d):
+        split = _token_split(f.stem, names)
+        if split is None:
+            continue
+        left_tok, right_tok, rest = split
+        i = f.stem.rfind(left_tok)
+        right_name = f.stem[:i] + right_tok + f.stem[i + len(left_tok) :] + f.suffix
+        stem = (rest or d.name) if prefix is None else (f"{prefix}_{rest}" if rest else prefix)
+        calib = d / "calib.txt"
+        pairs.append(
+            Pair(
+                stem=_safe_stem(stem),
+                left=f,
+                right=d / right_name,
+                calib_file=calib if calib.is_file() else None,
+            )
+        )
+    return pairs
+
+
+def _kitti_calib_for(root: Path, stem: str) -> Path | None:
+    """The KITTI layout's calibration file of a frame: ``calib/<frame>.txt`` (2012) or
+    ``calib_cam_to_cam/<frame>.txt`` (2015), the frame being the image name without its
+    ``_10``/``_11`` suffix. Locating the file only; :func:`stereodepth.calib.read_kitti_calib`
+    reads it."""
+    frame = re.sub(r"_\d\d$", "", stem)
+    for sub in ("calib", "calib_cam_to_cam"):
+        p = root / sub / f"{frame}.txt"
+        if p.is_file():
+            return p
+    return None
+
+
+def _folder_pairs(root: Path, *, prefix: str | None) -> list[Pair] | None:
+    """The pairs of a folder holding left and right sub-folders (KITTI's ``image_2`` and
+    ``image_3``...), or None when it holds none."""
+    for left_dir, right_dir, cams in FOLDER_PAIRS:
+        ld, rd = root / left_dir, root / right_dir
+        if not (ld.is_dir() and rd.is_dir()):
+            continue
+        pairs = []
+        shared_calib = root / "calib.txt"
+        for f in _images(ld):
+            calib = _kitti_calib_for(root, f.stem) if cams else None
+            kitti = cams if calib is not None else None
+            if calib is None and shared_calib.is_file():
+                calib = shared_calib
+            pairs.append(
+                Pair(
+                    stem=_safe_stem(f.stem if prefix is None else f"{prefix}_{f.stem}"),
+                    left=f,
+                    right=rd / f.name,
+                    calib_file=calib,
+                    kitti_cams=kitti,
+                )
+            )
+        return pairs
+    return None
+
+
+def _search(
+    root: Path, names: Sequence[tuple[str, str]], exclude: Sequence[Path]
+) -> tuple[list[Pair], list[tuple[Path, str]]]:
+    """Walks ``root`` down to SEARCH_DEPTH levels: a folder with left/right sub-folders is one
+    set of pairs (its sub-folders are its own), any other folder gives the pairs named by
+    tokens in it, then its sub-folders are searched. Hidden folders and ``exclude`` (OUTDIR)
+    are left out."""
+    tokens = ", ".join(f"{a}/{b}" for a, b in names)
+    excluded = {p.resolve() for p in exclude}
+    pairs: list[Pair] = []
+    skipped: list[tuple[Path, str]] = []
+
+    def visit(d: Path, rel: tuple[str, ...]) -> None:
+        prefix = "_".join(rel) if rel else None
+        layout = _folder_pairs(d, prefix=prefix)
+        if layout is not None:
+            pairs.extend(layout)
+            return
+        found = _scene_pairs(d, names, prefix=prefix)
+        pairs.extend(found)
+        if not found:
+            n = len(_images(d))
+            if n:
+                skipped.append(
+                    (
+                        d,
+                        f"{n} image{'s' if n != 1 else ''} but no pair (no left image named "
+                        f"with {tokens}; --pair-names LEFT RIGHT names others)",
+                    )
+                )
+        for sub in _subfolders(d):
+            if sub.resolve() in excluded:
+                continue
+            if len(rel) >= SEARCH_DEPTH:
+                if _images(sub) or _subfolders(sub):
+                    skipped.append(
+                        (sub, f"not searched: more than {SEARCH_DEPTH} levels below INPUT")
+                    )
+                continue
+            visit(sub, (*rel, sub.name))
+
+    visit(root, ())
+    return pairs, skipped
+
+
+def _csv_path(base: Path, cell: str) -> Path:
+    p = Path(cell)
+    return p if p.is_absolute() else base / p
+
+
+def _csv_pairs(path: Path, names: Sequence[tuple[str, str]]) -> list[Pair]:
+    """The pairs of a CSV list, parsed exactly: UTF-8 (a byte-order mark is allowed), LF or
+    CR LF line ends, cells stripped of surrounding spaces, empty trailing cells ignored;
+    blank lines and lines whose first cell starts with ``#`` are skipped; an optional header
+    ``left,right[,stem]`` first. Anything else raises UsageError (a ValueError) naming the
+    file, the line and what was wrong."""
+    import csv
+
+    pairs = []
+    header_allowed = True
+    try:
+        with path.open(newline="", encoding="utf-8-sig") as fh:
+            reader = csv.reader(fh, strict=True)
+            for row in reader:
+                where = f"{path}:{reader.line_num}"
+                cells = [c.strip() for c in row]
+                while cells and not cells[-1]:
+                    cells.pop()
+                if not cells or cells[0].startswith("#"):
+                    continue
+                is_header = [c.lower() for c in cells[:2]] == ["left", "right"] and (
+                    len(cells) == 2 or (len(cells) == 3 and cells[2].lower() == "stem")
+                )
+                if is_header:
+                    if not header_allowed:
+                        raise UsageError(f"{where}: a header line after the first pair")
+                    header_allowed = False
+                    continue
+                header_allowed = False
+                if len(cells) not in (2, 3) or not cells[0] or not cells[1]:
+                    raise UsageError(f"{where}: expected left,right[,stem], got {','.join(row)!r}")
+                left, right = _csv_path(path.parent, cells[0]), _csv_path(path.parent, cells[1])
+                if os.path.normpath(left) == os.path.normpath(right):
+                    raise UsageError(f"{where}: the left and right image are the same file {left}")
+                if len(cells) == 3:
+                    stem = cells[2]
+                else:
+                    split = _token_split(left.stem, names)
+                    stem = (split[2] if split else left.stem) or left.parent.name
+                calib = left.parent / "calib.txt"
+                pairs.append(
+                    Pair(
+                        stem=_safe_stem(stem),
+                        left=left,
+                        right=right,
+                        calib_file=calib if calib.is_file() else None,
+                    )
+                )
+    except csv.Error as exc:
+        raise UsageError(f"{path}:{reader.line_num}: not a valid CSV line: {exc}") from exc
+    except UnicodeDecodeError as exc:
+        raise UsageError(f"{path}: not UTF-8 text ({exc.reason} at byte {exc.start})") from exc
+    except OSError as exc:
+        raise UsageError(f"cannot read {path}: {exc.strerror or exc}") from exc
+    return pairs
+
+
+def discover(
+    input_path: str | os.PathLike[str],
+    *,
+    pair_names: Sequence[tuple[str, str]] | None = None,
+    exclude: Sequence[str | os.PathLike[str]] = (),
+) -> Discovery:
+    """The stereo pairs of a folder or a CSV list (see :mod:`stereodepth.batch`), in order,
+    and the folders skipped with the reason. ``exclude``: folders not to search (OUTDIR).
+
+    Pairs whose right image is missing are returned too (they fail when processed, and the
+    report names them). Raises UsageError when nothing is found (naming what was skipped),
+    when two pairs would write the same outputs (stems equal but for case included: they
+    collide on case-insensitive file systems), or for bad ``pair_names``."""
+    root = Path(input_path)
+    names = list(pair_names) if pair_names else list(PAIR_NAMES)
+    check_pair_names(names)
+    skipped: list[tuple[Path, str]] = []
+    if not root.exists():
+        raise UsageError(f"INPUT not found: {root}")
+    if root.is_file():
+        if root.suffix.lower() != ".csv":
+            raise UsageError(f"INPUT must be a folder or a .csv list of pairs, got {root}")
+        pairs = _csv_pairs(root, names)
+    else:
+        pairs, skipped = _search(root, names, [Path(p) for p in exclude])
+    found = Discovery(pairs, skipped)
+    if not pairs:
+        tokens = ", ".join(f"{a}/{b}" for a, b in names)
+        why = "; ".join(found.skipped_text(3))
+        raise UsageError(
+            f"no stereo pairs found in {root} (searched {SEARCH_DEPTH} levels of folders): "
+            f"expected image_2/image_3 (or image_0/image_1, left/right) folders, scene folders "
+            f"with pairs named {tokens}, or a CSV list" + (f"; {why}" if why else "")
+        )
+    seen: dict[str, Pair] = {}
+    for p in pairs:
+        key = p.stem.casefold()
+        if key in seen:
+            raise UsageError(
+                f"two pairs would write the same outputs {p.stem!r}: {seen[key].left} and "
+                f"{p.left} (give output stems in a CSV list)"
+            )
+        seen[key] = p
+    return found
+
+
+def find_pairs(
+    input_path: str | os.PathLike[str],
+    *,
+    pair_names: Sequence[tuple[str, str]] | None = None,
+    exclude: Sequence[str | os.PathLike[str]] = (),
+) -> list[Pair]:
+    """The pairs of :func:`discover` (the same arguments and errors)."""
+    return discover(input_path, pair_names=pair_names, exclude=exclude).pairs

@@ -1,0 +1,78 @@
+"""What a batch job is made of: the pairs, the options every pair is computed with, and the
+error that stops a job before it starts."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from ..calib import Calibration
+
+FORMATS = {"npy": "npy", "png16": "png", "pfm": "pfm"}
+STATUSES = ("ok", "skipped", "failed", "cancelled")
+#: A pair's record is ``<stem>.record.json``: no other file of a job ends so (the report is
+#: ``report.json`` by default), so a pair named ``report`` cannot overwrite the report.
+RECORD_SUFFIX = ".record.json"
+
+
+class UsageError(ValueError):
+    """A mistake in the command or its input that no pair can get past (exit status 2)."""
+
+
+@dataclass(frozen=True)
+class Pair:
+    """One stereo pair to process. ``calib_file`` is the calibration found beside it (with the
+    KITTI cameras ``kitti_cams`` for a KITTI file); ``problem`` a reason it cannot run;
+    ``calib_file_unused`` says that a calibration from the command line replaced
+    ``calib_file``."""
+
+    stem: str
+    left: Path
+    right: Path
+    calib_file: Path | None = None
+    kitti_cams: tuple[int, int] | None = None
+    calibration: Calibration | None = None
+    num_disparities: int | None = None
+    problem: str | None = None
+    calib_file_unused: bool = False
+
+
+@dataclass(frozen=True)
+class BatchOptions:
+    """What every pair is computed with (besides its calibration)."""
+
+    out_dir: Path
+    format: str = "npy"
+    ply: bool = False
+    preview: bool = False  # colour PNGs of the disparity and the depth, with colour bars
+    matcher: dict[str, Any] = field(default_factory=dict)  # block_match keyword arguments
+    min_depth_m: float | None = None
+    max_depth_m: float | None = None
+    force: bool = False
+
+    def output_paths(self, stem: str) -> dict[str, Path]:
+        ext = FORMATS[self.format]
+        out = {
+            "disparity": self.out_dir / f"{stem}.disparity.{ext}",
+            "depth": self.out_dir / f"{stem}.depth.{ext}",
+        }
+        if self.ply:
+            out["ply"] = self.out_dir / f"{stem}.ply"
+        if self.preview:
+            for kind in ("disparity", "depth"):
+                out[f"{kind}_preview"] = self.out_dir / f"{stem}.{kind}.preview.png"
+        return out
+
+    def record_path(self, stem: str) -> Path:
+        return self.out_dir / f"{stem}{RECORD_SUFFIX}"
+
+    def owned_names(self, stem: str) -> set[str]:
+        """The names of every file a pair may write into OUTDIR, in any format, with or
+        without ``--ply`` or ``--preview``: the only files batch ever removes (when they are
+        stale)."""
+        names = {
+            f"{stem}.{kind}.{ext}" for kind in ("disparity", "depth") for ext in FORMATS.values()
+        }
+        previews = {f"{stem}.{kind}.preview.png" for kind in ("disparity", "depth")}
+        return names | previews | {f"{stem}.ply", f"{stem}{RECORD_SUFFIX}"}

@@ -1,0 +1,361 @@
+"""Running a job: here on a thread pool (embedded) or on a Dask cluster, with a lock on OUTDIR,
+a progress bar and Ctrl-C handling."""
+
+from __future__ import annotations
+
+import contextlib
+import datetime as _dt
+import logging
+import os
+import signal
+import sys
+import threading
+import time
+import uuid
+from collections.abc import Callable, Iterator, Sequence
+from pathlib import Path
+from typing import Any
+
+from .. import _validate as check
+from .._extras import require
+from .compute import process_pair, record_failure
+from .job import BatchOptions, Pair, UsageError
+from .records import BatchReport, completed_record, jsonable, record_head
+
+#: Pairs in flight in the embedded runner: decoding, writing and fsyncing some overlap the
+#: matching of another (which uses every core). See bench/README.md for 1, 2 and 3.
+EMBEDDED_IN_FLIGHT = 3
+LOCK_NAME = ".stereodepth-batch.lock"
+
+
+@contextlib.contextmanager
+def _exclusive(out_dir: Path) -> Iterator[None]:
+    """Holds a lock on OUTDIR so that two jobs never write there at once; the lock file
+    (:data:`LOCK_NAME`) is removed when the job ends, however it ends (a job killed with
+    SIGKILL leaves it, unlocked: the next job takes it).
+
+    The file is removed while it is still locked, so a job that opened it just before must
+    find, once it holds the lock, that the file it locked is no longer the one at that path:
+    it then starts again with a new file."""
+    try:
+        import fcntl
+    except ImportError:  # pragma: no cover - not POSIX
+        yield
+        return
+    path = out_dir / LOCK_NAME
+    while True:
+        fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o666)
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            os.close(fd)
+            raise UsageError(f"another stereodepth batch job is writing to {out_dir}") from None
+        try:
+            same = os.path.samestat(os.fstat(fd), os.stat(path))
+        except FileNotFoundError:
+            same = False
+        if same:
+            break
+        os.close(fd)  # removed by the job that held it: lock the new file instead
+    try:
+        yield
+    finally:
+        with contextlib.suppress(FileNotFoundError):
+            os.unlink(path)
+        os.close(fd)
+
+
+class _Progress:
+    """A tqdm bar on stderr (when ``enabled``), or nothing."""
+
+    def __init__(self, total: int, enabled: bool) -> None:
+        self._bar: Any = None
+        self.failed = 0
+        if enabled:
+            from tqdm import tqdm
+
+            self._bar = tqdm(
+                total=total,
+                unit="pair",
+                file=sys.stderr,
+                dynamic_ncols=True,
+                desc="stereodepth batch",
+            )
+
+    def update(self, record: dict[str, Any]) -> None:
+        if record["status"] == "failed":
+            self.failed += 1
+        if self._bar is not None:
+            if self.failed:
+                self._bar.set_postfix(failed=self.failed, refresh=False)
+            self._bar.update(1)
+
+    def close(self) -> None:
+        if self._bar is not None:
+            self._bar.close()
+
+
+def _run_embedded(
+    todo: list[tuple[int, Pair]],
+    options: BatchOptions,
+    done: Callable[[int, dict[str, Any]], None],
+    threads: int | None,
+) -> None:
+    from concurrent.futures import FIRST_COMPLETED, ThreadPoolExecutor, wait
+
+    pool = ThreadPoolExecutor(max_workers=EMBEDDED_IN_FLIGHT, thread_name_prefix="stereodepth")
+    futures = {pool.submit(process_pair, p, options, threads): i for i, p in todo}
+    pending = set(futures)
+    try:
+        while pending:
+            finished, pending = wait(pending, timeout=0.5, return_when=FIRST_COMPLETED)
+            for f in finished:
+                done(futures[f], f.result())
+    except KeyboardInterrupt:
+        # Let the pairs in flight finish (their files are then complete); drop the rest.
+        for f in pending:
+            f.cancel()
+        pool.shutdown(wait=True)
+        for f in pending:
+            if f.done() and not f.cancelled():
+                done(futures[f], f.result())
+        raise
+    pool.shutdown(wait=True)
+
+
+def _run_dask(
+    todo: list[tuple[int, Pair]],
+    options: BatchOptions,
+    done: Callable[[int, dict[str, Any]], None],
+    threads: int | None,
+    client: Any,
+    stop: threading.Event,
+) -> None:
+    """Runs the pairs on the client's cluster until all are done or ``stop`` is set (Ctrl-C,
+    see :func:`_sigint_as_flag`): then the tasks not started are cancelled, the results that
+    already arrived are kept, and KeyboardInterrupt is raised here, outside Dask's calls."""
+    import queue
+
+    run_id = uuid.uuid4().hex[:8]
+    futures = {}
+    for i, p in todo:
+        f = client.submit(
+            process_pair, p, options, threads, key=f"stereodepth-{run_id}-{i}", pure=False
+        )
+        futures[f] = i
+    pairs = dict(todo)
+    arrived: queue.SimpleQueue[Any] = queue.SimpleQueue()
+    for f in futures:
+        f.add_done_callback(arrived.put)  # called from Dask's thread when the task ends
+    pending = set(futures)
+    while pending:
+        if stop.is_set():
+            client.cancel([f for f in pending if not f.done()])
+            for f in pending:
+                if f.done() and f.status == "finished":
+                    done(futures[f], f.result())
+            raise KeyboardInterrupt
+        try:
+            f = arrived.get(timeout=0.2)
+        except queue.Empty:
+            continue
+        pending.discard(f)  # Dask calls a future's callback once
+        i = futures[f]
+        try:
+            record = f.result()
+        except Exception as exc:  # the task itself never raises: a worker kept dying
+            head = record_head(pairs[i], "failed", f"{type(exc).__name__}: {exc}")
+            record = jsonable(record_failure(pairs[i], options, head))
+        done(i, record)
+
+
+def check_runner(
+    *,
+    scheduler: str | None = None,
+    workers: int | None = None,
+    threads: int | None = None,
+    progress: bool = False,
+) -> None:
+    """Raises UsageError for runner options that no pair can run with, and ImportError (one
+    line, with the install hint) when what they need is not installed: dask.distributed for
+    ``scheduler`` or ``workers``, tqdm for ``progress``."""
+    if scheduler is not None and workers is not None:
+        raise UsageError("give --scheduler or --workers, not both")
+    if workers is not None and workers < 1:
+        raise UsageError(f"--workers must be an integer >= 1, got {workers}")
+    if threads is not None and threads < 0:
+        raise UsageError(f"--threads must be an integer >= 0 (0: every core), got {threads}")
+    if scheduler is not None or workers is not None:
+        require("distributed", "running on Dask (--scheduler, --workers)")
+    if progress:
+        require("tqdm", "the progress bar (or give --quiet)")
+
+
+def run_batch(
+    pairs: Sequence[Pair],
+    options: BatchOptions,
+    *,
+    scheduler: str | None = None,
+    workers: int | None = None,
+    threads: int | None = None,
+    progress: bool = False,
+    on_result: Callable[[dict[str, Any]], None] | None = None,
+    notes: Sequence[str] = (),
+) -> BatchReport:
+    """Runs a job: every pair not already done, on this machine (default), on a local Dask
+    cluster of ``workers`` processes, or on the Dask cluster at ``scheduler``.
+
+    Pairs need their calibration (:func:`resolve_calibration`). ``threads`` is the matcher's
+    thread count per pair; by default every core, the cores / ``workers`` on a local cluster,
+    and on a ``scheduler`` cluster a worker's cores / its number of threads.
+    ``on_result`` is called in this thread with each record as it arrives. Ctrl-C
+    (KeyboardInterrupt) stops the job: the pairs in flight finish, the rest are ``cancelled``,
+    and the report says ``interrupted``. Writes ``<stem>.*`` files into ``options.out_dir``;
+    the caller writes the report."""
+    from ..io import remove_temp_files
+
+    check_runner(scheduler=scheduler, workers=workers, threads=threads, progress=progress)
+    out_dir = options.out_dir
+    out_dir.mkdir(parents=True, exist_ok=True)
+    started = _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")
+    t0 = time.perf_counter()
+    records: list[dict[str, Any] | None] = [None] * len(pairs)
+    removed = 0
+    interrupted = False
+    runner = "embedded"
+    with _exclusive(out_dir):
+        bar = _Progress(len(pairs), progress)
+
+        def done(i: int, record: dict[str, Any]) -> None:
+            records[i] = record
+            bar.update(record)
+            if on_result is not None:
+                on_result(record)
+
+        try:
+            removed += len(remove_temp_files(out_dir))
+            todo: list[tuple[int, Pair]] = []
+            for i, p in enumerate(pairs):
+                earlier = None if options.force else completed_record(p, options)
+                if earlier is None:
+                    todo.append((i, p))
+                    continue
+                keep = ("time_s", "density", "width", "height", "outputs")
+                done(i, {**record_head(p, "skipped"), **{k: earlier.get(k) for k in keep}})
+            if scheduler is None and workers is None:
+                if todo:
+                    _run_embedded(todo, options, done, threads)
+            else:
+                with (
+                    _sigint_as_flag() as stop,
+                    _dask_client(scheduler, workers, threads) as (client, runner, task_threads),
+                ):
+                    if todo:
+                        _run_dask(todo, options, done, task_threads, client, stop)
+        except KeyboardInterrupt:
+            interrupted = True
+        finally:
+            bar.close()
+            removed += len(remove_temp_files(out_dir))
+    final = []
+    for i, p in enumerate(pairs):
+        rec = records[i]
+        if rec is None:
+            # Interrupted: a pair whose result did not reach us may have finished anyway.
+            earlier = completed_record(p, options)
+            rec = record_head(p, "cancelled")
+            if earlier is not None:
+                rec.update(
+                    {
+                        k: earlier.get(k)
+                        for k in ("status", "time_s", "density", "width", "height", "outputs")
+                    }
+                )
+        final.append(rec)
+    return BatchReport(
+        pairs=final,
+        runner=runner,
+        elapsed_s=time.perf_counter() - t0,
+        interrupted=interrupted,
+        started=started,
+        removed_temp_files=removed,
+        notes=list(notes),
+    )
+
+
+@contextlib.contextmanager
+def _sigint_handled_by(handler: Any) -> Iterator[None]:
+    """SIGINT goes to ``handler`` (a function or ``signal.SIG_IGN``) for the block's duration,
+    then the previous handler comes back. A no-op outside the main thread, where signal
+    handlers cannot be set."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = signal.signal(signal.SIGINT, handler)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
+
+
+@contextlib.contextmanager
+def _sigint_as_flag() -> Iterator[threading.Event]:
+    """For the block's duration, Ctrl-C (SIGINT) sets the returned event instead of raising
+    KeyboardInterrupt wherever the main thread happens to be.
+
+    dask.distributed's blocking calls are not safe to interrupt: a KeyboardInterrupt that lands
+    inside one can leave its event loop thread printing a traceback. The Dask runner checks the
+    event between calls and stops the job itself, and the cluster then shuts down in order; a
+    second Ctrl-C raises KeyboardInterrupt as usual. Only Python's default handler is replaced:
+    an application's own handler, an ignored SIGINT and threads other than the main one are
+    left alone (the event is then never set)."""
+    stop = threading.Event()
+
+    def handler(signum: int, frame: Any) -> None:
+        if stop.is_set():  # a second Ctrl-C: the user will not wait for the orderly stop
+            raise KeyboardInterrupt
+        stop.set()
+
+    if signal.getsignal(signal.SIGINT) is not signal.default_int_handler:
+        yield stop
+        return
+    with _sigint_handled_by(handler):
+        yield stop
+
+
+@contextlib.contextmanager
+def _dask_client(
+    scheduler: str | None, workers: int | None, threads: int | None
+) -> Iterator[tuple[Any, str, int | None]]:
+    try:
+        from distributed import Client, LocalCluster
+    except ImportError as exc:  # pragma: no cover - depends on the environment
+        raise UsageError(
+            'running on Dask needs dask.distributed: pip install "stereodepth[batch]"'
+        ) from exc
+    if scheduler is not None:
+        try:
+            client = Client(scheduler, timeout="10s")  # type: ignore[no-untyped-call]
+        except OSError as exc:
+            raise UsageError(f"cannot reach the Dask scheduler at {scheduler}: {exc}") from exc
+        with client:
+            yield client, f"dask {scheduler}", threads
+        return
+    assert workers is not None
+    task_threads = threads if threads is not None else max(1, check.available_cores() // workers)
+    # The scheduler's HTTP server binds a free loopback port: with dashboard_address=None it
+    # would still try port 8787 and warn (or fail) when that is taken.
+    # Ctrl-C in a terminal reaches every process of the group: the worker processes start with
+    # SIGINT ignored (their children inherit it), so that this process alone stops the job
+    # and shuts the cluster down, rather than each worker dying with a traceback.
+    with _sigint_handled_by(signal.SIG_IGN):
+        cluster = LocalCluster(  # type: ignore[no-untyped-call]
+            n_workers=workers,
+            threads_per_worker=1,
+            processes=True,
+            host="127.0.0.1",
+            dashboard_address="127.0.0.1:0",
+            silence_logs=logging.ERROR,
+        )
+    with cluster, Client(cluster) as client:  # type: ignore[no-untyped-call]
+        yield client, f"local dask cluster of {workers} worker processes", task_threads

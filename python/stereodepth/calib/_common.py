@@ -1,0 +1,199 @@
+"""What every calibration reader shares: reading text, numbers, checks of arrays, rotations,
+distortion models, units and image sizes."""
+
+from __future__ import annotations
+
+import math
+import re
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+_NUMBER = r"[-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?"
+
+
+_NUMBER_RE = re.compile(_NUMBER)
+
+
+_INTEGER_RE = re.compile(r"\d+")
+
+
+_LINE_RE = re.compile(r"([A-Za-z_][A-Za-z0-9_]*)[ \t]*=[ \t]*(.*?)[ \t]*")
+
+
+#: Metres per unit of the translations in a calibration file (``translation_unit=``).
+TRANSLATION_UNITS: dict[str, float] = {
+    "m": 1.0,
+    "cm": 0.01,
+    "mm": 0.001,
+    "um": 1e-6,
+    "in": 0.0254,
+    "ft": 0.3048,
+}
+
+
+#: The number of distortion coefficients each model takes.
+DISTORTION_COUNTS: dict[str, tuple[int, ...]] = {
+    "none": (0,),
+    "plumb_bob": (4, 5, 8),
+    "equidistant": (4,),
+}
+
+
+#: Names other tools give the models: ROS, Kalibr, OpenCV's fisheye module.
+_MODEL_ALIASES = {
+    "none": "none",
+    "plumb_bob": "plumb_bob",
+    "radtan": "plumb_bob",
+    "rational_polynomial": "plumb_bob",
+    "equidistant": "equidistant",
+    "fisheye": "equidistant",
+}
+
+
+#: Models whose name fixes the number of coefficients.
+_NAMED_COUNTS = {"rational_polynomial": (8,), "radtan": (4,)}
+
+
+#: How close R R^T must be to I and det R to +1.
+ROTATION_TOLERANCE = 1e-6
+
+
+def _read_text(p: Path, what: str) -> str:
+    """A calibration file's text: UTF-8 (a byte-order mark is dropped), any line ends."""
+    if not p.is_file():
+        raise FileNotFoundError(f"{what} not found: {p}")
+    try:
+        return p.read_bytes().decode("utf-8-sig")
+    except UnicodeDecodeError as exc:
+        raise ValueError(f"{p}: not a text file ({what}): {exc}") from exc
+
+
+def _fail(where: str, message: str) -> ValueError:
+    return ValueError(f"{where}: {message}")
+
+
+def _check_array(value: Any, where: str, key: str, shape: tuple[int, ...]) -> np.ndarray:
+    """``value`` as a float64 array of ``shape`` (a vector also from (1, n) or (n, 1)),
+    finite."""
+    try:
+        a = np.array(value, dtype=np.float64)
+    except (TypeError, ValueError) as exc:
+        raise _fail(where, f"{key} must be numbers, got {value!r}") from exc
+    if len(shape) == 1 and a.ndim == 2 and 1 in a.shape:
+        a = a.reshape(-1)
+    if a.shape != shape and not (len(shape) == 1 and shape[0] < 0 and a.ndim == 1):
+        want = "(n,)" if shape[0] < 0 else str(shape)
+        raise _fail(where, f"{key} must have shape {want}, got {a.shape}")
+    if not np.isfinite(a).all():
+        raise _fail(where, f"{key} must be finite, got {a.tolist()}")
+    return a
+
+
+def _check_intrinsics(value: Any, where: str, key: str) -> np.ndarray:
+    k = _check_array(value, where, key, (3, 3))
+    if not (k[0, 0] > 0 and k[1, 1] > 0):
+        raise _fail(where, f"{key} focal lengths must be > 0, got fx={k[0, 0]}, fy={k[1, 1]}")
+    if k[1, 0] != 0 or k[2].tolist() != [0.0, 0.0, 1.0]:
+        raise _fail(where, f"{key} must be [fx s cx; 0 fy cy; 0 0 1], got {k.tolist()}")
+    return k
+
+
+def _check_rotation(value: Any, where: str, key: str) -> np.ndarray:
+    r = _check_array(value, where, key, (3, 3))
+    err = float(np.abs(r @ r.T - np.eye(3)).max())
+    det = float(np.linalg.det(r))
+    if err > ROTATION_TOLERANCE or abs(det - 1.0) > ROTATION_TOLERANCE:
+        raise _fail(
+            where,
+            f"{key} must be a rotation (R R^T = I and det R = +1 within {ROTATION_TOLERANCE:g}), "
+            f"got max |R R^T - I| = {err:.3g} and det R = {det:.9g}",
+        )
+    return r
+
+
+def _check_distortion(
+    value: Any, model: str, where: str, key: str, named: str | None = None
+) -> np.ndarray:
+    """Distortion coefficients of ``model``; ``named`` the file's own name for the model,
+    where it fixes the count (ROS's rational_polynomial 8, Kalibr's radtan 4)."""
+    d = _check_array(value, where, key, (-1,))
+    name = named.strip().lower() if named is not None else model
+    counts = _NAMED_COUNTS.get(name, DISTORTION_COUNTS[model])
+    if d.size not in counts:
+        takes = " or ".join(str(c) for c in counts)
+        raise _fail(where, f"{key} has {d.size} coefficients; the {name} model takes {takes}")
+    return d
+
+
+def _check_model(value: Any, where: str, key: str) -> str:
+    if not isinstance(value, str) or value.strip().lower() not in _MODEL_ALIASES:
+        known = ", ".join(sorted(_MODEL_ALIASES))
+        raise _fail(where, f"{key} must be one of {known}, got {value!r}")
+    return _MODEL_ALIASES[value.strip().lower()]
+
+
+def _check_image_size(value: Any, where: str, key: str) -> tuple[int, int]:
+    if isinstance(value, np.ndarray):
+        value = value.reshape(-1).tolist()
+    if not isinstance(value, list | tuple) or len(value) != 2:
+        raise _fail(where, f"{key} must be (width, height), got {value!r}")
+    w, h = value
+    out = []
+    for v in (w, h):
+        f = _to_float(v)
+        if f is None or not (f.is_integer() and f > 0):
+            raise _fail(where, f"{key} must be two whole numbers > 0, got {value!r}")
+        out.append(int(f))
+    return out[0], out[1]
+
+
+def _to_float(v: Any) -> float | None:
+    """A number from a parsed file: int or float (not bool), or a string that spells one
+    (PyYAML leaves ``1e-05`` and OpenCV's ``.Nan`` as strings)."""
+    if isinstance(v, bool | np.bool_):
+        return None
+    if isinstance(v, int | float | np.integer | np.floating):
+        return float(v)
+    if isinstance(v, str):
+        s = v.strip()
+        if _NUMBER_RE.fullmatch(s):
+            return float(s)
+        special = {".nan": math.nan, ".inf": math.inf, "+.inf": math.inf, "-.inf": -math.inf}
+        return special.get(s.lower())
+    return None
+
+
+def _unit(translation_unit: str) -> float:
+    if translation_unit not in TRANSLATION_UNITS:
+        known = ", ".join(repr(u) for u in TRANSLATION_UNITS)
+        raise ValueError(f"translation_unit must be one of {known}, got {translation_unit!r}")
+    return TRANSLATION_UNITS[translation_unit]
+
+
+def _image_size_of(
+    found: tuple[int, int] | None, given: Any, where: str, hint: str
+) -> tuple[int, int]:
+    """The image size from the file and/or the caller, which must agree when both are set."""
+    if given is not None:
+        given = _check_image_size(given, "image_size", "image_size")
+    if found is not None and given is not None and found != given:
+        raise _fail(where, f"the file gives an image size of {found}, image_size= {given}")
+    size = found or given
+    if size is None:
+        raise _fail(where, f"no image size in the file ({hint}): pass image_size=(width, height)")
+    return size
+
+
+def _check_cameras(cameras: Any, name: str = "cameras") -> tuple[int, int]:
+    try:
+        a, b = cameras
+    except (TypeError, ValueError):
+        raise ValueError(f"{name} must be two camera numbers, got {cameras!r}") from None
+    for c in (a, b):
+        if isinstance(c, bool) or not isinstance(c, int) or c < 0:
+            raise ValueError(f"{name} must be two whole numbers >= 0, got {cameras!r}")
+    if a == b:
+        raise ValueError(f"{name} must be two different cameras, got {cameras!r}")
+    return a, b

@@ -1,0 +1,137 @@
+"""Any calibration file, its format told by its content."""
+
+from __future__ import annotations
+
+import os
+import re
+from pathlib import Path
+from typing import Any
+
+from ._common import _fail, _read_text
+from ._trees import _yaml_tree
+from .kalibr import read_kalibr_stereo_calibration
+from .kitti import read_kitti_calib, read_kitti_stereo_calibration
+from .middlebury import read_middlebury_calib, read_middlebury_stereo_calibration
+from .opencv import _OPENCV_NAMES, read_opencv_stereo_calibration
+from .ros import read_ros_stereo_calibration
+from .stereo import Calibration, StereoCalibration
+
+__all__ = ["read_calibration", "read_stereo_calibration"]
+
+
+def read_stereo_calibration(
+    path: str | os.PathLike[str],
+    *,
+    second_path: str | os.PathLike[str] | None = None,
+    translation_unit: str = "m",
+    image_size: tuple[int, int] | None = None,
+    distortion_model: str | None = None,
+    cameras: tuple[int, int] | None = None,
+) -> StereoCalibration:
+    """A stereo calibration from any file this module reads, the format told by content:
+
+    - OpenCV FileStorage XML (``<opencv_storage>``) or YAML (keys such as M1, K1, R, T):
+      :func:`read_opencv_stereo_calibration`, ``second_path`` the second file when the
+      calibration is split in two (intrinsics and extrinsics);
+    - ROS camera_info YAML (``camera_matrix``): :func:`read_ros_stereo_calibration`, the
+      left camera's file, ``second_path`` the right camera's (required);
+    - Kalibr camchain YAML (``cam0`` with ``intrinsics``):
+      :func:`read_kalibr_stereo_calibration`;
+    - Middlebury ``calib.txt`` (``cam0=[...]``): :func:`read_middlebury_stereo_calibration`;
+    - KITTI (``P2: ...`` or ``P_rect_02: ...`` lines): :func:`read_kitti_stereo_calibration`.
+
+    The keywords go to the readers that take them: ``translation_unit`` (OpenCV, ROS,
+    Kalibr; Middlebury and KITTI files state their unit, so only "m" is accepted there),
+    ``image_size`` (all), ``distortion_model`` (OpenCV), ``cameras`` (Kalibr, default (0, 1);
+    KITTI, default (2, 3)). Raises FileNotFoundError, ValueError naming the file for an
+    unknown format, a keyword that does not apply or any fault the reader finds, and
+    ImportError when a YAML file needs PyYAML."""
+    p = Path(path)
+    text = _read_text(p, "calibration file")
+    head = text.lstrip()
+
+    def refuse(kind: str, **given: Any) -> None:
+        for name, value in given.items():
+            if value:
+                raise _fail(str(p), f"{name} does not apply to a {kind} file")
+
+    def opencv() -> StereoCalibration:
+        refuse("OpenCV", cameras=cameras)
+        return read_opencv_stereo_calibration(
+            p,
+            second_path,
+            translation_unit=translation_unit,
+            image_size=image_size,
+            distortion_model=distortion_model,
+        )
+
+    if head.startswith(("<?xml", "<opencv_storage")):
+        return opencv()
+    if re.search(r"^[ \t]*cam0[ \t]*=", text, flags=re.MULTILINE):
+        refuse(
+            "Middlebury",
+            second_path=second_path,
+            distortion_model=distortion_model,
+            cameras=cameras,
+            translation_unit=translation_unit != "m",
+        )
+        return read_middlebury_stereo_calibration(p, image_size=image_size)
+    if re.search(r"^[ \t]*P(_rect_0)?\d[ \t]*:[ \t]*[-+.\d]", text, flags=re.MULTILINE):
+        refuse(
+            "KITTI",
+            second_path=second_path,
+            distortion_model=distortion_model,
+            translation_unit=translation_unit != "m",
+        )
+        return read_kitti_stereo_calibration(p, cameras=cameras or (2, 3), image_size=image_size)
+    known = (
+        "not a calibration file this reader knows (OpenCV FileStorage, ROS camera_info, Kalibr "
+        "camchain, Middlebury calib.txt, KITTI)"
+    )
+    try:
+        tree = _yaml_tree(p, text)
+    except ValueError as exc:
+        if head.startswith("%YAML") or "!!opencv-" in text:
+            raise  # an OpenCV file with a fault: say which
+        raise _fail(str(p), f"{known}; as YAML: {str(exc)[len(str(p)) + 2 :]}") from exc
+    if "camera_matrix" in tree:
+        refuse("ROS camera_info", distortion_model=distortion_model, cameras=cameras)
+        if second_path is None:
+            raise _fail(
+                str(p),
+                "a ROS camera_info file holds one camera: pass the right camera's file "
+                "as second_path",
+            )
+        return read_ros_stereo_calibration(
+            p, second_path, translation_unit=translation_unit, image_size=image_size
+        )
+    if isinstance(tree.get("cam0"), dict) and "intrinsics" in tree["cam0"]:
+        refuse("Kalibr", second_path=second_path, distortion_model=distortion_model)
+        return read_kalibr_stereo_calibration(
+            p, cameras=cameras or (0, 1), translation_unit=translation_unit, image_size=image_size
+        )
+    if any(n in tree for names in _OPENCV_NAMES.values() for n in names):
+        return opencv()
+    raise _fail(str(p), known)
+
+
+def read_calibration(
+    path: str | os.PathLike[str], cams: tuple[int, int] | None = None
+) -> Calibration:
+    """A Middlebury ``calib.txt`` or a KITTI calibration file, told apart by their content."""
+    p = Path(path)
+    if not p.is_file():
+        raise FileNotFoundError(f"calibration file not found: {p}")
+    text = p.read_text(errors="replace")
+    if re.search(r"^\s*P(_rect_0)?\d\s*:", text, flags=re.MULTILINE):
+        return read_kitti_calib(p, cams or (2, 3))
+    c = read_middlebury_calib(p)
+    return Calibration(
+        focal_px=c.focal_px,
+        baseline_m=c.baseline_mm / 1000.0,
+        doffs_px=c.doffs_px,
+        cx_px=float(c.cam0[0, 2]),
+        cy_px=float(c.cam0[1, 2]),
+        num_disparities=c.ndisp,
+        source=str(p),
+    )

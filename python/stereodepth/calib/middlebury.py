@@ -1,0 +1,135 @@
+"""Middlebury's ``calib.txt`` (the 2014 format: cam0, cam1, doffs, baseline, width, height,
+ndisp; D. Scharstein et al., GCPR 2014)."""
+
+from __future__ import annotations
+
+import os
+import re
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from ._common import _INTEGER_RE, _LINE_RE, _NUMBER_RE, _image_size_of, _read_text
+from .stereo import StereoCalibration, _rectified_calibration
+
+__all__ = ["MiddleburyCalib", "read_middlebury_calib", "read_middlebury_stereo_calibration"]
+
+
+@dataclass(frozen=True)
+class MiddleburyCalib:
+    """The fields of a Middlebury ``calib.txt`` (2014 and later format)."""
+
+    cam0: np.ndarray  # 3x3 intrinsics of the left camera, pixels
+    cam1: np.ndarray  # 3x3 intrinsics of the right camera, pixels
+    doffs_px: float  # x difference of the principal points, cx1 - cx0
+    baseline_mm: float
+    width_px: int | None
+    height_px: int | None
+    ndisp: int | None  # a conservative bound on the number of disparity levels
+
+    @property
+    def focal_px(self) -> float:
+        return float(self.cam0[0, 0])
+
+
+def _matrix(text: str, key: str, path: Path) -> np.ndarray:
+    """``[a b c; d e f; g h i]``: a 3x3 intrinsics matrix, finite, positive focal lengths,
+    last row 0 0 1."""
+    rule = f"{key} must be a 3x3 matrix [fx 0 cx; 0 fy cy; 0 0 1]"
+    m = re.fullmatch(r"\[(.*)\]", text)
+    rows = m.group(1).split(";") if m else []
+    cells = [r.split() for r in rows]
+    if len(cells) != 3 or any(len(r) != 3 for r in cells):
+        raise ValueError(f"{path}: {rule}, got {text!r}")
+    if not all(_NUMBER_RE.fullmatch(v) for r in cells for v in r):
+        raise ValueError(f"{path}: {rule} of numbers, got {text!r}")
+    k = np.array([[float(v) for v in r] for r in cells], dtype=np.float64)
+    if not np.isfinite(k).all():
+        raise ValueError(f"{path}: {key} must be finite, got {text!r}")
+    if not (k[0, 0] > 0 and k[1, 1] > 0):
+        raise ValueError(f"{path}: {key} focal lengths must be > 0, got {text!r}")
+    if k[2].tolist() != [0.0, 0.0, 1.0] or k[1, 0] != 0:
+        raise ValueError(f"{path}: {key}'s last row must be 0 0 1, got {text!r}")
+    return k
+
+
+def read_middlebury_calib(path: str | os.PathLike[str]) -> MiddleburyCalib:
+    """Parses a Middlebury ``calib.txt`` (the 2014 format, vision.middlebury.edu/stereo/data/
+    scenes2014): one ``key=value`` a line, ``cam0=[f 0 cx; 0 f cy; 0 0 1]``, ``cam1=``,
+    ``doffs=`` (px), ``baseline=`` (mm), ``width=``, ``height=``, ``ndisp=``, and keys this
+    reader does not use (``isint``, ``vmin``, ``vmax``, ``dyavg``, ``dymax``, ...).
+
+    Line ends LF, CR LF or CR; spaces around ``=`` and at line ends; blank lines. The format
+    has no comments: any other line is refused. ``cam0`` and ``baseline`` are required,
+    ``cam1`` defaults to ``cam0``, ``doffs`` to 0.
+
+    Raises FileNotFoundError for a missing file and ValueError naming the file and the field
+    (with the line number for a malformed line): a line that is not ``key=value``, a key
+    given twice, a missing required key, a matrix that is not 3x3 with finite numbers,
+    positive focal lengths and a last row 0 0 1, a baseline that is not a finite number
+    > 0, a non-finite doffs, a width, height or ndisp that is not a whole number > 0."""
+    p = Path(path)
+    text = _read_text(p, "Middlebury calib.txt")
+    fields: dict[str, str] = {}
+    for lineno, line in enumerate(text.splitlines(), start=1):
+        if not line.strip():
+            continue
+        m = _LINE_RE.fullmatch(line.strip(" \t"))
+        if m is None:
+            raise ValueError(
+                f"{p}: line {lineno} of a Middlebury calib.txt must be key=value, got {line!r}"
+            )
+        key, value = m.groups()
+        if key in fields:
+            raise ValueError(f"{p}: {key} is given twice (line {lineno})")
+        fields[key] = value
+    for key in ("cam0", "baseline"):
+        if key not in fields:
+            raise ValueError(f"{p}: missing field {key!r} in Middlebury calib.txt")
+
+    def number(key: str) -> float:
+        v = fields[key]
+        if _NUMBER_RE.fullmatch(v) is None or not np.isfinite(float(v)):
+            raise ValueError(f"{p}: {key} must be a finite number, got {v!r}")
+        return float(v)
+
+    def whole(key: str) -> int | None:
+        if key not in fields:
+            return None
+        v = fields[key]
+        if _INTEGER_RE.fullmatch(v) is None or int(v) <= 0:
+            raise ValueError(f"{p}: {key} must be a whole number > 0, got {v!r}")
+        return int(v)
+
+    cam0 = _matrix(fields["cam0"], "cam0", p)
+    cam1 = _matrix(fields["cam1"], "cam1", p) if "cam1" in fields else cam0.copy()
+    baseline = number("baseline")
+    if not baseline > 0:
+        raise ValueError(f"{p}: baseline must be > 0 mm, got {fields['baseline']!r}")
+    doffs = number("doffs") if "doffs" in fields else 0.0
+    return MiddleburyCalib(
+        cam0=cam0,
+        cam1=cam1,
+        doffs_px=doffs,
+        baseline_mm=baseline,
+        width_px=whole("width"),
+        height_px=whole("height"),
+        ndisp=whole("ndisp"),
+    )
+
+
+def read_middlebury_stereo_calibration(
+    path: str | os.PathLike[str], *, image_size: tuple[int, int] | None = None
+) -> StereoCalibration:
+    """A Middlebury ``calib.txt`` (see :func:`read_middlebury_calib`) as a rectified
+    :class:`StereoCalibration`: K1 = cam0, K2 = cam1, no distortion, R = I,
+    T = (-baseline, 0, 0) in metres, image size from ``width`` and ``height`` (or
+    ``image_size=``), R1, R2, P1, P2, Q as ``cv2.stereoRectify`` lays them out (Q keeps
+    doffs). Raises as :func:`read_middlebury_calib`, and ValueError when the image size is
+    missing or disagrees with ``image_size=``."""
+    p = Path(path)
+    c = read_middlebury_calib(p)
+    found = (c.width_px, c.height_px) if c.width_px and c.height_px else None
+    size = _image_size_of(found, image_size, str(p), "width, height")
+    return _rectified_calibration(c.cam0, c.cam1, c.baseline_mm / 1000.0, size, str(p))

@@ -1,0 +1,132 @@
+"""A pair of ROS ``camera_info`` YAML files (sensor_msgs/CameraInfo: camera_matrix,
+distortion_model, distortion_coefficients, rectification_matrix, projection_matrix)."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ._common import (
+    _check_distortion,
+    _check_intrinsics,
+    _check_model,
+    _check_rotation,
+    _fail,
+    _image_size_of,
+    _read_text,
+    _unit,
+)
+from ._trees import _file_image_size, _ros_matrix, _yaml_tree
+from .stereo import StereoCalibration
+
+__all__ = ["read_ros_stereo_calibration"]
+
+
+def _ros_camera(p: Path, scale: float) -> dict[str, Any]:
+    where = str(p)
+    tree = _yaml_tree(p, _read_text(p, "ROS camera_info file"))
+    k = _check_intrinsics(_ros_matrix(tree, "camera_matrix", where, (3, 3)), where, "camera_matrix")
+    if "distortion_model" not in tree:
+        raise _fail(where, "missing key distortion_model")
+    model = _check_model(tree["distortion_model"], where, "distortion_model")
+    d = _ros_matrix(tree, "distortion_coefficients", where, (-1,))
+    d = _check_distortion(
+        d, model, where, "distortion_coefficients", named=tree["distortion_model"]
+    )
+    r = _check_rotation(
+        _ros_matrix(tree, "rectification_matrix", where, (3, 3)), where, "rectification_matrix"
+    )
+    pm = _ros_matrix(tree, "projection_matrix", where, (3, 4))
+    kp = _check_intrinsics(pm[:, :3], where, "projection_matrix[:, :3]")
+    pm[:, 3] *= scale
+    return {
+        "where": where,
+        "K": k,
+        "model": model,
+        "D": d,
+        "R": r,
+        "P": pm,
+        "t": np.linalg.solve(kp, pm[:, 3]),  # the rectified camera's offset, metres
+        "size": _file_image_size(tree, where),
+    }
+
+
+def read_ros_stereo_calibration(
+    left_path: str | os.PathLike[str],
+    right_path: str | os.PathLike[str],
+    *,
+    translation_unit: str = "m",
+    image_size: tuple[int, int] | None = None,
+) -> StereoCalibration:
+    """A stereo calibration from the two ROS camera_info YAML files of a rectified pair, as
+    ROS's camera_calibration writes them (wiki.ros.org/camera_calibration_parsers,
+    sensor_msgs/CameraInfo): ``image_width``, ``image_height``, ``camera_matrix``,
+    ``distortion_model`` (``plumb_bob``, ``rational_polynomial``, ``equidistant``),
+    ``distortion_coefficients``, ``rectification_matrix`` and ``projection_matrix``, each
+    matrix as ``{rows, cols, data}``.
+
+    ROS stores no R and T: they are recovered from the rectification. Each rectified camera
+    i has ``P_i = K'_i [I | t_i]`` (for the right camera of a horizontal pair ``Tx = -fx' B``,
+    so t = (-B, 0, 0)); a point X of the left camera is ``R1 X - t_1`` in the common
+    rectified frame, so ``R = R2^T R1`` and ``T = R2^T (t_2 - t_1)``. The two projections
+    must share fx' and fy' (a rectified pair). B is in metres by ROS's convention;
+    ``translation_unit`` says otherwise. R1, R2, P1, P2 are the files' rectification and
+    projection matrices.
+
+    Raises FileNotFoundError, ImportError without PyYAML, and ValueError naming the file
+    and the key for a missing key, a wrong shape, a non-finite value, a rectification matrix
+    that is not a rotation, a distortion count that does not fit the model, cameras with
+    different distortion models, image sizes or rectified focal lengths, a right camera
+    with no offset or files given in the wrong order."""
+    scale = _unit(translation_unit)
+    left = _ros_camera(Path(left_path), scale)
+    right = _ros_camera(Path(right_path), scale)
+    where = f"{left['where']} + {right['where']}"
+    if left["model"] != right["model"]:
+        raise _fail(where, f"distortion_model differs: {left['model']!r} and {right['model']!r}")
+    sizes = {s for s in (left["size"], right["size"]) if s is not None}
+    if len(sizes) > 1:
+        raise _fail(where, f"image_width/image_height differ: {left['size']} and {right['size']}")
+    size = _image_size_of(
+        sizes.pop() if sizes else None, image_size, where, "image_width, image_height"
+    )
+    pl, pr = left["P"], right["P"]
+    if not np.allclose(pl[:2, :2], pr[:2, :2], rtol=1e-9, atol=0):
+        raise _fail(
+            where,
+            "projection_matrix fx and fy differ between the cameras, got "
+            f"{pl[0, 0]}, {pl[1, 1]} and {pr[0, 0]}, {pr[1, 1]}: not a rectified pair",
+        )
+    if not np.any(right["t"]):
+        side = "left" if np.any(left["t"]) else "right"
+        raise _fail(
+            right["where"],
+            "projection_matrix has no translation (Tx = Ty = 0): not the right camera of a "
+            "stereo calibration" + (" (are the files swapped?)" if side == "left" else ""),
+        )
+    if pr[0, 3] - pl[0, 3] > 0:
+        raise _fail(
+            right["where"],
+            f"projection_matrix Tx = {pr[0, 3]} > 0: this camera is left of the other "
+            "(are the files swapped?)",
+        )
+    r = right["R"].T @ left["R"]
+    t = right["R"].T @ (right["t"] - left["t"])
+    return StereoCalibration(
+        K1=left["K"],
+        D1=left["D"],
+        K2=right["K"],
+        D2=right["D"],
+        distortion_model=left["model"],
+        R=r,
+        T=t,
+        image_size=size,
+        R1=left["R"],
+        R2=right["R"],
+        P1=pl,
+        P2=pr,
+        source=where,
+    )

@@ -1,0 +1,310 @@
+"""``stereodepth match LEFT RIGHT``: one rectified pair to disparity, depth, colour previews and
+a point cloud, with a summary on stdout (``--json`` for one JSON object).
+
+Outputs go to ``--out``: a folder (an existing one, or a path ending in ``/``, created) with
+files ``disparity.<ext>``, ``depth.<ext>``, ``disparity-preview.png``, ``depth-preview.png``
+and ``points.ply``; or a prefix (``--out results/teddy-`` writes ``results/teddy-disparity.pfm``
+and so on; its folder must exist). Formats: disparity as PFM (float32, NaN holes; default),
+``npy`` or ``png16`` (KITTI's uint16 of d x 256, 0 for holes); depth as ``npy`` (float32
+metres, NaN where unknown; default), ``pfm``, or ``png16`` (uint16 millimetres, 0 unknown).
+The previews are the colourised maps pixel for pixel with a colour bar and unit under them
+(:func:`stereodepth.save_colorized`); they need the ``plot`` extra (``--no-preview`` skips them).
+
+Depth needs a rig: ``--calib FILE`` (Middlebury calib.txt or KITTI calib) or ``--focal-px`` and
+``--baseline-mm`` (with ``--doffs-px``). Without one only the disparity is written.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+__all__ = ["output_paths", "register", "run"]
+
+DISPARITY_FORMATS = {"pfm": ".pfm", "npy": ".npy", "png16": ".png"}
+DEPTH_FORMATS = {"npy": ".npy", "pfm": ".pfm", "png16": ".png"}
+
+
+class _Usage(ValueError):
+    """Bad input on the command line (exit status 2)."""
+
+
+def register(subparsers: Any) -> None:
+    """Adds the ``match`` subcommand."""
+    p = subparsers.add_parser(
+        "match",
+        help="one stereo pair to disparity, depth, colour previews and a point cloud",
+        description=(
+            "Matches one rectified stereo pair and writes the disparity, the depth (with a "
+            "calibration), colour previews with colour bars and optionally a PLY point cloud; "
+            "prints a summary (size, search range, density, depth range, time)."
+        ),
+    )
+    p.add_argument("left", metavar="LEFT", help="the left image (PNG, JPEG, ...)")
+    p.add_argument("right", metavar="RIGHT", help="the right image, the same size")
+    m = p.add_argument_group("the matcher")
+    m.add_argument(
+        "--method",
+        choices=("bm", "sgm"),
+        default="bm",
+        help="bm: block matching (default); sgm: semi-global matching, where available",
+    )
+    m.add_argument(
+        "--num-disparities",
+        type=int,
+        metavar="N",
+        help="disparities searched (default: ndisp of a Middlebury calib.txt, else an eighth "
+        "of the width rounded up to 16, from 16 to 256)",
+    )
+    m.add_argument("--min-disparity", type=int, default=0, metavar="N", help="default 0")
+    m.add_argument("--block-size", type=int, metavar="N", help="block matcher's block side (odd)")
+    m.add_argument("--cost", choices=("census", "sad"), help="block matcher's cost (census)")
+    m.add_argument("--threads", type=int, metavar="N", help="threads (default: every core)")
+    r = p.add_argument_group("the rig (for depth)")
+    r.add_argument("--calib", metavar="FILE", help="Middlebury calib.txt or KITTI calib file")
+    r.add_argument("--focal-px", type=float, metavar="PX", help="focal length in pixels")
+    r.add_argument("--baseline-mm", type=float, metavar="MM", help="baseline in millimetres")
+    r.add_argument(
+        "--doffs-px", type=float, metavar="PX", help="principal point offset in px (default 0)"
+    )
+    o = p.add_argument_group("output")
+    o.add_argument(
+        "-o",
+        "--out",
+        default=".",
+        metavar="PATH",
+        help="a folder (existing, or ending in /) or a file-name prefix (default: .)",
+    )
+    o.add_argument(
+        "--disparity-format", choices=tuple(DISPARITY_FORMATS), default="pfm", help="default pfm"
+    )
+    o.add_argument(
+        "--depth-format",
+        choices=tuple(DEPTH_FORMATS),
+        default="npy",
+        help="npy or pfm: float32 m; png16: uint16 mm (default npy)",
+    )
+    o.add_argument("--no-preview", action="store_true", help="skip the colour previews")
+    o.add_argument(
+        "--cmap", default="turbo", metavar="NAME", help="colour map of the previews (turbo)"
+    )
+    o.add_argument("--ply", action="store_true", help="also write the point cloud as points.ply")
+    o.add_argument("--json", action="store_true", help="print the summary as one JSON object")
+    p.set_defaults(func=run)
+
+
+def output_paths(out: str, names: list[str]) -> dict[str, Path]:
+    """Where each output goes: ``out`` as a folder (existing, or ending in a separator: made)
+    or as a prefix of the file names (its folder must exist)."""
+    is_dir = out.endswith(("/", os.sep)) or Path(out).is_dir()
+    if is_dir:
+        folder = Path(out)
+        if folder.exists() and not folder.is_dir():
+            raise _Usage(f"--out must be a folder or a file-name prefix, got {out!r}")
+        try:
+            folder.mkdir(parents=True, exist_ok=True)
+        except OSError as exc:
+            raise _Usage(f"--out: cannot make the folder {out!r}: {exc.strerror}") from None
+        return {n: folder / n for n in names}
+    parent = Path(out).parent
+    if not parent.is_dir():
+        raise _Usage(f"--out: the folder of the prefix {out!r} does not exist: {str(parent)!r}")
+    return {n: Path(out + n) for n in names}
+
+
+def _rig(args: argparse.Namespace) -> tuple[dict[str, Any] | None, int | None, str | None]:
+    """(focal_px, baseline_m, doffs_px, cx_px, cy_px) or None; ndisp; the calibration's source."""
+    given = [
+        n for n, v in (("--focal-px", args.focal_px), ("--baseline-mm", args.baseline_mm)) if v
+    ]
+    if args.calib is not None:
+        if given or args.doffs_px is not None:
+            raise _Usage("give either --calib or --focal-px and --baseline-mm, not both")
+        from .match_pair import read_calibration_file
+
+        try:
+            c = read_calibration_file(args.calib)
+        except (OSError, ValueError) as exc:
+            raise _Usage(f"--calib: {exc}") from None
+        rig = {
+            "focal_px": float(c.focal_px),
+            "baseline_m": float(c.baseline_m),
+            "doffs_px": float(c.doffs_px),
+            "cx_px": c.cx_px,
+            "cy_px": c.cy_px,
+        }
+        return rig, c.num_disparities, str(args.calib)
+    if args.focal_px is None and args.baseline_mm is None:
+        if args.doffs_px is not None:
+            raise _Usage("--doffs-px goes with --focal-px and --baseline-mm")
+        return None, None, None
+    if args.focal_px is None or args.baseline_mm is None:
+        missing = "--baseline-mm" if args.focal_px is not None else "--focal-px"
+        raise _Usage(f"{missing} is required with {given[0]}")
+    for name, v in (("--focal-px", args.focal_px), ("--baseline-mm", args.baseline_mm)):
+        if not (np.isfinite(v) and v > 0):
+            raise _Usage(f"{name} must be a finite number > 0, got {v!r}")
+    doffs = 0.0 if args.doffs_px is None else float(args.doffs_px)
+    if not np.isfinite(doffs):
+        raise _Usage(f"--doffs-px must be finite, got {doffs!r}")
+    rig = {
+        "focal_px": float(args.focal_px),
+        "baseline_m": float(args.baseline_mm) / 1000.0,
+        "doffs_px": doffs,
+        "cx_px": None,
+        "cy_px": None,
+    }
+    return rig, None, "command line"
+
+
+def _read(name: str, path: str) -> np.ndarray:
+    from .io import read_image
+
+    try:
+        return read_image(path)
+    except (OSError, ValueError) as exc:
+        raise _Usage(f"{name}: {exc}") from None
+
+
+def run(args: argparse.Namespace) -> int:
+    """Matches the pair, writes the outputs, prints the summary; returns the exit status."""
+    from . import io
+    from .match_pair import match_pair
+
+    rig, ndisp, source = _rig(args)
+    if args.threads is not None and args.threads < 0:
+        raise _Usage(f"--threads must be an integer >= 0, got {args.threads}")
+    left_img = _read("LEFT", args.left)
+    right_img = _read("RIGHT", args.right)
+    if left_img.shape[:2] != right_img.shape[:2]:
+        raise _Usage(
+            f"LEFT and RIGHT must have the same size, got {left_img.shape[1]}x"
+            f"{left_img.shape[0]} and {right_img.shape[1]}x{right_img.shape[0]} px"
+        )
+    want_preview = not args.no_preview
+    if want_preview:
+        from .colormap import colormap_lut
+
+        colormap_lut(args.cmap)  # a bad name or a missing extra fails before any work
+    names = {"disparity": "disparity" + DISPARITY_FORMATS[args.disparity_format]}
+    if rig is not None:
+        names["depth"] = "depth" + DEPTH_FORMATS[args.depth_format]
+    if want_preview:
+        names["disparity_preview"] = "disparity-preview.png"
+        if rig is not None:
+            names["depth_preview"] = "depth-preview.png"
+    if args.ply:
+        if rig is None:
+            raise _Usage("--ply needs a rig: give --calib or --focal-px and --baseline-mm")
+        names["ply"] = "points.ply"
+    paths = output_paths(args.out, list(names.values()))
+    out = {key: paths[name] for key, name in names.items()}
+
+    result = match_pair(
+        left_img,
+        right_img,
+        method=args.method,
+        num_disparities=args.num_disparities if args.num_disparities is not None else ndisp,
+        min_disparity=args.min_disparity,
+        block_size=args.block_size,
+        cost=args.cost,
+        focal_px=None if rig is None else rig["focal_px"],
+        baseline_m=None if rig is None else rig["baseline_m"],
+        doffs_px=0.0 if rig is None else rig["doffs_px"],
+        threads=args.threads,
+    )
+    d = result.disparity
+    if args.disparity_format == "pfm":
+        io.write_pfm(out["disparity"], d)
+    elif args.disparity_format == "npy":
+        io.write_npy(out["disparity"], d)
+    else:
+        io.write_disparity_png16(out["disparity"], d)
+    if rig is not None:
+        from .depth import disparity_to_depth
+
+        assert result.depth is not None
+        if args.depth_format == "npy":
+            io.write_npy(out["depth"], result.depth)
+        elif args.depth_format == "pfm":
+            io.write_pfm(out["depth"], result.depth)
+        else:
+            mm = disparity_to_depth(
+                d,
+                focal_px=rig["focal_px"],
+                baseline_m=rig["baseline_m"],
+                doffs_px=rig["doffs_px"],
+                dtype=np.uint16,
+            )
+            io.write_png16(out["depth"], mm)
+    if want_preview:
+        from .colormap import save_colorized
+
+        save_colorized(out["disparity_preview"], d, quantity="disparity", unit="px", cmap=args.cmap)
+        if result.depth is not None:
+            save_colorized(
+                out["depth_preview"], result.depth, quantity="depth", unit="m", cmap=args.cmap
+            )
+    if args.ply and rig is not None:
+        from .pointcloud import reproject, write_ply
+
+        points = reproject(
+            d,
+            focal_px=rig["focal_px"],
+            baseline_m=rig["baseline_m"],
+            doffs_px=rig["doffs_px"],
+            cx_px=rig["cx_px"],
+            cy_px=rig["cy_px"],
+        )
+        write_ply(out["ply"], points, left_img, comment="stereodepth match")
+
+    summary = result.summary()
+    summary.update(
+        {
+            "left": str(args.left),
+            "right": str(args.right),
+            "calibration": source,
+            "outputs": {k: str(v) for k, v in out.items()},
+        }
+    )
+    if args.json:
+        print(json.dumps(summary, indent=2, allow_nan=False))
+    else:
+        _print(summary, left_img)
+    return 0
+
+
+def _print(s: dict[str, Any], left: np.ndarray) -> None:
+    kind = "RGB" if left.ndim == 3 else ("16-bit grey" if left.dtype == np.uint16 else "grey")
+    p = s["params"]
+    lo = s["min_disparity"]
+    matcher = f"{s['method']}"
+    if s["method"] == "bm":
+        matcher += f", {p['cost']}, block {p['block_size']}"
+    matcher += f", disparities {lo} to {lo + s['num_disparities'] - 1} px ({s['num_disparities']})"
+    rows = [
+        ("pair", f"{s['left']}, {s['right']} ({s['width']}x{s['height']} px, {kind})"),
+        ("matcher", matcher),
+        ("time", f"{s['time_s']:.3g} s"),
+        ("density", f"{100 * s['density']:.1f} % of the pixels have a disparity"),
+    ]
+    dr = s["disparity_range_px"]
+    rows.append(("disparity", "none" if dr is None else f"{dr[0]:.4g} to {dr[1]:.4g} px"))
+    if s["calibration"] is None:
+        rows.append(("depth", "no rig: give --calib, or --focal-px and --baseline-mm"))
+    else:
+        zr = s["depth_range_m"]
+        rows.append(("depth", "none" if zr is None else f"{zr[0]:.4g} to {zr[1]:.4g} m"))
+        rows.append(("rig", f"from {s['calibration']}"))
+    for key, path in s["outputs"].items():
+        rows.append((key.replace("_", " "), path))
+    width = max(len(k) for k, _ in rows)
+    for key, value in rows:
+        print(f"{key.ljust(width)}  {value}")
+    sys.stdout.flush()

@@ -1,0 +1,857 @@
+"""The web page's depth-map view: a stereo pair in, disparity, depth and a point cloud out.
+
+``POST /api/depthmap`` takes one JSON object:
+
+- ``left``, ``right``: the images as base64 (a ``data:`` URL is accepted), PNG or JPEG,
+  8-bit grey or colour or 16-bit grey (an alpha channel must be opaque and is dropped; 16-bit
+  colour is rejected); or ``"sample": true`` for the package's synthetic pair
+  (:mod:`stereodepth.sample`);
+- ``rig``: the calculator's rig with its names and units (``baseline_mm`` and ``focal_px``
+  with ``doffs_px``, or ``focal_mm`` and ``pixel_um``);
+- ``method`` (``bm``, or ``sgm`` where the library has it), ``num_disparities`` (default: an
+  eighth of the width rounded up to 16), ``block_size``, ``cost`` and ``disparity_step_px``
+  (for the depth resolution);
+- ``cx_px``, ``cy_px``: the left camera's principal point for the 3-D points (default: the
+  image centre; the page sends those of an uploaded calib.txt).
+
+The answer has the summary (size, density, time, ranges), the images as PNG data URLs (the
+left image, the colourised disparity and depth), the colour bars (limits and the colour table),
+the raw float32 disparity, depth and confidence maps (base64, little-endian, row-major: the
+page reads the exact values, so the depth it shows at a pixel is ``disparity_to_depth`` of
+that pixel's disparity to the last digit), a decimated coloured point cloud, and download
+links. ``GET /api/depthmap/{id}/point?x=&y=`` gives one pixel's numbers (its 3-D point from
+:func:`stereodepth.reproject`); ``GET /api/depthmap/{id}/{file}`` the downloads.
+
+Limits and safety: each image at most ``max_upload_bytes`` (default 20 MB) and
+``max_pixels`` (default 4 MP; both settable with ``create_app`` and ``stereodepth serve``);
+the request body is read up to what two such images need and no further (413 beyond). Images
+are decoded in memory and results kept in memory (the last few, under a random id); downloads
+are written to a temporary folder of the server's choosing. Matching runs in worker threads
+(at most two at once) so the server keeps answering. Every bad input answers 422 with
+``{"detail": [{"loc": ["body", field], "msg": ..., "type": ...}]}`` at its field, a body
+too large 413, a missing extra (Pillow, matplotlib) 503 with the install hint; none 500.
+"""
+
+from __future__ import annotations
+
+import base64
+import binascii
+import io
+import json
+import math
+import secrets
+import tempfile
+import threading
+import warnings
+from collections import OrderedDict
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from fastapi import APIRouter, Request
+from fastapi.responses import JSONResponse, Response
+
+__all__ = ["DEFAULT_MAX_PIXELS", "DEFAULT_MAX_UPLOAD_BYTES", "DepthMapLimits", "make_router"]
+
+#: Default limit of one uploaded image file, in bytes (20 MB).
+DEFAULT_MAX_UPLOAD_BYTES = 20_000_000
+#: Default limit of one image's size, in pixels (4 MP: 2560 x 1600 fits).
+DEFAULT_MAX_PIXELS = 4_000_000
+#: Results kept for the pixel queries and downloads (the oldest goes first).
+KEPT_RESULTS = 6
+#: Matching jobs running at once; more wait their turn (each uses every core).
+CONCURRENT_JOBS = 2
+#: The point cloud sent to the page has at most about this many points.
+MAX_CLOUD_POINTS = 40_000
+_FORMATS = ("PNG", "JPEG")
+_BODY_SLACK = 1_000_000  # the JSON around the two images
+
+
+@dataclass(frozen=True)
+class DepthMapLimits:
+    """The upload limits: bytes per image file and pixels per image."""
+
+    max_upload_bytes: int = DEFAULT_MAX_UPLOAD_BYTES
+    max_pixels: int = DEFAULT_MAX_PIXELS
+
+    def __post_init__(self) -> None:
+        for name in ("max_upload_bytes", "max_pixels"):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, int) or v < 1:
+                raise ValueError(f"{name} must be an integer >= 1, got {v!r}")
+
+    @property
+    def max_body_bytes(self) -> int:
+        return 2 * (4 * math.ceil(self.max_upload_bytes / 3)) + _BODY_SLACK
+
+
+class BadInput(Exception):
+    """A bad field: answered 422 at ``loc``."""
+
+    def __init__(self, loc: list[str], msg: str, kind: str = "value_error") -> None:
+        super().__init__(msg)
+        self.loc = loc
+        self.msg = msg
+        self.kind = kind
+
+
+def _error_response(errors: list[BadInput], status: int = 422) -> JSONResponse:
+    return JSONResponse(
+        status_code=status,
+        content={"detail": [{"loc": e.loc, "msg": e.msg, "type": e.kind} for e in errors]},
+    )
+
+
+def _mb(n: float) -> str:
+    return f"{n / 1e6:.3g} MB"
+
+
+def _mp(n: float) -> str:
+    return f"{n / 1e6:.3g} MP"
+
+
+# --- decoding an upload -----------------------------------------------------------------------
+def _png_colour_bits(data: bytes) -> tuple[int, int] | None:
+    """(bit depth, colour type) from a PNG's IHDR, or None."""
+    if data[:8] == b"\x89PNG\r\n\x1a\n" and len(data) >= 26 and data[12:16] == b"IHDR":
+        return data[24], data[25]
+    return None
+
+
+def decode_image(field: str, data: bytes, limits: DepthMapLimits) -> np.ndarray:
+    """An uploaded PNG or JPEG as (H, W) uint8/uint16 grey or (H, W, 3) uint8 RGB; BadInput
+    at ``field`` for anything else."""
+    from PIL import Image, UnidentifiedImageError
+
+    loc = ["body", field]
+    if not data:
+        raise BadInput(loc, f"{field}: the file is empty")
+    if len(data) > limits.max_upload_bytes:
+        raise BadInput(
+            loc,
+            f"{field}: the file is {_mb(len(data))}, more than the limit of "
+            f"{_mb(limits.max_upload_bytes)}",
+            "too_large",
+        )
+    bits = _png_colour_bits(data)
+    if bits is not None and bits[0] == 16 and bits[1] in (2, 6):
+        raise BadInput(
+            loc, f"{field}: 16-bit colour PNGs are not supported; give 8-bit colour or 16-bit grey"
+        )
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", Image.DecompressionBombWarning)
+        try:
+            im = Image.open(io.BytesIO(data))
+        except (Image.DecompressionBombError, Image.DecompressionBombWarning):
+            raise BadInput(
+                loc,
+                f"{field}: the image has more pixels than Pillow opens safely, more than the "
+                f"limit of {_mp(limits.max_pixels)}",
+                "too_large",
+            ) from None
+        except UnidentifiedImageError:
+            raise BadInput(
+                loc, f"{field}: not an image Pillow can read; give a PNG or JPEG file"
+            ) from None
+        except (OSError, ValueError, SyntaxError) as exc:
+            raise BadInput(loc, f"{field}: not a readable image ({exc})") from None
+    with im:
+        if im.format not in _FORMATS:
+            raise BadInput(loc, f"{field}: must be a PNG or JPEG image, got {im.format}")
+        w, h = im.size
+        if w * h > limits.max_pixels:
+            raise BadInput(
+                loc,
+                f"{field}: the image is {w}x{h} px ({_mp(w * h)}), more than the limit of "
+                f"{_mp(limits.max_pixels)}",
+                "too_large",
+            )
+        try:
+            im.load()
+        except (OSError, ValueError, SyntaxError) as exc:
+            raise BadInput(loc, f"{field}: the image is truncated or damaged ({exc})") from None
+        mode = im.mode
+        if mode in ("I;16", "I;16B", "I;16L"):
+            return np.asarray(im, dtype=np.uint16)
+        if mode == "I":
+            a = np.asarray(im)
+            if a.min() < 0 or a.max() > 65535:
+                raise BadInput(loc, f"{field}: 32-bit images are not supported")
+            return a.astype(np.uint16)
+        if mode in ("L", "1"):
+            return np.asarray(im.convert("L"), dtype=np.uint8)
+        if mode in ("RGBA", "LA", "PA", "P") or "transparency" in im.info:
+            rgba = im.convert("RGBA")
+            alpha = np.asarray(rgba)[..., 3]
+            if (alpha != 255).any():
+                raise BadInput(
+                    loc,
+                    f"{field}: the image has transparent pixels (an alpha channel); "
+                    "give an opaque image",
+                )
+            rgb = np.asarray(rgba.convert("RGB"), dtype=np.uint8)
+            if (
+                mode in ("LA", "P", "PA")
+                and (rgb[..., 0] == rgb[..., 1]).all()
+                and (rgb[..., 1] == rgb[..., 2]).all()
+            ):
+                return np.ascontiguousarray(rgb[..., 0])
+            return rgb
+        if mode in ("RGB", "CMYK", "YCbCr"):
+            return np.asarray(im.convert("RGB"), dtype=np.uint8)
+        raise BadInput(loc, f"{field}: images of mode {mode} are not supported")
+
+
+def _b64(field: str, value: Any) -> bytes:
+    loc = ["body", field]
+    if not isinstance(value, str):
+        raise BadInput(loc, f"{field}: give the image file as base64 text")
+    text = value
+    if text.startswith("data:"):
+        head, sep, text = text.partition(",")
+        if not sep or ";base64" not in head:
+            raise BadInput(loc, f"{field}: a data URL must be base64")
+    try:
+        return base64.b64decode(text, validate=True)
+    except (binascii.Error, ValueError):
+        raise BadInput(loc, f"{field}: not valid base64") from None
+
+
+# --- the request --------------------------------------------------------------------------------
+@dataclass
+class Job:
+    left: np.ndarray
+    right: np.ndarray
+    sample: bool
+    rig: Any  # StereoRig
+    method: str
+    num_disparities: int | None
+    block_size: int | None
+    cost: str | None
+    disparity_step_px: float
+    truth: np.ndarray | None = None  # the sample pair's true disparity
+    cx_px: float | None = None  # the left camera's principal point; None: the image centre
+    cy_px: float | None = None
+
+
+_RIG_NAMES = ("baseline_mm", "focal_mm", "pixel_um", "focal_px", "doffs_px")
+
+
+def _number(loc: list[str], name: str, value: Any, rule_text: str) -> float | None:
+    if value is None or (isinstance(value, str) and value.strip() == ""):
+        return None
+    if isinstance(value, bool):
+        raise BadInput(loc, f"{name} must be {rule_text}, got {value!r}")
+    if isinstance(value, str):
+        try:
+            v = float(value)
+        except ValueError:
+            raise BadInput(loc, f"{name} must be {rule_text}, got {value[:40]!r}") from None
+    elif isinstance(value, (int, float)):
+        v = float(value)
+    else:
+        raise BadInput(loc, f"{name} must be {rule_text}, got {value!r}")
+    return v
+
+
+def _rig_of(body: dict[str, Any]) -> Any:
+    from .app import FIELDS, _rig
+
+    raw = body.get("rig")
+    if not isinstance(raw, dict):
+        raise BadInput(["body", "rig"], "rig must be an object with the calculator's fields")
+    values: dict[str, float | None] = {}
+    errors: list[BadInput] = []
+    for name in _RIG_NAMES:
+        f = FIELDS[name]
+        loc = ["body", "rig", name]
+        try:
+            v = _number(loc, name, raw.get(name), f.rule)
+        except BadInput as e:
+            errors.append(e)
+            continue
+        if v is not None:
+            ok = math.isfinite(v)
+            if ok and f.minimum is not None:
+                ok = v > f.minimum if f.exclusive_minimum else v >= f.minimum
+            if ok and f.maximum is not None:
+                ok = v <= f.maximum
+            if not ok:
+                errors.append(BadInput(loc, f"{name} must be {f.rule}, got {raw.get(name)!r}"))
+                continue
+        values[name] = v
+    if errors:
+        raise ExceptionGroupLike(errors)
+    if values.get("baseline_mm") is None:
+        raise BadInput(["body", "rig", "baseline_mm"], "baseline_mm is required", "missing")
+    try:
+        rig = _rig(
+            float(values["baseline_mm"] or 0),
+            values.get("focal_mm"),
+            values.get("pixel_um"),
+            values.get("focal_px"),
+            values.get("doffs_px"),
+            None,
+            None,
+        )
+    except (ValueError, TypeError, ArithmeticError) as exc:
+        raise BadInput(["body", "rig"], str(exc)) from None
+    if isinstance(rig, list):
+        raise ExceptionGroupLike([BadInput(["body", "rig", e["loc"][-1]], e["msg"]) for e in rig])
+    return rig
+
+
+class ExceptionGroupLike(Exception):
+    """Several bad fields at once."""
+
+    def __init__(self, errors: list[BadInput]) -> None:
+        super().__init__("; ".join(e.msg for e in errors))
+        self.errors = errors
+
+
+def _int_field(body: dict[str, Any], name: str, lo: int, hi: int) -> int | None:
+    value = body.get(name)
+    if value is None or (isinstance(value, str) and value.strip() == ""):
+        return None
+    rule = f"an integer from {lo} to {hi}"
+    loc = ["body", name]
+    v: Any = value
+    if isinstance(value, str):
+        try:
+            v = int(value.strip())
+        except ValueError:
+            raise BadInput(loc, f"{name} must be {rule}, got {value[:40]!r}") from None
+    if isinstance(v, float) and v.is_integer():
+        v = int(v)
+    if isinstance(v, bool) or not isinstance(v, int) or not lo <= v <= hi:
+        raise BadInput(loc, f"{name} must be {rule}, got {value!r}")
+    return v
+
+
+def _parse_request(data: bytes, limits: DepthMapLimits) -> Job:
+    try:
+        body = json.loads(data)
+    except (ValueError, UnicodeDecodeError):
+        raise BadInput(["body"], "the request must be JSON") from None
+    return parse_job(body, limits)
+
+
+def parse_job(body: Any, limits: DepthMapLimits) -> Job:
+    """The checked request, or BadInput / ExceptionGroupLike naming the fields."""
+    from ..match_pair import METHODS, prepare_pair, sgm_available
+    from ..matching import MAX_BLOCK_SIZE, MAX_NUM_DISPARITIES
+
+    if not isinstance(body, dict):
+        raise BadInput(["body"], "the request must be a JSON object")
+    errors: list[BadInput] = []
+    try:
+        rig = _rig_of(body)
+    except BadInput as e:
+        errors.append(e)
+    except ExceptionGroupLike as g:
+        errors.extend(g.errors)
+
+    method = body.get("method", "bm")
+    if method not in METHODS:
+        errors.append(BadInput(["body", "method"], f"method must be bm or sgm, got {method!r}"))
+    elif method == "sgm" and not sgm_available():
+        errors.append(
+            BadInput(
+                ["body", "method"],
+                "method sgm (semi-global matching) is not in this version of the library; use bm",
+            )
+        )
+    cost = body.get("cost")
+    if cost is not None and cost not in MAX_BLOCK_SIZE:
+        errors.append(BadInput(["body", "cost"], f"cost must be census or sad, got {cost!r}"))
+    nums: dict[str, int | None] = {}
+    for name, lo, hi in (
+        ("num_disparities", 1, MAX_NUM_DISPARITIES),
+        ("block_size", 3, max(MAX_BLOCK_SIZE.values())),
+    ):
+        try:
+            nums[name] = _int_field(body, name, lo, hi)
+        except BadInput as e:
+            errors.append(e)
+    step = 1.0
+    try:
+        got = _number(
+            ["body", "disparity_step_px"],
+            "disparity_step_px",
+            body.get("disparity_step_px"),
+            "a number > 0 and <= 1000",
+        )
+        if got is not None:
+            if not (math.isfinite(got) and 0 < got <= 1000):
+                raise BadInput(
+                    ["body", "disparity_step_px"],
+                    f"disparity_step_px must be a number > 0 and <= 1000, got "
+                    f"{body.get('disparity_step_px')!r}",
+                )
+            step = got
+    except BadInput as e:
+        errors.append(e)
+
+    centre: dict[str, float | None] = {}
+    for name in ("cx_px", "cy_px"):
+        try:
+            v = _number(["body", name], name, body.get(name), "a finite number (px)")
+            if v is not None and not math.isfinite(v):
+                raise BadInput(["body", name], f"{name} must be a finite number (px), got {v!r}")
+            centre[name] = v
+        except BadInput as e:
+            errors.append(e)
+
+    sample = body.get("sample", False)
+    if not isinstance(sample, bool):
+        errors.append(BadInput(["body", "sample"], f"sample must be true or false, got {sample!r}"))
+        sample = False
+    left = right = None
+    truth = None
+    if sample:
+        from ..sample import sample_pair
+
+        s = sample_pair()
+        left, right, truth = s.left, s.right, s.disparity
+    else:
+        images: dict[str, np.ndarray] = {}
+        for field in ("left", "right"):
+            if body.get(field) is None:
+                errors.append(
+                    BadInput(["body", field], f"{field}: choose an image file", "missing")
+                )
+                continue
+            try:
+                images[field] = decode_image(field, _b64(field, body[field]), limits)
+            except BadInput as e:
+                errors.append(e)
+        if len(images) == 2:
+            try:
+                prepare_pair(images["left"], images["right"])  # the checks only
+                left, right = images["left"], images["right"]
+            except ValueError as exc:
+                errors.append(BadInput(["body", "right"], str(exc)))
+    if errors:
+        raise ExceptionGroupLike(errors)
+    assert left is not None and right is not None
+    return Job(
+        left=left,
+        right=right,
+        sample=sample,
+        rig=rig,
+        method=method,
+        num_disparities=nums.get("num_disparities"),
+        block_size=nums.get("block_size"),
+        cost=cost,
+        disparity_step_px=step,
+        truth=truth,
+        cx_px=centre.get("cx_px"),
+        cy_px=centre.get("cy_px"),
+    )
+
+
+# --- the computation ---------------------------------------------------------------------------
+@dataclass
+class Stored:
+    """A result kept for pixel queries and downloads."""
+
+    disparity: np.ndarray
+    depth: np.ndarray
+    confidence: np.ndarray | None
+    colours: np.ndarray
+    focal_px: float
+    baseline_m: float
+    doffs_px: float
+    cx_px: float
+    cy_px: float
+
+    def points(self, rows: int | None = None) -> np.ndarray:
+        """reproject of the disparity (its first ``rows`` rows) with the rig."""
+        from ..pointcloud import reproject
+
+        d = self.disparity if rows is None else self.disparity[:rows]
+        return reproject(
+            d,
+            focal_px=self.focal_px,
+            baseline_m=self.baseline_m,
+            doffs_px=self.doffs_px,
+            cx_px=self.cx_px,
+            cy_px=self.cy_px,
+        )
+
+
+def _display(image: np.ndarray) -> np.ndarray:
+    """An image as 8-bit for the page: 16-bit grey keeps its high byte."""
+    if image.dtype == np.uint16:
+        return (image >> 8).astype(np.uint8)
+    return image
+
+
+def _data_url(rgb: np.ndarray) -> str:
+    from ..colormap import png_bytes
+
+    return "data:image/png;base64," + base64.b64encode(png_bytes(rgb, compress_level=1)).decode()
+
+
+def _f32(a: np.ndarray) -> str:
+    return base64.b64encode(np.ascontiguousarray(a, dtype="<f4").tobytes()).decode("ascii")
+
+
+def _colorbar(values: np.ndarray, unit: str) -> dict[str, Any]:
+    from ..colormap import colorize_limits, colormap_lut
+
+    lo, hi = colorize_limits(values)
+    lut = colormap_lut("turbo")
+    return {
+        "vmin": lo,
+        "vmax": hi,
+        "unit": unit,
+        "colors": ["#{:02x}{:02x}{:02x}".format(*map(int, c)) for c in lut[::8]]
+        + ["#{:02x}{:02x}{:02x}".format(*map(int, lut[-1]))],
+    }
+
+
+def _cloud(points: np.ndarray, colours: np.ndarray) -> dict[str, Any]:
+    valid = np.isfinite(points).all(axis=-1)
+    n = int(valid.sum())
+    step = max(1, math.ceil(math.sqrt(n / MAX_CLOUD_POINTS))) if n else 1
+    sub = points[::step, ::step]
+    ok = valid[::step, ::step]
+    c = colours[::step, ::step]
+    if c.ndim == 2:
+        c = np.repeat(c[..., None], 3, axis=-1)
+    p = sub[ok].astype(np.float64)
+    cols = c[ok]
+    return {
+        "step": step,
+        "count": int(ok.sum()),
+        "x": np.round(p[:, 0], 4).tolist(),
+        "y": np.round(p[:, 1], 4).tolist(),
+        "z": np.round(p[:, 2], 4).tolist(),
+        # The points' colours: base64 of uint8 R, G, B per point, in order.
+        "rgb": base64.b64encode(np.ascontiguousarray(cols, dtype=np.uint8).tobytes()).decode(),
+    }
+
+
+def _against_truth(disparity: np.ndarray, truth: np.ndarray) -> dict[str, float | None]:
+    """How the estimate compares with the true disparity (the sample pair): the mean absolute
+    error and the fraction off by more than 1 px, over the pixels with an estimate."""
+    ok = np.isfinite(disparity) & np.isfinite(truth)
+    if not ok.any():
+        return {"mean_abs_error_px": None, "bad_1": None}
+    err = np.abs(disparity[ok].astype(np.float64) - truth[ok])
+    return {"mean_abs_error_px": float(err.mean()), "bad_1": float((err > 1).mean())}
+
+
+def compute(job: Job) -> tuple[dict[str, Any], Stored]:
+    """Runs the matcher and builds the answer (in a worker thread)."""
+    from ..match_pair import match_pair
+
+    rig = job.rig
+    focal_px = float(rig.focal_px)
+    baseline_m = rig.baseline_mm / 1000.0
+    doffs = float(rig.doffs_px)
+    result = match_pair(
+        job.left,
+        job.right,
+        method=job.method,
+        num_disparities=job.num_disparities,
+        block_size=job.block_size,
+        cost=job.cost,
+        focal_px=focal_px,
+        baseline_m=baseline_m,
+        doffs_px=doffs,
+    )
+    assert result.depth is not None
+    colours = _display(job.left)
+    from ..colormap import colorize
+
+    h, w = result.disparity.shape
+    stored = Stored(
+        disparity=result.disparity,
+        depth=result.depth,
+        confidence=result.confidence,
+        colours=colours,
+        focal_px=focal_px,
+        baseline_m=baseline_m,
+        doffs_px=doffs,
+        cx_px=(w - 1) / 2.0 if job.cx_px is None else job.cx_px,
+        cy_px=(h - 1) / 2.0 if job.cy_px is None else job.cy_px,
+    )
+    points = stored.points()
+    summary = result.summary()
+    answer: dict[str, Any] = {
+        **summary,
+        "sample": job.sample,
+        "rig": {
+            "focal_px": focal_px,
+            "baseline_mm": rig.baseline_mm,
+            "doffs_px": doffs,
+            "cx_px": stored.cx_px,
+            "cy_px": stored.cy_px,
+            # B (m) x f (px), as StereoRig computes it: the page's depth resolution is
+            # Z * Z * step / bf_m_px, StereoRig.depth_resolution_m's formula.
+            "bf_m_px": rig.baseline_mm / 1000.0 * rig.focal_px,
+            "disparity_step_px": job.disparity_step_px,
+        },
+        "images": {
+            "left": _data_url(colours),
+            "disparity": _data_url(colorize(result.disparity)),
+            "depth": _data_url(colorize(result.depth)),
+        },
+        "colorbars": {
+            "disparity": _colorbar(result.disparity, "px"),
+            "depth": _colorbar(result.depth, "m"),
+        },
+        "arrays": {
+            "encoding": "base64 float32 little-endian, row-major (H, W); NaN where unknown",
+            "disparity": _f32(result.disparity),
+            "depth": _f32(result.depth),
+            "confidence": None if result.confidence is None else _f32(result.confidence),
+        },
+        "points": _cloud(points, colours),
+        "truth": None if job.truth is None else _against_truth(result.disparity, job.truth),
+    }
+    return answer, stored
+
+
+# --- downloads ---------------------------------------------------------------------------------
+DOWNLOADS = {
+    "disparity.pfm": "application/octet-stream",
+    "disparity.npy": "application/octet-stream",
+    "depth.npy": "application/octet-stream",
+    "depth.pfm": "application/octet-stream",
+    "depth-mm.png": "image/png",
+    "points.ply": "application/octet-stream",
+}
+
+
+def download_bytes(stored: Stored, name: str) -> bytes:
+    """One download, written by the library's writers into a temporary folder."""
+    from .. import io as sio
+    from ..depth import disparity_to_depth
+    from ..pointcloud import write_ply
+
+    with tempfile.TemporaryDirectory(prefix="stereodepth-web-") as tmp:
+        path = Path(tmp) / name
+        if name == "disparity.pfm":
+            sio.write_pfm(path, stored.disparity)
+        elif name == "disparity.npy":
+            sio.write_npy(path, stored.disparity)
+        elif name == "depth.npy":
+            sio.write_npy(path, stored.depth)
+        elif name == "depth.pfm":
+            sio.write_pfm(path, stored.depth)
+        elif name == "depth-mm.png":
+            mm = disparity_to_depth(
+                stored.disparity,
+                focal_px=stored.focal_px,
+                baseline_m=stored.baseline_m,
+                doffs_px=stored.doffs_px,
+                dtype=np.uint16,
+            )
+            sio.write_png16(path, mm)
+        else:
+            pts = stored.points()
+            write_ply(path, pts, stored.colours, comment="stereodepth web")
+        return path.read_bytes()
+
+
+# --- the routes --------------------------------------------------------------------------------
+class _Results:
+    """The last KEPT_RESULTS results by id, thread-safe."""
+
+    def __init__(self) -> None:
+        self._lock = threading.Lock()
+        self._items: OrderedDict[str, Stored] = OrderedDict()
+
+    def add(self, stored: Stored) -> str:
+        key = secrets.token_urlsafe(12)
+        with self._lock:
+            self._items[key] = stored
+            while len(self._items) > KEPT_RESULTS:
+                self._items.popitem(last=False)
+        return key
+
+    def get(self, key: str) -> Stored | None:
+        with self._lock:
+            return self._items.get(key)
+
+
+async def _read_body(request: Request, limit: int) -> bytes | None:
+    """The body, or None when it is larger than ``limit`` (read no further than that)."""
+    declared = request.headers.get("content-length")
+    if declared is not None and declared.isdigit() and int(declared) > limit:
+        return None
+    chunks: list[bytes] = []
+    size = 0
+    async for chunk in request.stream():
+        size += len(chunk)
+        if size > limit:
+            return None
+        chunks.append(chunk)
+    return b"".join(chunks)
+
+
+def make_router(limits: DepthMapLimits) -> APIRouter:
+    """The depth view's routes, with these upload limits."""
+    import anyio
+
+    router = APIRouter()
+    add_calib_route(router)
+    results = _Results()
+    jobs = anyio.CapacityLimiter(CONCURRENT_JOBS)
+
+    @router.get("/api/depthmap/limits", summary="The upload limits and the sample pair's rig")
+    def depthmap_limits() -> dict[str, Any]:
+        from ..match_pair import sgm_available
+        from ..sample import SAMPLE_BASELINE_MM, SAMPLE_FOCAL_PX
+
+        return {
+            "max_upload_bytes": limits.max_upload_bytes,
+            "max_pixels": limits.max_pixels,
+            "formats": list(_FORMATS),
+            "methods": ["bm", "sgm"] if sgm_available() else ["bm"],
+            "sample": {
+                "width_px": 320,
+                "height_px": 240,
+                "focal_px": SAMPLE_FOCAL_PX,
+                "baseline_mm": SAMPLE_BASELINE_MM,
+                "doffs_px": 0.0,
+            },
+        }
+
+    @router.post(
+        "/api/depthmap",
+        summary="A stereo pair to disparity, depth and a point cloud (see the module's doc)",
+        responses={422: {"description": "Bad input, at its field"}, 413: {}},
+    )
+    async def depthmap(request: Request) -> Response:
+        data = await _read_body(request, limits.max_body_bytes)
+        if data is None:
+            return _error_response(
+                [
+                    BadInput(
+                        ["body"],
+                        f"the request is larger than {_mb(limits.max_body_bytes)}: each image "
+                        f"may be at most {_mb(limits.max_upload_bytes)}",
+                        "too_large",
+                    )
+                ],
+                413,
+            )
+        try:
+            # Parsing tens of megabytes of JSON and decoding the images: in a worker thread.
+            job = await anyio.to_thread.run_sync(_parse_request, data, limits, limiter=jobs)
+            answer, stored = await anyio.to_thread.run_sync(compute, job, limiter=jobs)
+        except BadInput as e:
+            return _error_response([e])
+        except ExceptionGroupLike as g:
+            return _error_response(g.errors)
+        except ImportError as exc:  # an extra that is not installed: Pillow, matplotlib
+            return _error_response([BadInput(["body"], str(exc), "missing_extra")], 503)
+        except (ValueError, TypeError) as exc:  # the library's parameter checks
+            msg = str(exc)
+            name = msg.split(" ", 1)[0]
+            field = name if name in ("num_disparities", "block_size", "cost") else None
+            return _error_response([BadInput(["body", field] if field else ["body"], msg)])
+        key = results.add(stored)
+        answer["id"] = key
+        answer["downloads"] = {n: f"/api/depthmap/{key}/{n}" for n in DOWNLOADS}
+        return JSONResponse(answer)
+
+    @router.get("/api/depthmap/{key}/point", summary="One pixel's disparity, depth and 3-D point")
+    def point(key: str, x: int, y: int) -> Response:
+
+        stored = results.get(key)
+        if stored is None:
+            return _error_response([BadInput(["path", "key"], "no such result (or too old)")], 404)
+        h, w = stored.disparity.shape
+        bad = [
+            BadInput(["query", n], f"{n} must be an integer from 0 to {m - 1}, got {v}")
+            for n, v, m in (("x", x, w), ("y", y, h))
+            if not 0 <= v < m
+        ]
+        if bad:
+            return _error_response(bad)
+        # The rows down to y, as reproject computes them for the whole map (same x, y, cx, cy).
+        p = stored.points(rows=y + 1)[y, x]
+
+        def num(v: Any) -> float | None:
+            f = float(v)
+            return f if math.isfinite(f) else None
+
+        return JSONResponse(
+            {
+                "x": x,
+                "y": y,
+                "disparity_px": num(stored.disparity[y, x]),
+                "depth_m": num(stored.depth[y, x]),
+                "confidence": None if stored.confidence is None else num(stored.confidence[y, x]),
+                "point_m": None if not np.isfinite(p).all() else [float(v) for v in p],
+            }
+        )
+
+    @router.get("/api/depthmap/{key}/{name}", summary="Downloads: disparity, depth, PLY")
+    def download(key: str, name: str) -> Response:
+        stored = results.get(key)
+        if stored is None or name not in DOWNLOADS:
+            return _error_response([BadInput(["path"], "no such result or file")], 404)
+        return Response(
+            download_bytes(stored, name),
+            media_type=DOWNLOADS[name],
+            headers={"Content-Disposition": f'attachment; filename="{name}"'},
+        )
+
+    return router
+
+
+def parse_calib(text: Any) -> dict[str, Any]:
+    """A Middlebury calib.txt's rig for the page, or BadInput at ``calib``."""
+    from ..calib import read_middlebury_calib
+
+    loc = ["body", "calib"]
+    if not isinstance(text, str) or not text.strip():
+        raise BadInput(loc, "calib: give the text of a Middlebury calib.txt")
+    if len(text) > 100_000:
+        raise BadInput(loc, "calib: a calib.txt is a few lines; this file is too large")
+    with tempfile.TemporaryDirectory(prefix="stereodepth-web-") as tmp:
+        path = Path(tmp) / "calib.txt"
+        path.write_text(text, encoding="utf-8")
+        try:
+            c = read_middlebury_calib(path)
+        except (ValueError, OSError) as exc:
+            raise BadInput(loc, "calib: " + str(exc).replace(str(path), "calib.txt")) from None
+    return {
+        "focal_px": c.focal_px,
+        "baseline_mm": c.baseline_mm,
+        "doffs_px": c.doffs_px,
+        "width_px": c.width_px,
+        "height_px": c.height_px,
+        "ndisp": c.ndisp,
+        "cx_px": float(c.cam0[0, 2]),
+        "cy_px": float(c.cam0[1, 2]),
+    }
+
+
+def add_calib_route(router: APIRouter) -> None:
+    """``POST /api/calib``: ``{"calib": "<text of calib.txt>"}`` to the rig's numbers."""
+
+    @router.post("/api/calib", summary="A Middlebury calib.txt to the rig's numbers")
+    async def calib(request: Request) -> Response:
+        data = await _read_body(request, 200_000)
+        if data is None:
+            return _error_response(
+                [BadInput(["body", "calib"], "calib: the file is too large")], 413
+            )
+        try:
+            body = json.loads(data)
+        except (ValueError, UnicodeDecodeError):
+            return _error_response([BadInput(["body"], "the request must be JSON")])
+        if not isinstance(body, dict):
+            return _error_response([BadInput(["body"], "the request must be a JSON object")])
+        try:
+            return JSONResponse(parse_calib(body.get("calib")))
+        except BadInput as e:
+            return _error_response([e])

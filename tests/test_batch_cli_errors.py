@@ -1,0 +1,121 @@
+"""Every error path of ``stereodepth batch`` that the user can reach from the command line:
+one line on stderr, ``stereodepth batch: error: ...`` in the user's terms (the flag they typed,
+never our classes), exit status 2, no traceback, and nothing written."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from stereodepth import cli
+
+Image = pytest.importorskip("PIL.Image")
+
+
+def scene(root: Path) -> Path:
+    """One Middlebury scene (im0, im1, calib.txt with ndisp) in ``root/in/teddy``."""
+    d = root / "in" / "teddy"
+    d.mkdir(parents=True)
+    rng = np.random.default_rng(0)
+    left = rng.integers(0, 256, (24, 40), dtype=np.uint8)
+    Image.fromarray(left).save(d / "im0.png")
+    Image.fromarray(np.roll(left, -2, axis=1)).save(d / "im1.png")
+    (d / "calib.txt").write_text(
+        "cam0=[700 0 20; 0 700 12; 0 0 1]\ncam1=[700 0 20; 0 700 12; 0 0 1]\n"
+        "doffs=0\nbaseline=100\nwidth=40\nheight=24\nndisp=16\n"
+    )
+    return root / "in"
+
+
+# (arguments after INPUT; {tmp} is the test's folder), a fragment the message must hold
+ROWS: list[tuple[list[str], str]] = [
+    # matcher options: the flag or --option KEY the user typed, never BlockMatchOptions
+    (["--option", "foo=1"], "--option foo: the matcher has no option 'foo' (its options: "),
+    (["--option", "uniqueness_ratio=-1"], "--option uniqueness_ratio: uniqueness_ratio must be"),
+    (["--option", "subpixel=maybe"], "--option subpixel: subpixel must be True, False"),
+    (["--option", "threads=2"], "--option threads: use --threads"),
+    (["--option", "channel_order=bgr"], "--option channel_order: use --channel-order"),
+    (["--option", "isa=avx2"], "--option isa: not available in batch"),
+    (["--option", "return_confidence=true"], "--option return_confidence: not available"),
+    (["--option", "num_disparities=4"], "--option num_disparities: use --num-disparities"),
+    (["--option", "foo"], "argument --option: expected KEY=VALUE with KEY a name, got 'foo'"),
+    (["--block-size", "4"], "--block-size 4: block_size must be an odd integer in [3, 63]"),
+    (["--cost", "sad", "--block-size", "41"], "--block-size 41: block_size must be an odd"),
+    (["--min-disparity", "99999"], "--min-disparity 99999: min_disparity must be an integer"),
+    (["--num-disparities", "0"], "--num-disparities must be an integer >= 1, got 0"),
+    (["--num-disparities", "5000"], "--num-disparities 5000: num_disparities must be"),
+    # depths, calibration, runner
+    (["--min-depth-m", "5", "--max-depth-m", "1"], "--max-depth-m must be >= --min-depth-m"),
+    (["--max-depth-m", "0"], "--max-depth-m must be a finite number > 0, got 0.0"),
+    (["--min-depth-m", "-1"], "--min-depth-m must be a finite number >= 0, got -1.0"),
+    (["--focal-px", "700"], "give both --focal-px and --baseline-mm"),
+    (["--focal-px", "nan", "--baseline-mm", "100"], "--focal-px must be a finite number > 0"),
+    (["--cx-px", "3"], "--cx-px goes with --focal-px and --baseline-mm"),
+    (["--calib", "{tmp}/nowhere.txt"], "--calib: calibration file not found"),
+    (["--workers", "0"], "--workers must be an integer >= 1, got 0"),
+    (["--threads", "-1"], "--threads must be an integer >= 0"),
+    (["--workers", "2", "--scheduler", "tcp://127.0.0.1:1"], "give --scheduler or --workers"),
+    # pair names, outputs
+    (["--pair-names", "cam0", "cam0"], "--pair-names: the left and right names must differ"),
+    (["--pair-names", "cam", "cam1"], "--pair-names: neither name may be part of the other"),
+    (["--pair-names", "cam0"], "argument --pair-names: expected 2 arguments"),
+    (["--report", "{tmp}/nowhere/r.json"], "the folder {tmp}/nowhere does not exist"),
+    (["--report", "{tmp}/out/teddy.record.json"], "pair 'teddy' writes that file"),
+    (["--report", "{tmp}/in/teddy/im0.png"], "that is an input of pair 'teddy'"),
+    (["--report", "{tmp}"], "--report must be a file, got the folder"),
+    # argparse's own checks, in one line too
+    (["--format", "tiff"], "argument --format: invalid choice: 'tiff'"),
+    (["--workers", "two"], "argument --workers: invalid int value: 'two'"),
+    (["--channel-order", "grb"], "argument --channel-order: invalid choice: 'grb'"),
+]
+
+
+def run(argv: list[str], capsys: pytest.CaptureFixture[str]) -> tuple[int, str]:
+    try:
+        status = cli.main(["batch", *argv])
+    except SystemExit as exc:  # argparse exits; anything else would be a traceback
+        status = int(exc.code or 0)
+    return status, capsys.readouterr().err
+
+
+def assert_one_line(status: int, err: str, fragment: str) -> None:
+    assert status == 2, err
+    assert err.count("\n") == 1 and err.endswith("\n"), err
+    assert err.startswith("stereodepth batch: error: "), err
+    assert fragment in err, err
+    for internal in ("Traceback", "__init__", "BlockMatchOptions", "usage:"):
+        assert internal not in err, err
+
+
+@pytest.mark.parametrize(("extra", "fragment"), ROWS, ids=[" ".join(r[0]) for r in ROWS])
+def test_batch_error_paths(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], extra: list[str], fragment: str
+) -> None:
+    inp = scene(tmp_path)
+    argv = [str(inp), "-o", str(tmp_path / "out"), "--quiet"]
+    argv += [a.replace("{tmp}", str(tmp_path)) for a in extra]
+    status, err = run(argv, capsys)
+    assert_one_line(status, err, fragment.replace("{tmp}", str(tmp_path)))
+    assert not (tmp_path / "out").exists()  # refused before any work
+
+
+def test_input_and_output_errors(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    inp = scene(tmp_path)
+    out = str(tmp_path / "out")
+    (tmp_path / "file").write_text("")
+    (tmp_path / "empty").mkdir()
+    (tmp_path / "bad.csv").write_text("a.png,b.png,c,d\n")
+    cases = [
+        ([str(tmp_path / "absent"), "-o", out], "INPUT not found"),
+        ([str(tmp_path / "empty"), "-o", out], "no stereo pairs found in"),
+        ([str(tmp_path / "bad.csv"), "-o", out], "bad.csv:1: expected left,right[,stem]"),
+        ([str(inp), "-o", str(tmp_path / "file")], "OUTDIR must be a folder, got the file"),
+        ([str(inp), "-o", str(tmp_path / "file" / "out")], "cannot be created: "),
+        ([str(inp)], "the following arguments are required: -o/--output"),
+    ]
+    for argv, fragment in cases:
+        status, err = run([*argv, "--quiet"], capsys)
+        assert_one_line(status, err, fragment)
+    assert not (tmp_path / "out").exists()

@@ -1,0 +1,63 @@
+"""The CSV list of stereodepth batch is parsed exactly: UTF-8 with or without a byte-order
+mark, LF or CR LF, cells stripped, trailing empty cells ignored, ``#`` comments and blank lines
+skipped, an optional header first; anything else raises a ValueError naming file and line."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from stereodepth import batch
+
+
+def write(tmp_path: Path, text: str, *, newline: str = "\n", bom: bool = False) -> Path:
+    p = tmp_path / "pairs.csv"
+    p.write_bytes((b"\xef\xbb\xbf" if bom else b"") + text.replace("\n", newline).encode())
+    return p
+
+
+LIST = (
+    "left,right,stem\n"
+    "# a comment line\n"
+    "\n"
+    "  imgs/a_left.png , imgs/a_right.png ,  \n"
+    'imgs/b0.png,"imgs/b 1.png",frame-b,,\n'
+    "   \n"
+)
+
+
+@pytest.mark.parametrize("newline", ["\n", "\r\n"], ids=["LF", "CRLF"])
+@pytest.mark.parametrize("bom", [False, True], ids=["plain", "bom"])
+def test_a_list_parses_the_same_whatever_its_line_ends(
+    tmp_path: Path, newline: str, bom: bool
+) -> None:
+    pairs = batch.find_pairs(write(tmp_path, LIST, newline=newline, bom=bom))
+    assert [(p.stem, p.left, p.right) for p in pairs] == [
+        ("a", tmp_path / "imgs/a_left.png", tmp_path / "imgs/a_right.png"),
+        ("frame-b", tmp_path / "imgs/b0.png", tmp_path / "imgs/b 1.png"),
+    ]
+
+
+@pytest.mark.parametrize(
+    ("text", "message"),
+    [
+        ("a.png,b.png\nc.png\n", r"pairs.csv:2: expected left,right\[,stem\], got 'c.png'"),
+        ("a.png,b.png,s,extra\n", r"pairs.csv:1: expected left,right\[,stem\]"),
+        ("a.png,,s\n", r"pairs.csv:1: expected left,right\[,stem\]"),
+        ("x/a.png,x/./a.png\n", r"pairs.csv:1: the left and right image are the same file"),
+        ("a.png,b.png\nleft,right\n", r"pairs.csv:2: a header line after the first pair"),
+        ('a.png,"b.png\n', r"pairs.csv:1: not a valid CSV line"),
+    ],
+    ids=["short", "long", "empty-right", "same-file", "late-header", "open-quote"],
+)
+def test_bad_lines_are_refused_with_file_and_line(tmp_path: Path, text: str, message: str) -> None:
+    with pytest.raises(ValueError, match=message):
+        batch.find_pairs(write(tmp_path, text))
+
+
+def test_a_file_that_is_not_utf8_is_refused(tmp_path: Path) -> None:
+    p = tmp_path / "pairs.csv"
+    p.write_bytes(b"caf\xe9.png,b.png\n")
+    with pytest.raises(ValueError, match=r"pairs.csv: not UTF-8 text"):
+        batch.find_pairs(p)

@@ -1,0 +1,376 @@
+"""stereodepth batch as a new user meets it: where the outputs go, which pairs are found,
+what a failed re-run leaves, which calibration wins, what is checked before the first pair,
+colour and grey, the lock file, the colour order (issue 10, items 4 and 5)."""
+
+from __future__ import annotations
+
+import inspect
+import json
+import sys
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+
+import stereodepth
+from stereodepth import batch, cli
+
+Image = pytest.importorskip("PIL.Image")
+
+SHAPE = (32, 48)
+
+
+def save_pair(
+    d: Path, left_name: str, right_name: str, *, seed: int = 0, rgb: bool = False
+) -> None:
+    d.mkdir(parents=True, exist_ok=True)
+    rng = np.random.default_rng(seed)
+    left = rng.integers(0, 256, (*SHAPE, 3) if rgb else SHAPE, dtype=np.uint8)
+    Image.fromarray(left).save(d / left_name)
+    Image.fromarray(np.roll(left, -3, axis=1)).save(d / right_name)
+
+
+def calib_txt(ndisp: int | None = 16) -> str:
+    text = (
+        "cam0=[700 0 24; 0 700 16; 0 0 1]\ncam1=[700 0 24; 0 700 16; 0 0 1]\n"
+        "doffs=0\nbaseline=100\nwidth=48\nheight=32\n"
+    )
+    return text + (f"ndisp={ndisp}\n" if ndisp is not None else "")
+
+
+def scene(d: Path, *, seed: int = 0, calib: bool = True, rgb: bool = False) -> Path:
+    save_pair(d, "im0.png", "im1.png", seed=seed, rgb=rgb)
+    if calib:
+        (d / "calib.txt").write_text(calib_txt())
+    return d
+
+
+def kitti_set(root: Path) -> Path:
+    for sub in ("image_2", "image_3", "calib"):
+        (root / sub).mkdir(parents=True)
+    rng = np.random.default_rng(7)
+    left = rng.integers(0, 256, (*SHAPE, 3), dtype=np.uint8)
+    Image.fromarray(left).save(root / "image_2" / "000000_10.png")
+    Image.fromarray(np.roll(left, -3, axis=1)).save(root / "image_3" / "000000_10.png")
+    rows = {0: "0", 1: "-70", 2: "0", 3: "-70"}
+    (root / "calib" / "000000.txt").write_text(
+        "".join(f"P{i}: 700 0 24 {tx} 0 700 16 0 0 0 1 0\n" for i, tx in rows.items())
+    )
+    return root
+
+
+def run(capsys: pytest.CaptureFixture[str], *argv: Any) -> tuple[int, str, str]:
+    try:
+        status = cli.main(["batch", *(str(a) for a in argv)])
+    except SystemExit as exc:
+        status = int(exc.code or 0)
+    captured = capsys.readouterr()
+    return status, captured.out, captured.err
+
+
+def report_of(path: Path) -> dict[str, Any]:
+    data: dict[str, Any] = json.loads(path.read_text())
+    return data
+
+
+def record_of(out: Path, stem: str) -> dict[str, Any]:
+    return report_of(out / f"{stem}.record.json")
+
+
+# --- output locations, checked before any work -----------------------------------------------
+def test_report_into_a_missing_folder_is_refused_before_any_pair(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    scene(tmp_path / "in" / "a")
+    out, report = tmp_path / "out", tmp_path / "missing" / "report.json"
+    status, _, err = run(capsys, tmp_path / "in", "-o", out, "--report", report, "--quiet")
+    assert status == 2
+    assert err == (
+        f"stereodepth batch: error: --report {report}: the folder {report.parent} does not exist\n"
+    )
+    assert not out.exists()  # no pair was computed
+    # a report inside OUTDIR (created by the job) is fine
+    status, _, _ = run(capsys, tmp_path / "in", "-o", out, "--report", out / "r.json", "--quiet")
+    assert status == 0 and report_of(out / "r.json")["counts"]["ok"] == 1
+
+
+# --- pair names ---------------------------------------------------------------------------------
+def test_the_same_pair_name_twice_is_refused(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    save_pair(tmp_path / "in", "x_cam0.png", "x_cam1.png")
+    status, _, err = run(
+        capsys, tmp_path / "in", "-o", tmp_path / "out", "--pair-names", "cam0", "cam0"
+    )
+    assert status == 2
+    assert err.startswith("stereodepth batch: error: --pair-names: the left and right names")
+    assert not (tmp_path / "out").exists()
+    with pytest.raises(batch.UsageError, match="pair_names: the left and right names must differ"):
+        batch.find_pairs(tmp_path / "in", pair_names=[("cam0", "cam0")])
+    with pytest.raises(batch.UsageError, match="neither name may be part of the other"):
+        batch.find_pairs(tmp_path / "in", pair_names=[("cam", "cam1")])
+    pairs = batch.find_pairs(tmp_path / "in", pair_names=[("cam0", "cam1")])
+    assert [(p.left.name, p.right.name) for p in pairs] == [("x_cam0.png", "x_cam1.png")]
+
+
+# --- the report and the records never collide ---------------------------------------------------
+def test_a_scene_named_report_and_the_report_never_collide(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    inp, out = tmp_path / "in", tmp_path / "out"
+    scene(inp / "report", seed=1)
+    scene(inp / "teddy", seed=2)
+    assert run(capsys, inp, "-o", out, "--quiet")[0] == 0
+    assert report_of(out / "report.json")["counts"] == {
+        "ok": 2,
+        "skipped": 0,
+        "failed": 0,
+        "cancelled": 0,
+    }
+    assert record_of(out, "report")["status"] == "ok"
+    # the re-run finds both records intact: nothing is recomputed
+    assert run(capsys, inp, "-o", out, "--quiet")[0] == 0
+    assert report_of(out / "report.json")["counts"]["skipped"] == 2
+    # a report named like a pair's file is refused; one named like the old records is fine
+    status, _, err = run(capsys, inp, "-o", out, "--report", out / "teddy.record.json")
+    assert status == 2 and "pair 'teddy' writes that file" in err
+    assert run(capsys, inp, "-o", out, "--report", out / "teddy.json", "--quiet")[0] == 0
+    assert report_of(out / "teddy.json")["counts"]["skipped"] == 2
+    assert record_of(out, "teddy")["status"] == "ok"
+
+
+# --- no pair goes missing silently --------------------------------------------------------------
+def test_nested_scenes_and_a_kitti_set_among_them_are_found(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    inp = tmp_path / "in"
+    scene(inp / "middlebury" / "2014" / "teddy", seed=1)  # three levels down
+    kitti_set(inp / "kitti")
+    scene(inp / "a" / "b" / "c" / "too-deep", seed=2)  # four levels: not searched
+    (inp / "photos").mkdir()
+    Image.fromarray(np.zeros(SHAPE, np.uint8)).save(inp / "photos" / "holiday.png")
+    (inp / ".hidden").mkdir()
+    found = batch.discover(inp)
+    assert [p.stem for p in found.pairs] == ["kitti_000000_10", "middlebury_2014_teddy"]
+    assert found.pairs[0].kitti_cams == (2, 3)
+    skipped = {path.relative_to(inp).as_posix(): why for path, why in found.skipped}
+    assert skipped == {
+        "a/b/c/too-deep": "not searched: more than 3 levels below INPUT",
+        "photos": "1 image but no pair (no left image named with im0/im1, left/right, "
+        "Left/Right, LEFT/RIGHT; --pair-names LEFT RIGHT names others)",
+    }
+    out = tmp_path / "out"
+    status, _, err = run(capsys, inp, "-o", out, "--num-disparities", "16")
+    assert status == 0
+    assert f"stereodepth batch: note: skipped {inp / 'photos'}: 1 image but no pair" in err
+    assert f"stereodepth batch: note: skipped {inp / 'a/b/c/too-deep'}: not searched" in err
+    report = report_of(out / "report.json")
+    assert report["counts"]["ok"] == 2
+    assert sum("skipped" in n for n in report["notes"]) == 2
+    assert record_of(out, "kitti_000000_10")["calibration_source"] == str(
+        inp / "kitti" / "calib" / "000000.txt"
+    )
+
+
+def test_nothing_found_says_what_was_skipped(tmp_path: Path) -> None:
+    save_pair(tmp_path / "in" / "shots", "a.png", "b.png")
+    with pytest.raises(
+        batch.UsageError, match=r"no stereo pairs found .*skipped .*shots: 2 images"
+    ):
+        batch.find_pairs(tmp_path / "in")
+
+
+def test_outdir_inside_input_is_not_searched(tmp_path: Path) -> None:
+    scene(tmp_path / "teddy")
+    (tmp_path / "out" / "old").mkdir(parents=True)
+    Image.fromarray(np.zeros(SHAPE, np.uint8)).save(tmp_path / "out" / "old" / "left.png")
+    found = batch.discover(tmp_path, exclude=[tmp_path / "out"])
+    assert [p.stem for p in found.pairs] == ["teddy"] and found.skipped == []
+
+
+# --- a failed re-run and stale outputs ----------------------------------------------------------
+def test_a_failed_rerun_says_failed_and_leaves_no_stale_output(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    inp, out = tmp_path / "in", tmp_path / "out"
+    scene(inp / "teddy")
+    assert run(capsys, inp, "-o", out, "--ply", "--quiet")[0] == 0
+    names = {"teddy.disparity.npy", "teddy.depth.npy", "teddy.ply", "teddy.record.json"}
+    assert {p.name for p in out.glob("teddy.*")} == names
+    data = (inp / "teddy" / "im1.png").read_bytes()
+    (inp / "teddy" / "im1.png").write_bytes(data[: len(data) // 3])  # now corrupt
+    status, _, err = run(capsys, inp, "-o", out, "--quiet")
+    assert status == 1 and "failed teddy: cannot decode image" in err
+    record = record_of(out, "teddy")
+    assert record["status"] == "failed" and "cannot decode image" in record["error"]
+    assert sorted(Path(p).name for p in record["removed"]) == sorted(names - {"teddy.record.json"})
+    assert {p.name for p in out.glob("teddy.*")} == {"teddy.record.json"}
+    assert report_of(out / "report.json")["pairs"][0]["status"] == "failed"
+
+
+def test_a_changed_run_removes_the_outputs_it_no_longer_writes(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    inp, out = tmp_path / "in", tmp_path / "out"
+    scene(inp / "teddy")
+    assert run(capsys, inp, "-o", out, "--ply", "--quiet")[0] == 0
+    status, printed, _ = run(capsys, inp, "-o", out)  # without --ply: the .ply is stale
+    assert status == 0 and "removed 1 stale output file of earlier runs" in printed
+    assert not (out / "teddy.ply").exists()
+    assert record_of(out, "teddy")["removed"] == [str(out / "teddy.ply")]
+    assert run(capsys, inp, "-o", out, "--format", "png16", "--quiet")[0] == 0
+    assert {p.name for p in out.glob("teddy.*")} == {
+        "teddy.disparity.png",
+        "teddy.depth.png",
+        "teddy.record.json",
+    }
+    # a file the record does not list, even with a pair's name, is left alone
+    (out / "teddy.disparity.pfm").write_bytes(b"mine")
+    assert run(capsys, inp, "-o", out, "--force", "--quiet")[0] == 0
+    assert (out / "teddy.disparity.pfm").read_bytes() == b"mine"
+
+
+def test_a_pair_whose_dask_worker_kept_dying_gets_a_failed_record(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """The Dask runner's failure without a result from the task (KilledWorker) is written the
+    same way as any other failure: the earlier outputs go, the record says failed."""
+    inp, out = tmp_path / "in", tmp_path / "out"
+    scene(inp / "teddy")
+    assert run(capsys, inp, "-o", out, "--ply", "--quiet")[0] == 0
+    pair = batch.resolve_calibration(batch.find_pairs(inp))[0]
+    head = batch.records.record_head(pair, "failed", "KilledWorker: the worker died 3 times")
+    rec = batch.compute.record_failure(pair, batch.BatchOptions(out_dir=out), head)
+    assert rec["status"] == "failed" and len(rec["removed"]) == 3
+    assert {p.name for p in out.glob("teddy.*")} == {"teddy.record.json"}
+    assert record_of(out, "teddy")["error"] == "KilledWorker: the worker died 3 times"
+
+
+# --- calibration precedence ---------------------------------------------------------------------
+def test_calibration_precedence_is_stated_per_pair_and_the_message_is_true(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    inp, out = tmp_path / "in", tmp_path / "out"
+    scene(inp / "a", seed=1)
+    scene(inp / "b", seed=2)
+    rig = ["--focal-px", "650", "--baseline-mm", "120"]
+    status, _, err = run(capsys, inp, "-o", out, *rig)
+    assert status == 2
+    assert err == (
+        "stereodepth batch: error: --num-disparities is required with --focal-px and "
+        f"--baseline-mm: they replace the pairs' own calibration files (2 found, e.g. "
+        f"{inp / 'a' / 'calib.txt'}), whose ndisp is then not used\n"
+    )
+    status, _, err = run(capsys, inp, "-o", out, *rig, "--num-disparities", "16")
+    assert status == 0
+    assert err == (
+        "stereodepth batch: note: calibration: --focal-px/--baseline-mm for every pair; 2 "
+        f"pairs' own calibration files (e.g. {inp / 'a' / 'calib.txt'}) not used\n"
+    )
+    rec = record_of(out, "a")
+    assert rec["calibration_source"] == "--focal-px/--baseline-mm"
+    assert rec["calibration_not_used"] == str(inp / "a" / "calib.txt")
+    assert rec["settings"]["calibration"]["focal_px"] == 650.0
+    assert any("not used" in n for n in report_of(out / "report.json")["notes"])
+    # --calib FILE: named as such
+    (tmp_path / "rig.txt").write_text(calib_txt(ndisp=None))
+    status, _, err = run(capsys, inp, "-o", out, "--calib", tmp_path / "rig.txt")
+    assert status == 2
+    assert err == (
+        f"stereodepth batch: error: --num-disparities is required: --calib {tmp_path / 'rig.txt'} "
+        "has no ndisp\n"
+    )
+    # each pair's own file: named by its path, nothing replaced
+    assert run(capsys, inp, "-o", tmp_path / "own", "--quiet")[0] == 0
+    rec = record_of(tmp_path / "own", "b")
+    assert rec["calibration_source"] == str(inp / "b" / "calib.txt")
+    assert rec["calibration_not_used"] is None
+
+
+def test_kitti_without_num_disparities_names_the_kitti_files(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    inp = kitti_set(tmp_path / "in")
+    status, _, err = run(capsys, inp, "-o", tmp_path / "out")
+    assert status == 2
+    assert err == (
+        "stereodepth batch: error: --num-disparities is required: the pairs' calibration "
+        f"files have no ndisp (e.g. {inp / 'calib' / '000000.txt'}); KITTI calibration files "
+        "never have one\n"
+    )
+
+
+# --- options and extras, before the first pair --------------------------------------------------
+def test_an_impossible_depth_range_is_refused_before_the_first_pair(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    scene(tmp_path / "in" / "a")
+    scene(tmp_path / "in" / "b", seed=1)
+    out = tmp_path / "out"
+    status, printed, err = run(
+        capsys, tmp_path / "in", "-o", out, "--min-depth-m", "5", "--max-depth-m", "1"
+    )
+    assert (status, printed) == (2, "")
+    assert err == (
+        "stereodepth batch: error: --max-depth-m must be >= --min-depth-m, got --min-depth-m 5 "
+        "and --max-depth-m 1\n"
+    )
+    assert not out.exists()
+
+
+@pytest.mark.parametrize("command", ["batch", "eval"])
+def test_missing_pillow_is_one_line_before_any_work(
+    tmp_path: Path,
+    capsys: pytest.CaptureFixture[str],
+    monkeypatch: pytest.MonkeyPatch,
+    command: str,
+) -> None:
+    """Without Pillow, both commands stop at once (even before looking at INPUT, which is
+    empty here) with one line naming the package and the extra that installs it."""
+    monkeypatch.setitem(sys.modules, "PIL", None)
+    monkeypatch.setitem(sys.modules, "PIL.Image", None)
+    (tmp_path / "in").mkdir()
+    argv = [command, str(tmp_path / "in")]
+    if command == "batch":
+        argv += ["-o", str(tmp_path / "out"), "--quiet"]
+    assert cli.main(argv) == 1
+    err = capsys.readouterr().err
+    assert err == (
+        f"stereodepth {command}: error: reading images needs Pillow, which is not installed: "
+        'pip install "stereodepth[batch]"\n'
+    )
+    assert not (tmp_path / "out").exists()
+
+
+# --- colour order -------------------------------------------------------------------------------
+def test_channel_order_is_passed_to_the_matcher(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    if "channel_order" not in inspect.signature(stereodepth.StereoMatcher).parameters:
+        pytest.skip("this matcher has no channel_order yet")
+    d = scene(tmp_path / "in" / "a", rgb=True)
+    out = tmp_path / "out"
+    assert run(capsys, tmp_path / "in", "-o", out, "--channel-order", "bgr", "--quiet")[0] == 0
+    left = np.asarray(Image.open(d / "im0.png"))
+    right = np.asarray(Image.open(d / "im1.png"))
+    want = stereodepth.block_match(left, right, num_disparities=16, channel_order="bgr")
+    np.testing.assert_array_equal(np.load(out / "a.disparity.npy"), want)
+    assert record_of(out, "a")["settings"]["matcher"]["channel_order"] == "bgr"
+
+
+# --- the lock file ------------------------------------------------------------------------------
+def test_the_lock_file_is_removed_when_the_job_ends(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    scene(tmp_path / "in" / "a")
+    out = tmp_path / "out"
+    assert run(capsys, tmp_path / "in", "-o", out, "--quiet")[0] == 0
+    assert not (out / batch.LOCK_NAME).exists()
+    (tmp_path / "in" / "a" / "im1.png").unlink()  # a failing pair: the job still ends cleanly
+    assert run(capsys, tmp_path / "in", "-o", out, "--quiet")[0] == 1
+    assert not (out / batch.LOCK_NAME).exists()
+    # a lock file left by a killed job does not stop the next one
+    (out / batch.LOCK_NAME).write_text("")
+    assert run(capsys, tmp_path / "in", "-o", out, "--quiet")[0] == 1
+    assert not (out / batch.LOCK_NAME).exists()

@@ -1,0 +1,96 @@
+"""The KITTI calibration reader (stereodepth.calib.read_kitti_calib) parses exactly: LF, CR LF
+or CR line ends, blank lines and trailing spaces are fine; the format has no comments, so
+anything but ``NAME: values`` lines, a malformed matrix, a camera given twice or two cameras
+that are not a rectified pair raise ValueError naming the file (and line) and what was wrong."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from stereodepth import batch, calib
+
+F, CX, CY = 721.5377, 609.5593, 172.854
+TX = {0: 0.0, 1: -387.5744, 2: 44.85728, 3: -339.5242}
+
+
+def p_line(i: int, *, name: str = "P{i}", f: float = F, cy: float = CY) -> str:
+    return (
+        f"{name.format(i=i)}: {f:e} 0.000000e+00 {CX:e} {TX[i]:e} 0.000000e+00 {f:e} {cy:e} "
+        "0.000000e+00 0.000000e+00 0.000000e+00 1.000000e+00 0.000000e+00"
+    )
+
+
+def kitti_2012() -> str:
+    return "\n".join(p_line(i) for i in range(4)) + "\nTr: 1 0 0 0 0 1 0 0 0 0 1 0\n"
+
+
+def write(tmp_path: Path, text: str, *, newline: str = "\n") -> Path:
+    p = tmp_path / "000000.txt"
+    p.write_bytes(text.replace("\n", newline).encode())
+    return p
+
+
+def test_reads_2012_and_2015_names(tmp_path: Path) -> None:
+    c = calib.read_kitti_calib(write(tmp_path, kitti_2012()))
+    assert (c.focal_px, c.cx_px, c.cy_px, c.doffs_px) == (F, CX, CY, 0.0)
+    assert c.baseline_m == pytest.approx((TX[2] - TX[3]) / F)
+    grey = calib.read_kitti_calib(write(tmp_path, kitti_2012()), (0, 1))
+    assert grey.baseline_m == pytest.approx(387.5744 / F)
+    rect = "calib_time: 09-Jan-2012 13:57:47\ncorner_dist: 9.950000e-02\n" + "\n".join(
+        p_line(i, name="P_rect_0{i}") for i in range(4)
+    )
+    assert calib.read_kitti_calib(write(tmp_path, rect)) == c
+    # still importable from stereodepth.batch, where it used to live
+    assert batch.read_kitti_calib is calib.read_kitti_calib
+    assert batch.read_calibration(write(tmp_path, rect)) == c
+
+
+@pytest.mark.parametrize("newline", ["\n", "\r\n", "\r"], ids=["LF", "CRLF", "CR"])
+def test_line_ends_blank_lines_and_trailing_spaces(tmp_path: Path, newline: str) -> None:
+    want = calib.read_kitti_calib(write(tmp_path, kitti_2012()))
+    text = "\n" + "\n\n".join(line + " \t" for line in kitti_2012().splitlines()) + "\n\n"
+    p = write(tmp_path, text, newline=newline)
+    assert calib.read_kitti_calib(p) == want
+    assert calib.read_calibration(p) == want
+
+
+@pytest.mark.parametrize(
+    ("text", "message"),
+    [
+        ("# KITTI\n" + kitti_2012(), r"000000.txt:1: expected 'NAME: values', got '# KITTI'"),
+        (kitti_2012() + "P2 1 2 3\n", r":6: expected 'NAME: values', got 'P2 1 2 3'"),
+        (kitti_2012().replace(p_line(3), "P3: 1 2 3"), r":4: P3 must be 12 numbers, got 3"),
+        (kitti_2012().replace(p_line(3), p_line(3) + " 0"), r":4: P3 must be 12 numbers, got 13"),
+        (
+            kitti_2012().replace(p_line(3), p_line(3).replace("1.000000e+00", "nan")),
+            r":4: P3 must be 12 finite numbers",
+        ),
+        (
+            kitti_2012().replace(p_line(3), p_line(3).replace("1.000000e+00", "one")),
+            r":4: P3 must be 12 numbers, got '7",
+        ),
+        (kitti_2012() + p_line(2, name="P_rect_0{i}") + "\n", r":6: P_rect_02 gives camera 2 "),
+        (kitti_2012().replace("P3:", "Q3:"), r"000000.txt: missing P3 \(or P_rect_03\)"),
+        (
+            kitti_2012().replace(p_line(3), p_line(3, f=700.0)),
+            r"P2 and P3 are not a rectified pair: their focal length fx differ",
+        ),
+        (
+            kitti_2012().replace(p_line(3), p_line(3, cy=180.0)),
+            r"P2 and P3 are not a rectified pair: their principal point row cy differ",
+        ),
+    ],
+    ids=["comment", "no-colon", "short", "long", "nan", "word", "twice", "missing", "focal", "row"],
+)
+def test_inconsistent_files_are_refused(tmp_path: Path, text: str, message: str) -> None:
+    with pytest.raises(ValueError, match=message):
+        calib.read_kitti_calib(write(tmp_path, text))
+
+
+def test_the_right_camera_must_be_right_of_the_left(tmp_path: Path) -> None:
+    with pytest.raises(ValueError, match="camera 2 must be right of camera 3"):
+        calib.read_kitti_calib(write(tmp_path, kitti_2012()), (3, 2))
+    with pytest.raises(ValueError, match=r"cams must be two different KITTI cameras, got \(2, 2\)"):
+        calib.read_kitti_calib(write(tmp_path, kitti_2012()), (2, 2))

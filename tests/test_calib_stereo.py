@@ -1,0 +1,907 @@
+"""stereodepth.calib.StereoCalibration and its readers: OpenCV FileStorage YAML and XML, ROS
+camera_info pairs, Kalibr camchains, Middlebury calib.txt and KITTI files, each with fixtures
+written here, and every malformed file refused with the file and the key named."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+
+from stereodepth import StereoRig
+from stereodepth import calib as sc
+from stereodepth.calib import StereoCalibration, read_stereo_calibration
+
+pytest.importorskip("yaml", reason="PyYAML (the calib extra) is not installed")
+
+
+def rot(rx: float, ry: float, rz: float) -> np.ndarray:
+    """A rotation matrix from small angles (radians), x then y then z."""
+    cx, sx, cy, sy, cz, sz = np.cos(rx), np.sin(rx), np.cos(ry), np.sin(ry), np.cos(rz), np.sin(rz)
+    mx = np.array([[1, 0, 0], [0, cx, -sx], [0, sx, cx]])
+    my = np.array([[cy, 0, sy], [0, 1, 0], [-sy, 0, cy]])
+    mz = np.array([[cz, -sz, 0], [sz, cz, 0], [0, 0, 1]])
+    return mz @ my @ mx
+
+
+K1 = np.array([[700.0, 0.0, 320.5], [0.0, 705.0, 240.25], [0.0, 0.0, 1.0]])
+K2 = np.array([[710.0, 0.0, 330.0], [0.0, 712.0, 236.0], [0.0, 0.0, 1.0]])
+D1 = np.array([0.1, -0.2, 0.001, 0.002, 0.03])
+D2 = np.array([0.09, -0.15, 0.0, 0.001, 0.01])
+R = rot(0.01, -0.02, 0.005)
+T_MM = np.array([-120.0, 1.0, 0.5])  # as OpenCV gives it for a target measured in mm
+
+
+def number(v: float) -> str:
+    """As OpenCV writes a double: full precision, .Nan and .Inf for the special values."""
+    special = {"nan": ".Nan", "inf": ".Inf", "-inf": "-.Inf"}
+    return special.get(repr(float(v)), repr(float(v)))
+
+
+def fmt(a: Any) -> str:
+    return ", ".join(number(v) for v in np.asarray(a, dtype=np.float64).reshape(-1))
+
+
+def opencv_yaml(entries: dict[str, Any], header: str = "%YAML:1.0\n---\n") -> str:
+    """A FileStorage YAML file as OpenCV 4 writes it (matrices as !!opencv-matrix)."""
+    out = [header.rstrip("\n")] if header else []
+    for key, value in entries.items():
+        if isinstance(value, np.ndarray):
+            m = value if value.ndim == 2 else value.reshape(1, -1)
+            out += [
+                f"{key}: !!opencv-matrix",
+                f"   rows: {m.shape[0]}",
+                f"   cols: {m.shape[1]}",
+                "   dt: d",
+                f"   data: [ {fmt(m)} ]",
+            ]
+        else:
+            out.append(f"{key}: {value}")
+    return "\n".join(out) + "\n"
+
+
+def opencv_xml(entries: dict[str, Any]) -> str:
+    out = ['<?xml version="1.0"?>', "<opencv_storage>"]
+    for key, value in entries.items():
+        if isinstance(value, np.ndarray):
+            m = value if value.ndim == 2 else value.reshape(1, -1)
+            data = " ".join(number(v) for v in m.reshape(-1))
+            out.append(
+                f'<{key} type_id="opencv-matrix"><rows>{m.shape[0]}</rows><cols>{m.shape[1]}'
+                f"</cols><dt>d</dt><data>\n    {data}</data></{key}>"
+            )
+        else:
+            out.append(f"<{key}>{value}</{key}>")
+    return "\n".join([*out, "</opencv_storage>"]) + "\n"
+
+
+def stereo_entries(**changes: Any) -> dict[str, Any]:
+    e: dict[str, Any] = {
+        "M1": K1,
+        "D1": D1,
+        "M2": K2,
+        "D2": D2,
+        "R": R,
+        "T": T_MM.reshape(3, 1),
+        "image_width": 640,
+        "image_height": 480,
+    }
+    for k, v in changes.items():
+        if v is None:
+            e.pop(k, None)
+        else:
+            e[k] = v
+    return e
+
+
+def write(path: Path, text: str) -> Path:
+    path.write_text(text)
+    return path
+
+
+# --- OpenCV FileStorage -----------------------------------------------------------------------
+@pytest.mark.parametrize("ext", ["yml", "xml"])
+def test_opencv_written_by_cv2(tmp_path: Path, ext: str) -> None:
+    """Files written by the real cv2.FileStorage after cv2.stereoRectify, both formats."""
+    cv2 = pytest.importorskip("cv2", reason="opencv-python-headless is not installed")
+    r1, r2, p1, p2, q, _, _ = cv2.stereoRectify(K1, D1, K2, D2, (640, 480), R, T_MM.reshape(3, 1))
+    path = tmp_path / f"stereo.{ext}"
+    fs = cv2.FileStorage(str(path), cv2.FILE_STORAGE_WRITE)
+    for key, value in {
+        "M1": K1,
+        "D1": D1.reshape(1, 5),
+        "M2": K2,
+        "D2": D2.reshape(1, 5),
+        "R": R,
+        "T": T_MM.reshape(3, 1),
+        "R1": r1,
+        "R2": r2,
+        "P1": p1,
+        "P2": p2,
+        "Q": q,
+    }.items():
+        fs.write(key, value)
+    fs.write("imageSize", (640, 480))
+    fs.release()
+    c = read_stereo_calibration(path, translation_unit="mm")
+    assert isinstance(c, StereoCalibration)
+    np.testing.assert_array_equal(c.K1, K1)
+    np.testing.assert_array_equal(c.K2, K2)
+    np.testing.assert_array_equal(c.D1, D1)
+    np.testing.assert_array_equal(c.D2, D2)
+    np.testing.assert_array_equal(c.R, R)
+    np.testing.assert_allclose(c.T, T_MM / 1000, rtol=1e-15)
+    assert c.distortion_model == "plumb_bob" and c.image_size == (640, 480)
+    assert not c.rectified and c.source == str(path)
+    np.testing.assert_array_equal(c.R1, r1)
+    np.testing.assert_array_equal(c.R2, r2)
+    np.testing.assert_array_equal(c.P1, p1)
+    np.testing.assert_allclose(c.P2[:, 3], p2[:, 3] / 1000, rtol=1e-15)
+    # Q in metres: the same points as OpenCV's, a thousand times smaller
+    disp = np.array([[10.0, 20.5], [33.0, 64.0]], np.float32)
+    want = cv2.reprojectImageTo3D(disp, q) / 1000
+    np.testing.assert_allclose(cv2.reprojectImageTo3D(disp, c.Q), want, rtol=1e-6)
+    # the rig of the rectified pair: P's focal length, the baseline |T| in mm
+    rig = c.to_rig()
+    assert rig.focal_px == p1[0, 0] and rig.width_px == 640 and rig.height_px == 480
+    assert rig.baseline_mm == pytest.approx(np.linalg.norm(T_MM), rel=1e-12)
+    assert rig.doffs_px == p2[0, 2] - p1[0, 2]
+    for func in (sc.read_opencv_stereo_calibration,):
+        c2 = func(path, translation_unit="mm")
+        np.testing.assert_array_equal(c2.T, c.T)
+
+
+def test_opencv_fisheye_written_by_cv2(tmp_path: Path) -> None:
+    cv2 = pytest.importorskip("cv2", reason="opencv-python-headless is not installed")
+    d = np.array([[0.01], [-0.002], [0.0003], [-0.00004]])
+    fs = cv2.FileStorage(str(tmp_path / "f.yaml"), cv2.FILE_STORAGE_WRITE)
+    for key, value in {"K1": K1, "D1": d, "K2": K2, "D2": d, "R": R, "T": T_MM / 1000}.items():
+        fs.write(key, value)
+    fs.write("distortion_model", "fisheye")
+    fs.write("image_width", 640)
+    fs.write("image_height", 480)
+    fs.release()
+    c = read_stereo_calibration(tmp_path / "f.yaml")
+    assert c.distortion_model == "equidistant"
+    np.testing.assert_array_equal(c.D1, d.reshape(4))
+    np.testing.assert_allclose(c.T, T_MM / 1000, rtol=1e-15)
+    with pytest.raises(ValueError, match=r"f\.yaml: distortion_model is 'equidistant', "):
+        read_stereo_calibration(tmp_path / "f.yaml", distortion_model="plumb_bob")
+
+
+@pytest.mark.parametrize("header", ["%YAML:1.0\n---\n", "%YAML:1.0\n", "%YAML 1.2\n---\n", ""])
+def test_opencv_yaml_layouts(tmp_path: Path, header: str) -> None:
+    """OpenCV 4's %YAML:1.0 (that plain YAML parsers reject), OpenCV 5's %YAML 1.2, none;
+    CR LF line ends; image size as a sequence."""
+    entries = stereo_entries(image_width=None, image_height=None, imageSize="[ 640, 480 ]")
+    text = opencv_yaml(entries, header).replace("\n", "\r\n")
+    c = read_stereo_calibration(write(tmp_path / "s.yml", text))
+    np.testing.assert_array_equal(c.K1, K1)
+    np.testing.assert_array_equal(c.T, T_MM)  # translation_unit "m": taken as it is
+    assert c.image_size == (640, 480) and c.R1 is None and c.Q is None
+
+
+def test_opencv_xml_by_hand(tmp_path: Path) -> None:
+    c = read_stereo_calibration(write(tmp_path / "s.xml", opencv_xml(stereo_entries())))
+    np.testing.assert_array_equal(c.D2, D2)
+    np.testing.assert_array_equal(c.R, R)
+    assert c.image_size == (640, 480)
+
+
+def test_opencv_split_files_and_units(tmp_path: Path) -> None:
+    """OpenCV's stereo_calib sample: intrinsics.yml (M1 D1 M2 D2) and extrinsics.yml."""
+    e = stereo_entries()
+    intr = write(
+        tmp_path / "intrinsics.yml", opencv_yaml({k: e[k] for k in ("M1", "D1", "M2", "D2")})
+    )
+    extr = write(tmp_path / "extrinsics.yml", opencv_yaml({k: e[k] for k in ("R", "T")}))
+    for unit, scale in (("mm", 1e-3), ("cm", 1e-2), ("m", 1.0), ("in", 0.0254)):
+        c = read_stereo_calibration(
+            intr, second_path=extr, translation_unit=unit, image_size=(640, 480)
+        )
+        np.testing.assert_allclose(c.T, T_MM * scale, rtol=1e-15)
+    assert c.source == f"{intr} + {extr}"
+    c = read_stereo_calibration(extr, second_path=intr, image_size=(640, 480))  # either order
+    np.testing.assert_array_equal(c.K1, K1)
+    with pytest.raises(ValueError, match=r"intrinsics\.yml \+ .*extrinsics\.yml: no image size"):
+        read_stereo_calibration(intr, second_path=extr)
+    with pytest.raises(ValueError, match=r"translation_unit must be one of 'm', .* got 'km'"):
+        read_stereo_calibration(
+            intr, second_path=extr, translation_unit="km", image_size=(640, 480)
+        )
+    write(tmp_path / "both.yml", opencv_yaml({"R": R}))
+    with pytest.raises(ValueError, match=r"both\.yml: R is also given in .*extrinsics\.yml"):
+        sc.read_opencv_stereo_calibration(extr, tmp_path / "both.yml")
+
+
+def test_opencv_distortion_forms(tmp_path: Path) -> None:
+    d8 = np.array([0.1, -0.2, 0.001, 0.002, 0.03, 0.01, 0.0, 0.002])
+    d14 = np.concatenate([d8, np.zeros(6)])
+    for d, want in ((D1[:4], D1[:4]), (d8, d8), (d14, d8)):
+        c = read_stereo_calibration(
+            write(tmp_path / "d.yml", opencv_yaml(stereo_entries(D1=d, D2=d)))
+        )
+        np.testing.assert_array_equal(c.D1, want)
+    c = read_stereo_calibration(
+        write(tmp_path / "f.yml", opencv_yaml(stereo_entries(D1=D1[:4], D2=D2[:4]))),
+        distortion_model="equidistant",
+    )
+    assert c.distortion_model == "equidistant"
+
+
+NOT_ROTATION = r"must be a rotation \(R R\^T = I and det R = \+1 within 1e-06\)"
+
+
+@pytest.mark.parametrize(
+    ("changes", "message"),
+    [
+        ({"M2": None}, r"missing key K2 or M2 or cameraMatrix2"),
+        ({"T": None}, r"missing key T"),
+        ({"K1": K1}, r"both K1 and M1 are given"),
+        ({"R": R * 1.001}, "R " + NOT_ROTATION + r", got max \|R R\^T - I\| = 0\.002"),
+        ({"R": R @ np.diag([1.0, 1.0, -1.0])}, "R " + NOT_ROTATION + r".*det R = -1"),
+        ({"R": R + 1e-5}, "R " + NOT_ROTATION),
+        ({"R1": np.eye(3) * 2}, "R1 " + NOT_ROTATION),
+        ({"R": R[:2]}, r"R must have shape \(3, 3\), got \(2, 3\)"),
+        ({"T": np.array([[1.0, 2.0]])}, r"T must have shape \(3,\), got \(2,\)"),
+        ({"T": np.zeros((3, 1))}, r"T must not be zero"),
+        ({"P1": np.eye(3)}, r"P1 must have shape \(3, 4\), got \(3, 3\)"),
+        ({"Q": np.eye(3)}, r"Q must have shape \(4, 4\), got \(3, 3\)"),
+        ({"M1": np.full((3, 3), np.nan)}, r"M1 must be finite"),
+        ({"D2": np.array([0.1, np.inf, 0, 0, 0])}, r"D2 must be finite"),
+        ({"M1": np.diag([0.0, 700.0, 1.0])}, r"M1 focal lengths must be > 0, got fx=0\.0"),
+        ({"M2": K2 * 2}, r"M2 must be \[fx s cx; 0 fy cy; 0 0 1\]"),
+        ({"D1": D1[:3]}, r"D1 has 3 coefficients; the plumb_bob model takes 4 or 5 or 8"),
+        ({"D1": np.zeros(6)}, r"D1 has 6 coefficients"),
+        ({"D1": np.arange(14.0)}, r"D1 has thin prism or tilt terms \(coefficients 9 to 14\)"),
+        ({"D1": np.zeros((2, 5))}, r"D1 must have shape \(n,\), got \(2, 5\)"),
+        ({"distortion_model": "fov"}, r"distortion_model must be one of .* got 'fov'"),
+        ({"distortion_model": "equidistant"}, r"D1 has 5 coefficients; the equidistant model"),
+        ({"image_width": 0}, r"image_width, image_height must be two whole numbers > 0"),
+        ({"image_width": 640.5}, r"image_width, image_height must be two whole numbers > 0"),
+        ({"image_height": None}, r"image_width and image_height go together"),
+        ({"imageSize": "[ 640 ]"}, r"imageSize must be \(width, height\), got \[640\]"),
+        (
+            {"image_width": "wide"},
+            r"image_width, image_height must be two whole numbers > 0, got \('wide', 480\)",
+        ),
+    ],
+)
+@pytest.mark.parametrize("fmt_", ["yml", "xml"])
+def test_opencv_rejects(tmp_path: Path, changes: dict[str, Any], message: str, fmt_: str) -> None:
+    entries = stereo_entries(**changes)
+    text = opencv_yaml(entries) if fmt_ == "yml" else opencv_xml(entries)
+    path = write(tmp_path / f"bad.{fmt_}", text)
+    if fmt_ == "xml" and "imageSize" in changes:
+        path.write_text(text.replace("[ 640 ]", "640"))
+        message = message.replace(r"\[640\]", "640")
+    with pytest.raises(ValueError, match=r"^\S*bad\." + fmt_ + ": " + message):
+        read_stereo_calibration(path)
+
+
+@pytest.mark.parametrize(
+    ("text", "message"),
+    [
+        (
+            "%YAML:1.0\nM1: !!opencv-matrix\n   rows: 3\n   cols: 3\n   dt: d\n   data: [ 1, 2 ]\n",
+            r"M1: opencv-matrix of 3x3 needs 9 values, got 2",
+        ),
+        (
+            "%YAML:1.0\nM1: !!opencv-matrix\n   rows: 1\n   cols: 1\n   dt: q\n   data: [ 1 ]\n",
+            r"M1: opencv-matrix dt must be a type such as 'd' or 'f', got 'q'",
+        ),
+        (
+            "%YAML:1.0\nM1: !!opencv-matrix\n   rows: 1\n   cols: 1\n   dt: d\n   data: [ x ]\n",
+            r"M1: opencv-matrix data must be numbers, got 'x'",
+        ),
+        (
+            "%YAML:1.0\nM1: !!opencv-matrix\n   rows: -1\n   cols: 1\n   dt: d\n   data: [ 1 ]\n",
+            r"M1: opencv-matrix rows must be whole numbers >= 0, got -1",
+        ),
+        (
+            "%YAML:1.0\nM1: !!opencv-matrix\n   cols: 1\n   dt: d\n   data: [ 1 ]\n",
+            r"M1: opencv-matrix without rows",
+        ),
+        (
+            "%YAML:1.0\nR: !!opencv-matrix\n   rows: 1\n   cols: 1\n   dt: d\n   data: [ 1 ]\n"
+            "R: 2\n",
+            r"R is given twice \(line 7\)",
+        ),
+        ("%YAML:1.0\nM1: [1, 2\n", r"not valid YAML: while parsing"),
+        ("%YAML:1.0\n- 1\n- 2\n", r"a calibration file must be a YAML mapping, got list"),
+        ("%YAML:1.0\n? [1, 2]\n: 3\n", r"keys must be names, got \[1, 2\]"),
+        ("%YAML:1.0\nM1: !!python/object:os.system {}\n", r"not valid YAML: could not determine"),
+        (
+            "<?xml version='1.0'?>\n<opencv_storage>\n<M1 type_id='opencv-matrix'><rows>1</rows>"
+            "<cols>2</cols><dt>d</dt><data>1 two</data></M1>\n</opencv_storage>\n",
+            r"M1: opencv-matrix data must be numbers, got 'two'",
+        ),
+        (
+            "<?xml version='1.0'?>\n<opencv_storage>\n<R>1</R><R>2</R></opencv_storage>\n",
+            r"R is given twice",
+        ),
+        (
+            "<?xml version='1.0'?>\n<storage></storage>\n",
+            r"the XML root must be <opencv_storage>, got <storage>",
+        ),
+        ("<?xml version='1.0'?>\n<opencv_storage><M1>\n", r"not valid XML"),
+        (
+            "<?xml version='1.0'?>\n<!DOCTYPE x [<!ENTITY a 'aaaa'>]>\n<opencv_storage>"
+            "</opencv_storage>\n",
+            r"XML with a DOCTYPE or entities is not an OpenCV FileStorage",
+        ),
+    ],
+)
+def test_opencv_rejects_malformed(tmp_path: Path, text: str, message: str) -> None:
+    with pytest.raises(ValueError, match=r"^\S*bad\.yml: " + message):
+        read_stereo_calibration(write(tmp_path / "bad.yml", text))
+
+
+def test_image_size_keyword(tmp_path: Path) -> None:
+    path = write(tmp_path / "s.yml", opencv_yaml(stereo_entries()))
+    assert read_stereo_calibration(path, image_size=(640, 480)).image_size == (640, 480)
+    with pytest.raises(
+        ValueError,
+        match=r"s\.yml: the file gives an image size of \(640, 480\), "
+        r"image_size= \(641, 480\)",
+    ):
+        read_stereo_calibration(path, image_size=(641, 480))
+    with pytest.raises(ValueError, match=r"image_size: image_size must be two whole numbers > 0"):
+        read_stereo_calibration(path, image_size=(0, 480))
+
+
+def test_pyyaml_missing(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    path = write(tmp_path / "s.yml", opencv_yaml(stereo_entries()))
+    monkeypatch.setitem(sys.modules, "yaml", None)
+    with pytest.raises(ImportError, match=r'needs PyYAML: pip install "stereodepth\[calib\]"'):
+        read_stereo_calibration(path)
+    # XML, Middlebury and KITTI need no PyYAML
+    assert read_stereo_calibration(write(tmp_path / "s.xml", opencv_xml(stereo_entries())))
+
+
+# --- ROS camera_info --------------------------------------------------------------------------
+def ros_yaml(
+    k: np.ndarray,
+    d: np.ndarray,
+    model: str,
+    r: np.ndarray,
+    p: np.ndarray,
+    size: tuple[int, int] | None = (640, 480),
+    name: str = "left",
+) -> str:
+    """A camera_info YAML laid out as ROS's camera_calibration writes it."""
+    lines = []
+    if size is not None:
+        lines += [f"image_width: {size[0]}", f"image_height: {size[1]}"]
+    lines.append(f"camera_name: narrow_stereo/{name}")
+    for key, m in (
+        ("camera_matrix", k),
+        ("distortion_coefficients", d),
+        ("rectification_matrix", r),
+        ("projection_matrix", p),
+    ):
+        m2 = m if m.ndim == 2 else m.reshape(1, -1)
+        lines += [
+            f"{key}:",
+            f"  rows: {m2.shape[0]}",
+            f"  cols: {m2.shape[1]}",
+            f"  data: [{fmt(m2)}]",
+        ]
+        if key == "camera_matrix":
+            lines.append(f"distortion_model: {model}")
+    return "\n".join(lines) + "\n"
+
+
+def ros_pair(
+    tmp_path: Path, left: dict[str, Any] | None = None, right: dict[str, Any] | None = None
+) -> tuple[Path, Path]:
+    """A rectified pair: both cameras turned onto a common frame, baseline 0.12 m."""
+    r1, r2 = rot(0.002, -0.01, 0.003), rot(-0.001, 0.004, 0.002)
+    kp = np.array([[690.0, 0.0, 300.0], [0.0, 690.0, 238.0], [0.0, 0.0, 1.0]])
+    p1 = np.hstack([kp, np.zeros((3, 1))])
+    p2 = np.hstack([kp, np.array([[-690.0 * 0.12], [0.0], [0.0]])])
+    lk = {"k": K1, "d": D1, "model": "plumb_bob", "r": r1, "p": p1, "name": "left"}
+    rk = {"k": K2, "d": D2, "model": "plumb_bob", "r": r2, "p": p2, "name": "right"}
+    lk.update(left or {})
+    rk.update(right or {})
+    return (
+        write(tmp_path / "left.yaml", ros_yaml(**lk)),
+        write(tmp_path / "right.yaml", ros_yaml(**rk)),
+    )
+
+
+def test_ros_pair(tmp_path: Path) -> None:
+    lp, rp = ros_pair(tmp_path)
+    c = read_stereo_calibration(lp, second_path=rp)
+    r1, r2 = rot(0.002, -0.01, 0.003), rot(-0.001, 0.004, 0.002)
+    np.testing.assert_allclose(c.R, r2.T @ r1, atol=1e-15)
+    np.testing.assert_allclose(c.T, r2.T @ np.array([-0.12, 0.0, 0.0]), atol=1e-15)
+    np.testing.assert_array_equal(c.K2, K2)
+    np.testing.assert_array_equal(c.R1, r1)
+    assert c.distortion_model == "plumb_bob" and c.image_size == (640, 480)
+    assert c.Q is None and not c.rectified
+    rig = c.to_rig()
+    assert (rig.focal_px, rig.doffs_px) == (690.0, 0.0)
+    assert rig.baseline_mm == pytest.approx(120.0, rel=1e-14)
+    same = sc.read_ros_stereo_calibration(lp, rp, translation_unit="mm")
+    np.testing.assert_allclose(same.T, c.T / 1000, rtol=1e-15)
+    # the two ways of saying rational_polynomial and equidistant
+    d8 = np.arange(1.0, 9.0) / 100
+    lp, rp = ros_pair(
+        tmp_path,
+        {"d": d8, "model": "rational_polynomial"},
+        {"d": d8, "model": "rational_polynomial"},
+    )
+    c = read_stereo_calibration(lp, second_path=rp)
+    assert c.distortion_model == "plumb_bob" and c.D1.shape == (8,)
+    lp, rp = ros_pair(
+        tmp_path, {"d": D1[:4], "model": "equidistant"}, {"d": D2[:4], "model": "equidistant"}
+    )
+    assert read_stereo_calibration(lp, second_path=rp).distortion_model == "equidistant"
+
+
+def test_ros_recovers_opencv_r_and_t(tmp_path: Path) -> None:
+    """R and T recovered from stereoRectify's R1, R2, P1, P2 are the R and T it was given."""
+    cv2 = pytest.importorskip("cv2", reason="opencv-python-headless is not installed")
+    for r, t in ((R, T_MM / 1000), (rot(-0.03, 0.01, 0.02), np.array([-0.5, 0.02, -0.01]))):
+        r1, r2, p1, p2, _, _, _ = cv2.stereoRectify(K1, D1, K2, D2, (640, 480), r, t.reshape(3, 1))
+        lp, rp = ros_pair(tmp_path, {"r": r1, "p": p1}, {"r": r2, "p": p2})
+        c = read_stereo_calibration(lp, second_path=rp)
+        np.testing.assert_allclose(c.R, r, atol=1e-12)
+        np.testing.assert_allclose(c.T, t, atol=1e-12)
+
+
+P_LEFT = np.hstack([np.array([[690.0, 0, 300], [0, 690, 238], [0, 0, 1]]), np.zeros((3, 1))])
+P_FX700 = np.hstack([np.array([[700.0, 0, 300], [0, 690, 238], [0, 0, 1]]), [[-82.8], [0], [0]]])
+
+
+@pytest.mark.parametrize(
+    ("left", "right", "bad", "message"),
+    [
+        (
+            {},
+            {"model": "equidistant", "d": D2[:4]},
+            "left\\.yaml \\+ .*right",
+            r"distortion_model differs: 'plumb_bob' and 'equidistant'",
+        ),
+        ({}, {"size": (640, 481)}, "left\\.yaml \\+ .*right", r"image_width/image_height differ"),
+        (
+            {"size": None},
+            {"size": None},
+            "left\\.yaml \\+ .*right",
+            r"no image size in the file \(image_width, image_height\): pass image_size=",
+        ),
+        (
+            {},
+            {"p": P_FX700},
+            "left\\.yaml \\+ .*right",
+            r"projection_matrix fx and fy differ between the cameras",
+        ),
+        ({}, {"p": P_LEFT}, "right", r"projection_matrix has no translation \(Tx = Ty = 0\)"),
+        ({}, {"d": D2[:3]}, "right", r"distortion_coefficients has 3 coefficients; the plumb_bob"),
+        (
+            {"model": "rational_polynomial"},
+            {"model": "rational_polynomial"},
+            "left",
+            r"distortion_coefficients has 5 coefficients; the rational_polynomial model takes 8",
+        ),
+        ({"model": "pinhole"}, {}, "left", r"distortion_model must be one of .*got 'pinhole'"),
+        ({"r": np.eye(3) * 1.01}, {}, "left", "rectification_matrix " + NOT_ROTATION),
+        ({"k": np.full((3, 3), np.inf)}, {}, "left", r"camera_matrix must be finite"),
+        ({"p": P_LEFT[:, :3]}, {}, "left", r"projection_matrix must have shape \(3, 4\)"),
+    ],
+)
+def test_ros_rejects(
+    tmp_path: Path, left: dict[str, Any], right: dict[str, Any], bad: str, message: str
+) -> None:
+    lp, rp = ros_pair(tmp_path, left, right)
+    with pytest.raises(ValueError, match=r"^\S*" + bad + r"\.yaml: " + message):
+        read_stereo_calibration(lp, second_path=rp)
+
+
+def test_ros_rejects_swapped_and_malformed(tmp_path: Path) -> None:
+    lp, rp = ros_pair(tmp_path)
+    with pytest.raises(
+        ValueError,
+        match=r"left\.yaml: projection_matrix has no translation .*"
+        r"\(are the files swapped\?\)",
+    ):
+        read_stereo_calibration(rp, second_path=lp)
+    with pytest.raises(
+        ValueError,
+        match=r"left\.yaml: a ROS camera_info file holds one camera: "
+        "pass the right camera's file as second_path",
+    ):
+        read_stereo_calibration(lp)
+    text = rp.read_text()
+    cases = [
+        (text.replace("rectification_matrix", "rect_matrix"), "missing key rectification_matrix"),
+        (text.replace("distortion_model: plumb_bob\n", ""), "missing key distortion_model"),
+        (
+            text.replace("  rows: 3\n  cols: 4", "  rows: 3\n  cols: 3"),
+            r"projection_matrix of 3x3 needs 9 values, got 12",
+        ),
+        (
+            text.replace("camera_matrix:\n  rows: 3", "camera_matrix:\n  rows: three"),
+            r"camera_matrix rows and cols must be whole numbers, got 'three', 3",
+        ),
+        (text.replace("data: [710.0", "data: [seven"), r"camera_matrix\.data must be numbers"),
+        (
+            text.replace("camera_matrix:\n", "camera_matrix: 7\nx:\n"),
+            r"camera_matrix must be a mapping with rows, cols and data, got 7",
+        ),
+    ]
+    for content, message in cases:
+        rp.write_text(content)
+        with pytest.raises(ValueError, match=r"^\S*right\.yaml: " + message):
+            read_stereo_calibration(lp, second_path=rp)
+    p_swapped = np.hstack([P_LEFT[:, :3], np.array([[690.0 * 0.12], [0.0], [0.0]])])
+    lp, rp = ros_pair(tmp_path, {}, {"p": p_swapped})
+    with pytest.raises(ValueError, match=r"right\.yaml: projection_matrix Tx = 82\.8 > 0"):
+        read_stereo_calibration(lp, second_path=rp)
+
+
+# --- Kalibr -----------------------------------------------------------------------------------
+def kalibr_yaml(cams: list[dict[str, Any]]) -> str:
+    out = []
+    for n, c in enumerate(cams):
+        out.append(f"cam{n}:")
+        if "T" in c:
+            out.append("  T_cn_cnm1:")
+            out += [f"  - [{fmt(row)}]" for row in c["T"]]
+        out += [
+            f"  cam_overlaps: [{n - 1 if n else 1}]",
+            f"  camera_model: {c.get('camera_model', 'pinhole')}",
+            f"  distortion_coeffs: [{fmt(c.get('d', D1[:4]))}]",
+            f"  distortion_model: {c.get('model', 'radtan')}",
+            f"  intrinsics: [{fmt(c.get('intrinsics', [458.6, 457.3, 367.2, 248.4]))}]",
+            f"  resolution: {c.get('resolution', [752, 480])}",
+            f"  rostopic: /cam{n}/image_raw",
+        ]
+    return "\n".join(out) + "\n"
+
+
+def transform(r: np.ndarray, t: np.ndarray) -> np.ndarray:
+    m = np.eye(4)
+    m[:3, :3], m[:3, 3] = r, t
+    return m
+
+
+RA, TA = rot(0.001, 0.002, -0.003), np.array([-0.11, 0.0004, 0.0002])
+RB, TB = rot(-0.002, 0.01, 0.001), np.array([-0.09, 0.001, -0.0003])
+
+
+def test_kalibr(tmp_path: Path) -> None:
+    path = write(
+        tmp_path / "camchain.yaml",
+        kalibr_yaml([{}, {"T": transform(RA, TA), "d": D2[:4]}, {"T": transform(RB, TB)}]),
+    )
+    c = read_stereo_calibration(path)
+    np.testing.assert_array_equal(c.R, RA)
+    np.testing.assert_array_equal(c.T, TA)
+    np.testing.assert_array_equal(c.K1, [[458.6, 0, 367.2], [0, 457.3, 248.4], [0, 0, 1]])
+    np.testing.assert_array_equal(c.D2, D2[:4])
+    assert c.distortion_model == "plumb_bob" and c.image_size == (752, 480)
+    with pytest.raises(ValueError, match=r"camchain\.yaml: this calibration is not rectified"):
+        c.to_rig()
+    # along the chain and backwards
+    c02 = sc.read_kalibr_stereo_calibration(path, cameras=(0, 2))
+    np.testing.assert_allclose(c02.R, RB @ RA, atol=1e-15)
+    np.testing.assert_allclose(c02.T, RB @ TA + TB, atol=1e-15)
+    c10 = read_stereo_calibration(path, cameras=(1, 0))
+    np.testing.assert_allclose(c10.R, RA.T, atol=1e-15)
+    np.testing.assert_allclose(c10.T, -RA.T @ TA, atol=1e-15)
+    fish = write(
+        tmp_path / "fish.yaml",
+        kalibr_yaml([{"model": "equidistant"}, {"T": transform(RA, TA), "model": "equidistant"}]),
+    )
+    assert read_stereo_calibration(fish).distortion_model == "equidistant"
+
+
+@pytest.mark.parametrize(
+    ("cams", "message"),
+    [
+        ([{}], r"missing key cam1"),
+        ([{}, {}], r"missing key cam1\.T_cn_cnm1"),
+        (
+            [{"camera_model": "omni"}, {"T": transform(RA, TA)}],
+            r"cam0\.camera_model must be 'pinhole', got 'omni'",
+        ),
+        ([{}, {"T": transform(RA * 1.01, TA)}], r"cam1\.T_cn_cnm1\[:3, :3\] " + NOT_ROTATION),
+        (
+            [{}, {"T": transform(RA, TA) + np.diag([0, 0, 0, 1.0])}],
+            r"cam1\.T_cn_cnm1 must end with the row 0 0 0 1, got \[0\.0, 0\.0, 0\.0, 2\.0\]",
+        ),
+        ([{}, {"T": transform(RA, TA)[:3]}], r"cam1\.T_cn_cnm1 must have shape \(4, 4\)"),
+        (
+            [{}, {"T": transform(RA, TA), "d": D1}],
+            r"cam1\.distortion_coeffs has 5 coefficients; the radtan model takes 4",
+        ),
+        (
+            [{"model": "equidistant", "d": D1}, {"T": transform(RA, TA)}],
+            r"cam0\.distortion_coeffs has 5 coefficients; the equidistant model takes 4",
+        ),
+        (
+            [{"model": "fov", "d": [0.9]}, {"T": transform(RA, TA)}],
+            r"cam0\.distortion_model must be one of",
+        ),
+        (
+            [{}, {"T": transform(RA, TA), "model": "equidistant"}],
+            r"cam0 and cam1 have different distortion models: 'plumb_bob' and 'equidistant'",
+        ),
+        (
+            [{}, {"T": transform(RA, TA), "resolution": [640, 480]}],
+            r"cam0 and cam1 resolutions differ: \(752, 480\) and \(640, 480\)",
+        ),
+        (
+            [{"intrinsics": [458.6, 457.3, 367.2]}, {"T": transform(RA, TA)}],
+            r"cam0\.intrinsics must have shape \(4,\), got \(3,\)",
+        ),
+        (
+            [{"intrinsics": [458.6, -457.3, 367.2, 1]}, {"T": transform(RA, TA)}],
+            r"cam0\.intrinsics focal lengths must be > 0",
+        ),
+        (
+            [{"resolution": [752]}, {"T": transform(RA, TA)}],
+            r"cam0\.resolution must be \(width, height\), got \[752\]",
+        ),
+    ],
+)
+def test_kalibr_rejects(tmp_path: Path, cams: list[dict[str, Any]], message: str) -> None:
+    path = write(tmp_path / "camchain.yaml", kalibr_yaml(cams))
+    with pytest.raises(ValueError, match=r"^\S*camchain\.yaml: " + message):
+        sc.read_kalibr_stereo_calibration(path)
+
+
+def test_kalibr_rejects_cameras(tmp_path: Path) -> None:
+    path = write(tmp_path / "camchain.yaml", kalibr_yaml([{}, {"T": transform(RA, TA)}]))
+    for cameras, message in (
+        ((0, 0), "two different cameras"),
+        ((0,), "two camera numbers"),
+        ((0, -1), "two whole numbers >= 0"),
+        ((0, 2), "missing key cam2"),
+    ):
+        with pytest.raises(ValueError, match=message):
+            read_stereo_calibration(path, cameras=cameras)  # type: ignore[arg-type]
+
+
+# --- Middlebury and KITTI: already rectified ----------------------------------------------------
+MIDDLEBURY = (
+    "cam0=[3950.25 0 1180.5; 0 3950.25 1005.75; 0 0 1]\n"
+    "cam1=[3950.25 0 1310.125; 0 3950.25 1005.75; 0 0 1]\n"
+    "doffs=129.625\nbaseline=190.5\nwidth=2900\nheight=1950\nndisp=280\n"
+)
+
+
+def test_middlebury(tmp_path: Path) -> None:
+    path = write(tmp_path / "calib.txt", MIDDLEBURY.replace("\n", "\r\n"))
+    c = read_stereo_calibration(path)
+    assert c.rectified and c.distortion_model == "none" and c.D1.shape == (0,)
+    np.testing.assert_array_equal(c.R, np.eye(3))
+    np.testing.assert_array_equal(c.T, [-0.1905, 0.0, 0.0])
+    assert c.image_size == (2900, 1950) and c.K2[0, 2] == 1310.125
+    rig = c.to_rig()
+    want = StereoRig.from_middlebury_calib(path)
+    assert (rig.baseline_mm, rig.focal_px) == (want.baseline_mm, want.focal_px) == (190.5, 3950.25)
+    assert rig.doffs_px == pytest.approx(want.doffs_px, rel=1e-14)  # cx1 - cx0 in floating point
+    assert (rig.width_px, rig.height_px) == (want.width_px, want.height_px)
+    # Q keeps doffs: Z = f B / (d + doffs), as the rig says
+    d = 50.0
+    _, _, z, w = c.Q @ np.array([1000.0, 900.0, d, 1.0])
+    assert z / w == pytest.approx(rig.depth_m(d), rel=1e-12)
+    # a file without width and height needs image_size=
+    small = write(tmp_path / "small.txt", "cam0=[700 0 300; 0 700 200; 0 0 1]\nbaseline=160\n")
+    with pytest.raises(ValueError, match=r"small\.txt: no image size in the file \(width, height"):
+        read_stereo_calibration(small)
+    c = sc.read_middlebury_stereo_calibration(small, image_size=(600, 400))
+    assert c.image_size == (600, 400) and c.to_rig().doffs_px == 0.0
+    with pytest.raises(
+        ValueError,
+        match=r"small\.txt: translation_unit does not apply to a "
+        "Middlebury file",
+    ):
+        read_stereo_calibration(small, translation_unit="mm", image_size=(600, 400))
+    with pytest.raises(ValueError, match=r"calib\.txt: baseline must be > 0 mm"):
+        read_stereo_calibration(write(tmp_path / "calib.txt", MIDDLEBURY.replace("190.5", "0")))
+
+
+P2_2012 = (
+    "7.100000e+02 0.000000e+00 6.000000e+02 4.400000e+01 0.000000e+00 7.100000e+02 "
+    "1.750000e+02 2.000000e-01 0.000000e+00 0.000000e+00 1.000000e+00 2.500000e-03"
+)
+P3_2012 = (
+    "7.100000e+02 0.000000e+00 6.000000e+02 -3.400000e+02 0.000000e+00 7.100000e+02 "
+    "1.750000e+02 2.200000e+00 0.000000e+00 0.000000e+00 1.000000e+00 2.700000e-03"
+)
+P0_2012 = (
+    "7.100000e+02 0.000000e+00 6.000000e+02 0.000000e+00 0.000000e+00 7.100000e+02 "
+    "1.750000e+02 0.000000e+00 0.000000e+00 0.000000e+00 1.000000e+00 0.000000e+00"
+)
+
+
+def kitti_2012() -> str:
+    p1 = P0_2012.replace("0.000000e+00 0.000000e+00 7", "-3.800000e+02 0.000000e+00 7", 1)
+    return (
+        f"P0: {P0_2012}\nP1: {p1}\nP2: {P2_2012}\nP3: {P3_2012}\n"
+        "R0_rect: 1 0 0 0 1 0 0 0 1\nTr_velo_to_cam: 1 0 0 0 0 1 0 0 0 0 1 0\n"
+    )
+
+
+def test_kitti(tmp_path: Path) -> None:
+    path = write(tmp_path / "000070.txt", kitti_2012())
+    with pytest.raises(
+        ValueError,
+        match=r"000070\.txt: no image size in the file \(S_rect_02\): "
+        r"pass image_size=\(width, height\)",
+    ):
+        read_stereo_calibration(path)
+    c = read_stereo_calibration(path, image_size=(1242, 375))
+    assert c.rectified and c.distortion_model == "none" and c.image_size == (1242, 375)
+    baseline = (4.4e01 + 3.4e02) / 7.1e02
+    np.testing.assert_array_equal(c.T, [-baseline, 0.0, 0.0])
+    np.testing.assert_array_equal(c.K1, np.array(P2_2012.split(), float).reshape(3, 4)[:, :3])
+    rig = c.to_rig()
+    assert (rig.focal_px, rig.doffs_px) == (710.0, 0.0)
+    assert rig.baseline_mm == pytest.approx(baseline * 1000, rel=1e-15)
+    c01 = read_stereo_calibration(path, image_size=(1242, 375), cameras=(0, 1))
+    assert c01.to_rig().baseline_mm == pytest.approx(380.0 / 710.0 * 1000, rel=1e-15)
+    # calib_cam_to_cam.txt of KITTI 2015: P_rect_0N and the image size S_rect_0N, CR LF
+    text = (
+        "calib_time: 09-Jan-2012 13:57:47\ncorner_dist: 9.950000e-02\n"
+        "S_rect_02: 1.242000e+03 3.750000e+02\n"
+        f"P_rect_02: {P2_2012}\nS_rect_03: 1.242000e+03 3.750000e+02\nP_rect_03: {P3_2012}\n"
+    )
+    c = read_stereo_calibration(write(tmp_path / "cam_to_cam.txt", text.replace("\n", "\r\n")))
+    assert c.image_size == (1242, 375)
+    np.testing.assert_array_equal(c.T, [-baseline, 0.0, 0.0])
+
+
+@pytest.mark.parametrize(
+    ("text", "message"),
+    [
+        (kitti_2012().replace("P3:", "Q3:"), r": missing P3 \(or P_rect_03\)"),
+        (kitti_2012() + f"P_rect_02: {P2_2012}\n", r":7: P_rect_02 gives camera 2 again"),
+        (kitti_2012() + f"P2: {P2_2012}\n", r":7: P2 is given twice \(first on line 3\)"),
+        (kitti_2012().replace(" 2.500000e-03", ""), r":3: P2 must be 12 numbers, got 11"),
+        (kitti_2012().replace("2.500000e-03", "x"), r":3: P2 must be 12 numbers, got '7"),
+        (kitti_2012().replace("2.500000e-03", "nan"), r":3: P2 must be 12 finite numbers"),
+        (kitti_2012().replace("2.500000e-03", "1e999"), r":3: P2 must be 12 finite numbers"),
+        (kitti_2012() + "just words\n", r":7: expected 'NAME: values', got 'just words'"),
+        (
+            kitti_2012().replace(P3_2012, P3_2012.replace("-3.400000e+02", "3.400000e+02")),
+            r": camera 3 must be right of camera 2, got a baseline of -0\.4",
+        ),
+        (
+            kitti_2012().replace(P3_2012, P3_2012.replace("1.750000e+02", "1.7e+02")),
+            r": P2 and P3 are not a rectified pair: their principal point row cy differ \(175\.0 ",
+        ),
+        (
+            kitti_2012().replace(
+                P2_2012, P2_2012.replace("0.000000e+00 0.000000e+00 1.0", "0 1 1.0")
+            ),
+            r": P2 must be a rectified projection \[fx 0 cx tx; 0 fy cy ty; 0 0 1 tz\]",
+        ),
+        (kitti_2012() + "S_rect_02: 1242 0\n", r": S_rect_02 must be two whole numbers > 0"),
+    ],
+)
+def test_kitti_rejects(tmp_path: Path, text: str, message: str) -> None:
+    with pytest.raises(ValueError, match=r"^\S*calib\.txt" + message):
+        sc.read_kitti_stereo_calibration(
+            write(tmp_path / "calib.txt", text), image_size=(1242, 375)
+        )
+
+
+# --- the type itself, and the format detection -------------------------------------------------
+def fields(**changes: Any) -> dict[str, Any]:
+    f: dict[str, Any] = {
+        "K1": K1,
+        "D1": D1,
+        "K2": K2,
+        "D2": D2,
+        "distortion_model": "plumb_bob",
+        "R": R,
+        "T": T_MM / 1000,
+        "image_size": (640, 480),
+    }
+    f.update(changes)
+    return f
+
+
+def test_direct_construction() -> None:
+    c = StereoCalibration(**fields(D1=D1.tolist(), T=(T_MM / 1000).reshape(3, 1)))
+    assert c.D1.dtype == np.float64 and c.D1.shape == (5,) and c.T.shape == (3,)
+    assert c.baseline_m == pytest.approx(np.linalg.norm(T_MM) / 1000)
+    assert c.distortion_model == "plumb_bob"
+    with pytest.raises(AttributeError):
+        c.R = np.eye(3)  # type: ignore[misc]
+    assert StereoCalibration(**fields(distortion_model="RadTan")).distortion_model == "plumb_bob"
+
+
+@pytest.mark.parametrize(
+    ("changes", "exc", "message"),
+    [
+        ({"R": np.diag([1.0, 1.0, -1.0])}, ValueError, r"StereoCalibration: R " + NOT_ROTATION),
+        ({"K2": np.eye(2)}, ValueError, r"StereoCalibration: K2 must have shape \(3, 3\)"),
+        (
+            {"D2": D2[:4], "distortion_model": "equidistant", "D1": D1},
+            ValueError,
+            r"D1 has 5 coefficients; the equidistant model takes 4",
+        ),
+        ({"distortion_model": "none"}, ValueError, r"D1 has 5 coefficients; the none model"),
+        ({"distortion_model": 3}, ValueError, r"distortion_model must be one of"),
+        ({"image_size": (640,)}, ValueError, r"image_size must be \(width, height\)"),
+        ({"image_size": (True, 480)}, ValueError, r"image_size must be two whole numbers > 0"),
+        ({"T": [0.0, 0.0, np.nan]}, ValueError, r"T must be finite"),
+        ({"P2": np.zeros((3, 3))}, ValueError, r"P2 must have shape \(3, 4\)"),
+        ({"P1": np.zeros((3, 4))}, ValueError, r"P1\[:, :3\] focal lengths must be > 0"),
+        ({"image_size": "64"}, ValueError, r"image_size must be \(width, height\), got '64'"),
+        (
+            {"rectified": True},
+            ValueError,
+            r"a rectified calibration has R = identity and distortion_model 'none'",
+        ),
+        ({"rectified": 1}, TypeError, r"rectified must be a bool, got 1"),
+        ({"source": Path("x")}, TypeError, r"source must be a str"),
+        ({"source": "mine.yml", "K1": K1 * 0}, ValueError, r"mine\.yml: K1 focal lengths"),
+    ],
+)
+def test_direct_construction_rejects(changes: dict[str, Any], exc: type, message: str) -> None:
+    with pytest.raises(exc, match=message):
+        StereoCalibration(**fields(**changes))
+
+
+def test_to_rig_rejects() -> None:
+    rect = {"D1": [], "D2": [], "distortion_model": "none", "R": np.eye(3), "rectified": True}
+    with pytest.raises(ValueError, match=r"rectified pair has the same fx, fy and cy in K1 and K2"):
+        StereoCalibration(**fields(**rect, T=[-0.1, 0, 0])).to_rig()
+    k = {"K2": K1}
+    with pytest.raises(ValueError, match=r"a rectified horizontal pair has T = \(-B, 0, 0\)"):
+        StereoCalibration(**fields(**rect, **k, T=[-0.1, 0.01, 0])).to_rig()
+    with pytest.raises(ValueError, match=r"the right camera must be to the right of the left"):
+        StereoCalibration(**fields(**rect, **k, T=[0.1, 0, 0])).to_rig()
+    p1 = P_LEFT
+    p2 = P_LEFT + np.array([[0, 0, 0, 0], [0, 0, 0, -50.0], [0, 0, 0, 0]])
+    with pytest.raises(ValueError, match=r"P2 is of a vertical pair"):
+        StereoCalibration(**fields(P1=p1, P2=p2)).to_rig()
+
+
+def test_unknown_formats_and_keywords(tmp_path: Path) -> None:
+    for text in ("name: nothing\n", "a = b\n", "<?xml version='1.0'?>\n<opencv_storage/>\n"):
+        path = write(tmp_path / "x.cfg", text)
+        with pytest.raises(
+            ValueError,
+            match=r"x\.cfg: (not a calibration file this reader knows|"
+            "missing key K1 or M1 or cameraMatrix1)",
+        ):
+            read_stereo_calibration(path)
+    with pytest.raises(FileNotFoundError, match=r"calibration file not found: .*nope\.yml"):
+        read_stereo_calibration(tmp_path / "nope.yml")
+    opencv = write(tmp_path / "s.yml", opencv_yaml(stereo_entries()))
+    with pytest.raises(ValueError, match=r"s\.yml: cameras does not apply to a OpenCV file"):
+        read_stereo_calibration(opencv, cameras=(0, 1))
+    kitti = write(tmp_path / "k.txt", kitti_2012())
+    with pytest.raises(ValueError, match=r"k\.txt: distortion_model does not apply to a KITTI"):
+        read_stereo_calibration(kitti, distortion_model="none", image_size=(1242, 375))
+    # OpenCV YAML without the directive or the tags (as PyYAML-based scripts write it)
+    plain = "\n".join(
+        [
+            f"K1: [{fmt(K1)}]",
+            f"D1: [{fmt(D1)}]",
+            f"K2: [{fmt(K2)}]",
+            f"D2: [{fmt(D2)}]",
+            f"R: {np.array2string(R, separator=', ')}".replace("\n", ""),
+            f"T: [{fmt(T_MM)}]",
+            "image_size: [640, 480]",
+        ]
+    )
+    with pytest.raises(ValueError, match=r"plain\.yml: K1 must have shape \(3, 3\), got \(9,\)"):
+        read_stereo_calibration(write(tmp_path / "plain.yml", plain))
+    nested = plain.replace(f"K1: [{fmt(K1)}]", f"K1: {K1.tolist()}").replace(
+        f"K2: [{fmt(K2)}]", f"K2: {K2.tolist()}"
+    )
+    c = read_stereo_calibration(write(tmp_path / "plain.yml", nested), translation_unit="mm")
+    np.testing.assert_allclose(c.R, R, atol=1e-8)
+    np.testing.assert_array_equal(c.T, T_MM / 1000)

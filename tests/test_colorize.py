@@ -1,0 +1,179 @@
+"""stereodepth.colorize and save_colorized: a tiny map coloured by hand, limits, clipping,
+NaN, the figure's colour bar, and one test per rejected input."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+
+pytest.importorskip("matplotlib", reason="the plot extra is not installed")
+
+import matplotlib
+
+import stereodepth
+from stereodepth import colorize, save_colorized
+from stereodepth.colormap import (
+    COLORBAR_HEIGHT_PX,
+    LUT_SIZE,
+    colorize_limits,
+    colormap_lut,
+    preview_image,
+)
+
+
+def colour(name: str, k: int) -> list[int]:
+    """The k-th of 256 colours of matplotlib's map, by hand: cmap(k / 255), rounded."""
+    r, g, b, _ = matplotlib.colormaps[name](k / 255.0)
+    return [round(r * 255), round(g * 255), round(b * 255)]
+
+
+def test_tiny_map_by_hand() -> None:
+    values = np.array([[0.0, 1.0, 2.0], [np.nan, 3.0, 4.0], [1.5, np.inf, -np.inf]])
+    got = colorize(values, vmin=1.0, vmax=3.0, invalid_color=(255, 0, 255))
+    assert got.dtype == np.uint8 and got.shape == (3, 3, 3)
+    # t = (v - 1) / 2 clipped to [0, 1]; k = rint(255 t): 0 -> 0 (clipped), 1 -> 0,
+    # 2 -> rint(127.5) = 128, 3 -> 255, 4 -> 255 (clipped), 1.5 -> rint(63.75) = 64.
+    expected = [
+        [colour("turbo", 0), colour("turbo", 0), colour("turbo", 128)],
+        [[255, 0, 255], colour("turbo", 255), colour("turbo", 255)],
+        [colour("turbo", 64), [255, 0, 255], [255, 0, 255]],
+    ]
+    assert got.tolist() == expected
+
+
+def test_other_map_and_integer_input() -> None:
+    values = np.array([[10, 20], [30, 40]], dtype=np.uint16)
+    got = colorize(values, cmap="gray", vmin=10, vmax=40)
+    # gray is r = g = b = k: 0, 85, 170, 255.
+    assert got[..., 0].tolist() == [[0, 85], [170, 255]]
+    assert (got[..., 0] == got[..., 1]).all() and (got[..., 1] == got[..., 2]).all()
+    assert colorize(values, cmap=matplotlib.colormaps["gray"], vmin=10, vmax=40).tolist() == (
+        got.tolist()
+    )
+
+
+def test_default_limits_are_the_1st_and_99th_percentiles() -> None:
+    rng = np.random.default_rng(3)
+    values = rng.normal(20, 5, (40, 50))
+    values[0, :5] = np.nan
+    values[1, 0] = 1e6  # an outlier does not wash the map out
+    finite = values[np.isfinite(values)]
+    lo, hi = np.percentile(finite, [1, 99])
+    assert colorize_limits(values) == (lo, hi)
+    assert colorize(values).tolist() == colorize(values, vmin=lo, vmax=hi).tolist()
+    # One limit given, the other a percentile.
+    assert colorize_limits(values, vmin=0) == (0.0, hi)
+    assert colorize_limits(values, vmax=30) == (lo, 30.0)
+
+
+def test_all_invalid_and_constant_maps() -> None:
+    nan = np.full((2, 3), np.nan)
+    assert (colorize(nan, invalid_color=(1, 2, 3)) == [1, 2, 3]).all()
+    assert colorize_limits(nan) == (0.0, 1.0)
+    flat = np.full((2, 2), 7.0)
+    assert colorize_limits(flat) == (7.0, 7.0)
+    assert (colorize(flat) == colour("turbo", 128)).all()  # the middle colour
+    # A given limit beyond every value: both limits at that value; the values below it.
+    assert colorize_limits(flat, vmin=9) == (9.0, 9.0)
+    assert (colorize(flat, vmin=9) == colour("turbo", 0)).all()
+
+
+def test_lut_is_matplotlibs_sampled() -> None:
+    lut = colormap_lut("viridis")
+    assert lut.shape == (LUT_SIZE, 3) and lut.dtype == np.uint8
+    assert lut[0].tolist() == colour("viridis", 0) and lut[200].tolist() == colour("viridis", 200)
+
+
+def test_exported_from_the_package() -> None:
+    assert stereodepth.colorize is colorize and "colorize" in stereodepth.__all__
+
+
+def test_save_colorized_writes_the_map_and_a_colour_bar(tmp_path: Path) -> None:
+    from PIL import Image
+
+    values = np.linspace(0, 50, 37 * 61).reshape(37, 61).astype(np.float32)
+    values[3, 4] = np.nan
+    out = save_colorized(tmp_path / "d.png", values, quantity="depth", unit="m", vmin=5, vmax=45)
+    assert out == tmp_path / "d.png"
+    with Image.open(out) as im:
+        assert im.mode == "RGB" and im.size == (61, 37 + COLORBAR_HEIGHT_PX)
+        a = np.asarray(im)
+    assert a[:37].tolist() == colorize(values, vmin=5, vmax=45).tolist()
+    assert a[37:].min() < 128  # something (bar and text) is drawn on the white strip
+    assert a.tolist() == preview_image(values, label="depth (m)", vmin=5, vmax=45).tolist()
+    assert [p.name for p in tmp_path.iterdir()] == ["d.png"]  # no temporary file left
+
+
+# --- rejected input: one test per kind ---------------------------------------------------------
+@pytest.mark.parametrize(
+    ("values", "kind", "message"),
+    [
+        ("abc", TypeError, "values must be a 2-D array of real numbers"),
+        (
+            np.zeros((2, 2), dtype=bool),
+            TypeError,
+            "values must be a 2-D array of real numbers, got bool",
+        ),
+        (np.zeros((2, 2), dtype=complex), TypeError, "dtype complex128"),
+        ([[1, 2], [3]], TypeError, "values must be a 2-D array"),
+        (np.zeros(5), ValueError, "values must be a non-empty 2-D (H, W) array, got shape (5,)"),
+        (np.zeros((0, 4)), ValueError, "got shape (0, 4)"),
+        (np.zeros((2, 2, 3)), ValueError, "got shape (2, 2, 3)"),
+    ],
+)
+def test_bad_values(values: Any, kind: type[Exception], message: str) -> None:
+    with pytest.raises(kind, match=None) as info:
+        colorize(values)
+    assert message in str(info.value)
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "kind", "message"),
+    [
+        ({"vmin": "1"}, TypeError, "vmin must be a real number or None, got str '1'"),
+        ({"vmax": True}, TypeError, "vmax must be a real number or None, got bool True"),
+        ({"vmin": float("nan")}, ValueError, "vmin must be finite, got nan"),
+        ({"vmax": float("inf")}, ValueError, "vmax must be finite, got inf"),
+        ({"vmin": 3, "vmax": 3}, ValueError, "vmin must be < vmax, got vmin=3.0 and vmax=3.0"),
+        ({"vmin": 4, "vmax": 1}, ValueError, "vmin must be < vmax"),
+        ({"cmap": "no-such-map"}, ValueError, "cmap must be a matplotlib colour map name"),
+        ({"cmap": 3}, TypeError, "cmap must be a colour map name or a matplotlib Colormap"),
+        ({"invalid_color": (0, 0)}, ValueError, "invalid_color must be three integers"),
+        ({"invalid_color": (0, 0, 256)}, ValueError, "got (0, 0, 256)"),
+        ({"invalid_color": (0, 0, 0.5)}, TypeError, "invalid_color must be three integers"),
+        ({"invalid_color": "red"}, TypeError, "invalid_color must be three integers"),
+        ({"invalid_color": 5}, TypeError, "got int 5"),
+    ],
+)
+def test_bad_options(kwargs: dict[str, Any], kind: type[Exception], message: str) -> None:
+    with pytest.raises(kind) as info:
+        colorize(np.ones((2, 2)), **kwargs)
+    assert message in str(info.value)
+
+
+@pytest.mark.parametrize(
+    ("path", "kwargs", "kind", "message"),
+    [
+        ("d.jpg", {}, ValueError, "path must end in .png"),
+        ("missing/d.png", {}, ValueError, "path's folder must exist"),
+        ("d.png", {"unit": 3}, TypeError, "unit must be a str"),
+    ],
+)
+def test_save_colorized_bad_input(
+    tmp_path: Path, path: str, kwargs: dict[str, Any], kind: type[Exception], message: str
+) -> None:
+    with pytest.raises(kind) as info:
+        save_colorized(tmp_path / path, np.ones((2, 2)), **kwargs)
+    assert message in str(info.value)
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_without_matplotlib_one_line_with_the_install_hint(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setitem(sys.modules, "matplotlib", None)  # import matplotlib raises ImportError
+    with pytest.raises(ImportError) as info:
+        colorize(np.ones((2, 2)))
+    assert str(info.value) == 'colour maps need matplotlib: pip install "stereodepth[plot]"'

@@ -1,0 +1,384 @@
+"""``stereodepth match`` end to end on shared scenes (skipped when absent) and on the package's
+own sample pair: the files, their formats, the previews, the depth equal to the library's, the
+summary; and every kind of bad input: one line, exit status 2, no traceback."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+
+pytest.importorskip("PIL", reason="reading images needs Pillow (the batch extra)")
+pytest.importorskip("matplotlib", reason="the previews need the plot extra")
+
+from PIL import Image
+
+import stereodepth
+from stereodepth import block_match, colorize, disparity_to_depth, reproject
+from stereodepth.cli import main
+from stereodepth.colormap import COLORBAR_HEIGHT_PX
+from stereodepth.io import read_image, read_pfm
+from stereodepth.match_pair import default_num_disparities, sgm_available
+from stereodepth.sample import sample_pair
+
+PIANO = {"focal_px": 713.189, "baseline_mm": 178.089, "doffs_px": 31.34, "ndisp": 73}
+
+
+def write_middlebury_calib(path: Path, w: int, h: int) -> Path:
+    f, d = PIANO["focal_px"], PIANO["doffs_px"]
+    path.write_text(
+        f"cam0=[{f} 0 276.193; 0 {f} 242.587; 0 0 1]\n"
+        f"cam1=[{f} 0 {276.193 + d}; 0 {f} 242.587; 0 0 1]\n"
+        f"doffs={d}\nbaseline={PIANO['baseline_mm']}\nwidth={w}\nheight={h}\n"
+        f"ndisp={PIANO['ndisp']}\nisint=0\nvmin=0\nvmax=60\n"
+    )
+    return path
+
+
+def run(capsys: pytest.CaptureFixture[str], *args: str) -> tuple[int, str, str]:
+    code = main(["match", *map(str, args)])
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+def same(a: np.ndarray, b: np.ndarray) -> bool:
+    """Equal bit for bit, NaN where NaN."""
+    return a.dtype == b.dtype and a.shape == b.shape and a.tobytes() == b.tobytes()
+
+
+@pytest.fixture
+def piano(stereo_data_dir: Path) -> Path:
+    p = stereo_data_dir / "mb2014q-piano"
+    if not p.is_dir():
+        pytest.skip("mb2014q-piano not in the shared data")
+    return p
+
+
+@pytest.mark.data
+def test_middlebury_calib_folder_outputs(
+    piano: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    left, right = read_image(piano / "left.png"), read_image(piano / "right.png")
+    h, w = left.shape[:2]
+    calib = write_middlebury_calib(tmp_path / "calib.txt", w, h)
+    out = tmp_path / "out"
+    code, text, err = run(
+        capsys,
+        piano / "left.png",
+        piano / "right.png",
+        "--calib",
+        calib,
+        "-o",
+        f"{out}/",
+        "--ply",
+        "--json",
+    )
+    assert code == 0, err
+    s = json.loads(text)
+    names = sorted(p.name for p in out.iterdir())
+    assert names == sorted(
+        ["disparity.pfm", "depth.npy", "disparity-preview.png", "depth-preview.png", "points.ply"]
+    )
+    # The disparity is the library's block matcher with Middlebury's ndisp.
+    disparity = read_pfm(out / "disparity.pfm")
+    assert same(disparity, block_match(left, right, num_disparities=PIANO["ndisp"]))
+    # The depth is disparity_to_depth of that disparity with the calibration, bit for bit.
+    depth = np.load(out / "depth.npy")
+    expected = disparity_to_depth(
+        disparity,
+        focal_px=PIANO["focal_px"],
+        baseline_m=PIANO["baseline_mm"] / 1000,
+        doffs_px=PIANO["doffs_px"],
+    )
+    assert same(depth, expected)
+    y, x = 300, 400  # a pixel on the piano
+    assert (
+        np.isfinite(depth[y, x])
+        and depth[y, x]
+        == disparity_to_depth(
+            disparity[y : y + 1, x : x + 1],
+            focal_px=PIANO["focal_px"],
+            baseline_m=PIANO["baseline_mm"] / 1000,
+            doffs_px=PIANO["doffs_px"],
+        )[0, 0]
+    )
+    # Previews: RGB PNGs, the map pixel for pixel over a colour bar.
+    for name, values in (("disparity", disparity), ("depth", depth)):
+        with Image.open(out / f"{name}-preview.png") as im:
+            assert im.mode == "RGB" and im.size == (w, h + COLORBAR_HEIGHT_PX)
+            assert np.asarray(im)[:h].tolist() == colorize(values).tolist()
+    # The summary.
+    assert (s["width"], s["height"], s["method"]) == (w, h, "bm")
+    assert s["num_disparities"] == PIANO["ndisp"]
+    assert s["density"] == float(np.isfinite(disparity).mean())
+    finite = depth[np.isfinite(depth)]
+    assert s["depth_range_m"] == [float(finite.min()), float(finite.max())]
+    assert s["time_s"] > 0 and s["calibration"] == str(calib)
+    assert s["outputs"]["ply"] == str(out / "points.ply")
+    head = (out / "points.ply").read_bytes()[:400].decode("ascii", "replace")
+    points = reproject(
+        disparity,
+        focal_px=PIANO["focal_px"],
+        baseline_m=PIANO["baseline_mm"] / 1000,
+        doffs_px=PIANO["doffs_px"],
+        cx_px=276.193,
+        cy_px=242.587,
+    )
+    n = int(np.isfinite(points).all(axis=-1).sum())
+    assert f"element vertex {n}\n" in head and "property uchar red" in head
+
+
+@pytest.mark.data
+def test_kitti_rig_on_the_command_line_prefix_and_png16(
+    stereo_data_dir: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    scene = stereo_data_dir / "kitti2012-000070"
+    if not scene.is_dir():
+        pytest.skip("kitti2012-000070 not in the shared data")
+    rig = ["--focal-px", "718.856", "--baseline-mm", "537.166"]
+    code, text, err = run(
+        capsys,
+        scene / "left.png",
+        scene / "right.png",
+        *rig,
+        "--num-disparities",
+        "160",
+        "--disparity-format",
+        "png16",
+        "--depth-format",
+        "png16",
+        "--no-preview",
+        "-o",
+        tmp_path / "k-",
+    )
+    assert code == 0, err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["k-depth.png", "k-disparity.png"]
+    left, right = read_image(scene / "left.png"), read_image(scene / "right.png")
+    d = block_match(left, right, num_disparities=160)
+    got_d = read_image(tmp_path / "k-disparity.png")
+    ok = np.isfinite(d) & (d > 0)
+    assert got_d.dtype == np.uint16
+    assert (got_d[~ok] == 0).all()
+    assert np.array_equal(got_d[ok], np.minimum(np.rint(d[ok].astype(np.float64) * 256), 65535))
+    mm = disparity_to_depth(d, focal_px=718.856, baseline_m=0.537166, dtype=np.uint16)
+    assert np.array_equal(read_image(tmp_path / "k-depth.png"), mm)
+    assert "density" in text and "depth" in text and "from command line" in text
+
+
+def test_sample_pair_without_a_rig_writes_the_disparity_only(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    s = sample_pair(160, 120)
+    Image.fromarray(s.left).save(tmp_path / "l.png")
+    Image.fromarray(s.right).convert("L").save(tmp_path / "r.png")  # grey with RGB: in grey
+    code, text, err = run(
+        capsys,
+        tmp_path / "l.png",
+        tmp_path / "r.png",
+        "-o",
+        f"{tmp_path / 'o'}/",
+        "--disparity-format",
+        "npy",
+    )
+    assert code == 0, err
+    assert sorted(p.name for p in (tmp_path / "o").iterdir()) == [
+        "disparity-preview.png",
+        "disparity.npy",
+    ]
+    d = np.load(tmp_path / "o" / "disparity.npy")
+    grey = read_image(tmp_path / "r.png")
+    from stereodepth.match_pair import prepare_pair
+
+    lg, rg = prepare_pair(s.left, grey)
+    assert same(d, block_match(lg, rg, num_disparities=default_num_disparities(160)))
+    ok = np.isfinite(d)
+    assert np.mean(np.abs(d[ok] - s.disparity[ok]) <= 1) > 0.95  # the known disparity
+    assert "no rig: give --calib" in text
+
+
+def test_kitti_calib_file(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    s = sample_pair(128, 96, seed=2)
+    Image.fromarray(s.left).save(tmp_path / "l.png")
+    Image.fromarray(s.right).save(tmp_path / "r.png")
+    f, cx, cy, tx = 721.5377, 60.5, 45.25, -387.5744  # P3[0, 3] = -f * baseline
+    zeros = "0.000000e+00"
+    (tmp_path / "calib.txt").write_text(
+        "".join(
+            f"P{i}: {f} {zeros} {cx} {t} {zeros} {f} {cy} {zeros} {zeros} {zeros} 1 {zeros}\n"
+            for i, t in ((0, 0.0), (1, tx), (2, 0.0), (3, tx))
+        )
+    )
+    code, text, err = run(
+        capsys,
+        tmp_path / "l.png",
+        tmp_path / "r.png",
+        "--calib",
+        tmp_path / "calib.txt",
+        "-o",
+        tmp_path / "k-",
+        "--ply",
+        "--json",
+        "--no-preview",
+    )
+    assert code == 0, err
+    d = read_pfm(tmp_path / "k-disparity.pfm")
+    baseline_m = -tx / f
+    depth = disparity_to_depth(d, focal_px=f, baseline_m=baseline_m)
+    assert same(np.load(tmp_path / "k-depth.npy"), depth)
+    points = reproject(d, focal_px=f, baseline_m=baseline_m, cx_px=cx, cy_px=cy)
+    ok = np.isfinite(points).all(axis=-1)
+    data = (tmp_path / "k-points.ply").read_bytes()
+    assert f"element vertex {int(ok.sum())}\n".encode() in data[:300]
+    body = data[data.index(b"end_header\n") + len(b"end_header\n") :]
+    vertex = np.frombuffer(body, dtype=[("xyz", "<f4", 3), ("rgb", "u1", 3)])
+    assert np.array_equal(vertex["xyz"], points[ok])  # the calibration's cx, cy
+    assert np.array_equal(vertex["rgb"], s.left[ok])
+    rig = json.loads(text)["rig"]
+    assert rig == {"focal_px": f, "baseline_m": baseline_m, "doffs_px": 0.0}
+
+
+# --- bad input: one line, exit 2 ------------------------------------------------------------------
+@pytest.fixture
+def pair(tmp_path: Path) -> tuple[Path, Path]:
+    s = sample_pair(96, 64)
+    Image.fromarray(s.left).save(tmp_path / "l.png")
+    Image.fromarray(s.right).save(tmp_path / "r.png")
+    return tmp_path / "l.png", tmp_path / "r.png"
+
+
+def bad_cases(tmp: Path, left: Path, right: Path) -> list[tuple[list[Any], str]]:
+    (tmp / "notimage.png").write_bytes(b"hello, not a PNG")
+    Image.fromarray(np.zeros((64, 90, 3), np.uint8)).save(tmp / "small.png")
+    (tmp / "bad_calib.txt").write_text("cam0=[1 0 0; 0 1 0]\nbaseline=100\n")
+    return [
+        ([tmp / "nope.png", right], "LEFT: image not found"),
+        ([left, tmp / "notimage.png"], "RIGHT: cannot decode image"),
+        ([left, tmp / "small.png"], "LEFT and RIGHT must have the same size, got 96x64 and 90x64"),
+        ([left, right, "--calib", tmp / "none.txt"], "--calib: calibration file not found"),
+        ([left, right, "--calib", tmp / "bad_calib.txt"], "cam0 must be a 3x3 matrix"),
+        ([left, right, "--calib", tmp / "bad_calib.txt", "--focal-px", "700"], "not both"),
+        ([left, right, "--focal-px", "700"], "--baseline-mm is required with --focal-px"),
+        ([left, right, "--focal-px", "-7", "--baseline-mm", "100"], "--focal-px must be a finite"),
+        ([left, right, "--doffs-px", "3"], "--doffs-px goes with --focal-px"),
+        (
+            [left, right, "--num-disparities", "0"],
+            "num_disparities must be an integer in [1, 4096]",
+        ),
+        ([left, right, "--block-size", "4"], "block_size must be an odd integer"),
+        ([left, right, "--cmap", "nope"], "cmap must be a matplotlib colour map name"),
+        ([left, right, "--ply"], "--ply needs a rig"),
+        ([left, right, "-o", tmp / "missing" / "p-"], "the folder of the prefix"),
+        ([left, right, "--threads", "-1"], "--threads must be an integer >= 0, got -1"),
+    ]
+
+
+def test_bad_input_one_line_exit_2(
+    tmp_path: Path, pair: tuple[Path, Path], capsys: pytest.CaptureFixture[str]
+) -> None:
+    for args, message in bad_cases(tmp_path, *pair):
+        code, out, err = run(capsys, *args)
+        assert code == 2, (args, err)
+        assert out == ""
+        lines = err.strip().splitlines()
+        assert len(lines) == 1 and lines[0].startswith("stereodepth match: error: "), err
+        assert message in lines[0], (message, err)
+        assert "Traceback" not in err
+    assert not list(Path.cwd().glob("disparity*"))  # nothing written for a bad command
+
+
+def test_sgm_path_with_a_stand_in_matcher(
+    pair: tuple[Path, Path],
+    tmp_path: Path,
+    capsys: pytest.CaptureFixture[str],
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """The options reach semi_global_match where it takes them, its (disparity, confidence) is
+    used as the block matcher's; an option it lacks is refused in one line."""
+    calls: list[dict[str, Any]] = []
+
+    def stand_in(
+        left: Any,
+        right: Any,
+        *,
+        num_disparities: int,
+        min_disparity: int = 0,
+        block_size: int = 5,
+        threads: int | None = None,
+        return_confidence: bool = False,
+    ) -> Any:
+        calls.append(
+            {
+                "num_disparities": num_disparities,
+                "min_disparity": min_disparity,
+                "block_size": block_size,
+                "threads": threads,
+                "return_confidence": return_confidence,
+            }
+        )
+        d = block_match(left, right, num_disparities=num_disparities, block_size=block_size)
+        return d, np.ones_like(d)
+
+    monkeypatch.setattr(stereodepth, "semi_global_match", stand_in, raising=False)
+    code, out, err = run(
+        capsys,
+        *pair,
+        "--method",
+        "sgm",
+        "--block-size",
+        "7",
+        "--num-disparities",
+        "32",
+        "--threads",
+        "1",
+        "-o",
+        f"{tmp_path}/s/",
+        "--json",
+        "--no-preview",
+    )
+    assert code == 0, err
+    assert calls == [
+        {
+            "num_disparities": 32,
+            "min_disparity": 0,
+            "block_size": 7,
+            "threads": 1,
+            "return_confidence": True,
+        }
+    ]
+    s = json.loads(out)
+    assert s["method"] == "sgm" and s["params"] == {
+        "num_disparities": 32,
+        "min_disparity": 0,
+        "block_size": 7,
+    }
+    left, right = read_image(pair[0]), read_image(pair[1])
+    assert same(
+        read_pfm(tmp_path / "s" / "disparity.pfm"),
+        block_match(left, right, num_disparities=32, block_size=7),
+    )
+    code, _, err = run(capsys, *pair, "--method", "sgm", "--cost", "sad", "-o", f"{tmp_path}/t/")
+    assert code == 2
+    assert err.strip() == (
+        "stereodepth match: error: cost is an option of method 'bm'; "
+        "method 'sgm' has no cost, got 'sad'"
+    )
+
+
+def test_sgm_without_the_semi_global_matcher(
+    pair: tuple[Path, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    if sgm_available():
+        code, _, err = run(capsys, *pair, "--method", "sgm", "-o", f"{tmp_path / 'sgm'}/")
+        assert code == 0, err
+        assert (tmp_path / "sgm" / "disparity.pfm").is_file()
+        return
+    code, _, err = run(capsys, *pair, "--method", "sgm", "-o", f"{tmp_path / 'sgm'}/")
+    assert code == 2
+    assert err.strip() == (
+        "stereodepth match: error: method 'sgm' needs stereodepth.semi_global_match, which this "
+        "version of the library does not have; use method 'bm'"
+    )
+    assert not hasattr(stereodepth, "semi_global_match")

@@ -1,0 +1,483 @@
+"""The web page's depth-map API through FastAPI's test client: the numbers are the library's
+(disparity, depth, 3-D points, downloads), every bad upload answers at its field (never 500),
+the limits hold, and two uploads at once both complete while the server keeps answering."""
+
+from __future__ import annotations
+
+import base64
+import io
+import struct
+import threading
+import zlib
+from typing import Any
+
+import numpy as np
+import pytest
+
+pytest.importorskip("fastapi", reason="the web extra is not installed")
+pytest.importorskip("PIL", reason="decoding uploads needs Pillow")
+pytest.importorskip("matplotlib", reason="the colour maps need the plot extra")
+
+from fastapi.testclient import TestClient
+from PIL import Image
+
+import stereodepth.web.depthmap as depthmap
+from stereodepth import block_match, disparity_to_depth, reproject
+from stereodepth.io import read_image, read_pfm
+from stereodepth.match_pair import default_num_disparities, prepare_pair, sgm_available
+from stereodepth.sample import SAMPLE_BASELINE_MM, SAMPLE_FOCAL_PX, sample_pair
+from stereodepth.web.app import create_app
+
+RIG = {"baseline_mm": SAMPLE_BASELINE_MM, "focal_px": SAMPLE_FOCAL_PX}
+
+
+@pytest.fixture(scope="module")
+def client() -> TestClient:
+    return TestClient(create_app())
+
+
+@pytest.fixture(scope="module")
+def pair() -> Any:
+    return sample_pair(96, 72, seed=4)
+
+
+def encode(a: np.ndarray, fmt: str = "PNG", **kw: Any) -> str:
+    buf = io.BytesIO()
+    Image.fromarray(a).save(buf, format=fmt, **kw)
+    return base64.b64encode(buf.getvalue()).decode()
+
+
+def b64(data: bytes) -> str:
+    return base64.b64encode(data).decode()
+
+
+def post(client: TestClient, **body: Any) -> Any:
+    body.setdefault("rig", RIG)
+    return client.post("/api/depthmap", json=body)
+
+
+def f32(text: str, shape: tuple[int, int]) -> np.ndarray:
+    return np.frombuffer(base64.b64decode(text), dtype="<f4").reshape(shape)
+
+
+def same(a: np.ndarray, b: np.ndarray) -> bool:
+    return a.shape == b.shape and np.asarray(a, np.float32).tobytes() == b.tobytes()
+
+
+def png_chunk(kind: bytes, data: bytes) -> bytes:
+    return struct.pack(">I", len(data)) + kind + data + struct.pack(">I", zlib.crc32(kind + data))
+
+
+def png16_rgb(w: int, h: int) -> bytes:
+    """A valid 16-bit RGB PNG, written by hand (colour type 2, bit depth 16)."""
+    raw = b"".join(b"\x00" + bytes(6 * w) for _ in range(h))
+    return (
+        b"\x89PNG\r\n\x1a\n"
+        + png_chunk(b"IHDR", struct.pack(">IIBBBBB", w, h, 16, 2, 0, 0, 0))
+        + png_chunk(b"IDAT", zlib.compress(raw))
+        + png_chunk(b"IEND", b"")
+    )
+
+
+# --- the numbers are the library's -------------------------------------------------------------
+def test_upload_gives_the_libraries_disparity_depth_and_points(
+    client: TestClient, pair: Any
+) -> None:
+    r = post(client, left=encode(pair.left), right=encode(pair.right), disparity_step_px=0.25)
+    assert r.status_code == 200, r.text
+    body = r.json()
+    h, w = pair.disparity.shape
+    assert (body["width"], body["height"]) == (w, h)
+    nd = default_num_disparities(w)
+    assert body["params"] == {
+        "num_disparities": nd,
+        "min_disparity": 0,
+        "block_size": 9,
+        "cost": "census",
+    }
+    expected, confidence = block_match(
+        pair.left, pair.right, num_disparities=nd, return_confidence=True
+    )
+    disparity = f32(body["arrays"]["disparity"], (h, w))
+    depth = f32(body["arrays"]["depth"], (h, w))
+    assert same(disparity, expected)
+    assert same(f32(body["arrays"]["confidence"], (h, w)), confidence)
+    lib_depth = disparity_to_depth(expected, focal_px=SAMPLE_FOCAL_PX, baseline_m=0.12)
+    assert same(depth, lib_depth)  # bit for bit, NaN where NaN
+    assert body["density"] == float(np.isfinite(expected).mean())
+    assert body["rig"]["bf_m_px"] == SAMPLE_BASELINE_MM / 1000.0 * SAMPLE_FOCAL_PX
+    assert body["rig"]["disparity_step_px"] == 0.25
+    # Images: PNG data URLs of the right size.
+    for key in ("left", "disparity", "depth"):
+        head, _, data = body["images"][key].partition(",")
+        assert head == "data:image/png;base64"
+        with Image.open(io.BytesIO(base64.b64decode(data))) as im:
+            assert im.size == (w, h) and im.mode == "RGB"
+    # The point of a pixel: reproject's, at that pixel.
+    points = reproject(expected, focal_px=SAMPLE_FOCAL_PX, baseline_m=0.12)
+    y, x = np.argwhere(np.isfinite(expected))[len(np.argwhere(np.isfinite(expected))) // 2]
+    pt = client.get(f"/api/depthmap/{body['id']}/point", params={"x": int(x), "y": int(y)}).json()
+    assert pt["disparity_px"] == float(expected[y, x])
+    assert pt["depth_m"] == float(lib_depth[y, x])
+    assert pt["point_m"] == [float(v) for v in points[y, x]]
+    assert pt["confidence"] == float(confidence[y, x])
+    # The cloud: decimated valid points, coloured.
+    cloud = body["points"]
+    assert cloud["count"] == len(cloud["x"]) == len(base64.b64decode(cloud["rgb"])) // 3 > 0
+    step = cloud["step"]
+    sub = points[::step, ::step]
+    kept = np.isfinite(sub).all(axis=-1)
+    assert cloud["count"] == int(kept.sum())
+    assert cloud["z"] == np.round(sub[kept][:, 2].astype(np.float64), 4).tolist()
+    rgb = np.frombuffer(base64.b64decode(cloud["rgb"]), np.uint8).reshape(-1, 3)
+    assert np.array_equal(rgb, pair.left[::step, ::step][kept])
+
+
+def test_downloads_are_the_libraries_files(client: TestClient, pair: Any, tmp_path: Any) -> None:
+    body = post(client, left=encode(pair.left), right=encode(pair.right)).json()
+    h, w = pair.disparity.shape
+    disparity = f32(body["arrays"]["disparity"], (h, w))
+    files = {}
+    for name, url in body["downloads"].items():
+        r = client.get(url)
+        assert r.status_code == 200, name
+        assert "attachment" in r.headers["content-disposition"]
+        (tmp_path / name).write_bytes(r.content)
+        files[name] = tmp_path / name
+    assert same(read_pfm(files["disparity.pfm"]), disparity)
+    assert same(np.load(files["disparity.npy"]), disparity)
+    depth = disparity_to_depth(disparity, focal_px=SAMPLE_FOCAL_PX, baseline_m=0.12)
+    assert same(np.load(files["depth.npy"]), depth)
+    assert same(read_pfm(files["depth.pfm"]), depth)
+    mm = disparity_to_depth(disparity, focal_px=SAMPLE_FOCAL_PX, baseline_m=0.12, dtype=np.uint16)
+    assert np.array_equal(read_image(files["depth-mm.png"]), mm)
+    n = int(np.isfinite(disparity).sum())
+    assert f"element vertex {n}\n".encode() in files["points.ply"].read_bytes()[:300]
+    assert client.get(f"/api/depthmap/{body['id']}/secret.txt").status_code == 404
+    assert client.get("/api/depthmap/nope/points.ply").status_code == 404
+    r = client.get(f"/api/depthmap/{body['id']}/point", params={"x": w, "y": 0})
+    assert r.status_code == 422 and r.json()["detail"][0]["loc"] == ["query", "x"]
+
+
+def test_principal_point_for_the_points(client: TestClient, pair: Any) -> None:
+    body = post(client, left=encode(pair.left), right=encode(pair.right), cx_px=30.5, cy_px=20)
+    assert body.status_code == 200, body.text
+    b = body.json()
+    assert (b["rig"]["cx_px"], b["rig"]["cy_px"]) == (30.5, 20.0)
+    h, w = pair.disparity.shape
+    disparity = f32(b["arrays"]["disparity"], (h, w))
+    points = reproject(disparity, focal_px=SAMPLE_FOCAL_PX, baseline_m=0.12, cx_px=30.5, cy_px=20)
+    y, x = np.argwhere(np.isfinite(disparity))[-1]
+    pt = client.get(f"/api/depthmap/{b['id']}/point", params={"x": int(x), "y": int(y)}).json()
+    assert pt["point_m"] == [float(v) for v in points[y, x]]
+    ply = client.get(b["downloads"]["points.ply"]).content
+    vertex = np.frombuffer(
+        ply[ply.index(b"end_header\n") + 11 :], dtype=[("xyz", "<f4", 3), ("rgb", "u1", 3)]
+    )
+    assert np.array_equal(vertex["xyz"], points[np.isfinite(points).all(axis=-1)])
+
+
+def test_sample_pair_and_mixed_inputs(client: TestClient, pair: Any) -> None:
+    r = post(client, sample=True)
+    assert r.status_code == 200 and r.json()["sample"] is True
+    s = sample_pair()
+    got = f32(r.json()["arrays"]["disparity"], s.disparity.shape)
+    expected = block_match(s.left, s.right, num_disparities=default_num_disparities(320))
+    assert same(got, expected)
+    ok = np.isfinite(expected)
+    err = np.abs(expected[ok].astype(np.float64) - s.disparity[ok])
+    assert r.json()["truth"] == {"mean_abs_error_px": err.mean(), "bad_1": (err > 1).mean()}
+    assert r.json()["truth"]["bad_1"] < 0.01  # the sample is easy: the matcher finds it
+    # A JPEG colour left and a grey PNG right: matched in grey.
+    grey = np.asarray(Image.fromarray(pair.right).convert("L"))
+    left_jpeg = encode(pair.left, "JPEG", quality=95)
+    r = post(client, left="data:image/jpeg;base64," + left_jpeg, right=encode(grey))
+    assert r.status_code == 200, r.text
+    with Image.open(io.BytesIO(base64.b64decode(left_jpeg))) as im:
+        left = np.asarray(im.convert("RGB"))
+    lg, rg = prepare_pair(left, grey)
+    got = f32(r.json()["arrays"]["disparity"], grey.shape)
+    assert same(got, block_match(lg, rg, num_disparities=default_num_disparities(96)))
+    # 16-bit grey pairs are matched as 16-bit; an opaque alpha channel is dropped.
+    l16 = (np.asarray(Image.fromarray(pair.left).convert("L"), np.uint16) * 257).astype(np.uint16)
+    r16 = (grey.astype(np.uint16) * 257).astype(np.uint16)
+    r = post(client, left=encode(l16), right=encode(r16), num_disparities=32, block_size=7)
+    assert r.status_code == 200, r.text
+    got = f32(r.json()["arrays"]["disparity"], grey.shape)
+    assert same(got, block_match(l16, r16, num_disparities=32, block_size=7))
+    rgba = np.dstack([pair.left, np.full(grey.shape, 255, np.uint8)])
+    assert post(client, left=encode(rgba), right=encode(pair.right)).status_code == 200
+
+
+def test_middlebury_calib_fills_the_rig(client: TestClient) -> None:
+    text = "cam0=[1733.74 0 792.27; 0 1733.74 541.89; 0 0 1]\ndoffs=0\nbaseline=536.62\n"
+    text += "width=1920\nheight=1080\nndisp=170\n"
+    r = client.post("/api/calib", json={"calib": text})
+    assert r.status_code == 200
+    assert r.json() == {
+        "focal_px": 1733.74,
+        "baseline_mm": 536.62,
+        "doffs_px": 0.0,
+        "width_px": 1920,
+        "height_px": 1080,
+        "ndisp": 170,
+        "cx_px": 792.27,
+        "cy_px": 541.89,
+    }
+    for bad, msg in [
+        ("baseline=1\n", "calib: calib.txt: missing field 'cam0'"),
+        ("cam0=[1 2; 3 4]\nbaseline=3\n", "cam0 must be a 3x3 matrix"),
+        ("", "calib: give the text of a Middlebury calib.txt"),
+    ]:
+        r = client.post("/api/calib", json={"calib": bad})
+        assert r.status_code == 422
+        (item,) = r.json()["detail"]
+        assert item["loc"] == ["body", "calib"] and msg in item["msg"], item
+        assert "/tmp" not in item["msg"]  # the server's temporary path is not shown
+
+
+# --- every bad input: 422 (or 413) at its field, never 500 ------------------------------------
+def bad_cases(pair: Any) -> list[tuple[dict[str, Any], list[Any], str]]:
+    left, right = encode(pair.left), encode(pair.right)
+    png = base64.b64decode(left)
+    gif = io.BytesIO()
+    Image.fromarray(pair.left).convert("P").save(gif, format="GIF")
+    transparent = np.dstack([pair.left, np.full(pair.disparity.shape, 255, np.uint8)])
+    transparent[0, 0, 3] = 0
+    l16 = np.zeros(pair.disparity.shape, np.uint16)
+    return [
+        (
+            {"left": b64(b"just some text"), "right": right},
+            ["body", "left"],
+            "left: not an image Pillow can read; give a PNG or JPEG file",
+        ),
+        (
+            {"left": left, "right": encode(pair.right[:, :90])},
+            ["body", "right"],
+            "right must have the size of left, 96x72 px, got 90x72 px",
+        ),
+        (
+            {"left": b64(png[: len(png) // 2]), "right": right},
+            ["body", "left"],
+            "left: the image is truncated or damaged",
+        ),
+        (
+            {"left": left, "right": b64(png16_rgb(96, 72))},
+            ["body", "right"],
+            "right: 16-bit colour PNGs are not supported",
+        ),
+        (
+            {"left": encode(transparent), "right": right},
+            ["body", "left"],
+            "left: the image has transparent pixels",
+        ),
+        (
+            {"left": b64(gif.getvalue()), "right": right},
+            ["body", "left"],
+            "left: must be a PNG or JPEG image, got GIF",
+        ),
+        (
+            {"left": encode(l16), "right": right},
+            ["body", "right"],
+            "right must have the bit depth of left (16-bit), got 8-bit",
+        ),
+        ({"right": right}, ["body", "left"], "left: choose an image file"),
+        ({"left": "%%%not base64", "right": right}, ["body", "left"], "left: not valid base64"),
+        ({"left": b64(b""), "right": right}, ["body", "left"], "left: the file is empty"),
+        ({"left": 5, "right": right}, ["body", "left"], "give the image file as base64"),
+        (
+            {"left": left, "right": right, "rig": {"baseline_mm": -1, "focal_px": 700}},
+            ["body", "rig", "baseline_mm"],
+            "baseline_mm must be a number > 0",
+        ),
+        (
+            {"left": left, "right": right, "rig": {"baseline_mm": 1, "focal_px": "x"}},
+            ["body", "rig", "focal_px"],
+            "focal_px must be a number > 0",
+        ),
+        (
+            {"left": left, "right": right, "rig": {"baseline_mm": 100, "focal_mm": 4}},
+            ["body", "rig", "pixel_um"],
+            "pixel_um is required",
+        ),
+        (
+            {"left": left, "right": right, "rig": {"focal_px": 700}},
+            ["body", "rig", "baseline_mm"],
+            "baseline_mm is required",
+        ),
+        ({"left": left, "right": right, "rig": "150"}, ["body", "rig"], "rig must be an object"),
+        (
+            {"left": left, "right": right, "num_disparities": "abc"},
+            ["body", "num_disparities"],
+            "num_disparities must be an integer from 1 to 4096, got 'abc'",
+        ),
+        (
+            {"left": left, "right": right, "num_disparities": 0},
+            ["body", "num_disparities"],
+            "num_disparities must be an integer from 1 to 4096, got 0",
+        ),
+        (
+            {"left": left, "right": right, "block_size": 4},
+            ["body", "block_size"],
+            "block_size must be an odd integer",
+        ),
+        ({"left": left, "right": right, "cost": "ssd"}, ["body", "cost"], "cost must be census"),
+        ({"left": left, "right": right, "method": "x"}, ["body", "method"], "method must be bm"),
+        (
+            {"left": left, "right": right, "disparity_step_px": 0},
+            ["body", "disparity_step_px"],
+            "disparity_step_px must be a number > 0",
+        ),
+        ({"sample": "yes"}, ["body", "sample"], "sample must be true or false"),
+        ({"sample": True, "cx_px": "abc"}, ["body", "cx_px"], "cx_px must be a finite number"),
+        ({"sample": True, "cy_px": "inf"}, ["body", "cy_px"], "cy_px must be a finite number"),
+    ]
+
+
+def test_every_bad_upload_is_answered_at_its_field(client: TestClient, pair: Any) -> None:
+    for body, loc, message in bad_cases(pair):
+        r = post(client, **body)
+        assert r.status_code == 422, (loc, r.text)
+        details = r.json()["detail"]
+        found = [d for d in details if d["loc"] == loc]
+        assert found, (loc, details)
+        assert message in found[0]["msg"], (message, found[0]["msg"])
+
+
+def test_sgm_where_missing(client: TestClient, pair: Any) -> None:
+    r = post(client, left=encode(pair.left), right=encode(pair.right), method="sgm")
+    if sgm_available():
+        assert r.status_code == 200
+    else:
+        assert r.status_code == 422
+        assert r.json()["detail"][0]["loc"] == ["body", "method"]
+
+
+def test_without_matplotlib_a_clear_answer_not_500(
+    pair: Any, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    import sys
+
+    monkeypatch.setitem(sys.modules, "matplotlib", None)  # import matplotlib raises
+    r = TestClient(create_app()).post("/api/depthmap", json={"sample": True, "rig": RIG})
+    assert r.status_code == 503
+    assert r.json()["detail"][0]["msg"] == (
+        'colour maps need matplotlib: pip install "stereodepth[plot]"'
+    )
+
+
+def test_sgm_with_a_stand_in_matcher(
+    client: TestClient, pair: Any, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    import stereodepth
+
+    def stand_in(left: Any, right: Any, *, num_disparities: int, min_disparity: int = 0) -> Any:
+        return block_match(left, right, num_disparities=num_disparities)
+
+    monkeypatch.setattr(stereodepth, "semi_global_match", stand_in, raising=False)
+    assert client.get("/api/depthmap/limits").json()["methods"] == ["bm", "sgm"]
+    r = post(
+        client,
+        left=encode(pair.left),
+        right=encode(pair.right),
+        method="sgm",
+        cost=None,
+        block_size=None,
+        num_disparities=24,
+    )
+    assert r.status_code == 200, r.text
+    b = r.json()
+    assert b["method"] == "sgm" and b["arrays"]["confidence"] is None
+    h, w = pair.disparity.shape
+    assert same(
+        f32(b["arrays"]["disparity"], (h, w)), stand_in(pair.left, pair.right, num_disparities=24)
+    )
+    r = post(client, left=encode(pair.left), right=encode(pair.right), method="sgm", block_size=5)
+    assert r.status_code == 422
+    assert r.json()["detail"][0]["loc"] == ["body", "block_size"]
+
+
+def test_not_json_and_not_an_object(client: TestClient) -> None:
+    r = client.post("/api/depthmap", content=b"{nope", headers={"content-type": "application/json"})
+    assert r.status_code == 422 and r.json()["detail"][0]["msg"] == "the request must be JSON"
+    r = client.post("/api/depthmap", json=[1, 2])
+    assert r.status_code == 422
+    assert r.json()["detail"][0]["msg"] == "the request must be a JSON object"
+
+
+def test_limits_in_bytes_and_pixels(pair: Any) -> None:
+    left, right = encode(pair.left), encode(pair.right)
+    size = len(base64.b64decode(left))
+    small = TestClient(create_app(max_upload_bytes=size - 1, max_pixels=96 * 72))
+    r = small.post("/api/depthmap", json={"left": left, "right": right, "rig": RIG})
+    assert r.status_code == 422
+    item = r.json()["detail"][0]
+    assert item["loc"] == ["body", "left"] and "more than the limit of" in item["msg"]
+    assert item["type"] == "too_large"
+    limits = small.get("/api/depthmap/limits").json()
+    assert (limits["max_upload_bytes"], limits["max_pixels"]) == (size - 1, 96 * 72)
+    # A body larger than two images may be is refused before it is read whole.
+    big = "A" * (depthmap.DepthMapLimits(size - 1).max_body_bytes + 10)
+    r = small.post("/api/depthmap", json={"left": big, "right": right, "rig": RIG})
+    assert r.status_code == 413 and r.json()["detail"][0]["type"] == "too_large"
+    # Pixels: one pixel more than the limit.
+    tight = TestClient(create_app(max_pixels=96 * 72 - 1))
+    r = tight.post("/api/depthmap", json={"left": left, "right": right, "rig": RIG})
+    assert r.status_code == 422
+    msg = r.json()["detail"][0]["msg"]
+    assert msg.startswith("left: the image is 96x72 px") and "more than the limit" in msg
+    # An image beyond what Pillow opens safely (a decompression bomb) is too large too.
+    bomb = (
+        b"\x89PNG\r\n\x1a\n"
+        + png_chunk(b"IHDR", struct.pack(">IIBBBBB", 20000, 20000, 8, 0, 0, 0, 0))
+        + png_chunk(b"IDAT", zlib.compress(b""))
+        + png_chunk(b"IEND", b"")
+    )
+    huge = TestClient(create_app(max_pixels=10**9))
+    r = huge.post("/api/depthmap", json={"left": b64(bomb), "right": right, "rig": RIG})
+    assert r.status_code == 422
+    item = r.json()["detail"][0]
+    assert item["loc"] == ["body", "left"] and item["type"] == "too_large", item
+    with pytest.raises(ValueError, match="max_pixels must be an integer >= 1, got 0"):
+        create_app(max_pixels=0)
+
+
+def test_two_uploads_at_once_both_complete_and_the_server_keeps_answering(
+    pair: Any, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Both jobs wait inside the worker threads until /api/calc has answered: the calculator
+    answers while matching runs, and then both uploads complete."""
+    calc_answered = threading.Event()
+    started = threading.Barrier(3, timeout=30)
+    real = depthmap.compute
+
+    def slow_compute(job: Any) -> Any:
+        started.wait()
+        assert calc_answered.wait(timeout=30)
+        return real(job)
+
+    monkeypatch.setattr(depthmap, "compute", slow_compute)
+    left, right = encode(pair.left), encode(pair.right)
+    grey_left = encode(np.asarray(Image.fromarray(pair.left).convert("L")))
+    answers: dict[int, Any] = {}
+    with TestClient(create_app()) as c:
+
+        def upload(i: int, left_b64: str) -> None:
+            answers[i] = c.post(
+                "/api/depthmap", json={"left": left_b64, "right": right, "rig": RIG}
+            )
+
+        threads = [
+            threading.Thread(target=upload, args=(0, left)),
+            threading.Thread(target=upload, args=(1, grey_left)),
+        ]
+        for t in threads:
+            t.start()
+        started.wait()  # both jobs are in their worker threads
+        r = c.get("/api/calc", params={"baseline_mm": 120, "focal_px": 700, "disparity_px": 30})
+        assert r.status_code == 200
+        calc_answered.set()
+        for t in threads:
+            t.join(timeout=60)
+    assert answers[0].status_code == 200 and answers[1].status_code == 200
+    assert answers[0].json()["id"] != answers[1].json()["id"]
