@@ -1001,6 +1001,42 @@ void right_group(const uint16_t* recent, uint16_t* rmin, uint16_t* rarg, ptrdiff
   }
 }
 
+// right_group when every block cost is below 4095: each cost and its pixel's place in the
+// group (4 bits) as one 16-bit key, cost << 4 | t, so that one unsigned minimum per pixel
+// keeps the least cost and, among equal costs, the first pixel (the lowest disparity), as the
+// strict < does. The 0xFFFF of `recent` either side of the lanes gives keys of at least
+// 0xFFF0, above every real one; a column that only such keys reach gets cost 4095, which the
+// first real cost replaces (its columns are never read before one arrives).
+template <int NC>
+void right_group_keyed(const uint16_t* recent, uint16_t* rmin, uint16_t* rarg, ptrdiff_t x0,
+                       int n) {
+  constexpr ptrdiff_t kRow = 16 * NC + 32;
+  const __m256i ones = _mm256_set1_epi16(-1);
+  const __m256i low4 = _mm256_set1_epi16(15);
+  const __m256i xv = _mm256_set1_epi16(static_cast<short>(x0));
+  for (int k = 0; k <= NC; ++k) {
+    __m256i key = ones;
+    __m256i tv = _mm256_setzero_si256();
+    const uint16_t* p = recent + 16 + 16 * k;  // row t: lanes 16k - t ..
+    for (int t = 0; t < n; ++t, p += kRow - 1) {
+      const __m256i v = _mm256_loadu_si256(reinterpret_cast<const __m256i*>(p));
+      key = _mm256_min_epu16(key, _mm256_or_si256(_mm256_slli_epi16(v, 4), tv));
+      tv = _mm256_add_epi16(tv, _mm256_set1_epi16(1));
+    }
+    auto* pm = reinterpret_cast<__m256i*>(rmin + x0 + 16 * k);
+    auto* pa = reinterpret_cast<__m256i*>(rarg + x0 + 16 * k);
+    const __m256i best = _mm256_load_si256(pm);
+    const __m256i cost = _mm256_srli_epi16(key, 4);
+    const __m256i m = _mm256_min_epu16(cost, best);
+    // cost < best: the minimum is not best (earlier groups keep their winners on a tie).
+    const __m256i keep = _mm256_cmpeq_epi16(m, best);
+    _mm256_store_si256(pm, m);
+    _mm256_store_si256(
+        pa, _mm256_blendv_epi8(_mm256_add_epi16(xv, _mm256_and_si256(key, low4)),
+                               _mm256_load_si256(pa), keep));
+  }
+}
+
 // First pass with the NC vectors of 16 costs in registers (the AVX2 form of winners_avx512):
 // the column-sum update fused in, a branch-free winner, and the right winners updated per
 // group of 16 pixels (right_group) from the costs stored in `recent`, which also gives the
@@ -1125,6 +1161,8 @@ void winners_avx2(const RowCtx& c) {
   const __m256i iota = lane_iota16();
   const __m256i two = _mm256_set1_epi16(2);
   uint32_t tsums[16];  // the block texture sums of the group's pixels
+  // Whether every block cost is below 4095 (see right_group_keyed).
+  const bool keyed = (2 * r + 1) * (2 * r + 1) * (sizeof(F) == 4 ? kCensusCostMax : kSadCostMax) <= 4094;
 
   // The winners of the group of pixels x0 .. x1 (at most 16) from their costs in `recent`.
   // Apart from the running sums, one pixel's work does not depend on another's, but its
@@ -1241,7 +1279,13 @@ void winners_avx2(const RowCtx& c) {
     for (int i = 0; i < NC; ++i) _mm256_store_si256(reinterpret_cast<__m256i*>(row) + i, A[i]);
     tsums[t] = tsum;
     if (t == 15 || x == cols - 1) {
-      if (lr_on) right_group<NC>(recent, rmin, rarg, x - t, t + 1);
+      if (lr_on) {
+        if (keyed) {
+          right_group_keyed<NC>(recent, rmin, rarg, x - t, t + 1);
+        } else {
+          right_group<NC>(recent, rmin, rarg, x - t, t + 1);
+        }
+      }
       group_winners(x - t, x);
     }
   }
