@@ -961,13 +961,13 @@ void winners_avx512(const RowCtx& c) {
 
 constexpr int kMaxChunks = 16;  // dp <= 256
 
-// The census codes of a padded right row (16 bits each) split into nibbles for the lookup
-// in update_col: out[i] = code & 0x0F0F and out[n + i] = (code >> 4) & 0x0F0F, one load per
-// 16 lanes.
-void nibbles_of(const uint32_t* rpad, uint16_t* out, ptrdiff_t n) {
+// The n census codes of a row (16 bits each) split into nibbles for the lookup in
+// update_col: out[i] = code & 0x0F0F and out[stride + i] = (code >> 4) & 0x0F0F, one load per
+// 16 lanes (padded right rows), one broadcast per column (left rows).
+void nibbles_of(const uint32_t* codes, uint16_t* out, ptrdiff_t n, ptrdiff_t stride) {
   for (ptrdiff_t i = 0; i < n; ++i) {
-    out[i] = static_cast<uint16_t>(rpad[i] & 0x0F0Fu);
-    out[n + i] = static_cast<uint16_t>((rpad[i] >> 4) & 0x0F0Fu);
+    out[i] = static_cast<uint16_t>(codes[i] & 0x0F0Fu);
+    out[stride + i] = static_cast<uint16_t>((codes[i] >> 4) & 0x0F0Fu);
   }
 }
 
@@ -1076,12 +1076,14 @@ void winners_avx2(const RowCtx& c) {
   struct CensusLeft {
     __m256i in0, in1, out0, out1;
   };
+  // (The left rows' nibbles follow the right rows' in the same buffers, as two more rows.)
+  const uint16_t* const lin16 = in16 ? in16 + 2 * nib : nullptr;
+  const uint16_t* const lout16 = out16 ? out16 + 2 * nib : nullptr;
   auto census_left = [&](ptrdiff_t j) {
-    const uint32_t li = static_cast<uint32_t>(in_l[j]), lo = static_cast<uint32_t>(out_l[j]);
-    return CensusLeft{_mm256_set1_epi16(static_cast<short>(li & 0x0F0Fu)),
-                      _mm256_set1_epi16(static_cast<short>((li >> 4) & 0x0F0Fu)),
-                      _mm256_set1_epi16(static_cast<short>(lo & 0x0F0Fu)),
-                      _mm256_set1_epi16(static_cast<short>((lo >> 4) & 0x0F0Fu))};
+    return CensusLeft{_mm256_set1_epi16(static_cast<short>(lin16[j])),
+                      _mm256_set1_epi16(static_cast<short>(lin16[nib + j])),
+                      _mm256_set1_epi16(static_cast<short>(lout16[j])),
+                      _mm256_set1_epi16(static_cast<short>(lout16[nib + j]))};
   };
   // Census: vector i of column j updated, stored and returned (so the running sum need not
   // load it back: a store forwarded to a load adds its latency to the sum's chain).
@@ -1738,8 +1740,12 @@ void match_band_impl(const MatchArgs& a, const BandScratch& s, ptrdiff_t y0, ptr
           }
 #elif defined(STEREODEPTH_BM_AVX2)
           if constexpr (sizeof(F) == 4) {
-            nibbles_of(rpad_in, static_cast<uint16_t*>(s.quad_in), npad);
-            nibbles_of(rpad_out, static_cast<uint16_t*>(s.quad_out), npad);
+            auto* qi = static_cast<uint16_t*>(s.quad_in);
+            auto* qo = static_cast<uint16_t*>(s.quad_out);
+            nibbles_of(rpad_in, qi, npad, npad);
+            nibbles_of(rpad_out, qo, npad, npad);
+            nibbles_of(lrow(yin), qi + 2 * npad, cols, npad);
+            nibbles_of(lrow(yout), qo + 2 * npad, cols, npad);
             c.nibble_stride = npad;
             c.in_quad = s.quad_in;
             c.out_quad = s.quad_out;
