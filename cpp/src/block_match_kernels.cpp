@@ -1192,17 +1192,22 @@ void winners_avx2(const RowCtx& c) {
       const uint32_t best = static_cast<uint32_t>(_mm_cvtsi128_si32(m8)) & 0xFFFFu;
       const __m256i bv = _mm256_broadcastw_epi16(m8);  // not through a general register
       // The winner: the highest lane holding the least cost (the lowest disparity on a tie),
-      // branch-free (see winners_avx512). vpmovmskb gives two bits per 16-bit lane.
+      // branch-free (see winners_avx512), four vectors (64 lanes) at a time: the comparison
+      // masks of two vectors packed to bytes (vpacksswb interleaves their 128-bit halves,
+      // vpermq puts them back in order) give one bit per lane.
       int qb = 0;
-      for (int i = 0; i < NC; i += 2) {
+      for (int g = 0; g < NC; g += 4) {
         auto eq = [&](int k) {
-          return static_cast<std::uint64_t>(
-              static_cast<uint32_t>(_mm256_movemask_epi8(_mm256_cmpeq_epi16(V[k], bv))));
+          return k < NC ? _mm256_cmpeq_epi16(V[k], bv) : _mm256_setzero_si256();
         };
-        std::uint64_t w = eq(i);
-        if (i + 1 < NC) w |= eq(i + 1) << 32;
-        const int top = 16 * i + (63 - __builtin_clzll(w | 1u)) / 2;
-        const int found = -static_cast<int>(w != 0);  // all ones when this pair holds the least
+        auto bits = [&](int k) {
+          const __m256i m = _mm256_permute4x64_epi64(_mm256_packs_epi16(eq(k), eq(k + 1)), 0xD8);
+          return static_cast<std::uint64_t>(static_cast<uint32_t>(_mm256_movemask_epi8(m)));
+        };
+        std::uint64_t w = bits(g);
+        if (g + 2 < NC) w |= bits(g + 2) << 32;
+        const int top = 16 * g + 63 - __builtin_clzll(w | 1u);
+        const int found = -static_cast<int>(w != 0);  // all ones when this group holds the least
         qb ^= (qb ^ top) & found;
       }
       uint32_t second = kNone;
