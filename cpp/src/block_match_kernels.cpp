@@ -1014,15 +1014,19 @@ void right_group_keyed(const uint16_t* recent, uint16_t* rmin, uint16_t* rarg, p
   const __m256i ones = _mm256_set1_epi16(-1);
   const __m256i low4 = _mm256_set1_epi16(15);
   const __m256i xv = _mm256_set1_epi16(static_cast<short>(x0));
-  for (int k = 0; k <= NC; ++k) {
-    __m256i key = ones;
-    __m256i tv = _mm256_setzero_si256();
-    const uint16_t* p = recent + 16 + 16 * k;  // row t: lanes 16k - t ..
-    for (int t = 0; t < n; ++t, p += kRow - 1) {
-      const __m256i v = _mm256_loadu_si256(reinterpret_cast<const __m256i*>(p));
-      key = _mm256_min_epu16(key, _mm256_or_si256(_mm256_slli_epi16(v, 4), tv));
-      tv = _mm256_add_epi16(tv, _mm256_set1_epi16(1));
+  __m256i keys[NC + 1];
+  for (int k = 0; k <= NC; ++k) keys[k] = ones;
+  __m256i tv = _mm256_setzero_si256();
+  for (int t = 0; t < n; ++t) {
+    const uint16_t* p = recent + t * kRow + 16 - t;  // block k: lanes 16k - t ..
+    for (int k = 0; k <= NC; ++k) {
+      const __m256i v = _mm256_loadu_si256(reinterpret_cast<const __m256i*>(p + 16 * k));
+      keys[k] = _mm256_min_epu16(keys[k], _mm256_or_si256(_mm256_slli_epi16(v, 4), tv));
     }
+    tv = _mm256_add_epi16(tv, _mm256_set1_epi16(1));
+  }
+  for (int k = 0; k <= NC; ++k) {
+    const __m256i key = keys[k];
     auto* pm = reinterpret_cast<__m256i*>(rmin + x0 + 16 * k);
     auto* pa = reinterpret_cast<__m256i*>(rarg + x0 + 16 * k);
     const __m256i best = _mm256_load_si256(pm);
