@@ -1176,6 +1176,23 @@ void winners_avx2(const RowCtx& c) {
   // costs already in L1, the chains of many pixels overlap, where interleaved with the
   // column-sum update the processor's window held about two pixels and waited on each.
   auto group_winners = [&](ptrdiff_t x0, ptrdiff_t x1) {
+    // In two loops: the least costs first (a short chain), then the rest, which starts from
+    // the least cost in memory; each loop's chain is then short enough for the processor to
+    // overlap several pixels.
+    alignas(32) uint16_t bests[16];
+    for (ptrdiff_t x = x0; x <= x1; ++x) {
+      const uint16_t* const row = recent + (x - x0) * kRow + 16;
+      // The least cost, in four chains of minima (a quarter of one chain's latency).
+      __m256i mins[4] = {ones, ones, ones, ones};
+      for (int i = 0; i < NC; ++i) {
+        mins[i & 3] = _mm256_min_epu16(
+            mins[i & 3], _mm256_load_si256(reinterpret_cast<const __m256i*>(row) + i));
+      }
+      const __m256i m = _mm256_min_epu16(_mm256_min_epu16(mins[0], mins[1]),
+                                         _mm256_min_epu16(mins[2], mins[3]));
+      bests[x - x0] = static_cast<uint16_t>(_mm_cvtsi128_si32(_mm_minpos_epu16(
+          _mm_min_epu16(_mm256_castsi256_si128(m), _mm256_extracti128_si256(m, 1)))));
+    }
     for (ptrdiff_t x = x0; x <= x1; ++x) {
       if (x < xlo || x > xhi) {
         record_none(c, x);
@@ -1184,17 +1201,8 @@ void winners_avx2(const RowCtx& c) {
       const uint16_t* const row = recent + (x - x0) * kRow + 16;
       __m256i V[NC];
       for (int i = 0; i < NC; ++i) V[i] = _mm256_load_si256(reinterpret_cast<const __m256i*>(row) + i);
-      // The least cost, in four chains of minima (a quarter of one chain's latency).
-      __m256i mins[4] = {ones, ones, ones, ones};
-      for (int i = 0; i < NC; ++i) mins[i & 3] = _mm256_min_epu16(mins[i & 3], V[i]);
-      const __m128i m8 = [&] {
-        const __m256i m = _mm256_min_epu16(_mm256_min_epu16(mins[0], mins[1]),
-                                           _mm256_min_epu16(mins[2], mins[3]));
-        return _mm_minpos_epu16(
-            _mm_min_epu16(_mm256_castsi256_si128(m), _mm256_extracti128_si256(m, 1)));
-      }();
-      const uint32_t best = static_cast<uint32_t>(_mm_cvtsi128_si32(m8)) & 0xFFFFu;
-      const __m256i bv = _mm256_broadcastw_epi16(m8);  // not through a general register
+      const uint32_t best = bests[x - x0];
+      const __m256i bv = _mm256_set1_epi16(static_cast<short>(bests[x - x0]));
       // The winner: the highest lane holding the least cost (the lowest disparity on a tie),
       // branch-free (see winners_avx512), four vectors (64 lanes) at a time: the comparison
       // masks of two vectors packed to bytes (vpacksswb interleaves their 128-bit halves,
