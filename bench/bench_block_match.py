@@ -138,7 +138,9 @@ def test_speed_vs_opencv_interleaved() -> None:
     """Per scene, the median over rounds of stereodepth's time over StereoBM's (block 9, the
     same grey images, ndisp and 2 threads), and of the one-shot block_match's time over
     StereoMatcher.compute's; the targets are a median over scenes <= 0.4, the same on a
-    1280 x 720 pair with ndisp 128, and the one-shot within 5 % of the matcher."""
+    1280 x 720 pair with ndisp 128, and the one-shot within 5 % of the matcher. On a busy
+    machine the ratio of the least times over the rounds is printed beside (a round that other
+    jobs interrupt is slow, not fast)."""
     import time
 
     if not SCENES:
@@ -149,10 +151,10 @@ def test_speed_vs_opencv_interleaved() -> None:
     print(f"ISA: {sd.build_info()['isa']}, {THREADS} threads, {rounds} rounds")
     print(
         "| scene | W x H x ndisp | stereodepth ms | StereoBM(9) ms | ratio | "
-        "stereodepth ns/(px*d) | one-shot / matcher |"
+        "least-time ratio | stereodepth ns/(px*d) | one-shot / matcher | (least times) |"
     )
-    print("|---|---|---:|---:|---:|---:|---:|")
-    ratios = []
+    print("|---|---|---:|---:|---:|---:|---:|---:|---:|")
+    ratios, least_ratios = [], []
     scenes = [load_scene(path) for path in SCENES] + [hd_pair()]
     for s in scenes:
         left, right, nd = s["left"], s["right"], s["ndisp"]
@@ -161,7 +163,7 @@ def test_speed_vs_opencv_interleaved() -> None:
         bm = cv2.StereoBM_create(numDisparities=nd, blockSize=DEFAULT_BLOCK_SIZE)
         want = matcher.compute(left, right)
         bm.compute(left, right)
-        ours, theirs, per_round, one_shot = [], [], [], []
+        ours, theirs, per_round, one_shot, one_shot_times = [], [], [], [], []
         for _ in range(rounds):
             t0 = time.perf_counter()
             matcher.compute(left, right)
@@ -174,17 +176,22 @@ def test_speed_vs_opencv_interleaved() -> None:
             theirs.append(t2 - t1)
             per_round.append((t1 - t0) / (t2 - t1))
             one_shot.append((t3 - t2) / (t1 - t0))
+            one_shot_times.append(t3 - t2)
         np.testing.assert_array_equal(d, want)
         ratio = float(np.median(per_round))
+        least = min(ours) / min(theirs)
         if s["name"] != "adirondack 1280x720":
             ratios.append(ratio)
+            least_ratios.append(least)
         print(
             f"| {s['name']} | {w} x {h} x {nd} | {1e3 * np.median(ours):.2f} | "
-            f"{1e3 * np.median(theirs):.2f} | {ratio:.3f} | "
-            f"{1e9 * np.median(ours) / (w * h * nd):.3f} | {np.median(one_shot):.3f} |"
+            f"{1e3 * np.median(theirs):.2f} | {ratio:.3f} | {least:.3f} | "
+            f"{1e9 * np.median(ours) / (w * h * nd):.3f} | {np.median(one_shot):.3f} | "
+            f"{min(one_shot_times) / min(ours):.3f} |"
         )
     median = float(np.median(ratios))
     print(f"median over the {len(ratios)} scenes of stereodepth / StereoBM: {median:.3f}")
+    print(f"the same from the least times: {float(np.median(least_ratios)):.3f}")
     assert len(ratios) == len(SCENES)
 
 
