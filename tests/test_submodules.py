@@ -18,6 +18,7 @@ SUBMODULES = [
     "calib",
     "charts",
     "cli",
+    "colormap",
     "dask",
     "depth",
     "evaluation",
@@ -26,12 +27,27 @@ SUBMODULES = [
     "metrics",
     "plotting",
     "pointcloud",
+    "rectify",
     "reference",
     "rig",
+    "sample",
     "web",
 ]
 #: Submodules that need no optional extra: using them must not import one.
-CORE = ["calib", "charts", "depth", "io", "matching", "metrics", "pointcloud", "reference", "rig"]
+CORE = [
+    "calib",
+    "charts",
+    "colormap",
+    "depth",
+    "io",
+    "matching",
+    "metrics",
+    "pointcloud",
+    "rectify",
+    "reference",
+    "rig",
+    "sample",
+]
 #: Optional extras that ``import stereodepth`` must not import.
 HEAVY = ["dask", "distributed", "matplotlib", "fastapi", "uvicorn", "plotly", "PIL", "cv2", "tqdm"]
 

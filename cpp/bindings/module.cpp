@@ -17,6 +17,7 @@ namespace stereodepth::bindings {
 void bind_depth(py::module_& m);
 void bind_block_match(py::module_& m);
 void bind_reproject(py::module_& m);
+void bind_rectify(py::module_& m);
 }  // namespace stereodepth::bindings
 
 namespace {
@@ -75,4 +76,5 @@ PYBIND11_MODULE(_core, m) {
   bindings::bind_depth(m);
   bindings::bind_block_match(m);
   bindings::bind_reproject(m);
+  bindings::bind_rectify(m);
 }

@@ -6,6 +6,8 @@
   sub-pixel, validity checks); :func:`to_opencv_disparity` for OpenCV's int16 x16 format.
 - :func:`from_opencv_disparity`: OpenCV's int16 x16 output back to float pixels with NaN holes.
 - :func:`reproject`, :func:`write_ply`: disparity maps to XYZ point clouds and PLY files.
+- :class:`StereoRectifier`, :func:`stereo_rectify`, :func:`init_undistort_rectify_map`,
+  :func:`remap`: raw, distorted pairs to rectified pairs, natively.
 - :mod:`stereodepth.reference`: the pure-numpy oracle of every native kernel.
 
 Every public submodule is an attribute of the package, imported on first use (PEP 562), so
@@ -25,6 +27,7 @@ from .colormap import colorize, save_colorized
 from .depth import disparity_to_depth, from_opencv_disparity
 from .matching import StereoMatcher, block_match, to_opencv_disparity
 from .pointcloud import reproject, write_ply
+from .rectify import StereoRectifier, init_undistort_rectify_map, remap, stereo_rectify
 from .rig import DepthTable, StereoRig
 
 __version__: str = _core.__version__
@@ -32,6 +35,7 @@ __version__: str = _core.__version__
 __all__ = [
     "DepthTable",
     "StereoMatcher",
+    "StereoRectifier",
     "StereoRig",
     "__version__",
     "block_match",
@@ -39,8 +43,11 @@ __all__ = [
     "colorize",
     "disparity_to_depth",
     "from_opencv_disparity",
+    "init_undistort_rectify_map",
+    "remap",
     "reproject",
     "save_colorized",
+    "stereo_rectify",
     "to_opencv_disparity",
     "write_ply",
 ]
@@ -74,6 +81,7 @@ _SUBMODULES: frozenset[str] = frozenset(
         "plotting",
         "pointcloud",
         "reference",
+        "rectify",
         "rig",
         "sample",
         "web",

@@ -59,3 +59,67 @@ class BlockMatcher:
     def threads(self) -> int: ...
     @property
     def isa(self) -> str: ...
+
+def stereo_rectify(
+    K1: np.ndarray,
+    D1: np.ndarray,
+    K2: np.ndarray,
+    D2: np.ndarray,
+    model: str,
+    width: int,
+    height: int,
+    R: np.ndarray,
+    T: np.ndarray,
+    alpha: float,
+    new_width: int,
+    new_height: int,
+    zero_disparity: bool,
+) -> dict[str, Any]: ...
+def fisheye_stereo_rectify(
+    K1: np.ndarray,
+    D1: np.ndarray,
+    K2: np.ndarray,
+    D2: np.ndarray,
+    width: int,
+    height: int,
+    R: np.ndarray,
+    T: np.ndarray,
+    balance: float,
+    fov_scale: float,
+    new_width: int,
+    new_height: int,
+    zero_disparity: bool,
+) -> dict[str, Any]: ...
+def undistort_points(
+    K: np.ndarray, D: np.ndarray, model: str, points: np.ndarray
+) -> np.ndarray: ...
+def init_undistort_rectify_map(
+    K: np.ndarray,
+    D: np.ndarray,
+    model: str,
+    R: np.ndarray,
+    P: np.ndarray,
+    map_x: np.ndarray,
+    map_y: np.ndarray,
+    threads: int,
+) -> None: ...
+
+class RemapTable:
+    def __init__(
+        self,
+        map_x: np.ndarray,
+        map_y: np.ndarray,
+        src_rows: int,
+        src_cols: int,
+        precision: str,
+        threads: int,
+    ) -> None: ...
+    def apply(
+        self, image: np.ndarray, out: np.ndarray, threads: int, isa: str = "auto"
+    ) -> None: ...
+    @property
+    def shape(self) -> tuple[int, int]: ...
+    @property
+    def source_shape(self) -> tuple[int, int]: ...
+    @property
+    def precision(self) -> str: ...

@@ -1,0 +1,291 @@
+// Per-row remap loops (the arithmetic is specified in stereodepth/remap.hpp). Compiled once
+// per instruction set (STEREODEPTH_ISA_NS); everything here stays inside that namespace.
+//
+// The scalar loop is the reference. With AVX2, eight output pixels are computed at once
+// wherever all their four neighbours are inside the image: gathers fetch the top and bottom
+// neighbour pairs (two 32-bit ones for grey, four 64-bit ones for RGB), pmaddwd forms top and
+// bot, and one 32-bit multiply blends them as top * 1024 + (bot - top) * fy, which equals the
+// specification's sum exactly.
+#include "remap_kernels.hpp"
+
+#include <cmath>
+#include <cstdint>
+#include <cstring>
+
+#if defined(__AVX2__)
+#include <immintrin.h>
+#endif
+
+#ifndef STEREODEPTH_ISA_NS
+#error "STEREODEPTH_ISA_NS must name the instruction set this file is compiled for"
+#endif
+
+namespace stereodepth::detail::STEREODEPTH_ISA_NS {
+namespace {
+
+constexpr int kOne = 1 << kRemapFractionBits;  // 1024
+constexpr int kShift = 2 * kRemapFractionBits;  // 20
+
+// Pixels [begin, end) of a row of T samples with CN interleaved channels, scalar.
+template <typename T, int CN>
+void remap_scalar(const RemapRowArgs& a, std::ptrdiff_t begin, std::ptrdiff_t end) {
+  using Acc = std::int32_t;  // uint8 only: at most 255 * 2^20
+  T* out = static_cast<T*>(a.dst);
+  const std::ptrdiff_t rows = a.src_rows, cols = a.src_cols;
+  for (std::ptrdiff_t j = begin; j < end; ++j) {
+    const std::ptrdiff_t x = a.xy[2 * j], y = a.xy[2 * j + 1];
+    const Acc fx = static_cast<Acc>(a.frac[j] & 0xffffu);
+    const Acc fy = static_cast<Acc>(a.frac[j] >> 16);
+    const bool x0 = x >= 0 && x < cols, x1 = x + 1 >= 0 && x + 1 < cols;
+    const bool y0 = y >= 0 && y < rows, y1 = y + 1 >= 0 && y + 1 < rows;
+    const T* r0 = reinterpret_cast<const T*>(a.src + (y0 ? y : 0) * a.src_stride);
+    const T* r1 = reinterpret_cast<const T*>(a.src + (y1 ? y + 1 : 0) * a.src_stride);
+    for (int c = 0; c < CN; ++c) {
+      const Acc p00 = (y0 && x0) ? static_cast<Acc>(r0[x * CN + c]) : 0;
+      const Acc p01 = (y0 && x1) ? static_cast<Acc>(r0[(x + 1) * CN + c]) : 0;
+      const Acc p10 = (y1 && x0) ? static_cast<Acc>(r1[x * CN + c]) : 0;
+      const Acc p11 = (y1 && x1) ? static_cast<Acc>(r1[(x + 1) * CN + c]) : 0;
+      const Acc top = p00 * (kOne - fx) + p01 * fx;
+      const Acc bot = p10 * (kOne - fx) + p11 * fx;
+      out[j * CN + c] =
+          static_cast<T>((top * (kOne - fy) + bot * fy + (Acc{1} << (kShift - 1))) >> kShift);
+    }
+  }
+}
+
+template <typename T, int CN>
+void remap_row_scalar(const RemapRowArgs& a) {
+  remap_scalar<T, CN>(a, 0, a.n);
+}
+
+// 16-bit grey from float positions, float64 arithmetic (remap.hpp).
+void remap_u16(const RemapRowArgs& a, std::ptrdiff_t begin, std::ptrdiff_t end) {
+  auto* out = static_cast<std::uint16_t*>(a.dst);
+  const std::ptrdiff_t rows = a.src_rows, cols = a.src_cols;
+  for (std::ptrdiff_t j = begin; j < end; ++j) {
+    const double px = a.pos[2 * j], py = a.pos[2 * j + 1];
+    const double fx0 = std::floor(px), fy0 = std::floor(py);
+    const double fx = px - fx0, fy = py - fy0;
+    const std::ptrdiff_t x = static_cast<std::ptrdiff_t>(fx0), y = static_cast<std::ptrdiff_t>(fy0);
+    const bool x0 = x >= 0 && x < cols, x1 = x + 1 >= 0 && x + 1 < cols;
+    const bool y0 = y >= 0 && y < rows, y1 = y + 1 >= 0 && y + 1 < rows;
+    const auto* r0 = reinterpret_cast<const std::uint16_t*>(a.src + (y0 ? y : 0) * a.src_stride);
+    const auto* r1 =
+        reinterpret_cast<const std::uint16_t*>(a.src + (y1 ? y + 1 : 0) * a.src_stride);
+    const double p00 = (y0 && x0) ? r0[x] : 0.0, p01 = (y0 && x1) ? r0[x + 1] : 0.0;
+    const double p10 = (y1 && x0) ? r1[x] : 0.0, p11 = (y1 && x1) ? r1[x + 1] : 0.0;
+    const double top = p00 * (1.0 - fx) + p01 * fx;
+    const double bot = p10 * (1.0 - fx) + p11 * fx;
+    double v = std::nearbyint(top * (1.0 - fy) + bot * fy);
+    v = v < 65535.0 ? v : 65535.0;
+    out[j] = static_cast<std::uint16_t>(v);
+  }
+}
+
+#if !defined(__AVX2__)
+void remap_row_u16(const RemapRowArgs& a) { remap_u16(a, 0, a.n); }
+#endif
+
+#if defined(__AVX2__)
+
+// Eight grey uint8 results from the offsets `e` of the top-left neighbours and fractions `f`;
+// `pick` moves the two neighbours of each 32-bit gather into int16 pairs.
+inline __m128i blend8(const std::uint8_t* src, std::ptrdiff_t stride, __m256i e, __m256i f,
+                      __m256i pick) {
+  __m256i top = _mm256_i32gather_epi32(reinterpret_cast<const int*>(src), e, 1);
+  __m256i bot = _mm256_i32gather_epi32(reinterpret_cast<const int*>(src + stride), e, 1);
+  top = _mm256_shuffle_epi8(top, pick);
+  bot = _mm256_shuffle_epi8(bot, pick);
+  const __m256i fx = _mm256_and_si256(f, _mm256_set1_epi32(0xffff));
+  const __m256i wx = _mm256_or_si256(_mm256_sub_epi32(_mm256_set1_epi32(kOne), fx),
+                                     _mm256_slli_epi32(fx, 16));
+  const __m256i t = _mm256_madd_epi16(top, wx);
+  const __m256i b = _mm256_madd_epi16(bot, wx);
+  const __m256i fy = _mm256_srli_epi32(f, 16);
+  __m256i v = _mm256_add_epi32(_mm256_slli_epi32(t, kRemapFractionBits),
+                               _mm256_mullo_epi32(_mm256_sub_epi32(b, t), fy));
+  v = _mm256_srai_epi32(_mm256_add_epi32(v, _mm256_set1_epi32(1 << (kShift - 1))), kShift);
+  const __m128i w = _mm_packus_epi32(_mm256_castsi256_si128(v), _mm256_extracti128_si256(v, 1));
+  return _mm_packus_epi16(w, w);
+}
+
+// Bytes 4i and 4i + 1 of every dword as an int16 pair.
+inline __m256i pick_pattern() {
+  return _mm256_setr_epi8(0, -128, 1, -128, 4, -128, 5, -128, 8, -128, 9, -128, 12, -128, 13,
+                          -128, 0, -128, 1, -128, 4, -128, 5, -128, 8, -128, 9, -128, 12, -128,
+                          13, -128);
+}
+
+// Eight RGB pixels from the offsets `ofs` of their top-left neighbours: four 64-bit gathers
+// (8 bytes from each top-left neighbour, holding both neighbours' R G B, in the top and bottom
+// rows, four pixels per gather), byte pairs (left, right) per channel blended by pmaddwd, then
+// the rows as in blend8. Writes 24 bytes at `o`; with `room`, 4 more that later pixels
+// overwrite.
+inline void blend_rgb8(const std::uint8_t* src, std::ptrdiff_t stride, __m256i ofs, __m256i f,
+                       std::uint8_t* o, bool room) {
+  const auto* top = reinterpret_cast<const long long*>(src);
+  const auto* bottom = reinterpret_cast<const long long*>(src + stride);
+  const __m128i o03 = _mm256_castsi256_si128(ofs), o47 = _mm256_extracti128_si256(ofs, 1);
+  // (left, right) byte pairs per channel, two pixels per 128-bit lane.
+  const __m256i pairs = _mm256_setr_epi8(0, 3, 1, 4, 2, 5, 6, 7, 8, 11, 9, 12, 10, 13, 14, 15,
+                                         0, 3, 1, 4, 2, 5, 6, 7, 8, 11, 9, 12, 10, 13, 14, 15);
+  const __m256i t03 = _mm256_shuffle_epi8(_mm256_i32gather_epi64(top, o03, 1), pairs);
+  const __m256i t47 = _mm256_shuffle_epi8(_mm256_i32gather_epi64(top, o47, 1), pairs);
+  const __m256i b03 = _mm256_shuffle_epi8(_mm256_i32gather_epi64(bottom, o03, 1), pairs);
+  const __m256i b47 = _mm256_shuffle_epi8(_mm256_i32gather_epi64(bottom, o47, 1), pairs);
+  const __m256i fx = _mm256_and_si256(f, _mm256_set1_epi32(0xffff));
+  const __m256i wx = _mm256_or_si256(_mm256_sub_epi32(_mm256_set1_epi32(kOne), fx),
+                                     _mm256_slli_epi32(fx, 16));
+  const __m256i fy = _mm256_srli_epi32(f, 16);
+  // R G B and a discarded fourth value of pixels p and p + 1.
+  auto two = [&](__m128i t_pairs, __m128i b_pairs, int p) {
+    const __m256i sel = _mm256_setr_epi32(p, p, p, p, p + 1, p + 1, p + 1, p + 1);
+    const __m256i w = _mm256_permutevar8x32_epi32(wx, sel);
+    const __m256i t = _mm256_madd_epi16(_mm256_cvtepu8_epi16(t_pairs), w);
+    const __m256i b = _mm256_madd_epi16(_mm256_cvtepu8_epi16(b_pairs), w);
+    const __m256i y = _mm256_permutevar8x32_epi32(fy, sel);
+    const __m256i v = _mm256_add_epi32(_mm256_slli_epi32(t, kRemapFractionBits),
+                                       _mm256_mullo_epi32(_mm256_sub_epi32(b, t), y));
+    return _mm256_srai_epi32(_mm256_add_epi32(v, _mm256_set1_epi32(1 << (kShift - 1))), kShift);
+  };
+  const __m256i v01 = two(_mm256_castsi256_si128(t03), _mm256_castsi256_si128(b03), 0);
+  const __m256i v23 = two(_mm256_extracti128_si256(t03, 1), _mm256_extracti128_si256(b03, 1), 2);
+  const __m256i v45 = two(_mm256_castsi256_si128(t47), _mm256_castsi256_si128(b47), 4);
+  const __m256i v67 = two(_mm256_extracti128_si256(t47, 1), _mm256_extracti128_si256(b47, 1), 6);
+  // Bytes: lane 0 holds pixels 0 2 4 6, lane 1 pixels 1 3 5 7; put them in order, then drop
+  // every fourth byte in each lane.
+  const __m256i bytes = _mm256_packus_epi16(_mm256_packus_epi32(v01, v23),
+                                            _mm256_packus_epi32(v45, v67));
+  const __m256i ordered =
+      _mm256_permutevar8x32_epi32(bytes, _mm256_setr_epi32(0, 4, 1, 5, 2, 6, 3, 7));
+  const __m256i packed = _mm256_shuffle_epi8(
+      ordered, _mm256_setr_epi8(0, 1, 2, 4, 5, 6, 8, 9, 10, 12, 13, 14, -1, -1, -1, -1, 0, 1, 2,
+                                4, 5, 6, 8, 9, 10, 12, 13, 14, -1, -1, -1, -1));
+  const __m128i lo = _mm256_castsi256_si128(packed), hi = _mm256_extracti128_si256(packed, 1);
+  _mm_storeu_si128(reinterpret_cast<__m128i*>(o), lo);  // bytes 12..15 are rewritten below
+  if (room) {
+    _mm_storeu_si128(reinterpret_cast<__m128i*>(o + 12), hi);
+  } else {
+    _mm_storel_epi64(reinterpret_cast<__m128i*>(o + 12), hi);
+    const std::int32_t last = _mm_extract_epi32(hi, 2);
+    std::memcpy(o + 20, &last, sizeof last);
+  }
+}
+
+// 16-bit grey, four pixels at a time in float64: the scalar loop's operations in its order
+// (no contraction), so the results are the same bits; one 32-bit gather per row fetches both
+// neighbours of a pixel.
+void remap_row_u16_avx2(const RemapRowArgs& a) {
+  const std::ptrdiff_t stride = a.src_stride;
+  const std::ptrdiff_t extent = (a.src_rows - 1) * stride + a.src_cols * 2;
+  std::ptrdiff_t j = 0;
+  if (extent < (std::ptrdiff_t{1} << 30) && a.src_rows >= 2 && a.src_cols >= 2) {
+    auto* out = static_cast<std::uint16_t*>(a.dst);
+    const __m128i xmax = _mm_set1_epi32(static_cast<std::int32_t>(a.src_cols - 2));
+    const __m128i ymax = _mm_set1_epi32(static_cast<std::int32_t>(a.src_rows - 2));
+    const __m128i vstride = _mm_set1_epi32(static_cast<std::int32_t>(stride));
+    const __m128i elim = _mm_set1_epi32(static_cast<std::int32_t>(extent - stride - 4));
+    const __m128i lo16 = _mm_set1_epi32(0xffff);
+    const __m256i deinterleave = _mm256_setr_epi32(0, 2, 4, 6, 1, 3, 5, 7);
+    const __m256d one = _mm256_set1_pd(1.0), top_value = _mm256_set1_pd(65535.0);
+    const int* top = reinterpret_cast<const int*>(a.src);
+    const int* bottom = reinterpret_cast<const int*>(a.src + stride);
+    for (; j + 4 <= a.n; j += 4) {
+      const __m256 xy = _mm256_permutevar8x32_ps(_mm256_loadu_ps(a.pos + 2 * j), deinterleave);
+      const __m256d px = _mm256_cvtps_pd(_mm256_castps256_ps128(xy));
+      const __m256d py = _mm256_cvtps_pd(_mm256_extractf128_ps(xy, 1));
+      const __m256d x0 = _mm256_floor_pd(px), y0 = _mm256_floor_pd(py);
+      const __m256d fx = _mm256_sub_pd(px, x0), fy = _mm256_sub_pd(py, y0);
+      const __m128i ix = _mm256_cvtpd_epi32(x0), iy = _mm256_cvtpd_epi32(y0);
+      const __m128i ofs = _mm_add_epi32(_mm_mullo_epi32(iy, vstride), _mm_add_epi32(ix, ix));
+      const __m128i bad = _mm_or_si128(
+          _mm_or_si128(_mm_cmpgt_epi32(ix, xmax), _mm_cmpgt_epi32(iy, ymax)),
+          _mm_or_si128(_mm_or_si128(_mm_cmplt_epi32(ix, _mm_setzero_si128()),
+                                    _mm_cmplt_epi32(iy, _mm_setzero_si128())),
+                       _mm_cmpgt_epi32(ofs, elim)));
+      if (!_mm_testz_si128(bad, bad)) {
+        remap_u16(a, j, j + 4);
+        continue;
+      }
+      const __m128i t = _mm_i32gather_epi32(top, ofs, 1);
+      const __m128i b = _mm_i32gather_epi32(bottom, ofs, 1);
+      const __m256d p00 = _mm256_cvtepi32_pd(_mm_and_si128(t, lo16));
+      const __m256d p01 = _mm256_cvtepi32_pd(_mm_srli_epi32(t, 16));
+      const __m256d p10 = _mm256_cvtepi32_pd(_mm_and_si128(b, lo16));
+      const __m256d p11 = _mm256_cvtepi32_pd(_mm_srli_epi32(b, 16));
+      const __m256d wx = _mm256_sub_pd(one, fx);
+      const __m256d vt = _mm256_add_pd(_mm256_mul_pd(p00, wx), _mm256_mul_pd(p01, fx));
+      const __m256d vb = _mm256_add_pd(_mm256_mul_pd(p10, wx), _mm256_mul_pd(p11, fx));
+      __m256d v = _mm256_add_pd(_mm256_mul_pd(vt, _mm256_sub_pd(one, fy)), _mm256_mul_pd(vb, fy));
+      v = _mm256_min_pd(_mm256_round_pd(v, _MM_FROUND_TO_NEAREST_INT | _MM_FROUND_NO_EXC),
+                        top_value);
+      const __m128i v32 = _mm256_cvtpd_epi32(v);
+      _mm_storel_epi64(reinterpret_cast<__m128i*>(out + j), _mm_packus_epi32(v32, v32));
+    }
+  }
+  remap_u16(a, j, a.n);
+}
+
+// CN = 1 (grey) or 3 (RGB) uint8 channels.
+template <int CN>
+void remap_row_u8_avx2(const RemapRowArgs& a) {
+  const std::ptrdiff_t stride = a.src_stride;
+  std::ptrdiff_t j = 0;
+  // Whole-vector path needs every offset in int32 and the stride in int16.
+  const std::ptrdiff_t extent = (a.src_rows - 1) * stride + a.src_cols * CN;
+  if (stride <= 32767 && extent < (std::ptrdiff_t{1} << 30) && a.src_rows >= 2 &&
+      a.src_cols >= 2) {
+    const __m256i mul = _mm256_set1_epi32((static_cast<std::int32_t>(stride) << 16) | CN);
+    // Inside: 0 <= x <= cols - 2 and 0 <= y <= rows - 2, tested on the int16 pairs.
+    const __m256i lim = _mm256_set1_epi32(
+        (static_cast<std::int32_t>(a.src_rows - 2) << 16) |
+        static_cast<std::int32_t>(static_cast<std::uint16_t>(a.src_cols - 2)));
+    // The gathers of the bottom row (4 bytes for grey, 8 for RGB) must stay inside the image.
+    const __m256i elim =
+        _mm256_set1_epi32(static_cast<std::int32_t>(extent - stride - (CN == 1 ? 4 : 8)));
+    const __m256i pick = pick_pattern();
+    const __m256i zero = _mm256_setzero_si256();
+    std::uint8_t* out = static_cast<std::uint8_t*>(a.dst);
+    for (; j + 8 <= a.n; j += 8) {
+      const __m256i xy = _mm256_loadu_si256(reinterpret_cast<const __m256i*>(a.xy + 2 * j));
+      const __m256i f = _mm256_loadu_si256(reinterpret_cast<const __m256i*>(a.frac + j));
+      const __m256i ofs = _mm256_madd_epi16(xy, mul);
+      const __m256i bad = _mm256_or_si256(
+          _mm256_or_si256(_mm256_cmpgt_epi16(xy, lim), _mm256_cmpgt_epi16(zero, xy)),
+          _mm256_cmpgt_epi32(ofs, elim));
+      if (!_mm256_testz_si256(bad, bad)) {
+        remap_scalar<std::uint8_t, CN>(a, j, j + 8);
+        continue;
+      }
+      if constexpr (CN == 1) {
+        _mm_storel_epi64(reinterpret_cast<__m128i*>(out + j), blend8(a.src, stride, ofs, f, pick));
+      } else {
+        blend_rgb8(a.src, stride, ofs, f, out + 3 * j, j + 10 <= a.n);
+      }
+    }
+  }
+  remap_scalar<std::uint8_t, CN>(a, j, a.n);
+}
+
+#endif
+
+}  // namespace
+
+const RemapKernels& remap_kernels() {
+#if defined(__AVX2__)
+  static const RemapKernels kernels = {{
+      &remap_row_u8_avx2<1>,
+      &remap_row_u16_avx2,
+      &remap_row_u8_avx2<3>,
+  }};
+#else
+  static const RemapKernels kernels = {{
+      &remap_row_scalar<std::uint8_t, 1>,
+      &remap_row_u16,
+      &remap_row_scalar<std::uint8_t, 3>,
+  }};
+#endif
+  return kernels;
+}
+
+}  // namespace stereodepth::detail::STEREODEPTH_ISA_NS
