@@ -1,6 +1,8 @@
 // Binds stereodepth/block_match.hpp: check and convert with the GIL held, then release it.
 #include <memory>
 #include <string>
+#include <utility>
+#include <vector>
 
 #include "bind_common.hpp"
 #include "stereodepth/block_match.hpp"
@@ -81,6 +83,22 @@ void compute_py(BlockMatcher& self, const py::array& left, const py::array& righ
   self.compute(l, r, d, c);
 }
 
+// Diagnostics (bench/): BlockMatcher::stage_times as a dict of stage name -> seconds.
+py::dict stage_times_py(BlockMatcher& self, const py::array& left, const py::array& right,
+                        py::array& disparity, int repeats) {
+  const StereoImage l = image_view(left, "left");
+  const StereoImage r = image_view(right, "right");
+  const ImageView<float> d = output_view(disparity, "disparity");
+  std::vector<std::pair<std::string, double>> times;
+  {
+    py::gil_scoped_release release;
+    times = self.stage_times(l, r, d, repeats);
+  }
+  py::dict out;
+  for (const auto& [name, seconds] : times) out[py::str(name)] = seconds;
+  return out;
+}
+
 }  // namespace
 
 void bind_block_match(py::module_& m) {
@@ -113,6 +131,10 @@ void bind_block_match(py::module_& m) {
       .def("compute", &compute_py, py::arg("left"), py::arg("right"), py::arg("disparity"),
            py::arg("confidence") = py::none(),
            "Writes the disparity (and the confidence, unless None) of left.")
+      .def("_stage_times", &stage_times_py, py::arg("left"), py::arg("right"),
+           py::arg("disparity"), py::arg("repeats") = 5,
+           "Diagnostics for bench/: each stage timed alone on one thread (seconds, the least "
+           "of `repeats` runs); see BlockMatcher::stage_times in block_match.hpp.")
       .def_property_readonly("threads", &BlockMatcher::threads)
       .def_property_readonly("isa", [](const BlockMatcher& self) { return isa_name(self.isa()); });
 }

@@ -2,10 +2,13 @@
 
 #include <algorithm>
 #include <atomic>
+#include <chrono>
 #include <cmath>
 #include <cstdint>
 #include <cstring>
 #include <limits>
+#include <memory>
+#include <mutex>
 #include <sstream>
 #include <stdexcept>
 #include <string>
@@ -55,11 +58,24 @@ template <typename T>
 
 const char* cost_name(MatchCost cost) { return cost == MatchCost::kCensus ? "census" : "sad"; }
 
+// Grow-only byte storage, left uninitialised (every piece is written before it is read):
+// std::vector would zero it, page by page, on every growth.
+struct ByteBuffer {
+  std::unique_ptr<std::uint8_t[]> bytes;
+  std::size_t size = 0;
+  void grow(std::size_t n) {
+    if (n <= size) return;
+    bytes.reset();
+    bytes.reset(new std::uint8_t[n]);
+    size = n;
+  }
+};
+
 // 64-byte aligned pieces carved out of one byte buffer, with a 64-byte gap after each piece
 // that AddressSanitizer builds poison, so an overrun of any piece is caught.
 class Arena {
  public:
-  explicit Arena(std::vector<std::uint8_t>* storage) : storage_(storage) {}
+  explicit Arena(ByteBuffer* storage) : storage_(storage) {}
   // First pass: count; second pass (after reserve()): hand out pointers.
   template <typename T>
   T* take(std::size_t count) {
@@ -74,15 +90,15 @@ class Arena {
     return p;
   }
   void reserve() {
-    STEREODEPTH_UNPOISON(storage_->data(), storage_->size());
-    if (storage_->size() < used_ + 64) storage_->resize(used_ + 64);
-    const auto addr = reinterpret_cast<std::uintptr_t>(storage_->data());
-    base_ = storage_->data() + ((64 - addr % 64) % 64);
+    STEREODEPTH_UNPOISON(storage_->bytes.get(), storage_->size);
+    storage_->grow(used_ + 64);
+    const auto addr = reinterpret_cast<std::uintptr_t>(storage_->bytes.get());
+    base_ = storage_->bytes.get() + ((64 - addr % 64) % 64);
     used_ = 0;
   }
 
  private:
-  std::vector<std::uint8_t>* storage_;
+  ByteBuffer* storage_;
   std::uint8_t* base_ = nullptr;
   std::size_t used_ = 0;
 };
@@ -160,18 +176,57 @@ void validate(const BlockMatchParams& p) {
 
 struct BlockMatcher::Workspace {
   ~Workspace() {
-    for (auto& w : workers) STEREODEPTH_UNPOISON(w.data(), w.size());
+    for (auto& w : workers) STEREODEPTH_UNPOISON(w.bytes.get(), w.size);
   }
 
-  std::vector<std::vector<std::uint8_t>> workers;  // per worker: scratch, grey, feature rows
+  std::vector<ByteBuffer> workers;                // per worker: scratch, grey, feature rows
   std::vector<std::vector<SpeckleBand>> speckle;  // speckle labellings, per worker
   std::vector<SpeckleRun> speckle_runs;
   std::vector<std::int64_t> speckle_sizes;
+
+  std::size_t bytes() const {
+    std::size_t n = 0;
+    for (const auto& w : workers) n += w.size;
+    return n;
+  }
+
+  // Workspaces outlive their matchers: a matcher made for one call (block_match) takes one
+  // that an earlier matcher released, rather than allocating its buffers and faulting them
+  // in again. Up to kPooled released workspaces of at most kPooledBytes each are kept.
+  static constexpr std::size_t kPooled = 4;
+  static constexpr std::size_t kPooledBytes = std::size_t{64} << 20;
+  // Never destroyed, so a matcher released during static destruction still finds them.
+  static std::mutex& pool_mutex() {
+    static auto* m = new std::mutex;
+    return *m;
+  }
+  static std::vector<std::unique_ptr<Workspace>>& pool() {
+    static auto* p = new std::vector<std::unique_ptr<Workspace>>;
+    return *p;
+  }
+  static std::unique_ptr<Workspace> acquire() {
+    {
+      std::lock_guard<std::mutex> lock(pool_mutex());
+      auto& p = pool();
+      if (!p.empty()) {
+        std::unique_ptr<Workspace> ws = std::move(p.back());
+        p.pop_back();
+        return ws;
+      }
+    }
+    return std::make_unique<Workspace>();
+  }
+  static void release(std::unique_ptr<Workspace> ws) {
+    if (!ws || ws->bytes() > kPooledBytes) return;
+    std::lock_guard<std::mutex> lock(pool_mutex());
+    auto& p = pool();
+    if (p.size() < kPooled) p.push_back(std::move(ws));
+  }
 };
 
 BlockMatcher::BlockMatcher(const BlockMatchParams& params, int threads, Isa isa)
     : params_(params), threads_(resolve_threads(threads)), isa_(isa),
-      workspace_(std::make_unique<Workspace>()) {
+      workspace_(Workspace::acquire()) {
   validate(params_);
   if (params_.uniqueness_ratio > 0) {
     // The uniqueness check, second * 100 > best * (100 + ratio), as a table of the least
@@ -191,7 +246,7 @@ BlockMatcher::BlockMatcher(const BlockMatchParams& params, int threads, Isa isa)
   }
 }
 
-BlockMatcher::~BlockMatcher() = default;
+BlockMatcher::~BlockMatcher() { Workspace::release(std::move(workspace_)); }
 
 void BlockMatcher::compute(const StereoImage& left, const StereoImage& right,
                            const ImageView<float>& disparity, const ImageView<float>& confidence) {
@@ -454,9 +509,18 @@ void BlockMatcher::compute(const StereoImage& left, const StereoImage& right,
       if (!stole) return;
     }
   };
+  // A thread runs its own worker, then any worker that no thread has started: on a busy
+  // machine a thread that starts late finds its band done rather than holding the call up.
+  std::vector<std::atomic<bool>> started(nw);
+  for (auto& f : started) f.store(false);
   parallel_for_rows(static_cast<std::ptrdiff_t>(nw), static_cast<int>(nw), 1,
                     [&](std::ptrdiff_t b, std::ptrdiff_t e) {
-                      for (std::ptrdiff_t w = b; w < e; ++w) run_worker(static_cast<std::size_t>(w));
+                      for (std::ptrdiff_t first = b; first < e; ++first) {
+                        for (std::size_t k = 0; k < nw; ++k) {
+                          const std::size_t w = (static_cast<std::size_t>(first) + k) % nw;
+                          if (!started[w].exchange(true)) run_worker(w);
+                        }
+                      }
                     });
 
   // 3. The speckle filter: join the segments, clear the small regions.
@@ -481,6 +545,160 @@ void block_match(const StereoImage& left, const StereoImage& right,
                  const BlockMatchParams& params, int threads, Isa isa) {
   BlockMatcher matcher(params, threads, isa);
   matcher.compute(left, right, disparity, confidence);
+}
+
+std::vector<std::pair<std::string, double>> BlockMatcher::stage_times(
+    const StereoImage& left, const StereoImage& right, const ImageView<float>& disparity,
+    int repeats) {
+  const BlockMatchParams& p = params_;
+  if (left.format == PixelFormat::kGrey16 || left.format != right.format ||
+      left.rows != right.rows || left.cols != right.cols || left.rows < 1 || left.cols < 1 ||
+      disparity.rows != left.rows || disparity.cols != left.cols) {
+    throw std::invalid_argument("stage_times takes two 8-bit images of one shape and their disparity");
+  }
+  if (repeats < 1) throw std::invalid_argument("repeats must be >= 1");
+  std::lock_guard<std::mutex> lock(mutex_);
+  const detail::BlockMatchKernels& k = kernels_for(isa_);
+  const std::ptrdiff_t rows = left.rows, cols = left.cols;
+  const int dp = (p.num_disparities + k.lanes - 1) / k.lanes * k.lanes;
+  const bool rgb = left.format == PixelFormat::kRgb8;
+  const bool census = p.cost == MatchCost::kCensus;
+  const bool texture_on = p.texture_threshold > 0;
+  const std::size_t feat_size = census ? 4 : 1;
+  const auto pix = static_cast<std::size_t>(rows * cols);
+
+  ByteBuffer storage;
+  Arena arena(&storage);
+  detail::BandScratch scratch{};
+  std::uint8_t *grey[2] = {}, *feat[2] = {}, *texture = nullptr;
+  float* copy = nullptr;
+  for (int pass = 0; pass < 2; ++pass) {
+    scratch = carve_band(arena, cols, dp, feat_size, k.lanes);
+    grey[0] = arena.take<std::uint8_t>(pix);
+    grey[1] = arena.take<std::uint8_t>(pix);
+    feat[0] = arena.take<std::uint8_t>(pix * feat_size);
+    feat[1] = arena.take<std::uint8_t>(pix * feat_size);
+    texture = arena.take<std::uint8_t>(pix);
+    copy = arena.take<float>(pix);
+    if (pass == 0) arena.reserve();
+  }
+
+  std::vector<std::pair<std::string, double>> out;
+  auto timed = [&](const char* name, auto&& fn, auto&& before) {
+    double best = 0;
+    for (int i = 0; i < repeats; ++i) {
+      before();
+      const auto t0 = std::chrono::steady_clock::now();
+      fn();
+      const double s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+      if (i == 0 || s < best) best = s;
+    }
+    out.emplace_back(name, best);
+  };
+  auto nothing = [] {};
+
+  const StereoImage* images[2] = {&left, &right};
+  const std::uint8_t* base[2];
+  for (int im = 0; im < 2; ++im) base[im] = static_cast<const std::uint8_t*>(images[im]->data);
+  std::ptrdiff_t stride = left.row_stride;
+  if (rgb) {
+    timed("grey", [&] {
+      for (int im = 0; im < 2; ++im) {
+        for (std::ptrdiff_t y = 0; y < rows; ++y) {
+          k.rgb_to_grey(base[im] + y * images[im]->row_stride, grey[im] + y * cols, cols);
+        }
+      }
+    }, nothing);
+    base[0] = grey[0];
+    base[1] = grey[1];
+    stride = cols;
+  }
+  auto grey_row = [&](int im, std::ptrdiff_t y) {
+    return base[im] + std::clamp<std::ptrdiff_t>(y, 0, rows - 1) * stride;
+  };
+  timed("features", [&] {
+    for (int im = 0; im < 2; ++im) {
+      for (std::ptrdiff_t y = 0; y < rows; ++y) {
+        if (census) {
+          const std::uint8_t* r5[5];
+          for (int i = 0; i < 5; ++i) r5[i] = grey_row(im, y + i - 2);
+          k.census_row8(r5, reinterpret_cast<std::uint32_t*>(feat[im]) + y * cols, cols);
+        } else {
+          const std::uint8_t* r3[3];
+          for (int i = 0; i < 3; ++i) r3[i] = grey_row(im, y + i - 1);
+          k.sobel_row8(r3, feat[im] + y * cols, nullptr, cols);
+        }
+      }
+    }
+  }, nothing);
+  if (texture_on) {
+    timed("texture", [&] {
+      for (std::ptrdiff_t y = 0; y < rows; ++y) {
+        const std::uint8_t* r3[3];
+        for (int i = 0; i < 3; ++i) r3[i] = grey_row(0, y + i - 1);
+        k.sobel_row8(r3, nullptr, texture + y * cols, cols);
+      }
+    }, nothing);
+  }
+
+  detail::MatchArgs a{};
+  a.cost = p.cost;
+  a.left_feat = feat[0];
+  a.right_feat = feat[1];
+  a.feat_stride = cols;
+  a.feat_row0 = 0;
+  a.texture = texture_on ? texture : nullptr;
+  a.texture_stride = cols;
+  a.rows = rows;
+  a.cols = cols;
+  a.min_d = p.min_disparity;
+  a.num_d = p.num_disparities;
+  a.dp = dp;
+  a.radius = p.block_size / 2;
+  a.subpixel = p.subpixel;
+  a.uniqueness_factor = uniqueness_factor_;
+  a.unique_min = unique_min_.empty() ? nullptr : unique_min_.data();
+  a.texture_sum_min = p.texture_threshold * static_cast<double>(p.block_size * p.block_size);
+  a.lr_max_diff = p.lr_max_diff;
+  a.disp = disparity.data;
+  a.disp_stride = disparity.row_stride;
+  a.conf = nullptr;
+  a.conf_stride = 0;
+  // The second pass needs the first's records of its row: it is timed as both passes less
+  // the first, the two runs taking turns so that a change of load hits both.
+  double first = 0, both = 0;
+  for (int i = 0; i < repeats; ++i) {
+    for (int pass = 0; pass < 2; ++pass) {
+      a.first_pass_only = pass == 0;
+      const auto t0 = std::chrono::steady_clock::now();
+      k.match_band(a, scratch, 0, rows, true);
+      const double s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+      double& best = pass == 0 ? first : both;
+      if (i == 0 || s < best) best = s;
+    }
+  }
+  out.emplace_back("first pass", first);
+  out.emplace_back("second pass", std::max(0.0, both - first));
+
+  if (p.speckle_window > 0) {
+    const float rf = speckle_range_f(p.speckle_range);
+    const ImageView<float> view{copy, rows, cols, cols};
+    SpeckleBand band;
+    std::vector<SpeckleRun> runs;
+    std::vector<std::int64_t> sizes;
+    const std::vector<SpeckleBand*> bands = {&band};
+    const std::vector<std::ptrdiff_t> starts = {0, rows};
+    timed("speckle", [&] {
+      speckle_band(k, view, 0, rows, rf, band);
+      speckle_finish(k, view, ImageView<float>{}, p.speckle_window, rf, bands, starts, runs, sizes);
+    }, [&] {
+      for (std::ptrdiff_t y = 0; y < rows; ++y) {
+        std::memcpy(copy + y * cols, disparity.row(y), sizeof(float) * static_cast<std::size_t>(cols));
+      }
+    });
+  }
+  STEREODEPTH_UNPOISON(storage.bytes.get(), storage.size);
+  return out;
 }
 
 }  // namespace stereodepth

@@ -156,10 +156,59 @@ inline void census_block(const T* const* rows, ptrdiff_t x, uint32_t* out) {
 }
 #endif
 
+#if defined(STEREODEPTH_BM_AVX2)
+// The census codes of the 32 interior 8-bit pixels from x: each neighbour's comparison sets
+// its bit in one of two byte planes (bits 8-15, 0-7), interleaved into 16-bit codes and
+// widened to 32 bits.
+inline void census_block_avx2(const uint8_t* const* rows, ptrdiff_t x, uint32_t* out) {
+  auto load = [](const uint8_t* p) {
+    return _mm256_loadu_si256(reinterpret_cast<const __m256i*>(p));
+  };
+  const __m256i c = load(rows[2] + x);
+  __m256i plane[2] = {_mm256_setzero_si256(), _mm256_setzero_si256()};
+  int bit = 15;
+  for (int dy = 0; dy < 5; ++dy) {
+    for (int dx = -2; dx <= 2; ++dx) {
+      if (!on_ring(dy, dx)) continue;
+      const __m256i v = load(rows[dy] + x + dx);
+      // v >= c (unsigned) where max(v, c) == v; the bit is set where v < c.
+      const __m256i ge = _mm256_cmpeq_epi8(_mm256_max_epu8(v, c), v);
+      const int p = 1 - bit / 8;  // plane 0: bits 8-15
+      plane[p] = _mm256_or_si256(
+          plane[p], _mm256_andnot_si256(ge, _mm256_set1_epi8(static_cast<char>(1 << (bit % 8)))));
+      --bit;
+    }
+  }
+  // Pixels 0-7 and 16-23 (lo), 8-15 and 24-31 (hi) as 16-bit codes.
+  const __m256i lo = _mm256_unpacklo_epi8(plane[1], plane[0]);
+  const __m256i hi = _mm256_unpackhi_epi8(plane[1], plane[0]);
+  auto put = [&](ptrdiff_t at, __m128i codes) {
+    _mm256_storeu_si256(reinterpret_cast<__m256i*>(out + x + at), _mm256_cvtepu16_epi32(codes));
+  };
+  put(0, _mm256_castsi256_si128(lo));
+  put(8, _mm256_castsi256_si128(hi));
+  put(16, _mm256_extracti128_si256(lo, 1));
+  put(24, _mm256_extracti128_si256(hi, 1));
+}
+#endif
+
 template <typename T>
 void census_row(const T* const* rows, uint32_t* out, ptrdiff_t cols) {
   ptrdiff_t x = 0;
   for (; x < cols && x < 2; ++x) out[x] = census_at(rows, x, cols);
+#if defined(STEREODEPTH_BM_AVX2)
+  if constexpr (sizeof(T) == 1) {
+    constexpr ptrdiff_t kBlock = 32;
+    if (cols - 4 >= kBlock) {
+      for (; x + kBlock <= cols - 2; x += kBlock) census_block_avx2(rows, x, out);
+      // The tail: one more block ending at the last interior column (see below).
+      if (x < cols - 2) {
+        census_block_avx2(rows, cols - 2 - kBlock, out);
+        x = cols - 2;
+      }
+    }
+  }
+#endif
 #if defined(STEREODEPTH_BM_AVX512)
   constexpr ptrdiff_t kBlock = sizeof(T) == 1 ? 64 : 32;
   if (cols - 4 >= kBlock) {
@@ -402,6 +451,7 @@ struct RowCtx {
   // unique_min[best]; the second pass subtracts the winner and its two neighbours (see
   // decide_avx512).
   bool count_low;
+  bool first_pass_only;  // diagnostics: skip the second pass (see MatchArgs)
   double texture_sum_min, uniqueness_factor, lr_max_diff;
   uint16_t* acc;   // dp lanes of scratch (generic pass)
   uint16_t* rmin;  // generic pass
@@ -912,13 +962,13 @@ void winners_avx512(const RowCtx& c) {
 
 constexpr int kMaxChunks = 16;  // dp <= 256
 
-// The census codes of a padded right row (16 bits each) split into nibbles for the lookup
-// in update_col: out[i] = code & 0x0F0F and out[n + i] = (code >> 4) & 0x0F0F, one load per
-// 16 lanes.
-void nibbles_of(const uint32_t* rpad, uint16_t* out, ptrdiff_t n) {
+// The n census codes of a row (16 bits each) split into nibbles for the lookup in
+// update_col: out[i] = code & 0x0F0F and out[stride + i] = (code >> 4) & 0x0F0F, one load per
+// 16 lanes (padded right rows), one broadcast per column (left rows).
+void nibbles_of(const uint32_t* codes, uint16_t* out, ptrdiff_t n, ptrdiff_t stride) {
   for (ptrdiff_t i = 0; i < n; ++i) {
-    out[i] = static_cast<uint16_t>(rpad[i] & 0x0F0Fu);
-    out[n + i] = static_cast<uint16_t>((rpad[i] >> 4) & 0x0F0Fu);
+    out[i] = static_cast<uint16_t>(codes[i] & 0x0F0Fu);
+    out[stride + i] = static_cast<uint16_t>((codes[i] >> 4) & 0x0F0Fu);
   }
 }
 
@@ -949,6 +999,46 @@ void right_group(const uint16_t* recent, uint16_t* rmin, uint16_t* rarg, ptrdiff
     }
     _mm256_store_si256(pm, best);
     _mm256_store_si256(pa, arg);
+  }
+}
+
+// right_group when every block cost is below 4095: each cost and its pixel's place in the
+// group (4 bits) as one 16-bit key, cost << 4 | t, so that one unsigned minimum per pixel
+// keeps the least cost and, among equal costs, the first pixel (the lowest disparity), as the
+// strict < does. The 0xFFFF of `recent` either side of the lanes gives keys of at least
+// 0xFFF0, above every real one; a column that only such keys reach gets cost 4095, which the
+// first real cost replaces (its columns are never read before one arrives).
+template <int NC>
+void right_group_keyed(const uint16_t* recent, uint16_t* rmin, uint16_t* rarg, ptrdiff_t x0,
+                       int n) {
+  constexpr ptrdiff_t kRow = 16 * NC + 32;
+  const __m256i ones = _mm256_set1_epi16(-1);
+  const __m256i low4 = _mm256_set1_epi16(15);
+  const __m256i xv = _mm256_set1_epi16(static_cast<short>(x0));
+  __m256i keys[NC + 1];
+  for (int k = 0; k <= NC; ++k) keys[k] = ones;
+  __m256i tv = _mm256_setzero_si256();
+  for (int t = 0; t < n; ++t) {
+    const uint16_t* p = recent + t * kRow + 16 - t;  // block k: lanes 16k - t ..
+    for (int k = 0; k <= NC; ++k) {
+      const __m256i v = _mm256_loadu_si256(reinterpret_cast<const __m256i*>(p + 16 * k));
+      keys[k] = _mm256_min_epu16(keys[k], _mm256_or_si256(_mm256_slli_epi16(v, 4), tv));
+    }
+    tv = _mm256_add_epi16(tv, _mm256_set1_epi16(1));
+  }
+  for (int k = 0; k <= NC; ++k) {
+    const __m256i key = keys[k];
+    auto* pm = reinterpret_cast<__m256i*>(rmin + x0 + 16 * k);
+    auto* pa = reinterpret_cast<__m256i*>(rarg + x0 + 16 * k);
+    const __m256i best = _mm256_load_si256(pm);
+    const __m256i cost = _mm256_srli_epi16(key, 4);
+    const __m256i m = _mm256_min_epu16(cost, best);
+    // cost < best: the minimum is not best (earlier groups keep their winners on a tie).
+    const __m256i keep = _mm256_cmpeq_epi16(m, best);
+    _mm256_store_si256(pm, m);
+    _mm256_store_si256(
+        pa, _mm256_blendv_epi8(_mm256_add_epi16(xv, _mm256_and_si256(key, low4)),
+                               _mm256_load_si256(pa), keep));
   }
 }
 
@@ -987,29 +1077,43 @@ void winners_avx2(const RowCtx& c) {
   const uint16_t* in16 = static_cast<const uint16_t*>(c.in_quad);
   const uint16_t* out16 = static_cast<const uint16_t*>(c.out_quad);
   const ptrdiff_t nib = c.nibble_stride;  // from the low nibbles to the high ones
+  // Census: the left codes' nibbles of column j, entering and leaving, broadcast.
+  struct CensusLeft {
+    __m256i in0, in1, out0, out1;
+  };
+  // (The left rows' nibbles follow the right rows' in the same buffers, as two more rows.)
+  const uint16_t* const lin16 = in16 ? in16 + 2 * nib : nullptr;
+  const uint16_t* const lout16 = out16 ? out16 + 2 * nib : nullptr;
+  auto census_left = [&](ptrdiff_t j) {
+    return CensusLeft{_mm256_set1_epi16(static_cast<short>(lin16[j])),
+                      _mm256_set1_epi16(static_cast<short>(lin16[nib + j])),
+                      _mm256_set1_epi16(static_cast<short>(lout16[j])),
+                      _mm256_set1_epi16(static_cast<short>(lout16[nib + j]))};
+  };
+  // Census: vector i of column j updated, stored and returned (so the running sum need not
+  // load it back: a store forwarded to a load adds its latency to the sum's chain).
+  auto census_update = [&](const CensusLeft& l, ptrdiff_t j, int i) {
+    const __m256i lut = nibble_popcounts();
+    // Set bits of each byte of (l ^ r): the counts of its two nibbles.
+    auto count = [&](__m256i l0, __m256i l1, const uint16_t* p) {
+      const __m256i r0 = _mm256_loadu_si256(reinterpret_cast<const __m256i*>(p));
+      const __m256i r1 = _mm256_loadu_si256(reinterpret_cast<const __m256i*>(p + nib));
+      return _mm256_add_epi8(_mm256_shuffle_epi8(lut, _mm256_xor_si256(l0, r0)),
+                             _mm256_shuffle_epi8(lut, _mm256_xor_si256(l1, r1)));
+    };
+    auto* s = reinterpret_cast<__m256i*>(S + j * dp) + i;
+    const __m256i pin = count(l.in0, l.in1, in16 + j + 16 * i);
+    const __m256i pout = count(l.out0, l.out1, out16 + j + 16 * i);
+    const __m256i d = _mm256_maddubs_epi16(_mm256_set1_epi8(1), _mm256_sub_epi8(pin, pout));
+    const __m256i v = _mm256_add_epi16(_mm256_load_si256(s), d);
+    _mm256_store_si256(s, v);
+    return v;
+  };
   auto update_col = [&](ptrdiff_t j) {
     auto* s = reinterpret_cast<__m256i*>(S + j * dp);
     if constexpr (sizeof(F) == 4) {
-      const uint32_t li = in_l[j], lo = out_l[j];
-      const __m256i li0 = _mm256_set1_epi16(static_cast<short>(li & 0x0F0Fu));
-      const __m256i li1 = _mm256_set1_epi16(static_cast<short>((li >> 4) & 0x0F0Fu));
-      const __m256i lo0 = _mm256_set1_epi16(static_cast<short>(lo & 0x0F0Fu));
-      const __m256i lo1 = _mm256_set1_epi16(static_cast<short>((lo >> 4) & 0x0F0Fu));
-      const __m256i lut = nibble_popcounts();
-      const __m256i byte_ones = _mm256_set1_epi8(1);
-      // Set bits of each byte of (l ^ r): the counts of its two nibbles.
-      auto count = [&](__m256i l0, __m256i l1, const uint16_t* p) {
-        const __m256i r0 = _mm256_loadu_si256(reinterpret_cast<const __m256i*>(p));
-        const __m256i r1 = _mm256_loadu_si256(reinterpret_cast<const __m256i*>(p + nib));
-        return _mm256_add_epi8(_mm256_shuffle_epi8(lut, _mm256_xor_si256(l0, r0)),
-                               _mm256_shuffle_epi8(lut, _mm256_xor_si256(l1, r1)));
-      };
-      for (int i = 0; i < NC; ++i) {
-        const __m256i pin = count(li0, li1, in16 + j + 16 * i);
-        const __m256i pout = count(lo0, lo1, out16 + j + 16 * i);
-        const __m256i d = _mm256_maddubs_epi16(byte_ones, _mm256_sub_epi8(pin, pout));
-        _mm256_store_si256(s + i, _mm256_add_epi16(_mm256_load_si256(s + i), d));
-      }
+      const CensusLeft l = census_left(j);
+      for (int i = 0; i < NC; ++i) census_update(l, j, i);
     } else {
       // SAD, 32 lanes of bytes at a time: |l - r| = max - min, and the entering row's cost
       // minus the leaving row's (-62 .. 62) fits a signed byte, widened for the sums. (With
@@ -1052,13 +1156,10 @@ void winners_avx2(const RowCtx& c) {
 
   // The winner's neighbours serve the sub-pixel step and the counted uniqueness check.
   const bool around = c.subpixel != SubpixelFit::kNone || count_low;
-  const bool keep = lr_on || around;  // whether the costs go to `recent`
-  if (keep) {
-    for (ptrdiff_t t = 0; t < 16; ++t) {
-      for (int j = 0; j < 16; ++j) {
-        recent[t * kRow + j] = 0xFFFF;
-        recent[t * kRow + 16 + dp + j] = 0xFFFF;
-      }
+  for (ptrdiff_t t = 0; t < 16; ++t) {
+    for (int j = 0; j < 16; ++j) {
+      recent[t * kRow + j] = 0xFFFF;
+      recent[t * kRow + 16 + dp + j] = 0xFFFF;
     }
   }
   if (lr_on) {
@@ -1066,87 +1167,146 @@ void winners_avx2(const RowCtx& c) {
   }
   const __m256i iota = lane_iota16();
   const __m256i two = _mm256_set1_epi16(2);
+  uint32_t tsums[16];  // the block texture sums of the group's pixels
+  // Whether every block cost is below 4095 (see right_group_keyed).
+  const bool keyed = (2 * r + 1) * (2 * r + 1) * (sizeof(F) == 4 ? kCensusCostMax : kSadCostMax) <= 4094;
 
+  // The winners of the group of pixels x0 .. x1 (at most 16) from their costs in `recent`.
+  // Apart from the running sums, one pixel's work does not depend on another's, but its
+  // chain (least cost, its lane, the uniqueness count) is long: in a loop of its own, over
+  // costs already in L1, the chains of many pixels overlap, where interleaved with the
+  // column-sum update the processor's window held about two pixels and waited on each.
+  auto group_winners = [&](ptrdiff_t x0, ptrdiff_t x1) {
+    // In two loops: the least costs first (a short chain), then the rest, which starts from
+    // the least cost in memory; each loop's chain is then short enough for the processor to
+    // overlap several pixels.
+    alignas(32) uint16_t bests[16];
+    for (ptrdiff_t x = x0; x <= x1; ++x) {
+      const uint16_t* const row = recent + (x - x0) * kRow + 16;
+      // The least cost, in four chains of minima (a quarter of one chain's latency).
+      __m256i mins[4] = {ones, ones, ones, ones};
+      for (int i = 0; i < NC; ++i) {
+        mins[i & 3] = _mm256_min_epu16(
+            mins[i & 3], _mm256_load_si256(reinterpret_cast<const __m256i*>(row) + i));
+      }
+      const __m256i m = _mm256_min_epu16(_mm256_min_epu16(mins[0], mins[1]),
+                                         _mm256_min_epu16(mins[2], mins[3]));
+      bests[x - x0] = static_cast<uint16_t>(_mm_cvtsi128_si32(_mm_minpos_epu16(
+          _mm_min_epu16(_mm256_castsi256_si128(m), _mm256_extracti128_si256(m, 1)))));
+    }
+    for (ptrdiff_t x = x0; x <= x1; ++x) {
+      if (x < xlo || x > xhi) {
+        record_none(c, x);
+        continue;
+      }
+      const uint16_t* const row = recent + (x - x0) * kRow + 16;
+      __m256i V[NC];
+      for (int i = 0; i < NC; ++i) V[i] = _mm256_load_si256(reinterpret_cast<const __m256i*>(row) + i);
+      const uint32_t best = bests[x - x0];
+      const __m256i bv = _mm256_set1_epi16(static_cast<short>(bests[x - x0]));
+      // The winner: the highest lane holding the least cost (the lowest disparity on a tie),
+      // branch-free (see winners_avx512), four vectors (64 lanes) at a time: the comparison
+      // masks of two vectors packed to bytes (vpacksswb interleaves their 128-bit halves,
+      // vpermq puts them back in order) give one bit per lane.
+      int qb = 0;
+      for (int g = 0; g < NC; g += 4) {
+        auto eq = [&](int k) {
+          return k < NC ? _mm256_cmpeq_epi16(V[k], bv) : _mm256_setzero_si256();
+        };
+        auto bits = [&](int k) {
+          const __m256i m = _mm256_permute4x64_epi64(_mm256_packs_epi16(eq(k), eq(k + 1)), 0xD8);
+          return static_cast<std::uint64_t>(static_cast<uint32_t>(_mm256_movemask_epi8(m)));
+        };
+        std::uint64_t w = bits(g);
+        if (g + 2 < NC) w |= bits(g + 2) << 32;
+        const int top = 16 * g + 63 - __builtin_clzll(w | 1u);
+        const int found = -static_cast<int>(w != 0);  // all ones when this group holds the least
+        qb ^= (qb ^ top) & found;
+      }
+      uint32_t second = kNone;
+      if (count_low) {
+        // How many lanes cost less than the uniqueness threshold (see winners_avx512): the
+        // lanes >= it are those with min(a, thr) == thr; two vectors' masks packed to bytes
+        // give one bit per lane.
+        const __m256i thr = _mm256_set1_epi32(static_cast<int>(unique_min[best]));
+        auto at_least = [&](int k) {
+          return _mm256_cmpeq_epi16(_mm256_min_epu16(V[k], thr), thr);
+        };
+        uint32_t high = 0;
+        for (int i = 0; i < NC; i += 2) {
+          const __m256i m = _mm256_packs_epi16(at_least(i), i + 1 < NC ? at_least(i + 1) : ones);
+          high += static_cast<uint32_t>(__builtin_popcount(
+              static_cast<uint32_t>(_mm256_movemask_epi8(m))));
+        }
+        second = static_cast<uint32_t>(16 * (NC + (NC & 1))) - high;
+      } else if (need_second) {
+        // The exact second-best cost, for the confidence: lanes qb - 1 .. qb + 1 are those
+        // with (lane - (qb - 1)) <= 2, unsigned.
+        __m256i m2 = ones;
+        for (int i = 0; i < NC; ++i) {
+          const __m256i rel =
+              _mm256_sub_epi16(iota, _mm256_set1_epi16(static_cast<short>(qb - 1 - 16 * i)));
+          const __m256i ex = _mm256_cmpeq_epi16(_mm256_min_epu16(rel, two), rel);
+          m2 = _mm256_min_epu16(m2, _mm256_or_si256(V[i], ex));
+        }
+        second = hmin_epu16(m2);
+      }
+      WinnerRecord* rec = records + x;
+      rec->best = static_cast<uint16_t>(best);
+      rec->second = static_cast<uint16_t>(second);
+      rec->kbest = dp - 1 - qb;
+      rec->tsum = tsums[x - x0];
+      // c0 | c2 << 16: lanes qb + 1 and qb - 1 (disparity index kb - 1 and kb + 1). Beyond
+      // the lanes `recent` holds 0xFFFF where the other passes store 0: the second pass reads
+      // neither (it needs 1 <= kb <= nd - 2).
+      rec->around = 0;
+      if (around) {
+        rec->around =
+            static_cast<uint32_t>(row[qb + 1]) | (static_cast<uint32_t>(row[qb - 1]) << 16);
+      }
+    }
+  };
+
+  // Along the row: the block sums of each pixel go to `recent`; every 16 pixels, the right
+  // winners and the winners of those pixels.
   for (ptrdiff_t x = 0; x < cols; ++x) {
     if (x > 0) {
-      if (fused && x + r < cols) update_col(x + r);
       const ptrdiff_t xp = clamp_index(x + r, 0, cols - 1);
       const ptrdiff_t xm = clamp_index(x - r - 1, 0, cols - 1);
-      for (int i = 0; i < NC; ++i) {
-        A[i] = _mm256_sub_epi16(_mm256_add_epi16(A[i], column(xp, i)), column(xm, i));
+      if constexpr (sizeof(F) == 4) {
+        if (fused && x + r < cols) {
+          const CensusLeft l = census_left(x + r);
+          for (int i = 0; i < NC; ++i) {
+            A[i] = _mm256_sub_epi16(_mm256_add_epi16(A[i], census_update(l, x + r, i)),
+                                    column(xm, i));
+          }
+        } else {
+          for (int i = 0; i < NC; ++i) {
+            A[i] = _mm256_sub_epi16(_mm256_add_epi16(A[i], column(xp, i)), column(xm, i));
+          }
+        }
+      } else {
+        if (fused && x + r < cols) update_col(x + r);
+        for (int i = 0; i < NC; ++i) {
+          A[i] = _mm256_sub_epi16(_mm256_add_epi16(A[i], column(xp, i)), column(xm, i));
+        }
       }
       A[0] = _mm256_or_si256(A[0], padv);
       if (texcol) tsum += texcol[xp] - texcol[xm];
     }
     const int t = static_cast<int>(x & 15);
     uint16_t* const row = recent + t * kRow + 16;
-    if (keep) {
-      for (int i = 0; i < NC; ++i) _mm256_store_si256(reinterpret_cast<__m256i*>(row) + i, A[i]);
-    }
-    if (lr_on && (t == 15 || x == cols - 1)) right_group<NC>(recent, rmin, rarg, x - t, t + 1);
-    if (x < xlo || x > xhi) {
-      record_none(c, x);
-      continue;
-    }
-    // The least cost, in four chains of minima (a quarter of one chain's latency).
-    __m256i mins[4] = {ones, ones, ones, ones};
-    for (int i = 0; i < NC; ++i) mins[i & 3] = _mm256_min_epu16(mins[i & 3], A[i]);
-    const uint32_t best = hmin_epu16(
-        _mm256_min_epu16(_mm256_min_epu16(mins[0], mins[1]), _mm256_min_epu16(mins[2], mins[3])));
-    const __m256i bv = _mm256_set1_epi16(static_cast<short>(best));
-    // The winner: the highest lane holding the least cost (the lowest disparity on a tie),
-    // branch-free (see winners_avx512). vpmovmskb gives two bits per 16-bit lane.
-    int qb = 0;
-    for (int i = 0; i < NC; i += 2) {
-      auto eq = [&](int k) {
-        return static_cast<std::uint64_t>(
-            static_cast<uint32_t>(_mm256_movemask_epi8(_mm256_cmpeq_epi16(A[k], bv))));
-      };
-      std::uint64_t w = eq(i);
-      if (i + 1 < NC) w |= eq(i + 1) << 32;
-      const int top = 16 * i + (63 - __builtin_clzll(w | 1u)) / 2;
-      const int found = -static_cast<int>(w != 0);  // all ones when this pair holds the least
-      qb ^= (qb ^ top) & found;
-    }
-    uint32_t second = kNone;
-    if (count_low) {
-      // How many lanes cost less than the uniqueness threshold (see winners_avx512): the
-      // lanes >= it are those with min(a, thr) == thr; two vectors' masks packed to bytes
-      // give one bit per lane.
-      const __m256i thr = _mm256_set1_epi32(static_cast<int>(unique_min[best]));
-      auto at_least = [&](int k) {
-        return _mm256_cmpeq_epi16(_mm256_min_epu16(A[k], thr), thr);
-      };
-      uint32_t high = 0;
-      for (int i = 0; i < NC; i += 2) {
-        const __m256i m = _mm256_packs_epi16(at_least(i), i + 1 < NC ? at_least(i + 1) : ones);
-        high += static_cast<uint32_t>(__builtin_popcount(
-            static_cast<uint32_t>(_mm256_movemask_epi8(m))));
+    for (int i = 0; i < NC; ++i) _mm256_store_si256(reinterpret_cast<__m256i*>(row) + i, A[i]);
+    tsums[t] = tsum;
+    if (t == 15 || x == cols - 1) {
+      if (lr_on) {
+        if (keyed) {
+          right_group_keyed<NC>(recent, rmin, rarg, x - t, t + 1);
+        } else {
+          right_group<NC>(recent, rmin, rarg, x - t, t + 1);
+        }
       }
-      second = static_cast<uint32_t>(16 * (NC + (NC & 1))) - high;
-    } else if (need_second) {
-      // The exact second-best cost, for the confidence: lanes qb - 1 .. qb + 1 are those with
-      // (lane - (qb - 1)) <= 2, unsigned.
-      __m256i m2 = ones;
-      for (int i = 0; i < NC; ++i) {
-        const __m256i rel =
-            _mm256_sub_epi16(iota, _mm256_set1_epi16(static_cast<short>(qb - 1 - 16 * i)));
-        const __m256i ex = _mm256_cmpeq_epi16(_mm256_min_epu16(rel, two), rel);
-        m2 = _mm256_min_epu16(m2, _mm256_or_si256(A[i], ex));
-      }
-      second = hmin_epu16(m2);
-    }
-    WinnerRecord* rec = records + x;
-    rec->best = static_cast<uint16_t>(best);
-    rec->second = static_cast<uint16_t>(second);
-    rec->kbest = dp - 1 - qb;
-    rec->tsum = tsum;
-    // c0 | c2 << 16: lanes qb + 1 and qb - 1 (disparity index kb - 1 and kb + 1). Beyond the
-    // lanes `recent` holds 0xFFFF where the other passes store 0: the second pass reads
-    // neither (it needs 1 <= kb <= nd - 2).
-    rec->around = 0;
-    if (around) {
-      rec->around = static_cast<uint32_t>(row[qb + 1]) | (static_cast<uint32_t>(row[qb - 1]) << 16);
+      group_winners(x - t, x);
     }
   }
 }
@@ -1446,14 +1606,22 @@ void decide_avx2(const RowCtx& c) {
       d = _mm256_blendv_ps(d, _mm256_add_ps(d, _mm256_div_ps(num, den)), use);
     }
     const __m256 okf = _mm256_castsi256_ps(ok);
-    _mm256_maskstore_ps(c.drow + x, lanes, _mm256_blendv_ps(nan, d, okf));
+    // A masked store only for the row's tail: vmaskmovps is microcoded on AMD processors.
+    auto store = [&](float* p, __m256 v) {
+      if (n == 8) {
+        _mm256_storeu_ps(p, v);
+      } else {
+        _mm256_maskstore_ps(p, lanes, v);
+      }
+    };
+    store(c.drow + x, _mm256_blendv_ps(nan, d, okf));
     if (c.crow) {
       const __m256 ratio = _mm256_div_ps(_mm256_cvtepi32_ps(_mm256_sub_epi32(s2, b)),
                                          _mm256_cvtepi32_ps(s2));
       const __m256 pos = _mm256_castsi256_ps(_mm256_cmpgt_epi32(s2, zero));
       const __m256 conf = _mm256_blendv_ps(_mm256_set1_ps(1.0f), _mm256_and_ps(ratio, pos),
                                            _mm256_castsi256_ps(has2));
-      _mm256_maskstore_ps(c.crow + x, lanes, _mm256_and_ps(conf, okf));
+      store(c.crow + x, _mm256_and_ps(conf, okf));
     }
   }
 }
@@ -1578,14 +1746,14 @@ void row_pass(const RowCtx& c) {
     RowCtx counted = c;
     counted.count_low = c.unique_min != nullptr && c.crow == nullptr;
     winners_fixed<1, Cost>(counted);
-    decide(counted);
+    if (!c.first_pass_only) decide(counted);
   } else {
     winners_generic(c);
-    decide(c);
+    if (!c.first_pass_only) decide(c);
   }
 #else
   winners_generic(c);
-  decide_generic(c);
+  if (!c.first_pass_only) decide_generic(c);
 #endif
   if (c.clip_border) border_band(c);
 }
@@ -1651,6 +1819,7 @@ void match_band_impl(const MatchArgs& a, const BandScratch& s, ptrdiff_t y0, ptr
   c.recent = s.recent;
   c.rec = static_cast<WinnerRecord*>(s.records);
   c.unique_min = a.unique_min;
+  c.first_pass_only = a.first_pass_only;
 
   const bool fused = fuses_update(dp);
   for (ptrdiff_t y = y0; y < y1; ++y) {
@@ -1687,8 +1856,12 @@ void match_band_impl(const MatchArgs& a, const BandScratch& s, ptrdiff_t y0, ptr
           }
 #elif defined(STEREODEPTH_BM_AVX2)
           if constexpr (sizeof(F) == 4) {
-            nibbles_of(rpad_in, static_cast<uint16_t*>(s.quad_in), npad);
-            nibbles_of(rpad_out, static_cast<uint16_t*>(s.quad_out), npad);
+            auto* qi = static_cast<uint16_t*>(s.quad_in);
+            auto* qo = static_cast<uint16_t*>(s.quad_out);
+            nibbles_of(rpad_in, qi, npad, npad);
+            nibbles_of(rpad_out, qo, npad, npad);
+            nibbles_of(lrow(yin), qi + 2 * npad, cols, npad);
+            nibbles_of(lrow(yout), qo + 2 * npad, cols, npad);
             c.nibble_stride = npad;
             c.in_quad = s.quad_in;
             c.out_quad = s.quad_out;
@@ -1746,6 +1919,38 @@ void speckle_links(const float* d, const float* u, ptrdiff_t cols, float rf, std
     }
     // The first 16 columns' left links (column 0 has none).
     for (ptrdiff_t j = 1; j < 16; ++j) {
+      if (std::fabs(d[j] - d[j - 1]) <= rf) left[0] |= std::uint64_t{1} << j;
+    }
+  }
+#elif defined(STEREODEPTH_BM_AVX2)
+  // 32 columns at a time, four movemasks of 8 per 32-bit half word (|a - b| is a - b with
+  // the sign bit cleared, as fabs; a NaN compares false); column 0 has no left neighbour.
+  auto* v32 = reinterpret_cast<uint32_t*>(valid);
+  auto* l32 = reinterpret_cast<uint32_t*>(left);
+  auto* u32 = reinterpret_cast<uint32_t*>(up);
+  const __m256 r = _mm256_set1_ps(rf);
+  const __m256 magnitude = _mm256_castsi256_ps(_mm256_set1_epi32(0x7FFFFFFF));
+  auto near = [&](__m256 a, __m256 b) {
+    return static_cast<uint32_t>(_mm256_movemask_ps(
+        _mm256_cmp_ps(_mm256_and_ps(_mm256_sub_ps(a, b), magnitude), r, _CMP_LE_OQ)));
+  };
+  if (cols > 32) {
+    for (; i + 32 <= cols; i += 32) {
+      uint32_t vb = 0, lb = 0, ub = 0;
+      for (int k = 0; k < 4; ++k) {
+        const ptrdiff_t j = i + 8 * k;
+        const __m256 dj = _mm256_loadu_ps(d + j);
+        vb |= static_cast<uint32_t>(_mm256_movemask_ps(_mm256_cmp_ps(dj, dj, _CMP_ORD_Q)))
+              << (8 * k);
+        if (j > 0) lb |= near(dj, _mm256_loadu_ps(d + j - 1)) << (8 * k);
+        if (u) ub |= near(dj, _mm256_loadu_ps(u + j)) << (8 * k);
+      }
+      v32[i / 32] = vb;
+      l32[i / 32] = lb;
+      u32[i / 32] = ub;
+    }
+    // The first 8 columns' left links (column 0 has none).
+    for (ptrdiff_t j = 1; j < 8; ++j) {
       if (std::fabs(d[j] - d[j - 1]) <= rf) left[0] |= std::uint64_t{1} << j;
     }
   }

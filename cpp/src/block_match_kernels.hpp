@@ -43,6 +43,9 @@ struct MatchArgs {
   std::ptrdiff_t disp_stride;
   float* conf;  // may be null
   std::ptrdiff_t conf_stride;
+  // Diagnostics only (BlockMatcher::stage_times): run the first pass of each row and skip
+  // the second, leaving the outputs unwritten.
+  bool first_pass_only = false;
 };
 
 // One pixel's winner, written by the first pass of a row and read by the second.
@@ -65,7 +68,7 @@ struct BandScratch {
   void* rpad_out;          // the same for the leaving row
   // Census, the padded rows regrouped for the SIMD builds (see the kernels), cols + dp +
   // kRowPad elements of regrouped_bytes(lanes) each: AVX-512, for in-order packing; AVX2, the
-  // codes' nibbles as two rows of uint16.
+  // codes' nibbles as two rows of uint16, then those of the left row as two more.
   void* quad_in;
   void* quad_out;
   std::uint16_t* rmin;     // cols + dp + kRowPad: least cost per right column
@@ -79,7 +82,7 @@ struct BandScratch {
 
 // Bytes per element of the regrouped census rows of a build with this many lanes.
 inline constexpr std::size_t regrouped_bytes(int lanes) {
-  return lanes == 32 ? 64 : lanes == 16 ? 4 : 0;
+  return lanes == 32 ? 64 : lanes == 16 ? 8 : 0;
 }
 
 // Elements of BandScratch::recent: 16 rows of dp + 32 (AVX2 builds only).
