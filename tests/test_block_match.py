@@ -746,6 +746,17 @@ GOOD = shifted_pair((8, 20), 2, seed=40)
             TypeError,
             "threads must be an integer, got float 1.5",
         ),
+        # Beyond a C int pybind11 raised its own TypeError, which names no parameter.
+        (
+            {"num_disparities": 8, "threads": 2**31},
+            ValueError,
+            "threads must be an integer <= 2147483647, got 2147483648",
+        ),
+        (
+            {"num_disparities": 8, "speckle_window": 2**40},
+            ValueError,
+            "speckle_window must be an integer <= 2147483647, got 1099511627776",
+        ),
         (
             {"num_disparities": 8, "return_confidence": "yes"},
             TypeError,
@@ -841,6 +852,22 @@ def test_matcher_rejects_missing_and_unknown_parameters() -> None:
         sd.StereoMatcher(block_size=9)
     with pytest.raises(TypeError, match="unexpected keyword argument 'blocksize'"):
         sd.StereoMatcher(num_disparities=8, blocksize=9)
+
+
+@pytest.mark.parametrize("ratio", [6553399.0, 6553400.0, 1e7, 1e20, 1e300])
+@pytest.mark.parametrize("cost", ["census", "sad"])
+def test_huge_uniqueness_ratio_matches_the_oracle(ratio: float, cost: str) -> None:
+    # A ratio of 1e20 hung the matcher's constructor: its table loop added 1.0 to a double
+    # too large to change. From 6553400 on (a factor of 65535 x 100) no second-best cost
+    # passes a winner above 0; a winning cost of 0 still passes.
+    rng = np.random.default_rng(11)
+    left = rng.integers(0, 256, (24, 40), dtype=np.uint8)
+    right = np.roll(left, -3, axis=1)
+    right[:8, ::7] = 0  # winners above cost 0 in the top rows, 0 below
+    got = sd.block_match(left, right, num_disparities=8, cost=cost, uniqueness_ratio=ratio)
+    want = ref.block_match(left, right, num_disparities=8, cost=cost, uniqueness_ratio=ratio)
+    np.testing.assert_array_equal(got, want, strict=True)
+    assert np.isfinite(got).any() and np.isnan(got).any()
 
 
 def test_native_layer_rejects_bad_parameters_too() -> None:

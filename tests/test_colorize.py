@@ -82,6 +82,26 @@ def test_all_invalid_and_constant_maps() -> None:
     assert (colorize(flat, vmin=9) == colour("turbo", 0)).all()
 
 
+def test_values_near_the_float64_limits() -> None:
+    # hi - lo and the percentiles' interpolation overflow float64 here: no warning (pytest
+    # runs with -W error), no IndexError; the lowest, middle and highest colours.
+    big = np.finfo(np.float64).max / 1.05
+    values = np.array([[-big, 0.0, big, np.nan]])
+    got = colorize(values, vmin=-big, vmax=big)
+    assert got[0].tolist() == [
+        colour("turbo", 0),
+        colour("turbo", 128),
+        colour("turbo", 255),
+        [0, 0, 0],
+    ]
+    lo, hi = colorize_limits(values)
+    assert np.isfinite([lo, hi]).all() and -big < lo < 0 < hi < big
+    assert colorize(values)[0, :3].tolist() == got[0, :3].tolist()
+    # float32 maps near their own limit are computed in float64 and do not overflow.
+    f32 = np.array([[-3e38, 0.0, 3e38]], dtype=np.float32)
+    assert colorize(f32)[0].tolist() == got[0, :3].tolist()
+
+
 def test_lut_is_matplotlibs_sampled() -> None:
     lut = colormap_lut("viridis")
     assert lut.shape == (LUT_SIZE, 3) and lut.dtype == np.uint8

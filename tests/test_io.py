@@ -55,6 +55,16 @@ def test_read_image_missing_and_corrupt(tmp_path: Path) -> None:
             io.read_image(tmp_path / bad)
 
 
+def test_read_image_rejects_floating_point_images(tmp_path: Path) -> None:
+    # Pillow opens float TIFF and PFM files as mode F; converting them to RGB quantised the
+    # samples (0..1 became all black) instead of saying so.
+    Image.fromarray(np.linspace(0, 1, 20, dtype=np.float32).reshape(4, 5)).save(tmp_path / "f.tif")
+    io.write_pfm(tmp_path / "d.pfm", np.arange(12, dtype=np.float32).reshape(3, 4))
+    for name in ("f.tif", "d.pfm"):
+        with pytest.raises(ValueError, match=re.escape(name) + r".*floating-point image.*read_pfm"):
+            io.read_image(tmp_path / name)
+
+
 # --- atomic_write -----------------------------------------------------------------------------
 def test_atomic_write_replaces_only_on_success(tmp_path: Path) -> None:
     target = tmp_path / "out.bin"

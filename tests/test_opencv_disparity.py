@@ -137,6 +137,21 @@ def test_metrics_read_opencv_output_with_its_min_disparity() -> None:
             TypeError,
             "min_disparity must be an integer, got float 1.5",
         ),
+        # Out of OpenCV's range every pixel silently became NaN; to_opencv_disparity refused.
+        (
+            lambda: stereodepth.from_opencv_disparity(
+                np.zeros((2, 2), np.int16), min_disparity=1_000_000
+            ),
+            ValueError,
+            r"min_disparity must be in \[-2047, 2048\] .* got 1000000",
+        ),
+        (
+            lambda: stereodepth.from_opencv_disparity(
+                np.zeros((2, 2), np.int16), min_disparity=-2048
+            ),
+            ValueError,
+            r"min_disparity must be in \[-2047, 2048\] .* got -2048",
+        ),
         (
             lambda: stereodepth.disparity_to_depth(
                 np.zeros((2, 2), np.int16), focal_px=1.0, baseline_m=1.0, min_disparity="16"

@@ -522,6 +522,14 @@ def test_write_ply_grey_uint16_and_uncoloured(tmp_path: Path) -> None:
             "colors must have dtype uint8 or uint16, got float32",
         ),
         (np.zeros((4, 3)), None, ValueError, "comment must be ASCII text"),
+        # A float64 coordinate beyond float32 was cast to inf with a RuntimeWarning and its
+        # point silently left out.
+        (
+            np.array([[0.0, 0.0, 1.0], [1e300, 0.0, 1.0]]),
+            None,
+            ValueError,
+            r"points must fit in float32 .* got a finite coordinate of magnitude 1e\+300",
+        ),
         (
             np.zeros((4, 3)),
             np.zeros((5, 3), np.uint8),

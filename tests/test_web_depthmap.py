@@ -321,6 +321,9 @@ def bad_cases(pair: Any) -> list[tuple[dict[str, Any], list[Any], str]]:
             "block_size must be an odd integer",
         ),
         ({"left": left, "right": right, "cost": "ssd"}, ["body", "cost"], "cost must be census"),
+        # Unhashable values were answered "unhashable type: 'dict'" at the body, not the field.
+        ({"left": left, "right": right, "cost": {}}, ["body", "cost"], "cost must be census"),
+        ({"left": left, "right": right, "cost": ["sad"]}, ["body", "cost"], "cost must be census"),
         ({"left": left, "right": right, "method": "x"}, ["body", "method"], "method must be bm"),
         (
             {"left": left, "right": right, "disparity_step_px": 0},
@@ -402,6 +405,12 @@ def test_not_json_and_not_an_object(client: TestClient) -> None:
     r = client.post("/api/depthmap", json=[1, 2])
     assert r.status_code == 422
     assert r.json()["detail"][0]["msg"] == "the request must be a JSON object"
+    # JSON nested deeper than Python's recursion limit was a 500 (RecursionError).
+    deep = b"[" * 100_000 + b"]" * 100_000
+    for url in ("/api/depthmap", "/api/calib"):
+        r = client.post(url, content=deep, headers={"content-type": "application/json"})
+        assert r.status_code == 422, (url, r.text)
+        assert r.json()["detail"][0]["msg"] == "the request must be JSON nested less deeply"
 
 
 def test_limits_in_bytes_and_pixels(pair: Any) -> None:

@@ -237,9 +237,14 @@ BlockMatcher::BlockMatcher(const BlockMatchParams& params, int threads, Isa isa)
     unique_min_.resize(static_cast<std::size_t>(max_cost) + 1);
     for (int b = 0; b <= max_cost; ++b) {
       const double bound = static_cast<double>(b) * uniqueness_factor_;
-      double s = std::floor(bound / 100.0);
-      while (s > 0 && s * 100.0 > bound) s -= 1.0;
-      while (!(s * 100.0 > bound)) s += 1.0;
+      double s = 65535.0;  // the cap: no second-best cost passes (s * 100 > bound needs more)
+      if (bound < 65535.0 * 100.0) {
+        // Here s < 2^16, so s + 1 != s: the loops end. Beyond, s += 1.0 could not change a
+        // large s (a ratio of 1e20 hung the constructor).
+        s = std::floor(bound / 100.0);
+        while (s > 0 && s * 100.0 > bound) s -= 1.0;
+        while (!(s * 100.0 > bound)) s += 1.0;
+      }
       const auto t = static_cast<std::uint32_t>(std::min(s, 65535.0));
       unique_min_[static_cast<std::size_t>(b)] = t | (t << 16);  // twice: see the kernels
     }

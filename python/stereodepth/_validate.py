@@ -66,11 +66,15 @@ def available_cores() -> int:
     return int(_core.build_info()["default_threads"])
 
 
+#: The largest count the native core takes (a C int): beyond, pybind11 raised its own TypeError.
+MAX_NATIVE_INT = 2**31 - 1
+
+
 def threads(value: Any) -> int:
     """None or 0 means every core this process may use."""
     if value is None:
         return 0
-    return integer("threads", value, minimum=0)
+    return integer("threads", value, minimum=0, maximum=MAX_NATIVE_INT)
 
 
 def real_array(name: str, value: Any) -> np.ndarray:

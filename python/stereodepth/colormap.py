@@ -124,7 +124,11 @@ def _resolve_limits(
     if vmin is not None and vmax is not None and not vmin < vmax:
         raise ValueError(f"vmin must be < vmax, got vmin={vmin!r} and vmax={vmax!r}")
     if (vmin is None or vmax is None) and valid.any():
-        lo_p, hi_p = np.percentile(arr[valid], DEFAULT_PERCENTILES)
+        finite = arr[valid]
+        if math.isfinite(float(finite.max()) - float(finite.min())):
+            lo_p, hi_p = np.percentile(finite, DEFAULT_PERCENTILES)
+        else:  # a range beyond float64 (values near its limits): interpolate the halves
+            lo_p, hi_p = 2.0 * np.percentile(finite / 2, DEFAULT_PERCENTILES)
         lo = float(lo_p) if vmin is None else vmin
         hi = float(hi_p) if vmax is None else vmax
     else:
@@ -189,7 +193,13 @@ def colorize(
     lo, hi = _resolve_limits(arr, valid, lo_in, hi_in)
     v = np.where(valid, arr, lo)
     if hi > lo:
-        t = np.clip((v - lo) / (hi - lo), 0.0, 1.0)
+        # Clipped first, so that v - lo cannot overflow; halved where hi - lo would (values
+        # near the float64 limits), which gives t to the rounding of the halves.
+        v = np.clip(v, lo, hi)
+        if math.isfinite(hi - lo):
+            t = (v - lo) / (hi - lo)
+        else:
+            t = np.clip((v / 2 - lo / 2) / (hi / 2 - lo / 2), 0.0, 1.0)
     else:
         t = np.where(v < lo, 0.0, np.where(v > lo, 1.0, 0.5))
     index = np.rint(t * (LUT_SIZE - 1)).astype(np.intp)

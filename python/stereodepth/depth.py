@@ -245,12 +245,19 @@ def from_opencv_disparity(raw: Any, *, min_disparity: int = 0) -> np.ndarray:
     negative ``minDisparity`` produces). The inverse of
     :func:`stereodepth.to_opencv_disparity` with the same ``min_disparity``.
 
-    Raises TypeError unless ``raw`` is an int16 array and ``min_disparity`` an integer.
+    Raises TypeError unless ``raw`` is an int16 array and ``min_disparity`` an integer, and
+    ValueError for a ``min_disparity`` outside [-2047, 2048], which no OpenCV matcher can have
+    (its holes, ``(minDisparity - 1) * 16``, would not fit in int16; every pixel would be NaN).
     """
     arr = raw if isinstance(raw, np.ndarray) else np.asarray(raw)
     if arr.dtype != np.int16:
         raise TypeError(f"raw must be OpenCV's int16 disparity (x16), got dtype {arr.dtype}")
     md = check_min_disparity(min_disparity)
+    if not -2047 <= md <= 2048:  # as to_opencv_disparity: beyond, OpenCV's holes overflow int16
+        raise ValueError(
+            f"min_disparity must be in [-2047, 2048] (OpenCV's invalid value (min_disparity - 1)"
+            f" * 16 must fit in int16), got {md}"
+        )
     out: np.ndarray = arr.astype(np.float32) * np.float32(1 / 16)  # exact: a power of two
     out[arr.astype(np.int32) < md * 16] = np.nan
     return out

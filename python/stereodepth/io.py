@@ -49,7 +49,8 @@ def read_image(path: str | os.PathLike[str]) -> np.ndarray:
     :func:`read_pnm`, exactly, with their samples as stored (a 16-bit PPM gives (H, W, 3)
     uint16); every other format by Pillow. Palette and grey-alpha images become grey or RGB;
     an alpha channel is dropped. Raises FileNotFoundError for a missing file and ValueError
-    naming the file when it cannot be decoded."""
+    naming the file when it cannot be decoded or holds floating-point samples (a float TIFF or
+    a PFM: :func:`read_pfm` reads those)."""
     p = Path(path)
     if not p.is_file():
         raise FileNotFoundError(f"image not found: {p}")
@@ -71,6 +72,12 @@ def read_image(path: str | os.PathLike[str]) -> np.ndarray:
                 return arr.astype(np.uint16)
             if mode == "L":
                 return np.asarray(im, dtype=np.uint8)
+            if mode == "F" or mode.startswith("F;"):
+                # Converting would quantise (0..1 becomes all black): not an image to match.
+                raise ValueError(
+                    f"{p}: a floating-point image (mode {mode}) is not an 8- or 16-bit image; "
+                    "read disparity or depth maps with read_pfm"
+                )
             if mode in ("1", "P", "LA", "PA"):
                 im2 = im.convert("RGBA" if mode in ("P", "PA") else "L")
                 if im2.mode == "RGBA":

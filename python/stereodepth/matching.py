@@ -235,7 +235,9 @@ class BlockMatchOptions:
             self.lr_max_diff: float | None = None
         else:
             self.lr_max_diff = check.non_negative("lr_max_diff", lr_max_diff)
-        self.speckle_window = check.integer("speckle_window", speckle_window, minimum=0)
+        self.speckle_window = check.integer(
+            "speckle_window", speckle_window, minimum=0, maximum=check.MAX_NATIVE_INT
+        )
         self.speckle_range = check.non_negative("speckle_range", speckle_range)
         self.threads = check.threads(threads)
         if not isinstance(return_confidence, (bool, np.bool_)):

@@ -276,7 +276,8 @@ def write_ply(
 
     Vertex properties: float x, y, z, and uchar red, green, blue when coloured.
 
-    Raises TypeError for a ``path`` that is not a str or os.PathLike, FileNotFoundError
+    Raises ValueError for a finite coordinate beyond float32's range (about 3.4e38), TypeError
+    for a ``path`` that is not a str or os.PathLike, FileNotFoundError
     (naming ``path``) when its folder does not exist, before any work, and OSError naming
     ``path`` when it cannot be written; ``path`` is then left as it was."""
     from .io import atomic_write
@@ -299,7 +300,15 @@ def write_ply(
     if pts.ndim < 2 or pts.shape[-1] != 3:
         raise ValueError(f"points must have shape (N, 3) or (H, W, 3), got {pts.shape}")
     cols = None if colors is None else _colours_u8(colors, pts.shape[:-1])
-    pts32 = pts.reshape(-1, 3).astype(np.float32, copy=False)
+    flat = pts.reshape(-1, 3)
+    if flat.dtype.kind == "f" and flat.dtype.itemsize > 4 and flat.size:
+        finite = np.abs(flat[np.isfinite(flat)])
+        if finite.size and finite.max() > np.finfo(np.float32).max:
+            raise ValueError(
+                "points must fit in float32 (PLY stores float x, y, z), got a finite "
+                f"coordinate of magnitude {float(finite.max())!r}"
+            )
+    pts32 = flat.astype(np.float32, copy=False)
     keep = np.isfinite(pts32).all(axis=1)
     n = int(np.count_nonzero(keep))
     vertex = np.empty(n, dtype=_PLY_VERTEX if cols is None else _PLY_VERTEX_RGB)

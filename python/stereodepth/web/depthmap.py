@@ -334,6 +334,8 @@ def _parse_request(data: bytes, limits: DepthMapLimits) -> Job:
         body = json.loads(data)
     except (ValueError, UnicodeDecodeError):
         raise BadInput(["body"], "the request must be JSON") from None
+    except RecursionError:  # arrays or objects nested thousands deep
+        raise BadInput(["body"], "the request must be JSON nested less deeply") from None
     return parse_job(body, limits)
 
 
@@ -363,7 +365,7 @@ def parse_job(body: Any, limits: DepthMapLimits) -> Job:
             )
         )
     cost = body.get("cost")
-    if cost is not None and cost not in MAX_BLOCK_SIZE:
+    if cost is not None and (not isinstance(cost, str) or cost not in MAX_BLOCK_SIZE):
         errors.append(BadInput(["body", "cost"], f"cost must be census or sad, got {cost!r}"))
     nums: dict[str, int | None] = {}
     for name, lo, hi in (
@@ -849,6 +851,10 @@ def add_calib_route(router: APIRouter) -> None:
             body = json.loads(data)
         except (ValueError, UnicodeDecodeError):
             return _error_response([BadInput(["body"], "the request must be JSON")])
+        except RecursionError:  # arrays or objects nested thousands deep
+            return _error_response(
+                [BadInput(["body"], "the request must be JSON nested less deeply")]
+            )
         if not isinstance(body, dict):
             return _error_response([BadInput(["body"], "the request must be a JSON object")])
         try:
