@@ -593,9 +593,13 @@ def test_confidence_is_in_unit_interval_and_zero_on_holes() -> None:
 
 def test_to_opencv_disparity() -> None:
     d = np.array([[0.0, 1.5, np.nan], [2.03125, 63.9375, -0.5]], dtype=np.float32)
-    out = sd.to_opencv_disparity(d)
+    # -0.5 px is valid only when the search range reaches it: with min_disparity 0, OpenCV
+    # would read its -8 as a hole, so it is refused rather than lost.
+    with pytest.raises(ValueError, match=r">= min_disparity \(0\) px or NaN"):
+        sd.to_opencv_disparity(d)
+    out = sd.to_opencv_disparity(d, min_disparity=-1)
     assert out.dtype == np.int16
-    np.testing.assert_array_equal(out, [[0, 24, -16], [33, 1023, -8]])
+    np.testing.assert_array_equal(out, [[0, 24, -32], [33, 1023, -8]])
     out = sd.to_opencv_disparity(d, min_disparity=-4)
     assert out[0, 2] == -80
     # Round trip through the depth converter's OpenCV convention.
@@ -910,7 +914,19 @@ def test_native_layer_rejects_bad_parameters_too() -> None:
             np.full((2, 2), 2048.0, np.float32),
             {},
             ValueError,
-            r"disparity must lie in \(-2048, 2048\) px",
+            r"disparity must be below 2048 px to fit OpenCV's int16 x16 format, got 2048.0",
+        ),
+        (
+            np.array([[3.0, 20.0]], np.float32),
+            {"min_disparity": 16},
+            ValueError,
+            r"disparity must be >= min_disparity \(16\) px or NaN: .* got 3.0 px",
+        ),
+        (
+            np.full((2, 2), -2048.0, np.float32),
+            {"min_disparity": -2047},
+            ValueError,
+            r"disparity must be >= min_disparity \(-2047\) px or NaN",
         ),
         (np.full((2, 2), np.inf, np.float32), {}, ValueError, "disparity must be finite or NaN"),
         (

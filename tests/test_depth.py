@@ -187,6 +187,23 @@ def test_zero_disparity_is_invalid_and_tiny_is_infinite_and_invalid() -> None:
     assert np.isnan(z).all()
 
 
+@pytest.mark.parametrize("dtype", [np.float16, np.float32, np.float64])
+def test_infinite_disparity_is_invalid_not_zero_metres(dtype: type) -> None:
+    """+inf disparity is no match: NaN (0 in millimetres), never a depth of 0 m, natively and
+    in the oracle; so is a finite disparity whose d * scale + doffs overflows."""
+    d = np.array([[np.inf, -np.inf, np.nan, 10.0]], dtype=dtype)
+    for out in (np.float32, np.uint16):
+        for fn in (stereodepth.disparity_to_depth, reference.disparity_to_depth):
+            z = fn(d, focal_px=1000.0, baseline_m=0.1, dtype=out)
+            if out == np.float32:
+                assert np.isnan(z[0, :3]).all() and z[0, 3] == np.float32(10.0)
+            else:
+                assert z.tolist() == [[0, 0, 0, 10000]]
+    big = np.array([[np.finfo(np.float32).max]], np.float32)
+    z = stereodepth.disparity_to_depth(big, focal_px=1000.0, baseline_m=0.1, scale=16.0)
+    assert np.isnan(z).all()
+
+
 @pytest.mark.parametrize("threads", [1, 2, 3, 5])
 def test_thread_count_does_not_change_bits(threads: int) -> None:
     rng = np.random.default_rng(5)

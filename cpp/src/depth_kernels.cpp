@@ -37,6 +37,9 @@ inline float half_to_float(std::uint16_t h) {
 struct Half {};  // tag for float16 input stored as raw bits
 
 // Float32 output, float32 arithmetic (float16, float32, int16, uint16 input).
+constexpr float kInfF = std::numeric_limits<float>::infinity();
+constexpr double kInf = std::numeric_limits<double>::infinity();
+
 template <typename Tag, typename In>
 void row_to_f32(const void* vin, float* out, std::ptrdiff_t n, const DepthRowParams& p) {
   const In* in = static_cast<const In*>(vin);
@@ -53,7 +56,8 @@ void row_to_f32(const void* vin, float* out, std::ptrdiff_t n, const DepthRowPar
     }
     const float den = d * scale + doffs;
     const float z = k / den;
-    bool ok = (den > 0.0f) & (z >= zmin) & (z <= zmax);
+    // An infinite disparity (den = inf) is no match: its depth 0 would read as valid.
+    bool ok = (den > 0.0f) & (den < kInfF) & (z >= zmin) & (z <= zmax);
     if (has_invalid) ok &= (d != invalid);
     if (has_below) ok &= (d >= below);
     out[i] = ok ? z : nan;
@@ -69,7 +73,7 @@ void row_f64_to_f32(const void* vin, float* out, std::ptrdiff_t n, const DepthRo
     const double den = d * p.scale + p.doffs;
     const double z = p.k / den;
     const float zf = static_cast<float>(z);
-    bool ok = (den > 0.0) & (zf >= p.min_f) & (zf <= p.max_f);
+    bool ok = (den > 0.0) & (den < kInf) & (zf >= p.min_f) & (zf <= p.max_f);
     if (p.has_invalid) ok &= (d != p.invalid);
     if (p.has_below) ok &= (d >= p.below);
     out[i] = ok ? zf : nan;
@@ -90,7 +94,7 @@ void row_to_u16(const void* vin, std::uint16_t* out, std::ptrdiff_t n,
     }
     const double den = d * p.scale + p.doffs;
     const double z = p.k / den;
-    bool ok = (den > 0.0) & (z >= p.min) & (z <= p.max);
+    bool ok = (den > 0.0) & (den < kInf) & (z >= p.min) & (z <= p.max);
     if (p.has_invalid) ok &= (d != p.invalid);
     if (p.has_below) ok &= (d >= p.below);
     // Round half to even (the default rounding mode), clamp to the format's range.

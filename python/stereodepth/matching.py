@@ -649,8 +649,9 @@ def to_opencv_disparity(disparity: Any, *, min_disparity: int = 0) -> np.ndarray
 
     Returns int16 disparity x 16, rounded to the nearest sixteenth (half away from zero), with
     holes (NaN) set to OpenCV's invalid value ``(min_disparity - 1) * 16``. Raises ValueError
-    when a finite disparity does not fit (OpenCV's format holds -2048 < d < 2048), or when the
-    invalid value itself does not fit in int16.
+    when a finite disparity does not fit: at 2048 px or more, or below ``min_disparity``
+    (which OpenCV's readers, and :func:`stereodepth.from_opencv_disparity`, would take for a
+    hole); or when the invalid value itself does not fit in int16.
     """
     arr = np.asarray(disparity)
     if arr.dtype.kind != "f":
@@ -670,9 +671,15 @@ def to_opencv_disparity(disparity: Any, *, min_disparity: int = 0) -> np.ndarray
     fixed = np.trunc(scaled + np.copysign(0.5, scaled))
     if finite.any():
         lo, hi = float(fixed[finite].min()), float(fixed[finite].max())
-        if lo < info.min or hi > info.max:
+        if hi > info.max:
             raise ValueError(
-                "disparity must lie in (-2048, 2048) px to fit OpenCV's int16 x16 format, "
-                f"got values from {lo / 16} to {hi / 16}"
+                f"disparity must be below 2048 px to fit OpenCV's int16 x16 format, got {hi / 16}"
+            )
+        if lo < md * 16:
+            # OpenCV reads every value below min_disparity * 16 as a hole: such a disparity
+            # would come back as one, silently.
+            raise ValueError(
+                f"disparity must be >= min_disparity ({md}) px or NaN: OpenCV's format reads "
+                f"anything below min_disparity * 16 as a hole, got {lo / 16} px"
             )
     return np.where(finite, fixed, invalid).astype(np.int16)

@@ -67,7 +67,12 @@ def disparity_to_depth(
             d = arr.astype(np.float32)
             den = d * np.float32(o.scale) + np.float32(o.doffs_px)
             z = np.float32(k) / den
-            ok = (den > 0) & (z >= np.float32(o.min_depth_m)) & (z <= np.float32(o.max_depth_m))
+            ok = (
+                (den > 0)
+                & (den < np.inf)  # an infinite disparity is no match
+                & (z >= np.float32(o.min_depth_m))
+                & (z <= np.float32(o.max_depth_m))
+            )
             if o.invalid_value is not None:
                 ok &= d != np.float32(o.invalid_value)
             if o.invalid_below is not None:
@@ -82,11 +87,12 @@ def disparity_to_depth(
                 zf = z.astype(np.float32)
                 ok = (
                     (den > 0)
+                    & (den < np.inf)
                     & (zf >= np.float32(o.min_depth_m))
                     & (zf <= np.float32(o.max_depth_m))
                 )
             else:
-                ok = (den > 0) & (z >= o.min_depth_m) & (z <= o.max_depth_m)
+                ok = (den > 0) & (den < np.inf) & (z >= o.min_depth_m) & (z <= o.max_depth_m)
             if o.invalid_value is not None:
                 ok &= d != o.invalid_value
             if o.invalid_below is not None:
