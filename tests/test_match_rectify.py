@@ -84,12 +84,12 @@ def raw_files(tmp: Path, left: np.ndarray, right: np.ndarray) -> tuple[Path, Pat
 
 
 def check_outputs(
-    out: Path, summary: dict[str, Any], calib_path: Path, left: Path, right: Path
+    out: Path, summary: dict[str, Any], calib_path: Path, left: Path, right: Path, **read: Any
 ) -> StereoRectifier:
-    """The command's outputs against the library's steps done by hand."""
-    rect = StereoRectifier.from_calibration(
-        read_stereo_calibration(calib_path, translation_unit="mm")
-    )
+    """The command's outputs against the library's steps done by hand (``read``: the reader's
+    options, default translation_unit="mm")."""
+    read.setdefault("translation_unit", "mm")
+    rect = StereoRectifier.from_calibration(read_stereo_calibration(calib_path, **read))
     rect_l, rect_r = rect.rectify(read_image(left), read_image(right))
     h, w = rect_l.shape[:2]
     expected = block_match(rect_l, rect_r, num_disparities=default_num_disparities(w))
@@ -115,7 +115,8 @@ def check_outputs(
         "baseline_m": rig.baseline_mm / 1000.0,
         "doffs_px": rig.doffs_px,
     }
-    assert summary["calibration"] == str(calib_path)
+    second = read.get("second_path")
+    assert summary["calibration"] == str(calib_path) + ("" if second is None else f", {second}")
     assert (out / "points.ply").stat().st_size > 0
     return rect
 
@@ -177,28 +178,61 @@ def test_raw_scene_round_trip(
     assert np.median(np.abs(back[inner] - orig_l.astype(np.int16)[inner])) <= 2
 
 
-# --- bad input: one line, exit 2 ------------------------------------------------------------------
-def ros_camera_info(path: Path) -> Path:
+def ros_camera_info(
+    path: Path,
+    K: np.ndarray,
+    D: np.ndarray,
+    R: np.ndarray,
+    P: np.ndarray,
+    size: tuple[int, int],
+) -> Path:
+    """One camera as a ROS camera_info YAML file (translations in metres)."""
+
+    def matrix(name: str, a: np.ndarray) -> str:
+        a = np.atleast_2d(a)
+        data = ", ".join(repr(float(v)) for v in a.ravel())
+        return f"{name}:\n  rows: {a.shape[0]}\n  cols: {a.shape[1]}\n  data: [{data}]\n"
+
     path.write_text(
-        "image_width: 96\nimage_height: 64\ncamera_name: left\n"
-        "camera_matrix:\n  rows: 3\n  cols: 3\n  data: [96.0, 0, 47.5, 0, 96.0, 31.5, 0, 0, 1]\n"
-        "distortion_model: plumb_bob\n"
-        "distortion_coefficients:\n  rows: 1\n  cols: 5\n  data: [0, 0, 0, 0, 0]\n"
-        "rectification_matrix:\n  rows: 3\n  cols: 3\n  data: [1, 0, 0, 0, 1, 0, 0, 0, 1]\n"
-        "projection_matrix:\n  rows: 3\n  cols: 4\n"
-        "  data: [96.0, 0, 47.5, 0, 0, 96.0, 31.5, 0, 0, 0, 1, 0]\n"
+        f"image_width: {size[0]}\nimage_height: {size[1]}\ncamera_name: {path.stem}\n"
+        + matrix("camera_matrix", K)
+        + "distortion_model: plumb_bob\n"
+        + matrix("distortion_coefficients", D)
+        + matrix("rectification_matrix", R)
+        + matrix("projection_matrix", P)
     )
     return path
+
+
+def test_ros_camera_info_pair(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    pytest.importorskip("yaml", reason="YAML calibrations need PyYAML (the calib extra)")
+    s = sample_pair(128, 80)
+    left, right, c = raw_files(tmp_path, s.left, s.right)
+    ros_l = ros_camera_info(tmp_path / "left.yaml", c.K1, c.D1, c.R1, c.P1, c.image_size)
+    ros_r = ros_camera_info(tmp_path / "right.yaml", c.K2, c.D2, c.R2, c.P2, c.image_size)
+    out = tmp_path / "out"
+    code, text, err = run(
+        capsys, left, right, "--calib", ros_l, "--calib-right", ros_r, "-o", f"{out}/",
+        "--write-rectified", "--ply", "--no-preview", "--json",
+    )  # fmt: skip
+    assert code == 0, err
+    rect = check_outputs(
+        out, json.loads(text), ros_l, left, right, second_path=ros_r, translation_unit="m"
+    )
+    assert rect.rig.baseline_mm == pytest.approx(100.0, rel=1e-9)
+
+
+# --- bad input: one line, exit 2 ------------------------------------------------------------------
 
 
 def test_bad_input_one_line_exit_2(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     pytest.importorskip("yaml", reason="YAML calibrations need PyYAML (the calib extra)")
     s = sample_pair(96, 64)
-    left, right, calib = raw_files(tmp_path, s.left, s.right)
-    yaml = write_opencv_yaml(tmp_path / "stereo.yml", calib, stored=False)
-    vertical = calib.__class__(**{**calib.__dict__, "R": np.eye(3), "T": np.array([0, -0.1, 0])})
+    left, right, c = raw_files(tmp_path, s.left, s.right)
+    yaml = write_opencv_yaml(tmp_path / "stereo.yml", c, stored=False)
+    vertical = c.__class__(**{**c.__dict__, "R": np.eye(3), "T": np.array([0, -0.1, 0])})
     vertical_yaml = write_opencv_yaml(tmp_path / "vertical.yml", vertical, stored=False)
-    ros = ros_camera_info(tmp_path / "left.yaml")
+    ros = ros_camera_info(tmp_path / "left.yaml", c.K1, c.D1, c.R1, c.P1, c.image_size)
     (tmp_path / "garbage.yml").write_text("stereo: [1, 2\n")
     (tmp_path / "partial.yml").write_text("%YAML:1.0\n---\nM1: [1, 2, 3]\n")
     middlebury = tmp_path / "calib.txt"
