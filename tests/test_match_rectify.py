@@ -222,6 +222,44 @@ def test_ros_camera_info_pair(tmp_path: Path, capsys: pytest.CaptureFixture[str]
     assert rect.rig.baseline_mm == pytest.approx(100.0, rel=1e-9)
 
 
+def kalibr_camchain(path: Path, calib: Any) -> Path:
+    """The calibration as a Kalibr camchain (pinhole, radtan k1 k2 r1 r2; metres)."""
+
+    def numbers(a: Any) -> str:
+        return "[" + ", ".join(repr(float(v)) for v in np.ravel(a)) + "]"
+
+    pose = np.eye(4)
+    pose[:3, :3], pose[:3, 3] = calib.R, calib.T
+    text = ""
+    for n, (K, D) in enumerate(((calib.K1, calib.D1), (calib.K2, calib.D2))):
+        assert D[4] == 0  # radtan has no k3
+        text += (
+            f"cam{n}:\n  camera_model: pinhole\n"
+            f"  intrinsics: {numbers([K[0, 0], K[1, 1], K[0, 2], K[1, 2]])}\n"
+            f"  distortion_model: radtan\n  distortion_coeffs: {numbers(D[:4])}\n"
+            f"  resolution: [{calib.image_size[0]}, {calib.image_size[1]}]\n"
+        )
+        if n == 1:
+            text += "  T_cn_cnm1:\n" + "".join(f"  - {numbers(row)}\n" for row in pose)
+    path.write_text(text)
+    return path
+
+
+def test_kalibr_camchain(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    pytest.importorskip("yaml", reason="YAML calibrations need PyYAML (the calib extra)")
+    s = sample_pair(128, 80)
+    left, right, c = raw_files(tmp_path, s.left, s.right)
+    chain = kalibr_camchain(tmp_path / "camchain.yaml", c)
+    out = tmp_path / "out"
+    code, text, err = run(
+        capsys, left, right, "--calib", chain, "-o", f"{out}/",
+        "--write-rectified", "--ply", "--no-preview", "--json",
+    )  # fmt: skip
+    assert code == 0, err
+    rect = check_outputs(out, json.loads(text), chain, left, right, translation_unit="m")
+    assert rect.rig.baseline_mm == pytest.approx(100.0, rel=1e-9)
+
+
 # --- bad input: one line, exit 2 ------------------------------------------------------------------
 
 
