@@ -10,8 +10,26 @@ metres, NaN where unknown; default), ``pfm``, or ``png16`` (uint16 millimetres, 
 The previews are the colourised maps pixel for pixel with a colour bar and unit under them
 (:func:`stereodepth.save_colorized`); they need the ``plot`` extra (``--no-preview`` skips them).
 
-Depth needs a rig: ``--calib FILE`` (Middlebury calib.txt or KITTI calib) or ``--focal-px`` and
-``--baseline-mm`` (with ``--doffs-px``). Without one only the disparity is written.
+Depth needs a rig: ``--calib FILE`` or ``--focal-px`` and ``--baseline-mm`` (with
+``--doffs-px``). Without one only the disparity is written.
+
+The rule for ``--calib``: the file's format says whether the pair is already rectified.
+
+- A Middlebury ``calib.txt`` or a KITTI calibration file describes a rectified pair: LEFT and
+  RIGHT are matched as they are, with the rig the file gives (and Middlebury's ``ndisp``).
+- Any other calibration :func:`stereodepth.calib.read_stereo_calibration` reads (OpenCV
+  FileStorage YAML/XML, Kalibr camchain, a ROS camera_info file with ``--calib-right FILE``
+  for the right camera; ``--translation-unit`` the unit of its translations, default m)
+  describes a raw pair, which is rectified automatically before matching:
+  :meth:`stereodepth.StereoRectifier.from_calibration` (the file's own R1, R2, P1, P2 where
+  it holds them, else Bouguet's method with alpha -1), then ``rectify(LEFT, RIGHT)``. The
+  rig is ``rectifier.rig`` (focal_px, baseline, doffs) with cx, cy from P1, so the disparity,
+  depth, previews and point cloud are all of the rectified left camera (its frame is the raw
+  left camera's rotated by R1, ``x_rect = R1 @ x_raw``), at the rectified size. The summary
+  says ``rectified: true`` with ``rectified_size`` ``[width, height]``; ``--write-rectified``
+  also writes the rectified pair as ``left-rectified.png`` and ``right-rectified.png``.
+  ``--no-rectify`` refuses to rectify: a raw calibration is then an error. Rigs whose
+  rectified baseline is vertical are refused (the matchers search along rows).
 """
 
 from __future__ import annotations
@@ -19,11 +37,15 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import re
 import sys
+import time
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+
+from .calib import TRANSLATION_UNITS
 
 __all__ = ["output_paths", "register", "run"]
 
@@ -41,9 +63,12 @@ def register(subparsers: Any) -> None:
         "match",
         help="one stereo pair to disparity, depth, colour previews and a point cloud",
         description=(
-            "Matches one rectified stereo pair and writes the disparity, the depth (with a "
+            "Matches one stereo pair and writes the disparity, the depth (with a "
             "calibration), colour previews with colour bars and optionally a PLY point cloud; "
-            "prints a summary (size, search range, density, depth range, time)."
+            "prints a summary (size, search range, density, depth range, time). The pair is "
+            "matched as given with a Middlebury or KITTI --calib (rectified pairs), and "
+            "rectified first with any other calibration (a raw pair: OpenCV, Kalibr, ROS); "
+            "then every output is of the rectified left camera, in its frame."
         ),
     )
     p.add_argument("left", metavar="LEFT", help="the left image (PNG, JPEG, ...)")
@@ -67,7 +92,29 @@ def register(subparsers: Any) -> None:
     m.add_argument("--cost", choices=("census", "sad"), help="block matcher's cost (census)")
     m.add_argument("--threads", type=int, metavar="N", help="threads (default: every core)")
     r = p.add_argument_group("the rig (for depth)")
-    r.add_argument("--calib", metavar="FILE", help="Middlebury calib.txt or KITTI calib file")
+    r.add_argument(
+        "--calib",
+        metavar="FILE",
+        help="Middlebury calib.txt or KITTI calib (rectified pairs: matched as given), or a raw "
+        "calibration (OpenCV FileStorage YAML/XML, Kalibr camchain, ROS camera_info): the pair "
+        "is rectified first and the depth is in the rectified left camera's frame",
+    )
+    r.add_argument(
+        "--calib-right",
+        metavar="FILE",
+        help="the right camera's ROS camera_info file (--calib is the left one's)",
+    )
+    r.add_argument(
+        "--translation-unit",
+        choices=tuple(TRANSLATION_UNITS),
+        default="m",
+        help="unit of the translations in a raw --calib file (default m)",
+    )
+    r.add_argument(
+        "--no-rectify",
+        action="store_true",
+        help="never rectify: a --calib file of a raw (unrectified) pair is an error",
+    )
     r.add_argument("--focal-px", type=float, metavar="PX", help="focal length in pixels")
     r.add_argument("--baseline-mm", type=float, metavar="MM", help="baseline in millimetres")
     r.add_argument(
@@ -95,6 +142,12 @@ def register(subparsers: Any) -> None:
         "--cmap", default="turbo", metavar="NAME", help="colour map of the previews (turbo)"
     )
     o.add_argument("--ply", action="store_true", help="also write the point cloud as points.ply")
+    o.add_argument(
+        "--write-rectified",
+        action="store_true",
+        help="with a raw --calib: also write the rectified pair as left-rectified.png and "
+        "right-rectified.png",
+    )
     o.add_argument("--json", action="store_true", help="print the summary as one JSON object")
     p.set_defaults(func=run)
 
@@ -118,14 +171,106 @@ def output_paths(out: str, names: list[str]) -> dict[str, Path]:
     return {n: Path(out + n) for n in names}
 
 
-def _rig(args: argparse.Namespace) -> tuple[dict[str, Any] | None, int | None, str | None]:
-    """(focal_px, baseline_m, doffs_px, cx_px, cy_px) or None; ndisp; the calibration's source."""
+# The formats of rectified pairs, told by content as read_stereo_calibration tells them.
+_MIDDLEBURY_RE = re.compile(r"^[ \t]*cam0[ \t]*=", flags=re.MULTILINE)
+_KITTI_RE = re.compile(r"^[ \t]*P(_rect_0)?\d[ \t]*:[ \t]*[-+.\d]", flags=re.MULTILINE)
+
+
+def _is_rectified_format(path: Path) -> bool:
+    """Whether ``path`` is a Middlebury calib.txt or a KITTI calibration file (pairs that are
+    already rectified), by its content."""
+    text = path.read_text(errors="replace")
+    return bool(_MIDDLEBURY_RE.search(text) or _KITTI_RE.search(text))
+
+
+def _cli_names(message: str) -> str:
+    """A reader's message with its keyword names replaced by this command's options."""
+    return message.replace("second_path", "--calib-right").replace(
+        "translation_unit", "--translation-unit"
+    )
+
+
+def _raw_rectifier(args: argparse.Namespace) -> Any:
+    """The StereoRectifier of a raw --calib file (with --calib-right, --translation-unit)."""
+    from .calib import read_stereo_calibration
+    from .rectify import StereoRectifier
+
+    try:
+        calib = read_stereo_calibration(
+            args.calib, second_path=args.calib_right, translation_unit=args.translation_unit
+        )
+    except (OSError, ValueError, ImportError) as exc:
+        raise _Usage(f"--calib: {_cli_names(str(exc))}") from None
+    if calib.rectified:  # not from the raw formats today; refuse rather than guess
+        raise _Usage(f"--calib: {args.calib} is read as a rectified pair of unknown format")
+    if args.no_rectify:
+        raise _Usage(
+            f"--calib: {args.calib} is the calibration of a raw (unrectified) pair and "
+            "--no-rectify forbids rectifying it: drop --no-rectify, or give a Middlebury or "
+            "KITTI calibration of a rectified pair"
+        )
+    if args.threads is not None and args.threads < 0:
+        raise _Usage(f"--threads must be an integer >= 0, got {args.threads}")
+    try:
+        rectifier = StereoRectifier.from_calibration(calib, threads=args.threads)
+    except (TypeError, ValueError) as exc:
+        raise _Usage(f"--calib: {args.calib}: cannot rectify: {exc}") from None
+    if rectifier.vertical:
+        raise _Usage(
+            f"--calib: {args.calib} is a vertical rig (the rectified baseline is along y), "
+            "and the matchers search along rows"
+        )
+    return rectifier
+
+
+def _rig(
+    args: argparse.Namespace,
+) -> tuple[dict[str, Any] | None, int | None, str | None, Any]:
+    """(focal_px, baseline_m, doffs_px, cx_px, cy_px) or None; ndisp; the calibration's source;
+    the StereoRectifier of a raw calibration, else None."""
     given = [
         n for n, v in (("--focal-px", args.focal_px), ("--baseline-mm", args.baseline_mm)) if v
     ]
+    calib_only = (
+        ("--calib-right", args.calib_right is not None),
+        ("--translation-unit", args.translation_unit != "m"),
+        ("--write-rectified", args.write_rectified),
+    )
+    if args.calib is None:
+        for flag, used in (*calib_only, ("--no-rectify", args.no_rectify)):
+            if used:
+                raise _Usage(f"{flag} goes with --calib FILE")
     if args.calib is not None:
         if given or args.doffs_px is not None:
             raise _Usage("give either --calib or --focal-px and --baseline-mm, not both")
+        path = Path(args.calib)
+        if not path.is_file():
+            raise _Usage(f"--calib: calibration file not found: {args.calib}")
+        try:
+            rectified = _is_rectified_format(path)
+        except OSError as exc:
+            raise _Usage(f"--calib: cannot read {args.calib}: {exc.strerror}") from None
+        if not rectified:
+            rectifier = _raw_rectifier(args)
+            r = rectifier.rig
+            P1 = rectifier.P1
+            rig: dict[str, Any] = {
+                "focal_px": float(r.focal_px),
+                "baseline_m": float(r.baseline_mm) / 1000.0,
+                "doffs_px": float(r.doffs_px),
+                "cx_px": float(P1[0, 2]),
+                "cy_px": float(P1[1, 2]),
+            }
+            source = str(args.calib)
+            if args.calib_right is not None:
+                source += f", {args.calib_right}"
+            return rig, None, source, rectifier
+        for flag, used in calib_only:
+            if used:
+                raise _Usage(
+                    f"{flag} does not apply to {args.calib}, a Middlebury or KITTI calibration "
+                    "of a pair that is already rectified"
+                )
         from .match_pair import read_calibration_file
 
         try:
@@ -139,11 +284,11 @@ def _rig(args: argparse.Namespace) -> tuple[dict[str, Any] | None, int | None, s
             "cx_px": c.cx_px,
             "cy_px": c.cy_px,
         }
-        return rig, c.num_disparities, str(args.calib)
+        return rig, c.num_disparities, str(args.calib), None
     if args.focal_px is None and args.baseline_mm is None:
         if args.doffs_px is not None:
             raise _Usage("--doffs-px goes with --focal-px and --baseline-mm")
-        return None, None, None
+        return None, None, None, None
     if args.focal_px is None or args.baseline_mm is None:
         missing = "--baseline-mm" if args.focal_px is not None else "--focal-px"
         raise _Usage(f"{missing} is required with {given[0]}")
@@ -160,7 +305,7 @@ def _rig(args: argparse.Namespace) -> tuple[dict[str, Any] | None, int | None, s
         "cx_px": None,
         "cy_px": None,
     }
-    return rig, None, "command line"
+    return rig, None, "command line", None
 
 
 def _read(name: str, path: str) -> np.ndarray:
@@ -175,9 +320,9 @@ def _read(name: str, path: str) -> np.ndarray:
 def run(args: argparse.Namespace) -> int:
     """Matches the pair, writes the outputs, prints the summary; returns the exit status."""
     from . import io
-    from .match_pair import match_pair
+    from .match_pair import match_pair, prepare_pair
 
-    rig, ndisp, source = _rig(args)
+    rig, ndisp, source, rectifier = _rig(args)
     if args.threads is not None and args.threads < 0:
         raise _Usage(f"--threads must be an integer >= 0, got {args.threads}")
     left_img = _read("LEFT", args.left)
@@ -187,6 +332,13 @@ def run(args: argparse.Namespace) -> int:
             f"LEFT and RIGHT must have the same size, got {left_img.shape[1]}x"
             f"{left_img.shape[0]} and {right_img.shape[1]}x{right_img.shape[0]} px"
         )
+    if rectifier is not None:
+        cw, ch = rectifier.image_size
+        if left_img.shape[:2] != (ch, cw):
+            raise _Usage(
+                f"LEFT and RIGHT must have the size of the calibration in --calib, {cw}x{ch} "
+                f"px, got {left_img.shape[1]}x{left_img.shape[0]} px"
+            )
     want_preview = not args.no_preview
     if want_preview:
         from .colormap import colormap_lut
@@ -203,9 +355,22 @@ def run(args: argparse.Namespace) -> int:
         if rig is None:
             raise _Usage("--ply needs a rig: give --calib or --focal-px and --baseline-mm")
         names["ply"] = "points.ply"
+    if args.write_rectified:
+        names["left_rectified"] = "left-rectified.png"
+        names["right_rectified"] = "right-rectified.png"
     paths = output_paths(args.out, list(names.values()))
     out = {key: paths[name] for key, name in names.items()}
 
+    rectify_s = None
+    if rectifier is not None:
+        # The pair as the rectified cameras see it; everything below is in their frame.
+        left_img, right_img = prepare_pair(left_img, right_img)
+        t0 = time.perf_counter()
+        left_img, right_img = rectifier.rectify(left_img, right_img)
+        rectify_s = time.perf_counter() - t0
+        if args.write_rectified:
+            _write_png(out["left_rectified"], left_img)
+            _write_png(out["right_rectified"], right_img)
     result = match_pair(
         left_img,
         right_img,
@@ -270,14 +435,32 @@ def run(args: argparse.Namespace) -> int:
             "left": str(args.left),
             "right": str(args.right),
             "calibration": source,
+            "rectified": rectifier is not None,
             "outputs": {k: str(v) for k, v in out.items()},
         }
     )
+    if rectifier is not None:
+        summary["raw_size"] = list(rectifier.image_size)
+        summary["rectified_size"] = list(rectifier.output_size)
+        summary["rectify_time_s"] = rectify_s
     if args.json:
         print(json.dumps(summary, indent=2, allow_nan=False))
     else:
         _print(summary, left_img)
     return 0
+
+
+def _write_png(path: Path, image: np.ndarray) -> None:
+    """An 8-bit grey or RGB, or a 16-bit grey image as a PNG, atomically."""
+    from . import io
+
+    if image.dtype == np.uint16:
+        io.write_png16(path, image)
+        return
+    from PIL import Image
+
+    with io.atomic_write(path) as f:
+        Image.fromarray(np.ascontiguousarray(image)).save(f, format="PNG")
 
 
 def _print(s: dict[str, Any], left: np.ndarray) -> None:
@@ -302,6 +485,15 @@ def _print(s: dict[str, Any], left: np.ndarray) -> None:
         zr = s["depth_range_m"]
         rows.append(("depth", "none" if zr is None else f"{zr[0]:.4g} to {zr[1]:.4g} m"))
         rows.append(("rig", f"from {s['calibration']}"))
+    if s["rectified"]:
+        (rw, rh), (ow, oh) = s["raw_size"], s["rectified_size"]
+        rows.append(
+            (
+                "rectified",
+                f"yes, {rw}x{rh} to {ow}x{oh} px in {s['rectify_time_s']:.3g} s: "
+                "disparity and depth of the rectified left camera",
+            )
+        )
     for key, path in s["outputs"].items():
         rows.append((key.replace("_", " "), path))
     width = max(len(k) for k, _ in rows)

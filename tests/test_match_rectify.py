@@ -1,0 +1,306 @@
+"""``stereodepth match --calib RAW.yaml``: a calibration of a raw (unrectified) pair makes the
+command rectify the pair before matching (OpenCV FileStorage YAML written by cv2.FileStorage,
+skipped without OpenCV). The raw pairs come from the generator of test_rectify_roundtrip.py
+(``make_raw_pair``: a known lens distortion and small rotations applied to a rectified pair),
+on the package's sample pair and on a shared scene (skipped when absent). The disparity must
+be block_match of ``StereoRectifier.rectify`` of the raw pair and the depth
+``disparity_to_depth`` with ``rectifier.rig``, bit for bit; plus the bad inputs: one line,
+exit status 2."""
+
+from __future__ import annotations
+
+import importlib.util
+import json
+from pathlib import Path
+from types import ModuleType
+from typing import Any
+
+import numpy as np
+import pytest
+
+pytest.importorskip("PIL", reason="reading images needs Pillow (the batch extra)")
+
+from PIL import Image
+
+from stereodepth import block_match, disparity_to_depth
+from stereodepth.calib import read_stereo_calibration
+from stereodepth.cli import main
+from stereodepth.io import read_image, read_pfm
+from stereodepth.match_pair import default_num_disparities
+from stereodepth.rectify import StereoRectifier
+from stereodepth.sample import sample_pair
+
+
+def generator() -> ModuleType:
+    """tests/test_rectify_roundtrip.py as a module, for its documented ``make_raw_pair``
+    (pytest imports test files with importlib, so they cannot import each other by name)."""
+    path = Path(__file__).with_name("test_rectify_roundtrip.py")
+    spec = importlib.util.spec_from_file_location("_rectify_roundtrip_generator", path)
+    assert spec is not None and spec.loader is not None
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def write_opencv_yaml(path: Path, calib: Any, *, stored: bool) -> Path:
+    """The calibration as cv2.FileStorage YAML, translations in millimetres (so the command
+    needs ``--translation-unit mm``); with the generator's R1, R2, P1, P2 when ``stored``."""
+    cv2 = pytest.importorskip("cv2", reason="opencv-python-headless is not installed")
+    mm = np.diag([1.0, 1.0, 1.0, 1000.0])
+    fields = {
+        "M1": calib.K1,
+        "D1": calib.D1.reshape(1, -1),
+        "M2": calib.K2,
+        "D2": calib.D2.reshape(1, -1),
+        "R": calib.R,
+        "T": 1000.0 * calib.T.reshape(3, 1),
+    }
+    if stored:
+        fields.update({"R1": calib.R1, "R2": calib.R2, "P1": calib.P1, "P2": calib.P2 @ mm})
+    fs = cv2.FileStorage(str(path), cv2.FILE_STORAGE_WRITE)
+    for key, value in fields.items():
+        fs.write(key, np.asarray(value, dtype=np.float64))
+    fs.write("imageSize", tuple(int(v) for v in calib.image_size))
+    fs.release()
+    return path
+
+
+def run(capsys: pytest.CaptureFixture[str], *args: Any) -> tuple[int, str, str]:
+    code = main(["match", *map(str, args)])
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+def same(a: np.ndarray, b: np.ndarray) -> bool:
+    """Equal bit for bit, NaN where NaN."""
+    return a.dtype == b.dtype and a.shape == b.shape and a.tobytes() == b.tobytes()
+
+
+def raw_files(tmp: Path, left: np.ndarray, right: np.ndarray) -> tuple[Path, Path, Any]:
+    raw_l, raw_r, calib, _ = generator().make_raw_pair(left, right)
+    Image.fromarray(raw_l).save(tmp / "raw-left.png")
+    Image.fromarray(raw_r).save(tmp / "raw-right.png")
+    return tmp / "raw-left.png", tmp / "raw-right.png", calib
+
+
+def check_outputs(
+    out: Path, summary: dict[str, Any], calib_path: Path, left: Path, right: Path, **read: Any
+) -> StereoRectifier:
+    """The command's outputs against the library's steps done by hand (``read``: the reader's
+    options, default translation_unit="mm")."""
+    read.setdefault("translation_unit", "mm")
+    rect = StereoRectifier.from_calibration(read_stereo_calibration(calib_path, **read))
+    rect_l, rect_r = rect.rectify(read_image(left), read_image(right))
+    h, w = rect_l.shape[:2]
+    expected = block_match(rect_l, rect_r, num_disparities=default_num_disparities(w))
+    disparity = read_pfm(out / "disparity.pfm")
+    assert same(disparity, expected)
+    rig = rect.rig
+    depth = np.load(out / "depth.npy")
+    assert same(
+        depth,
+        disparity_to_depth(
+            disparity,
+            focal_px=rig.focal_px,
+            baseline_m=rig.baseline_mm / 1000.0,
+            doffs_px=rig.doffs_px,
+        ),
+    )
+    assert same(read_image(out / "left-rectified.png"), rect_l)
+    assert same(read_image(out / "right-rectified.png"), rect_r)
+    assert summary["rectified"] is True
+    assert summary["rectified_size"] == [w, h] and summary["raw_size"] == [w, h]
+    assert summary["rig"] == {
+        "focal_px": rig.focal_px,
+        "baseline_m": rig.baseline_mm / 1000.0,
+        "doffs_px": rig.doffs_px,
+    }
+    second = read.get("second_path")
+    assert summary["calibration"] == str(calib_path) + ("" if second is None else f", {second}")
+    assert (out / "points.ply").stat().st_size > 0
+    return rect
+
+
+@pytest.mark.parametrize("stored", [True, False], ids=["stored-R1-P1", "bouguet"])
+def test_raw_yaml_rectifies_then_matches(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], stored: bool
+) -> None:
+    s = sample_pair(160, 96)
+    left, right, calib = raw_files(tmp_path, s.left, s.right)
+    yaml = write_opencv_yaml(tmp_path / "stereo.yml", calib, stored=stored)
+    out = tmp_path / "out"
+    code, text, err = run(
+        capsys, left, right, "--calib", yaml, "--translation-unit", "mm", "-o", f"{out}/",
+        "--write-rectified", "--ply", "--no-preview", "--json",
+    )  # fmt: skip
+    assert code == 0, err
+    rect = check_outputs(out, json.loads(text), yaml, left, right)
+    # The generator's baseline, 0.1 m, read in millimetres.
+    assert rect.rig.baseline_mm == pytest.approx(100.0, rel=1e-9)
+    if stored:  # the file's own transforms are used as they are
+        np.testing.assert_array_equal(rect.P1, calib.P1)
+
+
+def test_text_summary_says_rectified(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    s = sample_pair(96, 64)
+    left, right, calib = raw_files(tmp_path, s.left, s.right)
+    yaml = write_opencv_yaml(tmp_path / "stereo.yml", calib, stored=True)
+    code, text, err = run(
+        capsys, left, right, "--calib", yaml, "--translation-unit", "mm", "-o",
+        f"{tmp_path}/p-", "--no-preview",
+    )  # fmt: skip
+    assert code == 0, err
+    row = next(line for line in text.splitlines() if line.startswith("rectified"))
+    assert "96x64 to 96x64 px" in row and "rectified left camera" in row
+    assert (tmp_path / "p-depth.npy").exists() and not (tmp_path / "p-left-rectified.png").exists()
+
+
+@pytest.mark.data
+def test_raw_scene_round_trip(
+    stereo_data_dir: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    scene = stereo_data_dir / "mb2003-teddy"
+    if not scene.is_dir():
+        pytest.skip("mb2003-teddy not in the shared data")
+    orig_l, orig_r = read_image(scene / "left.png"), read_image(scene / "right.png")
+    left, right, calib = raw_files(tmp_path, orig_l, orig_r)
+    yaml = write_opencv_yaml(tmp_path / "stereo.yml", calib, stored=True)
+    out = tmp_path / "out"
+    code, text, err = run(
+        capsys, left, right, "--calib", yaml, "--translation-unit", "mm", "-o", f"{out}/",
+        "--write-rectified", "--ply", "--no-preview", "--json",
+    )  # fmt: skip
+    assert code == 0, err
+    check_outputs(out, json.loads(text), yaml, left, right)
+    # Rectified back, the scene is itself again (up to resampling, away from the borders).
+    back = read_image(out / "left-rectified.png").astype(np.int16)
+    inner = (slice(20, -20), slice(20, -20))
+    assert np.median(np.abs(back[inner] - orig_l.astype(np.int16)[inner])) <= 2
+
+
+def ros_camera_info(
+    path: Path,
+    K: np.ndarray,
+    D: np.ndarray,
+    R: np.ndarray,
+    P: np.ndarray,
+    size: tuple[int, int],
+) -> Path:
+    """One camera as a ROS camera_info YAML file (translations in metres)."""
+
+    def matrix(name: str, a: np.ndarray) -> str:
+        a = np.atleast_2d(a)
+        data = ", ".join(repr(float(v)) for v in a.ravel())
+        return f"{name}:\n  rows: {a.shape[0]}\n  cols: {a.shape[1]}\n  data: [{data}]\n"
+
+    path.write_text(
+        f"image_width: {size[0]}\nimage_height: {size[1]}\ncamera_name: {path.stem}\n"
+        + matrix("camera_matrix", K)
+        + "distortion_model: plumb_bob\n"
+        + matrix("distortion_coefficients", D)
+        + matrix("rectification_matrix", R)
+        + matrix("projection_matrix", P)
+    )
+    return path
+
+
+def test_ros_camera_info_pair(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    pytest.importorskip("yaml", reason="YAML calibrations need PyYAML (the calib extra)")
+    s = sample_pair(128, 80)
+    left, right, c = raw_files(tmp_path, s.left, s.right)
+    ros_l = ros_camera_info(tmp_path / "left.yaml", c.K1, c.D1, c.R1, c.P1, c.image_size)
+    ros_r = ros_camera_info(tmp_path / "right.yaml", c.K2, c.D2, c.R2, c.P2, c.image_size)
+    out = tmp_path / "out"
+    code, text, err = run(
+        capsys, left, right, "--calib", ros_l, "--calib-right", ros_r, "-o", f"{out}/",
+        "--write-rectified", "--ply", "--no-preview", "--json",
+    )  # fmt: skip
+    assert code == 0, err
+    rect = check_outputs(
+        out, json.loads(text), ros_l, left, right, second_path=ros_r, translation_unit="m"
+    )
+    assert rect.rig.baseline_mm == pytest.approx(100.0, rel=1e-9)
+
+
+def kalibr_camchain(path: Path, calib: Any) -> Path:
+    """The calibration as a Kalibr camchain (pinhole, radtan k1 k2 r1 r2; metres)."""
+
+    def numbers(a: Any) -> str:
+        return "[" + ", ".join(repr(float(v)) for v in np.ravel(a)) + "]"
+
+    pose = np.eye(4)
+    pose[:3, :3], pose[:3, 3] = calib.R, calib.T
+    text = ""
+    for n, (K, D) in enumerate(((calib.K1, calib.D1), (calib.K2, calib.D2))):
+        assert D[4] == 0  # radtan has no k3
+        text += (
+            f"cam{n}:\n  camera_model: pinhole\n"
+            f"  intrinsics: {numbers([K[0, 0], K[1, 1], K[0, 2], K[1, 2]])}\n"
+            f"  distortion_model: radtan\n  distortion_coeffs: {numbers(D[:4])}\n"
+            f"  resolution: [{calib.image_size[0]}, {calib.image_size[1]}]\n"
+        )
+        if n == 1:
+            text += "  T_cn_cnm1:\n" + "".join(f"  - {numbers(row)}\n" for row in pose)
+    path.write_text(text)
+    return path
+
+
+def test_kalibr_camchain(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    pytest.importorskip("yaml", reason="YAML calibrations need PyYAML (the calib extra)")
+    s = sample_pair(128, 80)
+    left, right, c = raw_files(tmp_path, s.left, s.right)
+    chain = kalibr_camchain(tmp_path / "camchain.yaml", c)
+    out = tmp_path / "out"
+    code, text, err = run(
+        capsys, left, right, "--calib", chain, "-o", f"{out}/",
+        "--write-rectified", "--ply", "--no-preview", "--json",
+    )  # fmt: skip
+    assert code == 0, err
+    rect = check_outputs(out, json.loads(text), chain, left, right, translation_unit="m")
+    assert rect.rig.baseline_mm == pytest.approx(100.0, rel=1e-9)
+
+
+# --- bad input: one line, exit 2 ------------------------------------------------------------------
+
+
+def test_bad_input_one_line_exit_2(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    pytest.importorskip("yaml", reason="YAML calibrations need PyYAML (the calib extra)")
+    s = sample_pair(96, 64)
+    left, right, c = raw_files(tmp_path, s.left, s.right)
+    yaml = write_opencv_yaml(tmp_path / "stereo.yml", c, stored=False)
+    vertical = c.__class__(**{**c.__dict__, "R": np.eye(3), "T": np.array([0, -0.1, 0])})
+    vertical_yaml = write_opencv_yaml(tmp_path / "vertical.yml", vertical, stored=False)
+    ros = ros_camera_info(tmp_path / "left.yaml", c.K1, c.D1, c.R1, c.P1, c.image_size)
+    (tmp_path / "garbage.yml").write_text("stereo: [1, 2\n")
+    (tmp_path / "partial.yml").write_text("%YAML:1.0\n---\nM1: [1, 2, 3]\n")
+    middlebury = tmp_path / "calib.txt"
+    middlebury.write_text(
+        "cam0=[96 0 47.5; 0 96 31.5; 0 0 1]\ncam1=[96 0 47.5; 0 96 31.5; 0 0 1]\n"
+        "doffs=0\nbaseline=100\nwidth=96\nheight=64\n"
+    )
+    Image.fromarray(np.zeros((48, 80), np.uint8)).save(tmp_path / "small.png")
+    small = tmp_path / "small.png"
+    cases: list[tuple[list[Any], str]] = [
+        (["--calib", yaml, "--no-rectify"], "--no-rectify forbids rectifying it"),
+        (["--calib", ros], "pass the right camera's file as --calib-right"),
+        (["--calib", tmp_path / "garbage.yml"], "not a calibration file this reader knows"),
+        (["--calib", tmp_path / "partial.yml"], "partial.yml"),
+        (["--calib", yaml, "--translation-unit", "mm", "--focal-px", "9"], "not both"),
+        (["--calib", vertical_yaml], "vertical rig"),
+        (["--calib", middlebury, "--calib-right", ros], "--calib-right does not apply"),
+        (["--calib", middlebury, "--write-rectified"], "--write-rectified does not apply"),
+        (["--calib", middlebury, "--translation-unit", "mm"], "--translation-unit does not"),
+        (["--no-rectify"], "--no-rectify goes with --calib FILE"),
+        (["--calib-right", ros], "--calib-right goes with --calib FILE"),
+    ]
+    for args, message in cases:
+        code, out, err = run(capsys, left, right, *args)
+        assert code == 2, (args, err)
+        assert out == ""
+        lines = err.strip().splitlines()
+        assert len(lines) == 1 and lines[0].startswith("stereodepth match: error: "), err
+        assert message in lines[0], (message, err)
+        assert "Traceback" not in err
+    code, out, err = run(capsys, small, small, "--calib", yaml, "-o", f"{tmp_path}/x-")
+    assert code == 2 and "size of the calibration in --calib, 96x64 px, got 80x48" in err, err
+    assert not list(tmp_path.glob("x-*")) and not list(Path.cwd().glob("disparity*"))
