@@ -905,3 +905,14 @@ def test_unknown_formats_and_keywords(tmp_path: Path) -> None:
     c = read_stereo_calibration(write(tmp_path / "plain.yml", nested), translation_unit="mm")
     np.testing.assert_allclose(c.R, R, atol=1e-8)
     np.testing.assert_array_equal(c.T, T_MM / 1000)
+
+
+def test_rectified_format_tells_rectified_files_from_raw_ones(tmp_path: Path) -> None:
+    kitti = write(tmp_path / "k.txt", kitti_2012())
+    mb = write(tmp_path / "calib.txt", "cam0=[700 0 300; 0 700 200; 0 0 1]\r\nbaseline=100\r\n")
+    raw = write(tmp_path / "s.yaml", "%YAML:1.0\n---\nR: !!opencv-matrix\n")
+    assert sc.rectified_format(kitti) == "kitti"
+    assert sc.rectified_format(mb) == "middlebury"
+    assert sc.rectified_format(raw) is None
+    with pytest.raises(FileNotFoundError, match="calibration file not found"):
+        sc.rectified_format(tmp_path / "missing.txt")

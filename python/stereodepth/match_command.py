@@ -37,7 +37,6 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import re
 import sys
 import time
 from pathlib import Path
@@ -171,18 +170,6 @@ def output_paths(out: str, names: list[str]) -> dict[str, Path]:
     return {n: Path(out + n) for n in names}
 
 
-# The formats of rectified pairs, told by content as read_stereo_calibration tells them.
-_MIDDLEBURY_RE = re.compile(r"^[ \t]*cam0[ \t]*=", flags=re.MULTILINE)
-_KITTI_RE = re.compile(r"^[ \t]*P(_rect_0)?\d[ \t]*:[ \t]*[-+.\d]", flags=re.MULTILINE)
-
-
-def _is_rectified_format(path: Path) -> bool:
-    """Whether ``path`` is a Middlebury calib.txt or a KITTI calibration file (pairs that are
-    already rectified), by its content."""
-    text = path.read_text(errors="replace")
-    return bool(_MIDDLEBURY_RE.search(text) or _KITTI_RE.search(text))
-
-
 def _cli_names(message: str) -> str:
     """A reader's message with its keyword names replaced by this command's options."""
     return message.replace("second_path", "--calib-right").replace(
@@ -246,10 +233,14 @@ def _rig(
         path = Path(args.calib)
         if not path.is_file():
             raise _Usage(f"--calib: calibration file not found: {args.calib}")
+        from .calib import rectified_format
+
         try:
-            rectified = _is_rectified_format(path)
+            rectified = rectified_format(path) is not None
         except OSError as exc:
             raise _Usage(f"--calib: cannot read {args.calib}: {exc.strerror}") from None
+        except ValueError as exc:
+            raise _Usage(f"--calib: {exc}") from None
         if not rectified:
             rectifier = _raw_rectifier(args)
             r = rectifier.rig

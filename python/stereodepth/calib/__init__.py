@@ -13,7 +13,7 @@ PyYAML, the ``calib`` extra: ``pip install "stereodepth[calib]"``.
 from __future__ import annotations
 
 from ._common import DISTORTION_COUNTS, TRANSLATION_UNITS
-from .detect import read_calibration, read_stereo_calibration
+from .detect import read_calibration, read_stereo_calibration, rectified_format
 from .kalibr import read_kalibr_stereo_calibration
 from .kitti import read_kitti_calib, read_kitti_stereo_calibration
 from .middlebury import MiddleburyCalib, read_middlebury_calib, read_middlebury_stereo_calibration
@@ -36,4 +36,5 @@ __all__ = [
     "read_opencv_stereo_calibration",
     "read_ros_stereo_calibration",
     "read_stereo_calibration",
+    "rectified_format",
 ]

@@ -16,7 +16,27 @@ from .opencv import _OPENCV_NAMES, read_opencv_stereo_calibration
 from .ros import read_ros_stereo_calibration
 from .stereo import Calibration, StereoCalibration
 
-__all__ = ["read_calibration", "read_stereo_calibration"]
+__all__ = ["read_calibration", "read_stereo_calibration", "rectified_format"]
+
+# The calibration files of already rectified pairs, told by their content.
+_MIDDLEBURY_RE = re.compile(r"^[ \t]*cam0[ \t]*=", flags=re.MULTILINE)
+_KITTI_RE = re.compile(r"^[ \t]*P(_rect_0)?\d[ \t]*:[ \t]*[-+.\d]", flags=re.MULTILINE)
+
+
+def _rectified_format_of(text: str) -> str | None:
+    if _MIDDLEBURY_RE.search(text):
+        return "middlebury"
+    if _KITTI_RE.search(text):
+        return "kitti"
+    return None
+
+
+def rectified_format(path: str | os.PathLike[str]) -> str | None:
+    """``"middlebury"`` or ``"kitti"`` when ``path`` is a calibration file of an already
+    rectified pair (a Middlebury ``calib.txt``, a KITTI calibration file), told by its content
+    as :func:`read_stereo_calibration` tells it; None for any other file (a raw calibration,
+    to be rectified). Raises FileNotFoundError, or ValueError for a file that is not text."""
+    return _rectified_format_of(_read_text(Path(path), "calibration file"))
 
 
 def read_stereo_calibration(
@@ -67,7 +87,8 @@ def read_stereo_calibration(
 
     if head.startswith(("<?xml", "<opencv_storage")):
         return opencv()
-    if re.search(r"^[ \t]*cam0[ \t]*=", text, flags=re.MULTILINE):
+    rectified = _rectified_format_of(text)
+    if rectified == "middlebury":
         refuse(
             "Middlebury",
             second_path=second_path,
@@ -76,7 +97,7 @@ def read_stereo_calibration(
             translation_unit=translation_unit != "m",
         )
         return read_middlebury_stereo_calibration(p, image_size=image_size)
-    if re.search(r"^[ \t]*P(_rect_0)?\d[ \t]*:[ \t]*[-+.\d]", text, flags=re.MULTILINE):
+    if rectified == "kitti":
         refuse(
             "KITTI",
             second_path=second_path,
