@@ -665,6 +665,7 @@ std::vector<std::pair<std::string, double>> BlockMatcher::stage_times(
   a.unique_min = unique_min_.empty() ? nullptr : unique_min_.data();
   a.texture_sum_min = p.texture_threshold * static_cast<double>(p.block_size * p.block_size);
   a.lr_max_diff = p.lr_max_diff;
+  a.clip_border = p.clip_border;
   a.disp = disparity.data;
   a.disp_stride = disparity.row_stride;
   a.conf = nullptr;

@@ -1633,6 +1633,13 @@ void decide_avx2(const RowCtx& c) {
 // pixel lies inside the image (the others never win), by decide_generic's rules; the winner
 // moves by the sub-pixel step only when both neighbours are inside too. Runs after the first
 // pass, when the column sums and the right winners of the row are complete.
+// The least of n >= 1 16-bit lanes (a reduction the compiler vectorises).
+inline uint32_t least_lane(const uint16_t* lanes, ptrdiff_t n) {
+  uint16_t m = 0xFFFFu;
+  for (ptrdiff_t i = 0; i < n; ++i) m = lanes[i] < m ? lanes[i] : m;
+  return m;
+}
+
 void border_band(const RowCtx& c) {
   const ptrdiff_t cols = c.cols;
   const int dp = c.dp, r = c.radius, nd = c.nd;
@@ -1670,19 +1677,18 @@ void border_band(const RowCtx& c) {
       for (int q = 0; q < dp; ++q) acc[q] = static_cast<uint16_t>(acc[q] + plus[q] - minus[q]);
       if (c.texcol) tsum += c.texcol[xp] - c.texcol[xm];
     }
-    // Disparity index k is lane dp - 1 - k.
-    uint32_t b = 0x10000u;
+    // Disparity index k is lane dp - 1 - k, so k = khi .. klo lie in ascending memory. The
+    // winner is the least cost (a min reduction) at its lowest k; the second best the least
+    // cost more than one disparity away, over the two lane ranges either side of the winner.
+    const uint32_t b = least_lane(acc + (dp - 1 - khi), khi - klo + 1);
     ptrdiff_t kb = klo;
-    for (ptrdiff_t k = klo; k <= khi; ++k) {
-      const uint32_t v = acc[dp - 1 - k];
-      if (v < b) {
-        b = v;
-        kb = k;
-      }
-    }
+    while (acc[dp - 1 - kb] != b) ++kb;
+    const ptrdiff_t lo_end = std::min(kb - 2, khi);  // k in klo .. kb - 2
+    const ptrdiff_t hi_begin = std::max(kb + 2, klo);  // k in kb + 2 .. khi
     uint32_t s2 = kNone;
-    for (ptrdiff_t k = klo; k <= khi; ++k) {
-      if ((k < kb - 1 || k > kb + 1) && acc[dp - 1 - k] < s2) s2 = acc[dp - 1 - k];
+    if (lo_end >= klo) s2 = std::min(s2, least_lane(acc + (dp - 1 - lo_end), lo_end - klo + 1));
+    if (khi >= hi_begin) {
+      s2 = std::min(s2, least_lane(acc + (dp - 1 - khi), khi - hi_begin + 1));
     }
     const bool has2 = s2 != kNone;
     bool ok = true;
