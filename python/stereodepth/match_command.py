@@ -77,7 +77,7 @@ def register(subparsers: Any) -> None:
         "--method",
         choices=("bm", "sgm"),
         default="bm",
-        help="bm: block matching (default); sgm: semi-global matching, where available",
+        help="bm: block matching (default); sgm: semi-global matching (more accurate, slower)",
     )
     m.add_argument(
         "--num-disparities",
