@@ -163,37 +163,10 @@ void init_undistort_rectify_map_py(const Doubles& K, const Doubles& D, const std
   init_undistort_rectify_map(cam, Rm, Pm, mx, my, n);
 }
 
-StereoImage source_view(const py::array& a, const char* name) {
-  StereoImage im;
-  const bool u8 = a.dtype().equal(py::dtype::of<std::uint8_t>());
-  const bool u16 = a.dtype().equal(py::dtype::of<std::uint16_t>());
-  if (!u8 && !u16) {
-    throw py::type_error(std::string(name) + " must have dtype uint8 or uint16, got " +
-                         dtype_str(a));
-  }
-  if (a.ndim() == 2) {
-    im.format = u8 ? PixelFormat::kGrey8 : PixelFormat::kGrey16;
-  } else if (a.ndim() == 3 && a.shape(2) == 3 && u8) {
-    im.format = PixelFormat::kRgb8;
-  } else {
-    throw py::value_error(std::string(name) +
-                          " must be (H, W) uint8/uint16 or (H, W, 3) uint8, got shape " +
-                          shape_str(a) + " " + dtype_str(a));
-  }
-  if (!(a.flags() & py::array::c_style)) {
-    throw py::type_error(std::string(name) + " must be C-contiguous");
-  }
-  im.data = a.data();
-  im.rows = a.shape(0);
-  im.cols = a.shape(1);
-  im.row_stride = a.ndim() == 2 ? a.shape(1) * a.itemsize() : a.shape(1) * 3;
-  return im;
-}
-
 void apply_py(const RemapTable& self, const py::array& src, py::array& out, int threads,
               const std::string& isa) {
-  const StereoImage s = source_view(src, "image");
-  const StereoImage o = source_view(out, "out");
+  const StereoImage s = image_view(src, "image");
+  const StereoImage o = image_view(out, "out");
   if (o.format != s.format || o.rows != self.rows() || o.cols != self.cols()) {
     throw py::value_error("out must have the maps' shape and the image's dtype, got " +
                           shape_str(out) + " " + dtype_str(out));
