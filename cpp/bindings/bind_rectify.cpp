@@ -61,6 +61,28 @@ py::array_t<double> to_numpy(const M& m) {
 
 py::tuple rect_tuple(const Rect& r) { return py::make_tuple(r.x, r.y, r.width, r.height); }
 
+// T as a 3-vector; ValueError naming it otherwise.
+Eigen::Vector3d vec3(const Doubles& v, const char* name) {
+  if (v.size() != 3) {
+    throw py::value_error(std::string(name) + " must have 3 entries, got " + shape_str(v));
+  }
+  return Eigen::Vector3d(v.data()[0], v.data()[1], v.data()[2]);
+}
+
+// R1, R2, P1, P2, Q and the ROIs as numpy arrays and tuples, for the Python side.
+py::dict rectification_dict(const StereoRectification& r, bool vertical) {
+  py::dict out;
+  out["R1"] = to_numpy(r.R1);
+  out["R2"] = to_numpy(r.R2);
+  out["P1"] = to_numpy(r.P1);
+  out["P2"] = to_numpy(r.P2);
+  out["Q"] = to_numpy(r.Q);
+  out["roi1"] = rect_tuple(r.roi1);
+  out["roi2"] = rect_tuple(r.roi2);
+  out["vertical"] = vertical;
+  return out;
+}
+
 py::dict stereo_rectify_py(const Doubles& K1, const Doubles& D1, const Doubles& K2,
                            const Doubles& D2, const std::string& model, int width, int height,
                            const Doubles& R, const Doubles& T, double alpha, int new_width,
@@ -68,8 +90,7 @@ py::dict stereo_rectify_py(const Doubles& K1, const Doubles& D1, const Doubles& 
   const CameraModel c1 = camera(K1, D1, model, "K1");
   const CameraModel c2 = camera(K2, D2, model, "K2");
   const Eigen::Matrix3d Rm = mat3(R, "R");
-  if (T.size() != 3) throw py::value_error("T must have 3 entries, got " + shape_str(T));
-  const Eigen::Vector3d Tv(T.data()[0], T.data()[1], T.data()[2]);
+  const Eigen::Vector3d Tv = vec3(T, "T");
   StereoRectifyParams p;
   p.alpha = alpha;
   p.new_width = new_width;
@@ -80,16 +101,7 @@ py::dict stereo_rectify_py(const Doubles& K1, const Doubles& D1, const Doubles& 
     py::gil_scoped_release release;
     r = stereo_rectify(c1, c2, width, height, Rm, Tv, p);
   }
-  py::dict out;
-  out["R1"] = to_numpy(r.R1);
-  out["R2"] = to_numpy(r.R2);
-  out["P1"] = to_numpy(r.P1);
-  out["P2"] = to_numpy(r.P2);
-  out["Q"] = to_numpy(r.Q);
-  out["roi1"] = rect_tuple(r.roi1);
-  out["roi2"] = rect_tuple(r.roi2);
-  out["vertical"] = r.vertical;
-  return out;
+  return rectification_dict(r, r.vertical);
 }
 
 py::dict fisheye_stereo_rectify_py(const Doubles& K1, const Doubles& D1, const Doubles& K2,
@@ -99,8 +111,7 @@ py::dict fisheye_stereo_rectify_py(const Doubles& K1, const Doubles& D1, const D
   const CameraModel c1 = camera(K1, D1, "equidistant", "K1");
   const CameraModel c2 = camera(K2, D2, "equidistant", "K2");
   const Eigen::Matrix3d Rm = mat3(R, "R");
-  if (T.size() != 3) throw py::value_error("T must have 3 entries, got " + shape_str(T));
-  const Eigen::Vector3d Tv(T.data()[0], T.data()[1], T.data()[2]);
+  const Eigen::Vector3d Tv = vec3(T, "T");
   FisheyeRectifyParams p;
   p.balance = balance;
   p.fov_scale = fov_scale;
@@ -112,16 +123,7 @@ py::dict fisheye_stereo_rectify_py(const Doubles& K1, const Doubles& D1, const D
     py::gil_scoped_release release;
     r = fisheye_stereo_rectify(c1, c2, width, height, Rm, Tv, p);
   }
-  py::dict out;
-  out["R1"] = to_numpy(r.R1);
-  out["R2"] = to_numpy(r.R2);
-  out["P1"] = to_numpy(r.P1);
-  out["P2"] = to_numpy(r.P2);
-  out["Q"] = to_numpy(r.Q);
-  out["roi1"] = rect_tuple(r.roi1);
-  out["roi2"] = rect_tuple(r.roi2);
-  out["vertical"] = false;
-  return out;
+  return rectification_dict(r, false);
 }
 
 py::array_t<double> undistort_points_py(const Doubles& K, const Doubles& D,
