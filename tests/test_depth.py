@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 import threading
 
 import numpy as np
@@ -411,6 +412,33 @@ def test_unknown_isa_is_rejected() -> None:
     out = np.empty((2, 3), np.float32)
     with pytest.raises(ValueError, match="isa must be one of"):
         _core.disparity_to_depth(D, out, 1.0, 1.0, 0.0, 1.0, 0.0, 1.0, None, None, 1, isa="sse9")
+
+
+@pytest.mark.parametrize(
+    ("value", "expected"), [("avx-2", None), ("AVX2", None), ("baseline", "baseline")]
+)
+def test_the_isa_environment_variable_is_checked(value: str, expected: str | None) -> None:
+    """A mistyped STEREODEPTH_ISA must not silently run another instruction set: every kernel
+    call names the variable and the value (in a fresh process: the choice is made once)."""
+    import subprocess
+    import sys
+
+    code = (
+        "import numpy as np, stereodepth as s\n"
+        "try:\n"
+        "    s.disparity_to_depth(np.ones((2, 3), np.float32), focal_px=1.0, baseline_m=1.0)\n"
+        "    print(s.build_info()['isa'])\n"
+        "except ValueError as e:\n"
+        "    print('ValueError:', e)\n"
+    )
+    env = {**os.environ, "STEREODEPTH_ISA": value}
+    out = subprocess.run(
+        [sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True
+    ).stdout.strip()
+    if expected is None:
+        assert out.startswith("ValueError:") and "STEREODEPTH_ISA" in out and repr(value) in out
+    else:
+        assert out == expected
 
 
 def test_build_info_reports_compiler_isa_and_threads() -> None:

@@ -40,10 +40,18 @@ Isa detect_default() {
     const std::string name(env);
     if (!name.empty() && name != "auto") {
       Isa cap = Isa::kBaseline;
-      try {
-        cap = parse_isa(name);
-      } catch (const std::invalid_argument&) {
-        return best;  // an unknown value is ignored rather than breaking import
+      if (name == "baseline") {
+        cap = Isa::kBaseline;
+      } else if (name == "avx2") {
+        cap = Isa::kAvx2;
+      } else if (name == "avx512") {
+        cap = Isa::kAvx512;
+      } else {
+        // A mistyped cap must not silently run another ISA (a benchmark would name the wrong
+        // one): every kernel call raises until it is fixed.
+        throw std::invalid_argument(
+            "the environment variable STEREODEPTH_ISA must be 'auto', 'baseline', 'avx2' or "
+            "'avx512', got '" + name + "'");
       }
       if (static_cast<int>(cap) < static_cast<int>(best)) best = cap;
     }
