@@ -879,6 +879,9 @@ def test_unknown_formats_and_keywords(tmp_path: Path) -> None:
             read_stereo_calibration(path)
     with pytest.raises(FileNotFoundError, match=r"calibration file not found: .*nope\.yml"):
         read_stereo_calibration(tmp_path / "nope.yml")
+    (tmp_path / "dir.yml").mkdir()
+    with pytest.raises(IsADirectoryError, match=r"calibration file is a folder, not a file"):
+        read_stereo_calibration(tmp_path / "dir.yml")
     opencv = write(tmp_path / "s.yml", opencv_yaml(stereo_entries()))
     with pytest.raises(ValueError, match=r"s\.yml: cameras does not apply to a OpenCV file"):
         read_stereo_calibration(opencv, cameras=(0, 1))

@@ -45,6 +45,18 @@ def test_read_image_modes(tmp_path: Path) -> None:
 def test_read_image_missing_and_corrupt(tmp_path: Path) -> None:
     with pytest.raises(FileNotFoundError, match=r"image not found: .*nope\.png"):
         io.read_image(tmp_path / "nope.png")
+    # A folder is not "missing": every reader says what it is (same rule for PFM and PNM).
+    folder = tmp_path / "folder.png"
+    folder.mkdir()
+    for reader, what in (
+        (io.read_image, "image"),
+        (io.read_pfm, "PFM file"),
+        (io.read_pnm, "PNM file"),
+    ):
+        with pytest.raises(
+            IsADirectoryError, match=rf"{what} is a folder, not a file: .*folder\.png"
+        ):
+            reader(folder)
     good = tmp_path / "good.png"
     Image.fromarray(np.zeros((64, 64), np.uint8) + 7).save(good)
     data = good.read_bytes()

@@ -260,6 +260,7 @@ def bad_cases(tmp: Path, left: Path, right: Path) -> list[tuple[list[Any], str]]
     (tmp / "bad_calib.txt").write_text("cam0=[1 0 0; 0 1 0]\nbaseline=100\n")
     return [
         ([tmp / "nope.png", right], "LEFT: image not found"),
+        ([tmp, right], "LEFT: image is a folder, not a file"),
         ([left, tmp / "notimage.png"], "RIGHT: cannot decode image"),
         ([left, tmp / "small.png"], "LEFT and RIGHT must have the same size, got 96x64 and 90x64"),
         ([left, right, "--calib", tmp / "none.txt"], "--calib: calibration file not found"),

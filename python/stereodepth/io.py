@@ -42,18 +42,32 @@ def _pil() -> Any:
     return Image
 
 
+def require_file(path: str | os.PathLike[str], what: str) -> Path:
+    """``path`` as a Path when it names an existing regular file (or a link to one).
+
+    Raises FileNotFoundError ("{what} not found: path") when nothing is there and
+    IsADirectoryError ("{what} is a folder, not a file: path") for a folder, so that a user who
+    passed a folder is not told the file is missing.
+    """
+    p = Path(path)
+    if p.is_dir():
+        raise IsADirectoryError(f"{what} is a folder, not a file: {p}")
+    if not p.is_file():
+        raise FileNotFoundError(f"{what} not found: {p}")
+    return p
+
+
 def read_image(path: str | os.PathLike[str]) -> np.ndarray:
     """An image file as a numpy array: (H, W) uint8 or uint16 grey, or (H, W, 3) uint8 RGB.
 
     PBM, PGM and PPM files (netpbm P1 to P6, told by their first two bytes) are read by
     :func:`read_pnm`, exactly, with their samples as stored (a 16-bit PPM gives (H, W, 3)
     uint16); every other format by Pillow. Palette and grey-alpha images become grey or RGB;
-    an alpha channel is dropped. Raises FileNotFoundError for a missing file and ValueError
+    an alpha channel is dropped. Raises FileNotFoundError for a missing file, IsADirectoryError for a folder and ValueError
     naming the file when it cannot be decoded or holds floating-point samples (a float TIFF or
     a PFM: :func:`read_pfm` reads those)."""
     p = Path(path)
-    if not p.is_file():
-        raise FileNotFoundError(f"image not found: {p}")
+    require_file(p, "image")
     with p.open("rb") as f:
         magic = f.read(2)
     if magic in _PNM_KINDS:
@@ -234,12 +248,11 @@ def read_pfm(path: str | os.PathLike[str]) -> np.ndarray:
     the body must have exactly the size the header gives. PFM has no comments: a ``#`` in
     the header is refused.
 
-    Raises FileNotFoundError for a missing file and ValueError naming the file and the fault:
+    Raises FileNotFoundError for a missing file, IsADirectoryError for a folder and ValueError naming the file and the fault:
     a bad magic, a non-numeric, zero or negative width or height, a non-numeric, zero or
     non-finite scale, a comment, a truncated body or extra bytes."""
     p = Path(path)
-    if not p.is_file():
-        raise FileNotFoundError(f"PFM file not found: {p}")
+    require_file(p, "PFM file")
     data = p.read_bytes()
     if data[:2] not in (b"PF", b"Pf") or not data[2:3].isspace():
         raise ValueError(f"{p}: not a PFM file: it must start with 'PF' or 'Pf', got {data[:8]!r}")
@@ -358,13 +371,12 @@ def read_pnm(path: str | os.PathLike[str]) -> np.ndarray:
     shifted. The body must have exactly the size the header gives; a plain (ASCII) raster
     exactly width * height * samples values.
 
-    Raises FileNotFoundError for a missing file and ValueError naming the file and the fault:
+    Raises FileNotFoundError for a missing file, IsADirectoryError for a folder and ValueError naming the file and the fault:
     a bad magic (PAM, P7, is not read), non-numeric, zero or negative width, height or
     maxval, a maxval above 65535, a sample above the maxval, a truncated body or extra
     bytes."""
     p = Path(path)
-    if not p.is_file():
-        raise FileNotFoundError(f"PNM file not found: {p}")
+    require_file(p, "PNM file")
     data = p.read_bytes()
     kind = _PNM_KINDS.get(data[:2])
     if kind is None or not (data[2:3].isspace() or data[2:3] == b"#"):

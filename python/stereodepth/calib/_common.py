@@ -62,8 +62,9 @@ ROTATION_TOLERANCE = 1e-6
 
 def _read_text(p: Path, what: str) -> str:
     """A calibration file's text: UTF-8 (a byte-order mark is dropped), any line ends."""
-    if not p.is_file():
-        raise FileNotFoundError(f"{what} not found: {p}")
+    from ..io import require_file
+
+    require_file(p, what)
     try:
         return p.read_bytes().decode("utf-8-sig")
     except UnicodeDecodeError as exc:

@@ -7,6 +7,7 @@ import re
 from pathlib import Path
 from typing import Any
 
+from ..io import require_file
 from ._common import _fail, _read_text
 from ._trees import _yaml_tree
 from .kalibr import read_kalibr_stereo_calibration
@@ -141,8 +142,7 @@ def read_calibration(
 ) -> Calibration:
     """A Middlebury ``calib.txt`` or a KITTI calibration file, told apart by their content."""
     p = Path(path)
-    if not p.is_file():
-        raise FileNotFoundError(f"calibration file not found: {p}")
+    require_file(p, "calibration file")
     text = p.read_text(errors="replace")
     if re.search(r"^\s*P(_rect_0)?\d\s*:", text, flags=re.MULTILINE):
         return read_kitti_calib(p, cams or (2, 3))
