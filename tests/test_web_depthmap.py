@@ -333,6 +333,8 @@ def bad_cases(pair: Any) -> list[tuple[dict[str, Any], list[Any], str]]:
         ({"sample": "yes"}, ["body", "sample"], "sample must be true or false"),
         ({"sample": True, "cx_px": "abc"}, ["body", "cx_px"], "cx_px must be a finite number"),
         ({"sample": True, "cy_px": "inf"}, ["body", "cy_px"], "cy_px must be a finite number"),
+        ({"sample": True, "cx_px": 1e308}, ["body", "cx_px"], "cx_px must be a finite number"),
+        ({"sample": True, "cy_px": "-2e6"}, ["body", "cy_px"], "magnitude at most 1e+06"),
     ]
 
 

@@ -12,7 +12,11 @@
   eighth of the width rounded up to 16), ``block_size``, ``cost`` and ``disparity_step_px``
   (for the depth resolution);
 - ``cx_px``, ``cy_px``: the left camera's principal point for the 3-D points (default: the
-  image centre; the page sends those of an uploaded calib.txt).
+  image centre; the page sends those of an uploaded calib.txt), each at most 1e6 px in
+  magnitude (beyond, the points' x and y could overflow float32).
+
+Numbers may come as JSON numbers or as numeric strings (what the page's form fields hold);
+an integer field also takes a float with an integral value (``16.0``).
 
 The answer has the summary (size, density, time, ranges), the images as PNG data URLs (the
 left image, the colourised disparity and depth), the colour bars (limits and the colour table),
@@ -238,6 +242,10 @@ class Job:
 _RIG_NAMES = ("baseline_mm", "focal_mm", "pixel_um", "focal_px", "doffs_px")
 
 
+#: The largest magnitude of cx_px / cy_px (px): a principal point is near the image.
+MAX_PRINCIPAL_POINT_PX = 1e6
+
+
 def _number(loc: list[str], name: str, value: Any, rule_text: str) -> float | None:
     if value is None or (isinstance(value, str) and value.strip() == ""):
         return None
@@ -397,10 +405,11 @@ def parse_job(body: Any, limits: DepthMapLimits) -> Job:
 
     centre: dict[str, float | None] = {}
     for name in ("cx_px", "cy_px"):
+        rule = f"a finite number (px) of magnitude at most {MAX_PRINCIPAL_POINT_PX:g}"
         try:
-            v = _number(["body", name], name, body.get(name), "a finite number (px)")
-            if v is not None and not math.isfinite(v):
-                raise BadInput(["body", name], f"{name} must be a finite number (px), got {v!r}")
+            v = _number(["body", name], name, body.get(name), rule)
+            if v is not None and not (math.isfinite(v) and abs(v) <= MAX_PRINCIPAL_POINT_PX):
+                raise BadInput(["body", name], f"{name} must be {rule}, got {v!r}")
             centre[name] = v
         except BadInput as e:
             errors.append(e)
