@@ -74,6 +74,7 @@ CASES: list[tuple[list[str], str]] = [
         "--disparity-px must be finite and >= 50 (with --doffs-px -50, a disparity below 50 px "
         "puts the point behind the cameras), got 10.0",
     ),
+    (["calc", *ARM, "--doffs-px", "-inf"], "--doffs-px must be finite, got -inf"),
     (["calc", *ARM, "--max-disparity-px", "0"], "--max-disparity-px must be a finite number > 0"),
     (["calc", *ARM, "--table-disparities-px", "4", "-1"], "--table-disparities-px must be"),
     (["calc", *ARM, "--plot", "charts.gif"], "--plot must name a .png, .svg or .pdf file"),
@@ -203,6 +204,19 @@ def test_printed_rig_is_the_call_that_builds_it(capsys: pytest.CaptureFixture[st
         shown = capsys.readouterr().out.splitlines()[0].split(None, 1)[1]
         rig = eval(shown, {"StereoRig": StereoRig})  # our own repr
         assert repr(rig) == shown
+
+
+@pytest.mark.parametrize("value", ["-1e3", "-1E+3", "-1000.0", "-1000"])
+def test_negative_numbers_in_any_notation_are_values_not_options(
+    value: str, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """``--doffs-px -1e3`` was refused as "expected one argument" (argparse's own rule knows
+    -3 and -.5 but not exponents); without '=' it must mean what '--doffs-px=-1e3' means."""
+    assert main(["calc", *ARM, "--doffs-px", value, "--disparity-px", "1500"]) == 0
+    spaced = capsys.readouterr().out
+    assert main(["calc", *ARM, f"--doffs-px={value}", "--disparity-px", "1500"]) == 0
+    assert spaced == capsys.readouterr().out
+    assert "doffs_px=-1000.0" in spaced
 
 
 def test_write_ply_to_a_missing_folder_names_the_path(tmp_path: Path) -> None:

@@ -44,6 +44,17 @@ class ArgumentParser(argparse.ArgumentParser):
     """argparse, with usage errors in one line: ``PROG: error: MESSAGE (see PROG --help)``,
     exit status 2. Subcommand parsers inherit the class (add_subparsers uses the parent's)."""
 
+    #: What argparse takes for a negative number rather than an option: its own rule (-3, -.5,
+    #: -2.5) misses exponents and inf, so ``--doffs-px -1e9`` was "expected one argument".
+    #: (Python 3.13's argparse accepts these already; none of our options looks like one.)
+    _NEGATIVE_NUMBER = re.compile(
+        r"^-(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?$|^-(inf|infinity|nan)$", re.I
+    )
+
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        super().__init__(*args, **kwargs)
+        self._negative_number_matcher = self._NEGATIVE_NUMBER
+
     def error(self, message: str) -> NoReturn:
         self.exit(2, f"{self.prog}: error: {one_line(message)} (see {self.prog} --help)\n")
 

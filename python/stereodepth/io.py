@@ -63,9 +63,9 @@ def read_image(path: str | os.PathLike[str]) -> np.ndarray:
     PBM, PGM and PPM files (netpbm P1 to P6, told by their first two bytes) are read by
     :func:`read_pnm`, exactly, with their samples as stored (a 16-bit PPM gives (H, W, 3)
     uint16); every other format by Pillow. Palette and grey-alpha images become grey or RGB;
-    an alpha channel is dropped. Raises FileNotFoundError for a missing file, IsADirectoryError for a folder and ValueError
-    naming the file when it cannot be decoded or holds floating-point samples (a float TIFF or
-    a PFM: :func:`read_pfm` reads those)."""
+    an alpha channel is dropped. Raises FileNotFoundError for a missing file,
+    IsADirectoryError for a folder and ValueError naming the file when it cannot be decoded or
+    holds floating-point samples (a float TIFF or a PFM: :func:`read_pfm` reads those)."""
     p = Path(path)
     require_file(p, "image")
     with p.open("rb") as f:
@@ -248,9 +248,9 @@ def read_pfm(path: str | os.PathLike[str]) -> np.ndarray:
     the body must have exactly the size the header gives. PFM has no comments: a ``#`` in
     the header is refused.
 
-    Raises FileNotFoundError for a missing file, IsADirectoryError for a folder and ValueError naming the file and the fault:
-    a bad magic, a non-numeric, zero or negative width or height, a non-numeric, zero or
-    non-finite scale, a comment, a truncated body or extra bytes."""
+    Raises FileNotFoundError for a missing file, IsADirectoryError for a folder and ValueError
+    naming the file and the fault: a bad magic, a non-numeric, zero or negative width or height, a
+    non-numeric, zero or non-finite scale, a comment, a truncated body or extra bytes."""
     p = Path(path)
     require_file(p, "PFM file")
     data = p.read_bytes()
@@ -371,10 +371,10 @@ def read_pnm(path: str | os.PathLike[str]) -> np.ndarray:
     shifted. The body must have exactly the size the header gives; a plain (ASCII) raster
     exactly width * height * samples values.
 
-    Raises FileNotFoundError for a missing file, IsADirectoryError for a folder and ValueError naming the file and the fault:
-    a bad magic (PAM, P7, is not read), non-numeric, zero or negative width, height or
-    maxval, a maxval above 65535, a sample above the maxval, a truncated body or extra
-    bytes."""
+    Raises FileNotFoundError for a missing file, IsADirectoryError for a folder and ValueError
+    naming the file and the fault: a bad magic (PAM, P7, is not read), non-numeric, zero or negative
+    width, height or maxval, a maxval above 65535, a sample above the maxval, a truncated body or
+    extra bytes."""
     p = Path(path)
     require_file(p, "PNM file")
     data = p.read_bytes()
