@@ -270,6 +270,8 @@ def test_bad_input_one_line_exit_2(tmp_path: Path, capsys: pytest.CaptureFixture
     yaml = write_opencv_yaml(tmp_path / "stereo.yml", c, stored=False)
     vertical = c.__class__(**{**c.__dict__, "R": np.eye(3), "T": np.array([0, -0.1, 0])})
     vertical_yaml = write_opencv_yaml(tmp_path / "vertical.yml", vertical, stored=False)
+    swapped = c.__class__(**{**c.__dict__, "R": c.R.T, "T": -c.R.T @ c.T})
+    swapped_yaml = write_opencv_yaml(tmp_path / "swapped.yml", swapped, stored=False)
     ros = ros_camera_info(tmp_path / "left.yaml", c.K1, c.D1, c.R1, c.P1, c.image_size)
     (tmp_path / "garbage.yml").write_text("stereo: [1, 2\n")
     (tmp_path / "partial.yml").write_text("%YAML:1.0\n---\nM1: [1, 2, 3]\n")
@@ -287,6 +289,7 @@ def test_bad_input_one_line_exit_2(tmp_path: Path, capsys: pytest.CaptureFixture
         (["--calib", tmp_path / "partial.yml"], "partial.yml"),
         (["--calib", yaml, "--translation-unit", "mm", "--focal-px", "9"], "not both"),
         (["--calib", vertical_yaml], "vertical rig"),
+        (["--calib", swapped_yaml], "first camera is right of the second"),
         (["--calib", middlebury, "--calib-right", ros], "--calib-right does not apply"),
         (["--calib", middlebury, "--write-rectified"], "--write-rectified does not apply"),
         (["--calib", middlebury, "--translation-unit", "mm"], "--translation-unit does not"),

@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import sys
 import threading
 import zlib
@@ -585,6 +586,14 @@ def test_rectifier_rig_and_q() -> None:
     rv = StereoRectifier.from_calibration(calib_of(vertical))
     assert rv.vertical and not rect.vertical
     assert rv.rig.baseline_mm == pytest.approx(np.linalg.norm(vertical.T) * 1000, rel=1e-12)
+    # Swapped cameras (the first is the right one, T[0] > 0): Q says negative disparities,
+    # which no matcher here searches, so the rig refuses rather than report a baseline whose
+    # sign disagrees with Q.
+    swapped = calib_of(dataclasses.replace(rig, R=rig.R.T, T=-rig.R.T @ rig.T))
+    rs = StereoRectifier.from_calibration(swapped)
+    assert rs.P2[0, 3] > 0
+    with pytest.raises(ValueError, match=r"first camera is right of the second .*swap"):
+        rs.rig
 
 
 def test_rectifier_uses_the_files_transforms_unless_asked() -> None:

@@ -207,6 +207,10 @@ def _raw_rectifier(args: argparse.Namespace) -> Any:
             f"--calib: {args.calib} is a vertical rig (the rectified baseline is along y), "
             "and the matchers search along rows"
         )
+    try:
+        rectifier.rig  # noqa: B018 - refuses a pair whose first camera is the right one
+    except ValueError as exc:
+        raise _Usage(f"--calib: {args.calib}: {exc}") from None
     return rectifier
 
 

@@ -100,7 +100,7 @@ def _camera_matrix(name: str, value: Any) -> np.ndarray:
     if not (K[0, 0] > 0 and K[1, 1] > 0):
         raise ValueError(
             f"{name} must have fx = {name}[0, 0] > 0 and fy = {name}[1, 1] > 0, "
-            f"got {K[0, 0]!r} and {K[1, 1]!r}"
+            f"got {float(K[0, 0])!r} and {float(K[1, 1])!r}"
         )
     if K[0, 1] != 0 or K[1, 0] != 0 or K[2, 0] != 0 or K[2, 1] != 0 or K[2, 2] != 1:
         raise ValueError(
@@ -705,9 +705,20 @@ class StereoRectifier:
         """The rectified rig as a :class:`StereoRig`: ``focal_px = P1[0, 0]``, baseline
         ``|P2[i, 3]| / P2[0, 0]`` (i = 0, or 1 for a vertical rig) in millimetres (T was in
         metres), ``doffs_px = P2[0, 2] - P1[0, 2]`` (0 with zero_disparity), and the output
-        size."""
+        size.
+
+        Raises ValueError when the first camera is to the right of (or, for a vertical rig,
+        below) the second: its disparities would be negative."""
         f = float(self._P1[0, 0])
         i = 1 if self.vertical else 0
+        if self._P2[i, 3] > 0:
+            axis, side = ("x", "right") if i == 0 else ("y", "below")
+            raise ValueError(
+                f"the first camera is {side} of the second (P2[{i}, 3] = "
+                f"{float(self._P2[i, 3]):g} > 0, T[{i}] > 0): its disparities along {axis} are "
+                "negative, which the matchers do not search; swap the cameras (the images and "
+                "the calibration's camera 1 and camera 2)"
+            )
         baseline_m = abs(float(self._P2[i, 3])) / float(self._P2[0, 0])
         doffs = float(self._P2[i, 2] - self._P1[i, 2])
         w, h = self._output_size
