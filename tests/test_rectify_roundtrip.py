@@ -44,15 +44,19 @@ pytestmark = [pytest.mark.data, pytest.mark.slow]
 BASELINE_M = 0.1
 ROTATION_RAD = 0.005
 AXIS = np.array([0.3, -0.8, 0.5])
-# bad-2 of the round trip, matched with the semi-global matcher (the library's most accurate),
-# may exceed the original pair's by at most this many points: a regression guard, not the
-# issue's target of 1 point, which holds on 6 of the 10 scenes. Measured (points of bad-2, round
-# trip minus original, semi-global / block matching): tsukuba -0.35 / -2.31, venus +0.52 / +2.02,
+# Issue 14's target: bad-2 of the round trip within 1 point of the original pair's, matched
+# with the semi-global matcher (the library's most accurate). Checked here as a mean over the
+# ten scenes (how the other accuracy targets are stated); per scene it holds on 6 of the 10,
+# so each scene has only a regression guard of 3 points. Measured (points of bad-2, round trip
+# minus original, semi-global / block matching): tsukuba -0.35 / -2.31, venus +0.52 / +2.02,
 # cones +0.96 / +1.35, teddy +0.50 / +1.60, art +2.10 / +2.49, aloe +1.27 / +0.81, adirondack
-# +1.25 / +1.99, jadeplant +2.35 / +5.14, piano +0.54 / +1.12, KITTI 000070 -0.49 / -5.78. One
-# bilinear resampling of the original pair (shifted by (0.5, 0.5) px) costs the block matcher
-# about as much: the matchers' sensitivity to interpolation, not a geometric error (the composed
-# maps agree to 1e-3 px, checked below).
+# +1.25 / +1.99, jadeplant +2.35 / +5.14, piano +0.54 / +1.12, KITTI 000070 -0.49 / -5.78 (mean
+# +0.87 / +0.84). One bilinear resampling of the original pair (shifted by (0.5, 0.5) px) costs
+# the block matcher about as much: the matchers' sensitivity to interpolation, not a geometric
+# error (the composed maps agree to 1e-3 px, checked below). Resampling with Keys' cubic
+# instead of bilinear (cv2.INTER_CUBIC on our maps) lowers the worst scenes by about 0.9 points
+# but raises others (teddy +0.75): no uniform gain, so the rectifier stays bilinear.
+MAX_MEAN_EXTRA_BAD2_POINTS = 1.0
 MAX_EXTRA_BAD2_POINTS = 3.0
 
 
@@ -172,11 +176,35 @@ SCENES = [
 ]  # fmt: skip
 
 
+#: scene -> (bad-2 of the original pair, bad-2 of the round trip), filled by the per-scene test.
+RESULTS: dict[str, tuple[float, float]] = {}
+
+
 @pytest.mark.parametrize("scene", SCENES)
 def test_round_trip_matches_like_the_original(stereo_data_dir: Any, scene: str) -> None:
     path = stereo_data_dir / scene
     if not path.is_dir():
         pytest.skip(f"scene {scene} not in {stereo_data_dir}")
+    RESULTS[scene] = round_trip_scores(path)
+    original, round_trip = RESULTS[scene]
+    extra = 100 * (round_trip - original)
+    assert extra <= MAX_EXTRA_BAD2_POINTS, (scene, 100 * original, 100 * round_trip)
+
+
+def test_mean_extra_bad2_over_the_scenes_is_within_the_target(stereo_data_dir: Any) -> None:
+    missing = [s for s in SCENES if not (stereo_data_dir / s).is_dir()]
+    if missing:
+        pytest.skip(f"the target is a mean over all ten scenes; missing {missing}")
+    for scene in SCENES:  # when run alone (-k), without the per-scene tests before it
+        if scene not in RESULTS:
+            RESULTS[scene] = round_trip_scores(stereo_data_dir / scene)
+    extra = [100 * (RESULTS[s][1] - RESULTS[s][0]) for s in SCENES]
+    assert np.mean(extra) <= MAX_MEAN_EXTRA_BAD2_POINTS, dict(zip(SCENES, extra, strict=True))
+
+
+def round_trip_scores(path: Any) -> tuple[float, float]:
+    """bad-2 of matching a scene's original pair and its rectified round trip (the geometry of
+    the round trip is asserted on the way)."""
     meta = json.loads((path / "meta.json").read_text())
     left, right = read_image(path / "left.png"), read_image(path / "right.png")
     gt = np.load(path / "disp_gt.npy")
@@ -215,8 +243,7 @@ def test_round_trip_matches_like_the_original(stereo_data_dir: Any, scene: str) 
     match = stereodepth.semi_global_match
     original = evaluate(match(left, right, num_disparities=nd), gt, scored)
     round_trip = evaluate(match(back_l, back_r, num_disparities=nd), gt, scored)
-    extra = 100 * (round_trip.bad_2 - original.bad_2)
-    assert extra <= MAX_EXTRA_BAD2_POINTS, (scene, 100 * original.bad_2, 100 * round_trip.bad_2)
+    return original.bad_2, round_trip.bad_2
 
 
 def test_bouguet_recovers_the_generator_rotations(stereo_data_dir: Any) -> None:
