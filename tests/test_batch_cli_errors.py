@@ -57,6 +57,10 @@ ROWS: list[tuple[list[str], str]] = [
     (["--workers", "0"], "--workers must be an integer >= 1, got 0"),
     (["--threads", "-1"], "--threads must be an integer >= 0"),
     (["--workers", "2", "--scheduler", "tcp://127.0.0.1:1"], "give --scheduler or --workers"),
+    (["--scheduler", "foo"], "--scheduler 'foo': expected a Dask scheduler address tcp://"),
+    (["--scheduler", ""], "--scheduler '': expected a Dask scheduler address tcp://HOST:PORT"),
+    (["--scheduler", "http://h:8786"], "--scheduler 'http://h:8786': unknown protocol 'http'"),
+    (["--scheduler", "tcp://h:0"], "--scheduler 'tcp://h:0': the port must be in 1..65535"),
     # pair names, outputs
     (["--pair-names", "cam0", "cam0"], "--pair-names: the left and right names must differ"),
     (["--pair-names", "cam", "cam1"], "--pair-names: neither name may be part of the other"),

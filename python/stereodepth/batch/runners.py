@@ -7,6 +7,7 @@ import contextlib
 import datetime as _dt
 import logging
 import os
+import re
 import signal
 import sys
 import threading
@@ -169,6 +170,33 @@ def _run_dask(
         done(i, record)
 
 
+#: A dask.distributed scheduler's address: [PROTOCOL://]HOST:PORT, HOST a name, an IPv4
+#: address or a bracketed IPv6 address.
+_SCHEDULER_ADDRESS = re.compile(
+    r"(?:(?P<protocol>[a-z][a-z0-9+.-]*)://)?(?P<host>\[[0-9A-Fa-f:.]+\]|[^\s:/\[\]]+)"
+    r":(?P<port>[0-9]{1,5})/?"
+)
+_SCHEDULER_PROTOCOLS = ("tcp", "tls", "ws", "wss", "ucx")
+
+
+def check_scheduler_address(scheduler: str) -> None:
+    """Raises UsageError, naming ``--scheduler`` and the value, unless ``scheduler`` is a
+    dask.distributed address ``[tcp|tls|ws|wss|ucx://]HOST:PORT`` with a port in 1..65535.
+    Whether a scheduler answers there is known only when connecting."""
+    hint = "expected a Dask scheduler address tcp://HOST:PORT"
+    m = _SCHEDULER_ADDRESS.fullmatch(scheduler)
+    if m is None:
+        raise UsageError(f"--scheduler {scheduler!r}: {hint}")
+    protocol = m.group("protocol")
+    if protocol is not None and protocol not in _SCHEDULER_PROTOCOLS:
+        raise UsageError(
+            f"--scheduler {scheduler!r}: unknown protocol {protocol!r} "
+            f"({', '.join(_SCHEDULER_PROTOCOLS)}); {hint}"
+        )
+    if not 1 <= int(m.group("port")) <= 65535:
+        raise UsageError(f"--scheduler {scheduler!r}: the port must be in 1..65535; {hint}")
+
+
 def check_runner(
     *,
     scheduler: str | None = None,
@@ -181,6 +209,8 @@ def check_runner(
     ``scheduler`` or ``workers``, tqdm for ``progress``."""
     if scheduler is not None and workers is not None:
         raise UsageError("give --scheduler or --workers, not both")
+    if scheduler is not None:
+        check_scheduler_address(scheduler)
     if workers is not None and workers < 1:
         raise UsageError(f"--workers must be an integer >= 1, got {workers}")
     if threads is not None and threads < 0:
@@ -212,11 +242,33 @@ def run_batch(
     (KeyboardInterrupt) stops the job: the pairs in flight finish, the rest are ``cancelled``,
     and the report says ``interrupted``. Writes ``<stem>.*`` files into ``options.out_dir``;
     the caller writes the report."""
-    from ..io import remove_temp_files
-
     check_runner(scheduler=scheduler, workers=workers, threads=threads, progress=progress)
     out_dir = options.out_dir
+    created = not out_dir.exists()
     out_dir.mkdir(parents=True, exist_ok=True)
+    try:
+        return _run_locked(pairs, options, scheduler, workers, threads, progress, on_result, notes)
+    except UsageError:
+        if created:  # e.g. the scheduler did not answer: leave no empty OUTDIR behind
+            with contextlib.suppress(OSError):
+                out_dir.rmdir()
+        raise
+
+
+def _run_locked(
+    pairs: Sequence[Pair],
+    options: BatchOptions,
+    scheduler: str | None,
+    workers: int | None,
+    threads: int | None,
+    progress: bool,
+    on_result: Callable[[dict[str, Any]], None] | None,
+    notes: Sequence[str],
+) -> BatchReport:
+    """:func:`run_batch` once OUTDIR exists."""
+    from ..io import remove_temp_files
+
+    out_dir = options.out_dir
     started = _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")
     t0 = time.perf_counter()
     records: list[dict[str, Any] | None] = [None] * len(pairs)
@@ -336,8 +388,10 @@ def _dask_client(
     if scheduler is not None:
         try:
             client = Client(scheduler, timeout="10s")  # type: ignore[no-untyped-call]
-        except OSError as exc:
-            raise UsageError(f"cannot reach the Dask scheduler at {scheduler}: {exc}") from exc
+        except (OSError, ValueError) as exc:
+            raise UsageError(
+                f"--scheduler {scheduler!r}: cannot reach the Dask scheduler: {exc}"
+            ) from exc
         with client:
             yield client, f"dask {scheduler}", threads
         return
