@@ -32,7 +32,10 @@ def scene(root: Path) -> Path:
 # (arguments after INPUT; {tmp} is the test's folder), a fragment the message must hold
 ROWS: list[tuple[list[str], str]] = [
     # matcher options: the flag or --option KEY the user typed, never BlockMatchOptions
-    (["--option", "foo=1"], "--option foo: the matcher has no option 'foo' (its options: "),
+    (
+        ["--option", "foo=1"],
+        "--option foo: --method bm (block matching) has no option 'foo' (its options: ",
+    ),
     (["--option", "uniqueness_ratio=-1"], "--option uniqueness_ratio: uniqueness_ratio must be"),
     (["--option", "subpixel=maybe"], "--option subpixel: subpixel must be True, False"),
     (["--option", "threads=2"], "--option threads: use --threads"),

@@ -73,9 +73,7 @@ def matcher_keywords(method: str) -> list[str]:
     """The keyword options of a method's matcher class, in its signature's order (``isa``,
     for testing and benchmarking, left out)."""
     params = inspect.signature(matcher_class(method).__init__).parameters
-    return [
-        n for n, p in params.items() if p.kind is inspect.Parameter.KEYWORD_ONLY and n != "isa"
-    ]
+    return [n for n, p in params.items() if p.kind is inspect.Parameter.KEYWORD_ONLY and n != "isa"]
 
 
 _thread_state = threading.local()

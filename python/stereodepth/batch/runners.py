@@ -21,7 +21,7 @@ from .. import _validate as check
 from .._extras import require
 from .compute import process_pair, record_failure
 from .job import BatchOptions, Pair, UsageError
-from .records import BatchReport, completed_record, jsonable, record_head
+from .records import BatchReport, completed_record, jsonable, matcher_options, record_head
 
 #: Pairs in flight in the embedded runner: decoding, writing and fsyncing some overlap the
 #: matching of another (which uses every core). See bench/README.md for 1, 2 and 3.
@@ -165,7 +165,7 @@ def _run_dask(
         try:
             record = f.result()
         except Exception as exc:  # the task itself never raises: a worker kept dying
-            head = record_head(pairs[i], "failed", f"{type(exc).__name__}: {exc}")
+            head = record_head(pairs[i], "failed", f"{type(exc).__name__}: {exc}", options)
             record = jsonable(record_failure(pairs[i], options, head))
         done(i, record)
 
@@ -293,7 +293,8 @@ def _run_locked(
                     todo.append((i, p))
                     continue
                 keep = ("time_s", "density", "width", "height", "outputs")
-                done(i, {**record_head(p, "skipped"), **{k: earlier.get(k) for k in keep}})
+                head = record_head(p, "skipped", options=options)
+                done(i, {**head, **{k: earlier.get(k) for k in keep}})
             if scheduler is None and workers is None:
                 if todo:
                     _run_embedded(todo, options, done, threads)
@@ -315,7 +316,7 @@ def _run_locked(
         if rec is None:
             # Interrupted: a pair whose result did not reach us may have finished anyway.
             earlier = completed_record(p, options)
-            rec = record_head(p, "cancelled")
+            rec = record_head(p, "cancelled", options=options)
             if earlier is not None:
                 rec.update(
                     {
@@ -332,6 +333,9 @@ def _run_locked(
         started=started,
         removed_temp_files=removed,
         notes=list(notes),
+        method=options.method,
+        matcher_options=matcher_options(options),
+        rectification=None if options.rectification is None else options.rectification.as_dict(),
     )
 
 
