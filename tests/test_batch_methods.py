@@ -162,6 +162,12 @@ BAD: list[tuple[list[str], str]] = [
     (["--method", "sgm", "--option", "paths=5"], "--option paths: paths must be 3, 4 or 8, got 5"),
     (["--method", "sgm", "--option", "fill=1"], "--option fill: fill must be a bool, got int 1"),
     (["--method", "sgm", "--option", "isa=avx2"], "--option isa: not available in batch"),
+    (
+        ["--method", "sgm", "--option", "cost=sad"],
+        "--option cost: an option of --method bm; --method sgm (semi-global matching) has no "
+        "option 'cost'",
+    ),
+    (["--method", "sgm", "--option", "block_size=1"], "--option block_size: use --block-size"),
     (["--method", "sgm", "--option", "threads=2"], "--option threads: use --threads"),
     (
         ["--method", "sgm", "--option", "max_memory_mb=0"],

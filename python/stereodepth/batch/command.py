@@ -239,7 +239,7 @@ def _matcher_options(args: argparse.Namespace) -> dict[str, Any]:
     opts: dict[str, Any] = {}
     typed: dict[str, str] = {}
     for key, value in args.option:
-        if key in _RESERVED:
+        if key in _RESERVED and (key in known or _RESERVED[key] is None):
             flag = _RESERVED[key]
             raise UsageError(
                 f"--option {key}: use {flag}" if flag else f"--option {key}: not available in batch"
