@@ -117,7 +117,8 @@ def raw_calibration(
 def raw_rectifier(stereo: Any, calib: str, *, threads: int | None = None) -> Any:
     """The :class:`stereodepth.StereoRectifier` of a raw calibration read by
     :func:`raw_calibration` (``calib`` its file, for messages). Raises ValueError when it
-    cannot rectify, or when the rig is vertical."""
+    cannot rectify, when the rig is vertical, or when its rig is refused (a first camera to
+    the right of the second)."""
     from .rectify import StereoRectifier
 
     try:
@@ -129,6 +130,10 @@ def raw_rectifier(stereo: Any, calib: str, *, threads: int | None = None) -> Any
             f"--calib: {calib} is a vertical rig (the rectified baseline is along y), "
             "and the matchers search along rows"
         )
+    try:
+        rectifier.rig  # noqa: B018 - refuses a pair whose first camera is the right one
+    except ValueError as exc:
+        raise ValueError(f"--calib: {calib}: {exc}") from None
     return rectifier
 
 
