@@ -126,3 +126,27 @@ def test_input_and_output_errors(tmp_path: Path, capsys: pytest.CaptureFixture[s
         status, err = run([*argv, "--quiet"], capsys)
         assert_one_line(status, err, fragment)
     assert not (tmp_path / "out").exists()
+
+
+def test_an_unreachable_scheduler_names_the_flag_and_leaves_no_outdir(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The connection's failure (here without waiting for the network: Client raises as it does
+    after its timeout) is one line naming --scheduler and the address, and the OUTDIR the job
+    had just made is removed again."""
+    distributed = pytest.importorskip("distributed")
+
+    def refuse(address: str, **kwargs: object) -> None:
+        raise OSError(f"Timed out trying to connect to {address} after 10 s")
+
+    monkeypatch.setattr(distributed, "Client", refuse)
+    inp = scene(tmp_path)
+    argv = [str(inp), "-o", str(tmp_path / "out"), "--quiet", "--scheduler", "tcp://127.0.0.1:9"]
+    status, err = run(argv, capsys)
+    assert_one_line(
+        status,
+        err,
+        "--scheduler 'tcp://127.0.0.1:9': cannot reach the Dask scheduler: Timed out trying to "
+        "connect to tcp://127.0.0.1:9 after 10 s",
+    )
+    assert not (tmp_path / "out").exists()

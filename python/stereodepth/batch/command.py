@@ -140,7 +140,7 @@ def register(subparsers: Any) -> None:
         type=int,
         metavar="N",
         help="disparities searched (default: ndisp of the Middlebury calib.txt that gives the "
-        "rig; required with KITTI files and with --focal-px)",
+        "rig; required with KITTI files, with --focal-px and with a raw --calib)",
     )
     m.add_argument("--min-disparity", type=int, metavar="D", help="smallest disparity searched")
     m.add_argument(
