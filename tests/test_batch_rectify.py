@@ -245,6 +245,11 @@ BAD: list[tuple[list[str], str]] = [
         "argument --translation-unit: invalid choice: 'km'",
     ),
     (["--calib", "{raw}.absent", "--num-disparities", "16"], "--calib: calibration file not found"),
+    (
+        ["--calib", "{vertical}", "--translation-unit", "mm", "--num-disparities", "16"],
+        "--calib: {vertical} is a vertical rig (the rectified baseline is along y)",
+    ),
+    (["--calib", "{garbage}", "--num-disparities", "16"], "--calib: "),
 ]
 
 
@@ -256,7 +261,15 @@ def test_bad_rectification_flags_exit_2(
     raw = mr.write_opencv_yaml(tmp_path / "stereo.yml", calib, stored=True)
     mb = tmp_path / "calib.txt"
     mb.write_text(tb.calib_text())
-    subst = {"{raw}": str(raw), "{mb}": str(mb)}
+    vertical = calib.__class__(**{**calib.__dict__, "R": np.eye(3), "T": np.array([0, -0.1, 0])})
+    vertical_yaml = mr.write_opencv_yaml(tmp_path / "vertical.yml", vertical, stored=False)
+    (tmp_path / "garbage.yml").write_text("stereo: [1, 2\n")
+    subst = {
+        "{raw}": str(raw),
+        "{mb}": str(mb),
+        "{vertical}": str(vertical_yaml),
+        "{garbage}": str(tmp_path / "garbage.yml"),
+    }
 
     def fill(text: str) -> str:
         for k, v in subst.items():
