@@ -157,7 +157,7 @@ def _ndisp_required(
 #: Rectifiers built in this process, by (calibration digest, threads): each worker process of
 #: a Dask job builds a job's maps once, not once per pair. A few entries at most.
 _RECTIFIERS: dict[tuple[str, int], Any] = {}
-_RECTIFIERS_LOCK = threading.Lock()
+_RECTIFIERS_LOCK = threading.RLock()
 _RECTIFIERS_KEPT = 4
 
 
@@ -222,11 +222,12 @@ class BatchRectifier:
         from .. import _validate as check
 
         n = check.threads(threads)
+        # Built under the lock: threads of one worker that start together build it once.
         with _RECTIFIERS_LOCK:
             found = _RECTIFIERS.get((self.digest, n))
-        if found is None:
-            found = _calib_rule.raw_rectifier(self.stereo, self.source, threads=n)
-            self._keep(n, found)
+            if found is None:
+                found = _calib_rule.raw_rectifier(self.stereo, self.source, threads=n)
+                self._keep(n, found)
         return found
 
     def rectify(
