@@ -554,7 +554,11 @@ def test_a_second_job_on_the_same_outdir_is_refused(tmp_path: Path) -> None:
             True,
             "--option num_disparities: use --num-disparities",
         ),
-        (["--option", "colour=1"], True, "--option colour: the matcher has no option 'colour'"),
+        (
+            ["--option", "colour=1"],
+            True,
+            "--option colour: --method bm \\(block matching\\) has no option 'colour'",
+        ),
         (["--num-disparities", "0"], True, "--num-disparities must be an integer >= 1, got 0"),
         (["--max-depth-m", "nan"], True, "--max-depth-m must be a finite number > 0, got nan"),
         (["--calib", "nowhere.txt"], True, "--calib: calibration file not found"),

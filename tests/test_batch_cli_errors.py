@@ -32,7 +32,10 @@ def scene(root: Path) -> Path:
 # (arguments after INPUT; {tmp} is the test's folder), a fragment the message must hold
 ROWS: list[tuple[list[str], str]] = [
     # matcher options: the flag or --option KEY the user typed, never BlockMatchOptions
-    (["--option", "foo=1"], "--option foo: the matcher has no option 'foo' (its options: "),
+    (
+        ["--option", "foo=1"],
+        "--option foo: --method bm (block matching) has no option 'foo' (its options: ",
+    ),
     (["--option", "uniqueness_ratio=-1"], "--option uniqueness_ratio: uniqueness_ratio must be"),
     (["--option", "subpixel=maybe"], "--option subpixel: subpixel must be True, False"),
     (["--option", "threads=2"], "--option threads: use --threads"),
@@ -57,6 +60,10 @@ ROWS: list[tuple[list[str], str]] = [
     (["--workers", "0"], "--workers must be an integer >= 1, got 0"),
     (["--threads", "-1"], "--threads must be an integer >= 0"),
     (["--workers", "2", "--scheduler", "tcp://127.0.0.1:1"], "give --scheduler or --workers"),
+    (["--scheduler", "foo"], "--scheduler 'foo': expected a Dask scheduler address tcp://"),
+    (["--scheduler", ""], "--scheduler '': expected a Dask scheduler address tcp://HOST:PORT"),
+    (["--scheduler", "http://h:8786"], "--scheduler 'http://h:8786': unknown protocol 'http'"),
+    (["--scheduler", "tcp://h:0"], "--scheduler 'tcp://h:0': the port must be in 1..65535"),
     # pair names, outputs
     (["--pair-names", "cam0", "cam0"], "--pair-names: the left and right names must differ"),
     (["--pair-names", "cam", "cam1"], "--pair-names: neither name may be part of the other"),
@@ -118,4 +125,28 @@ def test_input_and_output_errors(tmp_path: Path, capsys: pytest.CaptureFixture[s
     for argv, fragment in cases:
         status, err = run([*argv, "--quiet"], capsys)
         assert_one_line(status, err, fragment)
+    assert not (tmp_path / "out").exists()
+
+
+def test_an_unreachable_scheduler_names_the_flag_and_leaves_no_outdir(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The connection's failure (here without waiting for the network: Client raises as it does
+    after its timeout) is one line naming --scheduler and the address, and the OUTDIR the job
+    had just made is removed again."""
+    distributed = pytest.importorskip("distributed")
+
+    def refuse(address: str, **kwargs: object) -> None:
+        raise OSError(f"Timed out trying to connect to {address} after 10 s")
+
+    monkeypatch.setattr(distributed, "Client", refuse)
+    inp = scene(tmp_path)
+    argv = [str(inp), "-o", str(tmp_path / "out"), "--quiet", "--scheduler", "tcp://127.0.0.1:9"]
+    status, err = run(argv, capsys)
+    assert_one_line(
+        status,
+        err,
+        "--scheduler 'tcp://127.0.0.1:9': cannot reach the Dask scheduler: Timed out trying to "
+        "connect to tcp://127.0.0.1:9 after 10 s",
+    )
     assert not (tmp_path / "out").exists()

@@ -96,6 +96,40 @@ def test_block_match_equals_numpy_frame_by_frame(rgb: bool, chunks: str) -> None
     assert_same(one.compute(), got[0])
 
 
+@pytest.mark.parametrize("rgb", [False, True], ids=["grey", "rgb"])
+@pytest.mark.parametrize("chunks", ["frame", "split"])
+def test_semi_global_match_equals_numpy_frame_by_frame(rgb: bool, chunks: str) -> None:
+    left, right = stack(7, rgb=rgb)
+    if chunks == "frame":
+        c: tuple[int, ...] = (1, H, W, 3) if rgb else (1, H, W)
+    else:  # frames split across chunks: rechunked to whole frames
+        c = (2, 11, 17, 3) if rgb else (2, 11, 17)
+    params = {"num_disparities": 16, "paths": 8, "p2": 300, "fill": True}
+    lazy = sdd.semi_global_match(
+        da.from_array(left, chunks=c), da.from_array(right, chunks=c), **params
+    )
+    assert lazy.shape == (N, H, W) and lazy.dtype == np.float32
+    assert all(len(ch) == 1 for ch in lazy.chunks[1:])
+    got = lazy.compute(scheduler="threads")
+    for i in range(N):
+        want = stereodepth.semi_global_match(left[i], right[i], **params)
+        assert_same(got[i], want)
+        assert np.nanmedian(got[i]) == pytest.approx(2 + i, abs=0.05)
+    one = sdd.semi_global_match(da.from_array(left[0]), da.from_array(right[0]), **params)
+    assert_same(one.compute(), got[0])
+
+
+def test_semi_global_match_of_uint16_frames_with_one_intensity_range() -> None:
+    left, right = stack(8)
+    left16, right16 = left.astype(np.uint16) * 16 + 100, right.astype(np.uint16) * 16 + 100
+    params = {"num_disparities": 16, "intensity_range": (0, 4095)}
+    got = sdd.semi_global_match(
+        da.from_array(left16, chunks=(2, H, W)), da.from_array(right16, chunks=(2, H, W)), **params
+    ).compute(scheduler="threads")
+    want = [stereodepth.semi_global_match(left16[i], right16[i], **params) for i in range(N)]
+    assert_same(got, np.stack(want))
+
+
 def test_reproject_equals_numpy() -> None:
     d = disparities(4)
     rig = {**RIG, "cx_px": 24.5, "cy_px": 17.0}
@@ -232,6 +266,76 @@ def test_the_whole_chain_is_lazy_and_checked_up_front() -> None:
             ValueError,
             r"disparity must have shape \(H, W\) or \(N, H, W\), got \(2, 2, 2, 2\)",
         ),
+        (
+            lambda: sdd.semi_global_match(
+                da.ones((4, 4), dtype=np.uint8), da.ones((4, 4), dtype=np.uint8)
+            ),
+            TypeError,
+            r"semi_global_match\(\) missing required keyword argument: 'num_disparities'",
+        ),
+        (
+            lambda: sdd.semi_global_match(
+                da.ones((4, 4), dtype=np.uint8),
+                da.ones((4, 4), dtype=np.uint8),
+                num_disparities=16,
+                p1=600,
+            ),
+            ValueError,
+            r"p2 must be an integer in \[p1, .*\] = \[600, .*got 500",
+        ),
+        (
+            lambda: sdd.semi_global_match(
+                da.ones((4, 4), dtype=np.uint8),
+                da.ones((4, 4), dtype=np.uint8),
+                num_disparities=16,
+                paths=5,
+            ),
+            ValueError,
+            "paths must be 3, 4 or 8, got 5",
+        ),
+        (
+            lambda: sdd.semi_global_match(
+                da.ones((4, 4), dtype=np.uint8),
+                da.ones((4, 4), dtype=np.uint8),
+                num_disparities=16,
+                cost="sad",
+            ),
+            TypeError,
+            "unexpected keyword argument 'cost'",
+        ),
+        (
+            lambda: sdd.semi_global_match(
+                da.ones((4, 4), dtype=np.uint8),
+                da.ones((4, 4), dtype=np.uint8),
+                num_disparities=16,
+                return_confidence=True,
+            ),
+            TypeError,
+            "return_confidence is not accepted for dask arrays",
+        ),
+        (
+            lambda: sdd.semi_global_match(
+                da.ones((4, 4), dtype=np.uint8), da.ones((4, 5), dtype=np.uint8), num_disparities=16
+            ),
+            ValueError,
+            r"left and right must have the same shape, got \(4, 4\) and \(4, 5\)",
+        ),
+        (
+            lambda: sdd.semi_global_match(
+                da.ones((4, 4), dtype=np.float32),
+                da.ones((4, 4), dtype=np.float32),
+                num_disparities=16,
+            ),
+            TypeError,
+            "left must be uint8 or uint16 images, got dtype float32",
+        ),
+        (
+            lambda: sdd.semi_global_match(
+                np.ones((4, 4), np.uint8), da.ones((4, 4), dtype=np.uint8), num_disparities=16
+            ),
+            TypeError,
+            "left must be a dask.array.Array .* got ndarray",
+        ),
     ],
 )
 def test_rejects_bad_input_before_computing(call: Any, exc: type, message: str) -> None:
@@ -261,6 +365,13 @@ def test_on_a_local_cluster() -> None:
         )
         depth = sdd.disparity_to_depth(disparity, **RIG, dtype=np.uint16)
         got = client.compute(depth).result()
+        sgm = sdd.semi_global_match(
+            da.from_array(left, chunks=(2, H, W, 3)),
+            da.from_array(right, chunks=(2, H, W, 3)),
+            num_disparities=16,
+            paths=4,
+        )
+        got_sgm = client.compute(sgm).result()
     want = [
         stereodepth.disparity_to_depth(
             matching.block_match(left[i], right[i], num_disparities=16), **RIG, dtype=np.uint16
@@ -268,3 +379,8 @@ def test_on_a_local_cluster() -> None:
         for i in range(N)
     ]
     assert_same(got, np.stack(want))
+    want_sgm = [
+        stereodepth.semi_global_match(left[i], right[i], num_disparities=16, paths=4)
+        for i in range(N)
+    ]
+    assert_same(got_sgm, np.stack(want_sgm))

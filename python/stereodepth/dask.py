@@ -11,8 +11,13 @@ result equals the numpy function's, frame by frame, bit for bit::
     left = da.from_zarr("left.zarr")           # (N, H, W) uint8, any chunking
     right = da.from_zarr("right.zarr")
     disparity = sdd.block_match(left, right, num_disparities=128)
+    # or sdd.semi_global_match(left, right, num_disparities=128, paths=8)
     depth = sdd.disparity_to_depth(disparity, focal_px=718.9, baseline_m=0.537)
     depth.to_zarr("depth.zarr")
+
+The matchers keep the numpy API's names and parameters: :func:`block_match` for
+:func:`stereodepth.block_match`, :func:`semi_global_match` for
+:func:`stereodepth.semi_global_match`.
 
 Needs dask (the ``batch`` extra): ``pip install "stereodepth[batch]"``.
 """
@@ -23,7 +28,7 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["block_match", "disparity_to_depth", "reproject"]
+__all__ = ["block_match", "disparity_to_depth", "reproject", "semi_global_match"]
 
 
 def _da() -> Any:
@@ -90,15 +95,37 @@ def block_match(left: Any, right: Any, **params: Any) -> Any:
     (``return_confidence`` is not accepted). Each frame is matched as the numpy function
     matches it, so a uint16 pair is stretched over its own range, frame by frame (see
     :mod:`stereodepth.matching`); ``intensity_range=(lo, hi)`` gives every frame of the stack
-    the same scale."""
-    from stereodepth.matching import BlockMatchOptions
+    the same scale. :func:`semi_global_match` is its semi-global sibling."""
+    return _match("bm", "block_match", left, right, params)
+
+
+def semi_global_match(left: Any, right: Any, **params: Any) -> Any:
+    """:func:`stereodepth.semi_global_match` on dask arrays of image pairs, as
+    :func:`block_match` does for the block matcher: the same shapes and dtypes ((H, W) or
+    (N, H, W) grey uint8/uint16, (H, W, 3) or (N, H, W, 3) uint8 colour), the same float32
+    disparity out ((H, W) or (N, H, W), NaN where invalid), whole frames per chunk, each frame
+    equal bit for bit to the numpy function's. ``params`` are those of the numpy function
+    (``num_disparities``, ``p1``, ``p2``, ``paths``, ``fill``, ``max_memory_mb`` ...), checked
+    now, so a bad one raises TypeError or ValueError before anything is computed
+    (``return_confidence`` is not accepted). Each worker thread keeps one matcher for the
+    frames it matches (the semi-global matcher's buffers are large: ``max_memory_mb`` is per
+    thread). Source: H. Hirschmüller, IEEE PAMI 30(2), 2008."""
+    return _match("sgm", "semi_global_match", left, right, params)
+
+
+def _match(method: str, name: str, left: Any, right: Any, params: dict[str, Any]) -> Any:
+    """A matcher of :mod:`stereodepth._methods` over dask arrays: the checks of the numpy
+    function ``name`` now, then one task per chunk of whole frames."""
+    from stereodepth._methods import options_class
 
     la, ra = _as_dask("left", left), _as_dask("right", right)
     if params.get("return_confidence"):
         raise TypeError("return_confidence is not accepted for dask arrays")
+    if "isa" in params:
+        raise TypeError(f"{name}() got an unexpected keyword argument 'isa'")
     if "num_disparities" not in params:
-        raise TypeError("block_match() missing required keyword argument: 'num_disparities'")
-    BlockMatchOptions(**params)
+        raise TypeError(f"{name}() missing required keyword argument: 'num_disparities'")
+    options_class(method)(**params)
     if la.shape != ra.shape:
         raise ValueError(f"left and right must have the same shape, got {la.shape} and {ra.shape}")
     if la.dtype != ra.dtype:
@@ -128,6 +155,7 @@ def block_match(left: Any, right: Any, **params: Any) -> Any:
         ra,
         dtype=np.float32,
         drop_axis=drop,
+        method=method,
         params=params,
         stacked=stacked,
         meta=meta,
@@ -135,18 +163,21 @@ def block_match(left: Any, right: Any, **params: Any) -> Any:
 
 
 def _match_block(
-    left: np.ndarray, right: np.ndarray, *, params: dict[str, Any], stacked: bool
+    left: np.ndarray,
+    right: np.ndarray,
+    *,
+    method: str,
+    params: dict[str, Any],
+    stacked: bool,
 ) -> np.ndarray:
-    from stereodepth import matching
+    from stereodepth._methods import compute_disparity, thread_matcher
 
+    matcher = thread_matcher(method, **params)
     if not stacked:
-        disparity = matching.thread_matcher(**params).compute(left, right)
-        assert isinstance(disparity, np.ndarray)  # no confidence was asked for
-        return disparity
+        return compute_disparity(matcher, left, right)
     out = np.empty(left.shape[:3], dtype=np.float32)
-    matcher = matching.thread_matcher(**params)
     for i in range(left.shape[0]):
-        out[i] = matcher.compute(left[i], right[i])
+        out[i] = compute_disparity(matcher, left[i], right[i])
     return out
 
 

@@ -170,109 +170,57 @@ def output_paths(out: str, names: list[str]) -> dict[str, Path]:
     return {n: Path(out + n) for n in names}
 
 
-def _cli_names(message: str) -> str:
-    """A reader's message with its keyword names replaced by this command's options."""
-    return message.replace("second_path", "--calib-right").replace(
-        "translation_unit", "--translation-unit"
-    )
-
-
-def _raw_rectifier(args: argparse.Namespace) -> Any:
-    """The StereoRectifier of a raw --calib file (with --calib-right, --translation-unit)."""
-    from .calib import read_stereo_calibration
-    from .rectify import StereoRectifier
-
-    try:
-        calib = read_stereo_calibration(
-            args.calib, second_path=args.calib_right, translation_unit=args.translation_unit
-        )
-    except (OSError, ValueError, ImportError) as exc:
-        raise _Usage(f"--calib: {_cli_names(str(exc))}") from None
-    if calib.rectified:  # not from the raw formats today; refuse rather than guess
-        raise _Usage(f"--calib: {args.calib} is read as a rectified pair of unknown format")
-    if args.no_rectify:
-        raise _Usage(
-            f"--calib: {args.calib} is the calibration of a raw (unrectified) pair and "
-            "--no-rectify forbids rectifying it: drop --no-rectify, or give a Middlebury or "
-            "KITTI calibration of a rectified pair"
-        )
-    if args.threads is not None and args.threads < 0:
-        raise _Usage(f"--threads must be an integer >= 0, got {args.threads}")
-    try:
-        rectifier = StereoRectifier.from_calibration(calib, threads=args.threads)
-    except (TypeError, ValueError) as exc:
-        raise _Usage(f"--calib: {args.calib}: cannot rectify: {exc}") from None
-    if rectifier.vertical:
-        raise _Usage(
-            f"--calib: {args.calib} is a vertical rig (the rectified baseline is along y), "
-            "and the matchers search along rows"
-        )
-    try:
-        rectifier.rig  # noqa: B018 - refuses a pair whose first camera is the right one
-    except ValueError as exc:
-        raise _Usage(f"--calib: {args.calib}: {exc}") from None
-    return rectifier
-
-
 def _rig(
     args: argparse.Namespace,
 ) -> tuple[dict[str, Any] | None, int | None, str | None, Any]:
     """(focal_px, baseline_m, doffs_px, cx_px, cy_px) or None; ndisp; the calibration's source;
-    the StereoRectifier of a raw calibration, else None."""
+    the StereoRectifier of a raw calibration, else None. The rule for --calib is
+    :mod:`stereodepth._calib_rule`'s, shared with ``stereodepth batch``."""
+    from . import _calib_rule as rule
+
     given = [
         n for n, v in (("--focal-px", args.focal_px), ("--baseline-mm", args.baseline_mm)) if v
     ]
-    calib_only = (
-        ("--calib-right", args.calib_right is not None),
-        ("--translation-unit", args.translation_unit != "m"),
-        ("--write-rectified", args.write_rectified),
-    )
     if args.calib is None:
-        for flag, used in (*calib_only, ("--no-rectify", args.no_rectify)):
-            if used:
-                raise _Usage(f"{flag} goes with --calib FILE")
+        try:
+            rule.check_without_calib(
+                calib_right=args.calib_right,
+                translation_unit=args.translation_unit,
+                no_rectify=args.no_rectify,
+                write_rectified=args.write_rectified,
+            )
+        except ValueError as exc:
+            raise _Usage(str(exc)) from None
     if args.calib is not None:
         if given or args.doffs_px is not None:
             raise _Usage("give either --calib or --focal-px and --baseline-mm, not both")
-        path = Path(args.calib)
-        if not path.is_file():
-            raise _Usage(f"--calib: calibration file not found: {args.calib}")
-        from .calib import rectified_format
-
+        rectifier = None
         try:
-            rectified = rectified_format(path) is not None
-        except OSError as exc:
-            raise _Usage(f"--calib: cannot read {args.calib}: {exc.strerror}") from None
+            stereo = rule.raw_calibration(
+                args.calib,
+                calib_right=args.calib_right,
+                translation_unit=args.translation_unit,
+                no_rectify=args.no_rectify,
+                write_rectified=args.write_rectified,
+            )
+            if stereo is not None:
+                if args.threads is not None and args.threads < 0:
+                    raise _Usage(f"--threads must be an integer >= 0, got {args.threads}")
+                rectifier = rule.raw_rectifier(stereo, args.calib, threads=args.threads)
+        except _Usage:
+            raise
         except ValueError as exc:
-            raise _Usage(f"--calib: {exc}") from None
-        if not rectified:
-            rectifier = _raw_rectifier(args)
-            r = rectifier.rig
-            P1 = rectifier.P1
-            rig: dict[str, Any] = {
-                "focal_px": float(r.focal_px),
-                "baseline_m": float(r.baseline_mm) / 1000.0,
-                "doffs_px": float(r.doffs_px),
-                "cx_px": float(P1[0, 2]),
-                "cy_px": float(P1[1, 2]),
-            }
-            source = str(args.calib)
-            if args.calib_right is not None:
-                source += f", {args.calib_right}"
-            return rig, None, source, rectifier
-        for flag, used in calib_only:
-            if used:
-                raise _Usage(
-                    f"{flag} does not apply to {args.calib}, a Middlebury or KITTI calibration "
-                    "of a pair that is already rectified"
-                )
+            raise _Usage(str(exc)) from None
+        if rectifier is not None:
+            source = rule.calibration_source(args.calib, args.calib_right)
+            return rule.rectified_rig(rectifier), None, source, rectifier
         from .match_pair import read_calibration_file
 
         try:
             c = read_calibration_file(args.calib)
         except (OSError, ValueError) as exc:
             raise _Usage(f"--calib: {exc}") from None
-        rig = {
+        rig: dict[str, Any] = {
             "focal_px": float(c.focal_px),
             "baseline_m": float(c.baseline_m),
             "doffs_px": float(c.doffs_px),
@@ -315,6 +263,7 @@ def _read(name: str, path: str) -> np.ndarray:
 def run(args: argparse.Namespace) -> int:
     """Matches the pair, writes the outputs, prints the summary; returns the exit status."""
     from . import io
+    from ._calib_rule import write_png
     from .match_pair import match_pair, prepare_pair
 
     rig, ndisp, source, rectifier = _rig(args)
@@ -364,8 +313,8 @@ def run(args: argparse.Namespace) -> int:
         left_img, right_img = rectifier.rectify(left_img, right_img)
         rectify_s = time.perf_counter() - t0
         if args.write_rectified:
-            _write_png(out["left_rectified"], left_img)
-            _write_png(out["right_rectified"], right_img)
+            write_png(out["left_rectified"], left_img)
+            write_png(out["right_rectified"], right_img)
     result = match_pair(
         left_img,
         right_img,
@@ -443,19 +392,6 @@ def run(args: argparse.Namespace) -> int:
     else:
         _print(summary, left_img)
     return 0
-
-
-def _write_png(path: Path, image: np.ndarray) -> None:
-    """An 8-bit grey or RGB, or a 16-bit grey image as a PNG, atomically."""
-    from . import io
-
-    if image.dtype == np.uint16:
-        io.write_png16(path, image)
-        return
-    from PIL import Image
-
-    with io.atomic_write(path) as f:
-        Image.fromarray(np.ascontiguousarray(image)).save(f, format="PNG")
 
 
 def _print(s: dict[str, Any], left: np.ndarray) -> None:

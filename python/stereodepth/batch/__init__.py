@@ -38,14 +38,38 @@ Images
     be colour or both grey, of the same size and bit depth, as :func:`stereodepth.block_match`
     requires: a mixed pair fails with a message saying which is which.
 
+Matcher
+    ``--method bm`` (:func:`stereodepth.block_match`, the default) or ``--method sgm``
+    (:func:`stereodepth.semi_global_match`). ``--min-disparity`` and ``--block-size`` apply to
+    both, ``--cost`` to bm only; ``--option KEY=VALUE`` passes any other keyword of the chosen
+    matcher. Every option is checked against the chosen method before the first pair
+    (:mod:`stereodepth._methods` names each method's matcher and options): an option of the
+    other method is an error naming the flag, the method and its options. Records and the
+    report hold ``method`` and ``matcher_options``.
+
 Calibration
     A pair's rig comes whole from the first of: ``--focal-px`` and ``--baseline-mm`` (with
     ``--doffs-px``, ``--cx-px``, ``--cy-px``); ``--calib FILE`` (a Middlebury ``calib.txt`` or
-    a KITTI calibration file); the pair's own file (``calib.txt`` in its folder, or KITTI's).
+    a KITTI calibration file, or a raw calibration); the pair's own file (``calib.txt`` in its
+    folder, or KITTI's).
     The number of disparities is ``--num-disparities``, else ``ndisp`` of the file the rig
     came from (KITTI files have none). Each record names the source used
     (``calibration_source``) and the pair's own file when an option replaced it
     (``calibration_not_used``); the command says so in a note.
+
+Raw pairs
+    A ``--calib`` file that is not a Middlebury or KITTI calibration (OpenCV FileStorage
+    YAML/XML, Kalibr camchain, ROS camera_info with ``--calib-right``; ``--translation-unit``)
+    describes raw pairs: every pair is rectified before matching, by the rule of ``stereodepth
+    match`` (:mod:`stereodepth._calib_rule`, shared). The rectifier is built once
+    (:class:`~.calibration.BatchRectifier`; on Dask the calibration is shipped and each worker
+    process builds the maps once) and the rig is the rectifier's: the disparity, depth,
+    previews and point clouds are of the rectified left camera, in its frame (``x_rect = R1 @
+    x_raw``), at the rectified size. ``--num-disparities`` is required (raw calibrations have
+    no ndisp). Records say ``rectified`` and ``settings.rectification``; a pair whose size is
+    not the calibration's fails alone; ``--write-rectified`` also writes
+    ``S.left-rectified.png`` and ``S.right-rectified.png``; ``--no-rectify`` makes a raw
+    calibration an error.
 
 Output, per pair with stem S, in OUTDIR
     ``S.disparity.EXT`` and ``S.depth.EXT`` (EXT by ``--format``: ``npy`` float32 disparity in
@@ -76,7 +100,8 @@ Running
 
 Errors
     Everything no pair could get past is checked before the first pair: the options (matcher
-    options, depth range, pair names, runner), the optional extras (Pillow; tqdm for the
+    options for the chosen method, depth range, pair names, runner, the scheduler's address),
+    a raw calibration (read, and its rectifier built), the optional extras (Pillow; tqdm for the
     progress bar; dask.distributed for Dask), the output locations, the pairs and their
     calibration. Each is one line on stderr.
 
@@ -88,7 +113,7 @@ flight finish, the rest are reported as cancelled).
 from __future__ import annotations
 
 from ..calib import Calibration, read_calibration, read_kitti_calib
-from .calibration import resolve_calibration
+from .calibration import BatchRectifier, raw_rectification, resolve_calibration
 from .command import print_summary, register, run
 from .compute import process_pair
 from .discovery import (
@@ -115,6 +140,7 @@ __all__ = [
     "SEARCH_DEPTH",
     "STATUSES",
     "BatchOptions",
+    "BatchRectifier",
     "BatchReport",
     "Calibration",
     "Discovery",
@@ -125,6 +151,7 @@ __all__ = [
     "find_pairs",
     "print_summary",
     "process_pair",
+    "raw_rectification",
     "read_calibration",
     "read_kitti_calib",
     "register",

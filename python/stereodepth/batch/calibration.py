@@ -9,15 +9,28 @@ Precedence
     disparities is ``--num-disparities``, else ``ndisp`` of the file the rig came from (a
     Middlebury ``calib.txt``; KITTI files have none). A pair's own file that a higher source
     replaces is not read; each pair's record names the source used and the file not used.
+
+Raw pairs
+    A ``--calib`` file that is not a Middlebury or KITTI calibration is the calibration of a
+    raw pair (OpenCV FileStorage YAML/XML, Kalibr, ROS camera_info with ``--calib-right``),
+    and every pair is rectified before matching, by the rule of ``stereodepth match``
+    (:mod:`stereodepth._calib_rule`): the rectifier is built once (:class:`BatchRectifier`;
+    on Dask the calibration travels and each worker process builds it once), and the rig is
+    the rectifier's, so the depth and points are in the rectified left camera's frame.
 """
 
 from __future__ import annotations
 
+import hashlib
+import threading
 from collections.abc import Sequence
 from dataclasses import replace
 from pathlib import Path
+from typing import Any
 
-from ..calib import Calibration, read_calibration
+import numpy as np
+
+from ..calib import Calibration, StereoCalibration, read_calibration
 from .job import Pair, UsageError
 
 #: The source named in records for a rig given on the command line.
@@ -45,15 +58,18 @@ def resolve_calibration(
     given: Calibration | None = None,
     calib_file: Path | None = None,
     num_disparities: int | None = None,
+    calib_rig: Calibration | None = None,
 ) -> list[Pair]:
     """Each pair with its calibration and number of disparities, or the problem that stops it,
     by the precedence of :mod:`stereodepth.batch.calibration`: ``given`` (the command line)
     wins over ``calib_file`` (``--calib``) which wins over each pair's own file.
+    ``calib_rig`` is the rig of a raw ``calib_file`` (its rectified rig, from
+    :func:`raw_rectification`), used instead of reading the file.
 
     Raises UsageError when no pair has a calibration or a number of disparities, so a
     forgotten option is one clear error (naming where the calibration came from) rather than
     a failure per pair."""
-    shared = given
+    shared = given if given is not None else calib_rig
     if shared is None and calib_file is not None:
         try:
             shared = read_calibration(calib_file, pairs[0].kitti_cams if pairs else None)
@@ -136,3 +152,146 @@ def _ndisp_required(
     return f"{head}: the pairs' calibration files have no ndisp (e.g. {files[0]})" + (
         "; KITTI calibration files never have one" if kitti else ""
     )
+
+
+#: Rectifiers built in this process, by (calibration digest, threads): each worker process of
+#: a Dask job builds a job's maps once, not once per pair. A few entries at most.
+_RECTIFIERS: dict[tuple[str, int], Any] = {}
+_RECTIFIERS_LOCK = threading.RLock()
+_RECTIFIERS_KEPT = 4
+
+
+def _digest(stereo: StereoCalibration) -> str:
+    """A fingerprint of everything the rectification depends on."""
+    h = hashlib.sha256()
+    h.update(f"{stereo.distortion_model}|{tuple(stereo.image_size)}".encode())
+    for name in ("K1", "D1", "K2", "D2", "R", "T", "R1", "R2", "P1", "P2", "Q"):
+        value = getattr(stereo, name, None)
+        h.update(name.encode())
+        if value is not None:
+            h.update(np.ascontiguousarray(value, dtype=np.float64).tobytes())
+    return h.hexdigest()[:16]
+
+
+class BatchRectifier:
+    """Rectifies every pair of a job whose ``--calib`` file is a raw calibration, by the rule
+    of ``stereodepth match`` (:mod:`stereodepth._calib_rule`).
+
+    It holds the calibration (``stereo``, a :class:`stereodepth.calib.StereoCalibration`),
+    which is what travels to Dask workers (a few hundred bytes), and builds the
+    :class:`stereodepth.StereoRectifier` from it once per process and thread count: its maps
+    are not rebuilt for each pair. ``source`` names the file(s) in records."""
+
+    def __init__(self, stereo: StereoCalibration, source: str, rectifier: Any = None) -> None:
+        self.stereo = stereo
+        self.source = source
+        self.digest = _digest(stereo)
+        w, h = (int(v) for v in stereo.image_size)
+        self.image_size = (w, h)
+        if rectifier is not None:
+            self._keep(rectifier.threads, rectifier)
+
+    def __getstate__(self) -> dict[str, Any]:
+        return {"stereo": self.stereo, "source": self.source}
+
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        self.__init__(state["stereo"], state["source"])  # type: ignore[misc]
+
+    def __eq__(self, other: object) -> bool:
+        return isinstance(other, BatchRectifier) and (self.digest, self.source) == (
+            other.digest,
+            other.source,
+        )
+
+    def __hash__(self) -> int:
+        return hash((self.digest, self.source))
+
+    def __repr__(self) -> str:
+        return f"BatchRectifier({self.source!r}, {self.image_size[0]}x{self.image_size[1]} px)"
+
+    def _keep(self, threads: int, rectifier: Any) -> None:
+        with _RECTIFIERS_LOCK:
+            while len(_RECTIFIERS) >= _RECTIFIERS_KEPT:
+                _RECTIFIERS.pop(next(iter(_RECTIFIERS)))
+            _RECTIFIERS[(self.digest, threads)] = rectifier
+
+    def rectifier(self, threads: int | None = None) -> Any:
+        """This process's :class:`stereodepth.StereoRectifier` of the calibration with
+        ``threads`` (None or 0: every core), built on first use."""
+        from .. import _calib_rule
+        from .. import _validate as check
+
+        n = check.threads(threads)
+        # Built under the lock: threads of one worker that start together build it once.
+        with _RECTIFIERS_LOCK:
+            found = _RECTIFIERS.get((self.digest, n))
+            if found is None:
+                found = _calib_rule.raw_rectifier(self.stereo, self.source, threads=n)
+                self._keep(n, found)
+        return found
+
+    def rectify(
+        self, left: np.ndarray, right: np.ndarray, threads: int | None = None
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """The rectified pair. Raises ValueError when the images are not of the calibration's
+        size."""
+        w, h = self.image_size
+        if left.shape[:2] != (h, w):
+            raise ValueError(
+                f"the pair is {left.shape[1]}x{left.shape[0]} px, and --calib {self.source} is "
+                f"the calibration of {w}x{h} px images"
+            )
+        rectified: tuple[np.ndarray, np.ndarray] = self.rectifier(threads).rectify(left, right)
+        return rectified
+
+    def as_dict(self) -> dict[str, Any]:
+        """What records and the report say: the calibration, its digest, the sizes."""
+        return {
+            "calibration": self.source,
+            "digest": self.digest,
+            "raw_size": list(self.image_size),
+            "rectified_size": list(self.image_size),
+        }
+
+
+def raw_rectification(
+    calib: str,
+    *,
+    calib_right: str | None = None,
+    translation_unit: str = "m",
+    no_rectify: bool = False,
+    write_rectified: bool = False,
+    threads: int | None = None,
+) -> tuple[BatchRectifier, Calibration] | None:
+    """For a raw ``--calib`` file: the job's :class:`BatchRectifier` (its rectifier built now,
+    so that a calibration that cannot rectify stops the job before the first pair) and the
+    rectified rig every pair's depth uses (the rectified left camera's: focal length,
+    baseline, doffs, principal point of P1). None for a Middlebury or KITTI file (a rectified
+    pair: :func:`resolve_calibration` reads it). Raises UsageError in the flags' names; the
+    rule is ``stereodepth match``'s (:mod:`stereodepth._calib_rule`)."""
+    from .. import _calib_rule as rule
+
+    try:
+        stereo = rule.raw_calibration(
+            calib,
+            calib_right=calib_right,
+            translation_unit=translation_unit,
+            no_rectify=no_rectify,
+            write_rectified=write_rectified,
+        )
+        if stereo is None:
+            return None
+        source = rule.calibration_source(calib, calib_right)
+        rectifier = rule.raw_rectifier(stereo, source, threads=threads)
+    except ValueError as exc:
+        raise UsageError(str(exc)) from None
+    rig = rule.rectified_rig(rectifier)
+    rectified = Calibration(
+        focal_px=rig["focal_px"],
+        baseline_m=rig["baseline_m"],
+        doffs_px=rig["doffs_px"],
+        cx_px=rig["cx_px"],
+        cy_px=rig["cy_px"],
+        source=f"--calib {source} (rectified)",
+    )
+    return BatchRectifier(stereo, source, rectifier), rectified

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import inspect
 import json
 import math
 import os
@@ -13,9 +14,16 @@ from typing import Any, NoReturn
 
 from .. import _validate as check
 from .._extras import require
-from ..calib import Calibration
+from .._methods import METHODS, check_method
+from ..calib import TRANSLATION_UNITS, Calibration
 from ..cli import key_value_option
-from .calibration import COMMAND_LINE, calibration_note, resolve_calibration
+from .calibration import (
+    COMMAND_LINE,
+    BatchRectifier,
+    calibration_note,
+    raw_rectification,
+    resolve_calibration,
+)
 from .discovery import check_pair_names, discover
 from .job import FORMATS, BatchOptions, Pair, UsageError
 from .records import BatchReport
@@ -63,7 +71,26 @@ def register(subparsers: Any) -> None:
     c.add_argument(
         "--calib",
         metavar="FILE",
-        help="one calibration for every pair: Middlebury calib.txt or KITTI calib",
+        help="one calibration for every pair: Middlebury calib.txt or KITTI calib (rectified "
+        "pairs: matched as given), or a raw calibration (OpenCV FileStorage YAML/XML, Kalibr "
+        "camchain, ROS camera_info): every pair is rectified first and the depth is in the "
+        "rectified left camera's frame",
+    )
+    c.add_argument(
+        "--calib-right",
+        metavar="FILE",
+        help="the right camera's ROS camera_info file (--calib is the left one's)",
+    )
+    c.add_argument(
+        "--translation-unit",
+        choices=tuple(TRANSLATION_UNITS),
+        default="m",
+        help="unit of the translations in a raw --calib file (default m)",
+    )
+    c.add_argument(
+        "--no-rectify",
+        action="store_true",
+        help="never rectify: a --calib file of a raw (unrectified) pair is an error",
     )
     o = p.add_argument_group("output")
     o.add_argument(
@@ -82,6 +109,12 @@ def register(subparsers: Any) -> None:
         help="also write colour previews of the disparity and the depth, with colour bars "
         "(S.disparity.preview.png, S.depth.preview.png; needs matplotlib, the plot extra)",
     )
+    o.add_argument(
+        "--write-rectified",
+        action="store_true",
+        help="with a raw --calib: also write each rectified pair as S.left-rectified.png and "
+        "S.right-rectified.png",
+    )
     o.add_argument("--min-depth-m", type=float, help="depths nearer than this are invalid")
     o.add_argument("--max-depth-m", type=float, help="depths farther than this are invalid")
     o.add_argument(
@@ -93,25 +126,35 @@ def register(subparsers: Any) -> None:
         "--force", action="store_true", help="recompute pairs whose outputs are already complete"
     )
     o.add_argument("--quiet", action="store_true", help="no progress bar and no summary")
-    m = p.add_argument_group("matcher (stereodepth.block_match)")
+    m = p.add_argument_group(
+        "matcher (bm: stereodepth.block_match; sgm: stereodepth.semi_global_match)"
+    )
+    m.add_argument(
+        "--method",
+        choices=METHODS,
+        default="bm",
+        help="bm: block matching (default); sgm: semi-global matching (more accurate, slower)",
+    )
     m.add_argument(
         "--num-disparities",
         type=int,
         metavar="N",
         help="disparities searched (default: ndisp of the Middlebury calib.txt that gives the "
-        "rig; required with KITTI files and with --focal-px)",
+        "rig; required with KITTI files, with --focal-px and with a raw --calib)",
     )
     m.add_argument("--min-disparity", type=int, metavar="D", help="smallest disparity searched")
-    m.add_argument("--block-size", type=int, metavar="N", help="odd block side")
-    m.add_argument("--cost", choices=("census", "sad"), help="matching cost")
+    m.add_argument(
+        "--block-size", type=int, metavar="N", help="block side (bm: odd, >= 3; sgm: 1 or 3)"
+    )
+    m.add_argument("--cost", choices=("census", "sad"), help="matching cost (bm only)")
     m.add_argument(
         "--option",
         action="append",
         type=key_value_option,
         default=[],
         metavar="KEY=VALUE",
-        help="other keyword argument of stereodepth.block_match, repeatable "
-        "(e.g. uniqueness_ratio=15, subpixel=false)",
+        help="other keyword argument of the method's matcher, repeatable "
+        "(e.g. uniqueness_ratio=15, subpixel=false; sgm: p1=40, p2=500, paths=8)",
     )
     m.add_argument(
         "--channel-order",
@@ -168,65 +211,113 @@ def _one_line_error(parser: argparse.ArgumentParser) -> Callable[[str], NoReturn
     return error
 
 
-def _matcher_keywords() -> list[str]:
-    """The keyword options of the matcher (:class:`stereodepth.StereoMatcher`)."""
-    import inspect
-
-    from ..matching import StereoMatcher
-
-    params = inspect.signature(StereoMatcher.__init__).parameters
-    return [n for n, prm in params.items() if prm.kind is inspect.Parameter.KEYWORD_ONLY]
+#: For each method, the options whose limits the others' depend on: checked first, then
+#: given along with each later one, so that an error names the option at fault.
+_BASES = {"bm": ("cost",), "sgm": ("block_size", "paths", "p1")}
 
 
 def _matcher_options(args: argparse.Namespace) -> dict[str, Any]:
-    """The matcher's keyword arguments from --option and the matcher flags, each checked now,
-    before any pair runs, with an error that names what the user typed."""
-    import inspect
+    """The keyword arguments of ``--method``'s matcher from --option and the matcher flags,
+    each checked now, before any pair runs, by the matcher's own rules, with an error that
+    names what the user typed; an option of the other method says so."""
+    from .._methods import METHOD_NAMES, METHODS, matcher_class, matcher_keywords, options_class
 
-    from ..matching import BlockMatchOptions, StereoMatcher
+    method = args.method
+    known = matcher_keywords(method)
+    names = ", ".join(k for k in known if k not in _RESERVED)
+    this = f"--method {method} ({METHOD_NAMES[method]})"
 
-    known = _matcher_keywords()
+    def not_an_option(typed: str, key: str) -> UsageError:
+        owners = [m for m in METHODS if m != method and key in matcher_keywords(m)]
+        if owners:
+            return UsageError(
+                f"{typed}: an option of --method {owners[0]}; {this} has no option {key!r} "
+                f"(its options: {names})"
+            )
+        return UsageError(f"{typed}: {this} has no option {key!r} (its options: {names})")
+
     opts: dict[str, Any] = {}
     typed: dict[str, str] = {}
     for key, value in args.option:
-        if key in _RESERVED:
+        if key in _RESERVED and (key in known or _RESERVED[key] is None):
             flag = _RESERVED[key]
             raise UsageError(
                 f"--option {key}: use {flag}" if flag else f"--option {key}: not available in batch"
             )
         if key not in known:
-            names = ", ".join(k for k in known if k not in _RESERVED)
-            raise UsageError(
-                f"--option {key}: the matcher has no option {key!r} (its options: {names})"
-            )
+            raise not_an_option(f"--option {key}", key)
         opts[key] = value
         typed[key] = f"--option {key}"
     for key, flag in _FLAGS.items():
         if getattr(args, key) is not None:
+            if key not in known:
+                raise not_an_option(flag, key)
             opts[key] = getattr(args, key)
             typed[key] = f"{flag} {getattr(args, key)}"
     nd = args.num_disparities or 16
+    checker = options_class(method)
     try:
-        BlockMatchOptions(num_disparities=nd)
+        checker(num_disparities=nd)
     except (TypeError, ValueError) as exc:
         raise UsageError(f"--num-disparities {nd}: {exc}") from exc
-    checked = set(inspect.signature(BlockMatchOptions.__init__).parameters)
-    cost = {"cost": opts["cost"]} if "cost" in opts else {}
-    for key in sorted(opts, key=lambda k: k != "cost"):  # the cost first: limits depend on it
+    checked = set(inspect.signature(checker.__init__).parameters)
+    bases = [k for k in _BASES[method] if k in opts]
+    context: dict[str, Any] = {}
+    for key in [*bases, *sorted(k for k in opts if k not in bases)]:
         if key in checked:
             try:
-                BlockMatchOptions(num_disparities=nd, **{**cost, key: opts[key]})
+                checker(num_disparities=nd, **{**context, key: opts[key]})
             except (TypeError, ValueError) as exc:
                 raise UsageError(f"{typed[key]}: {exc}") from exc
+        if key in bases:
+            context[key] = opts[key]
     if args.channel_order is not None:
         if "channel_order" not in known:
-            raise UsageError("--channel-order: this version of the matcher has no channel_order")
+            raise UsageError(f"--channel-order: {this} has no channel_order")
         opts["channel_order"] = args.channel_order
     try:  # all together, as each pair will make its matcher
-        StereoMatcher(num_disparities=nd, threads=1, **opts)
+        matcher_class(method)(num_disparities=nd, threads=1, **opts)
     except (TypeError, ValueError) as exc:
-        raise UsageError(f"matcher options: {exc}") from exc
+        raise UsageError(f"{this} options: {exc}") from exc
     return opts
+
+
+def _raw_rectification(
+    args: argparse.Namespace,
+) -> tuple[BatchRectifier, Calibration] | None:
+    """The rectifier and rectified rig of a raw --calib file, None for none or a rectified
+    one; the flags that go with a raw file checked (the rule of ``stereodepth match``)."""
+    from .. import _calib_rule
+
+    if args.calib is None:
+        try:
+            _calib_rule.check_without_calib(
+                calib_right=args.calib_right,
+                translation_unit=args.translation_unit,
+                no_rectify=args.no_rectify,
+                write_rectified=args.write_rectified,
+            )
+        except ValueError as exc:
+            raise UsageError(str(exc)) from None
+        return None
+    return raw_rectification(
+        args.calib,
+        calib_right=args.calib_right,
+        translation_unit=args.translation_unit,
+        no_rectify=args.no_rectify,
+        write_rectified=args.write_rectified,
+        threads=args.threads,
+    )
+
+
+def _rectify_note(raw: tuple[BatchRectifier, Calibration] | None) -> str | None:
+    if raw is None:
+        return None
+    w, h = raw[0].image_size
+    return (
+        f"--calib {raw[0].source} is a raw calibration: every pair ({w}x{h} px) is rectified "
+        "before matching; disparity, depth and points are of the rectified left camera"
+    )
 
 
 def _given_calibration(args: argparse.Namespace) -> Calibration | None:
@@ -355,6 +446,7 @@ def run(args: argparse.Namespace) -> int:
     if args.num_disparities is not None and args.num_disparities < 1:
         raise UsageError(f"--num-disparities must be an integer >= 1, got {args.num_disparities}")
     given = _given_calibration(args)
+    check_method(args.method, "--method")
     matcher = _matcher_options(args)
     _check_depth_range(args)
     pair_names = [tuple(args.pair_names)] if args.pair_names else None
@@ -367,6 +459,7 @@ def run(args: argparse.Namespace) -> int:
     require("PIL.Image", "reading images")
     if args.preview:
         require("matplotlib", "--preview")
+    raw = _raw_rectification(args)
     out_dir = Path(args.output)
     _writable_folder(out_dir, "OUTDIR")
     report_path = _report_path(args, out_dir)
@@ -377,6 +470,7 @@ def run(args: argparse.Namespace) -> int:
         given=given,
         calib_file=Path(args.calib) if args.calib else None,
         num_disparities=args.num_disparities,
+        calib_rig=None if raw is None else raw[1],
     )
     options = BatchOptions(
         out_dir=out_dir,
@@ -387,14 +481,16 @@ def run(args: argparse.Namespace) -> int:
         min_depth_m=args.min_depth_m,
         max_depth_m=args.max_depth_m,
         force=args.force,
+        method=args.method,
+        rectification=None if raw is None else raw[0],
+        write_rectified=args.write_rectified,
     )
     _check_report_is_its_own(report_path, pairs, options)
     notes = found.skipped_text(limit=len(found.skipped))
-    calib_note = calibration_note(pairs)
-    if calib_note:
-        notes.append(calib_note)
+    calib_notes = [n for n in (calibration_note(pairs), _rectify_note(raw)) if n]
+    notes.extend(calib_notes)
     if not args.quiet:
-        shown = found.skipped_text() + ([calib_note] if calib_note else [])
+        shown = found.skipped_text() + calib_notes
         for note in shown:
             print(f"stereodepth batch: note: {note}", file=sys.stderr)
     report = run_batch(

@@ -73,11 +73,17 @@ def _write_map(path: Path, kind: str, array: np.ndarray, fmt: str) -> None:
 def process_pair(pair: Pair, options: BatchOptions, threads: int | None = None) -> dict[str, Any]:
     """Computes and writes one pair's outputs; never raises for a bad pair.
 
+    The pair is matched by ``options.method`` (``"bm"``: :class:`stereodepth.StereoMatcher`,
+    ``"sgm"``: :class:`stereodepth.SemiGlobalMatcher`) with ``options.matcher``, after
+    rectification when ``options.rectification`` is set (a raw ``--calib``): the disparity,
+    depth, points and previews are then of the rectified left camera, at the rectified size.
+
     Returns the pair's record: ``stem``, ``left``, ``right``, ``status`` (``ok`` or
     ``failed``), ``error``, ``time_s``, ``density`` (the fraction of pixels with a
     disparity), ``width``, ``height``, ``outputs``, ``settings``, ``calibration_source``,
-    ``calibration_not_used`` and ``removed`` (the stale files of an earlier run removed). The
-    record is also written, last, as ``<stem>.record.json``, for a failed pair too.
+    ``calibration_not_used``, ``method``, ``matcher_options``, ``rectified`` and ``removed``
+    (the stale files of an earlier run removed). The record is also written, last, as
+    ``<stem>.record.json``, for a failed pair too.
 
     The outputs of an earlier run of the pair (as its record lists them) that this run does
     not write again are removed: all of them when the pair fails (its record then says
@@ -87,7 +93,7 @@ def process_pair(pair: Pair, options: BatchOptions, threads: int | None = None) 
     from ..pointcloud import reproject, write_ply
 
     t0 = time.perf_counter()
-    record = record_head(pair, "failed")
+    record = record_head(pair, "failed", options=options)
     earlier = earlier_outputs(pair, options)
     written: set[Path] = set()
     try:
@@ -98,14 +104,25 @@ def process_pair(pair: Pair, options: BatchOptions, threads: int | None = None) 
             raise ValueError("no calibration or number of disparities for this pair")
         threads = _task_threads() if threads is None else threads
         left, right, colours, stamps = _load_pair(pair)
-        from ..matching import thread_matcher
+        paths = options.output_paths(pair.stem)
+        if options.rectification is not None:
+            # The pair as the rectified cameras see it: everything below is in their frame.
+            left, right = options.rectification.rectify(left, right, threads)
+            colours = left
+            if options.write_rectified:
+                from .._calib_rule import write_png
+
+                for side, image in (("left", left), ("right", right)):
+                    written.add(paths[f"{side}_rectified"])
+                    write_png(paths[f"{side}_rectified"], image)
+        from .._methods import compute_disparity, thread_matcher
 
         matcher = thread_matcher(
-            num_disparities=pair.num_disparities, **{**options.matcher, "threads": threads}
+            options.method,
+            num_disparities=pair.num_disparities,
+            **{**options.matcher, "threads": threads},
         )
-        disparity = matcher.compute(left, right)
-        if not isinstance(disparity, np.ndarray):  # pragma: no cover - no confidence asked
-            raise TypeError("block_match returned more than the disparity")
+        disparity = compute_disparity(matcher, left, right)
         depth = disparity_to_depth(
             disparity,
             focal_px=calib.focal_px,
@@ -116,7 +133,6 @@ def process_pair(pair: Pair, options: BatchOptions, threads: int | None = None) 
             dtype=np.uint16 if options.format == "png16" else np.float32,
             threads=threads,
         )
-        paths = options.output_paths(pair.stem)
         written.update(paths.values())
         _write_map(paths["disparity"], "disparity", disparity, options.format)
         _write_map(paths["depth"], "depth", depth, options.format)

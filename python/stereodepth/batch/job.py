@@ -5,9 +5,12 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from ..calib import Calibration
+
+if TYPE_CHECKING:
+    from .calibration import BatchRectifier
 
 FORMATS = {"npy": "npy", "png16": "png", "pfm": "pfm"}
 STATUSES = ("ok", "skipped", "failed", "cancelled")
@@ -40,16 +43,25 @@ class Pair:
 
 @dataclass(frozen=True)
 class BatchOptions:
-    """What every pair is computed with (besides its calibration)."""
+    """What every pair is computed with (besides its calibration).
+
+    ``method`` names the matcher, ``"bm"`` (:func:`stereodepth.block_match`) or ``"sgm"``
+    (:func:`stereodepth.semi_global_match`), and ``matcher`` holds its keyword arguments
+    (``num_disparities`` and ``threads`` come from the pair and the runner). ``rectification``
+    rectifies every pair before matching (a raw ``--calib`` file); ``write_rectified`` also
+    writes the rectified pair."""
 
     out_dir: Path
     format: str = "npy"
     ply: bool = False
     preview: bool = False  # colour PNGs of the disparity and the depth, with colour bars
-    matcher: dict[str, Any] = field(default_factory=dict)  # block_match keyword arguments
+    matcher: dict[str, Any] = field(default_factory=dict)  # the method's keyword arguments
     min_depth_m: float | None = None
     max_depth_m: float | None = None
     force: bool = False
+    method: str = "bm"
+    rectification: BatchRectifier | None = None
+    write_rectified: bool = False
 
     def output_paths(self, stem: str) -> dict[str, Path]:
         ext = FORMATS[self.format]
@@ -62,6 +74,9 @@ class BatchOptions:
         if self.preview:
             for kind in ("disparity", "depth"):
                 out[f"{kind}_preview"] = self.out_dir / f"{stem}.{kind}.preview.png"
+        if self.write_rectified:
+            for side in ("left", "right"):
+                out[f"{side}_rectified"] = self.out_dir / f"{stem}.{side}-rectified.png"
         return out
 
     def record_path(self, stem: str) -> Path:
@@ -69,10 +84,11 @@ class BatchOptions:
 
     def owned_names(self, stem: str) -> set[str]:
         """The names of every file a pair may write into OUTDIR, in any format, with or
-        without ``--ply`` or ``--preview``: the only files batch ever removes (when they are
-        stale)."""
+        without ``--ply``, ``--preview`` or ``--write-rectified``: the only files batch ever
+        removes (when they are stale)."""
         names = {
             f"{stem}.{kind}.{ext}" for kind in ("disparity", "depth") for ext in FORMATS.values()
         }
         previews = {f"{stem}.{kind}.preview.png" for kind in ("disparity", "depth")}
-        return names | previews | {f"{stem}.ply", f"{stem}{RECORD_SUFFIX}"}
+        rectified = {f"{stem}.{side}-rectified.png" for side in ("left", "right")}
+        return names | previews | rectified | {f"{stem}.ply", f"{stem}{RECORD_SUFFIX}"}

@@ -33,9 +33,18 @@ def settings_of(pair: Pair, options: BatchOptions) -> dict[str, Any]:
         "min_depth_m": options.min_depth_m,
         "max_depth_m": options.max_depth_m,
         "num_disparities": pair.num_disparities,
-        "matcher": {k: v for k, v in sorted(options.matcher.items()) if k != "threads"},
+        "method": options.method,
+        "matcher": matcher_options(options),
         "calibration": {k: v for k, v in pair.calibration.as_dict().items() if k != "source"},
+        "rectification": None if options.rectification is None else options.rectification.as_dict(),
+        "write_rectified": options.write_rectified,
     }
+
+
+def matcher_options(options: BatchOptions) -> dict[str, Any]:
+    """The matcher options a job was given (``--option`` and the matcher flags), sorted; the
+    number of disparities is each pair's, the threads the runner's."""
+    return {k: v for k, v in sorted(options.matcher.items()) if k != "threads"}
 
 
 def completed_record(pair: Pair, options: BatchOptions) -> dict[str, Any] | None:
@@ -79,9 +88,13 @@ def jsonable(value: Any) -> Any:
     return value
 
 
-def record_head(pair: Pair, status: str, error: str | None = None) -> dict[str, Any]:
-    """The fields every record of a pair starts with; the rest are filled in as known."""
-    return {
+def record_head(
+    pair: Pair, status: str, error: str | None = None, options: BatchOptions | None = None
+) -> dict[str, Any]:
+    """The fields every record of a pair starts with; the rest are filled in as known. With
+    the job's ``options``: the matcher (``method``, ``matcher_options``) and whether the pair
+    is rectified before matching (``rectified``)."""
+    head: dict[str, Any] = {
         "stem": pair.stem,
         "left": str(pair.left),
         "right": str(pair.right),
@@ -92,6 +105,11 @@ def record_head(pair: Pair, status: str, error: str | None = None) -> dict[str, 
         "calibration_source": None if pair.calibration is None else pair.calibration.source,
         "calibration_not_used": str(pair.calib_file) if pair.calib_file_unused else None,
     }
+    if options is not None:
+        head["method"] = options.method
+        head["matcher_options"] = matcher_options(options)
+        head["rectified"] = options.rectification is not None
+    return head
 
 
 def earlier_outputs(pair: Pair, options: BatchOptions) -> set[Path]:
@@ -130,6 +148,9 @@ class BatchReport:
     started: str = ""
     removed_temp_files: int = 0
     notes: list[str] = field(default_factory=list)
+    method: str = "bm"
+    matcher_options: dict[str, Any] = field(default_factory=dict)
+    rectification: dict[str, Any] | None = None
 
     @property
     def counts(self) -> dict[str, int]:
@@ -158,6 +179,9 @@ class BatchReport:
                 "counts": self.counts,
                 "exit_status": self.exit_status,
                 "notes": self.notes,
+                "method": self.method,
+                "matcher_options": self.matcher_options,
+                "rectification": self.rectification,
                 "pairs": self.pairs,
             }
         )

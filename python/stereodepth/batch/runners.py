@@ -7,6 +7,7 @@ import contextlib
 import datetime as _dt
 import logging
 import os
+import re
 import signal
 import sys
 import threading
@@ -20,7 +21,7 @@ from .. import _validate as check
 from .._extras import require
 from .compute import process_pair, record_failure
 from .job import BatchOptions, Pair, UsageError
-from .records import BatchReport, completed_record, jsonable, record_head
+from .records import BatchReport, completed_record, jsonable, matcher_options, record_head
 
 #: Pairs in flight in the embedded runner: decoding, writing and fsyncing some overlap the
 #: matching of another (which uses every core). See bench/README.md for 1, 2 and 3.
@@ -164,9 +165,36 @@ def _run_dask(
         try:
             record = f.result()
         except Exception as exc:  # the task itself never raises: a worker kept dying
-            head = record_head(pairs[i], "failed", f"{type(exc).__name__}: {exc}")
+            head = record_head(pairs[i], "failed", f"{type(exc).__name__}: {exc}", options)
             record = jsonable(record_failure(pairs[i], options, head))
         done(i, record)
+
+
+#: A dask.distributed scheduler's address: [PROTOCOL://]HOST:PORT, HOST a name, an IPv4
+#: address or a bracketed IPv6 address.
+_SCHEDULER_ADDRESS = re.compile(
+    r"(?:(?P<protocol>[a-z][a-z0-9+.-]*)://)?(?P<host>\[[0-9A-Fa-f:.]+\]|[^\s:/\[\]]+)"
+    r":(?P<port>[0-9]{1,5})/?"
+)
+_SCHEDULER_PROTOCOLS = ("tcp", "tls", "ws", "wss", "ucx")
+
+
+def check_scheduler_address(scheduler: str) -> None:
+    """Raises UsageError, naming ``--scheduler`` and the value, unless ``scheduler`` is a
+    dask.distributed address ``[tcp|tls|ws|wss|ucx://]HOST:PORT`` with a port in 1..65535.
+    Whether a scheduler answers there is known only when connecting."""
+    hint = "expected a Dask scheduler address tcp://HOST:PORT"
+    m = _SCHEDULER_ADDRESS.fullmatch(scheduler)
+    if m is None:
+        raise UsageError(f"--scheduler {scheduler!r}: {hint}")
+    protocol = m.group("protocol")
+    if protocol is not None and protocol not in _SCHEDULER_PROTOCOLS:
+        raise UsageError(
+            f"--scheduler {scheduler!r}: unknown protocol {protocol!r} "
+            f"({', '.join(_SCHEDULER_PROTOCOLS)}); {hint}"
+        )
+    if not 1 <= int(m.group("port")) <= 65535:
+        raise UsageError(f"--scheduler {scheduler!r}: the port must be in 1..65535; {hint}")
 
 
 def check_runner(
@@ -181,6 +209,8 @@ def check_runner(
     ``scheduler`` or ``workers``, tqdm for ``progress``."""
     if scheduler is not None and workers is not None:
         raise UsageError("give --scheduler or --workers, not both")
+    if scheduler is not None:
+        check_scheduler_address(scheduler)
     if workers is not None and workers < 1:
         raise UsageError(f"--workers must be an integer >= 1, got {workers}")
     if threads is not None and threads < 0:
@@ -212,11 +242,33 @@ def run_batch(
     (KeyboardInterrupt) stops the job: the pairs in flight finish, the rest are ``cancelled``,
     and the report says ``interrupted``. Writes ``<stem>.*`` files into ``options.out_dir``;
     the caller writes the report."""
-    from ..io import remove_temp_files
-
     check_runner(scheduler=scheduler, workers=workers, threads=threads, progress=progress)
     out_dir = options.out_dir
+    created = not out_dir.exists()
     out_dir.mkdir(parents=True, exist_ok=True)
+    try:
+        return _run_locked(pairs, options, scheduler, workers, threads, progress, on_result, notes)
+    except UsageError:
+        if created:  # e.g. the scheduler did not answer: leave no empty OUTDIR behind
+            with contextlib.suppress(OSError):
+                out_dir.rmdir()
+        raise
+
+
+def _run_locked(
+    pairs: Sequence[Pair],
+    options: BatchOptions,
+    scheduler: str | None,
+    workers: int | None,
+    threads: int | None,
+    progress: bool,
+    on_result: Callable[[dict[str, Any]], None] | None,
+    notes: Sequence[str],
+) -> BatchReport:
+    """:func:`run_batch` once OUTDIR exists."""
+    from ..io import remove_temp_files
+
+    out_dir = options.out_dir
     started = _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")
     t0 = time.perf_counter()
     records: list[dict[str, Any] | None] = [None] * len(pairs)
@@ -241,7 +293,8 @@ def run_batch(
                     todo.append((i, p))
                     continue
                 keep = ("time_s", "density", "width", "height", "outputs")
-                done(i, {**record_head(p, "skipped"), **{k: earlier.get(k) for k in keep}})
+                head = record_head(p, "skipped", options=options)
+                done(i, {**head, **{k: earlier.get(k) for k in keep}})
             if scheduler is None and workers is None:
                 if todo:
                     _run_embedded(todo, options, done, threads)
@@ -263,7 +316,7 @@ def run_batch(
         if rec is None:
             # Interrupted: a pair whose result did not reach us may have finished anyway.
             earlier = completed_record(p, options)
-            rec = record_head(p, "cancelled")
+            rec = record_head(p, "cancelled", options=options)
             if earlier is not None:
                 rec.update(
                     {
@@ -280,6 +333,9 @@ def run_batch(
         started=started,
         removed_temp_files=removed,
         notes=list(notes),
+        method=options.method,
+        matcher_options=matcher_options(options),
+        rectification=None if options.rectification is None else options.rectification.as_dict(),
     )
 
 
@@ -336,8 +392,10 @@ def _dask_client(
     if scheduler is not None:
         try:
             client = Client(scheduler, timeout="10s")  # type: ignore[no-untyped-call]
-        except OSError as exc:
-            raise UsageError(f"cannot reach the Dask scheduler at {scheduler}: {exc}") from exc
+        except (OSError, ValueError) as exc:
+            raise UsageError(
+                f"--scheduler {scheduler!r}: cannot reach the Dask scheduler: {exc}"
+            ) from exc
         with client:
             yield client, f"dask {scheduler}", threads
         return

@@ -1,0 +1,171 @@
+"""The rule for a ``--calib FILE`` of the commands, shared by ``stereodepth match`` and
+``stereodepth batch``: the file's format says whether the pair is already rectified.
+
+- A Middlebury ``calib.txt`` or a KITTI calibration file describes a rectified pair: it is
+  matched as it is, with the rig the file gives.
+- Any other calibration :func:`stereodepth.calib.read_stereo_calibration` reads (OpenCV
+  FileStorage YAML/XML, Kalibr camchain, a pair of ROS camera_info files with
+  ``--calib-right``; ``--translation-unit`` the unit of its translations) describes a raw pair,
+  rectified automatically before matching by
+  :meth:`stereodepth.StereoRectifier.from_calibration` (the file's own R1, R2, P1, P2 where it
+  holds them, else Bouguet's method with alpha -1). The rig is then the rectifier's
+  (:func:`rectified_rig`), so disparity, depth and points are of the rectified left camera,
+  whose frame is the raw left camera's rotated by R1 (``x_rect = R1 @ x_raw``).
+  ``--no-rectify`` refuses: a raw calibration is then an error. Rigs whose rectified baseline
+  is vertical are refused (the matchers search along rows).
+
+Errors are ValueError, one line in the flags' names; each command turns them into its usage
+error (exit status 2).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+#: Flags that only apply to a raw --calib file.
+RAW_ONLY_FLAGS = ("--calib-right", "--translation-unit", "--write-rectified")
+
+
+def _cli_names(message: str) -> str:
+    """A reader's message with its keyword names replaced by the commands' flags."""
+    return message.replace("second_path", "--calib-right").replace(
+        "translation_unit", "--translation-unit"
+    )
+
+
+def check_without_calib(
+    *,
+    calib_right: str | None,
+    translation_unit: str,
+    no_rectify: bool,
+    write_rectified: bool,
+) -> None:
+    """Without ``--calib``: ValueError for a flag that goes with it."""
+    used = (
+        ("--calib-right", calib_right is not None),
+        ("--translation-unit", translation_unit != "m"),
+        ("--write-rectified", write_rectified),
+        ("--no-rectify", no_rectify),
+    )
+    for flag, given in used:
+        if given:
+            raise ValueError(f"{flag} goes with --calib FILE")
+
+
+def calibration_source(calib: str, calib_right: str | None) -> str:
+    """How records and summaries name a raw calibration: the file, and the right camera's."""
+    return calib if calib_right is None else f"{calib}, {calib_right}"
+
+
+def raw_calibration(
+    calib: str,
+    *,
+    calib_right: str | None = None,
+    translation_unit: str = "m",
+    no_rectify: bool = False,
+    write_rectified: bool = False,
+) -> Any:
+    """The :class:`stereodepth.calib.StereoCalibration` of ``--calib`` when it describes a raw
+    pair (to be rectified), None when it is a Middlebury or KITTI calibration of a rectified
+    pair (matched as given; the raw-only flags are then refused).
+
+    Raises ValueError (one line, in the flags' names) for a missing or unreadable file, a
+    raw-only flag with a rectified file, a raw file with ``no_rectify``, and whatever the
+    reader finds wrong."""
+    from .calib import read_stereo_calibration, rectified_format
+
+    from .io import require_file
+
+    try:
+        path = require_file(calib, "calibration file")
+    except OSError as exc:  # missing, or a folder
+        raise ValueError(f"--calib: {exc}") from None
+    try:
+        rectified = rectified_format(path) is not None
+    except OSError as exc:
+        raise ValueError(f"--calib: cannot read {calib}: {exc.strerror}") from None
+    except ValueError as exc:
+        raise ValueError(f"--calib: {exc}") from None
+    if rectified:
+        used = (
+            ("--calib-right", calib_right is not None),
+            ("--translation-unit", translation_unit != "m"),
+            ("--write-rectified", write_rectified),
+        )
+        for flag, given in used:
+            if given:
+                raise ValueError(
+                    f"{flag} does not apply to {calib}, a Middlebury or KITTI calibration "
+                    "of a pair that is already rectified"
+                )
+        return None
+    try:
+        stereo = read_stereo_calibration(
+            calib, second_path=calib_right, translation_unit=translation_unit
+        )
+    except (OSError, ValueError, ImportError) as exc:
+        raise ValueError(f"--calib: {_cli_names(str(exc))}") from None
+    if stereo.rectified:  # not from the raw formats today; refuse rather than guess
+        raise ValueError(f"--calib: {calib} is read as a rectified pair of unknown format")
+    if no_rectify:
+        raise ValueError(
+            f"--calib: {calib} is the calibration of a raw (unrectified) pair and "
+            "--no-rectify forbids rectifying it: drop --no-rectify, or give a Middlebury or "
+            "KITTI calibration of a rectified pair"
+        )
+    return stereo
+
+
+def raw_rectifier(stereo: Any, calib: str, *, threads: int | None = None) -> Any:
+    """The :class:`stereodepth.StereoRectifier` of a raw calibration read by
+    :func:`raw_calibration` (``calib`` its file, for messages). Raises ValueError when it
+    cannot rectify, when the rig is vertical, or when its rig is refused (a first camera to
+    the right of the second)."""
+    from .rectify import StereoRectifier
+
+    try:
+        rectifier = StereoRectifier.from_calibration(stereo, threads=threads)
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"--calib: {calib}: cannot rectify: {exc}") from None
+    if rectifier.vertical:
+        raise ValueError(
+            f"--calib: {calib} is a vertical rig (the rectified baseline is along y), "
+            "and the matchers search along rows"
+        )
+    try:
+        rectifier.rig  # noqa: B018 - refuses a pair whose first camera is the right one
+    except ValueError as exc:
+        raise ValueError(f"--calib: {calib}: {exc}") from None
+    return rectifier
+
+
+def rectified_rig(rectifier: Any) -> dict[str, float]:
+    """The rig of the rectified pair: ``focal_px``, ``baseline_m``, ``doffs_px`` of
+    ``rectifier.rig``, and the rectified left camera's principal point ``cx_px``, ``cy_px``
+    from P1."""
+    r = rectifier.rig
+    P1 = rectifier.P1
+    return {
+        "focal_px": float(r.focal_px),
+        "baseline_m": float(r.baseline_mm) / 1000.0,
+        "doffs_px": float(r.doffs_px),
+        "cx_px": float(P1[0, 2]),
+        "cy_px": float(P1[1, 2]),
+    }
+
+
+def write_png(path: Path, image: Any) -> None:
+    """An 8-bit grey or RGB, or a 16-bit grey image as a PNG, atomically (the rectified
+    images of ``--write-rectified``)."""
+    import numpy as np
+
+    from . import io
+
+    if image.dtype == np.uint16:
+        io.write_png16(path, image)
+        return
+    from PIL import Image
+
+    with io.atomic_write(path) as f:
+        Image.fromarray(np.ascontiguousarray(image)).save(f, format="PNG")

@@ -1,0 +1,104 @@
+"""The matchers by name, for the commands and the Dask functions that let the user choose one:
+``"bm"`` (block matching, :class:`stereodepth.StereoMatcher`) and ``"sgm"`` (semi-global
+matching, :class:`stereodepth.SemiGlobalMatcher`).
+
+One table says which class, which checked options (:class:`~stereodepth.matching.
+BlockMatchOptions`, :class:`~stereodepth.semi_global.SemiGlobalOptions`) and which keyword
+options each method has, so that ``stereodepth batch --method`` and :mod:`stereodepth.dask`
+check a user's options by the same rules as the matchers themselves; and
+:func:`thread_matcher` keeps one matcher per thread for jobs that match pair after pair.
+"""
+
+from __future__ import annotations
+
+import inspect
+import threading
+from typing import Any
+
+import numpy as np
+
+__all__ = [
+    "METHODS",
+    "check_method",
+    "matcher_class",
+    "matcher_keywords",
+    "options_class",
+    "thread_matcher",
+]
+
+#: The matchers: block matching (the default everywhere) and semi-global matching.
+METHODS = ("bm", "sgm")
+#: What each method is called in messages and help texts.
+METHOD_NAMES = {"bm": "block matching", "sgm": "semi-global matching"}
+
+
+def check_method(method: Any, name: str = "method") -> str:
+    """``method`` when it is one of :data:`METHODS`; TypeError or ValueError naming ``name``
+    and the value otherwise."""
+    if not isinstance(method, str):
+        raise TypeError(
+            f"{name} must be one of {', '.join(map(repr, METHODS))}, got "
+            f"{type(method).__name__} {method!r}"
+        )
+    if method not in METHODS:
+        raise ValueError(f"{name} must be one of {', '.join(map(repr, METHODS))}, got {method!r}")
+    return method
+
+
+def matcher_class(method: str) -> type[Any]:
+    """:class:`stereodepth.StereoMatcher` for ``"bm"``, :class:`stereodepth.SemiGlobalMatcher`
+    for ``"sgm"``."""
+    if check_method(method) == "bm":
+        from .matching import StereoMatcher
+
+        return StereoMatcher
+    from .semi_global import SemiGlobalMatcher
+
+    return SemiGlobalMatcher
+
+
+def options_class(method: str) -> type[Any]:
+    """The class that checks a method's parameters (the matcher's own checks, without making
+    a matcher): ``BlockMatchOptions`` or ``SemiGlobalOptions``."""
+    if check_method(method) == "bm":
+        from .matching import BlockMatchOptions
+
+        return BlockMatchOptions
+    from .semi_global import SemiGlobalOptions
+
+    return SemiGlobalOptions
+
+
+def matcher_keywords(method: str) -> list[str]:
+    """The keyword options of a method's matcher class, in its signature's order (``isa``,
+    for testing and benchmarking, left out)."""
+    params = inspect.signature(matcher_class(method).__init__).parameters
+    return [n for n, p in params.items() if p.kind is inspect.Parameter.KEYWORD_ONLY and n != "isa"]
+
+
+_thread_state = threading.local()
+
+
+def thread_matcher(method: str, **params: Any) -> Any:
+    """This thread's matcher of ``method`` with ``params``: made on the first call and reused
+    while the method and parameters stay the same, so that a job matching pair after pair (the
+    batch command, the Dask functions) does not allocate and fault in the matcher's buffers
+    again for every pair. Each thread keeps one matcher, released with the thread or when the
+    method or parameters change. Raises the matcher's TypeError or ValueError for bad
+    ``params``."""
+    key = (check_method(method), tuple(sorted(params.items(), key=lambda kv: kv[0])))
+    cached = getattr(_thread_state, "matcher", None)
+    if cached is None or cached[0] != key:
+        _thread_state.matcher = None  # release the old buffers before making the new ones
+        cached = (key, matcher_class(method)(**params))
+        _thread_state.matcher = cached
+    return cached[1]
+
+
+def compute_disparity(matcher: Any, left: np.ndarray, right: np.ndarray) -> np.ndarray:
+    """``matcher.compute(left, right)``, the disparity alone (the matchers made here never
+    return a confidence)."""
+    disparity = matcher.compute(left, right)
+    if not isinstance(disparity, np.ndarray):
+        raise TypeError("the matcher returned more than the disparity (return_confidence=True)")
+    return disparity
