@@ -593,7 +593,7 @@ def test_rectifier_rig_and_q() -> None:
     rs = StereoRectifier.from_calibration(swapped)
     assert rs.P2[0, 3] > 0
     with pytest.raises(ValueError, match=r"first camera is right of the second .*swap"):
-        rs.rig
+        rs.rig  # noqa: B018 - the property raises
 
 
 def test_rectifier_uses_the_files_transforms_unless_asked() -> None:

@@ -74,7 +74,6 @@ def raw_calibration(
     raw-only flag with a rectified file, a raw file with ``no_rectify``, and whatever the
     reader finds wrong."""
     from .calib import read_stereo_calibration, rectified_format
-
     from .io import require_file
 
     try:
