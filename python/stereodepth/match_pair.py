@@ -19,6 +19,8 @@ from typing import Any
 
 import numpy as np
 
+from ._methods import METHODS
+
 __all__ = [
     "METHODS",
     "MatchResult",
@@ -28,9 +30,6 @@ __all__ = [
     "read_calibration_file",
     "sgm_available",
 ]
-
-#: The matchers: block matching, and semi-global matching where the library has it.
-METHODS = ("bm", "sgm")
 
 
 def sgm_available() -> bool:
