@@ -162,6 +162,41 @@ def test_batch_equals_match_on_the_same_raw_pair(
     assert record["calibration_source"] == f"--calib {ros_l}, {ros_r} (rectified)"
 
 
+def test_alpha_recomputes_the_rectification_in_batch_as_in_match(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """``--alpha`` replaces the file's own transforms by Bouguet's with that alpha, in both
+    commands (one rule), and a rerun with another alpha redoes the pair."""
+    from stereodepth.rectify import StereoRectifier
+
+    inp, calib = raw_folder(tmp_path, 1)
+    yaml = mr.write_opencv_yaml(tmp_path / "stereo.yml", calib, stored=True)
+    out = tmp_path / "out"
+    common = ["--calib", yaml, "--translation-unit", "mm", "--num-disparities", NDISP]
+    assert (
+        run_cli("batch", inp, "-o", out, *common, "--alpha", "0", "--format", "pfm", "--quiet") == 0
+    )
+    m = tmp_path / "match"
+    assert run_cli(
+        "match", inp / "p0" / "left.png", inp / "p0" / "right.png", *common, "--alpha", "0",
+        "--depth-format", "pfm", "--no-preview", "-o", f"{m}/", "--json",
+    ) == 0  # fmt: skip
+    capsys.readouterr()
+    assert (out / "p0.depth.pfm").read_bytes() == (m / "depth.pfm").read_bytes()
+    expected = StereoRectifier.from_file(yaml, translation_unit="mm", alpha=0.0).rig
+    stored = StereoRectifier.from_file(yaml, translation_unit="mm").rig
+    assert expected.focal_px != stored.focal_px  # alpha 0 zooms in: a real change
+    record = json.loads((out / "p0.record.json").read_text())
+    settings = record["settings"]
+    assert settings["calibration"]["focal_px"] == pytest.approx(expected.focal_px, rel=1e-12)
+    assert settings["rectification"]["alpha"] == 0.0
+    first = (out / "p0.depth.pfm").read_bytes()
+    assert (
+        run_cli("batch", inp, "-o", out, *common, "--alpha", "1", "--format", "pfm", "--quiet") == 0
+    )
+    assert (out / "p0.depth.pfm").read_bytes() != first
+
+
 def test_a_pair_of_another_size_fails_alone(tmp_path: Path) -> None:
     inp, calib = raw_folder(tmp_path, 1)
     odd = inp / "odd"
@@ -250,6 +285,16 @@ BAD: list[tuple[list[str], str]] = [
         "--calib: {vertical} is a vertical rig (the rectified baseline is along y)",
     ),
     (["--calib", "{garbage}", "--num-disparities", "16"], "--calib: "),
+    (["--alpha", "0", "--num-disparities", "16"], "--alpha goes with --calib FILE"),
+    (["--calib", "{mb}", "--alpha", "0"], "--alpha does not apply to {mb}"),
+    (
+        ["--calib", "{raw}", "--translation-unit", "mm", "--num-disparities", "16", "--alpha", "2"],
+        "--alpha must be -1 (OpenCV's default scaling) or in [0, 1], got 2.0",
+    ),
+    (
+        ["--calib", "{raw}", "--num-disparities", "16", "--alpha", "nan"],
+        "--alpha must be -1 (OpenCV's default scaling) or in [0, 1], got nan",
+    ),
 ]
 
 

@@ -295,6 +295,9 @@ def test_bad_input_one_line_exit_2(tmp_path: Path, capsys: pytest.CaptureFixture
         (["--calib", middlebury, "--translation-unit", "mm"], "--translation-unit does not"),
         (["--no-rectify"], "--no-rectify goes with --calib FILE"),
         (["--calib-right", ros], "--calib-right goes with --calib FILE"),
+        (["--alpha", "0.5"], "--alpha goes with --calib FILE"),
+        (["--calib", middlebury, "--alpha", "0"], "--alpha does not apply"),
+        (["--calib", yaml, "--alpha", "-0.5"], "--alpha must be -1 (OpenCV's default scaling)"),
     ]
     for args, message in cases:
         code, out, err = run(capsys, left, right, *args)

@@ -8,9 +8,11 @@
   ``--calib-right``; ``--translation-unit`` the unit of its translations) describes a raw pair,
   rectified automatically before matching by
   :meth:`stereodepth.StereoRectifier.from_calibration` (the file's own R1, R2, P1, P2 where it
-  holds them, else Bouguet's method with alpha -1). The rig is then the rectifier's
-  (:func:`rectified_rig`), so disparity, depth and points are of the rectified left camera,
-  whose frame is the raw left camera's rotated by R1 (``x_rect = R1 @ x_raw``).
+  holds them, else Bouguet's method with alpha -1; ``--alpha A`` recomputes them with
+  Bouguet's method and that alpha: 0 crops to valid pixels, 1 keeps every raw pixel). The rig
+  is then the rectifier's (:func:`rectified_rig`), so disparity, depth and points are of the
+  rectified left camera, whose frame is the raw left camera's rotated by R1
+  (``x_rect = R1 @ x_raw``).
   ``--no-rectify`` refuses: a raw calibration is then an error. Rigs whose rectified baseline
   is vertical are refused (the matchers search along rows).
 
@@ -24,7 +26,7 @@ from pathlib import Path
 from typing import Any
 
 #: Flags that only apply to a raw --calib file.
-RAW_ONLY_FLAGS = ("--calib-right", "--translation-unit", "--write-rectified")
+RAW_ONLY_FLAGS = ("--calib-right", "--translation-unit", "--write-rectified", "--alpha")
 
 
 def _cli_names(message: str) -> str:
@@ -40,12 +42,14 @@ def check_without_calib(
     translation_unit: str,
     no_rectify: bool,
     write_rectified: bool,
+    alpha: float | None = None,
 ) -> None:
     """Without ``--calib``: ValueError for a flag that goes with it."""
     used = (
         ("--calib-right", calib_right is not None),
         ("--translation-unit", translation_unit != "m"),
         ("--write-rectified", write_rectified),
+        ("--alpha", alpha is not None),
         ("--no-rectify", no_rectify),
     )
     for flag, given in used:
@@ -65,6 +69,7 @@ def raw_calibration(
     translation_unit: str = "m",
     no_rectify: bool = False,
     write_rectified: bool = False,
+    alpha: float | None = None,
 ) -> Any:
     """The :class:`stereodepth.calib.StereoCalibration` of ``--calib`` when it describes a raw
     pair (to be rectified), None when it is a Middlebury or KITTI calibration of a rectified
@@ -91,6 +96,7 @@ def raw_calibration(
             ("--calib-right", calib_right is not None),
             ("--translation-unit", translation_unit != "m"),
             ("--write-rectified", write_rectified),
+            ("--alpha", alpha is not None),
         )
         for flag, given in used:
             if given:
@@ -116,15 +122,30 @@ def raw_calibration(
     return stereo
 
 
-def raw_rectifier(stereo: Any, calib: str, *, threads: int | None = None) -> Any:
+def check_alpha(alpha: Any) -> float | None:
+    """``--alpha``: None, -1 (OpenCV's default scaling) or a number in [0, 1]; ValueError
+    naming the flag otherwise."""
+    if alpha is None:
+        return None
+    a = float(alpha)
+    if not (a == -1 or 0 <= a <= 1):  # NaN fails both
+        raise ValueError(f"--alpha must be -1 (OpenCV's default scaling) or in [0, 1], got {a}")
+    return a
+
+
+def raw_rectifier(
+    stereo: Any, calib: str, *, threads: int | None = None, alpha: float | None = None
+) -> Any:
     """The :class:`stereodepth.StereoRectifier` of a raw calibration read by
-    :func:`raw_calibration` (``calib`` its file, for messages). Raises ValueError when it
-    cannot rectify, when the rig is vertical, or when its rig is refused (a first camera to
-    the right of the second)."""
+    :func:`raw_calibration` (``calib`` its file, for messages); ``alpha`` (``--alpha``) None
+    uses the file's own transforms where it has them, else Bouguet's with alpha -1. Raises
+    ValueError for a bad ``alpha``, when it cannot rectify, when the rig is vertical, or when
+    its rig is refused (a first camera to the right of the second)."""
     from .rectify import StereoRectifier
 
+    alpha = check_alpha(alpha)
     try:
-        rectifier = StereoRectifier.from_calibration(stereo, threads=threads)
+        rectifier = StereoRectifier.from_calibration(stereo, threads=threads, alpha=alpha)
     except (TypeError, ValueError) as exc:
         raise ValueError(f"--calib: {calib}: cannot rectify: {exc}") from None
     if rectifier.vertical:

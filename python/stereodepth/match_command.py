@@ -22,7 +22,8 @@ The rule for ``--calib``: the file's format says whether the pair is already rec
   for the right camera; ``--translation-unit`` the unit of its translations, default m)
   describes a raw pair, which is rectified automatically before matching:
   :meth:`stereodepth.StereoRectifier.from_calibration` (the file's own R1, R2, P1, P2 where
-  it holds them, else Bouguet's method with alpha -1), then ``rectify(LEFT, RIGHT)``. The
+  it holds them, else Bouguet's method with alpha -1; ``--alpha A`` recomputes them with
+  Bouguet's method and that alpha), then ``rectify(LEFT, RIGHT)``. The
   rig is ``rectifier.rig`` (focal_px, baseline, doffs) with cx, cy from P1, so the disparity,
   depth, previews and point cloud are all of the rectified left camera (its frame is the raw
   left camera's rotated by R1, ``x_rect = R1 @ x_raw``), at the rectified size. The summary
@@ -110,6 +111,14 @@ def register(subparsers: Any) -> None:
         help="unit of the translations in a raw --calib file (default m)",
     )
     r.add_argument(
+        "--alpha",
+        type=float,
+        metavar="A",
+        help="with a raw --calib file: recompute the rectification with this alpha (0: crop "
+        "to valid pixels, 1: keep every raw pixel, -1: OpenCV's default scaling); default: "
+        "the file's own rectification, else alpha -1",
+    )
+    r.add_argument(
         "--no-rectify",
         action="store_true",
         help="never rectify: a --calib file of a raw (unrectified) pair is an error",
@@ -188,6 +197,7 @@ def _rig(
                 translation_unit=args.translation_unit,
                 no_rectify=args.no_rectify,
                 write_rectified=args.write_rectified,
+                alpha=args.alpha,
             )
         except ValueError as exc:
             raise _Usage(str(exc)) from None
@@ -202,11 +212,14 @@ def _rig(
                 translation_unit=args.translation_unit,
                 no_rectify=args.no_rectify,
                 write_rectified=args.write_rectified,
+                alpha=args.alpha,
             )
             if stereo is not None:
                 if args.threads is not None and args.threads < 0:
                     raise _Usage(f"--threads must be an integer >= 0, got {args.threads}")
-                rectifier = rule.raw_rectifier(stereo, args.calib, threads=args.threads)
+                rectifier = rule.raw_rectifier(
+                    stereo, args.calib, threads=args.threads, alpha=args.alpha
+                )
         except _Usage:
             raise
         except ValueError as exc:

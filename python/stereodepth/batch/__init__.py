@@ -61,7 +61,7 @@ Raw pairs
     A ``--calib`` file that is not a Middlebury or KITTI calibration (OpenCV FileStorage
     YAML/XML, Kalibr camchain, ROS camera_info with ``--calib-right``; ``--translation-unit``)
     describes raw pairs: every pair is rectified before matching, by the rule of ``stereodepth
-    match`` (:mod:`stereodepth._calib_rule`, shared). The rectifier is built once
+    match`` (:mod:`stereodepth._calib_rule`, shared; ``--alpha`` too). The rectifier is built once
     (:class:`~.calibration.BatchRectifier`; on Dask the calibration is shipped and each worker
     process builds the maps once) and the rig is the rectifier's: the disparity, depth,
     previews and point clouds are of the rectified left camera, in its frame (``x_rect = R1 @

@@ -161,10 +161,10 @@ _RECTIFIERS_LOCK = threading.RLock()
 _RECTIFIERS_KEPT = 4
 
 
-def _digest(stereo: StereoCalibration) -> str:
-    """A fingerprint of everything the rectification depends on."""
+def _digest(stereo: StereoCalibration, alpha: float | None = None) -> str:
+    """A fingerprint of everything the rectification depends on (``--alpha`` included)."""
     h = hashlib.sha256()
-    h.update(f"{stereo.distortion_model}|{tuple(stereo.image_size)}".encode())
+    h.update(f"{stereo.distortion_model}|{tuple(stereo.image_size)}|{alpha!r}".encode())
     for name in ("K1", "D1", "K2", "D2", "R", "T", "R1", "R2", "P1", "P2", "Q"):
         value = getattr(stereo, name, None)
         h.update(name.encode())
@@ -182,20 +182,28 @@ class BatchRectifier:
     :class:`stereodepth.StereoRectifier` from it once per process and thread count: its maps
     are not rebuilt for each pair. ``source`` names the file(s) in records."""
 
-    def __init__(self, stereo: StereoCalibration, source: str, rectifier: Any = None) -> None:
+    def __init__(
+        self,
+        stereo: StereoCalibration,
+        source: str,
+        rectifier: Any = None,
+        *,
+        alpha: float | None = None,
+    ) -> None:
         self.stereo = stereo
         self.source = source
-        self.digest = _digest(stereo)
+        self.alpha = alpha
+        self.digest = _digest(stereo, alpha)
         w, h = (int(v) for v in stereo.image_size)
         self.image_size = (w, h)
         if rectifier is not None:
             self._keep(rectifier.threads, rectifier)
 
     def __getstate__(self) -> dict[str, Any]:
-        return {"stereo": self.stereo, "source": self.source}
+        return {"stereo": self.stereo, "source": self.source, "alpha": self.alpha}
 
     def __setstate__(self, state: dict[str, Any]) -> None:
-        self.__init__(state["stereo"], state["source"])  # type: ignore[misc]
+        self.__init__(state["stereo"], state["source"], alpha=state["alpha"])  # type: ignore[misc]
 
     def __eq__(self, other: object) -> bool:
         return isinstance(other, BatchRectifier) and (self.digest, self.source) == (
@@ -226,7 +234,9 @@ class BatchRectifier:
         with _RECTIFIERS_LOCK:
             found = _RECTIFIERS.get((self.digest, n))
             if found is None:
-                found = _calib_rule.raw_rectifier(self.stereo, self.source, threads=n)
+                found = _calib_rule.raw_rectifier(
+                    self.stereo, self.source, threads=n, alpha=self.alpha
+                )
                 self._keep(n, found)
         return found
 
@@ -249,6 +259,7 @@ class BatchRectifier:
         return {
             "calibration": self.source,
             "digest": self.digest,
+            "alpha": self.alpha,
             "raw_size": list(self.image_size),
             "rectified_size": list(self.image_size),
         }
@@ -261,6 +272,7 @@ def raw_rectification(
     translation_unit: str = "m",
     no_rectify: bool = False,
     write_rectified: bool = False,
+    alpha: float | None = None,
     threads: int | None = None,
 ) -> tuple[BatchRectifier, Calibration] | None:
     """For a raw ``--calib`` file: the job's :class:`BatchRectifier` (its rectifier built now,
@@ -278,11 +290,12 @@ def raw_rectification(
             translation_unit=translation_unit,
             no_rectify=no_rectify,
             write_rectified=write_rectified,
+            alpha=alpha,
         )
         if stereo is None:
             return None
         source = rule.calibration_source(calib, calib_right)
-        rectifier = rule.raw_rectifier(stereo, source, threads=threads)
+        rectifier = rule.raw_rectifier(stereo, source, threads=threads, alpha=alpha)
     except ValueError as exc:
         raise UsageError(str(exc)) from None
     rig = rule.rectified_rig(rectifier)
@@ -294,4 +307,4 @@ def raw_rectification(
         cy_px=rig["cy_px"],
         source=f"--calib {source} (rectified)",
     )
-    return BatchRectifier(stereo, source, rectifier), rectified
+    return BatchRectifier(stereo, source, rectifier, alpha=alpha), rectified

@@ -88,6 +88,14 @@ def register(subparsers: Any) -> None:
         help="unit of the translations in a raw --calib file (default m)",
     )
     c.add_argument(
+        "--alpha",
+        type=float,
+        metavar="A",
+        help="with a raw --calib file: recompute the rectification with this alpha (0: crop "
+        "to valid pixels, 1: keep every raw pixel, -1: OpenCV's default scaling); default: "
+        "the file's own rectification, else alpha -1",
+    )
+    c.add_argument(
         "--no-rectify",
         action="store_true",
         help="never rectify: a --calib file of a raw (unrectified) pair is an error",
@@ -296,6 +304,7 @@ def _raw_rectification(
                 translation_unit=args.translation_unit,
                 no_rectify=args.no_rectify,
                 write_rectified=args.write_rectified,
+                alpha=args.alpha,
             )
         except ValueError as exc:
             raise UsageError(str(exc)) from None
@@ -306,6 +315,7 @@ def _raw_rectification(
         translation_unit=args.translation_unit,
         no_rectify=args.no_rectify,
         write_rectified=args.write_rectified,
+        alpha=args.alpha,
         threads=args.threads,
     )
 
