@@ -12,6 +12,7 @@ from __future__ import annotations
 import importlib.util
 import json
 import pickle
+import types
 from pathlib import Path
 from types import ModuleType
 from typing import Any
@@ -197,6 +198,47 @@ def test_alpha_recomputes_the_rectification_in_batch_as_in_match(
     assert (out / "p0.depth.pfm").read_bytes() != first
 
 
+@pytest.mark.parametrize("method", ["bm", "sgm"])
+def test_vertical_rig_matched_transposed_as_match_does(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], method: str
+) -> None:
+    """The sample pair transposed is a rectified vertical pair (second camera below): batch
+    gives the horizontal pair's disparity transposed, byte for byte as ``stereodepth match``."""
+    pytest.importorskip("yaml", reason="YAML calibrations need PyYAML (the calib extra)")
+    from PIL import Image
+
+    s = sample_pair(96, 64)
+    d = tmp_path / "in" / "p0"
+    d.mkdir(parents=True)
+    up, down = (np.ascontiguousarray(np.swapaxes(a, 0, 1)) for a in (s.left, s.right))
+    Image.fromarray(up).save(d / "left.png")
+    Image.fromarray(down).save(d / "right.png")
+    h, w = up.shape[:2]
+    K = np.array([[100.0, 0, (w - 1) / 2], [0, 100.0, (h - 1) / 2], [0, 0, 1]])
+    c = types.SimpleNamespace(
+        K1=K, D1=np.zeros(5), K2=K, D2=np.zeros(5), R=np.eye(3), T=np.array([0, -0.1, 0]),
+        image_size=(w, h),
+    )  # fmt: skip
+    yaml = mr.write_opencv_yaml(tmp_path / "vertical.yml", c, stored=False)
+    common = ["--calib", yaml, "--translation-unit", "mm", "--num-disparities", "32"]
+    out = tmp_path / "out"
+    assert run_cli(
+        "batch", d.parent, "-o", out, *common, "--method", method, "--format", "pfm", "--quiet"
+    ) == 0  # fmt: skip
+    match = stereodepth.block_match if method == "bm" else stereodepth.semi_global_match
+    horizontal = match(s.left, s.right, num_disparities=32)
+    assert isinstance(horizontal, np.ndarray)
+    disparity = io.read_pfm(out / "p0.disparity.pfm")
+    assert disparity.tobytes() == np.ascontiguousarray(horizontal.T).tobytes()
+    m = tmp_path / "match"
+    assert run_cli(
+        "match", d / "left.png", d / "right.png", *common, "--method", method,
+        "--depth-format", "pfm", "--disparity-format", "pfm", "--no-preview", "-o", f"{m}/",
+    ) == 0  # fmt: skip
+    capsys.readouterr()
+    assert (out / "p0.depth.pfm").read_bytes() == (m / "depth.pfm").read_bytes()
+
+
 def test_a_pair_of_another_size_fails_alone(tmp_path: Path) -> None:
     inp, calib = raw_folder(tmp_path, 1)
     odd = inp / "odd"
@@ -282,7 +324,7 @@ BAD: list[tuple[list[str], str]] = [
     (["--calib", "{raw}.absent", "--num-disparities", "16"], "--calib: calibration file not found"),
     (
         ["--calib", "{vertical}", "--translation-unit", "mm", "--num-disparities", "16"],
-        "--calib: {vertical} is a vertical rig (the rectified baseline is along y)",
+        "--calib: {vertical}: the first camera is below the second",
     ),
     (["--calib", "{garbage}", "--num-disparities", "16"], "--calib: "),
     (["--alpha", "0", "--num-disparities", "16"], "--alpha goes with --calib FILE"),
@@ -306,7 +348,7 @@ def test_bad_rectification_flags_exit_2(
     raw = mr.write_opencv_yaml(tmp_path / "stereo.yml", calib, stored=True)
     mb = tmp_path / "calib.txt"
     mb.write_text(tb.calib_text())
-    vertical = calib.__class__(**{**calib.__dict__, "R": np.eye(3), "T": np.array([0, -0.1, 0])})
+    vertical = calib.__class__(**{**calib.__dict__, "R": np.eye(3), "T": np.array([0, 0.1, 0])})
     vertical_yaml = mr.write_opencv_yaml(tmp_path / "vertical.yml", vertical, stored=False)
     (tmp_path / "garbage.yml").write_text("stereo: [1, 2\n")
     subst = {

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import importlib.util
 import json
+import types
 from pathlib import Path
 from types import ModuleType
 from typing import Any
@@ -263,13 +264,53 @@ def test_kalibr_camchain(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> 
 # --- bad input: one line, exit 2 ------------------------------------------------------------------
 
 
+def test_vertical_rig_is_matched_along_its_columns(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A rig with the second camera below the first: the sample pair transposed is exactly
+    such a pair, already rectified (R = I, T along -y, no distortion: the maps are the
+    identity), so match must give the transposed disparity of the horizontal pair, and depth
+    f B / d in the vertical pair's own orientation."""
+    pytest.importorskip("yaml", reason="YAML calibrations need PyYAML (the calib extra)")
+    s = sample_pair(96, 64)
+    up, down = (np.ascontiguousarray(np.swapaxes(a, 0, 1)) for a in (s.left, s.right))
+    Image.fromarray(up).save(tmp_path / "up.png")
+    Image.fromarray(down).save(tmp_path / "down.png")
+    h, w = up.shape[:2]
+    K = np.array([[100.0, 0, (w - 1) / 2], [0, 100.0, (h - 1) / 2], [0, 0, 1]])
+    c = types.SimpleNamespace(
+        K1=K, D1=np.zeros(5), K2=K, D2=np.zeros(5), R=np.eye(3), T=np.array([0, -0.1, 0]),
+        image_size=(w, h),
+    )  # fmt: skip
+    yaml = write_opencv_yaml(tmp_path / "vertical.yml", c, stored=False)
+    out = tmp_path / "out"
+    code, text, err = run(
+        capsys, tmp_path / "up.png", tmp_path / "down.png", "--calib", yaml,
+        "--translation-unit", "mm", "--num-disparities", "32", "--disparity-format", "pfm",
+        "-o", f"{out}/", "--no-preview", "--json",
+    )  # fmt: skip
+    assert code == 0, err
+    rect = StereoRectifier.from_file(yaml, translation_unit="mm")
+    assert rect.vertical
+    assert all(same(a, b) for a, b in zip(rect.rectify(up, down), (up, down), strict=True))
+    expected = block_match(s.left, s.right, num_disparities=32).T
+    disparity = read_pfm(out / "disparity.pfm")
+    assert disparity.shape == (h, w) and same(disparity, np.ascontiguousarray(expected))
+    depth = np.load(out / "depth.npy")
+    ok = np.isfinite(disparity)
+    assert ok.mean() > 0.5
+    np.testing.assert_allclose(depth[ok], 100.0 * 0.1 / disparity[ok], rtol=1e-6)
+    assert json.loads(text)["rectified"] is True
+
+
 def test_bad_input_one_line_exit_2(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     pytest.importorskip("yaml", reason="YAML calibrations need PyYAML (the calib extra)")
     s = sample_pair(96, 64)
     left, right, c = raw_files(tmp_path, s.left, s.right)
     yaml = write_opencv_yaml(tmp_path / "stereo.yml", c, stored=False)
-    vertical = c.__class__(**{**c.__dict__, "R": np.eye(3), "T": np.array([0, -0.1, 0])})
-    vertical_yaml = write_opencv_yaml(tmp_path / "vertical.yml", vertical, stored=False)
+    # The second camera above the first: its disparities are negative.
+    upside = c.__class__(**{**c.__dict__, "R": np.eye(3), "T": np.array([0, 0.1, 0])})
+    upside_yaml = write_opencv_yaml(tmp_path / "upside.yml", upside, stored=False)
     swapped = c.__class__(**{**c.__dict__, "R": c.R.T, "T": -c.R.T @ c.T})
     swapped_yaml = write_opencv_yaml(tmp_path / "swapped.yml", swapped, stored=False)
     ros = ros_camera_info(tmp_path / "left.yaml", c.K1, c.D1, c.R1, c.P1, c.image_size)
@@ -288,7 +329,7 @@ def test_bad_input_one_line_exit_2(tmp_path: Path, capsys: pytest.CaptureFixture
         (["--calib", tmp_path / "garbage.yml"], "not a calibration file this reader knows"),
         (["--calib", tmp_path / "partial.yml"], "partial.yml"),
         (["--calib", yaml, "--translation-unit", "mm", "--focal-px", "9"], "not both"),
-        (["--calib", vertical_yaml], "vertical rig"),
+        (["--calib", upside_yaml], "first camera is below the second"),
         (["--calib", swapped_yaml], "first camera is right of the second"),
         (["--calib", middlebury, "--calib-right", ros], "--calib-right does not apply"),
         (["--calib", middlebury, "--write-rectified"], "--write-rectified does not apply"),

@@ -13,8 +13,11 @@
   is then the rectifier's (:func:`rectified_rig`), so disparity, depth and points are of the
   rectified left camera, whose frame is the raw left camera's rotated by R1
   (``x_rect = R1 @ x_raw``).
-  ``--no-rectify`` refuses: a raw calibration is then an error. Rigs whose rectified baseline
-  is vertical are refused (the matchers search along rows).
+  ``--no-rectify`` refuses: a raw calibration is then an error. A vertical rig (the rectified
+  baseline along y, the first camera above the second) is matched on the transposed rectified
+  pair, whose epipolar lines are rows (:func:`along_rows`), and its disparity transposed back
+  (:func:`from_rows`): disparity, depth and points are still of the rectified first camera, in
+  its image's own orientation; disparity is then ``y1 - y2``.
 
 Errors are ValueError, one line in the flags' names; each command turns them into its usage
 error (exit status 2).
@@ -139,8 +142,8 @@ def raw_rectifier(
     """The :class:`stereodepth.StereoRectifier` of a raw calibration read by
     :func:`raw_calibration` (``calib`` its file, for messages); ``alpha`` (``--alpha``) None
     uses the file's own transforms where it has them, else Bouguet's with alpha -1. Raises
-    ValueError for a bad ``alpha``, when it cannot rectify, when the rig is vertical, or when
-    its rig is refused (a first camera to the right of the second)."""
+    ValueError for a bad ``alpha``, when it cannot rectify, or when its rig is refused (a first
+    camera to the right of, or below, the second)."""
     from .rectify import StereoRectifier
 
     alpha = check_alpha(alpha)
@@ -148,16 +151,31 @@ def raw_rectifier(
         rectifier = StereoRectifier.from_calibration(stereo, threads=threads, alpha=alpha)
     except (TypeError, ValueError) as exc:
         raise ValueError(f"--calib: {calib}: cannot rectify: {exc}") from None
-    if rectifier.vertical:
-        raise ValueError(
-            f"--calib: {calib} is a vertical rig (the rectified baseline is along y), "
-            "and the matchers search along rows"
-        )
     try:
         rectifier.rig  # noqa: B018 - refuses a pair whose first camera is the right one
     except ValueError as exc:
         raise ValueError(f"--calib: {calib}: {exc}") from None
     return rectifier
+
+
+def along_rows(vertical: bool, left: Any, right: Any) -> tuple[Any, Any]:
+    """The rectified pair as the matchers search it, along rows: as it is for a horizontal rig,
+    transposed ((H, W[, 3]) to (W, H[, 3]), contiguous copies) for a vertical one."""
+    if not vertical:
+        return left, right
+    import numpy as np
+
+    return tuple(np.ascontiguousarray(np.swapaxes(a, 0, 1)) for a in (left, right))  # type: ignore[return-value]
+
+
+def from_rows(vertical: bool, array: Any) -> Any:
+    """A (H, W) map computed on :func:`along_rows`'s pair, back in the rectified images'
+    orientation (transposed for a vertical rig)."""
+    if not vertical or array is None:
+        return array
+    import numpy as np
+
+    return np.ascontiguousarray(array.T)
 
 
 def rectified_rig(rectifier: Any) -> dict[str, float]:

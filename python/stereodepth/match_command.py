@@ -29,13 +29,16 @@ The rule for ``--calib``: the file's format says whether the pair is already rec
   left camera's rotated by R1, ``x_rect = R1 @ x_raw``), at the rectified size. The summary
   says ``rectified: true`` with ``rectified_size`` ``[width, height]``; ``--write-rectified``
   also writes the rectified pair as ``left-rectified.png`` and ``right-rectified.png``.
-  ``--no-rectify`` refuses to rectify: a raw calibration is then an error. Rigs whose
-  rectified baseline is vertical are refused (the matchers search along rows).
+  ``--no-rectify`` refuses to rectify: a raw calibration is then an error. A vertical rig
+  (first camera above the second) is matched on the transposed rectified pair and its
+  disparity (``y1 - y2``) transposed back, so every output is in the rectified first camera's
+  orientation.
 """
 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import os
 import sys
@@ -275,6 +278,7 @@ def _read(name: str, path: str) -> np.ndarray:
 
 def run(args: argparse.Namespace) -> int:
     """Matches the pair, writes the outputs, prints the summary; returns the exit status."""
+    from . import _calib_rule as rule
     from . import io
     from ._calib_rule import write_png
     from .match_pair import match_pair, prepare_pair
@@ -328,9 +332,11 @@ def run(args: argparse.Namespace) -> int:
         if args.write_rectified:
             write_png(out["left_rectified"], left_img)
             write_png(out["right_rectified"], right_img)
+    vertical = rectifier is not None and rectifier.vertical
+    rows_left, rows_right = rule.along_rows(vertical, left_img, right_img)
     result = match_pair(
-        left_img,
-        right_img,
+        rows_left,
+        rows_right,
         method=args.method,
         num_disparities=args.num_disparities if args.num_disparities is not None else ndisp,
         min_disparity=args.min_disparity,
@@ -341,6 +347,13 @@ def run(args: argparse.Namespace) -> int:
         doffs_px=0.0 if rig is None else rig["doffs_px"],
         threads=args.threads,
     )
+    if vertical:  # back in the rectified images' orientation
+        result = dataclasses.replace(
+            result,
+            disparity=rule.from_rows(True, result.disparity),
+            confidence=rule.from_rows(True, result.confidence),
+            depth=rule.from_rows(True, result.depth),
+        )
     d = result.disparity
     if args.disparity_format == "pfm":
         io.write_pfm(out["disparity"], d)

@@ -240,6 +240,10 @@ class BatchRectifier:
                 self._keep(n, found)
         return found
 
+    def vertical(self, threads: int | None = None) -> bool:
+        """Whether the rectified baseline is along y (the pair is then matched transposed)."""
+        return bool(self.rectifier(threads).vertical)
+
     def rectify(
         self, left: np.ndarray, right: np.ndarray, threads: int | None = None
     ) -> tuple[np.ndarray, np.ndarray]:
