@@ -334,7 +334,16 @@ BAD: list[tuple[list[str], str]] = [
         "--alpha must be -1 (OpenCV's default scaling) or in [0, 1], got 2.0",
     ),
     (
-        ["--calib", "{raw}", "--num-disparities", "16", "--alpha", "nan"],
+        [
+            "--calib",
+            "{raw}",
+            "--translation-unit",
+            "mm",
+            "--num-disparities",
+            "16",
+            "--alpha",
+            "nan",
+        ],
         "--alpha must be -1 (OpenCV's default scaling) or in [0, 1], got nan",
     ),
 ]

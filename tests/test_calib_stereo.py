@@ -178,14 +178,35 @@ def test_opencv_yaml_layouts(tmp_path: Path, header: str) -> None:
     CR LF line ends; image size as a sequence."""
     entries = stereo_entries(image_width=None, image_height=None, imageSize="[ 640, 480 ]")
     text = opencv_yaml(entries, header).replace("\n", "\r\n")
-    c = read_stereo_calibration(write(tmp_path / "s.yml", text))
+    c = read_stereo_calibration(write(tmp_path / "s.yml", text), translation_unit="m")
     np.testing.assert_array_equal(c.K1, K1)
     np.testing.assert_array_equal(c.T, T_MM)  # translation_unit "m": taken as it is
     assert c.image_size == (640, 480) and c.R1 is None and c.Q is None
 
 
+def test_opencv_translation_unit_not_given_refuses_an_implausible_baseline(
+    tmp_path: Path,
+) -> None:
+    """OpenCV files do not record T's unit. A T in millimetres read as metres (the default)
+    would make every depth 1000 times too large: without a unit, a baseline above 10 m is
+    refused with the way out; given a unit, any length is taken."""
+    mm = write(tmp_path / "mm.yml", opencv_yaml(stereo_entries()))  # |T| = 120 (mm)
+    with pytest.raises(
+        ValueError,
+        match=r"mm\.yml: T is 120\.0\d* long: .*give its unit with translation_unit, "
+        r"e\.g\. 'mm', or 'm'",
+    ):
+        read_stereo_calibration(mm)
+    np.testing.assert_allclose(read_stereo_calibration(mm, translation_unit="mm").T, T_MM / 1000)
+    np.testing.assert_array_equal(read_stereo_calibration(mm, translation_unit="m").T, T_MM)
+    metres = write(tmp_path / "m.yml", opencv_yaml(stereo_entries(T=T_MM.reshape(3, 1) / 1000)))
+    np.testing.assert_allclose(read_stereo_calibration(metres).T, T_MM / 1000, rtol=1e-15)
+
+
 def test_opencv_xml_by_hand(tmp_path: Path) -> None:
-    c = read_stereo_calibration(write(tmp_path / "s.xml", opencv_xml(stereo_entries())))
+    c = read_stereo_calibration(
+        write(tmp_path / "s.xml", opencv_xml(stereo_entries())), translation_unit="mm"
+    )
     np.testing.assert_array_equal(c.D2, D2)
     np.testing.assert_array_equal(c.R, R)
     assert c.image_size == (640, 480)
@@ -204,17 +225,19 @@ def test_opencv_split_files_and_units(tmp_path: Path) -> None:
         )
         np.testing.assert_allclose(c.T, T_MM * scale, rtol=1e-15)
     assert c.source == f"{intr} + {extr}"
-    c = read_stereo_calibration(extr, second_path=intr, image_size=(640, 480))  # either order
+    c = read_stereo_calibration(
+        extr, second_path=intr, image_size=(640, 480), translation_unit="mm"
+    )  # either order
     np.testing.assert_array_equal(c.K1, K1)
     with pytest.raises(ValueError, match=r"intrinsics\.yml \+ .*extrinsics\.yml: no image size"):
-        read_stereo_calibration(intr, second_path=extr)
+        read_stereo_calibration(intr, second_path=extr, translation_unit="mm")
     with pytest.raises(ValueError, match=r"translation_unit must be one of 'm', .* got 'km'"):
         read_stereo_calibration(
             intr, second_path=extr, translation_unit="km", image_size=(640, 480)
         )
     write(tmp_path / "both.yml", opencv_yaml({"R": R}))
     with pytest.raises(ValueError, match=r"both\.yml: R is also given in .*extrinsics\.yml"):
-        sc.read_opencv_stereo_calibration(extr, tmp_path / "both.yml")
+        sc.read_opencv_stereo_calibration(extr, tmp_path / "both.yml", translation_unit="mm")
 
 
 def test_opencv_distortion_forms(tmp_path: Path) -> None:
@@ -222,12 +245,14 @@ def test_opencv_distortion_forms(tmp_path: Path) -> None:
     d14 = np.concatenate([d8, np.zeros(6)])
     for d, want in ((D1[:4], D1[:4]), (d8, d8), (d14, d8)):
         c = read_stereo_calibration(
-            write(tmp_path / "d.yml", opencv_yaml(stereo_entries(D1=d, D2=d)))
+            write(tmp_path / "d.yml", opencv_yaml(stereo_entries(D1=d, D2=d))),
+            translation_unit="mm",
         )
         np.testing.assert_array_equal(c.D1, want)
     c = read_stereo_calibration(
         write(tmp_path / "f.yml", opencv_yaml(stereo_entries(D1=D1[:4], D2=D2[:4]))),
         distortion_model="equidistant",
+        translation_unit="mm",
     )
     assert c.distortion_model == "equidistant"
 
@@ -279,7 +304,7 @@ def test_opencv_rejects(tmp_path: Path, changes: dict[str, Any], message: str, f
         path.write_text(text.replace("[ 640 ]", "640"))
         message = message.replace(r"\[640\]", "640")
     with pytest.raises(ValueError, match=r"^\S*bad\." + fmt_ + ": " + message):
-        read_stereo_calibration(path)
+        read_stereo_calibration(path, translation_unit="mm")
 
 
 @pytest.mark.parametrize(
@@ -342,15 +367,17 @@ def test_opencv_rejects_malformed(tmp_path: Path, text: str, message: str) -> No
 
 def test_image_size_keyword(tmp_path: Path) -> None:
     path = write(tmp_path / "s.yml", opencv_yaml(stereo_entries()))
-    assert read_stereo_calibration(path, image_size=(640, 480)).image_size == (640, 480)
+    assert read_stereo_calibration(
+        path, image_size=(640, 480), translation_unit="mm"
+    ).image_size == (640, 480)
     with pytest.raises(
         ValueError,
         match=r"s\.yml: the file gives an image size of \(640, 480\), "
         r"image_size= \(641, 480\)",
     ):
-        read_stereo_calibration(path, image_size=(641, 480))
+        read_stereo_calibration(path, image_size=(641, 480), translation_unit="mm")
     with pytest.raises(ValueError, match=r"image_size: image_size must be two whole numbers > 0"):
-        read_stereo_calibration(path, image_size=(0, 480))
+        read_stereo_calibration(path, image_size=(0, 480), translation_unit="mm")
 
 
 def test_pyyaml_missing(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
@@ -359,7 +386,8 @@ def test_pyyaml_missing(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None
     with pytest.raises(ImportError, match=r'needs PyYAML: pip install "stereodepth\[calib\]"'):
         read_stereo_calibration(path)
     # XML, Middlebury and KITTI need no PyYAML
-    assert read_stereo_calibration(write(tmp_path / "s.xml", opencv_xml(stereo_entries())))
+    xml = write(tmp_path / "s.xml", opencv_xml(stereo_entries()))
+    assert read_stereo_calibration(xml, translation_unit="mm")
 
 
 # --- ROS camera_info --------------------------------------------------------------------------

@@ -324,13 +324,15 @@ def test_bad_input_one_line_exit_2(tmp_path: Path, capsys: pytest.CaptureFixture
     Image.fromarray(np.zeros((48, 80), np.uint8)).save(tmp_path / "small.png")
     small = tmp_path / "small.png"
     cases: list[tuple[list[Any], str]] = [
-        (["--calib", yaml, "--no-rectify"], "--no-rectify forbids rectifying it"),
+        (["--calib", yaml, "--translation-unit", "mm", "--no-rectify"], "--no-rectify forbids"),
+        (["--calib", yaml], "T is 100 long: read as metres (no translation unit given) that"),
+        (["--calib", yaml], "give its unit with --translation-unit, e.g. 'mm', or 'm' to"),
         (["--calib", ros], "pass the right camera's file as --calib-right"),
         (["--calib", tmp_path / "garbage.yml"], "not a calibration file this reader knows"),
         (["--calib", tmp_path / "partial.yml"], "partial.yml"),
         (["--calib", yaml, "--translation-unit", "mm", "--focal-px", "9"], "not both"),
-        (["--calib", upside_yaml], "first camera is below the second"),
-        (["--calib", swapped_yaml], "first camera is right of the second"),
+        (["--calib", upside_yaml, "--translation-unit", "mm"], "first camera is below the"),
+        (["--calib", swapped_yaml, "--translation-unit", "mm"], "first camera is right of the"),
         (["--calib", middlebury, "--calib-right", ros], "--calib-right does not apply"),
         (["--calib", middlebury, "--write-rectified"], "--write-rectified does not apply"),
         (["--calib", middlebury, "--translation-unit", "mm"], "--translation-unit does not"),
@@ -338,7 +340,10 @@ def test_bad_input_one_line_exit_2(tmp_path: Path, capsys: pytest.CaptureFixture
         (["--calib-right", ros], "--calib-right goes with --calib FILE"),
         (["--alpha", "0.5"], "--alpha goes with --calib FILE"),
         (["--calib", middlebury, "--alpha", "0"], "--alpha does not apply"),
-        (["--calib", yaml, "--alpha", "-0.5"], "--alpha must be -1 (OpenCV's default scaling)"),
+        (
+            ["--calib", yaml, "--translation-unit", "mm", "--alpha", "-0.5"],
+            "--alpha must be -1 (OpenCV's default scaling)",
+        ),
     ]
     for args, message in cases:
         code, out, err = run(capsys, left, right, *args)
@@ -348,6 +353,8 @@ def test_bad_input_one_line_exit_2(tmp_path: Path, capsys: pytest.CaptureFixture
         assert len(lines) == 1 and lines[0].startswith("stereodepth match: error: "), err
         assert message in lines[0], (message, err)
         assert "Traceback" not in err
-    code, out, err = run(capsys, small, small, "--calib", yaml, "-o", f"{tmp_path}/x-")
+    code, out, err = run(
+        capsys, small, small, "--calib", yaml, "--translation-unit", "mm", "-o", f"{tmp_path}/x-"
+    )
     assert code == 2 and "size of the calibration in --calib, 96x64 px, got 80x48" in err, err
     assert not list(tmp_path.glob("x-*")) and not list(Path.cwd().glob("disparity*"))

@@ -42,7 +42,7 @@ def _cli_names(message: str) -> str:
 def check_without_calib(
     *,
     calib_right: str | None,
-    translation_unit: str,
+    translation_unit: str | None,
     no_rectify: bool,
     write_rectified: bool,
     alpha: float | None = None,
@@ -50,7 +50,7 @@ def check_without_calib(
     """Without ``--calib``: ValueError for a flag that goes with it."""
     used = (
         ("--calib-right", calib_right is not None),
-        ("--translation-unit", translation_unit != "m"),
+        ("--translation-unit", translation_unit is not None),
         ("--write-rectified", write_rectified),
         ("--alpha", alpha is not None),
         ("--no-rectify", no_rectify),
@@ -69,7 +69,7 @@ def raw_calibration(
     calib: str,
     *,
     calib_right: str | None = None,
-    translation_unit: str = "m",
+    translation_unit: str | None = None,
     no_rectify: bool = False,
     write_rectified: bool = False,
     alpha: float | None = None,
@@ -97,7 +97,7 @@ def raw_calibration(
     if rectified:
         used = (
             ("--calib-right", calib_right is not None),
-            ("--translation-unit", translation_unit != "m"),
+            ("--translation-unit", translation_unit is not None),
             ("--write-rectified", write_rectified),
             ("--alpha", alpha is not None),
         )

@@ -19,7 +19,8 @@ The rule for ``--calib``: the file's format says whether the pair is already rec
   RIGHT are matched as they are, with the rig the file gives (and Middlebury's ``ndisp``).
 - Any other calibration :func:`stereodepth.calib.read_stereo_calibration` reads (OpenCV
   FileStorage YAML/XML, Kalibr camchain, a ROS camera_info file with ``--calib-right FILE``
-  for the right camera; ``--translation-unit`` the unit of its translations, default m)
+  for the right camera; ``--translation-unit`` the unit of its translations, default metres, refused
+  for an OpenCV file whose baseline would then exceed 10 m)
   describes a raw pair, which is rectified automatically before matching:
   :meth:`stereodepth.StereoRectifier.from_calibration` (the file's own R1, R2, P1, P2 where
   it holds them, else Bouguet's method with alpha -1; ``--alpha A`` recomputes them with
@@ -110,8 +111,8 @@ def register(subparsers: Any) -> None:
     r.add_argument(
         "--translation-unit",
         choices=tuple(TRANSLATION_UNITS),
-        default="m",
-        help="unit of the translations in a raw --calib file (default m)",
+        help="unit of the translations in a raw --calib file (default: metres, and an OpenCV "
+        "file whose baseline would then exceed 10 m is refused as probably in mm)",
     )
     r.add_argument(
         "--alpha",

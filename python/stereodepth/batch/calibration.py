@@ -273,7 +273,7 @@ def raw_rectification(
     calib: str,
     *,
     calib_right: str | None = None,
-    translation_unit: str = "m",
+    translation_unit: str | None = None,
     no_rectify: bool = False,
     write_rectified: bool = False,
     alpha: float | None = None,

@@ -84,8 +84,8 @@ def register(subparsers: Any) -> None:
     c.add_argument(
         "--translation-unit",
         choices=tuple(TRANSLATION_UNITS),
-        default="m",
-        help="unit of the translations in a raw --calib file (default m)",
+        help="unit of the translations in a raw --calib file (default: metres, and an OpenCV "
+        "file whose baseline would then exceed 10 m is refused as probably in mm)",
     )
     c.add_argument(
         "--alpha",

@@ -166,7 +166,17 @@ def _to_float(v: Any) -> float | None:
     return None
 
 
-def _unit(translation_unit: str) -> float:
+#: The longest baseline, in metres, that a calibration read with no ``translation_unit`` may
+#: have: OpenCV files do not record their unit, and a T in millimetres read as metres gives a
+#: baseline (and every depth) 1000 times too large, so such a file is refused and the unit
+#: must be given (``"m"`` accepts any length).
+MAX_IMPLICIT_BASELINE_M = 10.0
+
+
+def _unit(translation_unit: str | None) -> float:
+    """Metres per unit; None (no unit given) is metres."""
+    if translation_unit is None:
+        return 1.0
     if translation_unit not in TRANSLATION_UNITS:
         known = ", ".join(repr(u) for u in TRANSLATION_UNITS)
         raise ValueError(f"translation_unit must be one of {known}, got {translation_unit!r}")

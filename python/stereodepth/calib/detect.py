@@ -44,7 +44,7 @@ def read_stereo_calibration(
     path: str | os.PathLike[str],
     *,
     second_path: str | os.PathLike[str] | None = None,
-    translation_unit: str = "m",
+    translation_unit: str | None = None,
     image_size: tuple[int, int] | None = None,
     distortion_model: str | None = None,
     cameras: tuple[int, int] | None = None,
@@ -62,7 +62,8 @@ def read_stereo_calibration(
     - KITTI (``P2: ...`` or ``P_rect_02: ...`` lines): :func:`read_kitti_stereo_calibration`.
 
     The keywords go to the readers that take them: ``translation_unit`` (OpenCV, ROS,
-    Kalibr; Middlebury and KITTI files state their unit, so only "m" is accepted there),
+    Kalibr; None for metres, with OpenCV's plausibility check; Middlebury and KITTI files
+    state their unit, so only None or "m" is accepted there),
     ``image_size`` (all), ``distortion_model`` (OpenCV), ``cameras`` (Kalibr, default (0, 1);
     KITTI, default (2, 3)). Raises FileNotFoundError, ValueError naming the file for an
     unknown format, a keyword that does not apply or any fault the reader finds, and
@@ -95,7 +96,7 @@ def read_stereo_calibration(
             second_path=second_path,
             distortion_model=distortion_model,
             cameras=cameras,
-            translation_unit=translation_unit != "m",
+            translation_unit=translation_unit not in (None, "m"),
         )
         return read_middlebury_stereo_calibration(p, image_size=image_size)
     if rectified == "kitti":
@@ -103,7 +104,7 @@ def read_stereo_calibration(
             "KITTI",
             second_path=second_path,
             distortion_model=distortion_model,
-            translation_unit=translation_unit != "m",
+            translation_unit=translation_unit not in (None, "m"),
         )
         return read_kitti_stereo_calibration(p, cameras=cameras or (2, 3), image_size=image_size)
     known = (

@@ -31,7 +31,7 @@ def read_kalibr_stereo_calibration(
     path: str | os.PathLike[str],
     *,
     cameras: tuple[int, int] = (0, 1),
-    translation_unit: str = "m",
+    translation_unit: str | None = None,
     image_size: tuple[int, int] | None = None,
 ) -> StereoCalibration:
     """A stereo calibration from a Kalibr camchain YAML (``kalibr_calibrate_cameras``'s

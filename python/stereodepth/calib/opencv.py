@@ -10,6 +10,7 @@ from typing import Any
 import numpy as np
 
 from ._common import (
+    MAX_IMPLICIT_BASELINE_M,
     _check_array,
     _check_distortion,
     _check_intrinsics,
@@ -44,7 +45,7 @@ def read_opencv_stereo_calibration(
     path: str | os.PathLike[str],
     extrinsics_path: str | os.PathLike[str] | None = None,
     *,
-    translation_unit: str = "m",
+    translation_unit: str | None = None,
     image_size: tuple[int, int] | None = None,
     distortion_model: str | None = None,
 ) -> StereoCalibration:
@@ -63,11 +64,14 @@ def read_opencv_stereo_calibration(
 
     Units: OpenCV's T (and P2's last column, Q's last row) is in the unit of the
     calibration target's square size, which the file does not record: ``translation_unit``
-    says which it is (``"m"``, the default, ``"cm"``, ``"mm"``, ``"um"``, ``"in"``, ``"ft"``)
-    and T is converted to metres. Distortion: 4, 5 or 8 coefficients are the plumb_bob
-    (radtan) model unless the file's ``distortion_model`` or ``distortion_model=`` says
-    ``"equidistant"`` (``cv2.fisheye`` calibrations: 4 coefficients look the same); OpenCV's
-    12 and 14 coefficient forms are accepted when the thin prism and tilt terms are 0.
+    says which it is (``"m"``, ``"cm"``, ``"mm"``, ``"um"``, ``"in"``, ``"ft"``) and T is
+    converted to metres. Without it (None) T is read as metres, but a T longer than
+    ``MAX_IMPLICIT_BASELINE_M`` (10 m) is refused: it is far more likely millimetres read as
+    metres (every depth 1000 times too large) than a 10 m rig; pass ``"m"`` to accept it.
+    Distortion: 4, 5 or 8 coefficients are the plumb_bob (radtan) model unless the file's
+    ``distortion_model`` or ``distortion_model=`` says ``"equidistant"`` (``cv2.fisheye``
+    calibrations: 4 coefficients look the same); OpenCV's 12 and 14 coefficient forms are accepted
+    when the thin prism and tilt terms are 0.
 
     Raises FileNotFoundError for a missing file, ImportError without PyYAML, ValueError
     naming the file and the key for a missing key, a wrong shape, a non-finite value, a
@@ -121,7 +125,17 @@ def read_opencv_stereo_calibration(
     key, value, where = get("R")  # type: ignore[misc]
     out["R"] = _check_rotation(value, where, key)
     key, value, where = get("T")  # type: ignore[misc]
-    out["T"] = _check_array(value, where, key, (3,)) * scale
+    tvec = _check_array(value, where, key, (3,))
+    length = float(np.linalg.norm(tvec))
+    if translation_unit is None and length > MAX_IMPLICIT_BASELINE_M:
+        raise _fail(
+            where,
+            f"{key} is {length:g} long: read as metres (no translation unit given) that is an "
+            f"unlikely {length:g} m baseline. OpenCV's T is in the unit of the calibration "
+            "target's squares: give its unit with translation_unit, e.g. 'mm', or 'm' to "
+            "accept metres",
+        )
+    out["T"] = tvec * scale
     for field in ("R1", "R2", "P1", "P2", "Q"):
         hit = get(field, required=False)
         if hit is None:

@@ -58,7 +58,7 @@ def read_ros_stereo_calibration(
     left_path: str | os.PathLike[str],
     right_path: str | os.PathLike[str],
     *,
-    translation_unit: str = "m",
+    translation_unit: str | None = None,
     image_size: tuple[int, int] | None = None,
 ) -> StereoCalibration:
     """A stereo calibration from the two ROS camera_info YAML files of a rectified pair, as
