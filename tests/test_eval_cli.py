@@ -279,6 +279,35 @@ def test_opencv_sgbm_matches_direct_run(
     assert row["metrics"]["bad_2_est"] < 0.05
 
 
+def test_opencv_sgbm_3way_padded_matches_direct_run(
+    scenes_dir: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """3WAY on the pair padded on the left by ndisp copies of the first column, cut back: the
+    left band that plain 3WAY leaves empty gets disparities."""
+    cv2 = pytest.importorskip("cv2")
+    methods = ("opencv-sgbm-3way", "opencv-sgbm-3way-padded")
+    report = run_json(
+        capsys, str(scenes_dir), "--method", *methods, "--repeat", "1", "--scene", "rds-b"
+    )
+    plain, padded = (rows_of(report, "rds-b", m)[0] for m in methods)
+    assert (padded["block_size"], padded["num_disparities"]) == (5, 32)
+    left, right, gt, mask = load(scenes_dir / "rds-b")
+    mode = {"setMode": cv2.STEREO_SGBM_MODE_SGBM_3WAY}
+    pad = ((0, 0), (32, 0))
+    d = opencv_disparity(
+        cv2, "sgbm", np.pad(left, pad, mode="edge"), np.pad(right, pad, mode="edge"), 32, 5, **mode
+    )[:, 32:]
+    assert d.shape == gt.shape
+    assert_same_metrics(padded["metrics"], evaluate(d, gt, mask).as_dict())
+    unpadded = opencv_disparity(cv2, "sgbm", left, right, 32, 5, **mode)
+    assert_same_metrics(plain["metrics"], evaluate(unpadded, gt, mask).as_dict())
+    # Columns 20..30 have ground truth 20; plain 3WAY leaves its left 31 columns empty.
+    assert np.isnan(unpadded[:, :31]).all()
+    assert (np.abs(d[3:-3, 22:31] - 20) <= 1).mean() > 0.9
+    assert padded["metrics"]["density"] > plain["metrics"]["density"]
+    assert padded["metrics"]["bad_2"] < plain["metrics"]["bad_2"]
+
+
 def test_opencv_option_is_applied(scenes_dir: Path, capsys: pytest.CaptureFixture[str]) -> None:
     cv2 = pytest.importorskip("cv2")
     report = run_json(
