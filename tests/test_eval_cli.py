@@ -279,6 +279,35 @@ def test_opencv_sgbm_matches_direct_run(
     assert row["metrics"]["bad_2_est"] < 0.05
 
 
+def test_opencv_sgbm_3way_padded_matches_direct_run(
+    scenes_dir: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """3WAY on the pair padded on the left by ndisp copies of the first column, cut back: the
+    left band that plain 3WAY leaves empty gets disparities."""
+    cv2 = pytest.importorskip("cv2")
+    methods = ("opencv-sgbm-3way", "opencv-sgbm-3way-padded")
+    report = run_json(
+        capsys, str(scenes_dir), "--method", *methods, "--repeat", "1", "--scene", "rds-b"
+    )
+    plain, padded = (rows_of(report, "rds-b", m)[0] for m in methods)
+    assert (padded["block_size"], padded["num_disparities"]) == (5, 32)
+    left, right, gt, mask = load(scenes_dir / "rds-b")
+    mode = {"setMode": cv2.STEREO_SGBM_MODE_SGBM_3WAY}
+    pad = ((0, 0), (32, 0))
+    d = opencv_disparity(
+        cv2, "sgbm", np.pad(left, pad, mode="edge"), np.pad(right, pad, mode="edge"), 32, 5, **mode
+    )[:, 32:]
+    assert d.shape == gt.shape
+    assert_same_metrics(padded["metrics"], evaluate(d, gt, mask).as_dict())
+    unpadded = opencv_disparity(cv2, "sgbm", left, right, 32, 5, **mode)
+    assert_same_metrics(plain["metrics"], evaluate(unpadded, gt, mask).as_dict())
+    # Columns 20..30 have ground truth 20; plain 3WAY leaves its left 31 columns empty.
+    assert np.isnan(unpadded[:, :31]).all()
+    assert (np.abs(d[3:-3, 22:31] - 20) <= 1).mean() > 0.9
+    assert padded["metrics"]["density"] > plain["metrics"]["density"]
+    assert padded["metrics"]["bad_2"] < plain["metrics"]["bad_2"]
+
+
 def test_opencv_option_is_applied(scenes_dir: Path, capsys: pytest.CaptureFixture[str]) -> None:
     cv2 = pytest.importorskip("cv2")
     report = run_json(
@@ -901,3 +930,28 @@ def test_time_ratio_lines_follow_the_table(
         r"\d+\.\d{3}\n$",
         out,
     )
+
+
+@pytest.mark.data
+@pytest.mark.slow
+def test_issue_11_accuracy_targets_on_the_shared_scenes(
+    stereo_data_dir: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """sgm with its defaults, over the ten shared scenes (bench/README.md, "Semi-global
+    matching"): mean bad-2 at most 0.7x SGBM 3WAY's and below 3WAY's on the left-padded pair;
+    mean bad-0.5 among estimated pixels below 3WAY's."""
+    pytest.importorskip("cv2")
+    scenes = sorted(p.name for p in stereo_data_dir.iterdir() if (p / "disp_gt.npy").is_file())
+    if len(scenes) < 10:
+        pytest.skip(f"the ten shared scenes are not all in {stereo_data_dir}")
+    methods = ("sgm", "opencv-sgbm-3way", "opencv-sgbm-3way-padded")
+    report = run_json(
+        capsys, str(stereo_data_dir), "--method", *methods, "--repeat", "1", "--threads", "2"
+    )
+    means = {m["method"]: m["metrics"] for m in report["means"]}
+    for m in methods:
+        assert sum(r["method"] == m for r in report["results"]) == len(scenes)
+    ours, three_way, padded = (means[m] for m in methods)
+    assert ours["bad_2"] <= 0.7 * three_way["bad_2"]
+    assert ours["bad_2"] < padded["bad_2"]
+    assert ours["bad_0_5_est"] < three_way["bad_0_5_est"]

@@ -426,7 +426,7 @@ def test_matcher_reuses_its_buffers_across_sizes_and_reports_params() -> None:
         np.testing.assert_array_equal(
             m.compute(left, right), sd.semi_global_match(left, right, num_disparities=12, paths=8)
         )
-    assert m.params["paths"] == 8 and m.params["subpixel"] == "parabola"
+    assert m.params["paths"] == 8 and m.params["subpixel"] == "equiangular"
     assert repr(m).startswith("SemiGlobalMatcher(num_disparities=12, ")
     assert m.isa in SUPPORTED_ISAS
 

@@ -33,7 +33,11 @@ Methods
     P1=8*bs*bs, P2=32*bs*bs)`` (the usual penalties for one channel; mode ``MODE_SGBM`` and the
     other parameters at OpenCV's defaults) on the same grey images; default block size 5.
     ``opencv-sgbm-3way`` and ``opencv-sgbm-hh``: the same in ``MODE_SGBM_3WAY`` and
-    ``MODE_HH``.
+    ``MODE_HH``. ``opencv-sgbm-3way-padded``: ``MODE_SGBM_3WAY`` on the grey pair padded on the
+    left by ``num_disparities`` columns (each image's first column repeated,
+    ``cv2.BORDER_REPLICATE``), the padding cut off the result: OpenCV then matches the left
+    band of ``num_disparities - 1`` columns that it otherwise leaves without a match, which is
+    how OpenCV users get a disparity there (the peer of our border band); the padding is timed.
     OpenCV's int16 output (disparity x 16) becomes float32 / 16 with the values below
     ``minDisparity * 16`` = 0 (no match; OpenCV writes ``(minDisparity - 1) * 16``) as NaN,
     by :func:`stereodepth.from_opencv_disparity`. OpenCV runs only when ``cv2`` imports;
@@ -100,8 +104,15 @@ METHODS: dict[str, int | None] = {
     "opencv-sgbm": 5,
     "opencv-sgbm-3way": 5,
     "opencv-sgbm-hh": 5,
+    "opencv-sgbm-3way-padded": 5,
 }
-_OPENCV_METHODS = ("opencv-bm", "opencv-sgbm", "opencv-sgbm-3way", "opencv-sgbm-hh")
+_OPENCV_METHODS = (
+    "opencv-bm",
+    "opencv-sgbm",
+    "opencv-sgbm-3way",
+    "opencv-sgbm-hh",
+    "opencv-sgbm-3way-padded",
+)
 #: Options of stereodepth.block_match that eval sets itself.
 _RESERVED_OPTIONS = {
     "num_disparities": "set per scene from the ground truth; use --num-disparities",
@@ -352,6 +363,7 @@ def _opencv_factory(
                     "opencv-sgbm": cv2.STEREO_SGBM_MODE_SGBM,
                     "opencv-sgbm-3way": cv2.STEREO_SGBM_MODE_SGBM_3WAY,
                     "opencv-sgbm-hh": cv2.STEREO_SGBM_MODE_HH,
+                    "opencv-sgbm-3way-padded": cv2.STEREO_SGBM_MODE_SGBM_3WAY,
                 }
                 matcher = cv2.StereoSGBM_create(
                     minDisparity=0,
@@ -376,9 +388,17 @@ def _opencv_factory(
                         f"{_cv_message(exc)}"
                     ) from exc
 
+        pad = num_disparities if variant.method == "opencv-sgbm-3way-padded" else 0
+
+        def padded(img: np.ndarray) -> np.ndarray:
+            g = grey(img, variant.method)
+            if pad == 0:
+                return g
+            return np.asarray(cv2.copyMakeBorder(g, 0, 0, pad, 0, cv2.BORDER_REPLICATE))
+
         def match(left: np.ndarray, right: np.ndarray) -> np.ndarray:
             try:
-                raw = matcher.compute(grey(left, variant.method), grey(right, variant.method))
+                raw = matcher.compute(padded(left), padded(right))[:, pad:]
             except cv2.error as exc:
                 raise ValueError(f"{variant.method} failed: {_cv_message(exc)}") from exc
             # eval searches from 0 (minDisparity=0): holes are the raw values below 0.
@@ -745,7 +765,8 @@ def register(subparsers: Any) -> None:
         default=None,
         metavar="METHOD[:SIZES]",
         help="stereodepth (block matching), sgm (semi-global matching), opencv-bm, opencv-sgbm, "
-        "opencv-sgbm-3way, opencv-sgbm-hh, each optionally with its own block sizes "
+        "opencv-sgbm-3way, opencv-sgbm-hh, opencv-sgbm-3way-padded (3WAY on the pair padded on "
+        "the left by N columns), each optionally with its own block sizes "
         "(opencv-bm:9,15); default: stereodepth. OpenCV methods are skipped with a note when "
         "cv2 does not import",
     )

@@ -44,8 +44,9 @@ Steps, in the kernel and in the oracle alike:
    image: the least sum, the lowest disparity on a tie; every sum more than one disparity
    away must exceed the winner's by more than ``uniqueness_ratio`` percent; the right image's
    own winner at ``x - d`` (least ``S`` along the other diagonal) within ``lr_max_diff``;
-   the fit (``"parabola"`` by default) moves the winner only when both neighbours ``d - 1``
-   and ``d + 1`` are candidates inside the image.
+   the fit (``"equiangular"`` by default: the V-shaped fit, which suits census costs; or
+   ``"parabola"``) moves the winner only when both neighbours ``d - 1`` and ``d + 1`` are
+   candidates inside the image.
 6. Median (``median=True``): each valid pixel becomes the lower median of the valid pixels in
    its 3x3 window (inside the image); invalid pixels stay NaN.
 7. Speckle filter, as the block matcher's.
@@ -99,16 +100,30 @@ PATH_COUNTS = (3, 4, 8)
 STRIPE_ROWS = 64
 _SUBPIXEL_MODES = ("parabola", "equiangular")
 
-# Defaults, chosen by measuring on the shared scenes (bench/README.md).
+# Defaults, chosen by measuring on the shared scenes among round values, each change checked
+# on both halves of the scenes and the choice by leave-one-out (bench/README.md, "Semi-global
+# matching"). The rules behind them:
+# - P1 about a quarter of the box cost's range (0..144), P2 a bit under twice that range,
+#   halved at an intensity step of 32 grey levels (so P2' = 8000 / (32 + step), never below
+#   P1);
+# - the fit that suits the cost: census costs grow linearly with the shift, so the V-shaped
+#   (equiangular) fit (Shimizu & Okutomi, ICCV 2001), as the block matcher's census default;
+# - filters kept by their precision (the share of the pixels they remove that are wrong; holes
+#   count as bad, so every removal of a right pixel costs): the speckle filter (about 9 in 10)
+#   does the cleaning, at OpenCV's usual 100 px / 2 px; the left-right check rejects
+#   disagreements of more than 4 px (a looser check passes the occluded band at the left
+#   border); the uniqueness check (barely more than half of its rejects wrong) is off.
 DEFAULT_BLOCK_SIZE = 3
 DEFAULT_P1 = 40
-DEFAULT_P2 = 500
-DEFAULT_P2_STEP = 16
+DEFAULT_P2 = 250
+DEFAULT_P2_STEP = 32
 DEFAULT_PATHS = 3
-DEFAULT_UNIQUENESS_RATIO = 2.0
-DEFAULT_LR_MAX_DIFF = 2.0
+#: The fit that ``subpixel=True`` (the default) chooses.
+DEFAULT_SUBPIXEL = "equiangular"
+DEFAULT_UNIQUENESS_RATIO = 0.0
+DEFAULT_LR_MAX_DIFF = 4.0
 DEFAULT_SPECKLE_WINDOW = 100
-DEFAULT_SPECKLE_RANGE = 1.0
+DEFAULT_SPECKLE_RANGE = 2.0
 DEFAULT_MAX_MEMORY_MB = 2048.0
 
 
@@ -204,7 +219,7 @@ class SemiGlobalOptions:
         self.p2 = p2v
         self.p2_step = check.integer("p2_step", p2_step, minimum=0, maximum=65535)
         if isinstance(subpixel, (bool, np.bool_)):
-            self.subpixel: str | None = "parabola" if subpixel else None
+            self.subpixel: str | None = DEFAULT_SUBPIXEL if subpixel else None
         elif isinstance(subpixel, str):
             if subpixel not in _SUBPIXEL_MODES:
                 raise ValueError(
@@ -458,18 +473,20 @@ def semi_global_match(
         3 (one pass: along the row and from above, restarting every 64 rows; least memory),
         4 (horizontal and vertical) or 8 (and the diagonals).
     subpixel
-        ``True`` or ``"parabola"``, ``"equiangular"``, or ``False`` for integers.
+        ``True`` (the default) or ``"equiangular"``: the V-shaped fit, which suits census
+        costs; ``"parabola"``; or ``False`` for integers.
     uniqueness_ratio
         Percent by which every sum more than one disparity away must exceed the winner's;
-        0 turns the check off.
+        0 (the default) turns the check off.
     lr_max_diff
         Largest difference, in pixels, between the left disparity and the right image's own
-        at the matched pixel; None turns the check off.
+        at the matched pixel (default 4); None turns the check off.
     median
         A 3x3 median of the valid disparities (invalid pixels stay NaN).
     speckle_window, speckle_range
         Remove connected regions of at most ``speckle_window`` pixels whose neighbouring
-        disparities differ by at most ``speckle_range`` px; 0 turns it off.
+        disparities differ by at most ``speckle_range`` px (default 100 px and 2 px); 0 turns
+        it off.
     border
         ``"clip"``: pixels near the image's left edge are matched over the disparities whose
         right pixel lies in the image; ``"opencv"``: those pixels are NaN, as OpenCV's.
