@@ -919,3 +919,21 @@ def test_rectified_format_tells_rectified_files_from_raw_ones(tmp_path: Path) ->
     assert sc.rectified_format(raw) is None
     with pytest.raises(FileNotFoundError, match="calibration file not found"):
         sc.rectified_format(tmp_path / "missing.txt")
+
+
+def test_error_message_of_a_huge_value_stays_short(tmp_path: Path) -> None:
+    """A value of millions of items (here a YAML alias bomb: 9**6 strings in 1 kB) is named
+    in a message of a few lines, not megabytes."""
+    levels = ["a: &a [x, x, x, x, x, x, x, x, x]"]
+    for prev, cur in zip("abcde", "bcdef", strict=True):
+        levels.append(f"{cur}: &{cur} [" + ", ".join([f"*{prev}"] * 9) + "]")
+    p = write(tmp_path / "bomb.yml", "\n".join(levels) + "\nM1: *f\n")
+    with pytest.raises(ValueError, match=r"M1 must be numbers, got \[\[") as info:
+        read_stereo_calibration(p)
+    assert len(str(info.value)) < 2000
+    long = np.arange(100000.0)
+    long[-1] = np.nan
+    p = write(tmp_path / "long.yml", opencv_yaml(stereo_entries(D1=long)))
+    with pytest.raises(ValueError, match=r"D1 must be finite, got \[0\.0, 1\.0, .*\.\.\.") as info:
+        read_stereo_calibration(p)
+    assert len(str(info.value)) < 2000
