@@ -921,6 +921,23 @@ def test_rectified_format_tells_rectified_files_from_raw_ones(tmp_path: Path) ->
         sc.rectified_format(tmp_path / "missing.txt")
 
 
+@pytest.mark.parametrize(
+    "name, text",
+    [
+        ("deep.yml", "M1: " + "[" * 5000 + "]" * 5000 + "\n"),
+        ("deep.xml", '<?xml version="1.0"?>\n<opencv_storage>' + "<a>" * 5000 + "</a>" * 5000
+         + "</opencv_storage>\n"),
+    ],
+)  # fmt: skip
+def test_deeply_nested_file_is_a_value_error(tmp_path: Path, name: str, text: str) -> None:
+    """A file nested past Python's recursion limit is refused like any other malformed file
+    (it used to escape as RecursionError, a traceback on the command line)."""
+    p = write(tmp_path / name, text)
+    with pytest.raises(ValueError, match="nested too deeply to be a calibration file") as info:
+        read_stereo_calibration(p)
+    assert str(p) in str(info.value)
+
+
 def test_error_message_of_a_huge_value_stays_short(tmp_path: Path) -> None:
     """A value of millions of items (here a YAML alias bomb: 9**6 strings in 1 kB) is named
     in a message of a few lines, not megabytes."""

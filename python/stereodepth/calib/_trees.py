@@ -13,6 +13,9 @@ import numpy as np
 
 from ._common import _check_array, _check_image_size, _fail, _read_text, _shown, _to_float
 
+#: The message for a file nested deeper than Python's recursion limit (no calibration is).
+_TOO_DEEP = "nested too deeply to be a calibration file"
+
 
 def _yaml() -> Any:
     try:
@@ -110,6 +113,8 @@ def _yaml_tree(p: Path, text: str) -> dict[str, Any]:
         tree = yaml.load(text, Loader=Loader)  # a SafeLoader: no arbitrary objects
     except yaml.YAMLError as exc:
         raise _fail(where, f"not valid YAML: {' '.join(str(exc).split())}") from exc
+    except RecursionError:
+        raise _fail(where, _TOO_DEEP) from None
     if not isinstance(tree, dict):
         raise _fail(where, f"a calibration file must be a YAML mapping, got {type(tree).__name__}")
     return tree
@@ -155,7 +160,10 @@ def _xml_tree(p: Path, text: str) -> dict[str, Any]:
         raise _fail(where, f"not valid XML: {exc}") from exc
     if root.tag != "opencv_storage":
         raise _fail(where, f"the XML root must be <opencv_storage>, got <{root.tag}>")
-    tree = _xml_value(root, where)
+    try:
+        tree = _xml_value(root, where)
+    except RecursionError:
+        raise _fail(where, _TOO_DEEP) from None
     return tree if isinstance(tree, dict) else {}
 
 
