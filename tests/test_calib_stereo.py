@@ -954,3 +954,20 @@ def test_error_message_of_a_huge_value_stays_short(tmp_path: Path) -> None:
     with pytest.raises(ValueError, match=r"D1 must be finite, got \[0\.0, 1\.0, .*\.\.\.") as info:
         read_stereo_calibration(p)
     assert len(str(info.value)) < 2000
+
+
+def test_opencv_second_file_without_opencv_keys_is_refused(tmp_path: Path) -> None:
+    """``--calib stereo.yml --calib-right right.yaml`` (a ROS file given to an OpenCV one) used
+    to be merged and silently ignored; a second file must hold part of the calibration."""
+    full = write(tmp_path / "stereo.yml", opencv_yaml(stereo_entries()))
+    ros = write(
+        tmp_path / "right.yaml",
+        "image_width: 640\nimage_height: 480\ncamera_name: right\ncamera_matrix: {rows: 3}\n",
+    )
+    with pytest.raises(ValueError, match=r"right\.yaml: none of the matrices of an OpenCV"):
+        read_stereo_calibration(full, second_path=ros)
+    with pytest.raises(
+        ValueError,
+        match=r"its keys: \['camera_matrix', 'camera_name', 'image_height', 'image_width'\]",
+    ):
+        sc.read_opencv_stereo_calibration(full, ros)
