@@ -623,6 +623,18 @@ def test_rectifier_of_rectified_images_passes_them_through() -> None:
     assert sr.baseline_mm == pytest.approx(540.0)
     with pytest.raises(ValueError, match="left must have the calibration's size"):
         rect.rectify(left[:, :-1], right)
+    # Outputs given are written (they used to be left as they were, unnoticed) and checked.
+    out_l, out_r = np.full_like(left, 7), np.full_like(right, 7)
+    a, b = rect.rectify(left, right, out_left=out_l, out_right=out_r)
+    assert a is out_l and b is out_r
+    assert np.array_equal(out_l, left) and np.array_equal(out_r, right)
+    out_l[:] = 7
+    a, b = rect.rectify(left, right, out_left=out_l)
+    assert a is out_l and b is right and np.array_equal(out_l, left)
+    with pytest.raises(TypeError, match="out_right must have dtype uint8"):
+        rect.rectify(left, right, out_right=np.empty(right.shape, np.float32))
+    with pytest.raises(ValueError, match=r"out_left must have shape \(376, 1241\)"):
+        rect.rectify(left, right, out_left=np.empty((3, 3), np.uint8))
 
 
 def test_rectifier_from_file_reads_with_calib(tmp_path: Any) -> None:
