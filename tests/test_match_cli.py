@@ -334,7 +334,7 @@ def test_sgm_path_with_a_stand_in_matcher(
         "--method",
         "sgm",
         "--block-size",
-        "7",
+        "3",
         "--num-disparities",
         "32",
         "--threads",
@@ -349,7 +349,7 @@ def test_sgm_path_with_a_stand_in_matcher(
         {
             "num_disparities": 32,
             "min_disparity": 0,
-            "block_size": 7,
+            "block_size": 3,
             "threads": 1,
             "return_confidence": True,
         }
@@ -358,19 +358,16 @@ def test_sgm_path_with_a_stand_in_matcher(
     assert s["method"] == "sgm" and s["params"] == {
         "num_disparities": 32,
         "min_disparity": 0,
-        "block_size": 7,
+        "block_size": 3,
     }
     left, right = read_image(pair[0]), read_image(pair[1])
     assert same(
         read_pfm(tmp_path / "s" / "disparity.pfm"),
-        block_match(left, right, num_disparities=32, block_size=7),
+        block_match(left, right, num_disparities=32, block_size=3),
     )
     code, _, err = run(capsys, *pair, "--method", "sgm", "--cost", "sad", "-o", f"{tmp_path}/t/")
     assert code == 2
-    assert err.strip() == (
-        "stereodepth match: error: cost is an option of method 'bm'; "
-        "method 'sgm' has no cost, got 'sad'"
-    )
+    assert err.strip() == ("stereodepth match: error: --cost: --method sgm has no cost, got 'sad'")
 
 
 def test_sgm_without_the_semi_global_matcher(

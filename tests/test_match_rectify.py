@@ -307,3 +307,35 @@ def test_bad_input_one_line_exit_2(tmp_path: Path, capsys: pytest.CaptureFixture
     code, out, err = run(capsys, small, small, "--calib", yaml, "-o", f"{tmp_path}/x-")
     assert code == 2 and "size of the calibration in --calib, 96x64 px, got 80x48" in err, err
     assert not list(tmp_path.glob("x-*")) and not list(Path.cwd().glob("disparity*"))
+
+
+@pytest.mark.parametrize(
+    ("flags", "message"),
+    [
+        (["--method", "sgm", "--block-size", "5"], "--block-size 5: block_size must be 1 or 3"),
+        (["--block-size", "4"], "--block-size 4: block_size must be an odd integer"),
+        (["--cost", "sad", "--block-size", "33"], "--block-size 33: block_size must be an odd"),
+        (["--num-disparities", "5000"], "--num-disparities 5000: num_disparities must be"),
+        (["--min-disparity", "-99999"], "--min-disparity -99999: min_disparity must be"),
+        (["--method", "sgm", "--cost", "sad"], "--cost: --method sgm has no cost, got 'sad'"),
+    ],
+)
+def test_bad_matcher_flag_writes_nothing(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], flags: list[str], message: str
+) -> None:
+    """A matcher flag the matcher refuses is one line naming the flag as typed, before any
+    file is written: the rectified pair of --write-rectified used to be written first and
+    left behind."""
+    pytest.importorskip("yaml", reason="YAML calibrations need PyYAML (the calib extra)")
+    s = sample_pair(96, 64)
+    left, right, c = raw_files(tmp_path, s.left, s.right)
+    yaml = write_opencv_yaml(tmp_path / "stereo.yml", c, stored=False)
+    out = tmp_path / "out"
+    code, text, err = run(
+        capsys, left, right, "--calib", yaml, "--translation-unit", "mm", "-o", f"{out}/",
+        "--write-rectified", "--ply", "--no-preview", *flags,
+    )  # fmt: skip
+    assert code == 2 and text == ""
+    assert err == f"stereodepth match: error: {err.split('error: ', 1)[1]}"
+    assert len(err.strip().splitlines()) == 1 and message in err, err
+    assert not out.exists() or not list(out.iterdir())

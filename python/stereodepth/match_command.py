@@ -251,6 +251,33 @@ def _rig(
     return rig, None, "command line", None
 
 
+def _check_matcher_flags(args: argparse.Namespace, num_disparities: int) -> None:
+    """The matcher flags checked by the matcher's own rules before any work or any file is
+    written, each error naming the flag as typed (``--block-size 4: block_size must be ...``);
+    ``--cost`` first, as the block sizes the block matcher takes depend on it."""
+    from ._methods import matcher_keywords, options_class
+
+    checker = options_class(args.method)
+    known = matcher_keywords(args.method)
+    flags = (
+        ("--cost", "cost", args.cost),
+        ("--num-disparities", "num_disparities", args.num_disparities),
+        ("--min-disparity", "min_disparity", args.min_disparity),
+        ("--block-size", "block_size", args.block_size),
+    )
+    context: dict[str, Any] = {"num_disparities": num_disparities}
+    for flag, key, value in flags:
+        if value is None:
+            continue
+        if key not in known:
+            raise _Usage(f"{flag}: --method {args.method} has no {key}, got {value!r}")
+        try:
+            checker(**{**context, key: value})
+        except (TypeError, ValueError) as exc:
+            raise _Usage(f"{flag} {value}: {exc}") from None
+        context[key] = value
+
+
 def _read(name: str, path: str) -> np.ndarray:
     from .io import read_image
 
@@ -264,7 +291,7 @@ def run(args: argparse.Namespace) -> int:
     """Matches the pair, writes the outputs, prints the summary; returns the exit status."""
     from . import io
     from ._calib_rule import write_png
-    from .match_pair import match_pair, prepare_pair
+    from .match_pair import default_num_disparities, match_pair, prepare_pair
 
     rig, ndisp, source, rectifier = _rig(args)
     if args.threads is not None and args.threads < 0:
@@ -283,6 +310,10 @@ def run(args: argparse.Namespace) -> int:
                 f"LEFT and RIGHT must have the size of the calibration in --calib, {cw}x{ch} "
                 f"px, got {left_img.shape[1]}x{left_img.shape[0]} px"
             )
+    num_disparities = args.num_disparities if args.num_disparities is not None else ndisp
+    if num_disparities is None:
+        num_disparities = default_num_disparities(right_img.shape[1])
+    _check_matcher_flags(args, num_disparities)
     want_preview = not args.no_preview
     if want_preview:
         from .colormap import colormap_lut
@@ -312,14 +343,11 @@ def run(args: argparse.Namespace) -> int:
         t0 = time.perf_counter()
         left_img, right_img = rectifier.rectify(left_img, right_img)
         rectify_s = time.perf_counter() - t0
-        if args.write_rectified:
-            write_png(out["left_rectified"], left_img)
-            write_png(out["right_rectified"], right_img)
     result = match_pair(
         left_img,
         right_img,
         method=args.method,
-        num_disparities=args.num_disparities if args.num_disparities is not None else ndisp,
+        num_disparities=num_disparities,
         min_disparity=args.min_disparity,
         block_size=args.block_size,
         cost=args.cost,
@@ -328,6 +356,9 @@ def run(args: argparse.Namespace) -> int:
         doffs_px=0.0 if rig is None else rig["doffs_px"],
         threads=args.threads,
     )
+    if args.write_rectified:  # after matching: a pair the matcher refuses writes nothing
+        write_png(out["left_rectified"], left_img)
+        write_png(out["right_rectified"], right_img)
     d = result.disparity
     if args.disparity_format == "pfm":
         io.write_pfm(out["disparity"], d)
