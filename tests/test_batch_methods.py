@@ -63,8 +63,10 @@ def sgm_expected(scene: Path, **params: Any) -> tuple[np.ndarray, np.ndarray]:
              "fill=true", "--min-disparity", "1"],
             {"paths": 8, "p2": 300, "block_size": 1, "fill": True, "min_disparity": 1},
         ),
+        # p1 above the default p2 (500) is valid with its own p2: it was refused.
+        (["--option", "p1=600", "--option", "p2=700"], {"p1": 600, "p2": 700}),
     ],
-    ids=["defaults", "options"],
+    ids=["defaults", "options", "p1-above-the-default-p2"],
 )  # fmt: skip
 def test_sgm_outputs_equal_semi_global_match(
     tmp_path: Path, flags: list[str], params: dict[str, Any]

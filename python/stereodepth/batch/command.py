@@ -261,9 +261,14 @@ def _matcher_options(args: argparse.Namespace) -> dict[str, Any]:
     except (TypeError, ValueError) as exc:
         raise UsageError(f"--num-disparities {nd}: {exc}") from exc
     checked = set(inspect.signature(checker.__init__).parameters)
-    bases = [k for k in _BASES[method] if k in opts]
+    try:  # together first: p1=600 alone is refused (the default p2 is 500), with p2=700 not
+        checker(num_disparities=nd, **{k: v for k, v in opts.items() if k in checked})
+        at_fault: list[str] = []
+    except (TypeError, ValueError):
+        at_fault = list(opts)
+    bases = [k for k in _BASES[method] if k in at_fault]
     context: dict[str, Any] = {}
-    for key in [*bases, *sorted(k for k in opts if k not in bases)]:
+    for key in [*bases, *sorted(k for k in at_fault if k not in bases)]:
         if key in checked:
             try:
                 checker(num_disparities=nd, **{**context, key: opts[key]})
