@@ -119,6 +119,8 @@ def _match(method: str, name: str, left: Any, right: Any, params: dict[str, Any]
     from stereodepth._methods import options_class
 
     la, ra = _as_dask("left", left), _as_dask("right", right)
+    # A big-endian uint16 stack (FITS, PGM) is uint16: matched in the machine's byte order.
+    la, ra = (a if a.dtype.isnative else a.astype(a.dtype.newbyteorder("=")) for a in (la, ra))
     if params.get("return_confidence"):
         raise TypeError("return_confidence is not accepted for dask arrays")
     if "isa" in params:
