@@ -971,3 +971,19 @@ def test_opencv_second_file_without_opencv_keys_is_refused(tmp_path: Path) -> No
         match=r"its keys: \['camera_matrix', 'camera_name', 'image_height', 'image_width'\]",
     ):
         sc.read_opencv_stereo_calibration(full, ros)
+
+
+def test_a_file_too_large_for_a_calibration_is_refused_at_once(tmp_path: Path) -> None:
+    """A large text file given by mistake (an ASCII point cloud) is refused by its size; the
+    YAML parser took about 3 s per MB over it before saying it was no calibration."""
+    from stereodepth.calib._common import MAX_FILE_BYTES
+
+    p = tmp_path / "cloud.txt"
+    p.write_text("0.25 0.5 0.75\n" * (MAX_FILE_BYTES // 14 + 1))
+    with pytest.raises(ValueError, match=r"cloud\.txt: \d+ bytes is too large for a calibration"):
+        read_stereo_calibration(p)
+    with pytest.raises(ValueError, match="too large"):
+        sc.read_kalibr_stereo_calibration(p)
+    p.write_text("0.25 0.5 0.75\n")  # a small file still gets the reader's own answer
+    with pytest.raises(ValueError, match="not a calibration file this reader knows"):
+        read_stereo_calibration(p)

@@ -77,11 +77,24 @@ _NAMED_COUNTS = {"rational_polynomial": (8,), "radtan": (4,)}
 ROTATION_TOLERANCE = 1e-6
 
 
+#: The largest calibration file read, bytes: the files of every format here are a few kB; a
+#: larger file is another kind (a point cloud, a log) given by mistake, which the YAML parser
+#: would take minutes over (about 3 s per MB).
+MAX_FILE_BYTES = 4 * 1024 * 1024
+
+
 def _read_text(p: Path, what: str) -> str:
-    """A calibration file's text: UTF-8 (a byte-order mark is dropped), any line ends."""
+    """A calibration file's text: UTF-8 (a byte-order mark is dropped), any line ends, at
+    most :data:`MAX_FILE_BYTES`."""
     from ..io import require_file
 
     require_file(p, what)
+    size = p.stat().st_size
+    if size > MAX_FILE_BYTES:
+        raise ValueError(
+            f"{p}: {size} bytes is too large for a {what} (at most {MAX_FILE_BYTES} bytes; "
+            "calibration files are a few kB)"
+        )
     try:
         return p.read_bytes().decode("utf-8-sig")
     except UnicodeDecodeError as exc:
