@@ -385,3 +385,32 @@ def test_sgm_without_the_semi_global_matcher(
         "version of the library does not have; use method 'bm'"
     )
     assert not hasattr(stereodepth, "semi_global_match")
+
+
+def test_a_failed_write_leaves_no_outputs(
+    pair: tuple[Path, Path],
+    tmp_path: Path,
+    capsys: pytest.CaptureFixture[str],
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """An output name taken by a folder is refused before any work; a write that fails after
+    others removes the run's outputs (the disparity and depth used to stay, without a cloud)."""
+    out = tmp_path / "out"
+    (out / "points.ply").mkdir(parents=True)
+    rig = ["--focal-px", "100", "--baseline-mm", "100", "--no-preview", "--ply"]
+    code, _, err = run(capsys, *pair, *rig, "-o", f"{out}/")
+    assert code == 2 and err.count("\n") == 1
+    assert "points.ply' is a folder, so the output of that name cannot be written" in err
+    assert sorted(p.name for p in out.iterdir()) == ["points.ply"]
+
+    import stereodepth.pointcloud
+
+    def disk_full(*args: Any, **kwargs: Any) -> None:
+        raise OSError(28, "No space left on device")
+
+    monkeypatch.setattr(stereodepth.pointcloud, "write_ply", disk_full)
+    (out / "points.ply").rmdir()
+    (out / "depth.npy").write_bytes(b"an earlier run's depth")
+    code, _, err = run(capsys, *pair, *rig, "-o", f"{out}/")
+    assert code == 1 and "No space left on device" in err and err.count("\n") == 1
+    assert list(out.iterdir()) == []

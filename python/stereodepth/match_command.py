@@ -153,21 +153,30 @@ def register(subparsers: Any) -> None:
 
 def output_paths(out: str, names: list[str]) -> dict[str, Path]:
     """Where each output goes: ``out`` as a folder (existing, or ending in a separator: made)
-    or as a prefix of the file names (its folder must exist)."""
+    or as a prefix of the file names (its folder must exist). An output name taken by a folder
+    is refused before anything is written."""
     is_dir = out.endswith(("/", os.sep)) or Path(out).is_dir()
     if is_dir:
         folder = Path(out)
         if folder.exists() and not folder.is_dir():
             raise _Usage(f"--out must be a folder or a file-name prefix, got {out!r}")
+        paths = {n: folder / n for n in names}
+    else:
+        parent = Path(out).parent
+        if not parent.is_dir():
+            raise _Usage(f"--out: the folder of the prefix {out!r} does not exist: {str(parent)!r}")
+        paths = {n: Path(out + n) for n in names}
+    for path in paths.values():
+        if path.is_dir():
+            raise _Usage(
+                f"--out: {str(path)!r} is a folder, so the output of that name cannot be written"
+            )
+    if is_dir:
         try:
-            folder.mkdir(parents=True, exist_ok=True)
+            Path(out).mkdir(parents=True, exist_ok=True)
         except OSError as exc:
             raise _Usage(f"--out: cannot make the folder {out!r}: {exc.strerror}") from None
-        return {n: folder / n for n in names}
-    parent = Path(out).parent
-    if not parent.is_dir():
-        raise _Usage(f"--out: the folder of the prefix {out!r} does not exist: {str(parent)!r}")
-    return {n: Path(out + n) for n in names}
+    return paths
 
 
 def _rig(
@@ -289,8 +298,6 @@ def _read(name: str, path: str) -> np.ndarray:
 
 def run(args: argparse.Namespace) -> int:
     """Matches the pair, writes the outputs, prints the summary; returns the exit status."""
-    from . import io
-    from ._calib_rule import write_png
     from .match_pair import default_num_disparities, match_pair, prepare_pair
 
     rig, ndisp, source, rectifier = _rig(args)
@@ -356,6 +363,48 @@ def run(args: argparse.Namespace) -> int:
         doffs_px=0.0 if rig is None else rig["doffs_px"],
         threads=args.threads,
     )
+    try:
+        _write_outputs(args, out, result, rig, left_img, right_img)
+    except BaseException:
+        # A run that fails leaves none of its outputs: a new disparity beside an old depth
+        # would pass for one result.
+        for path in out.values():
+            if path.is_file():
+                path.unlink()
+        raise
+    summary = result.summary()
+    summary.update(
+        {
+            "left": str(args.left),
+            "right": str(args.right),
+            "calibration": source,
+            "rectified": rectifier is not None,
+            "outputs": {k: str(v) for k, v in out.items()},
+        }
+    )
+    if rectifier is not None:
+        summary["raw_size"] = list(rectifier.image_size)
+        summary["rectified_size"] = list(rectifier.output_size)
+        summary["rectify_time_s"] = rectify_s
+    if args.json:
+        print(json.dumps(summary, indent=2, allow_nan=False))
+    else:
+        _print(summary, left_img)
+    return 0
+
+
+def _write_outputs(
+    args: argparse.Namespace,
+    out: dict[str, Path],
+    result: Any,
+    rig: dict[str, Any] | None,
+    left_img: np.ndarray,
+    right_img: np.ndarray,
+) -> None:
+    """Writes every output of ``out`` (each file atomically)."""
+    from . import io
+    from ._calib_rule import write_png
+
     if args.write_rectified:  # after matching: a pair the matcher refuses writes nothing
         write_png(out["left_rectified"], left_img)
         write_png(out["right_rectified"], right_img)
@@ -383,7 +432,7 @@ def run(args: argparse.Namespace) -> int:
                 dtype=np.uint16,
             )
             io.write_png16(out["depth"], mm)
-    if want_preview:
+    if not args.no_preview:
         from .colormap import save_colorized
 
         save_colorized(out["disparity_preview"], d, quantity="disparity", unit="px", cmap=args.cmap)
@@ -403,26 +452,6 @@ def run(args: argparse.Namespace) -> int:
             cy_px=rig["cy_px"],
         )
         write_ply(out["ply"], points, left_img, comment="stereodepth match")
-
-    summary = result.summary()
-    summary.update(
-        {
-            "left": str(args.left),
-            "right": str(args.right),
-            "calibration": source,
-            "rectified": rectifier is not None,
-            "outputs": {k: str(v) for k, v in out.items()},
-        }
-    )
-    if rectifier is not None:
-        summary["raw_size"] = list(rectifier.image_size)
-        summary["rectified_size"] = list(rectifier.output_size)
-        summary["rectify_time_s"] = rectify_s
-    if args.json:
-        print(json.dumps(summary, indent=2, allow_nan=False))
-    else:
-        _print(summary, left_img)
-    return 0
 
 
 def _print(s: dict[str, Any], left: np.ndarray) -> None:
