@@ -594,6 +594,9 @@ def test_rectifier_rig_and_q() -> None:
     assert rs.P2[0, 3] > 0
     with pytest.raises(ValueError, match=r"first camera is right of the second .*swap"):
         rs.rig  # noqa: B018 - the property raises
+    upside = calib_of(dataclasses.replace(vertical, R=vertical.R.T, T=-vertical.R.T @ vertical.T))
+    with pytest.raises(ValueError, match=r"first camera is below the second \(P2\[1, 3\]"):
+        StereoRectifier.from_calibration(upside).rig  # noqa: B018 - the property raises
 
 
 def test_rectifier_uses_the_files_transforms_unless_asked() -> None:

@@ -722,9 +722,9 @@ class StereoRectifier:
         f = float(self._P1[0, 0])
         i = 1 if self.vertical else 0
         if self._P2[i, 3] > 0:
-            axis, side = ("x", "right") if i == 0 else ("y", "below")
+            axis, side = ("x", "right of") if i == 0 else ("y", "below")
             raise ValueError(
-                f"the first camera is {side} of the second (P2[{i}, 3] = "
+                f"the first camera is {side} the second (P2[{i}, 3] = "
                 f"{float(self._P2[i, 3]):g} > 0, T[{i}] > 0): its disparities along {axis} are "
                 "negative, which the matchers do not search; swap the cameras (the images and "
                 "the calibration's camera 1 and camera 2)"
