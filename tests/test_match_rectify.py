@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import importlib.util
 import json
+import sys
 from pathlib import Path
 from types import ModuleType
 from typing import Any
@@ -339,3 +340,27 @@ def test_bad_matcher_flag_writes_nothing(
     assert err == f"stereodepth match: error: {err.split('error: ', 1)[1]}"
     assert len(err.strip().splitlines()) == 1 and message in err, err
     assert not out.exists() or not list(out.iterdir())
+
+
+def test_yaml_calibration_without_pyyaml_is_a_missing_extra(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A YAML --calib without PyYAML is the missing-extra error of the README (the pip
+    install, exit status 1) for match and batch alike; it was a usage error (status 2)."""
+    s = sample_pair(96, 64)
+    left, right, c = raw_files(tmp_path, s.left, s.right)
+    ros = ros_camera_info(tmp_path / "left.yaml", c.K1, c.D1, c.R1, c.P1, c.image_size)
+    monkeypatch.setitem(sys.modules, "yaml", None)
+    want = (
+        "error: --calib: reading YAML calibration files needs PyYAML: "
+        'pip install "stereodepth[calib]"'
+    )
+    code, out, err = run(capsys, left, right, "--calib", ros, "-o", f"{tmp_path}/m/")
+    assert (code, out) == (1, "") and err.strip() == f"stereodepth match: {want}"
+    (tmp_path / "in").mkdir()
+    left.rename(tmp_path / "in" / "left.png")
+    right.rename(tmp_path / "in" / "right.png")
+    argv = ["batch", str(tmp_path / "in"), "-o", str(tmp_path / "b"), "--calib", str(ros)]
+    assert main([*argv, "--num-disparities", "16"]) == 1
+    assert capsys.readouterr().err.strip() == f"stereodepth batch: {want}"
+    assert not (tmp_path / "m").exists() and not (tmp_path / "b").exists()
