@@ -328,3 +328,27 @@ def test_raw_pairs_on_a_local_cluster(tmp_path: Path) -> None:
     report = tb.report_of(there)
     assert report["counts"]["ok"] == 4
     assert all(p["rectified"] for p in report["pairs"])
+
+
+def test_outputs_of_an_earlier_job_inside_input_are_not_pairs(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """``S.left-rectified.png`` and ``S.right-rectified.png`` of an earlier job whose OUTDIR
+    lies in INPUT are outputs: they were taken for a new raw pair and rectified a second time
+    by the next job, silently."""
+    inp, calib = raw_folder(tmp_path)
+    yaml = mr.write_opencv_yaml(tmp_path / "stereo.yml", calib, stored=False)
+    flags = ["--calib", yaml, "--translation-unit", "mm", "--num-disparities", NDISP]
+    assert run_cli("batch", inp, "-o", inp / "first", *flags, "--write-rectified", "--quiet") == 0
+    assert (inp / "first" / "p0.left-rectified.png").is_file()
+    capsys.readouterr()
+    assert run_cli("batch", inp, "-o", tmp_path / "second", *flags, "--method", "sgm") == 0
+    report = json.loads((tmp_path / "second" / "report.json").read_text())
+    assert sorted(p["stem"] for p in report["pairs"]) == ["p0", "p1"]
+    err = capsys.readouterr().err
+    assert f"skipped {inp / 'first'}: the outputs of an earlier batch job" in err
+    # OUTDIR = INPUT: the second run finds the same pairs, all done.
+    assert run_cli("batch", inp / "p0", "-o", inp / "p0", *flags, "--write-rectified") == 0
+    assert run_cli("batch", inp / "p0", "-o", inp / "p0", *flags, "--write-rectified") == 0
+    report = json.loads((inp / "p0" / "report.json").read_text())
+    assert [(p["stem"], p["status"]) for p in report["pairs"]] == [("p0", "skipped")]
