@@ -364,3 +364,25 @@ def test_yaml_calibration_without_pyyaml_is_a_missing_extra(
     assert main([*argv, "--num-disparities", "16"]) == 1
     assert capsys.readouterr().err.strip() == f"stereodepth batch: {want}"
     assert not (tmp_path / "m").exists() and not (tmp_path / "b").exists()
+
+
+def test_outputs_never_overwrite_the_inputs(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Raw images named as the rectified outputs, matched with ``-o`` their own folder: the
+    command overwrote the raw pair with its rectification. Now a usage error, nothing written."""
+    pytest.importorskip("yaml", reason="YAML calibrations need PyYAML (the calib extra)")
+    s = sample_pair(96, 64)
+    left, right, c = raw_files(tmp_path, s.left, s.right)
+    yaml = write_opencv_yaml(tmp_path / "stereo.yml", c, stored=False)
+    left = left.rename(tmp_path / "left-rectified.png")
+    right = right.rename(tmp_path / "right-rectified.png")
+    before = {p: p.read_bytes() for p in (left, right)}
+    code, out, err = run(
+        capsys, left, right, "--calib", yaml, "--translation-unit", "mm", "--write-rectified",
+        "--no-preview", "-o", f"{tmp_path}/",
+    )  # fmt: skip
+    assert (code, out) == (2, "") and err.count("\n") == 1
+    assert f"--out: '{left}' would overwrite LEFT '{left}'" in err
+    assert {p: p.read_bytes() for p in (left, right)} == before
+    assert not (tmp_path / "disparity.pfm").exists()

@@ -260,6 +260,35 @@ def _rig(
     return rig, None, "command line", None
 
 
+def _refuse_overwriting_inputs(args: argparse.Namespace, out: dict[str, Path]) -> None:
+    """A usage error when an output would replace one of the command's own input files (the
+    images or the calibration): ``match left-rectified.png right-rectified.png
+    --write-rectified -o .`` used to overwrite the raw pair it was given."""
+    given = [
+        (flag, value)
+        for flag, value in (
+            ("LEFT", args.left),
+            ("RIGHT", args.right),
+            ("--calib", args.calib),
+            ("--calib-right", args.calib_right),
+        )
+        if value is not None
+    ]
+    for path in out.values():
+        if not path.exists():
+            continue
+        for flag, value in given:
+            try:
+                same = os.path.samefile(path, value)
+            except OSError:
+                continue
+            if same:
+                raise _Usage(
+                    f"--out: {str(path)!r} would overwrite {flag} {value!r}: choose another "
+                    "--out folder or prefix"
+                )
+
+
 def _check_matcher_flags(args: argparse.Namespace, num_disparities: int) -> None:
     """The matcher flags checked by the matcher's own rules before any work or any file is
     written, each error naming the flag as typed (``--block-size 4: block_size must be ...``);
@@ -342,6 +371,7 @@ def run(args: argparse.Namespace) -> int:
         names["right_rectified"] = "right-rectified.png"
     paths = output_paths(args.out, list(names.values()))
     out = {key: paths[name] for key, name in names.items()}
+    _refuse_overwriting_inputs(args, out)
 
     rectify_s = None
     if rectifier is not None:
