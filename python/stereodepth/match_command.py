@@ -346,10 +346,10 @@ def run(args: argparse.Namespace) -> int:
                 f"LEFT and RIGHT must have the size of the calibration in --calib, {cw}x{ch} "
                 f"px, got {left_img.shape[1]}x{left_img.shape[0]} px"
             )
-    num_disparities = args.num_disparities if args.num_disparities is not None else ndisp
-    if num_disparities is None:
-        num_disparities = default_num_disparities(right_img.shape[1])
-    _check_matcher_flags(args, num_disparities)
+    # The search range the checks assume: the one match_pair uses (the matched width's default
+    # when neither the flag nor the calibration gives one; the checks do not depend on it).
+    checked_nd = args.num_disparities if args.num_disparities is not None else ndisp
+    _check_matcher_flags(args, checked_nd or default_num_disparities(right_img.shape[1]))
     want_preview = not args.no_preview
     if want_preview:
         from .colormap import colormap_lut
@@ -384,7 +384,7 @@ def run(args: argparse.Namespace) -> int:
         left_img,
         right_img,
         method=args.method,
-        num_disparities=num_disparities,
+        num_disparities=args.num_disparities if args.num_disparities is not None else ndisp,
         min_disparity=args.min_disparity,
         block_size=args.block_size,
         cost=args.cost,
