@@ -16,6 +16,7 @@ import pytest
 
 import stereodepth
 from stereodepth import cli, io
+from stereodepth.sample import sample_pair
 
 Image = pytest.importorskip("PIL.Image")
 
@@ -63,8 +64,10 @@ def sgm_expected(scene: Path, **params: Any) -> tuple[np.ndarray, np.ndarray]:
              "fill=true", "--min-disparity", "1"],
             {"paths": 8, "p2": 300, "block_size": 1, "fill": True, "min_disparity": 1},
         ),
+        # p1 above the default p2 (500) is valid with its own p2: it was refused.
+        (["--option", "p1=600", "--option", "p2=700"], {"p1": 600, "p2": 700}),
     ],
-    ids=["defaults", "options"],
+    ids=["defaults", "options", "p1-above-the-default-p2"],
 )  # fmt: skip
 def test_sgm_outputs_equal_semi_global_match(
     tmp_path: Path, flags: list[str], params: dict[str, Any]
@@ -246,3 +249,29 @@ def test_sgm_on_a_local_cluster_equals_embedded_and_direct(tmp_path: Path) -> No
         disparity, depth = sgm_expected(tmp_path / "in" / name, paths=4)
         np.testing.assert_array_equal(np.load(there / f"{name}.disparity.npy"), disparity)
         np.testing.assert_array_equal(np.load(there / f"{name}.depth.npy"), depth)
+
+
+def test_tuple_option_reaches_the_matcher(tmp_path: Path) -> None:
+    """``--option intensity_range=0,4095`` is the tuple (0, 4095): the option batch lists for
+    both methods could not be given before (the value stayed the string '0,4095')."""
+    assert cli.key_value_option("intensity_range=0,4095") == ("intensity_range", (0, 4095))
+    assert cli.key_value_option("x=1, 2.5,none") == ("x", (1, 2.5, None))
+    pair = sample_pair(96, 64, seed=3)
+    scene = tmp_path / "in" / "s0"
+    scene.mkdir(parents=True)
+    images = [
+        np.ascontiguousarray(im[..., 1]).astype(np.uint16) * 16 for im in (pair.left, pair.right)
+    ]
+    for name, image in zip(("left", "right"), images, strict=True):
+        io.write_png16(scene / f"{name}.png", image)
+    out = tmp_path / "out"
+    for method, match in (("bm", stereodepth.block_match), ("sgm", stereodepth.semi_global_match)):
+        assert run_cli(
+            "batch", tmp_path / "in", "-o", out, "--focal-px", "100", "--baseline-mm", "100",
+            "--num-disparities", "16", "--method", method, "--option", "intensity_range=0,4095",
+            "--quiet",
+        ) == 0  # fmt: skip
+        want = match(*images, num_disparities=16, intensity_range=(0, 4095))
+        np.testing.assert_array_equal(np.load(out / "s0.disparity.npy"), want, strict=True)
+        record = json.loads((out / "s0.record.json").read_text())
+        assert record["matcher_options"] == {"intensity_range": [0, 4095]}

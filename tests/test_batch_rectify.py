@@ -424,3 +424,50 @@ def test_raw_pairs_on_a_local_cluster(tmp_path: Path) -> None:
     report = tb.report_of(there)
     assert report["counts"]["ok"] == 4
     assert all(p["rectified"] for p in report["pairs"])
+
+
+def test_outputs_of_an_earlier_job_inside_input_are_not_pairs(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """``S.left-rectified.png`` and ``S.right-rectified.png`` of an earlier job whose OUTDIR
+    lies in INPUT are outputs: they were taken for a new raw pair and rectified a second time
+    by the next job, silently."""
+    inp, calib = raw_folder(tmp_path)
+    yaml = mr.write_opencv_yaml(tmp_path / "stereo.yml", calib, stored=False)
+    flags = ["--calib", yaml, "--translation-unit", "mm", "--num-disparities", NDISP]
+    assert run_cli("batch", inp, "-o", inp / "first", *flags, "--write-rectified", "--quiet") == 0
+    assert (inp / "first" / "p0.left-rectified.png").is_file()
+    capsys.readouterr()
+    assert run_cli("batch", inp, "-o", tmp_path / "second", *flags, "--method", "sgm") == 0
+    report = json.loads((tmp_path / "second" / "report.json").read_text())
+    assert sorted(p["stem"] for p in report["pairs"]) == ["p0", "p1"]
+    err = capsys.readouterr().err
+    assert f"skipped {inp / 'first'}: the outputs of an earlier batch job" in err
+    # OUTDIR = INPUT: the second run finds the same pairs, all done.
+    assert run_cli("batch", inp / "p0", "-o", inp / "p0", *flags, "--write-rectified") == 0
+    assert run_cli("batch", inp / "p0", "-o", inp / "p0", *flags, "--write-rectified") == 0
+    report = json.loads((inp / "p0" / "report.json").read_text())
+    assert [(p["stem"], p["status"]) for p in report["pairs"]] == [("p0", "skipped")]
+
+
+def test_no_output_is_an_input(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """A CSV list whose images carry the names of a pair's outputs in OUTDIR: the job wrote
+    the rectified pair over its own raw input (and could remove it as stale). Refused."""
+    inp, calib = raw_folder(tmp_path, n=1)
+    yaml = mr.write_opencv_yaml(tmp_path / "stereo.yml", calib, stored=False)
+    left = (inp / "p0" / "left.png").rename(inp / "p.left-rectified.png")
+    right = (inp / "p0" / "right.png").rename(inp / "p.right-rectified.png")
+    before = [left.read_bytes(), right.read_bytes()]
+    (inp / "list.csv").write_text("p.left-rectified.png,p.right-rectified.png,p\n")
+    for extra in (["--write-rectified"], []):
+        code = run_cli(
+            "batch", inp / "list.csv", "-o", inp, "--calib", yaml, "--translation-unit", "mm",
+            "--num-disparities", NDISP, "--quiet", *extra,
+        )  # fmt: skip
+        err = capsys.readouterr().err
+        assert code == 2 and err.count("\n") == 1, err
+        assert f"pair 'p' would write {inp / 'p.left-rectified.png'}, which is the input" in err
+    assert [left.read_bytes(), right.read_bytes()] == before
+    assert sorted(p.name for p in inp.iterdir()) == [
+        "list.csv", "p.left-rectified.png", "p.right-rectified.png", "p0",
+    ]  # fmt: skip

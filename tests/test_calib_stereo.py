@@ -947,3 +947,71 @@ def test_rectified_format_tells_rectified_files_from_raw_ones(tmp_path: Path) ->
     assert sc.rectified_format(raw) is None
     with pytest.raises(FileNotFoundError, match="calibration file not found"):
         sc.rectified_format(tmp_path / "missing.txt")
+
+
+@pytest.mark.parametrize(
+    ("name", "text"),
+    [
+        ("deep.yml", "M1: " + "[" * 5000 + "]" * 5000 + "\n"),
+        ("deep.xml", '<?xml version="1.0"?>\n<opencv_storage>' + "<a>" * 5000 + "</a>" * 5000
+         + "</opencv_storage>\n"),
+    ],
+)  # fmt: skip
+def test_deeply_nested_file_is_a_value_error(tmp_path: Path, name: str, text: str) -> None:
+    """A file nested past Python's recursion limit is refused like any other malformed file
+    (it used to escape as RecursionError, a traceback on the command line)."""
+    p = write(tmp_path / name, text)
+    with pytest.raises(ValueError, match="nested too deeply to be a calibration file") as info:
+        read_stereo_calibration(p)
+    assert str(p) in str(info.value)
+
+
+def test_error_message_of_a_huge_value_stays_short(tmp_path: Path) -> None:
+    """A huge value (a YAML alias bomb: 9**5 strings in a file of 300 bytes; 5000 distortion
+    coefficients) is named in a message of a few lines, not megabytes."""
+    levels = ["a: &a [x, x, x, x, x, x, x, x, x]"]
+    for prev, cur in zip("abcd", "bcde", strict=True):
+        levels.append(f"{cur}: &{cur} [" + ", ".join([f"*{prev}"] * 9) + "]")
+    p = write(tmp_path / "bomb.yml", "\n".join(levels) + "\nM1: *e\n")
+    with pytest.raises(ValueError, match=r"M1 must be numbers, got \[\[") as info:
+        read_stereo_calibration(p)
+    assert len(str(info.value)) < 2000
+    long = np.arange(5000.0)
+    long[-1] = np.nan
+    p = write(tmp_path / "long.yml", opencv_yaml(stereo_entries(D1=long)))
+    with pytest.raises(ValueError, match=r"D1 must be finite, got \[0\.0, 1\.0, .*\.\.\.") as info:
+        read_stereo_calibration(p)
+    assert len(str(info.value)) < 2000
+
+
+def test_opencv_second_file_without_opencv_keys_is_refused(tmp_path: Path) -> None:
+    """``--calib stereo.yml --calib-right right.yaml`` (a ROS file given to an OpenCV one) used
+    to be merged and silently ignored; a second file must hold part of the calibration."""
+    full = write(tmp_path / "stereo.yml", opencv_yaml(stereo_entries()))
+    ros = write(
+        tmp_path / "right.yaml",
+        "image_width: 640\nimage_height: 480\ncamera_name: right\ncamera_matrix: {rows: 3}\n",
+    )
+    with pytest.raises(ValueError, match=r"right\.yaml: none of the matrices of an OpenCV"):
+        read_stereo_calibration(full, second_path=ros)
+    with pytest.raises(
+        ValueError,
+        match=r"its keys: \['camera_matrix', 'camera_name', 'image_height', 'image_width'\]",
+    ):
+        sc.read_opencv_stereo_calibration(full, ros)
+
+
+def test_a_file_too_large_for_a_calibration_is_refused_at_once(tmp_path: Path) -> None:
+    """A large text file given by mistake (an ASCII point cloud) is refused by its size; the
+    YAML parser took about 3 s per MB over it before saying it was no calibration."""
+    from stereodepth.calib._common import MAX_FILE_BYTES
+
+    p = tmp_path / "cloud.txt"
+    p.write_text("0.25 0.5 0.75\n" * (MAX_FILE_BYTES // 14 + 1))
+    with pytest.raises(ValueError, match=r"cloud\.txt: \d+ bytes is too large for a calibration"):
+        read_stereo_calibration(p)
+    with pytest.raises(ValueError, match="too large"):
+        sc.read_kalibr_stereo_calibration(p)
+    p.write_text("0.25 0.5 0.75\n")  # a small file still gets the reader's own answer
+    with pytest.raises(ValueError, match="not a calibration file this reader knows"):
+        read_stereo_calibration(p)

@@ -302,7 +302,17 @@ def test_the_whole_chain_is_lazy_and_checked_up_front() -> None:
                 cost="sad",
             ),
             TypeError,
-            "unexpected keyword argument 'cost'",
+            r"^semi_global_match\(\) got an unexpected keyword argument 'cost'$",
+        ),
+        (
+            lambda: sdd.block_match(
+                da.ones((4, 4), dtype=np.uint8),
+                da.ones((4, 4), dtype=np.uint8),
+                num_disparities=16,
+                p1=3,
+            ),
+            TypeError,
+            r"^block_match\(\) got an unexpected keyword argument 'p1'$",
         ),
         (
             lambda: sdd.semi_global_match(

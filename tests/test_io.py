@@ -592,3 +592,13 @@ def test_pnm_any_samples_any_layout(
             path.write_bytes(cut)
             with pytest.raises(ValueError, match=r"a\.pnm: "):
                 io.read_pnm(path)
+
+
+def test_require_file_names_a_device_as_one() -> None:
+    """/dev/null exists: "not found" misled; a device or pipe is refused as what it is."""
+    from stereodepth.io import require_file
+
+    if not os.path.exists(os.devnull) or os.path.isfile(os.devnull):
+        pytest.skip("no device file to try")
+    with pytest.raises(FileNotFoundError, match="image is not a regular file .*: " + os.devnull):
+        require_file(os.devnull, "image")

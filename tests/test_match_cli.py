@@ -334,7 +334,7 @@ def test_sgm_path_with_a_stand_in_matcher(
         "--method",
         "sgm",
         "--block-size",
-        "7",
+        "3",
         "--num-disparities",
         "32",
         "--threads",
@@ -349,7 +349,7 @@ def test_sgm_path_with_a_stand_in_matcher(
         {
             "num_disparities": 32,
             "min_disparity": 0,
-            "block_size": 7,
+            "block_size": 3,
             "threads": 1,
             "return_confidence": True,
         }
@@ -358,19 +358,16 @@ def test_sgm_path_with_a_stand_in_matcher(
     assert s["method"] == "sgm" and s["params"] == {
         "num_disparities": 32,
         "min_disparity": 0,
-        "block_size": 7,
+        "block_size": 3,
     }
     left, right = read_image(pair[0]), read_image(pair[1])
     assert same(
         read_pfm(tmp_path / "s" / "disparity.pfm"),
-        block_match(left, right, num_disparities=32, block_size=7),
+        block_match(left, right, num_disparities=32, block_size=3),
     )
     code, _, err = run(capsys, *pair, "--method", "sgm", "--cost", "sad", "-o", f"{tmp_path}/t/")
     assert code == 2
-    assert err.strip() == (
-        "stereodepth match: error: cost is an option of method 'bm'; "
-        "method 'sgm' has no cost, got 'sad'"
-    )
+    assert err.strip() == ("stereodepth match: error: --cost: --method sgm has no cost, got 'sad'")
 
 
 def test_sgm_without_the_semi_global_matcher(
@@ -388,3 +385,32 @@ def test_sgm_without_the_semi_global_matcher(
         "version of the library does not have; use method 'bm'"
     )
     assert not hasattr(stereodepth, "semi_global_match")
+
+
+def test_a_failed_write_leaves_no_outputs(
+    pair: tuple[Path, Path],
+    tmp_path: Path,
+    capsys: pytest.CaptureFixture[str],
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """An output name taken by a folder is refused before any work; a write that fails after
+    others removes the run's outputs (the disparity and depth used to stay, without a cloud)."""
+    out = tmp_path / "out"
+    (out / "points.ply").mkdir(parents=True)
+    rig = ["--focal-px", "100", "--baseline-mm", "100", "--no-preview", "--ply"]
+    code, _, err = run(capsys, *pair, *rig, "-o", f"{out}/")
+    assert code == 2 and err.count("\n") == 1
+    assert "points.ply' is a folder, so the output of that name cannot be written" in err
+    assert sorted(p.name for p in out.iterdir()) == ["points.ply"]
+
+    import stereodepth.pointcloud
+
+    def disk_full(*args: Any, **kwargs: Any) -> None:
+        raise OSError(28, "No space left on device")
+
+    monkeypatch.setattr(stereodepth.pointcloud, "write_ply", disk_full)
+    (out / "points.ply").rmdir()
+    (out / "depth.npy").write_bytes(b"an earlier run's depth")
+    code, _, err = run(capsys, *pair, *rig, "-o", f"{out}/")
+    assert code == 1 and "No space left on device" in err and err.count("\n") == 1
+    assert list(out.iterdir()) == []

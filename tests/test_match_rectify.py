@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import importlib.util
 import json
+import sys
 import types
 from pathlib import Path
 from types import ModuleType
@@ -358,3 +359,81 @@ def test_bad_input_one_line_exit_2(tmp_path: Path, capsys: pytest.CaptureFixture
     )
     assert code == 2 and "size of the calibration in --calib, 96x64 px, got 80x48" in err, err
     assert not list(tmp_path.glob("x-*")) and not list(Path.cwd().glob("disparity*"))
+
+
+@pytest.mark.parametrize(
+    ("flags", "message"),
+    [
+        (["--method", "sgm", "--block-size", "5"], "--block-size 5: block_size must be 1 or 3"),
+        (["--block-size", "4"], "--block-size 4: block_size must be an odd integer"),
+        (["--cost", "sad", "--block-size", "33"], "--block-size 33: block_size must be an odd"),
+        (["--num-disparities", "5000"], "--num-disparities 5000: num_disparities must be"),
+        (["--min-disparity", "-99999"], "--min-disparity -99999: min_disparity must be"),
+        (["--method", "sgm", "--cost", "sad"], "--cost: --method sgm has no cost, got 'sad'"),
+    ],
+)
+def test_bad_matcher_flag_writes_nothing(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], flags: list[str], message: str
+) -> None:
+    """A matcher flag the matcher refuses is one line naming the flag as typed, before any
+    file is written: the rectified pair of --write-rectified used to be written first and
+    left behind."""
+    pytest.importorskip("yaml", reason="YAML calibrations need PyYAML (the calib extra)")
+    s = sample_pair(96, 64)
+    left, right, c = raw_files(tmp_path, s.left, s.right)
+    yaml = write_opencv_yaml(tmp_path / "stereo.yml", c, stored=False)
+    out = tmp_path / "out"
+    code, text, err = run(
+        capsys, left, right, "--calib", yaml, "--translation-unit", "mm", "-o", f"{out}/",
+        "--write-rectified", "--ply", "--no-preview", *flags,
+    )  # fmt: skip
+    assert code == 2 and text == ""
+    assert err == f"stereodepth match: error: {err.split('error: ', 1)[1]}"
+    assert len(err.strip().splitlines()) == 1 and message in err, err
+    assert not out.exists() or not list(out.iterdir())
+
+
+def test_yaml_calibration_without_pyyaml_is_a_missing_extra(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A YAML --calib without PyYAML is the missing-extra error of the README (the pip
+    install, exit status 1) for match and batch alike; it was a usage error (status 2)."""
+    s = sample_pair(96, 64)
+    left, right, c = raw_files(tmp_path, s.left, s.right)
+    ros = ros_camera_info(tmp_path / "left.yaml", c.K1, c.D1, c.R1, c.P1, c.image_size)
+    monkeypatch.setitem(sys.modules, "yaml", None)
+    want = (
+        "error: --calib: reading YAML calibration files needs PyYAML: "
+        'pip install "stereodepth[calib]"'
+    )
+    code, out, err = run(capsys, left, right, "--calib", ros, "-o", f"{tmp_path}/m/")
+    assert (code, out) == (1, "") and err.strip() == f"stereodepth match: {want}"
+    (tmp_path / "in").mkdir()
+    left.rename(tmp_path / "in" / "left.png")
+    right.rename(tmp_path / "in" / "right.png")
+    argv = ["batch", str(tmp_path / "in"), "-o", str(tmp_path / "b"), "--calib", str(ros)]
+    assert main([*argv, "--num-disparities", "16"]) == 1
+    assert capsys.readouterr().err.strip() == f"stereodepth batch: {want}"
+    assert not (tmp_path / "m").exists() and not (tmp_path / "b").exists()
+
+
+def test_outputs_never_overwrite_the_inputs(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Raw images named as the rectified outputs, matched with ``-o`` their own folder: the
+    command overwrote the raw pair with its rectification. Now a usage error, nothing written."""
+    pytest.importorskip("yaml", reason="YAML calibrations need PyYAML (the calib extra)")
+    s = sample_pair(96, 64)
+    left, right, c = raw_files(tmp_path, s.left, s.right)
+    yaml = write_opencv_yaml(tmp_path / "stereo.yml", c, stored=False)
+    left = left.rename(tmp_path / "left-rectified.png")
+    right = right.rename(tmp_path / "right-rectified.png")
+    before = {p: p.read_bytes() for p in (left, right)}
+    code, out, err = run(
+        capsys, left, right, "--calib", yaml, "--translation-unit", "mm", "--write-rectified",
+        "--no-preview", "-o", f"{tmp_path}/",
+    )  # fmt: skip
+    assert (code, out) == (2, "") and err.count("\n") == 1
+    assert f"--out: '{left}' would overwrite LEFT '{left}'" in err
+    assert {p: p.read_bytes() for p in (left, right)} == before
+    assert not (tmp_path / "disparity.pfm").exists()

@@ -541,3 +541,33 @@ def test_eval_rejects_channel_orders(tmp_path: Path, capsys: pytest.CaptureFixtu
     out, err = capsys.readouterr()
     assert out == ""
     assert err == "stereodepth eval: error: --option channel_order: use --channel-order\n"
+
+
+def test_big_endian_uint16_is_uint16_everywhere() -> None:
+    """A big-endian uint16 image (FITS, PGM, ``np.frombuffer(..., ">u2")``) is matched,
+    remapped and rectified as the same values in the machine's byte order; it was refused with
+    "must be ... uint16 ..., got dtype >u2"."""
+    left, right = random_dots((40, 64), 5, seed=3, values=np.arange(0, 4096, 3, dtype=np.uint16))
+    big = [a.astype(">u2") for a in (left, right)]
+    assert not big[0].dtype.isnative and np.array_equal(big[0], left)
+    for match in (sd.block_match, sd.semi_global_match):
+        assert_identical(match(*big, num_disparities=16), match(left, right, num_disparities=16))
+    for cls in (sd.StereoMatcher, sd.SemiGlobalMatcher):
+        m = cls(num_disparities=16)
+        assert_identical(m.compute(*big), m.compute(left, right))
+    mx, my = np.meshgrid(np.arange(64, dtype=np.float32) * 0.9, np.arange(40, dtype=np.float32))
+    want = sd.remap(left, mx, my)
+    assert_identical(sd.remap(big[0], mx.astype(">f4"), my.astype(">f4")), want)
+    assert_identical(ref.remap(big[0], mx, my), want)
+    k = np.array([[60.0, 0, 31.5], [0, 60.0, 19.5], [0, 0, 1]])
+    rect = sd.StereoRectifier(
+        K1=k, D1=None, K2=k, D2=None, R=np.eye(3), T=[-0.1, 0, 0], image_size=(64, 40)
+    )
+    for got, expected in zip(rect.rectify(*big), rect.rectify(left, right), strict=True):
+        assert_identical(got, expected)
+    da = pytest.importorskip("dask.array")
+    import stereodepth.dask as sdd
+
+    stack = [da.from_array(np.stack([a, a])) for a in big]
+    got = sdd.semi_global_match(*stack, num_disparities=16).compute()
+    assert_identical(got[1], sd.semi_global_match(left, right, num_disparities=16))

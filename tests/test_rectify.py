@@ -594,6 +594,9 @@ def test_rectifier_rig_and_q() -> None:
     assert rs.P2[0, 3] > 0
     with pytest.raises(ValueError, match=r"first camera is right of the second .*swap"):
         rs.rig  # noqa: B018 - the property raises
+    upside = calib_of(dataclasses.replace(vertical, R=vertical.R.T, T=-vertical.R.T @ vertical.T))
+    with pytest.raises(ValueError, match=r"first camera is below the second \(P2\[1, 3\]"):
+        StereoRectifier.from_calibration(upside).rig  # noqa: B018 - the property raises
 
 
 def test_rectifier_uses_the_files_transforms_unless_asked() -> None:
@@ -623,6 +626,18 @@ def test_rectifier_of_rectified_images_passes_them_through() -> None:
     assert sr.baseline_mm == pytest.approx(540.0)
     with pytest.raises(ValueError, match="left must have the calibration's size"):
         rect.rectify(left[:, :-1], right)
+    # Outputs given are written (they used to be left as they were, unnoticed) and checked.
+    out_l, out_r = np.full_like(left, 7), np.full_like(right, 7)
+    a, b = rect.rectify(left, right, out_left=out_l, out_right=out_r)
+    assert a is out_l and b is out_r
+    assert np.array_equal(out_l, left) and np.array_equal(out_r, right)
+    out_l[:] = 7
+    a, b = rect.rectify(left, right, out_left=out_l)
+    assert a is out_l and b is right and np.array_equal(out_l, left)
+    with pytest.raises(TypeError, match="out_right must have dtype uint8"):
+        rect.rectify(left, right, out_right=np.empty(right.shape, np.float32))
+    with pytest.raises(ValueError, match=r"out_left must have shape \(376, 1241\)"):
+        rect.rectify(left, right, out_left=np.empty((3, 3), np.uint8))
 
 
 def test_rectifier_from_file_reads_with_calib(tmp_path: Any) -> None:

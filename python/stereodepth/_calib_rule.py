@@ -80,7 +80,7 @@ def raw_calibration(
 
     Raises ValueError (one line, in the flags' names) for a missing or unreadable file, a
     raw-only flag with a rectified file, a raw file with ``no_rectify``, and whatever the
-    reader finds wrong."""
+    reader finds wrong; ImportError when a YAML file needs PyYAML (the ``calib`` extra)."""
     from .calib import read_stereo_calibration, rectified_format
     from .io import require_file
 
@@ -112,7 +112,9 @@ def raw_calibration(
         stereo = read_stereo_calibration(
             calib, second_path=calib_right, translation_unit=translation_unit
         )
-    except (OSError, ValueError, ImportError) as exc:
+    except ImportError as exc:  # a missing extra (PyYAML): the commands exit with status 1
+        raise ImportError(f"--calib: {exc}") from None
+    except (OSError, ValueError) as exc:
         raise ValueError(f"--calib: {_cli_names(str(exc))}") from None
     if stereo.rectified:  # not from the raw formats today; refuse rather than guess
         raise ValueError(f"--calib: {calib} is read as a rectified pair of unknown format")

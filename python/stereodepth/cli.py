@@ -82,10 +82,18 @@ def _as_flags(message: str) -> str:
 
 
 def key_value_option(text: str) -> tuple[str, Any]:
-    """argparse type of ``--option KEY=VALUE``: the value as bool, None, int, float or str."""
+    """argparse type of ``--option KEY=VALUE``: the value as bool, None, int, float or str,
+    or a tuple of those for comma-separated values (``intensity_range=0,4095``)."""
     key, sep, raw = text.partition("=")
     if not sep or not re.fullmatch(r"[A-Za-z_][A-Za-z0-9_]*", key):
         raise argparse.ArgumentTypeError(f"expected KEY=VALUE with KEY a name, got {text!r}")
+    if "," in raw:
+        return key, tuple(_scalar(part.strip()) for part in raw.split(","))
+    return key, _scalar(raw)
+
+
+def _scalar(raw: str) -> Any:
+    """One value of ``--option``: bool, None, int, float or str."""
     low = raw.lower()
     value: Any
     if low in ("true", "false"):
@@ -100,7 +108,7 @@ def key_value_option(text: str) -> tuple[str, Any]:
                 value = float(raw)
             except ValueError:
                 value = raw
-    return key, value
+    return value
 
 
 def _rig_from_args(args: argparse.Namespace) -> StereoRig:

@@ -119,13 +119,19 @@ def _match(method: str, name: str, left: Any, right: Any, params: dict[str, Any]
     from stereodepth._methods import options_class
 
     la, ra = _as_dask("left", left), _as_dask("right", right)
+    # A big-endian uint16 stack (FITS, PGM) is uint16: matched in the machine's byte order.
+    la, ra = (a if a.dtype.isnative else a.astype(a.dtype.newbyteorder("=")) for a in (la, ra))
     if params.get("return_confidence"):
         raise TypeError("return_confidence is not accepted for dask arrays")
     if "isa" in params:
         raise TypeError(f"{name}() got an unexpected keyword argument 'isa'")
     if "num_disparities" not in params:
         raise TypeError(f"{name}() missing required keyword argument: 'num_disparities'")
-    options_class(method)(**params)
+    checker = options_class(method)
+    try:
+        checker(**params)
+    except TypeError as exc:  # the numpy function's name, not the checker's
+        raise TypeError(str(exc).replace(f"{checker.__name__}.__init__()", f"{name}()")) from None
     if la.shape != ra.shape:
         raise ValueError(f"left and right must have the same shape, got {la.shape} and {ra.shape}")
     if la.dtype != ra.dtype:

@@ -45,14 +45,17 @@ def _pil() -> Any:
 def require_file(path: str | os.PathLike[str], what: str) -> Path:
     """``path`` as a Path when it names an existing regular file (or a link to one).
 
-    Raises FileNotFoundError ("{what} not found: path") when nothing is there and
-    IsADirectoryError ("{what} is a folder, not a file: path") for a folder, so that a user who
-    passed a folder is not told the file is missing.
+    Raises FileNotFoundError ("{what} not found: path") when nothing is there (or "{what}
+    is not a regular file (a device, pipe or socket): path" for one of those, which reading
+    could block on or never end) and IsADirectoryError ("{what} is a folder, not a file:
+    path") for a folder, so that a user who passed a folder is not told the file is missing.
     """
     p = Path(path)
     if p.is_dir():
         raise IsADirectoryError(f"{what} is a folder, not a file: {p}")
     if not p.is_file():
+        if p.exists():
+            raise FileNotFoundError(f"{what} is not a regular file (a device, pipe or socket): {p}")
         raise FileNotFoundError(f"{what} not found: {p}")
     return p
 

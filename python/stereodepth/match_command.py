@@ -166,21 +166,30 @@ def register(subparsers: Any) -> None:
 
 def output_paths(out: str, names: list[str]) -> dict[str, Path]:
     """Where each output goes: ``out`` as a folder (existing, or ending in a separator: made)
-    or as a prefix of the file names (its folder must exist)."""
+    or as a prefix of the file names (its folder must exist). An output name taken by a folder
+    is refused before anything is written."""
     is_dir = out.endswith(("/", os.sep)) or Path(out).is_dir()
     if is_dir:
         folder = Path(out)
         if folder.exists() and not folder.is_dir():
             raise _Usage(f"--out must be a folder or a file-name prefix, got {out!r}")
+        paths = {n: folder / n for n in names}
+    else:
+        parent = Path(out).parent
+        if not parent.is_dir():
+            raise _Usage(f"--out: the folder of the prefix {out!r} does not exist: {str(parent)!r}")
+        paths = {n: Path(out + n) for n in names}
+    for path in paths.values():
+        if path.is_dir():
+            raise _Usage(
+                f"--out: {str(path)!r} is a folder, so the output of that name cannot be written"
+            )
+    if is_dir:
         try:
-            folder.mkdir(parents=True, exist_ok=True)
+            Path(out).mkdir(parents=True, exist_ok=True)
         except OSError as exc:
             raise _Usage(f"--out: cannot make the folder {out!r}: {exc.strerror}") from None
-        return {n: folder / n for n in names}
-    parent = Path(out).parent
-    if not parent.is_dir():
-        raise _Usage(f"--out: the folder of the prefix {out!r} does not exist: {str(parent)!r}")
-    return {n: Path(out + n) for n in names}
+    return paths
 
 
 def _rig(
@@ -268,6 +277,62 @@ def _rig(
     return rig, None, "command line", None
 
 
+def _refuse_overwriting_inputs(args: argparse.Namespace, out: dict[str, Path]) -> None:
+    """A usage error when an output would replace one of the command's own input files (the
+    images or the calibration): ``match left-rectified.png right-rectified.png
+    --write-rectified -o .`` used to overwrite the raw pair it was given."""
+    given = [
+        (flag, value)
+        for flag, value in (
+            ("LEFT", args.left),
+            ("RIGHT", args.right),
+            ("--calib", args.calib),
+            ("--calib-right", args.calib_right),
+        )
+        if value is not None
+    ]
+    for path in out.values():
+        if not path.exists():
+            continue
+        for flag, value in given:
+            try:
+                same = os.path.samefile(path, value)
+            except OSError:
+                continue
+            if same:
+                raise _Usage(
+                    f"--out: {str(path)!r} would overwrite {flag} {value!r}: choose another "
+                    "--out folder or prefix"
+                )
+
+
+def _check_matcher_flags(args: argparse.Namespace, num_disparities: int) -> None:
+    """The matcher flags checked by the matcher's own rules before any work or any file is
+    written, each error naming the flag as typed (``--block-size 4: block_size must be ...``);
+    ``--cost`` first, as the block sizes the block matcher takes depend on it."""
+    from ._methods import matcher_keywords, options_class
+
+    checker = options_class(args.method)
+    known = matcher_keywords(args.method)
+    flags = (
+        ("--cost", "cost", args.cost),
+        ("--num-disparities", "num_disparities", args.num_disparities),
+        ("--min-disparity", "min_disparity", args.min_disparity),
+        ("--block-size", "block_size", args.block_size),
+    )
+    context: dict[str, Any] = {"num_disparities": num_disparities}
+    for flag, key, value in flags:
+        if value is None:
+            continue
+        if key not in known:
+            raise _Usage(f"{flag}: --method {args.method} has no {key}, got {value!r}")
+        try:
+            checker(**{**context, key: value})
+        except (TypeError, ValueError) as exc:
+            raise _Usage(f"{flag} {value}: {exc}") from None
+        context[key] = value
+
+
 def _read(name: str, path: str) -> np.ndarray:
     from .io import read_image
 
@@ -280,9 +345,7 @@ def _read(name: str, path: str) -> np.ndarray:
 def run(args: argparse.Namespace) -> int:
     """Matches the pair, writes the outputs, prints the summary; returns the exit status."""
     from . import _calib_rule as rule
-    from . import io
-    from ._calib_rule import write_png
-    from .match_pair import match_pair, prepare_pair
+    from .match_pair import default_num_disparities, match_pair, prepare_pair
 
     rig, ndisp, source, rectifier = _rig(args)
     if args.threads is not None and args.threads < 0:
@@ -301,6 +364,10 @@ def run(args: argparse.Namespace) -> int:
                 f"LEFT and RIGHT must have the size of the calibration in --calib, {cw}x{ch} "
                 f"px, got {left_img.shape[1]}x{left_img.shape[0]} px"
             )
+    # The search range the checks assume: the one match_pair uses (the matched width's default
+    # when neither the flag nor the calibration gives one; the checks do not depend on it).
+    checked_nd = args.num_disparities if args.num_disparities is not None else ndisp
+    _check_matcher_flags(args, checked_nd or default_num_disparities(right_img.shape[1]))
     want_preview = not args.no_preview
     if want_preview:
         from .colormap import colormap_lut
@@ -322,6 +389,7 @@ def run(args: argparse.Namespace) -> int:
         names["right_rectified"] = "right-rectified.png"
     paths = output_paths(args.out, list(names.values()))
     out = {key: paths[name] for key, name in names.items()}
+    _refuse_overwriting_inputs(args, out)
 
     rectify_s = None
     if rectifier is not None:
@@ -330,9 +398,6 @@ def run(args: argparse.Namespace) -> int:
         t0 = time.perf_counter()
         left_img, right_img = rectifier.rectify(left_img, right_img)
         rectify_s = time.perf_counter() - t0
-        if args.write_rectified:
-            write_png(out["left_rectified"], left_img)
-            write_png(out["right_rectified"], right_img)
     vertical = rectifier is not None and rectifier.vertical
     rows_left, rows_right = rule.along_rows(vertical, left_img, right_img)
     result = match_pair(
@@ -355,6 +420,51 @@ def run(args: argparse.Namespace) -> int:
             confidence=rule.from_rows(True, result.confidence),
             depth=rule.from_rows(True, result.depth),
         )
+    try:
+        _write_outputs(args, out, result, rig, left_img, right_img)
+    except BaseException:
+        # A run that fails leaves none of its outputs: a new disparity beside an old depth
+        # would pass for one result.
+        for path in out.values():
+            if path.is_file():
+                path.unlink()
+        raise
+    summary = result.summary()
+    summary.update(
+        {
+            "left": str(args.left),
+            "right": str(args.right),
+            "calibration": source,
+            "rectified": rectifier is not None,
+            "outputs": {k: str(v) for k, v in out.items()},
+        }
+    )
+    if rectifier is not None:
+        summary["raw_size"] = list(rectifier.image_size)
+        summary["rectified_size"] = list(rectifier.output_size)
+        summary["rectify_time_s"] = rectify_s
+    if args.json:
+        print(json.dumps(summary, indent=2, allow_nan=False))
+    else:
+        _print(summary, left_img)
+    return 0
+
+
+def _write_outputs(
+    args: argparse.Namespace,
+    out: dict[str, Path],
+    result: Any,
+    rig: dict[str, Any] | None,
+    left_img: np.ndarray,
+    right_img: np.ndarray,
+) -> None:
+    """Writes every output of ``out`` (each file atomically)."""
+    from . import io
+    from ._calib_rule import write_png
+
+    if args.write_rectified:  # after matching: a pair the matcher refuses writes nothing
+        write_png(out["left_rectified"], left_img)
+        write_png(out["right_rectified"], right_img)
     d = result.disparity
     if args.disparity_format == "pfm":
         io.write_pfm(out["disparity"], d)
@@ -379,7 +489,7 @@ def run(args: argparse.Namespace) -> int:
                 dtype=np.uint16,
             )
             io.write_png16(out["depth"], mm)
-    if want_preview:
+    if not args.no_preview:
         from .colormap import save_colorized
 
         save_colorized(out["disparity_preview"], d, quantity="disparity", unit="px", cmap=args.cmap)
@@ -399,26 +509,6 @@ def run(args: argparse.Namespace) -> int:
             cy_px=rig["cy_px"],
         )
         write_ply(out["ply"], points, left_img, comment="stereodepth match")
-
-    summary = result.summary()
-    summary.update(
-        {
-            "left": str(args.left),
-            "right": str(args.right),
-            "calibration": source,
-            "rectified": rectifier is not None,
-            "outputs": {k: str(v) for k, v in out.items()},
-        }
-    )
-    if rectifier is not None:
-        summary["raw_size"] = list(rectifier.image_size)
-        summary["rectified_size"] = list(rectifier.output_size)
-        summary["rectify_time_s"] = rectify_s
-    if args.json:
-        print(json.dumps(summary, indent=2, allow_nan=False))
-    else:
-        _print(summary, left_img)
-    return 0
 
 
 def _print(s: dict[str, Any], left: np.ndarray) -> None:

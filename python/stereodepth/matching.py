@@ -323,11 +323,15 @@ _IMAGE_RULE = "2-D uint8 or uint16 grey, or (H, W, 3) uint8 RGB"
 
 
 def as_image(image: Any, name: str) -> np.ndarray:
-    """Checks dtype and shape; returns a C-contiguous array (copying only when needed)."""
+    """Checks dtype and shape; returns a C-contiguous array in the machine's byte order
+    (copying only when needed: a big-endian uint16 image, as FITS or PGM readers give, is
+    a uint16 image)."""
     if not isinstance(image, np.ndarray):
         raise TypeError(
             f"{name} must be a numpy.ndarray ({_IMAGE_RULE}), got {type(image).__name__}"
         )
+    if not image.dtype.isnative and image.dtype.newbyteorder("=") == np.uint16:
+        image = image.astype(np.uint16)
     if image.dtype not in (np.uint8, np.uint16):
         raise TypeError(f"{name} must be {_IMAGE_RULE}, got dtype {image.dtype}")
     if image.ndim == 3:

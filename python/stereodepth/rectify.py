@@ -611,7 +611,8 @@ class StereoRectifier:
         """Rectifies one raw pair: (H, W) uint8/uint16 or (H, W, 3) uint8 images of the
         calibration's ``image_size``. Returns two images of ``output_size`` and the input
         dtype (written into ``out_left``/``out_right`` when given), sampled as :func:`remap`
-        does. For an already rectified calibration the inputs are returned as they are."""
+        does. For an already rectified calibration the inputs are returned as they are, or
+        copied into ``out_left``/``out_right`` when given."""
         imgs = []
         for name, im in (("left", left), ("right", right)):
             arr = _as_image(name, im)
@@ -627,14 +628,23 @@ class StereoRectifier:
                 "left and right must have the same shape and dtype, got "
                 f"{imgs[0].shape} {imgs[0].dtype} and {imgs[1].shape} {imgs[1].dtype}"
             )
-        if self._identity:
-            return left, right
         w, h = self._output_size
         shape = (h, w, *imgs[0].shape[2:])
         outs = (
             _prepare_out(out_left, shape, imgs[0].dtype, imgs[0], "out_left"),
             _prepare_out(out_right, shape, imgs[1].dtype, imgs[1], "out_right"),
         )
+        if self._identity:  # nothing to resample: the inputs, or copies in the given outputs
+            given = (out_left is not None, out_right is not None)
+            if not any(given):
+                return left, right
+            for out, img, is_given in zip(outs, imgs, given, strict=True):
+                if is_given:
+                    np.copyto(out, img)
+            return (
+                outs[0] if given[0] else left,
+                outs[1] if given[1] else right,
+            )
         for table, img, out in zip(self._table_pair(_precision(imgs[0])), imgs, outs, strict=True):
             table.apply(img, out, self._threads)
         return outs

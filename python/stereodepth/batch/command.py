@@ -269,9 +269,14 @@ def _matcher_options(args: argparse.Namespace) -> dict[str, Any]:
     except (TypeError, ValueError) as exc:
         raise UsageError(f"--num-disparities {nd}: {exc}") from exc
     checked = set(inspect.signature(checker.__init__).parameters)
-    bases = [k for k in _BASES[method] if k in opts]
+    try:  # together first: p1=600 alone is refused (the default p2 is 500), with p2=700 not
+        checker(num_disparities=nd, **{k: v for k, v in opts.items() if k in checked})
+        at_fault: list[str] = []
+    except (TypeError, ValueError):
+        at_fault = list(opts)
+    bases = [k for k in _BASES[method] if k in at_fault]
     context: dict[str, Any] = {}
-    for key in [*bases, *sorted(k for k in opts if k not in bases)]:
+    for key in [*bases, *sorted(k for k in at_fault if k not in bases)]:
         if key in checked:
             try:
                 checker(num_disparities=nd, **{**context, key: opts[key]})
@@ -414,6 +419,31 @@ def _check_report_is_its_own(report: Path, pairs: Sequence[Pair], options: Batch
                 raise UsageError(f"--report {report}: that is an input of pair {p.stem!r}")
 
 
+def _check_outputs_are_not_inputs(
+    pairs: Sequence[Pair], options: BatchOptions, calib_files: Sequence[str | None]
+) -> None:
+    """No file a pair may write or remove as stale (:meth:`BatchOptions.owned_names`) is an
+    input of any pair or the job (images, calibration files): a CSV list naming
+    ``OUTDIR/S.left-rectified.png`` as S's left image had it overwritten by its rectification."""
+    inputs: dict[Path, str] = {}
+    for c in calib_files:
+        if c is not None:
+            inputs[Path(c).resolve()] = c
+    for p in pairs:
+        for f in (p.left, p.right, p.calib_file):
+            if f is not None:
+                inputs[f.resolve()] = str(f)
+    out_dir = options.out_dir.resolve()
+    for p in pairs:
+        for name in sorted(options.owned_names(p.stem)):
+            hit = inputs.get(out_dir / name)
+            if hit is not None:
+                raise UsageError(
+                    f"pair {p.stem!r} would write {options.out_dir / name}, which is the input "
+                    f"{hit}: choose another OUTDIR (-o)"
+                )
+
+
 def print_summary(report: BatchReport, report_path: Path, file: Any = None) -> None:
     out = file or sys.stdout
     c = report.counts
@@ -496,6 +526,7 @@ def run(args: argparse.Namespace) -> int:
         write_rectified=args.write_rectified,
     )
     _check_report_is_its_own(report_path, pairs, options)
+    _check_outputs_are_not_inputs(pairs, options, [args.calib, args.calib_right])
     notes = found.skipped_text(limit=len(found.skipped))
     calib_notes = [n for n in (calibration_note(pairs), _rectify_note(raw)) if n]
     notes.extend(calib_notes)

@@ -103,9 +103,34 @@ def _subfolders(d: Path) -> list[Path]:
         return []
 
 
+def _batch_outputs(d: Path) -> set[str]:
+    """The names of the files in ``d`` that an earlier batch job wrote there, as its pairs'
+    records (``*.record.json``) list them: a job's OUTDIR inside INPUT holds images such as
+    ``S.left-rectified.png`` and ``S.right-rectified.png``, which are outputs, not pairs."""
+    import json
+
+    from .job import RECORD_SUFFIX
+
+    names: set[str] = set()
+    try:
+        records = [p for p in d.iterdir() if p.name.endswith(RECORD_SUFFIX) and p.is_file()]
+    except OSError:
+        return names
+    for p in records:
+        try:
+            outputs = json.loads(p.read_text(encoding="utf-8")).get("outputs") or {}
+            names.update(Path(o["path"]).name for o in outputs.values())
+        except (OSError, ValueError, TypeError, AttributeError, KeyError):
+            continue  # not a record of ours: its folder is searched as usual
+    return names
+
+
 def _scene_pairs(d: Path, names: Sequence[tuple[str, str]], *, prefix: str | None) -> list[Pair]:
     pairs = []
+    outputs = _batch_outputs(d)
     for f in _images(d):
+        if f.name in outputs:
+            continue
         split = _token_split(f.stem, names)
         if split is None:
             continue
@@ -186,7 +211,13 @@ def _search(
         found = _scene_pairs(d, names, prefix=prefix)
         pairs.extend(found)
         if not found:
-            n = len(_images(d))
+            images = _images(d)
+            ours = _batch_outputs(d)
+            n = sum(1 for f in images if f.name not in ours)
+            if len(images) > n:
+                skipped.append(
+                    (d, "the outputs of an earlier batch job (its *.record.json list them)")
+                )
             if n:
                 skipped.append(
                     (
@@ -197,6 +228,8 @@ def _search(
                 )
         for sub in _subfolders(d):
             if sub.resolve() in excluded:
+                if _images(sub):
+                    skipped.append((sub, "the output folder (-o): not searched"))
                 continue
             if len(rel) >= SEARCH_DEPTH:
                 if _images(sub) or _subfolders(sub):

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import math
 import re
+import reprlib
 from pathlib import Path
 from typing import Any
 
@@ -20,6 +21,22 @@ _INTEGER_RE = re.compile(r"\d+")
 
 
 _LINE_RE = re.compile(r"([A-Za-z_][A-Za-z0-9_]*)[ \t]*=[ \t]*(.*?)[ \t]*")
+
+
+def _limited_repr() -> reprlib.Repr:
+    r = reprlib.Repr()
+    r.maxlevel, r.maxlist, r.maxtuple, r.maxdict = 2, 16, 16, 8
+    r.maxstring, r.maxother, r.maxlong = 120, 120, 60
+    return r
+
+
+_REPR = _limited_repr()
+
+
+def _shown(value: Any) -> str:
+    """``repr(value)`` for an error message, shortened (``...``) where it is long or deeply
+    nested, so that a huge or hostile file gives a message of a few lines, not megabytes."""
+    return _REPR.repr(value)
 
 
 #: Metres per unit of the translations in a calibration file (``translation_unit=``).
@@ -60,11 +77,24 @@ _NAMED_COUNTS = {"rational_polynomial": (8,), "radtan": (4,)}
 ROTATION_TOLERANCE = 1e-6
 
 
+#: The largest calibration file read, bytes: the files of every format here are a few kB; a
+#: larger file is another kind (a point cloud, a log) given by mistake, which the YAML parser
+#: would take minutes over (about 3 s per MB).
+MAX_FILE_BYTES = 4 * 1024 * 1024
+
+
 def _read_text(p: Path, what: str) -> str:
-    """A calibration file's text: UTF-8 (a byte-order mark is dropped), any line ends."""
+    """A calibration file's text: UTF-8 (a byte-order mark is dropped), any line ends, at
+    most :data:`MAX_FILE_BYTES`."""
     from ..io import require_file
 
     require_file(p, what)
+    size = p.stat().st_size
+    if size > MAX_FILE_BYTES:
+        raise ValueError(
+            f"{p}: {size} bytes is too large for a {what} (at most {MAX_FILE_BYTES} bytes; "
+            "calibration files are a few kB)"
+        )
     try:
         return p.read_bytes().decode("utf-8-sig")
     except UnicodeDecodeError as exc:
@@ -81,14 +111,14 @@ def _check_array(value: Any, where: str, key: str, shape: tuple[int, ...]) -> np
     try:
         a = np.array(value, dtype=np.float64)
     except (TypeError, ValueError) as exc:
-        raise _fail(where, f"{key} must be numbers, got {value!r}") from exc
+        raise _fail(where, f"{key} must be numbers, got {_shown(value)}") from exc
     if len(shape) == 1 and a.ndim == 2 and 1 in a.shape:
         a = a.reshape(-1)
     if a.shape != shape and not (len(shape) == 1 and shape[0] < 0 and a.ndim == 1):
         want = "(n,)" if shape[0] < 0 else str(shape)
         raise _fail(where, f"{key} must have shape {want}, got {a.shape}")
     if not np.isfinite(a).all():
-        raise _fail(where, f"{key} must be finite, got {a.tolist()}")
+        raise _fail(where, f"{key} must be finite, got {_shown(a.tolist())}")
     return a
 
 
@@ -131,7 +161,7 @@ def _check_distortion(
 def _check_model(value: Any, where: str, key: str) -> str:
     if not isinstance(value, str) or value.strip().lower() not in _MODEL_ALIASES:
         known = ", ".join(sorted(_MODEL_ALIASES))
-        raise _fail(where, f"{key} must be one of {known}, got {value!r}")
+        raise _fail(where, f"{key} must be one of {known}, got {_shown(value)}")
     return _MODEL_ALIASES[value.strip().lower()]
 
 
@@ -139,13 +169,13 @@ def _check_image_size(value: Any, where: str, key: str) -> tuple[int, int]:
     if isinstance(value, np.ndarray):
         value = value.reshape(-1).tolist()
     if not isinstance(value, list | tuple) or len(value) != 2:
-        raise _fail(where, f"{key} must be (width, height), got {value!r}")
+        raise _fail(where, f"{key} must be (width, height), got {_shown(value)}")
     w, h = value
     out = []
     for v in (w, h):
         f = _to_float(v)
         if f is None or not (f.is_integer() and f > 0):
-            raise _fail(where, f"{key} must be two whole numbers > 0, got {value!r}")
+            raise _fail(where, f"{key} must be two whole numbers > 0, got {_shown(value)}")
         out.append(int(f))
     return out[0], out[1]
 

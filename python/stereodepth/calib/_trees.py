@@ -11,7 +11,10 @@ from typing import Any
 
 import numpy as np
 
-from ._common import _check_array, _check_image_size, _fail, _read_text, _to_float
+from ._common import _check_array, _check_image_size, _fail, _read_text, _shown, _to_float
+
+#: The message for a file nested deeper than Python's recursion limit (no calibration is).
+_TOO_DEEP = "nested too deeply to be a calibration file"
 
 
 def _yaml() -> Any:
@@ -28,7 +31,7 @@ def _opencv_matrix(node: Any, where: str, key: str) -> np.ndarray:
     """An ``opencv-matrix`` (rows, cols, dt, data) as a float64 (rows, cols[, channels]), or
     an ``opencv-nd-matrix`` (sizes, dt, data) as a float64 array of shape sizes[+ channels]."""
     if not isinstance(node, dict):
-        raise _fail(where, f"{key}: an opencv-matrix must be a mapping, got {node!r}")
+        raise _fail(where, f"{key}: an opencv-matrix must be a mapping, got {_shown(node)}")
     dims = ("sizes",) if "sizes" in node else ("rows", "cols")
     missing = [k for k in (*dims, "dt", "data") if k not in node]
     if missing:
@@ -39,12 +42,16 @@ def _opencv_matrix(node: Any, where: str, key: str) -> np.ndarray:
     for name, v in zip(dims * len(sizes) if dims == ("sizes",) else dims, sizes, strict=True):
         f = _to_float(v)
         if f is None or not (f.is_integer() and f >= 0):
-            raise _fail(where, f"{key}: opencv-matrix {name} must be whole numbers >= 0, got {v!r}")
+            raise _fail(
+                where, f"{key}: opencv-matrix {name} must be whole numbers >= 0, got {_shown(v)}"
+            )
         shape.append(int(f))
     dt = node["dt"]
     m = re.fullmatch(r"(\d*)([ucwsifdh])", str(dt).strip('"'))
     if m is None:
-        raise _fail(where, f"{key}: opencv-matrix dt must be a type such as 'd' or 'f', got {dt!r}")
+        raise _fail(
+            where, f"{key}: opencv-matrix dt must be a type such as 'd' or 'f', got {_shown(dt)}"
+        )
     channels = int(m.group(1) or 1)
     if channels != 1:
         shape.append(channels)
@@ -52,11 +59,13 @@ def _opencv_matrix(node: Any, where: str, key: str) -> np.ndarray:
     if isinstance(data, str | int | float):
         data = [data]
     if not isinstance(data, list):
-        raise _fail(where, f"{key}: opencv-matrix data must be a list of numbers, got {data!r}")
+        raise _fail(
+            where, f"{key}: opencv-matrix data must be a list of numbers, got {_shown(data)}"
+        )
     values = [_to_float(v) for v in data]
     bad = [v for v, f in zip(data, values, strict=True) if f is None]
     if bad:
-        raise _fail(where, f"{key}: opencv-matrix data must be numbers, got {bad[0]!r}")
+        raise _fail(where, f"{key}: opencv-matrix data must be numbers, got {_shown(bad[0])}")
     count = math.prod(shape)
     if len(values) != count:
         raise _fail(
@@ -84,7 +93,7 @@ def _yaml_tree(p: Path, text: str) -> dict[str, Any]:
         for key_node, value_node in node.value:
             key = loader.construct_object(key_node, deep=True)
             if not isinstance(key, str | int | float):
-                raise _fail(where, f"keys must be names, got {key!r}")
+                raise _fail(where, f"keys must be names, got {_shown(key)}")
             if key in out:
                 raise _fail(where, f"{key} is given twice (line {key_node.start_mark.line + 1})")
             value = loader.construct_object(value_node, deep=True)
@@ -104,6 +113,8 @@ def _yaml_tree(p: Path, text: str) -> dict[str, Any]:
         tree = yaml.load(text, Loader=Loader)  # a SafeLoader: no arbitrary objects
     except yaml.YAMLError as exc:
         raise _fail(where, f"not valid YAML: {' '.join(str(exc).split())}") from exc
+    except RecursionError:
+        raise _fail(where, _TOO_DEEP) from None
     if not isinstance(tree, dict):
         raise _fail(where, f"a calibration file must be a YAML mapping, got {type(tree).__name__}")
     return tree
@@ -149,7 +160,10 @@ def _xml_tree(p: Path, text: str) -> dict[str, Any]:
         raise _fail(where, f"not valid XML: {exc}") from exc
     if root.tag != "opencv_storage":
         raise _fail(where, f"the XML root must be <opencv_storage>, got <{root.tag}>")
-    tree = _xml_value(root, where)
+    try:
+        tree = _xml_value(root, where)
+    except RecursionError:
+        raise _fail(where, _TOO_DEEP) from None
     return tree if isinstance(tree, dict) else {}
 
 
@@ -205,13 +219,16 @@ def _ros_matrix(tree: dict[str, Any], key: str, where: str, shape: tuple[int, ..
         data = node["data"]
         rows, cols = node.get("rows"), node.get("cols")
         if not isinstance(data, list):
-            raise _fail(where, f"{key}.data must be a list of numbers, got {data!r}")
+            raise _fail(where, f"{key}.data must be a list of numbers, got {_shown(data)}")
         values = [_to_float(v) for v in data]
         if any(v is None for v in values):
-            raise _fail(where, f"{key}.data must be numbers, got {data!r}")
+            raise _fail(where, f"{key}.data must be numbers, got {_shown(data)}")
         r, c = _to_float(rows), _to_float(cols)
         if r is None or c is None or not (r.is_integer() and c.is_integer()) or r < 0 or c < 0:
-            raise _fail(where, f"{key} rows and cols must be whole numbers, got {rows!r}, {cols!r}")
+            raise _fail(
+                where,
+                f"{key} rows and cols must be whole numbers, got {_shown(rows)}, {_shown(cols)}",
+            )
         if len(values) != r * c:
             raise _fail(
                 where, f"{key} of {int(r)}x{int(c)} needs {int(r * c)} values, got {len(values)}"
@@ -220,14 +237,14 @@ def _ros_matrix(tree: dict[str, Any], key: str, where: str, shape: tuple[int, ..
     elif isinstance(node, np.ndarray):
         a = node
     else:
-        raise _fail(where, f"{key} must be a mapping with rows, cols and data, got {node!r}")
+        raise _fail(where, f"{key} must be a mapping with rows, cols and data, got {_shown(node)}")
     return _check_array(a, where, key, shape)
 
 
 def _numbers(value: Any, where: str, key: str) -> list[float]:
     if not isinstance(value, list):
-        raise _fail(where, f"{key} must be a list of numbers, got {value!r}")
+        raise _fail(where, f"{key} must be a list of numbers, got {_shown(value)}")
     out = [_to_float(v) for v in value]
     if any(v is None for v in out):
-        raise _fail(where, f"{key} must be a list of numbers, got {value!r}")
+        raise _fail(where, f"{key} must be a list of numbers, got {_shown(value)}")
     return [float(v) for v in out if v is not None]

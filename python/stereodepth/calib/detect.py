@@ -66,7 +66,8 @@ def read_stereo_calibration(
     state their unit, so only None or "m" is accepted there),
     ``image_size`` (all), ``distortion_model`` (OpenCV), ``cameras`` (Kalibr, default (0, 1);
     KITTI, default (2, 3)). Raises FileNotFoundError, ValueError naming the file for an
-    unknown format, a keyword that does not apply or any fault the reader finds, and
+    unknown format, a file over 4 MiB (``MAX_FILE_BYTES``: calibration files are a few kB),
+    a keyword that does not apply or any fault the reader finds, and
     ImportError when a YAML file needs PyYAML."""
     p = Path(path)
     text = _read_text(p, "calibration file")

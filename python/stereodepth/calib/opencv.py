@@ -18,6 +18,7 @@ from ._common import (
     _check_rotation,
     _fail,
     _image_size_of,
+    _shown,
     _unit,
 )
 from ._trees import _file_image_size, _lookup, _read_tree, _require
@@ -41,6 +42,10 @@ _OPENCV_NAMES: dict[str, tuple[str, ...]] = {
 }
 
 
+#: The matrices each file of a split calibration must hold at least one of.
+_MATRIX_KEYS = frozenset(n for names in _OPENCV_NAMES.values() for n in names)
+
+
 def read_opencv_stereo_calibration(
     path: str | os.PathLike[str],
     extrinsics_path: str | os.PathLike[str] | None = None,
@@ -56,7 +61,7 @@ def read_opencv_stereo_calibration(
     size (``image_size``/``imageSize`` as (width, height), or ``image_width`` and
     ``image_height``) and ``distortion_model``. OpenCV's stereo_calib sample writes two files,
     intrinsics.yml and extrinsics.yml: pass the second as ``extrinsics_path`` (a key in both
-    is refused).
+    is refused, and so is a file with none of these matrices).
 
     YAML needs PyYAML (``pip install "stereodepth[calib]"``); OpenCV's ``%YAML:1.0``
     directive and ``!!opencv-matrix`` tags are understood. XML is read with
@@ -83,6 +88,13 @@ def read_opencv_stereo_calibration(
     origin: dict[str, str] = {}
     for p in paths:
         _, t = _read_tree(p, "OpenCV calibration file")
+        if len(paths) > 1 and not any(k in _MATRIX_KEYS for k in t):
+            raise _fail(
+                f"{p}",
+                "none of the matrices of an OpenCV stereo calibration (M1/K1, D1, M2/K2, D2, "
+                "R, T, R1, R2, P1, P2, Q): not a part of a split calibration "
+                f"(its keys: {_shown(sorted(map(str, t)))})",
+            )
         for key, value in t.items():
             if key in tree:
                 raise _fail(f"{p}", f"{key} is also given in {origin[key]}")
