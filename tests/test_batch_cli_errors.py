@@ -49,6 +49,10 @@ ROWS: list[tuple[list[str], str]] = [
     (["--min-disparity", "99999"], "--min-disparity 99999: min_disparity must be an integer"),
     (["--num-disparities", "0"], "--num-disparities must be an integer >= 1, got 0"),
     (["--num-disparities", "5000"], "--num-disparities 5000: num_disparities must be"),
+    (
+        ["--num-disparities", "256", "--min-disparity", "1", "--format", "png16"],
+        "--format png16 holds disparities up to 255.996 px, and teddy searches up to 256 px",
+    ),
     # depths, calibration, runner
     (["--min-depth-m", "5", "--max-depth-m", "1"], "--max-depth-m must be >= --min-depth-m"),
     (["--max-depth-m", "0"], "--max-depth-m must be a finite number > 0, got 0.0"),

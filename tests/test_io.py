@@ -201,7 +201,7 @@ def test_disparity_png16_is_kitti_format(tmp_path: Path) -> None:
     d = np.array(
         [
             [0.0, 1.0, 10.5, 255.99],
-            [np.nan, -3.0, np.inf, 300.0],
+            [np.nan, -3.0, np.inf, 65535 / 256],
             [1 / 1024, 1 / 256, 100.00195, 2.5],
         ],
         np.float32,
@@ -212,7 +212,12 @@ def test_disparity_png16_is_kitti_format(tmp_path: Path) -> None:
     want = [[0, 256, 2688, 65533], [0, 0, 0, 65535], [0, 1, 25600, 640]]
     assert raw.tolist() == want
     ok = raw > 0
-    np.testing.assert_allclose(raw[ok] / 256, np.minimum(d[ok], 65535 / 256), atol=1 / 512)
+    np.testing.assert_allclose(raw[ok] / 256, d[ok], atol=1 / 512)
+    # Beyond 255.996 px the format has no value: refused, nothing written (it was capped).
+    d[1, 3] = 300.0
+    with pytest.raises(ValueError, match=r"disparity up to 300 px does not fit a 16-bit"):
+        io.write_disparity_png16(tmp_path / "e.png", d)
+    assert not (tmp_path / "e.png").exists()
 
 
 # --- PFM --------------------------------------------------------------------------------------

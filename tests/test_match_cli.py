@@ -260,6 +260,11 @@ def bad_cases(tmp: Path, left: Path, right: Path) -> list[tuple[list[Any], str]]
     (tmp / "bad_calib.txt").write_text("cam0=[1 0 0; 0 1 0]\nbaseline=100\n")
     return [
         ([tmp / "nope.png", right], "LEFT: image not found"),
+        (
+            [left, right, "--num-disparities", "272", "--disparity-format", "png16"],
+            "--disparity-format png16 holds disparities up to 255.996 px, and the search "
+            "reaches 271 px",
+        ),
         ([tmp, right], "LEFT: image is a folder, not a file"),
         ([left, tmp / "notimage.png"], "RIGHT: cannot decode image"),
         ([left, tmp / "small.png"], "LEFT and RIGHT must have the same size, got 96x64 and 90x64"),

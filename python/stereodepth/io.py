@@ -210,11 +210,20 @@ def write_png16(
 
 def write_disparity_png16(path: str | os.PathLike[str], disparity: np.ndarray) -> None:
     """A float disparity map in KITTI's format, atomically: uint16 PNG of round(d * 256), 0
-    where the disparity is NaN, infinite, <= 0 or too small to encode (< 1/512 px), capped at
-    65535 (255.996 px). Read back with ``read_image(path) / 256``."""
+    where the disparity is NaN, infinite, <= 0 or too small to encode (< 1/512 px): the format
+    has no negative values and 0 means "no value". Read back with ``read_image(path) / 256``.
+
+    Raises ValueError, writing nothing, for a finite disparity above the format's largest,
+    65535 / 256 = 255.996 px (it was once capped there: a wrong value, not a hole); write PFM
+    or ``.npy`` for larger search ranges."""
     d = _check_2d("disparity", disparity, (np.float32, np.float64)).astype(np.float64)
     ok = np.isfinite(d) & (d > 0)
-    v = np.minimum(np.rint(np.where(ok, d, 0.0) * 256.0), 65535.0)
+    v = np.rint(np.where(ok, d, 0.0) * 256.0)
+    if v.max(initial=0.0) > 65535.0:
+        raise ValueError(
+            f"disparity up to {float(d[ok].max()):g} px does not fit a 16-bit disparity PNG "
+            "(KITTI's d * 256 holds at most 255.996 px): write PFM or .npy instead"
+        )
     write_png16(path, v.astype(np.uint16))
 
 

@@ -368,6 +368,12 @@ def run(args: argparse.Namespace) -> int:
     # when neither the flag nor the calibration gives one; the checks do not depend on it).
     checked_nd = args.num_disparities if args.num_disparities is not None else ndisp
     _check_matcher_flags(args, checked_nd or default_num_disparities(right_img.shape[1]))
+    reach = args.min_disparity + (checked_nd or default_num_disparities(right_img.shape[1]))
+    if args.disparity_format == "png16" and reach > 256:  # KITTI's PNG: at most 65535 / 256
+        raise _Usage(
+            f"--disparity-format png16 holds disparities up to 255.996 px, and the search "
+            f"reaches {reach - 1} px (--min-disparity + --num-disparities - 1): use pfm or npy"
+        )
     want_preview = not args.no_preview
     if want_preview:
         from .colormap import colormap_lut

@@ -527,6 +527,15 @@ def run(args: argparse.Namespace) -> int:
     )
     _check_report_is_its_own(report_path, pairs, options)
     _check_outputs_are_not_inputs(pairs, options, [args.calib, args.calib_right])
+    if args.format == "png16":  # KITTI's disparity PNG holds at most 65535 / 256 px
+        lowest = int(options.matcher.get("min_disparity", 0))
+        for pair in pairs:
+            if pair.num_disparities is not None and lowest + pair.num_disparities > 256:
+                raise UsageError(
+                    f"--format png16 holds disparities up to 255.996 px, and {pair.stem} "
+                    f"searches up to {lowest + pair.num_disparities - 1} px (--min-disparity "
+                    "+ --num-disparities - 1): use --format pfm or npy"
+                )
     notes = found.skipped_text(limit=len(found.skipped))
     calib_notes = [n for n in (calibration_note(pairs), _rectify_note(raw)) if n]
     notes.extend(calib_notes)
