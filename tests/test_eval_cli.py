@@ -758,6 +758,13 @@ def test_shared_scene_stereodepth(
             "--option is for stereodepth.block_match: add --method stereodepth",
         ),
         (["--scene", "nothing*"], "--scene nothing* matches no scene in"),
+        (
+            ["--method", "stereodepth", "--sgm-option", "paths=8"],
+            "--sgm-option is for stereodepth.semi_global_match: add --method sgm",
+        ),
+        (["--method", "sgm", "--sgm-option", "paths=5"], "--sgm-option paths=5: paths must be"),
+        (["--method", "sgm", "--sgm-option", "cost=sad"], "--sgm-option cost: sgm's matcher has"),
+        (["--method", "sgm", "--sgm-option", "threads=1"], "--sgm-option threads: use --threads"),
     ],
 )
 def test_rejected_arguments(
@@ -891,6 +898,32 @@ def test_rejects_gt_without_values(
     assert "scene rds-b: the ground truth has no finite value" in err
 
 
+def test_sgm_method_passes_its_options(
+    scenes_dir: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """--sgm-option reaches the semi-global matcher (and only it): the scores equal those of
+    semi_global_match with the same options."""
+    from stereodepth import semi_global
+
+    argv = ["--method", "sgm", "stereodepth", "--threads", "1", "--sgm-option", "paths=8"]
+    argv += ["--sgm-option", "p2=300", "--sgm-option", "fill=true"]
+    report = run_json(capsys, str(scenes_dir), *argv)
+    row = next(r for r in report["results"] if r["method"] == "sgm" and r["scene"] == "rds-a")
+    left, right, gt, mask = load(scenes_dir / "rds-a")
+    direct = stereodepth.semi_global_match(
+        left, right, num_disparities=row["num_disparities"], threads=1, paths=8, p2=300,
+        fill=True,
+    )  # fmt: skip
+    assert row["metrics"]["bad_2"] == evaluate(direct, gt, mask).bad_2
+    calls: list[dict[str, Any]] = []
+    monkeypatch.setattr(semi_global, "SemiGlobalMatcher", fake_matcher(calls))
+    monkeypatch.setattr(matching, "StereoMatcher", fake_matcher(calls))
+    run_json(capsys, str(scenes_dir), *argv)
+    sgm_calls = [c for c in calls if "paths" in c]
+    assert sgm_calls and all((c["paths"], c["p2"], c["fill"]) == (8, 300, True) for c in sgm_calls)
+    assert len(sgm_calls) < len(calls)  # the block matcher got none of them
+
+
 def test_time_ratios_are_medians_over_shared_scenes() -> None:
     from stereodepth.evaluation import EvalResult, Variant, format_time_ratios, time_ratios
 
@@ -917,6 +950,13 @@ def test_time_ratios_are_medians_over_shared_scenes() -> None:
     assert format_time_ratios(rows) == (
         "time of stereodepth (block 9) / opencv-bm (block 9), median over 3 scene(s): 0.250"
     )
+    # sgm is ours too (no block size to name), compared with the peers, not with stereodepth.
+    sgm = Variant("sgm", None)
+    rows += [row("a", sgm, 2.0), row("b", sgm, 1.0)]
+    assert format_time_ratios(rows).splitlines() == [
+        "time of stereodepth (block 9) / opencv-bm (block 9), median over 3 scene(s): 0.250",
+        "time of sgm / opencv-bm (block 9), median over 2 scene(s): 0.500",
+    ]
 
 
 def test_time_ratio_lines_follow_the_table(

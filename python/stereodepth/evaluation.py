@@ -23,7 +23,8 @@ Methods
     matcher converts), with its own defaults unless ``--block-size`` / ``--option`` say
     otherwise.
     ``sgm``: :func:`stereodepth.semi_global_match` with its defaults (``--block-size`` 1 or 3;
-    ``--option`` is for ``stereodepth`` only).
+    ``--sgm-option KEY=VALUE`` passes its keyword options, as ``--option`` does for
+    ``stereodepth``). The time-ratio lines compare each of ours with each peer.
     ``opencv-bm``: ``cv2.StereoBM_create(numDisparities, blockSize)`` (other parameters at
     OpenCV's defaults) on grey uint8 images (``cv2.COLOR_RGB2GRAY``); default block size 9.
     Colour images are read as R, G, B (the order PNG stores); ``--channel-order bgr`` says
@@ -302,13 +303,16 @@ Matcher = Callable[[np.ndarray, np.ndarray], np.ndarray]
 
 
 def _stereodepth_factory(
-    threads: int, options: dict[str, Any], channel_order: str = "rgb"
+    threads: int,
+    options: dict[str, Any],
+    channel_order: str = "rgb",
+    sgm_options: dict[str, Any] | None = None,
 ) -> Callable[[Variant, int], Matcher]:
     from stereodepth.matching import StereoMatcher
     from stereodepth.semi_global import SemiGlobalMatcher
 
     def make(variant: Variant, num_disparities: int) -> Matcher:
-        kwargs = dict(options) if variant.method == "stereodepth" else {}
+        kwargs = dict(options) if variant.method == "stereodepth" else dict(sgm_options or {})
         if variant.block_size is not None:
             kwargs["block_size"] = variant.block_size
         # Made once per scene and reused across the timed runs, as the OpenCV matchers are.
@@ -621,10 +625,12 @@ def _means(rows: Sequence[EvalResult]) -> list[dict[str, Any]]:
 
 
 def time_ratios(rows: Sequence[EvalResult]) -> list[dict[str, Any]]:
-    """stereodepth's time over each other method's, per scene, and their median over the
-    scenes both ran: one entry per pair of a stereodepth variant and another variant."""
-    ours = [r for r in rows if r.variant.method == "stereodepth" and not r.best]
-    others = [r for r in rows if r.variant.method != "stereodepth" and not r.best]
+    """Our matchers' time over each peer's, per scene, and their median over the scenes both
+    ran: one entry per pair of one of our variants (``stereodepth``, ``sgm``) and a peer's
+    (every other method: OpenCV's)."""
+    mine_methods = ("stereodepth", "sgm")
+    ours = [r for r in rows if r.variant.method in mine_methods and not r.best]
+    others = [r for r in rows if r.variant.method not in mine_methods and not r.best]
     out = []
     for mine in dict.fromkeys(r.variant for r in ours):
         mine_by_scene = {r.scene: r for r in ours if r.variant == mine}
@@ -651,9 +657,13 @@ def time_ratios(rows: Sequence[EvalResult]) -> list[dict[str, Any]]:
 
 def format_time_ratios(rows: Sequence[EvalResult]) -> str:
     """One line per :func:`time_ratios` entry."""
+
+    def name(method: str, block: int | None) -> str:
+        return method if block is None else f"{method} (block {block})"
+
     return "\n".join(
-        f"time of {t['method']} (block {t['block_size']}) / {t['versus']} "
-        f"(block {t['versus_block_size']}), median over {t['scenes']} scene(s): "
+        f"time of {name(t['method'], t['block_size'])} / "
+        f"{name(t['versus'], t['versus_block_size'])}, median over {t['scenes']} scene(s): "
         f"{t['median']:.3f}"
         for t in time_ratios(rows)
     )
@@ -795,6 +805,15 @@ def register(subparsers: Any) -> None:
         "subpixel=false); true/false/none, integers and floats are converted",
     )
     m.add_argument(
+        "--sgm-option",
+        action="append",
+        type=key_value_option,
+        default=[],
+        metavar="KEY=VALUE",
+        help="keyword argument for stereodepth.semi_global_match (method sgm), repeatable "
+        "(e.g. paths=8, p2=300, fill=true)",
+    )
+    m.add_argument(
         "--opencv-option",
         action="append",
         type=key_value_option,
@@ -886,17 +905,21 @@ def _matcher_default_block_size() -> int:
     return default
 
 
-def _check_matcher_options(options: dict[str, Any]) -> None:
-    """Checks ``--option`` against stereodepth's matcher before any scene is read: an unknown
-    name, or a value the matcher refuses, is a usage error naming the option as typed."""
+def _check_matcher_options(options: dict[str, Any], method: str = "stereodepth") -> None:
+    """Checks ``--option`` (``--sgm-option`` for method ``"sgm"``) against the matcher before
+    any scene is read: an unknown name, or a value the matcher refuses, is a usage error
+    naming the option as typed."""
     import inspect
 
-    from stereodepth import matching
+    from stereodepth import matching, semi_global
 
     if not options:
         return
+    flag = "--option" if method == "stereodepth" else "--sgm-option"
+    cls = matching.StereoMatcher if method == "stereodepth" else semi_global.SemiGlobalMatcher
+    one_shot = matching.block_match if method == "stereodepth" else semi_global.semi_global_match
     known: list[str] = []
-    for func in (matching.block_match, matching.StereoMatcher.__init__):
+    for func in (one_shot, cls.__init__):
         for name, param in inspect.signature(func).parameters.items():
             if (
                 param.kind is inspect.Parameter.KEYWORD_ONLY
@@ -907,11 +930,11 @@ def _check_matcher_options(options: dict[str, Any]) -> None:
     for key in options:
         if key not in known:
             raise _usage_error(
-                f"--option {key}: stereodepth's matcher has no option {key!r}; "
+                f"{flag} {key}: {method}'s matcher has no option {key!r}; "
                 f"it takes {', '.join(known)}"
             )
     try:
-        matching.StereoMatcher(num_disparities=16, **options)
+        cls(num_disparities=16, **options)
     except (TypeError, ValueError) as exc:
         message = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
         culprit = next((k for k in options if message.startswith(k)), None)
@@ -922,7 +945,7 @@ def _check_matcher_options(options: dict[str, Any]) -> None:
             return f"{key}={shown}"
 
         typed = as_typed(culprit) if culprit is not None else " ".join(map(as_typed, options))
-        raise _usage_error(f"--option {typed}: {message}") from None
+        raise _usage_error(f"{flag} {typed}: {message}") from None
 
 
 def _jsonable(value: Any) -> Any:
@@ -952,9 +975,11 @@ def run(args: argparse.Namespace) -> int:
         )
     threads = args.threads or check.available_cores()
     options = dict(args.option)
-    for key in options:
-        if key in _RESERVED_OPTIONS:
-            raise _usage_error(f"--option {key}: {_RESERVED_OPTIONS[key]}")
+    sgm_options = dict(args.sgm_option)
+    for flag, given in (("--option", options), ("--sgm-option", sgm_options)):
+        for key in given:
+            if key in _RESERVED_OPTIONS:
+                raise _usage_error(f"{flag} {key}: {_RESERVED_OPTIONS[key]}")
     opencv_options = dict(args.opencv_option)
     variants = _variants(args.method or [("stereodepth", None)], args.block_size)
     scenes = find_scenes(args.dir, args.scene)
@@ -964,7 +989,10 @@ def run(args: argparse.Namespace) -> int:
     methods = {v.method for v in variants}
     if options and "stereodepth" not in methods:
         raise _usage_error("--option is for stereodepth.block_match: add --method stereodepth")
+    if sgm_options and "sgm" not in methods:
+        raise _usage_error("--sgm-option is for stereodepth.semi_global_match: add --method sgm")
     _check_matcher_options(options)
+    _check_matcher_options(sgm_options, "sgm")
     cv2: Any = None
     if methods & set(_OPENCV_METHODS):
         try:
@@ -997,7 +1025,9 @@ def run(args: argparse.Namespace) -> int:
         raise _usage_error("--opencv-option needs an OpenCV method (--method opencv-bm ...)")
     for name in ("stereodepth", "sgm"):
         if name in methods:
-            factories[name] = _stereodepth_factory(threads, options, args.channel_order)
+            factories[name] = _stereodepth_factory(
+                threads, options, args.channel_order, sgm_options
+            )
     for note in notes:
         print(f"stereodepth eval: {note}", file=sys.stderr)
 
