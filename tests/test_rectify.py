@@ -679,6 +679,7 @@ def good_args() -> dict[str, Any]:
         ({"R": np.diag([1.0, 1.0, -1.0])}, ValueError, "R must be a rotation matrix"),
         ({"R": 2 * np.eye(3)}, ValueError, "R must be a rotation matrix"),
         ({"T": np.zeros(3)}, ValueError, "T must not be zero"),
+        ({"T": np.array([0.01, 0.0, -0.1])}, ValueError, "T must lie mostly across the optical"),
         ({"T": np.zeros(4)}, ValueError, r"T must have shape \(3,\)"),
         ({"alpha": 1.5}, ValueError, "alpha must be -1"),
         ({"alpha": -0.5}, ValueError, "alpha must be -1"),

@@ -203,7 +203,8 @@ def stereo_rectify(
     R, T
         (3, 3) rotation and (3,) translation from the first camera's frame to the second's
         (``x2 = R @ x1 + T``), as ``cv2.stereoCalibrate``; T in metres. The rig is horizontal
-        when the rotated baseline's x component is the larger, else vertical.
+        when the rotated baseline's x component is the larger, else vertical; a T whose z
+        component is the largest (one camera behind the other) is refused.
     alpha
         -1: OpenCV's default scaling; 0: zoom so every rectified pixel is valid; 1: keep every
         raw pixel (black borders); in between, a blend of the two scales.
@@ -248,6 +249,13 @@ def stereo_rectify(
     t = _real_matrix("T", T, (3,))
     if not np.any(t != 0):
         raise ValueError("T must not be zero: the cameras need a baseline, got [0, 0, 0]")
+    if abs(t[2]) >= max(abs(t[0]), abs(t[1])):
+        # Bouguet's method turns the baseline into the new x (or y) axis: along the optical
+        # axis, the rectified cameras would look sideways, away from what both images show.
+        raise ValueError(
+            "T must lie mostly across the optical axis (|T[0]| or |T[1]| the largest): the "
+            f"cameras are one behind the other, which no rectification can pair, got {t.tolist()}"
+        )
     a = _alpha(alpha)
     new_w, new_h = (0, 0) if new_image_size is None else _size("new_image_size", new_image_size)
     if not isinstance(zero_disparity, bool):
