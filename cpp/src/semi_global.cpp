@@ -342,7 +342,66 @@ void SemiGlobalMatcher::compute(const StereoImage& left, const StereoImage& righ
   da.clip_border = p.clip_border;
 
   const auto n_col = static_cast<std::size_t>(cols) * static_cast<std::size_t>(nd);
-  if (single_pass) {
+  const bool fused = k.fused_row != nullptr && nd % k.fused_lanes == 0;
+  // The fused row's scratch (uint16 units, each piece 64-byte aligned): the sums of the
+  // vertical path and the path from the left, the pixel-sized pieces, the per-pixel results.
+  auto round64 = [](std::size_t n16) { return (n16 + 31) / 32 * 32; };
+  const std::size_t n_small = round64(8 * static_cast<std::size_t>(nd) + 512);
+  const std::size_t n_fused = round64(n_col) + n_small + round64(8 * static_cast<std::size_t>(cols)) +
+                              round64(static_cast<std::size_t>(cols));
+  auto fused_args = [&](std::uint16_t* at) {
+    detail::FusedRowArgs fa{};
+    fa.p = pp;
+    fa.d = da;
+    fa.partial = at;
+    at += round64(n_col);
+    fa.small = at;
+    at += n_small;
+    fa.result = reinterpret_cast<std::uint32_t*>(at);
+    at += round64(8 * static_cast<std::size_t>(cols));
+    fa.rfinal = at;
+    return fa;
+  };
+  if (single_pass && fused) {
+    // As below, with the fused row: per row the costs, then the path from above (in place in
+    // one row of path costs) and the paths along the row, the sums and the decision.
+    const std::ptrdiff_t stripes = (rows + kStripeRows - 1) / kStripeRows;
+    const std::ptrdiff_t ns = std::min<std::ptrdiff_t>(nt, stripes);
+    run_bands(ns, [&](std::ptrdiff_t b) {
+      const auto c = static_cast<std::size_t>(cols);
+      const std::size_t n_rev = round64(c + static_cast<std::size_t>(nd));
+      const std::size_t raw_len = (c + 2) * static_cast<std::size_t>(nd);
+      const std::size_t n_raw = round64(4 * raw_len);
+      const std::size_t n16 = n_rev + n_raw + round64((n_col + 1) / 2) + round64(n_col) +
+                              round64(c) + n_fused;
+      std::vector<std::uint8_t>& sc = ws.scratch[static_cast<std::size_t>(b)];
+      auto* rev = aligned<std::uint16_t>(sc, n16);
+      std::uint16_t* colraw = rev + n_rev;
+      RawRows raw;
+      for (int i = 0; i < 3; ++i) raw.slot[i] = colraw + static_cast<std::size_t>(i + 1) * raw_len;
+      auto* crow = reinterpret_cast<std::uint8_t*>(colraw + n_raw);
+      auto* lv = reinterpret_cast<std::int16_t*>(colraw + n_raw + round64((n_col + 1) / 2));
+      std::int16_t* lvmin = lv + round64(n_col);
+      detail::FusedRowArgs fa = fused_args(reinterpret_cast<std::uint16_t*>(lvmin + round64(c)));
+      fa.c = crow;
+      fa.lv = lv;
+      fa.lvmin = lvmin;
+      for (std::ptrdiff_t st = band(stripes, ns, b); st < band(stripes, ns, b + 1); ++st) {
+        const std::ptrdiff_t y0 = st * kStripeRows;
+        const std::ptrdiff_t y1 = std::min<std::ptrdiff_t>(rows, y0 + kStripeRows);
+        for (std::ptrdiff_t y = y0; y < y1; ++y) {
+          const std::uint16_t* raws[3];
+          raw.get(k, lcen, rcen, rows, cols, 0, cols, r, nd, p.min_disparity, y, rev, raws);
+          k.box_row(raws, r, cols, 0, cols, nd, p.min_disparity, cmax, colraw, crow);
+          fa.g = pgrey + y * cols;
+          fa.gprev = y == y0 ? nullptr : pgrey + (y - 1) * cols;
+          fa.disp = pre ? pre + y * cols : disparity.row(y);
+          fa.conf = confidence.data ? confidence.row(y) : nullptr;
+          k.fused_row(fa);
+        }
+      }
+    });
+  } else if (single_pass) {
     // paths == 3, one pass: stripes of kStripeRows rows (the last one shorter), each matched
     // top to bottom by one thread with the path from above restarting at its first row, so
     // the output does not depend on the number of threads; per row, the costs, the path from
@@ -463,6 +522,20 @@ void SemiGlobalMatcher::compute(const StereoImage& left, const StereoImage& righ
   
     // 2. Row by row (the rows split between the threads): the horizontal paths added to a copy
     //    of the row's sums, then the winner, checks and sub-pixel step on that copy.
+    if (fused) {
+      run_bands(nt, [&](std::ptrdiff_t b) {
+        auto* at = aligned<std::uint16_t>(ws.scratch[static_cast<std::size_t>(b)], n_fused);
+        detail::FusedRowArgs fa = fused_args(at);
+        for (std::ptrdiff_t y = band(rows, nt, b); y < band(rows, nt, b + 1); ++y) {
+          fa.c = costs + static_cast<std::size_t>(y) * n_col;
+          fa.base = sums + static_cast<std::size_t>(y) * n_col;
+          fa.g = pgrey + y * cols;
+          fa.disp = pre ? pre + y * cols : disparity.row(y);
+          fa.conf = confidence.data ? confidence.row(y) : nullptr;
+          k.fused_row(fa);
+        }
+      });
+    } else {
     run_bands(nt, [&](std::ptrdiff_t b) {
       const auto c = static_cast<std::size_t>(cols);
       auto* total = aligned<std::uint16_t>(
@@ -483,7 +556,7 @@ void SemiGlobalMatcher::compute(const StereoImage& left, const StereoImage& righ
                      winners);
       }
     });
-  
+    }
   }
 
   // 4. The 3x3 median of the valid disparities (the lower median; NaN stays NaN).

@@ -464,6 +464,361 @@ void decide_row(const DecideArgs& a, const uint16_t* s, float* disp, float* conf
 }
 
 // ------------------------------------------------------------------------------------------
+// The fused row (FusedRowFn): explicit SIMD, one template for AVX2 (V256) and AVX-512 (V512),
+// so both builds run the same steps. Every value read back was stored at the same address
+// and width (no store-forwarding stalls): the neighbours d - 1 and d + 1 come from shifts of
+// whole vectors in registers.
+
+#if defined(__AVX2__)
+struct V256 {
+  using R = __m256i;
+  static constexpr int kLanes = 16;
+  static R load(const void* p) { return _mm256_load_si256(static_cast<const R*>(p)); }
+  static void store(void* p, R v) { _mm256_store_si256(static_cast<R*>(p), v); }
+  static R widen(const std::uint8_t* p) {
+    return _mm256_cvtepu8_epi16(_mm_loadu_si128(reinterpret_cast<const __m128i*>(p)));
+  }
+  static R set1(int v) { return _mm256_set1_epi16(static_cast<short>(v)); }
+  static R iota() { return _mm256_setr_epi16(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15); }
+  static R add(R a, R b) { return _mm256_add_epi16(a, b); }
+  static R sub(R a, R b) { return _mm256_sub_epi16(a, b); }
+  static R min(R a, R b) { return _mm256_min_epu16(a, b); }
+  // lane 0: prev's last lane; lane i: cur[i - 1].
+  static R shift_up(R prev, R cur) {
+    return _mm256_alignr_epi8(cur, _mm256_permute2x128_si256(prev, cur, 0x21), 14);
+  }
+  // lane i: cur[i + 1]; the last lane: next[0].
+  static R shift_down(R cur, R next) {
+    return _mm256_alignr_epi8(_mm256_permute2x128_si256(cur, next, 0x21), cur, 2);
+  }
+  static std::uint32_t hmin(R v) { return hmin_epu16(v); }
+  // Where v <= r: r = v, a = k.
+  static void take_le(R& r, R& a, R v, R k) {
+    const R m = _mm256_min_epu16(r, v);
+    a = _mm256_blendv_epi8(a, k, _mm256_cmpeq_epi16(m, v));
+    r = m;
+  }
+  // The lowest lane equal to x, or -1.
+  static int first_eq(R v, R x) {
+    const unsigned mask = static_cast<unsigned>(_mm256_movemask_epi8(_mm256_cmpeq_epi16(v, x)));
+    return mask ? __builtin_ctz(mask) / 2 : -1;
+  }
+  // v with 0xFFFF in the lanes where k - lo (mod 2^16) > span.
+  static R or_outside(R v, R k, R lo, R span) {
+    const R rel = _mm256_sub_epi16(k, lo);
+    const R in = _mm256_cmpeq_epi16(_mm256_min_epu16(rel, span), rel);
+    return _mm256_or_si256(v, _mm256_xor_si256(in, _mm256_set1_epi16(-1)));
+  }
+  // v with 0xFFFF in the lanes where k - lo (mod 2^16) <= 2.
+  static R or_near(R v, R k, R lo) {
+    const R rel = _mm256_sub_epi16(k, lo);
+    const R two = _mm256_set1_epi16(2);
+    return _mm256_or_si256(v, _mm256_cmpeq_epi16(_mm256_min_epu16(rel, two), rel));
+  }
+};
+#endif
+
+#if defined(__AVX512BW__)
+struct V512 {
+  using R = __m512i;
+  static constexpr int kLanes = 32;
+  static R load(const void* p) { return _mm512_load_si512(p); }
+  static void store(void* p, R v) { _mm512_store_si512(p, v); }
+  static R widen(const std::uint8_t* p) {
+    return _mm512_cvtepu8_epi16(_mm256_loadu_si256(reinterpret_cast<const __m256i*>(p)));
+  }
+  static R set1(int v) { return _mm512_set1_epi16(static_cast<short>(v)); }
+  static R iota() {
+    return _mm512_set_epi16(31, 30, 29, 28, 27, 26, 25, 24, 23, 22, 21, 20, 19, 18, 17, 16, 15,
+                            14, 13, 12, 11, 10, 9, 8, 7, 6, 5, 4, 3, 2, 1, 0);
+  }
+  static R add(R a, R b) { return _mm512_add_epi16(a, b); }
+  static R sub(R a, R b) { return _mm512_sub_epi16(a, b); }
+  static R min(R a, R b) { return _mm512_min_epu16(a, b); }
+  // Index i < 32 picks the first operand's lane i, 32 + i the second's.
+  static R shift_up(R prev, R cur) {
+    const R idx = _mm512_add_epi16(iota(), _mm512_set1_epi16(31));  // 31, 32, .., 62
+    return _mm512_permutex2var_epi16(prev, idx, cur);
+  }
+  static R shift_down(R cur, R next) {
+    const R idx = _mm512_add_epi16(iota(), _mm512_set1_epi16(1));  // 1, 2, .., 32
+    return _mm512_permutex2var_epi16(cur, idx, next);
+  }
+  static std::uint32_t hmin(R v) {
+    return hmin_epu16(_mm256_min_epu16(_mm512_castsi512_si256(v), _mm512_extracti64x4_epi64(v, 1)));
+  }
+  static void take_le(R& r, R& a, R v, R k) {
+    a = _mm512_mask_mov_epi16(a, _mm512_cmple_epu16_mask(v, r), k);
+    r = _mm512_min_epu16(r, v);
+  }
+  static int first_eq(R v, R x) {
+    const unsigned mask = _mm512_cmpeq_epi16_mask(v, x);
+    return mask ? __builtin_ctz(mask) : -1;
+  }
+  static R or_outside(R v, R k, R lo, R span) {
+    return _mm512_mask_mov_epi16(v, _mm512_cmpgt_epu16_mask(_mm512_sub_epi16(k, lo), span),
+                                 _mm512_set1_epi16(-1));
+  }
+  static R or_near(R v, R k, R lo) {
+    return _mm512_mask_mov_epi16(v, _mm512_cmple_epu16_mask(_mm512_sub_epi16(k, lo), set1(2)),
+                                 _mm512_set1_epi16(-1));
+  }
+};
+#endif
+
+#if defined(__AVX2__)
+// path_step on one vector: a = L(q, d), lo = L(q, d - 1), hi = L(q, d + 1) (all >= 0 and
+// below 2^15, so unsigned minima are the signed ones).
+template <class V>
+inline typename V::R step_vec(typename V::R lo, typename V::R a, typename V::R hi,
+                              typename V::R c, typename V::R vp1, typename V::R mp2,
+                              typename V::R m) {
+  const typename V::R v = V::min(V::min(a, mp2), V::add(V::min(lo, hi), vp1));
+  return V::add(c, V::sub(v, m));
+}
+
+template <class V, bool kVertical, bool kBase>
+void fused_row_impl(const FusedRowArgs& a) {
+  using R = typename V::R;
+  constexpr int N = V::kLanes;
+  const ptrdiff_t cols = a.d.cols;
+  const int nd = a.p.nd, nv = nd / N;
+  const ptrdiff_t dmin = a.d.min_d;
+  const R sent = V::set1(kSentinel);
+  const R ones = V::set1(-1);
+  const R vp1 = V::set1(a.p.p1);
+  const uint8_t* g = a.g;
+  // small: the path along the row (nd), the row's sums of one pixel (nd), the right winners'
+  // window: least sums (nd) and their indices (nd).
+  int16_t* hrow = reinterpret_cast<int16_t*>(a.small);
+  uint16_t* tot = a.small + nd;
+  uint16_t* wmin = a.small + 2 * nd;
+  uint16_t* warg = a.small + 3 * nd;
+
+  // Pass 1, x rising: the path from above (in place) and the path from the left.
+  int mh = 0;
+  for (ptrdiff_t x = 0; x < cols; ++x) {
+    const uint8_t* cx = a.c + x * nd;
+    uint16_t* px = a.partial + x * nd;
+    const bool hfirst = x == 0;
+    const R mh_v = V::set1(mh);
+    const R mp2h = V::set1(hfirst ? 0 : mh + p2_for(a.p, g[x], g[x - 1]));
+    R hprev = sent, hcur = hfirst ? sent : V::load(hrow);
+    R hmin_v = ones;
+    [[maybe_unused]] int16_t* lvx = nullptr;
+    [[maybe_unused]] R vprev = sent, vcur = sent, vmin_v = ones, mv_v = sent, mp2v = sent;
+    [[maybe_unused]] bool vfirst = true;
+    if constexpr (kVertical) {
+      lvx = a.lv + x * nd;
+      vfirst = a.gprev == nullptr;
+      if (!vfirst) {
+        const int mv = a.lvmin[x];
+        mv_v = V::set1(mv);
+        mp2v = V::set1(mv + p2_for(a.p, g[x], a.gprev[x]));
+        vcur = V::load(lvx);
+      }
+    }
+    for (int i = 0; i < nv; ++i) {
+      const R c = V::widen(cx + i * N);
+      R part;
+      const R hnext = (hfirst || i + 1 == nv) ? sent : V::load(hrow + (i + 1) * N);
+      const R lh = hfirst ? c
+                          : step_vec<V>(V::shift_up(hprev, hcur), hcur,
+                                        V::shift_down(hcur, hnext), c, vp1, mp2h, mh_v);
+      V::store(hrow + i * N, lh);
+      hmin_v = V::min(hmin_v, lh);
+      hprev = hcur;
+      hcur = hnext;
+      part = lh;
+      if constexpr (kVertical) {
+        const R vnext = (vfirst || i + 1 == nv) ? sent : V::load(lvx + (i + 1) * N);
+        const R lvn = vfirst ? c
+                             : step_vec<V>(V::shift_up(vprev, vcur), vcur,
+                                           V::shift_down(vcur, vnext), c, vp1, mp2v, mv_v);
+        V::store(lvx + i * N, lvn);
+        vmin_v = V::min(vmin_v, lvn);
+        vprev = vcur;
+        vcur = vnext;
+        part = V::add(part, lvn);
+      }
+      if constexpr (kBase) part = V::add(part, V::load(a.base + x * nd + i * N));
+      V::store(px + i * N, part);
+    }
+    mh = static_cast<int>(V::hmin(hmin_v));
+    if constexpr (kVertical) a.lvmin[x] = static_cast<int16_t>(V::hmin(vmin_v));
+  }
+
+  // Pass 2, x falling: the path from the right, the sums, the winner and second best, and
+  // the right image's winners. wmin/warg lane k: right column x - dmin - k (the pixel's own
+  // candidates); one pixel to the left, every column moves down one lane: lane 0 is final
+  // (every candidate of that column has come) and the last lane starts empty. Candidates
+  // arrive with k falling, so <= keeps the lowest k of a tie.
+  for (int k = 0; k < nd; ++k) {
+    wmin[k] = 0xFFFFu;
+    warg[k] = 0;
+  }
+  uint32_t* res = a.result;
+  int mr = 0;
+  const R iota = V::iota();
+  for (ptrdiff_t x = cols - 1; x >= 0; --x) {
+    const uint8_t* cx = a.c + x * nd;
+    const uint16_t* px = a.partial + x * nd;
+    const bool first = x == cols - 1;
+    if (!first) {
+      const ptrdiff_t xr = x + 1 - dmin;
+      if (xr >= 0 && xr < cols) a.rfinal[xr] = warg[0];
+    }
+    const ptrdiff_t klo = clamp_index(x - dmin - cols + 1, 0, nd);
+    const ptrdiff_t khi = clamp_index(x - dmin, -1, nd - 1);
+    const bool border = klo != 0 || khi != nd - 1;
+    const R lo_v = V::set1(static_cast<int>(klo));
+    const R span_v = V::set1(static_cast<int>(khi - klo));
+    const R mr_v = V::set1(mr);
+    const R mp2r = V::set1(first ? 0 : mr + p2_for(a.p, g[x], g[x + 1]));
+    R rprev = sent, rcur = first ? sent : V::load(hrow);
+    R wcur = V::load(wmin), acur = V::load(warg);
+    R rmin_v = ones, best_v = ones;
+    R kv = iota;
+    for (int i = 0; i < nv; ++i) {
+      const R c = V::widen(cx + i * N);
+      const R rnext = (first || i + 1 == nv) ? sent : V::load(hrow + (i + 1) * N);
+      const R lr = first ? c
+                         : step_vec<V>(V::shift_up(rprev, rcur), rcur, V::shift_down(rcur, rnext),
+                                       c, vp1, mp2r, mr_v);
+      V::store(hrow + i * N, lr);
+      rmin_v = V::min(rmin_v, lr);
+      rprev = rcur;
+      rcur = rnext;
+      R t = V::add(V::load(px + i * N), lr);
+      if (border) t = V::or_outside(t, kv, lo_v, span_v);
+      V::store(tot + i * N, t);
+      best_v = V::min(best_v, t);
+      const bool last = i + 1 == nv;
+      const R wnext = last ? ones : V::load(wmin + (i + 1) * N);
+      const R anext = last ? ones : V::load(warg + (i + 1) * N);
+      R w = V::shift_down(wcur, wnext);
+      R wa = V::shift_down(acur, anext);
+      V::take_le(w, wa, t, kv);
+      V::store(wmin + i * N, w);
+      V::store(warg + i * N, wa);
+      wcur = wnext;
+      acur = anext;
+      kv = V::add(kv, V::set1(N));
+    }
+    mr = static_cast<int>(V::hmin(rmin_v));
+    uint32_t* rx = res + 4 * x;
+    if (klo > khi) continue;
+    const uint32_t best = V::hmin(best_v);
+    const R bv = V::set1(static_cast<int>(best));
+    int kb = 0;
+    for (int i = 0; i < nv; ++i) {
+      const int at = V::first_eq(V::load(tot + i * N), bv);
+      if (at >= 0) {
+        kb = i * N + at;
+        break;
+      }
+    }
+    R s2 = ones;
+    const R near = V::set1(kb - 1);
+    kv = iota;
+    for (int i = 0; i < nv; ++i) {
+      s2 = V::min(s2, V::or_near(V::load(tot + i * N), kv, near));
+      kv = V::add(kv, V::set1(N));
+    }
+    const uint32_t sec = V::hmin(s2);
+    rx[0] = best;
+    rx[1] = static_cast<uint32_t>(kb);
+    rx[2] = sec == 0xFFFFu ? kNone : sec;
+    rx[3] = (kb > 0 ? static_cast<uint32_t>(tot[kb - 1]) : 0u) |
+            (kb + 1 < nd ? static_cast<uint32_t>(tot[kb + 1]) << 16 : 0u);
+  }
+  // The columns still in the window are final.
+  for (int k = 0; k < nd; ++k) {
+    const ptrdiff_t xr = -dmin - k;
+    if (xr >= 0 && xr < cols) a.rfinal[xr] = warg[k];
+  }
+
+  // The checks and the sub-pixel step, as decide_row.
+  const DecideArgs& d = a.d;
+  const bool lr_on = d.lr_max_diff >= 0;
+  const float nan = std::numeric_limits<float>::quiet_NaN();
+  for (ptrdiff_t x = 0; x < cols; ++x) {
+    const ptrdiff_t klo = clamp_index(x - dmin - cols + 1, 0, nd);
+    const ptrdiff_t khi = clamp_index(x - dmin, -1, nd - 1);
+    bool ok = klo <= khi;
+    if (!d.clip_border) ok = ok && x - dmin - nd + 1 >= 0 && x - dmin <= cols - 1;
+    if (!ok) {
+      a.disp[x] = nan;
+      if (a.conf) a.conf[x] = 0.0f;
+      continue;
+    }
+    const uint32_t* rx = res + 4 * x;
+    const uint32_t best = rx[0], second = rx[2];
+    const ptrdiff_t kb = rx[1];
+    const bool has2 = second != kNone;
+    if (d.uniqueness_factor > 0 && has2) {
+      ok = static_cast<double>(second) * 100.0 > static_cast<double>(best) * d.uniqueness_factor;
+    }
+    if (ok && lr_on) {
+      const ptrdiff_t kr = a.rfinal[x - dmin - kb];
+      const ptrdiff_t diff = kb > kr ? kb - kr : kr - kb;
+      ok = static_cast<double>(diff) <= d.lr_max_diff;
+    }
+    if (!ok) {
+      a.disp[x] = nan;
+      if (a.conf) a.conf[x] = 0.0f;
+      continue;
+    }
+    float disp = static_cast<float>(dmin + kb);
+    if (d.subpixel != static_cast<int>(SubpixelFit::kNone) && kb - 1 >= klo && kb + 1 <= khi) {
+      const int32_t c0 = static_cast<int32_t>(rx[3] & 0xFFFFu);
+      const int32_t c1 = static_cast<int32_t>(best);
+      const int32_t c2 = static_cast<int32_t>(rx[3] >> 16);
+      const float num = static_cast<float>(c0 - c2);
+      float den;
+      if (d.subpixel == static_cast<int>(SubpixelFit::kParabola)) {
+        den = static_cast<float>(2 * (c0 + c2 - 2 * c1));
+      } else {
+        den = static_cast<float>(2 * (c0 - c1 > c2 - c1 ? c0 - c1 : c2 - c1));
+      }
+      if (den > 0.0f) disp = disp + num / den;
+    }
+    a.disp[x] = disp;
+    if (a.conf) {
+      a.conf[x] = !has2        ? 1.0f
+                  : second > 0 ? static_cast<float>(second - best) / static_cast<float>(second)
+                               : 0.0f;
+    }
+  }
+}
+
+template <class V>
+void fused_row_v(const FusedRowArgs& a) {
+  if (a.lv) {
+    if (a.base) {
+      fused_row_impl<V, true, true>(a);
+    } else {
+      fused_row_impl<V, true, false>(a);
+    }
+  } else if (a.base) {
+    fused_row_impl<V, false, true>(a);
+  } else {
+    fused_row_impl<V, false, false>(a);
+  }
+}
+
+void fused_row(const FusedRowArgs& a) {
+#if defined(__AVX512BW__)
+  if (a.p.nd % V512::kLanes == 0) {
+    fused_row_v<V512>(a);
+    return;
+  }
+#endif
+  fused_row_v<V256>(a);
+}
+#endif
+
+// ------------------------------------------------------------------------------------------
 // The 3x3 median of the valid disparities.
 
 // The lower median of the valid values of a window (n <= 9), by insertion.
@@ -546,6 +901,13 @@ const SemiGlobalKernels& semi_global_kernels() {
       &path_row,
       &decide_row,
       &median_row,
+#if defined(__AVX2__)
+      &fused_row,
+      16,
+#else
+      nullptr,
+      0,
+#endif
   };
   return kernels;
 }

@@ -67,6 +67,32 @@ using DecideRowFn = void (*)(const DecideArgs& a, const std::uint16_t* s, float*
 using MedianRowFn = void (*)(const float* up, const float* mid, const float* down, float* out,
                              std::uint8_t* flags, std::ptrdiff_t cols);
 
+// One image row's paths along the row and its decision, fused (explicit SIMD; 16 disparities
+// at a time with AVX2, 32 with AVX-512 when nd allows): pass 1 (x rising) the path from above
+// (kVertical: in place in lv, cols * nd int16, its least cost per pixel in lvmin; a path
+// starts where gprev is null) and the path from the left, their sum plus `base` (null: none)
+// into `partial`; pass 2 (x falling) the path from the right, the row's sums S, the winner,
+// the second best and the right image's winners (a window over the diagonal shifted one lane
+// per pixel); then the checks and the sub-pixel step. Same results as path_row +
+// horizontal_row + decide_row. Layouts: c, partial, base and lv hold nd values per pixel.
+struct FusedRowArgs {
+  PathParams p;
+  DecideArgs d;
+  const std::uint8_t* c;
+  const std::uint8_t* g;
+  const std::uint8_t* gprev;  // vertical: the row above (null: the path starts here)
+  std::int16_t* lv;           // null: no vertical path
+  std::int16_t* lvmin;        // cols
+  const std::uint16_t* base;  // null: none
+  std::uint16_t* partial;     // cols * nd scratch
+  std::uint16_t* small;       // 8 * nd + 512 scratch (aligned to 64 bytes)
+  std::uint32_t* result;      // 4 * cols scratch
+  std::uint16_t* rfinal;      // cols scratch
+  float* disp;
+  float* conf;  // null: not wanted
+};
+using FusedRowFn = void (*)(const FusedRowArgs& a);
+
 struct SemiGlobalKernels {
   RawRowFn raw_row;
   BoxRowFn box_row;
@@ -74,6 +100,8 @@ struct SemiGlobalKernels {
   PathRowFn path_row;
   DecideRowFn decide_row;
   MedianRowFn median_row;
+  FusedRowFn fused_row;  // null in the baseline build
+  int fused_lanes;       // fused_row needs nd % fused_lanes == 0
 };
 
 #define STEREODEPTH_DECLARE_SEMI_GLOBAL_KERNELS(ns) \
