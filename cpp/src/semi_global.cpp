@@ -93,16 +93,18 @@ void run_bands(std::ptrdiff_t n, Fn fn) {
   });
 }
 
-// The pixel costs of the last census rows a thread used (raw_row), so that each image row
-// computes one new census row's costs rather than the box's 2r + 1.
+// The pixel costs of the last census rows a thread used (raw_row or raw_row8: T is uint16_t
+// or uint8_t), so that each image row computes one new census row's costs rather than the
+// box's 2r + 1.
+template <typename T>
 struct RawRows {
-  std::uint16_t* slot[3] = {nullptr, nullptr, nullptr};
+  T* slot[3] = {nullptr, nullptr, nullptr};
   std::ptrdiff_t row[3] = {-1, -1, -1};
 
-  // The costs of the census rows y - r .. y + r (clamped) into raws.
-  void get(const detail::SemiGlobalKernels& k, const std::uint16_t* lcen, const std::uint16_t* rcen,
-           std::ptrdiff_t rows, std::ptrdiff_t cols, std::ptrdiff_t x0, std::ptrdiff_t x1, int r,
-           int nd, int min_d, std::ptrdiff_t y, std::uint16_t* rev, const std::uint16_t** raws) {
+  // The costs of the census rows y - r .. y + r (clamped) into raws; compute(yy, out) fills
+  // one slot with census row yy's costs.
+  template <typename Compute>
+  void get(std::ptrdiff_t rows, int r, std::ptrdiff_t y, const T** raws, Compute compute) {
     std::ptrdiff_t need[3];
     for (int i = 0; i < 2 * r + 1; ++i) {
       need[i] = std::clamp<std::ptrdiff_t>(y + i - r, 0, rows - 1);
@@ -122,8 +124,7 @@ struct RawRows {
         for (int s = 0; s < 3 && at < 0; ++s) {
           if (row[s] < 0 || !needed(row[s])) at = s;
         }
-        k.raw_row(lcen + need[i] * cols, rcen + need[i] * cols, cols, x0, x1, r, nd, min_d, rev,
-                  slot[at]);
+        compute(need[i], slot[at]);
         row[at] = need[i];
       }
       raws[i] = slot[at];
@@ -369,18 +370,20 @@ void SemiGlobalMatcher::compute(const StereoImage& left, const StereoImage& righ
     const std::ptrdiff_t ns = std::min<std::ptrdiff_t>(nt, stripes);
     run_bands(ns, [&](std::ptrdiff_t b) {
       const auto c = static_cast<std::size_t>(cols);
-      const std::size_t n_rev = round64(c + static_cast<std::size_t>(nd));
+      const std::size_t n_rev = round64(c + static_cast<std::size_t>(nd) + 32);
+      // uint8 raw rows and the box's ring
       const std::size_t raw_len = (c + 2) * static_cast<std::size_t>(nd);
-      const std::size_t n_raw = round64(4 * raw_len);
+      const std::size_t n_raw = round64((3 * raw_len + 3 * static_cast<std::size_t>(nd) + 1) / 2);
       const std::size_t n16 = n_rev + n_raw + round64((n_col + 1) / 2) + round64(n_col) +
                               round64(c) + n_fused;
       std::vector<std::uint8_t>& sc = ws.scratch[static_cast<std::size_t>(b)];
       auto* rev = aligned<std::uint16_t>(sc, n16);
-      std::uint16_t* colraw = rev + n_rev;
-      RawRows raw;
-      for (int i = 0; i < 3; ++i) raw.slot[i] = colraw + static_cast<std::size_t>(i + 1) * raw_len;
-      auto* crow = reinterpret_cast<std::uint8_t*>(colraw + n_raw);
-      auto* lv = reinterpret_cast<std::int16_t*>(colraw + n_raw + round64((n_col + 1) / 2));
+      auto* raw8 = reinterpret_cast<std::uint8_t*>(rev + n_rev);
+      RawRows<std::uint8_t> raw;
+      for (int i = 0; i < 3; ++i) raw.slot[i] = raw8 + static_cast<std::size_t>(i) * raw_len;
+      std::uint8_t* ring = raw8 + 3 * raw_len;
+      auto* crow = reinterpret_cast<std::uint8_t*>(rev + n_rev + n_raw);
+      auto* lv = reinterpret_cast<std::int16_t*>(rev + n_rev + n_raw + round64((n_col + 1) / 2));
       std::int16_t* lvmin = lv + round64(n_col);
       detail::FusedRowArgs fa = fused_args(reinterpret_cast<std::uint16_t*>(lvmin + round64(c)));
       fa.c = crow;
@@ -390,9 +393,12 @@ void SemiGlobalMatcher::compute(const StereoImage& left, const StereoImage& righ
         const std::ptrdiff_t y0 = st * kStripeRows;
         const std::ptrdiff_t y1 = std::min<std::ptrdiff_t>(rows, y0 + kStripeRows);
         for (std::ptrdiff_t y = y0; y < y1; ++y) {
-          const std::uint16_t* raws[3];
-          raw.get(k, lcen, rcen, rows, cols, 0, cols, r, nd, p.min_disparity, y, rev, raws);
-          k.box_row(raws, r, cols, 0, cols, nd, p.min_disparity, cmax, colraw, crow);
+          const std::uint8_t* raws[3];
+          raw.get(rows, r, y, raws, [&](std::ptrdiff_t yy, std::uint8_t* out) {
+            k.raw_row8(lcen + yy * cols, rcen + yy * cols, cols, 0, cols, r, nd, p.min_disparity,
+                       reinterpret_cast<std::uint8_t*>(rev), out);
+          });
+          k.box_row8(raws, r, cols, 0, cols, nd, p.min_disparity, cmax, ring, crow);
           fa.g = pgrey + y * cols;
           fa.gprev = y == y0 ? nullptr : pgrey + (y - 1) * cols;
           fa.disp = pre ? pre + y * cols : disparity.row(y);
@@ -421,7 +427,7 @@ void SemiGlobalMatcher::compute(const StereoImage& left, const StereoImage& righ
                               2 * lsz + 2 * c + 64;
       auto* rev = aligned<std::uint16_t>(sc, n16);
       std::uint16_t* colraw = rev + n_rev;
-      RawRows raw;
+      RawRows<std::uint16_t> raw;
       const std::size_t raw_len = (c + 2) * static_cast<std::size_t>(nd);
       for (int i = 0; i < 3; ++i) raw.slot[i] = colraw + static_cast<std::size_t>(i + 1) * raw_len;
       std::uint16_t* total = colraw + n_raw;
@@ -443,7 +449,10 @@ void SemiGlobalMatcher::compute(const StereoImage& left, const StereoImage& righ
         int flip = 0;
         for (std::ptrdiff_t y = y0; y < y1; ++y) {
           const std::uint16_t* raws[3];
-          raw.get(k, lcen, rcen, rows, cols, 0, cols, r, nd, p.min_disparity, y, rev, raws);
+          raw.get(rows, r, y, raws, [&](std::ptrdiff_t yy, std::uint16_t* out) {
+            k.raw_row(lcen + yy * cols, rcen + yy * cols, cols, 0, cols, r, nd, p.min_disparity,
+                      rev, out);
+          });
           k.box_row(raws, r, cols, 0, cols, nd, p.min_disparity, cmax, colraw, crow);
           const bool first = y == y0;
           k.path_row(pp, crow, pgrey + y * cols, first ? nullptr : pgrey + (y - 1) * cols,
@@ -483,17 +492,22 @@ void SemiGlobalMatcher::compute(const StereoImage& left, const StereoImage& righ
           const std::ptrdiff_t x0 = band(cols, nb, b), x1 = band(cols, nb, b + 1);
           std::uint16_t* rev = nullptr;
           std::uint16_t* colraw = nullptr;
-          RawRows raw;
+          RawRows<std::uint16_t> raw;
+          RawRows<std::uint8_t> raw8;  // with the 8-bit cost kernels
+          std::uint8_t* ring = nullptr;
           if (dy > 0) {
-            const std::size_t n_rev = static_cast<std::size_t>(cols) + static_cast<std::size_t>(nd);
+            const std::size_t n_rev =
+                static_cast<std::size_t>(cols) + static_cast<std::size_t>(nd) + 32;
             const std::size_t n_raw =
                 static_cast<std::size_t>(x1 - x0 + 2) * static_cast<std::size_t>(nd);
             rev = aligned<std::uint16_t>(ws.scratch[static_cast<std::size_t>(b)],
-                                         n_rev + 4 * n_raw);
+                                         n_rev + 4 * n_raw + static_cast<std::size_t>(nd));
             colraw = rev + n_rev;
             for (int j = 0; j < 3; ++j) {
               raw.slot[j] = colraw + static_cast<std::size_t>(j + 1) * n_raw;
+              raw8.slot[j] = reinterpret_cast<std::uint8_t*>(colraw) + j * n_raw;
             }
+            ring = reinterpret_cast<std::uint8_t*>(colraw) + 3 * n_raw;
           }
           int flip = 0;
           for (std::ptrdiff_t i = 0; i < rows; ++i) {
@@ -501,9 +515,21 @@ void SemiGlobalMatcher::compute(const StereoImage& left, const StereoImage& righ
             const std::ptrdiff_t yq = y - dy;
             std::uint8_t* crow = costs + static_cast<std::size_t>(y) * n_col;
             if (dy > 0) {
-              const std::uint16_t* raws[3];
-              raw.get(k, lcen, rcen, rows, cols, x0, x1, r, nd, p.min_disparity, y, rev, raws);
-              k.box_row(raws, r, cols, x0, x1, nd, p.min_disparity, cmax, colraw, crow);
+              if (k.raw_row8) {
+                const std::uint8_t* raws[3];
+                raw8.get(rows, r, y, raws, [&](std::ptrdiff_t yy, std::uint8_t* out) {
+                  k.raw_row8(lcen + yy * cols, rcen + yy * cols, cols, x0, x1, r, nd,
+                             p.min_disparity, reinterpret_cast<std::uint8_t*>(rev), out);
+                });
+                k.box_row8(raws, r, cols, x0, x1, nd, p.min_disparity, cmax, ring, crow);
+              } else {
+                const std::uint16_t* raws[3];
+                raw.get(rows, r, y, raws, [&](std::ptrdiff_t yy, std::uint16_t* out) {
+                  k.raw_row(lcen + yy * cols, rcen + yy * cols, cols, x0, x1, r, nd,
+                            p.min_disparity, rev, out);
+                });
+                k.box_row(raws, r, cols, x0, x1, nd, p.min_disparity, cmax, colraw, crow);
+              }
             }
             for (int v = 0; v < nv; ++v) {
               const auto pair = 2 * static_cast<std::size_t>(v);

@@ -464,6 +464,156 @@ void decide_row(const DecideArgs& a, const uint16_t* s, float* disp, float* conf
 }
 
 // ------------------------------------------------------------------------------------------
+// 8-bit costs (RawRow8Fn, BoxRow8Fn): one template for AVX2 (B256) and AVX-512 (B512).
+
+#if defined(__AVX2__)
+struct B256 {
+  using R = __m256i;
+  static constexpr int kLanes = 32;
+  static R load(const void* p) { return _mm256_loadu_si256(static_cast<const R*>(p)); }
+  static void store(void* p, R v) { _mm256_storeu_si256(static_cast<R*>(p), v); }
+  static R set1(int v) { return _mm256_set1_epi8(static_cast<char>(v)); }
+  static R add(R a, R b) { return _mm256_add_epi8(a, b); }
+  // Set bits of each byte.
+  static R popcount(R v) {
+    const R table = _mm256_setr_epi8(0, 1, 1, 2, 1, 2, 2, 3, 1, 2, 2, 3, 2, 3, 3, 4, 0, 1, 1, 2,
+                                     1, 2, 2, 3, 1, 2, 2, 3, 2, 3, 3, 4);
+    const R low4 = _mm256_set1_epi8(0x0F);
+    return _mm256_add_epi8(
+        _mm256_shuffle_epi8(table, _mm256_and_si256(v, low4)),
+        _mm256_shuffle_epi8(table, _mm256_and_si256(_mm256_srli_epi16(v, 4), low4)));
+  }
+  static R hamming(R lo, R hi, R llo, R lhi) {
+    return add(popcount(_mm256_xor_si256(lo, llo)), popcount(_mm256_xor_si256(hi, lhi)));
+  }
+};
+#endif
+
+#if defined(__AVX512BW__)
+struct B512 {
+  using R = __m512i;
+  static constexpr int kLanes = 64;
+  static R load(const void* p) { return _mm512_loadu_si512(p); }
+  static void store(void* p, R v) { _mm512_storeu_si512(p, v); }
+  static R set1(int v) { return _mm512_set1_epi8(static_cast<char>(v)); }
+  static R add(R a, R b) { return _mm512_add_epi8(a, b); }
+  static R popcount(R v) {
+    const R table = _mm512_broadcast_i32x4(
+        _mm_setr_epi8(0, 1, 1, 2, 1, 2, 2, 3, 1, 2, 2, 3, 2, 3, 3, 4));
+    const R low4 = _mm512_set1_epi8(0x0F);
+    return _mm512_add_epi8(
+        _mm512_shuffle_epi8(table, _mm512_and_si512(v, low4)),
+        _mm512_shuffle_epi8(table, _mm512_and_si512(_mm512_srli_epi16(v, 4), low4)));
+  }
+  static R hamming(R lo, R hi, R llo, R lhi) {
+    return add(popcount(_mm512_xor_si512(lo, llo)), popcount(_mm512_xor_si512(hi, lhi)));
+  }
+};
+#endif
+
+#if defined(__AVX2__)
+template <class B>
+void raw_row8_impl(const uint16_t* lrow, const uint16_t* rrow, ptrdiff_t cols, ptrdiff_t x0,
+                   ptrdiff_t x1, int radius, int nd, int min_d, uint8_t* rev, uint8_t* out) {
+  constexpr int N = B::kLanes;
+  // As raw_row, with the right census split into its low and high bytes.
+  const ptrdiff_t rl = cols + nd;
+  uint8_t* rlo = rev;
+  uint8_t* rhi = rev + rl + 32;
+  for (ptrdiff_t u = 0; u < rl; ++u) {
+    const uint16_t v = rrow[clamp_index(cols - 1 - min_d - u, 0, cols - 1)];
+    rlo[u] = static_cast<uint8_t>(v & 0xFF);
+    rhi[u] = static_cast<uint8_t>(v >> 8);
+  }
+  const ptrdiff_t n = x1 - x0 + 2 * radius;
+  for (ptrdiff_t j = 0; j < n; ++j) {
+    const ptrdiff_t x = clamp_index(x0 - radius + j, 0, cols - 1);
+    uint8_t* __restrict o = out + j * nd;
+    const uint16_t l = lrow[x];
+    const uint8_t* __restrict lo = rlo + (cols - 1 - x);
+    const uint8_t* __restrict hi = rhi + (cols - 1 - x);
+    const typename B::R llo = B::set1(l & 0xFF), lhi = B::set1(l >> 8);
+    int k = 0;
+    for (; k + N <= nd; k += N) {
+      B::store(o + k, B::hamming(B::load(lo + k), B::load(hi + k), llo, lhi));
+    }
+    for (; k < nd; ++k) {
+      o[k] = static_cast<uint8_t>(popcount16(static_cast<uint16_t>(l ^ (lo[k] | hi[k] << 8))));
+    }
+  }
+}
+
+template <class B>
+void box_row8_impl(const uint8_t* const* raws, int radius, ptrdiff_t cols, ptrdiff_t x0,
+                   ptrdiff_t x1, int nd, int min_d, int cmax, uint8_t* ring, uint8_t* out) {
+  constexpr int N = B::kLanes;
+  const uint8_t* __restrict a = raws[0];
+  const uint8_t* __restrict b = radius ? raws[1] : raws[0];
+  const uint8_t* __restrict c = radius ? raws[2] : raws[0];
+  // ring slot j % 3: the column sum of raw column j (columns clamp(x0 - r + j)).
+  auto colsum = [&](ptrdiff_t j) {
+    uint8_t* __restrict v = ring + (j % 3) * nd;
+    const ptrdiff_t at = j * nd;
+    int k = 0;
+    for (; k + N <= nd; k += N) {
+      B::store(v + k, B::add(B::add(B::load(a + at + k), B::load(b + at + k)),
+                             B::load(c + at + k)));
+    }
+    for (; k < nd; ++k) v[k] = static_cast<uint8_t>(a[at + k] + b[at + k] + c[at + k]);
+  };
+  if (radius) {
+    colsum(0);
+    colsum(1);
+  }
+  for (ptrdiff_t x = x0; x < x1; ++x) {
+    uint8_t* __restrict o = out + x * nd;
+    const ptrdiff_t j = x - x0 + radius;
+    if (radius == 0) {
+      std::memcpy(o, a + j * nd, static_cast<std::size_t>(nd));
+    } else {
+      colsum(j + 1);
+      const uint8_t* __restrict p = ring + ((j - 1) % 3) * nd;
+      const uint8_t* __restrict q = ring + (j % 3) * nd;
+      const uint8_t* __restrict s = ring + ((j + 1) % 3) * nd;
+      int k = 0;
+      for (; k + N <= nd; k += N) {
+        B::store(o + k, B::add(B::add(B::load(p + k), B::load(q + k)), B::load(s + k)));
+      }
+      for (; k < nd; ++k) o[k] = static_cast<uint8_t>(p[k] + q[k] + s[k]);
+    }
+    const ptrdiff_t khi = x - min_d;
+    const ptrdiff_t klo = x - min_d - cols + 1;
+    for (ptrdiff_t k = clamp_index(khi + 1, 0, nd); k < nd; ++k) o[k] = static_cast<uint8_t>(cmax);
+    for (ptrdiff_t k = 0, e = clamp_index(klo, 0, nd); k < e; ++k) {
+      o[k] = static_cast<uint8_t>(cmax);
+    }
+  }
+}
+
+void raw_row8(const uint16_t* lrow, const uint16_t* rrow, ptrdiff_t cols, ptrdiff_t x0,
+              ptrdiff_t x1, int radius, int nd, int min_d, uint8_t* rev, uint8_t* out) {
+#if defined(__AVX512BW__)
+  if (nd >= B512::kLanes) {
+    raw_row8_impl<B512>(lrow, rrow, cols, x0, x1, radius, nd, min_d, rev, out);
+    return;
+  }
+#endif
+  raw_row8_impl<B256>(lrow, rrow, cols, x0, x1, radius, nd, min_d, rev, out);
+}
+
+void box_row8(const uint8_t* const* raws, int radius, ptrdiff_t cols, ptrdiff_t x0, ptrdiff_t x1,
+              int nd, int min_d, int cmax, uint8_t* ring, uint8_t* out) {
+#if defined(__AVX512BW__)
+  if (nd >= B512::kLanes) {
+    box_row8_impl<B512>(raws, radius, cols, x0, x1, nd, min_d, cmax, ring, out);
+    return;
+  }
+#endif
+  box_row8_impl<B256>(raws, radius, cols, x0, x1, nd, min_d, cmax, ring, out);
+}
+#endif
+
+// ------------------------------------------------------------------------------------------
 // The fused row (FusedRowFn): explicit SIMD, one template for AVX2 (V256) and AVX-512 (V512),
 // so both builds run the same steps. Every value read back was stored at the same address
 // and width (no store-forwarding stalls): the neighbours d - 1 and d + 1 come from shifts of
@@ -902,9 +1052,13 @@ const SemiGlobalKernels& semi_global_kernels() {
       &decide_row,
       &median_row,
 #if defined(__AVX2__)
+      &raw_row8,
+      &box_row8,
       &fused_row,
       16,
 #else
+      nullptr,
+      nullptr,
       nullptr,
       0,
 #endif

@@ -67,6 +67,16 @@ using DecideRowFn = void (*)(const DecideArgs& a, const std::uint16_t* s, float*
 using MedianRowFn = void (*)(const float* up, const float* mid, const float* down, float* out,
                              std::uint8_t* flags, std::ptrdiff_t cols);
 
+// raw_row and box_row with 8-bit costs (explicit SIMD; null in the baseline build): the same
+// values, half the bytes. raw_row8's rev: 2 * (cols + nd) + 64 bytes of scratch; box_row8's
+// ring: 3 * nd bytes of scratch.
+using RawRow8Fn = void (*)(const std::uint16_t* lrow, const std::uint16_t* rrow,
+                           std::ptrdiff_t cols, std::ptrdiff_t x0, std::ptrdiff_t x1, int radius,
+                           int nd, int min_d, std::uint8_t* rev, std::uint8_t* out);
+using BoxRow8Fn = void (*)(const std::uint8_t* const* raws, int radius, std::ptrdiff_t cols,
+                           std::ptrdiff_t x0, std::ptrdiff_t x1, int nd, int min_d, int cmax,
+                           std::uint8_t* ring, std::uint8_t* out);
+
 // One image row's paths along the row and its decision, fused (explicit SIMD; 16 disparities
 // at a time with AVX2, 32 with AVX-512 when nd allows): pass 1 (x rising) the path from above
 // (kVertical: in place in lv, cols * nd int16, its least cost per pixel in lvmin; a path
@@ -100,6 +110,8 @@ struct SemiGlobalKernels {
   PathRowFn path_row;
   DecideRowFn decide_row;
   MedianRowFn median_row;
+  RawRow8Fn raw_row8;    // null in the baseline build
+  BoxRow8Fn box_row8;    // null in the baseline build
   FusedRowFn fused_row;  // null in the baseline build
   int fused_lanes;       // fused_row needs nd % fused_lanes == 0
 };
