@@ -374,8 +374,10 @@ void SemiGlobalMatcher::compute(const StereoImage& left, const StereoImage& righ
       // uint8 raw rows and the box's ring
       const std::size_t raw_len = (c + 2) * static_cast<std::size_t>(nd);
       const std::size_t n_raw = round64((3 * raw_len + 3 * static_cast<std::size_t>(nd) + 1) / 2);
-      const std::size_t n16 = n_rev + n_raw + round64((n_col + 1) / 2) + round64(n_col) +
-                              round64(c) + n_fused;
+      const std::size_t n_lv = round64(
+          detail::kFusedPad + c * static_cast<std::size_t>(nd + detail::kFusedPad) + 64);
+      const std::size_t n16 =
+          n_rev + n_raw + round64((n_col + 1) / 2) + n_lv + round64(c) + n_fused;
       std::vector<std::uint8_t>& sc = ws.scratch[static_cast<std::size_t>(b)];
       auto* rev = aligned<std::uint16_t>(sc, n16);
       auto* raw8 = reinterpret_cast<std::uint8_t*>(rev + n_rev);
@@ -384,7 +386,7 @@ void SemiGlobalMatcher::compute(const StereoImage& left, const StereoImage& righ
       std::uint8_t* ring = raw8 + 3 * raw_len;
       auto* crow = reinterpret_cast<std::uint8_t*>(rev + n_rev + n_raw);
       auto* lv = reinterpret_cast<std::int16_t*>(rev + n_rev + n_raw + round64((n_col + 1) / 2));
-      std::int16_t* lvmin = lv + round64(n_col);
+      std::int16_t* lvmin = lv + n_lv;
       detail::FusedRowArgs fa = fused_args(reinterpret_cast<std::uint16_t*>(lvmin + round64(c)));
       fa.c = crow;
       fa.lv = lv;

@@ -624,10 +624,18 @@ struct V256 {
   using R = __m256i;
   static constexpr int kLanes = 16;
   static R load(const void* p) { return _mm256_load_si256(static_cast<const R*>(p)); }
+  static R loadu(const void* p) { return _mm256_loadu_si256(static_cast<const R*>(p)); }
   static void store(void* p, R v) { _mm256_store_si256(static_cast<R*>(p), v); }
   static R widen(const std::uint8_t* p) {
     return _mm256_cvtepu8_epi16(_mm_loadu_si128(reinterpret_cast<const __m128i*>(p)));
   }
+  // Neighbour lanes of consecutive vectors a, b: X = cross(a, b) serves down(a, X) (lane i:
+  // a[i + 1], the last lane b[0]) and up(b, X) (lane 0: a's last lane, lane i: b[i - 1]);
+  // one lane permute per vector pair.
+  using X = R;
+  static X cross(R a, R b) { return _mm256_permute2x128_si256(a, b, 0x21); }
+  static R up(R b, X x) { return _mm256_alignr_epi8(b, x, 14); }
+  static R down(R a, X x) { return _mm256_alignr_epi8(x, a, 2); }
   static R set1(int v) { return _mm256_set1_epi16(static_cast<short>(v)); }
   static R iota() { return _mm256_setr_epi16(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15); }
   static R add(R a, R b) { return _mm256_add_epi16(a, b); }
@@ -673,7 +681,14 @@ struct V512 {
   using R = __m512i;
   static constexpr int kLanes = 32;
   static R load(const void* p) { return _mm512_load_si512(p); }
+  static R loadu(const void* p) { return _mm512_loadu_si512(p); }
   static void store(void* p, R v) { _mm512_store_si512(p, v); }
+  struct X {
+    R a, b;
+  };
+  static X cross(R a, R b) { return X{a, b}; }
+  static R up(R, X x) { return shift_up(x.a, x.b); }
+  static R down(R, X x) { return shift_down(x.a, x.b); }
   static R widen(const std::uint8_t* p) {
     return _mm512_cvtepu8_epi16(_mm256_loadu_si256(reinterpret_cast<const __m256i*>(p)));
   }
@@ -727,75 +742,194 @@ inline typename V::R step_vec(typename V::R lo, typename V::R a, typename V::R h
   return V::add(c, V::sub(v, m));
 }
 
+// Pass 1's work on one pixel: the path from the left (hrow: the previous pixel's, with a
+// sentinel vector after it; kHFirst: the path starts) and, kVertical, the path from above
+// (lvx: the pixel's row of path costs, in place, with a sentinel before and after it;
+// kVFirst: the path starts). Returns nothing; writes partial and the least path costs.
+template <class V, bool kVertical, bool kBase, bool kHFirst, bool kVFirst>
+inline void pass1_pixel(int nv, const uint8_t* __restrict cx, int16_t* __restrict hrow,
+                        int16_t* __restrict lvx, const uint16_t* __restrict bx,
+                        uint16_t* __restrict px, typename V::R vp1, typename V::R mh_v,
+                        typename V::R mp2h, typename V::R mv_v, typename V::R mp2v,
+                        int& mh_out, int16_t* lvmin_out) {
+  using R = typename V::R;
+  constexpr int N = V::kLanes;
+  const R sent = V::set1(kSentinel);
+  const R ones = V::set1(-1);
+  R hcur = sent;
+  typename V::X xprev{};
+  if constexpr (!kHFirst) {
+    hcur = V::load(hrow);
+    xprev = V::cross(sent, hcur);
+  }
+  R vlo = sent, va = sent, vhi = sent;
+  if constexpr (kVertical && !kVFirst) {
+    vlo = V::loadu(lvx - 1);
+    va = V::load(lvx);
+    vhi = V::loadu(lvx + 1);
+  }
+  R hmin_v = ones, vmin_v = ones;
+  for (int i = 0; i < nv; ++i) {
+    const R c = V::widen(cx + i * N);
+    R lh;
+    if constexpr (kHFirst) {
+      lh = c;
+    } else {
+      const R hnext = V::load(hrow + (i + 1) * N);  // the sentinel after the last
+      const typename V::X xcur = V::cross(hcur, hnext);
+      lh = step_vec<V>(V::up(hcur, xprev), hcur, V::down(hcur, xcur), c, vp1, mp2h, mh_v);
+      hcur = hnext;
+      xprev = xcur;
+    }
+    V::store(hrow + i * N, lh);
+    hmin_v = V::min(hmin_v, lh);
+    R part = lh;
+    if constexpr (kVertical) {
+      R lvn;
+      if constexpr (kVFirst) {
+        lvn = c;
+      } else {
+        // The next vector's neighbours, read before this one is overwritten.
+        const int at = (i + 1) * N;
+        const R nlo = V::loadu(lvx + at - 1), na = V::load(lvx + at), nhi = V::loadu(lvx + at + 1);
+        lvn = step_vec<V>(vlo, va, vhi, c, vp1, mp2v, mv_v);
+        vlo = nlo;
+        va = na;
+        vhi = nhi;
+      }
+      V::store(lvx + i * N, lvn);
+      vmin_v = V::min(vmin_v, lvn);
+      part = V::add(part, lvn);
+    }
+    if constexpr (kBase) part = V::add(part, V::load(bx + i * N));
+    V::store(px + i * N, part);
+  }
+  mh_out = static_cast<int>(V::hmin(hmin_v));
+  if constexpr (kVertical) *lvmin_out = static_cast<int16_t>(V::hmin(vmin_v));
+}
+
+// Pass 2's paths and sums on one pixel: the path from the right (hrow as in pass 1), the
+// sums into tot (0xFFFF outside klo .. klo + span when kBorder), the right winners' window
+// moved down one lane and updated. Returns the vector of least sums per lane.
+template <class V, bool kFirst, bool kBorder>
+inline typename V::R pass2_pixel(int nv, const uint8_t* __restrict cx, int16_t* __restrict hrow,
+                                 const uint16_t* __restrict px, uint16_t* __restrict tot,
+                                 uint16_t* __restrict wmin, uint16_t* __restrict warg,
+                                 typename V::R vp1, typename V::R mr_v, typename V::R mp2r,
+                                 typename V::R lo_v, typename V::R span_v, int& mr_out) {
+  using R = typename V::R;
+  constexpr int N = V::kLanes;
+  const R sent = V::set1(kSentinel);
+  const R ones = V::set1(-1);
+  const R step_k = V::set1(N);
+  R rcur = sent;
+  typename V::X xprev{};
+  if constexpr (!kFirst) {
+    rcur = V::load(hrow);
+    xprev = V::cross(sent, rcur);
+  }
+  R wcur = V::load(wmin), acur = V::load(warg);
+  R rmin_v = ones, best_v = ones;
+  R kv = V::iota();
+  for (int i = 0; i < nv; ++i) {
+    const R c = V::widen(cx + i * N);
+    R lr;
+    if constexpr (kFirst) {
+      lr = c;
+    } else {
+      const R rnext = V::load(hrow + (i + 1) * N);
+      const typename V::X xcur = V::cross(rcur, rnext);
+      lr = step_vec<V>(V::up(rcur, xprev), rcur, V::down(rcur, xcur), c, vp1, mp2r, mr_v);
+      rcur = rnext;
+      xprev = xcur;
+    }
+    V::store(hrow + i * N, lr);
+    rmin_v = V::min(rmin_v, lr);
+    R t = V::add(V::load(px + i * N), lr);
+    if constexpr (kBorder) t = V::or_outside(t, kv, lo_v, span_v);
+    V::store(tot + i * N, t);
+    best_v = V::min(best_v, t);
+    const R wnext = V::load(wmin + (i + 1) * N);  // 0xFFFF after the last
+    const R anext = V::load(warg + (i + 1) * N);
+    R w = V::down(wcur, V::cross(wcur, wnext));
+    R wa = V::down(acur, V::cross(acur, anext));
+    V::take_le(w, wa, t, kv);
+    V::store(wmin + i * N, w);
+    V::store(warg + i * N, wa);
+    wcur = wnext;
+    acur = anext;
+    kv = V::add(kv, step_k);
+  }
+  mr_out = static_cast<int>(V::hmin(rmin_v));
+  return best_v;
+}
+
 template <class V, bool kVertical, bool kBase>
 void fused_row_impl(const FusedRowArgs& a) {
   using R = typename V::R;
   constexpr int N = V::kLanes;
   const ptrdiff_t cols = a.d.cols;
   const int nd = a.p.nd, nv = nd / N;
+  const ptrdiff_t ls = nd + kFusedPad;
   const ptrdiff_t dmin = a.d.min_d;
   const R sent = V::set1(kSentinel);
   const R ones = V::set1(-1);
   const R vp1 = V::set1(a.p.p1);
   const uint8_t* g = a.g;
-  // small: the path along the row (nd), the row's sums of one pixel (nd), the right winners'
-  // window: least sums (nd) and their indices (nd).
+  // small: the path along the row (nd, then a sentinel pad), the right winners' window: least
+  // sums and their indices (nd each, then a pad of 0xFFFF), one pixel's sums (nd).
   int16_t* hrow = reinterpret_cast<int16_t*>(a.small);
-  uint16_t* tot = a.small + nd;
-  uint16_t* wmin = a.small + 2 * nd;
-  uint16_t* warg = a.small + 3 * nd;
+  uint16_t* wmin = a.small + ls;
+  uint16_t* warg = a.small + 2 * ls;
+  uint16_t* tot = a.small + 3 * ls;
+  for (int k = 0; k < kFusedPad; ++k) {
+    hrow[nd + k] = kSentinel;
+    wmin[nd + k] = 0xFFFFu;
+    warg[nd + k] = 0xFFFFu;
+  }
 
   // Pass 1, x rising: the path from above (in place) and the path from the left.
+  const bool vfirst = a.gprev == nullptr;
+  int16_t* lv0 = kVertical ? a.lv + kFusedPad : nullptr;
+  if (kVertical && vfirst) {
+    // The sentinels around each pixel's path costs (written once per path start).
+    for (int k = 0; k < kFusedPad; ++k) a.lv[k] = kSentinel;
+    for (ptrdiff_t x = 0; x < cols; ++x) {
+      for (int k = 0; k < kFusedPad; ++k) lv0[x * ls + nd + k] = kSentinel;
+    }
+  }
   int mh = 0;
   for (ptrdiff_t x = 0; x < cols; ++x) {
     const uint8_t* cx = a.c + x * nd;
     uint16_t* px = a.partial + x * nd;
-    const bool hfirst = x == 0;
+    const uint16_t* bx = kBase ? a.base + x * nd : nullptr;
+    int16_t* lvx = kVertical ? lv0 + x * ls : nullptr;
+    int16_t* lvmin = kVertical ? a.lvmin + x : nullptr;
+    R mv_v = sent, mp2v = sent;
+    if (kVertical && !vfirst) {
+      const int mv = a.lvmin[x];
+      mv_v = V::set1(mv);
+      mp2v = V::set1(mv + p2_for(a.p, g[x], a.gprev[x]));
+    }
+    if (x == 0) {
+      if (vfirst) {
+        pass1_pixel<V, kVertical, kBase, true, true>(nv, cx, hrow, lvx, bx, px, vp1, sent, sent,
+                                                     mv_v, mp2v, mh, lvmin);
+      } else {
+        pass1_pixel<V, kVertical, kBase, true, false>(nv, cx, hrow, lvx, bx, px, vp1, sent, sent,
+                                                      mv_v, mp2v, mh, lvmin);
+      }
+      continue;
+    }
     const R mh_v = V::set1(mh);
-    const R mp2h = V::set1(hfirst ? 0 : mh + p2_for(a.p, g[x], g[x - 1]));
-    R hprev = sent, hcur = hfirst ? sent : V::load(hrow);
-    R hmin_v = ones;
-    [[maybe_unused]] int16_t* lvx = nullptr;
-    [[maybe_unused]] R vprev = sent, vcur = sent, vmin_v = ones, mv_v = sent, mp2v = sent;
-    [[maybe_unused]] bool vfirst = true;
-    if constexpr (kVertical) {
-      lvx = a.lv + x * nd;
-      vfirst = a.gprev == nullptr;
-      if (!vfirst) {
-        const int mv = a.lvmin[x];
-        mv_v = V::set1(mv);
-        mp2v = V::set1(mv + p2_for(a.p, g[x], a.gprev[x]));
-        vcur = V::load(lvx);
-      }
+    const R mp2h = V::set1(mh + p2_for(a.p, g[x], g[x - 1]));
+    if (vfirst) {
+      pass1_pixel<V, kVertical, kBase, false, true>(nv, cx, hrow, lvx, bx, px, vp1, mh_v, mp2h,
+                                                    mv_v, mp2v, mh, lvmin);
+    } else {
+      pass1_pixel<V, kVertical, kBase, false, false>(nv, cx, hrow, lvx, bx, px, vp1, mh_v, mp2h,
+                                                     mv_v, mp2v, mh, lvmin);
     }
-    for (int i = 0; i < nv; ++i) {
-      const R c = V::widen(cx + i * N);
-      R part;
-      const R hnext = (hfirst || i + 1 == nv) ? sent : V::load(hrow + (i + 1) * N);
-      const R lh = hfirst ? c
-                          : step_vec<V>(V::shift_up(hprev, hcur), hcur,
-                                        V::shift_down(hcur, hnext), c, vp1, mp2h, mh_v);
-      V::store(hrow + i * N, lh);
-      hmin_v = V::min(hmin_v, lh);
-      hprev = hcur;
-      hcur = hnext;
-      part = lh;
-      if constexpr (kVertical) {
-        const R vnext = (vfirst || i + 1 == nv) ? sent : V::load(lvx + (i + 1) * N);
-        const R lvn = vfirst ? c
-                             : step_vec<V>(V::shift_up(vprev, vcur), vcur,
-                                           V::shift_down(vcur, vnext), c, vp1, mp2v, mv_v);
-        V::store(lvx + i * N, lvn);
-        vmin_v = V::min(vmin_v, lvn);
-        vprev = vcur;
-        vcur = vnext;
-        part = V::add(part, lvn);
-      }
-      if constexpr (kBase) part = V::add(part, V::load(a.base + x * nd + i * N));
-      V::store(px + i * N, part);
-    }
-    mh = static_cast<int>(V::hmin(hmin_v));
-    if constexpr (kVertical) a.lvmin[x] = static_cast<int16_t>(V::hmin(vmin_v));
   }
 
   // Pass 2, x falling: the path from the right, the sums, the winner and second best, and
@@ -823,39 +957,21 @@ void fused_row_impl(const FusedRowArgs& a) {
     const bool border = klo != 0 || khi != nd - 1;
     const R lo_v = V::set1(static_cast<int>(klo));
     const R span_v = V::set1(static_cast<int>(khi - klo));
-    const R mr_v = V::set1(mr);
-    const R mp2r = V::set1(first ? 0 : mr + p2_for(a.p, g[x], g[x + 1]));
-    R rprev = sent, rcur = first ? sent : V::load(hrow);
-    R wcur = V::load(wmin), acur = V::load(warg);
-    R rmin_v = ones, best_v = ones;
-    R kv = iota;
-    for (int i = 0; i < nv; ++i) {
-      const R c = V::widen(cx + i * N);
-      const R rnext = (first || i + 1 == nv) ? sent : V::load(hrow + (i + 1) * N);
-      const R lr = first ? c
-                         : step_vec<V>(V::shift_up(rprev, rcur), rcur, V::shift_down(rcur, rnext),
-                                       c, vp1, mp2r, mr_v);
-      V::store(hrow + i * N, lr);
-      rmin_v = V::min(rmin_v, lr);
-      rprev = rcur;
-      rcur = rnext;
-      R t = V::add(V::load(px + i * N), lr);
-      if (border) t = V::or_outside(t, kv, lo_v, span_v);
-      V::store(tot + i * N, t);
-      best_v = V::min(best_v, t);
-      const bool last = i + 1 == nv;
-      const R wnext = last ? ones : V::load(wmin + (i + 1) * N);
-      const R anext = last ? ones : V::load(warg + (i + 1) * N);
-      R w = V::shift_down(wcur, wnext);
-      R wa = V::shift_down(acur, anext);
-      V::take_le(w, wa, t, kv);
-      V::store(wmin + i * N, w);
-      V::store(warg + i * N, wa);
-      wcur = wnext;
-      acur = anext;
-      kv = V::add(kv, V::set1(N));
+    R best_v;
+    if (first) {
+      best_v = pass2_pixel<V, true, true>(nv, cx, hrow, px, tot, wmin, warg, vp1, sent, sent, lo_v,
+                                          span_v, mr);
+    } else {
+      const R mr_v = V::set1(mr);
+      const R mp2r = V::set1(mr + p2_for(a.p, g[x], g[x + 1]));
+      if (border) {
+        best_v = pass2_pixel<V, false, true>(nv, cx, hrow, px, tot, wmin, warg, vp1, mr_v, mp2r,
+                                             lo_v, span_v, mr);
+      } else {
+        best_v = pass2_pixel<V, false, false>(nv, cx, hrow, px, tot, wmin, warg, vp1, mr_v, mp2r,
+                                              lo_v, span_v, mr);
+      }
     }
-    mr = static_cast<int>(V::hmin(rmin_v));
     uint32_t* rx = res + 4 * x;
     if (klo > khi) continue;
     const uint32_t best = V::hmin(best_v);
@@ -870,7 +986,7 @@ void fused_row_impl(const FusedRowArgs& a) {
     }
     R s2 = ones;
     const R near = V::set1(kb - 1);
-    kv = iota;
+    R kv = iota;
     for (int i = 0; i < nv; ++i) {
       s2 = V::min(s2, V::or_near(V::load(tot + i * N), kv, near));
       kv = V::add(kv, V::set1(N));

@@ -79,23 +79,25 @@ using BoxRow8Fn = void (*)(const std::uint8_t* const* raws, int radius, std::ptr
 
 // One image row's paths along the row and its decision, fused (explicit SIMD; 16 disparities
 // at a time with AVX2, 32 with AVX-512 when nd allows): pass 1 (x rising) the path from above
-// (kVertical: in place in lv, cols * nd int16, its least cost per pixel in lvmin; a path
-// starts where gprev is null) and the path from the left, their sum plus `base` (null: none)
+// (in place in lv, its least cost per pixel in lvmin; a path starts where gprev is null) and the path from the left, their sum plus `base` (null: none)
 // into `partial`; pass 2 (x falling) the path from the right, the row's sums S, the winner,
 // the second best and the right image's winners (a window over the diagonal shifted one lane
 // per pixel); then the checks and the sub-pixel step. Same results as path_row +
 // horizontal_row + decide_row. Layouts: c, partial, base and lv hold nd values per pixel.
+// The padding after each pixel's values in the fused row's path rows (and before the first).
+inline constexpr int kFusedPad = 32;
+
 struct FusedRowArgs {
   PathParams p;
   DecideArgs d;
   const std::uint8_t* c;
   const std::uint8_t* g;
   const std::uint8_t* gprev;  // vertical: the row above (null: the path starts here)
-  std::int16_t* lv;           // null: no vertical path
+  std::int16_t* lv;           // kFusedPad + cols * (nd + kFusedPad) + 64; null: no vertical path
   std::int16_t* lvmin;        // cols
   const std::uint16_t* base;  // null: none
   std::uint16_t* partial;     // cols * nd scratch
-  std::uint16_t* small;       // 8 * nd + 512 scratch (aligned to 64 bytes)
+  std::uint16_t* small;       // 4 * (nd + kFusedPad) scratch (aligned to 64 bytes)
   std::uint32_t* result;      // 4 * cols scratch
   std::uint16_t* rfinal;      // cols scratch
   float* disp;
