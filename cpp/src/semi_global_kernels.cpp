@@ -1087,6 +1087,93 @@ void fused_row(const FusedRowArgs& a) {
 // ------------------------------------------------------------------------------------------
 // The 3x3 median of the valid disparities.
 
+// The 3x3 median of whole vectors of pixels (explicit SIMD; one template for AVX2 and
+// AVX-512): NaN becomes +inf (after every valid value), the five least of the nine are sorted
+// by bubbling, and the lower median of the n valid values is the ((n - 1) / 2)-th least.
+#if defined(__AVX2__)
+struct F256 {
+  using R = __m256;
+  static constexpr int kLanes = 8;
+  static R load(const float* p) { return _mm256_loadu_ps(p); }
+  static void store(float* p, R v) { _mm256_storeu_ps(p, v); }
+  static R set1(float v) { return _mm256_set1_ps(v); }
+  static R min(R a, R b) { return _mm256_min_ps(a, b); }
+  static R max(R a, R b) { return _mm256_max_ps(a, b); }
+  // v, or +inf where v is NaN (minps returns its second operand when either is NaN).
+  static R nan_to_inf(R v) { return _mm256_min_ps(v, _mm256_set1_ps(INFINITY)); }
+  static R count_valid(R n, R v) {
+    return _mm256_add_ps(n, _mm256_and_ps(_mm256_cmp_ps(v, v, _CMP_ORD_Q), _mm256_set1_ps(1.0f)));
+  }
+  // b where n >= t, else a.
+  static R select_ge(R a, R b, R n, float t) {
+    return _mm256_blendv_ps(a, b, _mm256_cmp_ps(n, _mm256_set1_ps(t), _CMP_GE_OQ));
+  }
+  // mid where mid is NaN, else r.
+  static R keep_nan(R mid, R r) { return _mm256_blendv_ps(r, mid, _mm256_cmp_ps(mid, mid, _CMP_UNORD_Q)); }
+};
+#endif
+
+#if defined(__AVX512F__)
+struct F512 {
+  using R = __m512;
+  static constexpr int kLanes = 16;
+  static R load(const float* p) { return _mm512_loadu_ps(p); }
+  static void store(float* p, R v) { _mm512_storeu_ps(p, v); }
+  static R set1(float v) { return _mm512_set1_ps(v); }
+  static R min(R a, R b) { return _mm512_min_ps(a, b); }
+  static R max(R a, R b) { return _mm512_max_ps(a, b); }
+  static R nan_to_inf(R v) { return _mm512_min_ps(v, _mm512_set1_ps(INFINITY)); }
+  static R count_valid(R n, R v) {
+    return _mm512_mask_add_ps(n, _mm512_cmp_ps_mask(v, v, _CMP_ORD_Q), n, _mm512_set1_ps(1.0f));
+  }
+  static R select_ge(R a, R b, R n, float t) {
+    return _mm512_mask_blend_ps(_mm512_cmp_ps_mask(n, _mm512_set1_ps(t), _CMP_GE_OQ), a, b);
+  }
+  static R keep_nan(R mid, R r) {
+    return _mm512_mask_blend_ps(_mm512_cmp_ps_mask(mid, mid, _CMP_UNORD_Q), r, mid);
+  }
+};
+#endif
+
+#if defined(__AVX2__)
+// Columns x0 .. x1 - 1 (1 <= x0, x1 <= cols - 1) of a row with rows above and below.
+template <class F>
+ptrdiff_t median_vec(const float* up, const float* mid, const float* down, float* out,
+                     ptrdiff_t x0, ptrdiff_t x1) {
+  using R = typename F::R;
+  constexpr int N = F::kLanes;
+  ptrdiff_t x = x0;
+  for (; x + N <= x1; x += N) {
+    R v[9];
+    const float* rows[3] = {up, mid, down};
+    R n = F::set1(0.0f);
+    for (int i = 0; i < 3; ++i) {
+      for (int j = 0; j < 3; ++j) {
+        const R a = F::load(rows[i] + x - 1 + j);
+        n = F::count_valid(n, a);
+        v[3 * i + j] = F::nan_to_inf(a);
+      }
+    }
+    // Bubble the five least to the front, in order.
+    for (int i = 0; i < 5; ++i) {
+      for (int j = 8; j > i; --j) {
+        const R lo = F::min(v[j - 1], v[j]);
+        v[j] = F::max(v[j - 1], v[j]);
+        v[j - 1] = lo;
+      }
+    }
+    R r = v[0];
+    r = F::select_ge(r, v[1], n, 3.0f);
+    r = F::select_ge(r, v[2], n, 5.0f);
+    r = F::select_ge(r, v[3], n, 7.0f);
+    r = F::select_ge(r, v[4], n, 9.0f);
+    F::store(out + x, F::keep_nan(F::load(mid + x), r));
+  }
+  return x;
+}
+#endif
+
+
 // The lower median of the valid values of a window (n <= 9), by insertion.
 inline float median_slow(const float* const* rows, int nrows, ptrdiff_t x, ptrdiff_t cols) {
   float v[9];
@@ -1122,6 +1209,21 @@ void median_row(const float* up, const float* mid, const float* down, float* out
   rows[nrows++] = mid;
   if (down) rows[nrows++] = down;
   ptrdiff_t x0 = 0, x1 = 0;  // columns done by the network
+#if defined(__AVX2__)
+  if (up && down && cols >= 3) {
+    // Vectors over the inner columns, the rest one by one.
+#if defined(__AVX512F__)
+    const ptrdiff_t xv = median_vec<F512>(up, mid, down, out, 1, cols - 1);
+#else
+    const ptrdiff_t xv = median_vec<F256>(up, mid, down, out, 1, cols - 1);
+#endif
+    for (ptrdiff_t x = 0; x < cols; ++x) {
+      if (x >= 1 && x < xv) continue;
+      out[x] = mid[x] != mid[x] ? mid[x] : median_slow(rows, nrows, x, cols);
+    }
+    return;
+  }
+#endif
   if (up && down && cols >= 3) {
     x0 = 1;
     x1 = cols - 1;
