@@ -656,10 +656,15 @@ struct V256 {
     a = _mm256_blendv_epi8(a, k, _mm256_cmpeq_epi16(m, v));
     r = m;
   }
-  // The lowest lane equal to x, or -1.
-  static int first_eq(R v, R x) {
-    const unsigned mask = static_cast<unsigned>(_mm256_movemask_epi8(_mm256_cmpeq_epi16(v, x)));
-    return mask ? __builtin_ctz(mask) / 2 : -1;
+  // Where v < r: r = v, a = k.
+  static void take_lt(R& r, R& a, R v, R k) {
+    const R m = _mm256_min_epu16(r, v);
+    a = _mm256_blendv_epi8(k, a, _mm256_cmpeq_epi16(m, r));
+    r = m;
+  }
+  // The least of the lanes of a whose lane of r equals b.
+  static std::uint32_t hmin_where_eq(R a, R r, R b) {
+    return hmin_epu16(_mm256_or_si256(a, _mm256_xor_si256(_mm256_cmpeq_epi16(r, b), set1(-1))));
   }
   // v with 0xFFFF in the lanes where k - lo (mod 2^16) > span.
   static R or_outside(R v, R k, R lo, R span) {
@@ -716,9 +721,12 @@ struct V512 {
     a = _mm512_mask_mov_epi16(a, _mm512_cmple_epu16_mask(v, r), k);
     r = _mm512_min_epu16(r, v);
   }
-  static int first_eq(R v, R x) {
-    const unsigned mask = _mm512_cmpeq_epi16_mask(v, x);
-    return mask ? __builtin_ctz(mask) : -1;
+  static void take_lt(R& r, R& a, R v, R k) {
+    a = _mm512_mask_mov_epi16(a, _mm512_cmplt_epu16_mask(v, r), k);
+    r = _mm512_min_epu16(r, v);
+  }
+  static std::uint32_t hmin_where_eq(R a, R r, R b) {
+    return hmin(_mm512_mask_mov_epi16(set1(-1), _mm512_cmpeq_epi16_mask(r, b), a));
   }
   static R or_outside(R v, R k, R lo, R span) {
     return _mm512_mask_mov_epi16(v, _mm512_cmpgt_epu16_mask(_mm512_sub_epi16(k, lo), span),
@@ -810,13 +818,15 @@ inline void pass1_pixel(int nv, const uint8_t* __restrict cx, int16_t* __restric
 
 // Pass 2's paths and sums on one pixel: the path from the right (hrow as in pass 1), the
 // sums into tot (0xFFFF outside klo .. klo + span when kBorder), the right winners' window
-// moved down one lane and updated. Returns the vector of least sums per lane.
+// moved down one lane and updated. Returns the least sum of each lane, and its lowest index in
+// arg_v.
 template <class V, bool kFirst, bool kBorder>
 inline typename V::R pass2_pixel(int nv, const uint8_t* __restrict cx, int16_t* __restrict hrow,
                                  const uint16_t* __restrict px, uint16_t* __restrict tot,
                                  uint16_t* __restrict wmin, uint16_t* __restrict warg,
                                  typename V::R vp1, typename V::R mr_v, typename V::R mp2r,
-                                 typename V::R lo_v, typename V::R span_v, int& mr_out) {
+                                 typename V::R lo_v, typename V::R span_v, int& mr_out,
+                                 typename V::R& arg_v) {
   using R = typename V::R;
   constexpr int N = V::kLanes;
   const R sent = V::set1(kSentinel);
@@ -829,7 +839,7 @@ inline typename V::R pass2_pixel(int nv, const uint8_t* __restrict cx, int16_t* 
     xprev = V::cross(sent, rcur);
   }
   R wcur = V::load(wmin), acur = V::load(warg);
-  R rmin_v = ones, best_v = ones;
+  R rmin_v = ones, best_v = ones, barg = V::set1(0);
   R kv = V::iota();
   for (int i = 0; i < nv; ++i) {
     const R c = V::widen(cx + i * N);
@@ -848,7 +858,7 @@ inline typename V::R pass2_pixel(int nv, const uint8_t* __restrict cx, int16_t* 
     R t = V::add(V::load(px + i * N), lr);
     if constexpr (kBorder) t = V::or_outside(t, kv, lo_v, span_v);
     V::store(tot + i * N, t);
-    best_v = V::min(best_v, t);
+    V::take_lt(best_v, barg, t, kv);
     const R wnext = V::load(wmin + (i + 1) * N);  // 0xFFFF after the last
     const R anext = V::load(warg + (i + 1) * N);
     R w = V::down(wcur, V::cross(wcur, wnext));
@@ -861,6 +871,7 @@ inline typename V::R pass2_pixel(int nv, const uint8_t* __restrict cx, int16_t* 
     kv = V::add(kv, step_k);
   }
   mr_out = static_cast<int>(V::hmin(rmin_v));
+  arg_v = barg;
   return best_v;
 }
 
@@ -957,33 +968,25 @@ void fused_row_impl(const FusedRowArgs& a) {
     const bool border = klo != 0 || khi != nd - 1;
     const R lo_v = V::set1(static_cast<int>(klo));
     const R span_v = V::set1(static_cast<int>(khi - klo));
-    R best_v;
+    R best_v, arg_v;
     if (first) {
       best_v = pass2_pixel<V, true, true>(nv, cx, hrow, px, tot, wmin, warg, vp1, sent, sent, lo_v,
-                                          span_v, mr);
+                                          span_v, mr, arg_v);
     } else {
       const R mr_v = V::set1(mr);
       const R mp2r = V::set1(mr + p2_for(a.p, g[x], g[x + 1]));
       if (border) {
         best_v = pass2_pixel<V, false, true>(nv, cx, hrow, px, tot, wmin, warg, vp1, mr_v, mp2r,
-                                             lo_v, span_v, mr);
+                                             lo_v, span_v, mr, arg_v);
       } else {
         best_v = pass2_pixel<V, false, false>(nv, cx, hrow, px, tot, wmin, warg, vp1, mr_v, mp2r,
-                                              lo_v, span_v, mr);
+                                              lo_v, span_v, mr, arg_v);
       }
     }
     uint32_t* rx = res + 4 * x;
     if (klo > khi) continue;
     const uint32_t best = V::hmin(best_v);
-    const R bv = V::set1(static_cast<int>(best));
-    int kb = 0;
-    for (int i = 0; i < nv; ++i) {
-      const int at = V::first_eq(V::load(tot + i * N), bv);
-      if (at >= 0) {
-        kb = i * N + at;
-        break;
-      }
-    }
+    const int kb = static_cast<int>(V::hmin_where_eq(arg_v, best_v, V::set1(static_cast<int>(best))));
     R s2 = ones;
     const R near = V::set1(kb - 1);
     R kv = iota;
