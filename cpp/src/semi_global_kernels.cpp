@@ -641,6 +641,13 @@ struct V256 {
   static R add(R a, R b) { return _mm256_add_epi16(a, b); }
   static R sub(R a, R b) { return _mm256_sub_epi16(a, b); }
   static R min(R a, R b) { return _mm256_min_epu16(a, b); }
+  static R max(R a, R b) { return _mm256_max_epu16(a, b); }
+  // b in the lanes where k - lo (mod 2^16) <= 2, a elsewhere.
+  static R blend_near(R a, R b, R k, R lo) {
+    const R rel = _mm256_sub_epi16(k, lo);
+    const R two = _mm256_set1_epi16(2);
+    return _mm256_blendv_epi8(a, b, _mm256_cmpeq_epi16(_mm256_min_epu16(rel, two), rel));
+  }
   // lane 0: prev's last lane; lane i: cur[i - 1].
   static R shift_up(R prev, R cur) {
     return _mm256_alignr_epi8(cur, _mm256_permute2x128_si256(prev, cur, 0x21), 14);
@@ -672,12 +679,6 @@ struct V256 {
     const R in = _mm256_cmpeq_epi16(_mm256_min_epu16(rel, span), rel);
     return _mm256_or_si256(v, _mm256_xor_si256(in, _mm256_set1_epi16(-1)));
   }
-  // v with 0xFFFF in the lanes where k - lo (mod 2^16) <= 2.
-  static R or_near(R v, R k, R lo) {
-    const R rel = _mm256_sub_epi16(k, lo);
-    const R two = _mm256_set1_epi16(2);
-    return _mm256_or_si256(v, _mm256_cmpeq_epi16(_mm256_min_epu16(rel, two), rel));
-  }
 };
 #endif
 
@@ -705,6 +706,10 @@ struct V512 {
   static R add(R a, R b) { return _mm512_add_epi16(a, b); }
   static R sub(R a, R b) { return _mm512_sub_epi16(a, b); }
   static R min(R a, R b) { return _mm512_min_epu16(a, b); }
+  static R max(R a, R b) { return _mm512_max_epu16(a, b); }
+  static R blend_near(R a, R b, R k, R lo) {
+    return _mm512_mask_mov_epi16(a, _mm512_cmple_epu16_mask(_mm512_sub_epi16(k, lo), set1(2)), b);
+  }
   // Index i < 32 picks the first operand's lane i, 32 + i the second's.
   static R shift_up(R prev, R cur) {
     const R idx = _mm512_add_epi16(iota(), _mm512_set1_epi16(31));  // 31, 32, .., 62
@@ -730,10 +735,6 @@ struct V512 {
   }
   static R or_outside(R v, R k, R lo, R span) {
     return _mm512_mask_mov_epi16(v, _mm512_cmpgt_epu16_mask(_mm512_sub_epi16(k, lo), span),
-                                 _mm512_set1_epi16(-1));
-  }
-  static R or_near(R v, R k, R lo) {
-    return _mm512_mask_mov_epi16(v, _mm512_cmple_epu16_mask(_mm512_sub_epi16(k, lo), set1(2)),
                                  _mm512_set1_epi16(-1));
   }
 };
@@ -818,15 +819,16 @@ inline void pass1_pixel(int nv, const uint8_t* __restrict cx, int16_t* __restric
 
 // Pass 2's paths and sums on one pixel: the path from the right (hrow as in pass 1), the
 // sums into tot (0xFFFF outside klo .. klo + span when kBorder), the right winners' window
-// moved down one lane and updated. Returns the least sum of each lane, and its lowest index in
-// arg_v.
+// moved down one lane and updated. Returns the least sum of each lane, its lowest index in
+// arg_v and the lane's second least (the least of the others; equal to the least on a tie)
+// in sec_v.
 template <class V, bool kFirst, bool kBorder>
 inline typename V::R pass2_pixel(int nv, const uint8_t* __restrict cx, int16_t* __restrict hrow,
                                  const uint16_t* __restrict px, uint16_t* __restrict tot,
                                  uint16_t* __restrict wmin, uint16_t* __restrict warg,
                                  typename V::R vp1, typename V::R mr_v, typename V::R mp2r,
                                  typename V::R lo_v, typename V::R span_v, int& mr_out,
-                                 typename V::R& arg_v) {
+                                 typename V::R& arg_v, typename V::R& sec_v) {
   using R = typename V::R;
   constexpr int N = V::kLanes;
   const R sent = V::set1(kSentinel);
@@ -839,7 +841,7 @@ inline typename V::R pass2_pixel(int nv, const uint8_t* __restrict cx, int16_t* 
     xprev = V::cross(sent, rcur);
   }
   R wcur = V::load(wmin), acur = V::load(warg);
-  R rmin_v = ones, best_v = ones, barg = V::set1(0);
+  R rmin_v = ones, best_v = ones, barg = V::set1(0), bsec = ones;
   R kv = V::iota();
   for (int i = 0; i < nv; ++i) {
     const R c = V::widen(cx + i * N);
@@ -858,6 +860,7 @@ inline typename V::R pass2_pixel(int nv, const uint8_t* __restrict cx, int16_t* 
     R t = V::add(V::load(px + i * N), lr);
     if constexpr (kBorder) t = V::or_outside(t, kv, lo_v, span_v);
     V::store(tot + i * N, t);
+    bsec = V::min(bsec, V::max(best_v, t));
     V::take_lt(best_v, barg, t, kv);
     const R wnext = V::load(wmin + (i + 1) * N);  // 0xFFFF after the last
     const R anext = V::load(warg + (i + 1) * N);
@@ -872,6 +875,7 @@ inline typename V::R pass2_pixel(int nv, const uint8_t* __restrict cx, int16_t* 
   }
   mr_out = static_cast<int>(V::hmin(rmin_v));
   arg_v = barg;
+  sec_v = bsec;
   return best_v;
 }
 
@@ -884,7 +888,6 @@ void fused_row_impl(const FusedRowArgs& a) {
   const ptrdiff_t ls = nd + kFusedPad;
   const ptrdiff_t dmin = a.d.min_d;
   const R sent = V::set1(kSentinel);
-  const R ones = V::set1(-1);
   const R vp1 = V::set1(a.p.p1);
   const uint8_t* g = a.g;
   // small: the path along the row (nd, then a sentinel pad), the right winners' window: least
@@ -954,7 +957,6 @@ void fused_row_impl(const FusedRowArgs& a) {
   }
   uint32_t* res = a.result;
   int mr = 0;
-  const R iota = V::iota();
   for (ptrdiff_t x = cols - 1; x >= 0; --x) {
     const uint8_t* cx = a.c + x * nd;
     const uint16_t* px = a.partial + x * nd;
@@ -968,33 +970,29 @@ void fused_row_impl(const FusedRowArgs& a) {
     const bool border = klo != 0 || khi != nd - 1;
     const R lo_v = V::set1(static_cast<int>(klo));
     const R span_v = V::set1(static_cast<int>(khi - klo));
-    R best_v, arg_v;
+    R best_v, arg_v, sec_v;
     if (first) {
       best_v = pass2_pixel<V, true, true>(nv, cx, hrow, px, tot, wmin, warg, vp1, sent, sent, lo_v,
-                                          span_v, mr, arg_v);
+                                          span_v, mr, arg_v, sec_v);
     } else {
       const R mr_v = V::set1(mr);
       const R mp2r = V::set1(mr + p2_for(a.p, g[x], g[x + 1]));
       if (border) {
         best_v = pass2_pixel<V, false, true>(nv, cx, hrow, px, tot, wmin, warg, vp1, mr_v, mp2r,
-                                             lo_v, span_v, mr, arg_v);
+                                             lo_v, span_v, mr, arg_v, sec_v);
       } else {
         best_v = pass2_pixel<V, false, false>(nv, cx, hrow, px, tot, wmin, warg, vp1, mr_v, mp2r,
-                                              lo_v, span_v, mr, arg_v);
+                                              lo_v, span_v, mr, arg_v, sec_v);
       }
     }
     uint32_t* rx = res + 4 * x;
     if (klo > khi) continue;
     const uint32_t best = V::hmin(best_v);
     const int kb = static_cast<int>(V::hmin_where_eq(arg_v, best_v, V::set1(static_cast<int>(best))));
-    R s2 = ones;
-    const R near = V::set1(kb - 1);
-    R kv = iota;
-    for (int i = 0; i < nv; ++i) {
-      s2 = V::min(s2, V::or_near(V::load(tot + i * N), kv, near));
-      kv = V::add(kv, V::set1(N));
-    }
-    const uint32_t sec = V::hmin(s2);
+    // The second best: the least over the lanes of each lane's least, or of its second least
+    // where the lane's least first comes at kb - 1, kb or kb + 1 (the only index of kb - 1 ..
+    // kb + 1 in that lane: a later equal least is then the second least).
+    const uint32_t sec = V::hmin(V::blend_near(best_v, sec_v, arg_v, V::set1(kb - 1)));
     rx[0] = best;
     rx[1] = static_cast<uint32_t>(kb);
     rx[2] = sec == 0xFFFFu ? kNone : sec;
