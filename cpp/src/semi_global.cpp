@@ -102,9 +102,11 @@ struct RawRows {
   std::ptrdiff_t row[3] = {-1, -1, -1};
 
   // The costs of the census rows y - r .. y + r (clamped) into raws; compute(yy, out) fills
-  // one slot with census row yy's costs.
+  // one slot with census row yy's costs. With `deferred` (not null), the last missing row,
+  // when it is needed once, is left to the caller: its index in raws, else -1.
   template <typename Compute>
-  void get(std::ptrdiff_t rows, int r, std::ptrdiff_t y, const T** raws, Compute compute) {
+  void get(std::ptrdiff_t rows, int r, std::ptrdiff_t y, T** raws, Compute compute,
+           int* deferred = nullptr) {
     std::ptrdiff_t need[3];
     for (int i = 0; i < 2 * r + 1; ++i) {
       need[i] = std::clamp<std::ptrdiff_t>(y + i - r, 0, rows - 1);
@@ -115,6 +117,17 @@ struct RawRows {
       }
       return false;
     };
+    int last = -1;  // the last missing row's index in need, when it is needed once
+    if (deferred) {
+      *deferred = -1;
+      for (int i = 0; i < 2 * r + 1; ++i) {
+        bool have = false;
+        int uses = 0;
+        for (int s = 0; s < 3; ++s) have = have || row[s] == need[i];
+        for (int j = 0; j < 2 * r + 1; ++j) uses += need[j] == need[i] ? 1 : 0;
+        if (!have) last = uses == 1 ? i : -1;
+      }
+    }
     for (int i = 0; i < 2 * r + 1; ++i) {
       int at = -1;
       for (int s = 0; s < 3; ++s) {
@@ -124,7 +137,11 @@ struct RawRows {
         for (int s = 0; s < 3 && at < 0; ++s) {
           if (row[s] < 0 || !needed(row[s])) at = s;
         }
-        compute(need[i], slot[at]);
+        if (i == last) {
+          *deferred = i;
+        } else {
+          compute(need[i], slot[at]);
+        }
         row[at] = need[i];
       }
       raws[i] = slot[at];
@@ -395,12 +412,19 @@ void SemiGlobalMatcher::compute(const StereoImage& left, const StereoImage& righ
         const std::ptrdiff_t y0 = st * kStripeRows;
         const std::ptrdiff_t y1 = std::min<std::ptrdiff_t>(rows, y0 + kStripeRows);
         for (std::ptrdiff_t y = y0; y < y1; ++y) {
-          const std::uint8_t* raws[3];
-          raw.get(rows, r, y, raws, [&](std::ptrdiff_t yy, std::uint8_t* out) {
-            k.raw_row8(lcen + yy * cols, rcen + yy * cols, cols, 0, cols, r, nd, p.min_disparity,
-                       reinterpret_cast<std::uint8_t*>(rev), out);
-          });
-          k.box_row8(raws, r, cols, 0, cols, nd, p.min_disparity, cmax, ring, crow);
+          std::uint8_t* raws[3];
+          int fresh = -1;
+          auto* rev8 = reinterpret_cast<std::uint8_t*>(rev);
+          raw.get(
+              rows, r, y, raws,
+              [&](std::ptrdiff_t yy, std::uint8_t* out) {
+                k.raw_row8(lcen + yy * cols, rcen + yy * cols, cols, 0, cols, r, nd,
+                           p.min_disparity, rev8, out);
+              },
+              &fresh);
+          const std::ptrdiff_t yf = fresh < 0 ? 0 : std::clamp<std::ptrdiff_t>(y + fresh - r, 0, rows - 1);
+          k.box_row8(raws, fresh, lcen + yf * cols, rcen + yf * cols, rev8, r, cols, 0, cols, nd,
+                     p.min_disparity, cmax, ring, crow);
           fa.g = pgrey + y * cols;
           fa.gprev = y == y0 ? nullptr : pgrey + (y - 1) * cols;
           fa.disp = pre ? pre + y * cols : disparity.row(y);
@@ -450,7 +474,7 @@ void SemiGlobalMatcher::compute(const StereoImage& left, const StereoImage& righ
         const std::ptrdiff_t y1 = std::min<std::ptrdiff_t>(rows, y0 + kStripeRows);
         int flip = 0;
         for (std::ptrdiff_t y = y0; y < y1; ++y) {
-          const std::uint16_t* raws[3];
+          std::uint16_t* raws[3];
           raw.get(rows, r, y, raws, [&](std::ptrdiff_t yy, std::uint16_t* out) {
             k.raw_row(lcen + yy * cols, rcen + yy * cols, cols, 0, cols, r, nd, p.min_disparity,
                       rev, out);
@@ -518,14 +542,22 @@ void SemiGlobalMatcher::compute(const StereoImage& left, const StereoImage& righ
             std::uint8_t* crow = costs + static_cast<std::size_t>(y) * n_col;
             if (dy > 0) {
               if (k.raw_row8) {
-                const std::uint8_t* raws[3];
-                raw8.get(rows, r, y, raws, [&](std::ptrdiff_t yy, std::uint8_t* out) {
-                  k.raw_row8(lcen + yy * cols, rcen + yy * cols, cols, x0, x1, r, nd,
-                             p.min_disparity, reinterpret_cast<std::uint8_t*>(rev), out);
-                });
-                k.box_row8(raws, r, cols, x0, x1, nd, p.min_disparity, cmax, ring, crow);
+                std::uint8_t* raws[3];
+                int fresh = -1;
+                auto* rev8 = reinterpret_cast<std::uint8_t*>(rev);
+                raw8.get(
+                    rows, r, y, raws,
+                    [&](std::ptrdiff_t yy, std::uint8_t* out) {
+                      k.raw_row8(lcen + yy * cols, rcen + yy * cols, cols, x0, x1, r, nd,
+                                 p.min_disparity, rev8, out);
+                    },
+                    &fresh);
+                const std::ptrdiff_t yf =
+                    fresh < 0 ? 0 : std::clamp<std::ptrdiff_t>(y + fresh - r, 0, rows - 1);
+                k.box_row8(raws, fresh, lcen + yf * cols, rcen + yf * cols, rev8, r, cols, x0, x1,
+                           nd, p.min_disparity, cmax, ring, crow);
               } else {
-                const std::uint16_t* raws[3];
+                std::uint16_t* raws[3];
                 raw.get(rows, r, y, raws, [&](std::ptrdiff_t yy, std::uint16_t* out) {
                   k.raw_row(lcen + yy * cols, rcen + yy * cols, cols, x0, x1, r, nd,
                             p.min_disparity, rev, out);

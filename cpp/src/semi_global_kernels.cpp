@@ -512,11 +512,11 @@ struct B512 {
 #endif
 
 #if defined(__AVX2__)
-template <class B>
-void raw_row8_impl(const uint16_t* lrow, const uint16_t* rrow, ptrdiff_t cols, ptrdiff_t x0,
-                   ptrdiff_t x1, int radius, int nd, int min_d, uint8_t* rev, uint8_t* out) {
-  constexpr int N = B::kLanes;
-  // As raw_row, with the right census split into its low and high bytes.
+// rev: the right census row reversed and split into its low bytes (rev[u]) and high bytes
+// (rev[cols + nd + 32 + u]) for u in 0 .. cols + nd - 1: right[clamp(cols - 1 - min_d - u)];
+// the right pixel of column x and index k is at u = cols - 1 - x + k, rising with k.
+inline void split_reversed(const uint16_t* rrow, ptrdiff_t cols, int nd, int min_d,
+                           uint8_t* rev) {
   const ptrdiff_t rl = cols + nd;
   uint8_t* rlo = rev;
   uint8_t* rhi = rev + rl + 32;
@@ -525,53 +525,81 @@ void raw_row8_impl(const uint16_t* lrow, const uint16_t* rrow, ptrdiff_t cols, p
     rlo[u] = static_cast<uint8_t>(v & 0xFF);
     rhi[u] = static_cast<uint8_t>(v >> 8);
   }
-  const ptrdiff_t n = x1 - x0 + 2 * radius;
-  for (ptrdiff_t j = 0; j < n; ++j) {
-    const ptrdiff_t x = clamp_index(x0 - radius + j, 0, cols - 1);
-    uint8_t* __restrict o = out + j * nd;
-    const uint16_t l = lrow[x];
-    const uint8_t* __restrict lo = rlo + (cols - 1 - x);
-    const uint8_t* __restrict hi = rhi + (cols - 1 - x);
-    const typename B::R llo = B::set1(l & 0xFF), lhi = B::set1(l >> 8);
-    int k = 0;
-    for (; k + N <= nd; k += N) {
-      B::store(o + k, B::hamming(B::load(lo + k), B::load(hi + k), llo, lhi));
-    }
-    for (; k < nd; ++k) {
-      o[k] = static_cast<uint8_t>(popcount16(static_cast<uint16_t>(l ^ (lo[k] | hi[k] << 8))));
-    }
+}
+
+// The pixel costs of left column x (census l) against the split right row, into o (nd bytes).
+template <class B>
+inline void hamming_column(uint16_t l, const uint8_t* rev, ptrdiff_t cols, ptrdiff_t x, int nd,
+                           uint8_t* __restrict o) {
+  constexpr int N = B::kLanes;
+  const uint8_t* __restrict lo = rev + (cols - 1 - x);
+  const uint8_t* __restrict hi = rev + (cols + nd + 32) + (cols - 1 - x);
+  const typename B::R llo = B::set1(l & 0xFF), lhi = B::set1(l >> 8);
+  int k = 0;
+  for (; k + N <= nd; k += N) {
+    B::store(o + k, B::hamming(B::load(lo + k), B::load(hi + k), llo, lhi));
+  }
+  for (; k < nd; ++k) {
+    o[k] = static_cast<uint8_t>(popcount16(static_cast<uint16_t>(l ^ (lo[k] | hi[k] << 8))));
   }
 }
 
 template <class B>
-void box_row8_impl(const uint8_t* const* raws, int radius, ptrdiff_t cols, ptrdiff_t x0,
-                   ptrdiff_t x1, int nd, int min_d, int cmax, uint8_t* ring, uint8_t* out) {
+void raw_row8_impl(const uint16_t* lrow, const uint16_t* rrow, ptrdiff_t cols, ptrdiff_t x0,
+                   ptrdiff_t x1, int radius, int nd, int min_d, uint8_t* rev, uint8_t* out) {
+  split_reversed(rrow, cols, nd, min_d, rev);
+  const ptrdiff_t n = x1 - x0 + 2 * radius;
+  for (ptrdiff_t j = 0; j < n; ++j) {
+    const ptrdiff_t x = clamp_index(x0 - radius + j, 0, cols - 1);
+    hamming_column<B>(lrow[x], rev, cols, x, nd, out + j * nd);
+  }
+}
+
+template <class B>
+void box_row8_impl(uint8_t* const* raws, int fresh, const uint16_t* lrow, const uint16_t* rrow,
+                   uint8_t* rev, int radius, ptrdiff_t cols, ptrdiff_t x0, ptrdiff_t x1, int nd,
+                   int min_d, int cmax, uint8_t* ring, uint8_t* out) {
   constexpr int N = B::kLanes;
-  const uint8_t* __restrict a = raws[0];
-  const uint8_t* __restrict b = radius ? raws[1] : raws[0];
-  const uint8_t* __restrict c = radius ? raws[2] : raws[0];
-  // ring slot j % 3: the column sum of raw column j (columns clamp(x0 - r + j)).
-  auto colsum = [&](ptrdiff_t j) {
-    uint8_t* __restrict v = ring + (j % 3) * nd;
+  if (fresh >= 0) split_reversed(rrow, cols, nd, min_d, rev);
+  // The fresh row (computed here, column by column) and the others.
+  uint8_t* f = fresh >= 0 ? raws[fresh] : nullptr;
+  const uint8_t* other[3];
+  int n_other = 0;
+  for (int i = 0; i < 2 * radius + 1; ++i) {
+    if (i != fresh) other[n_other++] = raws[i];
+  }
+  // Raw column j (image column clamp(x0 - r + j)): the fresh row's costs, and the column sum
+  // into ring slot j % 3 (radius 1) or the output (radius 0).
+  auto column = [&](ptrdiff_t j, uint8_t* __restrict v) {
     const ptrdiff_t at = j * nd;
+    if (f) {
+      const ptrdiff_t x = clamp_index(x0 - radius + j, 0, cols - 1);
+      hamming_column<B>(lrow[x], rev, cols, x, nd, f + at);
+    }
+    if (radius == 0) {
+      std::memcpy(v, (f ? f : other[0]) + at, static_cast<std::size_t>(nd));
+      return;
+    }
+    const uint8_t* __restrict a = f ? f + at : other[2] + at;
+    const uint8_t* __restrict b = other[0] + at;
+    const uint8_t* __restrict c = other[1] + at;
     int k = 0;
     for (; k + N <= nd; k += N) {
-      B::store(v + k, B::add(B::add(B::load(a + at + k), B::load(b + at + k)),
-                             B::load(c + at + k)));
+      B::store(v + k, B::add(B::add(B::load(a + k), B::load(b + k)), B::load(c + k)));
     }
-    for (; k < nd; ++k) v[k] = static_cast<uint8_t>(a[at + k] + b[at + k] + c[at + k]);
+    for (; k < nd; ++k) v[k] = static_cast<uint8_t>(a[k] + b[k] + c[k]);
   };
   if (radius) {
-    colsum(0);
-    colsum(1);
+    column(0, ring);
+    column(1, ring + nd);
   }
   for (ptrdiff_t x = x0; x < x1; ++x) {
     uint8_t* __restrict o = out + x * nd;
     const ptrdiff_t j = x - x0 + radius;
     if (radius == 0) {
-      std::memcpy(o, a + j * nd, static_cast<std::size_t>(nd));
+      column(j, o);
     } else {
-      colsum(j + 1);
+      column(j + 1, ring + ((j + 1) % 3) * nd);
       const uint8_t* __restrict p = ring + ((j - 1) % 3) * nd;
       const uint8_t* __restrict q = ring + (j % 3) * nd;
       const uint8_t* __restrict s = ring + ((j + 1) % 3) * nd;
@@ -601,15 +629,18 @@ void raw_row8(const uint16_t* lrow, const uint16_t* rrow, ptrdiff_t cols, ptrdif
   raw_row8_impl<B256>(lrow, rrow, cols, x0, x1, radius, nd, min_d, rev, out);
 }
 
-void box_row8(const uint8_t* const* raws, int radius, ptrdiff_t cols, ptrdiff_t x0, ptrdiff_t x1,
-              int nd, int min_d, int cmax, uint8_t* ring, uint8_t* out) {
+void box_row8(uint8_t* const* raws, int fresh, const uint16_t* lrow, const uint16_t* rrow,
+              uint8_t* rev, int radius, ptrdiff_t cols, ptrdiff_t x0, ptrdiff_t x1, int nd,
+              int min_d, int cmax, uint8_t* ring, uint8_t* out) {
 #if defined(__AVX512BW__)
   if (nd >= B512::kLanes) {
-    box_row8_impl<B512>(raws, radius, cols, x0, x1, nd, min_d, cmax, ring, out);
+    box_row8_impl<B512>(raws, fresh, lrow, rrow, rev, radius, cols, x0, x1, nd, min_d, cmax, ring,
+                        out);
     return;
   }
 #endif
-  box_row8_impl<B256>(raws, radius, cols, x0, x1, nd, min_d, cmax, ring, out);
+  box_row8_impl<B256>(raws, fresh, lrow, rrow, rev, radius, cols, x0, x1, nd, min_d, cmax, ring,
+                      out);
 }
 #endif
 

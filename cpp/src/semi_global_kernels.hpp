@@ -68,14 +68,16 @@ using MedianRowFn = void (*)(const float* up, const float* mid, const float* dow
                              std::uint8_t* flags, std::ptrdiff_t cols);
 
 // raw_row and box_row with 8-bit costs (explicit SIMD; null in the baseline build): the same
-// values, half the bytes. raw_row8's rev: 2 * (cols + nd) + 64 bytes of scratch; box_row8's
-// ring: 3 * nd bytes of scratch.
+// values, half the bytes. box_row8 may compute one of the raw rows itself, raws[fresh] (fresh
+// >= 0; that census row pair: lrow, rrow), column by column as it sums them. rev:
+// 2 * (cols + nd) + 64 bytes of scratch; ring: 3 * nd bytes of scratch.
 using RawRow8Fn = void (*)(const std::uint16_t* lrow, const std::uint16_t* rrow,
                            std::ptrdiff_t cols, std::ptrdiff_t x0, std::ptrdiff_t x1, int radius,
                            int nd, int min_d, std::uint8_t* rev, std::uint8_t* out);
-using BoxRow8Fn = void (*)(const std::uint8_t* const* raws, int radius, std::ptrdiff_t cols,
-                           std::ptrdiff_t x0, std::ptrdiff_t x1, int nd, int min_d, int cmax,
-                           std::uint8_t* ring, std::uint8_t* out);
+using BoxRow8Fn = void (*)(std::uint8_t* const* raws, int fresh, const std::uint16_t* lrow,
+                           const std::uint16_t* rrow, std::uint8_t* rev, int radius,
+                           std::ptrdiff_t cols, std::ptrdiff_t x0, std::ptrdiff_t x1, int nd,
+                           int min_d, int cmax, std::uint8_t* ring, std::uint8_t* out);
 
 // One image row's paths along the row and its decision, fused (explicit SIMD; 16 disparities
 // at a time with AVX2, 32 with AVX-512 when nd allows): pass 1 (x rising) the path from above
