@@ -565,7 +565,19 @@ void SemiGlobalMatcher::compute(const StereoImage& left, const StereoImage& righ
                 k.box_row(raws, r, cols, x0, x1, nd, p.min_disparity, cmax, colraw, crow);
               }
             }
-            for (int v = 0; v < nv; ++v) {
+            if (fused) {
+              std::int16_t* cur[3];
+              const std::int16_t* prev[3];
+              for (int v = 0; v < nv; ++v) {
+                const auto pair = 2 * static_cast<std::size_t>(v);
+                cur[v] = prow + (pair + static_cast<std::size_t>(flip)) * row_len;
+                prev[v] = prow + (pair + static_cast<std::size_t>(1 - flip)) * row_len;
+              }
+              k.path_rows(pp, crow, pgrey + y * cols, i > 0 ? pgrey + yq * cols : nullptr,
+                          i > 0 ? prev : nullptr, cur, nv, dxs, cols, x0, x1,
+                          sums + static_cast<std::size_t>(y) * n_col, dy > 0);
+            }
+            for (int v = 0; v < nv && !fused; ++v) {
               const auto pair = 2 * static_cast<std::size_t>(v);
               std::int16_t* cur = prow + (pair + static_cast<std::size_t>(flip)) * row_len;
               std::int16_t* prev = prow + (pair + static_cast<std::size_t>(1 - flip)) * row_len;

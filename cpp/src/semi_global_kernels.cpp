@@ -657,6 +657,7 @@ struct V256 {
   static R load(const void* p) { return _mm256_load_si256(static_cast<const R*>(p)); }
   static R loadu(const void* p) { return _mm256_loadu_si256(static_cast<const R*>(p)); }
   static void store(void* p, R v) { _mm256_store_si256(static_cast<R*>(p), v); }
+  static void storeu(void* p, R v) { _mm256_storeu_si256(static_cast<R*>(p), v); }
   static R widen(const std::uint8_t* p) {
     return _mm256_cvtepu8_epi16(_mm_loadu_si128(reinterpret_cast<const __m128i*>(p)));
   }
@@ -720,6 +721,7 @@ struct V512 {
   static R load(const void* p) { return _mm512_load_si512(p); }
   static R loadu(const void* p) { return _mm512_loadu_si512(p); }
   static void store(void* p, R v) { _mm512_store_si512(p, v); }
+  static void storeu(void* p, R v) { _mm512_storeu_si512(p, v); }
   struct X {
     R a, b;
   };
@@ -1090,6 +1092,88 @@ void fused_row_impl(const FusedRowArgs& a) {
   }
 }
 
+
+// PathRowsFn: per pixel, every direction's step and the sum in one sweep over the
+// disparities. A path's first pixel reads a row of zeros (m = 0): L = C + min(0, ..) - 0 = C.
+inline constexpr int kZeroRow = kMaxNumDisparities + 64;
+alignas(64) const int16_t kZeros[kZeroRow] = {};
+
+template <class V, int kNv, bool kWrite>
+void path_rows_impl(const PathParams& p, const uint8_t* c, const uint8_t* g, const uint8_t* gprev,
+                    const int16_t* const* prev, int16_t* const* cur, const int* dxs,
+                    ptrdiff_t cols, ptrdiff_t x0, ptrdiff_t x1, uint16_t* s) {
+  using R = typename V::R;
+  constexpr int N = V::kLanes;
+  const int nd = p.nd, ls = p.ls, nvec = nd / N;
+  const R vp1 = V::set1(p.p1);
+  const R ones = V::set1(-1);
+  for (ptrdiff_t x = x0; x < x1; ++x) {
+    const int16_t* q[kNv];
+    int16_t* out[kNv];
+    R m_v[kNv], mp2_v[kNv], mn[kNv];
+    for (int v = 0; v < kNv; ++v) {
+      const ptrdiff_t xq = x - dxs[v];
+      out[v] = cur[v] + x * ls;
+      mn[v] = ones;
+      if (prev == nullptr || xq < 0 || xq >= cols) {
+        q[v] = kZeros;
+        m_v[v] = V::set1(0);
+        mp2_v[v] = V::set1(0);
+      } else {
+        q[v] = prev[v] + xq * ls;
+        const int m = q[v][nd + 2];
+        m_v[v] = V::set1(m);
+        mp2_v[v] = V::set1(m + p2_for(p, g[x], gprev[xq]));
+      }
+    }
+    const uint8_t* cx = c + x * nd;
+    uint16_t* sx = s + x * nd;
+    for (int i = 0; i < nvec; ++i) {
+      const R cv = V::widen(cx + i * N);
+      R acc = kWrite ? V::set1(0) : V::loadu(sx + i * N);
+      for (int v = 0; v < kNv; ++v) {
+        const int16_t* qi = q[v] + i * N;
+        const R l = step_vec<V>(V::loadu(qi), V::loadu(qi + 1), V::loadu(qi + 2), cv, vp1,
+                                mp2_v[v], m_v[v]);
+        V::storeu(out[v] + 1 + i * N, l);
+        mn[v] = V::min(mn[v], l);
+        acc = V::add(acc, l);
+      }
+      V::storeu(sx + i * N, acc);
+    }
+    for (int v = 0; v < kNv; ++v) out[v][nd + 2] = static_cast<int16_t>(V::hmin(mn[v]));
+  }
+}
+
+template <class V>
+void path_rows_v(const PathParams& p, const uint8_t* c, const uint8_t* g, const uint8_t* gprev,
+                 const int16_t* const* prev, int16_t* const* cur, int nv, const int* dxs,
+                 ptrdiff_t cols, ptrdiff_t x0, ptrdiff_t x1, uint16_t* s, bool write) {
+  if (nv == 3) {
+    if (write) {
+      path_rows_impl<V, 3, true>(p, c, g, gprev, prev, cur, dxs, cols, x0, x1, s);
+    } else {
+      path_rows_impl<V, 3, false>(p, c, g, gprev, prev, cur, dxs, cols, x0, x1, s);
+    }
+  } else if (write) {
+    path_rows_impl<V, 1, true>(p, c, g, gprev, prev, cur, dxs, cols, x0, x1, s);
+  } else {
+    path_rows_impl<V, 1, false>(p, c, g, gprev, prev, cur, dxs, cols, x0, x1, s);
+  }
+}
+
+void path_rows(const PathParams& p, const uint8_t* c, const uint8_t* g, const uint8_t* gprev,
+               const int16_t* const* prev, int16_t* const* cur, int nv, const int* dxs,
+               ptrdiff_t cols, ptrdiff_t x0, ptrdiff_t x1, uint16_t* s, bool write) {
+#if defined(__AVX512BW__)
+  if (p.nd % V512::kLanes == 0) {
+    path_rows_v<V512>(p, c, g, gprev, prev, cur, nv, dxs, cols, x0, x1, s, write);
+    return;
+  }
+#endif
+  path_rows_v<V256>(p, c, g, gprev, prev, cur, nv, dxs, cols, x0, x1, s, write);
+}
+
 template <class V>
 void fused_row_v(const FusedRowArgs& a) {
   if (a.lv) {
@@ -1304,9 +1388,11 @@ const SemiGlobalKernels& semi_global_kernels() {
 #if defined(__AVX2__)
       &raw_row8,
       &box_row8,
+      &path_rows,
       &fused_row,
       16,
 #else
+      nullptr,
       nullptr,
       nullptr,
       nullptr,

@@ -47,6 +47,14 @@ using PathRowFn = void (*)(const PathParams& p, const std::uint8_t* c, const std
                            std::int16_t* cur, std::ptrdiff_t cols, std::ptrdiff_t x0,
                            std::ptrdiff_t x1, int dx, std::uint16_t* s, bool write);
 
+// path_row for nv (1 or 3) directions at once, dxs[v] for prev[v] and cur[v], their path costs
+// summed into s (written when `write`, added otherwise); explicit SIMD, nd % 16 == 0 (null in
+// the baseline build).
+using PathRowsFn = void (*)(const PathParams& p, const std::uint8_t* c, const std::uint8_t* g,
+                            const std::uint8_t* gprev, const std::int16_t* const* prev,
+                            std::int16_t* const* cur, int nv, const int* dxs, std::ptrdiff_t cols,
+                            std::ptrdiff_t x0, std::ptrdiff_t x1, std::uint16_t* s, bool write);
+
 struct DecideArgs {
   std::ptrdiff_t cols;
   int nd, min_d;
@@ -116,6 +124,7 @@ struct SemiGlobalKernels {
   MedianRowFn median_row;
   RawRow8Fn raw_row8;    // null in the baseline build
   BoxRow8Fn box_row8;    // null in the baseline build
+  PathRowsFn path_rows;  // null in the baseline build
   FusedRowFn fused_row;  // null in the baseline build
   int fused_lanes;       // fused_row needs nd % fused_lanes == 0
 };
