@@ -689,6 +689,14 @@ struct V256 {
     return _mm256_alignr_epi8(_mm256_permute2x128_si256(cur, next, 0x21), cur, 2);
   }
   static std::uint32_t hmin(R v) { return hmin_epu16(v); }
+  // The least lane in every lane (no trip through a general register).
+  static R hmin_v(R v) {
+    const __m128i m = _mm_min_epu16(_mm256_castsi256_si128(v), _mm256_extracti128_si256(v, 1));
+    return _mm256_broadcastw_epi16(_mm_minpos_epu16(m));
+  }
+  static std::uint32_t lane0(R v) {
+    return static_cast<std::uint32_t>(_mm_cvtsi128_si32(_mm256_castsi256_si128(v)) & 0xFFFF);
+  }
   // Where v <= r: r = v, a = k.
   static void take_le(R& r, R& a, R v, R k) {
     const R m = _mm256_min_epu16(r, v);
@@ -702,8 +710,8 @@ struct V256 {
     r = m;
   }
   // The least of the lanes of a whose lane of r equals b.
-  static std::uint32_t hmin_where_eq(R a, R r, R b) {
-    return hmin_epu16(_mm256_or_si256(a, _mm256_xor_si256(_mm256_cmpeq_epi16(r, b), set1(-1))));
+  static R hmin_where_eq(R a, R r, R b) {
+    return hmin_v(_mm256_or_si256(a, _mm256_xor_si256(_mm256_cmpeq_epi16(r, b), set1(-1))));
   }
   // v with 0xFFFF in the lanes where k - lo (mod 2^16) > span.
   static R or_outside(R v, R k, R lo, R span) {
@@ -763,8 +771,16 @@ struct V512 {
     a = _mm512_mask_mov_epi16(a, _mm512_cmplt_epu16_mask(v, r), k);
     r = _mm512_min_epu16(r, v);
   }
-  static std::uint32_t hmin_where_eq(R a, R r, R b) {
-    return hmin(_mm512_mask_mov_epi16(set1(-1), _mm512_cmpeq_epi16_mask(r, b), a));
+  static R hmin_v(R v) {
+    const __m256i h = _mm256_min_epu16(_mm512_castsi512_si256(v), _mm512_extracti64x4_epi64(v, 1));
+    const __m128i m = _mm_min_epu16(_mm256_castsi256_si128(h), _mm256_extracti128_si256(h, 1));
+    return _mm512_broadcastw_epi16(_mm_minpos_epu16(m));
+  }
+  static std::uint32_t lane0(R v) {
+    return static_cast<std::uint32_t>(_mm_cvtsi128_si32(_mm512_castsi512_si128(v)) & 0xFFFF);
+  }
+  static R hmin_where_eq(R a, R r, R b) {
+    return hmin_v(_mm512_mask_mov_epi16(set1(-1), _mm512_cmpeq_epi16_mask(r, b), a));
   }
   static R or_outside(R v, R k, R lo, R span) {
     return _mm512_mask_mov_epi16(v, _mm512_cmpgt_epu16_mask(_mm512_sub_epi16(k, lo), span),
@@ -793,7 +809,7 @@ inline void pass1_pixel(int nv, const uint8_t* __restrict cx, int16_t* __restric
                         int16_t* __restrict lvx, const uint16_t* __restrict bx,
                         uint16_t* __restrict px, typename V::R vp1, typename V::R mh_v,
                         typename V::R mp2h, typename V::R mv_v, typename V::R mp2v,
-                        int& mh_out, int16_t* lvmin_out) {
+                        typename V::R& mh_out, int16_t* lvmin_out) {
   using R = typename V::R;
   constexpr int N = V::kLanes;
   const R sent = V::set1(kSentinel);
@@ -846,7 +862,7 @@ inline void pass1_pixel(int nv, const uint8_t* __restrict cx, int16_t* __restric
     if constexpr (kBase) part = V::add(part, V::load(bx + i * N));
     V::store(px + i * N, part);
   }
-  mh_out = static_cast<int>(V::hmin(hmin_v));
+  mh_out = V::hmin_v(hmin_v);
   if constexpr (kVertical) *lvmin_out = static_cast<int16_t>(V::hmin(vmin_v));
 }
 
@@ -860,7 +876,7 @@ inline typename V::R pass2_pixel(int nv, const uint8_t* __restrict cx, int16_t* 
                                  const uint16_t* __restrict px, uint16_t* __restrict tot,
                                  uint16_t* __restrict wmin, uint16_t* __restrict warg,
                                  typename V::R vp1, typename V::R mr_v, typename V::R mp2r,
-                                 typename V::R lo_v, typename V::R span_v, int& mr_out,
+                                 typename V::R lo_v, typename V::R span_v, typename V::R& mr_out,
                                  typename V::R& arg_v, typename V::R& sec_v) {
   using R = typename V::R;
   constexpr int N = V::kLanes;
@@ -906,7 +922,7 @@ inline typename V::R pass2_pixel(int nv, const uint8_t* __restrict cx, int16_t* 
     acur = anext;
     kv = V::add(kv, step_k);
   }
-  mr_out = static_cast<int>(V::hmin(rmin_v));
+  mr_out = V::hmin_v(rmin_v);
   arg_v = barg;
   sec_v = bsec;
   return best_v;
@@ -945,7 +961,7 @@ void fused_row_impl(const FusedRowArgs& a) {
       for (int k = 0; k < kFusedPad; ++k) lv0[x * ls + nd + k] = kSentinel;
     }
   }
-  int mh = 0;
+  R mh = sent;  // the previous pixel's least path cost from the left, in every lane
   for (ptrdiff_t x = 0; x < cols; ++x) {
     const uint8_t* cx = a.c + x * nd;
     uint16_t* px = a.partial + x * nd;
@@ -968,8 +984,8 @@ void fused_row_impl(const FusedRowArgs& a) {
       }
       continue;
     }
-    const R mh_v = V::set1(mh);
-    const R mp2h = V::set1(mh + p2_for(a.p, g[x], g[x - 1]));
+    const R mh_v = mh;
+    const R mp2h = V::add(mh, V::set1(p2_for(a.p, g[x], g[x - 1])));
     if (vfirst) {
       pass1_pixel<V, kVertical, kBase, false, true>(nv, cx, hrow, lvx, bx, px, vp1, mh_v, mp2h,
                                                     mv_v, mp2v, mh, lvmin);
@@ -989,7 +1005,7 @@ void fused_row_impl(const FusedRowArgs& a) {
     warg[k] = 0;
   }
   uint32_t* res = a.result;
-  int mr = 0;
+  R mr = sent;
   for (ptrdiff_t x = cols - 1; x >= 0; --x) {
     const uint8_t* cx = a.c + x * nd;
     const uint16_t* px = a.partial + x * nd;
@@ -1008,8 +1024,8 @@ void fused_row_impl(const FusedRowArgs& a) {
       best_v = pass2_pixel<V, true, true>(nv, cx, hrow, px, tot, wmin, warg, vp1, sent, sent, lo_v,
                                           span_v, mr, arg_v, sec_v);
     } else {
-      const R mr_v = V::set1(mr);
-      const R mp2r = V::set1(mr + p2_for(a.p, g[x], g[x + 1]));
+      const R mr_v = mr;
+      const R mp2r = V::add(mr, V::set1(p2_for(a.p, g[x], g[x + 1])));
       if (border) {
         best_v = pass2_pixel<V, false, true>(nv, cx, hrow, px, tot, wmin, warg, vp1, mr_v, mp2r,
                                              lo_v, span_v, mr, arg_v, sec_v);
@@ -1020,12 +1036,14 @@ void fused_row_impl(const FusedRowArgs& a) {
     }
     uint32_t* rx = res + 4 * x;
     if (klo > khi) continue;
-    const uint32_t best = V::hmin(best_v);
-    const int kb = static_cast<int>(V::hmin_where_eq(arg_v, best_v, V::set1(static_cast<int>(best))));
+    const R best_b = V::hmin_v(best_v);
+    const R kb_b = V::hmin_where_eq(arg_v, best_v, best_b);
     // The second best: the least over the lanes of each lane's least, or of its second least
     // where the lane's least first comes at kb - 1, kb or kb + 1 (the only index of kb - 1 ..
     // kb + 1 in that lane: a later equal least is then the second least).
-    const uint32_t sec = V::hmin(V::blend_near(best_v, sec_v, arg_v, V::set1(kb - 1)));
+    const uint32_t sec = V::hmin(V::blend_near(best_v, sec_v, arg_v, V::sub(kb_b, V::set1(1))));
+    const uint32_t best = V::lane0(best_b);
+    const int kb = static_cast<int>(V::lane0(kb_b));
     rx[0] = best;
     rx[1] = static_cast<uint32_t>(kb);
     rx[2] = sec == 0xFFFFu ? kNone : sec;
