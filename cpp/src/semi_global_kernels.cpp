@@ -520,10 +520,22 @@ inline void split_reversed(const uint16_t* rrow, ptrdiff_t cols, int nd, int min
   const ptrdiff_t rl = cols + nd;
   uint8_t* rlo = rev;
   uint8_t* rhi = rev + rl + 32;
-  for (ptrdiff_t u = 0; u < rl; ++u) {
-    const uint16_t v = rrow[clamp_index(cols - 1 - min_d - u, 0, cols - 1)];
+  // u with cols - 1 - min_d - u inside the image: u0 .. u1 - 1; the edge pixels outside.
+  const ptrdiff_t u0 = clamp_index(-min_d, 0, rl);
+  const ptrdiff_t u1 = clamp_index(cols - min_d, u0, rl);
+  for (ptrdiff_t u = 0; u < u0; ++u) {
+    rlo[u] = static_cast<uint8_t>(rrow[cols - 1] & 0xFF);
+    rhi[u] = static_cast<uint8_t>(rrow[cols - 1] >> 8);
+  }
+  const uint16_t* __restrict src = rrow + (cols - 1 - min_d);
+  for (ptrdiff_t u = u0; u < u1; ++u) {
+    const uint16_t v = src[-u];
     rlo[u] = static_cast<uint8_t>(v & 0xFF);
     rhi[u] = static_cast<uint8_t>(v >> 8);
+  }
+  for (ptrdiff_t u = u1; u < rl; ++u) {
+    rlo[u] = static_cast<uint8_t>(rrow[0] & 0xFF);
+    rhi[u] = static_cast<uint8_t>(rrow[0] >> 8);
   }
 }
 
@@ -935,6 +947,7 @@ void fused_row_impl(const FusedRowArgs& a) {
   const ptrdiff_t cols = a.d.cols;
   const int nd = a.p.nd, nv = nd / N;
   const ptrdiff_t ls = nd + kFusedPad;
+  const ptrdiff_t lvs = nd + N;  // lv: each pixel's nd path costs, then N sentinels
   const ptrdiff_t dmin = a.d.min_d;
   const R sent = V::set1(kSentinel);
   const R vp1 = V::set1(a.p.p1);
@@ -958,7 +971,7 @@ void fused_row_impl(const FusedRowArgs& a) {
     // The sentinels around each pixel's path costs (written once per path start).
     for (int k = 0; k < kFusedPad; ++k) a.lv[k] = kSentinel;
     for (ptrdiff_t x = 0; x < cols; ++x) {
-      for (int k = 0; k < kFusedPad; ++k) lv0[x * ls + nd + k] = kSentinel;
+      for (int k = 0; k < N; ++k) lv0[x * lvs + nd + k] = kSentinel;
     }
   }
   R mh = sent;  // the previous pixel's least path cost from the left, in every lane
@@ -966,7 +979,7 @@ void fused_row_impl(const FusedRowArgs& a) {
     const uint8_t* cx = a.c + x * nd;
     uint16_t* px = a.partial + x * nd;
     const uint16_t* bx = kBase ? a.base + x * nd : nullptr;
-    int16_t* lvx = kVertical ? lv0 + x * ls : nullptr;
+    int16_t* lvx = kVertical ? lv0 + x * lvs : nullptr;
     int16_t* lvmin = kVertical ? a.lvmin + x : nullptr;
     R mv_v = sent, mp2v = sent;
     if (kVertical && !vfirst) {
