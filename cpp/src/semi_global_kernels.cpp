@@ -879,13 +879,13 @@ inline void pass1_pixel(int nv, const uint8_t* __restrict cx, int16_t* __restric
 }
 
 // Pass 2's paths and sums on one pixel: the path from the right (hrow as in pass 1), the
-// sums into tot (0xFFFF outside klo .. klo + span when kBorder), the right winners' window
+// sums (0xFFFF outside klo .. klo + span when kBorder), the right winners' window
 // moved down one lane and updated. Returns the least sum of each lane, its lowest index in
 // arg_v and the lane's second least (the least of the others; equal to the least on a tie)
 // in sec_v.
 template <class V, bool kFirst, bool kBorder>
 inline typename V::R pass2_pixel(int nv, const uint8_t* __restrict cx, int16_t* __restrict hrow,
-                                 const uint16_t* __restrict px, uint16_t* __restrict tot,
+                                 const uint16_t* __restrict px,
                                  uint16_t* __restrict wmin, uint16_t* __restrict warg,
                                  typename V::R vp1, typename V::R mr_v, typename V::R mp2r,
                                  typename V::R lo_v, typename V::R span_v, typename V::R& mr_out,
@@ -920,7 +920,6 @@ inline typename V::R pass2_pixel(int nv, const uint8_t* __restrict cx, int16_t* 
     rmin_v = V::min(rmin_v, lr);
     R t = V::add(V::load(px + i * N), lr);
     if constexpr (kBorder) t = V::or_outside(t, kv, lo_v, span_v);
-    V::store(tot + i * N, t);
     bsec = V::min(bsec, V::max(best_v, t));
     V::take_lt(best_v, barg, t, kv);
     const R wnext = V::load(wmin + (i + 1) * N);  // 0xFFFF after the last
@@ -953,11 +952,10 @@ void fused_row_impl(const FusedRowArgs& a) {
   const R vp1 = V::set1(a.p.p1);
   const uint8_t* g = a.g;
   // small: the path along the row (nd, then a sentinel pad), the right winners' window: least
-  // sums and their indices (nd each, then a pad of 0xFFFF), one pixel's sums (nd).
+  // sums and their indices (nd each, then a pad of 0xFFFF).
   int16_t* hrow = reinterpret_cast<int16_t*>(a.small);
   uint16_t* wmin = a.small + ls;
   uint16_t* warg = a.small + 2 * ls;
-  uint16_t* tot = a.small + 3 * ls;
   for (int k = 0; k < kFusedPad; ++k) {
     hrow[nd + k] = kSentinel;
     wmin[nd + k] = 0xFFFFu;
@@ -1034,16 +1032,16 @@ void fused_row_impl(const FusedRowArgs& a) {
     const R span_v = V::set1(static_cast<int>(khi - klo));
     R best_v, arg_v, sec_v;
     if (first) {
-      best_v = pass2_pixel<V, true, true>(nv, cx, hrow, px, tot, wmin, warg, vp1, sent, sent, lo_v,
+      best_v = pass2_pixel<V, true, true>(nv, cx, hrow, px, wmin, warg, vp1, sent, sent, lo_v,
                                           span_v, mr, arg_v, sec_v);
     } else {
       const R mr_v = mr;
       const R mp2r = V::add(mr, V::set1(p2_for(a.p, g[x], g[x + 1])));
       if (border) {
-        best_v = pass2_pixel<V, false, true>(nv, cx, hrow, px, tot, wmin, warg, vp1, mr_v, mp2r,
+        best_v = pass2_pixel<V, false, true>(nv, cx, hrow, px, wmin, warg, vp1, mr_v, mp2r,
                                              lo_v, span_v, mr, arg_v, sec_v);
       } else {
-        best_v = pass2_pixel<V, false, false>(nv, cx, hrow, px, tot, wmin, warg, vp1, mr_v, mp2r,
+        best_v = pass2_pixel<V, false, false>(nv, cx, hrow, px, wmin, warg, vp1, mr_v, mp2r,
                                               lo_v, span_v, mr, arg_v, sec_v);
       }
     }
@@ -1060,8 +1058,12 @@ void fused_row_impl(const FusedRowArgs& a) {
     rx[0] = best;
     rx[1] = static_cast<uint32_t>(kb);
     rx[2] = sec == 0xFFFFu ? kNone : sec;
-    rx[3] = (kb > 0 ? static_cast<uint32_t>(tot[kb - 1]) : 0u) |
-            (kb + 1 < nd ? static_cast<uint32_t>(tot[kb + 1]) << 16 : 0u);
+    // The sums beside the winner (used only when both are inside: unmasked), from the sums
+    // of the other paths and the path from the right just stored.
+    auto sum_at = [&](int k) {
+      return static_cast<uint32_t>(static_cast<uint16_t>(px[k] + static_cast<uint16_t>(hrow[k])));
+    };
+    rx[3] = (kb > 0 ? sum_at(kb - 1) : 0u) | (kb + 1 < nd ? sum_at(kb + 1) << 16 : 0u);
   }
   // The columns still in the window are final.
   for (int k = 0; k < nd; ++k) {
