@@ -365,7 +365,8 @@ void SemiGlobalMatcher::compute(const StereoImage& left, const StereoImage& righ
   // vertical path and the path from the left, the pixel-sized pieces, the per-pixel results.
   auto round64 = [](std::size_t n16) { return (n16 + 31) / 32 * 32; };
   const std::size_t n_small = round64(8 * static_cast<std::size_t>(nd) + 512);
-  const std::size_t n_fused = round64(n_col) + n_small + round64(8 * static_cast<std::size_t>(cols)) +
+  const std::size_t n_fused = round64(n_col) + n_small +
+                              round64(8 * static_cast<std::size_t>(cols)) +
                               round64(static_cast<std::size_t>(cols));
   auto fused_args = [&](std::uint16_t* at) {
     detail::FusedRowArgs fa{};
@@ -422,7 +423,8 @@ void SemiGlobalMatcher::compute(const StereoImage& left, const StereoImage& righ
                            p.min_disparity, rev8, out);
               },
               &fresh);
-          const std::ptrdiff_t yf = fresh < 0 ? 0 : std::clamp<std::ptrdiff_t>(y + fresh - r, 0, rows - 1);
+          const std::ptrdiff_t yf =
+              fresh < 0 ? 0 : std::clamp<std::ptrdiff_t>(y + fresh - r, 0, rows - 1);
           k.box_row8(raws, fresh, lcen + yf * cols, rcen + yf * cols, rev8, r, cols, 0, cols, nd,
                      p.min_disparity, cmax, ring, crow);
           fa.g = pgrey + y * cols;

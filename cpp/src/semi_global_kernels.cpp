@@ -4,6 +4,12 @@
 // compiler vectorises them for each build (SSE2, AVX2, AVX-512BW); every build computes the
 // same integers, and the floating-point steps use the same IEEE operations, in the same order,
 // as the numpy oracle.
+#if defined(__GNUC__) && !defined(__clang__)
+// GCC 12's AVX-512 headers trip -Wmaybe-uninitialized on their own _mm512_undefined_*()
+// placeholders when inlined (GCC bug 105593); set before any include so that it covers them.
+#pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
+#endif
+
 #include "semi_global_kernels.hpp"
 
 #include <cmath>
@@ -681,7 +687,9 @@ struct V256 {
   static R up(R b, X x) { return _mm256_alignr_epi8(b, x, 14); }
   static R down(R a, X x) { return _mm256_alignr_epi8(x, a, 2); }
   static R set1(int v) { return _mm256_set1_epi16(static_cast<short>(v)); }
-  static R iota() { return _mm256_setr_epi16(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15); }
+  static R iota() {
+    return _mm256_setr_epi16(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15);
+  }
   static R add(R a, R b) { return _mm256_add_epi16(a, b); }
   static R sub(R a, R b) { return _mm256_sub_epi16(a, b); }
   static R min(R a, R b) { return _mm256_min_epu16(a, b); }
@@ -1258,7 +1266,9 @@ struct F256 {
     return _mm256_blendv_ps(a, b, _mm256_cmp_ps(n, _mm256_set1_ps(t), _CMP_GE_OQ));
   }
   // mid where mid is NaN, else r.
-  static R keep_nan(R mid, R r) { return _mm256_blendv_ps(r, mid, _mm256_cmp_ps(mid, mid, _CMP_UNORD_Q)); }
+  static R keep_nan(R mid, R r) {
+    return _mm256_blendv_ps(r, mid, _mm256_cmp_ps(mid, mid, _CMP_UNORD_Q));
+  }
 };
 #endif
 

@@ -89,12 +89,15 @@ using BoxRow8Fn = void (*)(std::uint8_t* const* raws, int fresh, const std::uint
 
 // One image row's paths along the row and its decision, fused (explicit SIMD; 16 disparities
 // at a time with AVX2, 32 with AVX-512 when nd allows): pass 1 (x rising) the path from above
-// (in place in lv, its least cost per pixel in lvmin; a path starts where gprev is null) and the path from the left, their sum plus `base` (null: none)
-// into `partial`; pass 2 (x falling) the path from the right, the row's sums S, the winner,
-// the second best and the right image's winners (a window over the diagonal shifted one lane
-// per pixel); then the checks and the sub-pixel step. Same results as path_row +
-// horizontal_row + decide_row. Layouts: c, partial, base and lv hold nd values per pixel.
-// The padding after each pixel's values in the fused row's path rows (and before the first).
+// (null lv: none; in place in lv, each pixel's nd values then a pad of sentinels, its least
+// cost per pixel in lvmin; a path starts where gprev is null) and the path from the left,
+// their sum plus `base` (null: none) into `partial`; pass 2 (x falling) the path from the
+// right, the row's sums S, the winner, the second best and the right image's winners (a
+// window over the diagonal moved one lane per pixel); then the checks and the sub-pixel step.
+// Same results as path_row + horizontal_row + decide_row. c, partial and base hold nd values
+// per pixel.
+
+// The padding before the first pixel's path costs in lv and the most after each pixel's.
 inline constexpr int kFusedPad = 32;
 
 struct FusedRowArgs {
