@@ -1,6 +1,7 @@
 #include "stereodepth/semi_global.hpp"
 
 #include <algorithm>
+#include <atomic>
 #include <cmath>
 #include <condition_variable>
 #include <cstdint>
@@ -9,12 +10,17 @@
 #include <sstream>
 #include <stdexcept>
 #include <string>
+#include <thread>
 #include <vector>
 
 #include "block_match_kernels.hpp"
 #include "semi_global_kernels.hpp"
 #include "speckle.hpp"
 #include "stereodepth/parallel.hpp"
+
+#if defined(__x86_64__) || defined(_M_X64)
+#include <immintrin.h>
+#endif
 
 namespace stereodepth {
 namespace {
@@ -63,26 +69,41 @@ int vertical_paths(int paths) { return paths == 8 ? 3 : 1; }
 constexpr std::ptrdiff_t kStripeRows = 64;
 
 // Threads meet at every row (the diagonal paths read the previous row across band edges).
+// A row's share takes tens of microseconds, about what waking a blocked thread costs, so a
+// waiting thread first spins a while on the generation count, then blocks.
 class Barrier {
  public:
   explicit Barrier(std::ptrdiff_t n) : n_(n) {}
   void wait() {
-    std::unique_lock<std::mutex> lock(m_);
-    const std::uint64_t gen = gen_;
-    if (++count_ == n_) {
-      count_ = 0;
-      ++gen_;
+    const std::uint64_t gen = gen_.load(std::memory_order_acquire);
+    if (count_.fetch_add(1, std::memory_order_acq_rel) + 1 == n_) {
+      count_.store(0, std::memory_order_relaxed);
+      {
+        std::lock_guard<std::mutex> lock(m_);
+        gen_.store(gen + 1, std::memory_order_release);
+      }
       cv_.notify_all();
-    } else {
-      cv_.wait(lock, [&] { return gen != gen_; });
+      return;
     }
+    for (int i = 0; i < kSpins; ++i) {
+      if (gen_.load(std::memory_order_acquire) != gen) return;
+#if defined(__x86_64__) || defined(_M_X64)
+      _mm_pause();
+#else
+      std::this_thread::yield();
+#endif
+    }
+    std::unique_lock<std::mutex> lock(m_);
+    cv_.wait(lock, [&] { return gen_.load(std::memory_order_acquire) != gen; });
   }
 
  private:
+  static constexpr int kSpins = 4000;  // roughly 0.1 ms
   std::mutex m_;
   std::condition_variable cv_;
-  std::ptrdiff_t n_, count_ = 0;
-  std::uint64_t gen_ = 0;
+  const std::ptrdiff_t n_;
+  std::atomic<std::ptrdiff_t> count_{0};
+  std::atomic<std::uint64_t> gen_{0};
 };
 
 // Runs fn(b) for b in [0, n), each on its own thread (the caller's is the first).
