@@ -110,7 +110,7 @@ struct FusedRowArgs {
   std::int16_t* lvmin;        // cols
   const std::uint16_t* base;  // null: none
   std::uint16_t* partial;     // cols * nd scratch
-  std::uint16_t* small;       // 4 * (nd + kFusedPad) scratch (aligned to 64 bytes)
+  std::uint16_t* small;       // 3 * (nd + kFusedPad) scratch (aligned to 64 bytes)
   std::uint32_t* result;      // 4 * cols scratch
   std::uint16_t* rfinal;      // cols scratch
   float* disp;
