@@ -1,6 +1,7 @@
 #include "stereodepth/semi_global.hpp"
 
 #include <algorithm>
+#include <atomic>
 #include <cmath>
 #include <condition_variable>
 #include <cstdint>
@@ -9,12 +10,17 @@
 #include <sstream>
 #include <stdexcept>
 #include <string>
+#include <thread>
 #include <vector>
 
 #include "block_match_kernels.hpp"
 #include "semi_global_kernels.hpp"
 #include "speckle.hpp"
 #include "stereodepth/parallel.hpp"
+
+#if defined(__x86_64__) || defined(_M_X64)
+#include <immintrin.h>
+#endif
 
 namespace stereodepth {
 namespace {
@@ -63,26 +69,41 @@ int vertical_paths(int paths) { return paths == 8 ? 3 : 1; }
 constexpr std::ptrdiff_t kStripeRows = 64;
 
 // Threads meet at every row (the diagonal paths read the previous row across band edges).
+// A row's share takes tens of microseconds, about what waking a blocked thread costs, so a
+// waiting thread first spins a while on the generation count, then blocks.
 class Barrier {
  public:
   explicit Barrier(std::ptrdiff_t n) : n_(n) {}
   void wait() {
-    std::unique_lock<std::mutex> lock(m_);
-    const std::uint64_t gen = gen_;
-    if (++count_ == n_) {
-      count_ = 0;
-      ++gen_;
+    const std::uint64_t gen = gen_.load(std::memory_order_acquire);
+    if (count_.fetch_add(1, std::memory_order_acq_rel) + 1 == n_) {
+      count_.store(0, std::memory_order_relaxed);
+      {
+        std::lock_guard<std::mutex> lock(m_);
+        gen_.store(gen + 1, std::memory_order_release);
+      }
       cv_.notify_all();
-    } else {
-      cv_.wait(lock, [&] { return gen != gen_; });
+      return;
     }
+    for (int i = 0; i < kSpins; ++i) {
+      if (gen_.load(std::memory_order_acquire) != gen) return;
+#if defined(__x86_64__) || defined(_M_X64)
+      _mm_pause();
+#else
+      std::this_thread::yield();
+#endif
+    }
+    std::unique_lock<std::mutex> lock(m_);
+    cv_.wait(lock, [&] { return gen_.load(std::memory_order_acquire) != gen; });
   }
 
  private:
+  static constexpr int kSpins = 4000;  // roughly 0.1 ms
   std::mutex m_;
   std::condition_variable cv_;
-  std::ptrdiff_t n_, count_ = 0;
-  std::uint64_t gen_ = 0;
+  const std::ptrdiff_t n_;
+  std::atomic<std::ptrdiff_t> count_{0};
+  std::atomic<std::uint64_t> gen_{0};
 };
 
 // Runs fn(b) for b in [0, n), each on its own thread (the caller's is the first).
@@ -93,16 +114,20 @@ void run_bands(std::ptrdiff_t n, Fn fn) {
   });
 }
 
-// The pixel costs of the last census rows a thread used (raw_row), so that each image row
-// computes one new census row's costs rather than the box's 2r + 1.
+// The pixel costs of the last census rows a thread used (raw_row or raw_row8: T is uint16_t
+// or uint8_t), so that each image row computes one new census row's costs rather than the
+// box's 2r + 1.
+template <typename T>
 struct RawRows {
-  std::uint16_t* slot[3] = {nullptr, nullptr, nullptr};
+  T* slot[3] = {nullptr, nullptr, nullptr};
   std::ptrdiff_t row[3] = {-1, -1, -1};
 
-  // The costs of the census rows y - r .. y + r (clamped) into raws.
-  void get(const detail::SemiGlobalKernels& k, const std::uint16_t* lcen, const std::uint16_t* rcen,
-           std::ptrdiff_t rows, std::ptrdiff_t cols, std::ptrdiff_t x0, std::ptrdiff_t x1, int r,
-           int nd, int min_d, std::ptrdiff_t y, std::uint16_t* rev, const std::uint16_t** raws) {
+  // The costs of the census rows y - r .. y + r (clamped) into raws; compute(yy, out) fills
+  // one slot with census row yy's costs. With `deferred` (not null), the last missing row,
+  // when it is needed once, is left to the caller: its index in raws, else -1.
+  template <typename Compute>
+  void get(std::ptrdiff_t rows, int r, std::ptrdiff_t y, T** raws, Compute compute,
+           int* deferred = nullptr) {
     std::ptrdiff_t need[3];
     for (int i = 0; i < 2 * r + 1; ++i) {
       need[i] = std::clamp<std::ptrdiff_t>(y + i - r, 0, rows - 1);
@@ -113,6 +138,17 @@ struct RawRows {
       }
       return false;
     };
+    int last = -1;  // the last missing row's index in need, when it is needed once
+    if (deferred) {
+      *deferred = -1;
+      for (int i = 0; i < 2 * r + 1; ++i) {
+        bool have = false;
+        int uses = 0;
+        for (int s = 0; s < 3; ++s) have = have || row[s] == need[i];
+        for (int j = 0; j < 2 * r + 1; ++j) uses += need[j] == need[i] ? 1 : 0;
+        if (!have) last = uses == 1 ? i : -1;
+      }
+    }
     for (int i = 0; i < 2 * r + 1; ++i) {
       int at = -1;
       for (int s = 0; s < 3; ++s) {
@@ -122,8 +158,11 @@ struct RawRows {
         for (int s = 0; s < 3 && at < 0; ++s) {
           if (row[s] < 0 || !needed(row[s])) at = s;
         }
-        k.raw_row(lcen + need[i] * cols, rcen + need[i] * cols, cols, x0, x1, r, nd, min_d, rev,
-                  slot[at]);
+        if (i == last) {
+          *deferred = i;
+        } else {
+          compute(need[i], slot[at]);
+        }
         row[at] = need[i];
       }
       raws[i] = slot[at];
@@ -342,7 +381,82 @@ void SemiGlobalMatcher::compute(const StereoImage& left, const StereoImage& righ
   da.clip_border = p.clip_border;
 
   const auto n_col = static_cast<std::size_t>(cols) * static_cast<std::size_t>(nd);
-  if (single_pass) {
+  const bool fused = k.fused_row != nullptr && nd % k.fused_lanes == 0;
+  // The fused row's scratch (uint16 units, each piece 64-byte aligned): the sums of the
+  // vertical path and the path from the left, the pixel-sized pieces, the per-pixel results.
+  auto round64 = [](std::size_t n16) { return (n16 + 31) / 32 * 32; };
+  const std::size_t n_small = round64(8 * static_cast<std::size_t>(nd) + 512);
+  const std::size_t n_fused = round64(n_col) + n_small +
+                              round64(8 * static_cast<std::size_t>(cols)) +
+                              round64(static_cast<std::size_t>(cols));
+  auto fused_args = [&](std::uint16_t* at) {
+    detail::FusedRowArgs fa{};
+    fa.p = pp;
+    fa.d = da;
+    fa.partial = at;
+    at += round64(n_col);
+    fa.small = at;
+    at += n_small;
+    fa.result = reinterpret_cast<std::uint32_t*>(at);
+    at += round64(8 * static_cast<std::size_t>(cols));
+    fa.rfinal = at;
+    return fa;
+  };
+  if (single_pass && fused) {
+    // As below, with the fused row: per row the costs, then the path from above (in place in
+    // one row of path costs) and the paths along the row, the sums and the decision.
+    const std::ptrdiff_t stripes = (rows + kStripeRows - 1) / kStripeRows;
+    const std::ptrdiff_t ns = std::min<std::ptrdiff_t>(nt, stripes);
+    run_bands(ns, [&](std::ptrdiff_t b) {
+      const auto c = static_cast<std::size_t>(cols);
+      const std::size_t n_rev = round64(c + static_cast<std::size_t>(nd) + 32);
+      // uint8 raw rows and the box's ring
+      const std::size_t raw_len = (c + 2) * static_cast<std::size_t>(nd);
+      const std::size_t n_raw = round64((3 * raw_len + 3 * static_cast<std::size_t>(nd) + 1) / 2);
+      const std::size_t n_lv = round64(
+          detail::kFusedPad + c * static_cast<std::size_t>(nd + detail::kFusedPad) + 64);
+      const std::size_t n16 =
+          n_rev + n_raw + round64((n_col + 1) / 2) + n_lv + round64(c) + n_fused;
+      std::vector<std::uint8_t>& sc = ws.scratch[static_cast<std::size_t>(b)];
+      auto* rev = aligned<std::uint16_t>(sc, n16);
+      auto* raw8 = reinterpret_cast<std::uint8_t*>(rev + n_rev);
+      RawRows<std::uint8_t> raw;
+      for (int i = 0; i < 3; ++i) raw.slot[i] = raw8 + static_cast<std::size_t>(i) * raw_len;
+      std::uint8_t* ring = raw8 + 3 * raw_len;
+      auto* crow = reinterpret_cast<std::uint8_t*>(rev + n_rev + n_raw);
+      auto* lv = reinterpret_cast<std::int16_t*>(rev + n_rev + n_raw + round64((n_col + 1) / 2));
+      std::int16_t* lvmin = lv + n_lv;
+      detail::FusedRowArgs fa = fused_args(reinterpret_cast<std::uint16_t*>(lvmin + round64(c)));
+      fa.c = crow;
+      fa.lv = lv;
+      fa.lvmin = lvmin;
+      for (std::ptrdiff_t st = band(stripes, ns, b); st < band(stripes, ns, b + 1); ++st) {
+        const std::ptrdiff_t y0 = st * kStripeRows;
+        const std::ptrdiff_t y1 = std::min<std::ptrdiff_t>(rows, y0 + kStripeRows);
+        for (std::ptrdiff_t y = y0; y < y1; ++y) {
+          std::uint8_t* raws[3];
+          int fresh = -1;
+          auto* rev8 = reinterpret_cast<std::uint8_t*>(rev);
+          raw.get(
+              rows, r, y, raws,
+              [&](std::ptrdiff_t yy, std::uint8_t* out) {
+                k.raw_row8(lcen + yy * cols, rcen + yy * cols, cols, 0, cols, r, nd,
+                           p.min_disparity, rev8, out);
+              },
+              &fresh);
+          const std::ptrdiff_t yf =
+              fresh < 0 ? 0 : std::clamp<std::ptrdiff_t>(y + fresh - r, 0, rows - 1);
+          k.box_row8(raws, fresh, lcen + yf * cols, rcen + yf * cols, rev8, r, cols, 0, cols, nd,
+                     p.min_disparity, cmax, ring, crow);
+          fa.g = pgrey + y * cols;
+          fa.gprev = y == y0 ? nullptr : pgrey + (y - 1) * cols;
+          fa.disp = pre ? pre + y * cols : disparity.row(y);
+          fa.conf = confidence.data ? confidence.row(y) : nullptr;
+          k.fused_row(fa);
+        }
+      }
+    });
+  } else if (single_pass) {
     // paths == 3, one pass: stripes of kStripeRows rows (the last one shorter), each matched
     // top to bottom by one thread with the path from above restarting at its first row, so
     // the output does not depend on the number of threads; per row, the costs, the path from
@@ -362,7 +476,7 @@ void SemiGlobalMatcher::compute(const StereoImage& left, const StereoImage& righ
                               2 * lsz + 2 * c + 64;
       auto* rev = aligned<std::uint16_t>(sc, n16);
       std::uint16_t* colraw = rev + n_rev;
-      RawRows raw;
+      RawRows<std::uint16_t> raw;
       const std::size_t raw_len = (c + 2) * static_cast<std::size_t>(nd);
       for (int i = 0; i < 3; ++i) raw.slot[i] = colraw + static_cast<std::size_t>(i + 1) * raw_len;
       std::uint16_t* total = colraw + n_raw;
@@ -383,8 +497,11 @@ void SemiGlobalMatcher::compute(const StereoImage& left, const StereoImage& righ
         const std::ptrdiff_t y1 = std::min<std::ptrdiff_t>(rows, y0 + kStripeRows);
         int flip = 0;
         for (std::ptrdiff_t y = y0; y < y1; ++y) {
-          const std::uint16_t* raws[3];
-          raw.get(k, lcen, rcen, rows, cols, 0, cols, r, nd, p.min_disparity, y, rev, raws);
+          std::uint16_t* raws[3];
+          raw.get(rows, r, y, raws, [&](std::ptrdiff_t yy, std::uint16_t* out) {
+            k.raw_row(lcen + yy * cols, rcen + yy * cols, cols, 0, cols, r, nd, p.min_disparity,
+                      rev, out);
+          });
           k.box_row(raws, r, cols, 0, cols, nd, p.min_disparity, cmax, colraw, crow);
           const bool first = y == y0;
           k.path_row(pp, crow, pgrey + y * cols, first ? nullptr : pgrey + (y - 1) * cols,
@@ -424,17 +541,22 @@ void SemiGlobalMatcher::compute(const StereoImage& left, const StereoImage& righ
           const std::ptrdiff_t x0 = band(cols, nb, b), x1 = band(cols, nb, b + 1);
           std::uint16_t* rev = nullptr;
           std::uint16_t* colraw = nullptr;
-          RawRows raw;
+          RawRows<std::uint16_t> raw;
+          RawRows<std::uint8_t> raw8;  // with the 8-bit cost kernels
+          std::uint8_t* ring = nullptr;
           if (dy > 0) {
-            const std::size_t n_rev = static_cast<std::size_t>(cols) + static_cast<std::size_t>(nd);
+            const std::size_t n_rev =
+                static_cast<std::size_t>(cols) + static_cast<std::size_t>(nd) + 32;
             const std::size_t n_raw =
                 static_cast<std::size_t>(x1 - x0 + 2) * static_cast<std::size_t>(nd);
             rev = aligned<std::uint16_t>(ws.scratch[static_cast<std::size_t>(b)],
-                                         n_rev + 4 * n_raw);
+                                         n_rev + 4 * n_raw + static_cast<std::size_t>(nd));
             colraw = rev + n_rev;
             for (int j = 0; j < 3; ++j) {
               raw.slot[j] = colraw + static_cast<std::size_t>(j + 1) * n_raw;
+              raw8.slot[j] = reinterpret_cast<std::uint8_t*>(colraw) + j * n_raw;
             }
+            ring = reinterpret_cast<std::uint8_t*>(colraw) + 3 * n_raw;
           }
           int flip = 0;
           for (std::ptrdiff_t i = 0; i < rows; ++i) {
@@ -442,11 +564,43 @@ void SemiGlobalMatcher::compute(const StereoImage& left, const StereoImage& righ
             const std::ptrdiff_t yq = y - dy;
             std::uint8_t* crow = costs + static_cast<std::size_t>(y) * n_col;
             if (dy > 0) {
-              const std::uint16_t* raws[3];
-              raw.get(k, lcen, rcen, rows, cols, x0, x1, r, nd, p.min_disparity, y, rev, raws);
-              k.box_row(raws, r, cols, x0, x1, nd, p.min_disparity, cmax, colraw, crow);
+              if (k.raw_row8) {
+                std::uint8_t* raws[3];
+                int fresh = -1;
+                auto* rev8 = reinterpret_cast<std::uint8_t*>(rev);
+                raw8.get(
+                    rows, r, y, raws,
+                    [&](std::ptrdiff_t yy, std::uint8_t* out) {
+                      k.raw_row8(lcen + yy * cols, rcen + yy * cols, cols, x0, x1, r, nd,
+                                 p.min_disparity, rev8, out);
+                    },
+                    &fresh);
+                const std::ptrdiff_t yf =
+                    fresh < 0 ? 0 : std::clamp<std::ptrdiff_t>(y + fresh - r, 0, rows - 1);
+                k.box_row8(raws, fresh, lcen + yf * cols, rcen + yf * cols, rev8, r, cols, x0, x1,
+                           nd, p.min_disparity, cmax, ring, crow);
+              } else {
+                std::uint16_t* raws[3];
+                raw.get(rows, r, y, raws, [&](std::ptrdiff_t yy, std::uint16_t* out) {
+                  k.raw_row(lcen + yy * cols, rcen + yy * cols, cols, x0, x1, r, nd,
+                            p.min_disparity, rev, out);
+                });
+                k.box_row(raws, r, cols, x0, x1, nd, p.min_disparity, cmax, colraw, crow);
+              }
             }
-            for (int v = 0; v < nv; ++v) {
+            if (fused) {
+              std::int16_t* cur[3];
+              const std::int16_t* prev[3];
+              for (int v = 0; v < nv; ++v) {
+                const auto pair = 2 * static_cast<std::size_t>(v);
+                cur[v] = prow + (pair + static_cast<std::size_t>(flip)) * row_len;
+                prev[v] = prow + (pair + static_cast<std::size_t>(1 - flip)) * row_len;
+              }
+              k.path_rows(pp, crow, pgrey + y * cols, i > 0 ? pgrey + yq * cols : nullptr,
+                          i > 0 ? prev : nullptr, cur, nv, dxs, cols, x0, x1,
+                          sums + static_cast<std::size_t>(y) * n_col, dy > 0);
+            }
+            for (int v = 0; v < nv && !fused; ++v) {
               const auto pair = 2 * static_cast<std::size_t>(v);
               std::int16_t* cur = prow + (pair + static_cast<std::size_t>(flip)) * row_len;
               std::int16_t* prev = prow + (pair + static_cast<std::size_t>(1 - flip)) * row_len;
@@ -463,6 +617,20 @@ void SemiGlobalMatcher::compute(const StereoImage& left, const StereoImage& righ
   
     // 2. Row by row (the rows split between the threads): the horizontal paths added to a copy
     //    of the row's sums, then the winner, checks and sub-pixel step on that copy.
+    if (fused) {
+      run_bands(nt, [&](std::ptrdiff_t b) {
+        auto* at = aligned<std::uint16_t>(ws.scratch[static_cast<std::size_t>(b)], n_fused);
+        detail::FusedRowArgs fa = fused_args(at);
+        for (std::ptrdiff_t y = band(rows, nt, b); y < band(rows, nt, b + 1); ++y) {
+          fa.c = costs + static_cast<std::size_t>(y) * n_col;
+          fa.base = sums + static_cast<std::size_t>(y) * n_col;
+          fa.g = pgrey + y * cols;
+          fa.disp = pre ? pre + y * cols : disparity.row(y);
+          fa.conf = confidence.data ? confidence.row(y) : nullptr;
+          k.fused_row(fa);
+        }
+      });
+    } else {
     run_bands(nt, [&](std::ptrdiff_t b) {
       const auto c = static_cast<std::size_t>(cols);
       auto* total = aligned<std::uint16_t>(
@@ -483,7 +651,7 @@ void SemiGlobalMatcher::compute(const StereoImage& left, const StereoImage& righ
                      winners);
       }
     });
-  
+    }
   }
 
   // 4. The 3x3 median of the valid disparities (the lower median; NaN stays NaN).

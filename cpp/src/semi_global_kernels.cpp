@@ -4,6 +4,12 @@
 // compiler vectorises them for each build (SSE2, AVX2, AVX-512BW); every build computes the
 // same integers, and the floating-point steps use the same IEEE operations, in the same order,
 // as the numpy oracle.
+#if defined(__GNUC__) && !defined(__clang__)
+// GCC 12's AVX-512 headers trip -Wmaybe-uninitialized on their own _mm512_undefined_*()
+// placeholders when inlined (GCC bug 105593); set before any include so that it covers them.
+#pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
+#endif
+
 #include "semi_global_kernels.hpp"
 
 #include <cmath>
@@ -464,7 +470,868 @@ void decide_row(const DecideArgs& a, const uint16_t* s, float* disp, float* conf
 }
 
 // ------------------------------------------------------------------------------------------
+// 8-bit costs (RawRow8Fn, BoxRow8Fn): one template for AVX2 (B256) and AVX-512 (B512).
+
+#if defined(__AVX2__)
+struct B256 {
+  using R = __m256i;
+  static constexpr int kLanes = 32;
+  static R load(const void* p) { return _mm256_loadu_si256(static_cast<const R*>(p)); }
+  static void store(void* p, R v) { _mm256_storeu_si256(static_cast<R*>(p), v); }
+  static R set1(int v) { return _mm256_set1_epi8(static_cast<char>(v)); }
+  static R add(R a, R b) { return _mm256_add_epi8(a, b); }
+  // Set bits of each byte.
+  static R popcount(R v) {
+    const R table = _mm256_setr_epi8(0, 1, 1, 2, 1, 2, 2, 3, 1, 2, 2, 3, 2, 3, 3, 4, 0, 1, 1, 2,
+                                     1, 2, 2, 3, 1, 2, 2, 3, 2, 3, 3, 4);
+    const R low4 = _mm256_set1_epi8(0x0F);
+    return _mm256_add_epi8(
+        _mm256_shuffle_epi8(table, _mm256_and_si256(v, low4)),
+        _mm256_shuffle_epi8(table, _mm256_and_si256(_mm256_srli_epi16(v, 4), low4)));
+  }
+  static R hamming(R lo, R hi, R llo, R lhi) {
+    return add(popcount(_mm256_xor_si256(lo, llo)), popcount(_mm256_xor_si256(hi, lhi)));
+  }
+};
+#endif
+
+#if defined(__AVX512BW__)
+struct B512 {
+  using R = __m512i;
+  static constexpr int kLanes = 64;
+  static R load(const void* p) { return _mm512_loadu_si512(p); }
+  static void store(void* p, R v) { _mm512_storeu_si512(p, v); }
+  static R set1(int v) { return _mm512_set1_epi8(static_cast<char>(v)); }
+  static R add(R a, R b) { return _mm512_add_epi8(a, b); }
+  static R popcount(R v) {
+    const R table = _mm512_broadcast_i32x4(
+        _mm_setr_epi8(0, 1, 1, 2, 1, 2, 2, 3, 1, 2, 2, 3, 2, 3, 3, 4));
+    const R low4 = _mm512_set1_epi8(0x0F);
+    return _mm512_add_epi8(
+        _mm512_shuffle_epi8(table, _mm512_and_si512(v, low4)),
+        _mm512_shuffle_epi8(table, _mm512_and_si512(_mm512_srli_epi16(v, 4), low4)));
+  }
+  static R hamming(R lo, R hi, R llo, R lhi) {
+    return add(popcount(_mm512_xor_si512(lo, llo)), popcount(_mm512_xor_si512(hi, lhi)));
+  }
+};
+#endif
+
+#if defined(__AVX2__)
+// rev: the right census row reversed and split into its low bytes (rev[u]) and high bytes
+// (rev[cols + nd + 32 + u]) for u in 0 .. cols + nd - 1: right[clamp(cols - 1 - min_d - u)];
+// the right pixel of column x and index k is at u = cols - 1 - x + k, rising with k.
+inline void split_reversed(const uint16_t* rrow, ptrdiff_t cols, int nd, int min_d,
+                           uint8_t* rev) {
+  const ptrdiff_t rl = cols + nd;
+  uint8_t* rlo = rev;
+  uint8_t* rhi = rev + rl + 32;
+  // u with cols - 1 - min_d - u inside the image: u0 .. u1 - 1; the edge pixels outside.
+  const ptrdiff_t u0 = clamp_index(-min_d, 0, rl);
+  const ptrdiff_t u1 = clamp_index(cols - min_d, u0, rl);
+  for (ptrdiff_t u = 0; u < u0; ++u) {
+    rlo[u] = static_cast<uint8_t>(rrow[cols - 1] & 0xFF);
+    rhi[u] = static_cast<uint8_t>(rrow[cols - 1] >> 8);
+  }
+  const uint16_t* __restrict src = rrow + (cols - 1 - min_d);
+  for (ptrdiff_t u = u0; u < u1; ++u) {
+    const uint16_t v = src[-u];
+    rlo[u] = static_cast<uint8_t>(v & 0xFF);
+    rhi[u] = static_cast<uint8_t>(v >> 8);
+  }
+  for (ptrdiff_t u = u1; u < rl; ++u) {
+    rlo[u] = static_cast<uint8_t>(rrow[0] & 0xFF);
+    rhi[u] = static_cast<uint8_t>(rrow[0] >> 8);
+  }
+}
+
+// The pixel costs of left column x (census l) against the split right row, into o (nd bytes).
+template <class B>
+inline void hamming_column(uint16_t l, const uint8_t* rev, ptrdiff_t cols, ptrdiff_t x, int nd,
+                           uint8_t* __restrict o) {
+  constexpr int N = B::kLanes;
+  const uint8_t* __restrict lo = rev + (cols - 1 - x);
+  const uint8_t* __restrict hi = rev + (cols + nd + 32) + (cols - 1 - x);
+  const typename B::R llo = B::set1(l & 0xFF), lhi = B::set1(l >> 8);
+  int k = 0;
+  for (; k + N <= nd; k += N) {
+    B::store(o + k, B::hamming(B::load(lo + k), B::load(hi + k), llo, lhi));
+  }
+  for (; k < nd; ++k) {
+    o[k] = static_cast<uint8_t>(popcount16(static_cast<uint16_t>(l ^ (lo[k] | hi[k] << 8))));
+  }
+}
+
+template <class B>
+void raw_row8_impl(const uint16_t* lrow, const uint16_t* rrow, ptrdiff_t cols, ptrdiff_t x0,
+                   ptrdiff_t x1, int radius, int nd, int min_d, uint8_t* rev, uint8_t* out) {
+  split_reversed(rrow, cols, nd, min_d, rev);
+  const ptrdiff_t n = x1 - x0 + 2 * radius;
+  for (ptrdiff_t j = 0; j < n; ++j) {
+    const ptrdiff_t x = clamp_index(x0 - radius + j, 0, cols - 1);
+    hamming_column<B>(lrow[x], rev, cols, x, nd, out + j * nd);
+  }
+}
+
+template <class B>
+void box_row8_impl(uint8_t* const* raws, int fresh, const uint16_t* lrow, const uint16_t* rrow,
+                   uint8_t* rev, int radius, ptrdiff_t cols, ptrdiff_t x0, ptrdiff_t x1, int nd,
+                   int min_d, int cmax, uint8_t* ring, uint8_t* out) {
+  constexpr int N = B::kLanes;
+  if (fresh >= 0) split_reversed(rrow, cols, nd, min_d, rev);
+  // The fresh row (computed here, column by column) and the others.
+  uint8_t* f = fresh >= 0 ? raws[fresh] : nullptr;
+  const uint8_t* other[3];
+  int n_other = 0;
+  for (int i = 0; i < 2 * radius + 1; ++i) {
+    if (i != fresh) other[n_other++] = raws[i];
+  }
+  // Raw column j (image column clamp(x0 - r + j)): the fresh row's costs, and the column sum
+  // into ring slot j % 3 (radius 1) or the output (radius 0).
+  auto column = [&](ptrdiff_t j, uint8_t* __restrict v) {
+    const ptrdiff_t at = j * nd;
+    if (f) {
+      const ptrdiff_t x = clamp_index(x0 - radius + j, 0, cols - 1);
+      hamming_column<B>(lrow[x], rev, cols, x, nd, f + at);
+    }
+    if (radius == 0) {
+      std::memcpy(v, (f ? f : other[0]) + at, static_cast<std::size_t>(nd));
+      return;
+    }
+    const uint8_t* __restrict a = f ? f + at : other[2] + at;
+    const uint8_t* __restrict b = other[0] + at;
+    const uint8_t* __restrict c = other[1] + at;
+    int k = 0;
+    for (; k + N <= nd; k += N) {
+      B::store(v + k, B::add(B::add(B::load(a + k), B::load(b + k)), B::load(c + k)));
+    }
+    for (; k < nd; ++k) v[k] = static_cast<uint8_t>(a[k] + b[k] + c[k]);
+  };
+  if (radius) {
+    column(0, ring);
+    column(1, ring + nd);
+  }
+  for (ptrdiff_t x = x0; x < x1; ++x) {
+    uint8_t* __restrict o = out + x * nd;
+    const ptrdiff_t j = x - x0 + radius;
+    if (radius == 0) {
+      column(j, o);
+    } else {
+      column(j + 1, ring + ((j + 1) % 3) * nd);
+      const uint8_t* __restrict p = ring + ((j - 1) % 3) * nd;
+      const uint8_t* __restrict q = ring + (j % 3) * nd;
+      const uint8_t* __restrict s = ring + ((j + 1) % 3) * nd;
+      int k = 0;
+      for (; k + N <= nd; k += N) {
+        B::store(o + k, B::add(B::add(B::load(p + k), B::load(q + k)), B::load(s + k)));
+      }
+      for (; k < nd; ++k) o[k] = static_cast<uint8_t>(p[k] + q[k] + s[k]);
+    }
+    const ptrdiff_t khi = x - min_d;
+    const ptrdiff_t klo = x - min_d - cols + 1;
+    for (ptrdiff_t k = clamp_index(khi + 1, 0, nd); k < nd; ++k) o[k] = static_cast<uint8_t>(cmax);
+    for (ptrdiff_t k = 0, e = clamp_index(klo, 0, nd); k < e; ++k) {
+      o[k] = static_cast<uint8_t>(cmax);
+    }
+  }
+}
+
+void raw_row8(const uint16_t* lrow, const uint16_t* rrow, ptrdiff_t cols, ptrdiff_t x0,
+              ptrdiff_t x1, int radius, int nd, int min_d, uint8_t* rev, uint8_t* out) {
+#if defined(__AVX512BW__)
+  if (nd >= B512::kLanes) {
+    raw_row8_impl<B512>(lrow, rrow, cols, x0, x1, radius, nd, min_d, rev, out);
+    return;
+  }
+#endif
+  raw_row8_impl<B256>(lrow, rrow, cols, x0, x1, radius, nd, min_d, rev, out);
+}
+
+void box_row8(uint8_t* const* raws, int fresh, const uint16_t* lrow, const uint16_t* rrow,
+              uint8_t* rev, int radius, ptrdiff_t cols, ptrdiff_t x0, ptrdiff_t x1, int nd,
+              int min_d, int cmax, uint8_t* ring, uint8_t* out) {
+#if defined(__AVX512BW__)
+  if (nd >= B512::kLanes) {
+    box_row8_impl<B512>(raws, fresh, lrow, rrow, rev, radius, cols, x0, x1, nd, min_d, cmax, ring,
+                        out);
+    return;
+  }
+#endif
+  box_row8_impl<B256>(raws, fresh, lrow, rrow, rev, radius, cols, x0, x1, nd, min_d, cmax, ring,
+                      out);
+}
+#endif
+
+// ------------------------------------------------------------------------------------------
+// The fused row (FusedRowFn): explicit SIMD, one template for AVX2 (V256) and AVX-512 (V512),
+// so both builds run the same steps. Every value read back was stored at the same address
+// and width (no store-forwarding stalls): the neighbours d - 1 and d + 1 come from shifts of
+// whole vectors in registers.
+
+#if defined(__AVX2__)
+struct V256 {
+  using R = __m256i;
+  static constexpr int kLanes = 16;
+  static R load(const void* p) { return _mm256_load_si256(static_cast<const R*>(p)); }
+  static R loadu(const void* p) { return _mm256_loadu_si256(static_cast<const R*>(p)); }
+  static void store(void* p, R v) { _mm256_store_si256(static_cast<R*>(p), v); }
+  static void storeu(void* p, R v) { _mm256_storeu_si256(static_cast<R*>(p), v); }
+  static R widen(const std::uint8_t* p) {
+    return _mm256_cvtepu8_epi16(_mm_loadu_si128(reinterpret_cast<const __m128i*>(p)));
+  }
+  // Neighbour lanes of consecutive vectors a, b: X = cross(a, b) serves down(a, X) (lane i:
+  // a[i + 1], the last lane b[0]) and up(b, X) (lane 0: a's last lane, lane i: b[i - 1]);
+  // one lane permute per vector pair.
+  using X = R;
+  static X cross(R a, R b) { return _mm256_permute2x128_si256(a, b, 0x21); }
+  static R up(R b, X x) { return _mm256_alignr_epi8(b, x, 14); }
+  static R down(R a, X x) { return _mm256_alignr_epi8(x, a, 2); }
+  static R set1(int v) { return _mm256_set1_epi16(static_cast<short>(v)); }
+  static R iota() {
+    return _mm256_setr_epi16(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15);
+  }
+  static R add(R a, R b) { return _mm256_add_epi16(a, b); }
+  static R sub(R a, R b) { return _mm256_sub_epi16(a, b); }
+  static R min(R a, R b) { return _mm256_min_epu16(a, b); }
+  static R max(R a, R b) { return _mm256_max_epu16(a, b); }
+  // b in the lanes where k - lo (mod 2^16) <= 2, a elsewhere.
+  static R blend_near(R a, R b, R k, R lo) {
+    const R rel = _mm256_sub_epi16(k, lo);
+    const R two = _mm256_set1_epi16(2);
+    return _mm256_blendv_epi8(a, b, _mm256_cmpeq_epi16(_mm256_min_epu16(rel, two), rel));
+  }
+  // lane 0: prev's last lane; lane i: cur[i - 1].
+  static R shift_up(R prev, R cur) {
+    return _mm256_alignr_epi8(cur, _mm256_permute2x128_si256(prev, cur, 0x21), 14);
+  }
+  // lane i: cur[i + 1]; the last lane: next[0].
+  static R shift_down(R cur, R next) {
+    return _mm256_alignr_epi8(_mm256_permute2x128_si256(cur, next, 0x21), cur, 2);
+  }
+  static std::uint32_t hmin(R v) { return hmin_epu16(v); }
+  // The least lane in every lane (no trip through a general register).
+  static R hmin_v(R v) {
+    const __m128i m = _mm_min_epu16(_mm256_castsi256_si128(v), _mm256_extracti128_si256(v, 1));
+    return _mm256_broadcastw_epi16(_mm_minpos_epu16(m));
+  }
+  static std::uint32_t lane0(R v) {
+    return static_cast<std::uint32_t>(_mm_cvtsi128_si32(_mm256_castsi256_si128(v)) & 0xFFFF);
+  }
+  // Where v <= r: r = v, a = k.
+  static void take_le(R& r, R& a, R v, R k) {
+    const R m = _mm256_min_epu16(r, v);
+    a = _mm256_blendv_epi8(a, k, _mm256_cmpeq_epi16(m, v));
+    r = m;
+  }
+  // Where v < r: r = v, a = k.
+  static void take_lt(R& r, R& a, R v, R k) {
+    const R m = _mm256_min_epu16(r, v);
+    a = _mm256_blendv_epi8(k, a, _mm256_cmpeq_epi16(m, r));
+    r = m;
+  }
+  // The least of the lanes of a whose lane of r equals b.
+  static R hmin_where_eq(R a, R r, R b) {
+    return hmin_v(_mm256_or_si256(a, _mm256_xor_si256(_mm256_cmpeq_epi16(r, b), set1(-1))));
+  }
+  // v with 0xFFFF in the lanes where k - lo (mod 2^16) > span.
+  static R or_outside(R v, R k, R lo, R span) {
+    const R rel = _mm256_sub_epi16(k, lo);
+    const R in = _mm256_cmpeq_epi16(_mm256_min_epu16(rel, span), rel);
+    return _mm256_or_si256(v, _mm256_xor_si256(in, _mm256_set1_epi16(-1)));
+  }
+};
+#endif
+
+#if defined(__AVX512BW__)
+struct V512 {
+  using R = __m512i;
+  static constexpr int kLanes = 32;
+  static R load(const void* p) { return _mm512_load_si512(p); }
+  static R loadu(const void* p) { return _mm512_loadu_si512(p); }
+  static void store(void* p, R v) { _mm512_store_si512(p, v); }
+  static void storeu(void* p, R v) { _mm512_storeu_si512(p, v); }
+  struct X {
+    R a, b;
+  };
+  static X cross(R a, R b) { return X{a, b}; }
+  static R up(R, X x) { return shift_up(x.a, x.b); }
+  static R down(R, X x) { return shift_down(x.a, x.b); }
+  static R widen(const std::uint8_t* p) {
+    return _mm512_cvtepu8_epi16(_mm256_loadu_si256(reinterpret_cast<const __m256i*>(p)));
+  }
+  static R set1(int v) { return _mm512_set1_epi16(static_cast<short>(v)); }
+  static R iota() {
+    return _mm512_set_epi16(31, 30, 29, 28, 27, 26, 25, 24, 23, 22, 21, 20, 19, 18, 17, 16, 15,
+                            14, 13, 12, 11, 10, 9, 8, 7, 6, 5, 4, 3, 2, 1, 0);
+  }
+  static R add(R a, R b) { return _mm512_add_epi16(a, b); }
+  static R sub(R a, R b) { return _mm512_sub_epi16(a, b); }
+  static R min(R a, R b) { return _mm512_min_epu16(a, b); }
+  static R max(R a, R b) { return _mm512_max_epu16(a, b); }
+  static R blend_near(R a, R b, R k, R lo) {
+    return _mm512_mask_mov_epi16(a, _mm512_cmple_epu16_mask(_mm512_sub_epi16(k, lo), set1(2)), b);
+  }
+  // Index i < 32 picks the first operand's lane i, 32 + i the second's.
+  static R shift_up(R prev, R cur) {
+    const R idx = _mm512_add_epi16(iota(), _mm512_set1_epi16(31));  // 31, 32, .., 62
+    return _mm512_permutex2var_epi16(prev, idx, cur);
+  }
+  static R shift_down(R cur, R next) {
+    const R idx = _mm512_add_epi16(iota(), _mm512_set1_epi16(1));  // 1, 2, .., 32
+    return _mm512_permutex2var_epi16(cur, idx, next);
+  }
+  static std::uint32_t hmin(R v) {
+    return hmin_epu16(_mm256_min_epu16(_mm512_castsi512_si256(v), _mm512_extracti64x4_epi64(v, 1)));
+  }
+  static void take_le(R& r, R& a, R v, R k) {
+    a = _mm512_mask_mov_epi16(a, _mm512_cmple_epu16_mask(v, r), k);
+    r = _mm512_min_epu16(r, v);
+  }
+  static void take_lt(R& r, R& a, R v, R k) {
+    a = _mm512_mask_mov_epi16(a, _mm512_cmplt_epu16_mask(v, r), k);
+    r = _mm512_min_epu16(r, v);
+  }
+  static R hmin_v(R v) {
+    const __m256i h = _mm256_min_epu16(_mm512_castsi512_si256(v), _mm512_extracti64x4_epi64(v, 1));
+    const __m128i m = _mm_min_epu16(_mm256_castsi256_si128(h), _mm256_extracti128_si256(h, 1));
+    return _mm512_broadcastw_epi16(_mm_minpos_epu16(m));
+  }
+  static std::uint32_t lane0(R v) {
+    return static_cast<std::uint32_t>(_mm_cvtsi128_si32(_mm512_castsi512_si128(v)) & 0xFFFF);
+  }
+  static R hmin_where_eq(R a, R r, R b) {
+    return hmin_v(_mm512_mask_mov_epi16(set1(-1), _mm512_cmpeq_epi16_mask(r, b), a));
+  }
+  static R or_outside(R v, R k, R lo, R span) {
+    return _mm512_mask_mov_epi16(v, _mm512_cmpgt_epu16_mask(_mm512_sub_epi16(k, lo), span),
+                                 _mm512_set1_epi16(-1));
+  }
+};
+#endif
+
+#if defined(__AVX2__)
+// path_step on one vector: a = L(q, d), lo = L(q, d - 1), hi = L(q, d + 1) (all >= 0 and
+// below 2^15, so unsigned minima are the signed ones).
+template <class V>
+inline typename V::R step_vec(typename V::R lo, typename V::R a, typename V::R hi,
+                              typename V::R c, typename V::R vp1, typename V::R mp2,
+                              typename V::R m) {
+  const typename V::R v = V::min(V::min(a, mp2), V::add(V::min(lo, hi), vp1));
+  return V::add(c, V::sub(v, m));
+}
+
+// Pass 1's work on one pixel: the path from the left (hrow: the previous pixel's, with a
+// sentinel vector after it; kHFirst: the path starts) and, kVertical, the path from above
+// (lvx: the pixel's row of path costs, in place, with a sentinel before and after it;
+// kVFirst: the path starts). Returns nothing; writes partial and the least path costs.
+template <class V, bool kVertical, bool kBase, bool kHFirst, bool kVFirst>
+inline void pass1_pixel(int nv, const uint8_t* __restrict cx, int16_t* __restrict hrow,
+                        int16_t* __restrict lvx, const uint16_t* __restrict bx,
+                        uint16_t* __restrict px, typename V::R vp1, typename V::R mh_v,
+                        typename V::R mp2h, typename V::R mv_v, typename V::R mp2v,
+                        typename V::R& mh_out, int16_t* lvmin_out) {
+  using R = typename V::R;
+  constexpr int N = V::kLanes;
+  const R sent = V::set1(kSentinel);
+  const R ones = V::set1(-1);
+  R hcur = sent;
+  typename V::X xprev{};
+  if constexpr (!kHFirst) {
+    hcur = V::load(hrow);
+    xprev = V::cross(sent, hcur);
+  }
+  R vlo = sent, va = sent, vhi = sent;
+  if constexpr (kVertical && !kVFirst) {
+    vlo = V::loadu(lvx - 1);
+    va = V::load(lvx);
+    vhi = V::loadu(lvx + 1);
+  }
+  R hmin_v = ones, vmin_v = ones;
+  for (int i = 0; i < nv; ++i) {
+    const R c = V::widen(cx + i * N);
+    R lh;
+    if constexpr (kHFirst) {
+      lh = c;
+    } else {
+      const R hnext = V::load(hrow + (i + 1) * N);  // the sentinel after the last
+      const typename V::X xcur = V::cross(hcur, hnext);
+      lh = step_vec<V>(V::up(hcur, xprev), hcur, V::down(hcur, xcur), c, vp1, mp2h, mh_v);
+      hcur = hnext;
+      xprev = xcur;
+    }
+    V::store(hrow + i * N, lh);
+    hmin_v = V::min(hmin_v, lh);
+    R part = lh;
+    if constexpr (kVertical) {
+      R lvn;
+      if constexpr (kVFirst) {
+        lvn = c;
+      } else {
+        // The next vector's neighbours, read before this one is overwritten.
+        const int at = (i + 1) * N;
+        const R nlo = V::loadu(lvx + at - 1), na = V::load(lvx + at), nhi = V::loadu(lvx + at + 1);
+        lvn = step_vec<V>(vlo, va, vhi, c, vp1, mp2v, mv_v);
+        vlo = nlo;
+        va = na;
+        vhi = nhi;
+      }
+      V::store(lvx + i * N, lvn);
+      vmin_v = V::min(vmin_v, lvn);
+      part = V::add(part, lvn);
+    }
+    if constexpr (kBase) part = V::add(part, V::load(bx + i * N));
+    V::store(px + i * N, part);
+  }
+  mh_out = V::hmin_v(hmin_v);
+  if constexpr (kVertical) *lvmin_out = static_cast<int16_t>(V::hmin(vmin_v));
+}
+
+// Pass 2's paths and sums on one pixel: the path from the right (hrow as in pass 1), the
+// sums (0xFFFF outside klo .. klo + span when kBorder), the right winners' window
+// moved down one lane and updated. Returns the least sum of each lane, its lowest index in
+// arg_v and the lane's second least (the least of the others; equal to the least on a tie)
+// in sec_v.
+template <class V, bool kFirst, bool kBorder>
+inline typename V::R pass2_pixel(int nv, const uint8_t* __restrict cx, int16_t* __restrict hrow,
+                                 const uint16_t* __restrict px,
+                                 uint16_t* __restrict wmin, uint16_t* __restrict warg,
+                                 typename V::R vp1, typename V::R mr_v, typename V::R mp2r,
+                                 typename V::R lo_v, typename V::R span_v, typename V::R& mr_out,
+                                 typename V::R& arg_v, typename V::R& sec_v) {
+  using R = typename V::R;
+  constexpr int N = V::kLanes;
+  const R sent = V::set1(kSentinel);
+  const R ones = V::set1(-1);
+  const R step_k = V::set1(N);
+  R rcur = sent;
+  typename V::X xprev{};
+  if constexpr (!kFirst) {
+    rcur = V::load(hrow);
+    xprev = V::cross(sent, rcur);
+  }
+  R wcur = V::load(wmin), acur = V::load(warg);
+  R rmin_v = ones, best_v = ones, barg = V::set1(0), bsec = ones;
+  R kv = V::iota();
+  for (int i = 0; i < nv; ++i) {
+    const R c = V::widen(cx + i * N);
+    R lr;
+    if constexpr (kFirst) {
+      lr = c;
+    } else {
+      const R rnext = V::load(hrow + (i + 1) * N);
+      const typename V::X xcur = V::cross(rcur, rnext);
+      lr = step_vec<V>(V::up(rcur, xprev), rcur, V::down(rcur, xcur), c, vp1, mp2r, mr_v);
+      rcur = rnext;
+      xprev = xcur;
+    }
+    V::store(hrow + i * N, lr);
+    rmin_v = V::min(rmin_v, lr);
+    R t = V::add(V::load(px + i * N), lr);
+    if constexpr (kBorder) t = V::or_outside(t, kv, lo_v, span_v);
+    bsec = V::min(bsec, V::max(best_v, t));
+    V::take_lt(best_v, barg, t, kv);
+    const R wnext = V::load(wmin + (i + 1) * N);  // 0xFFFF after the last
+    const R anext = V::load(warg + (i + 1) * N);
+    R w = V::down(wcur, V::cross(wcur, wnext));
+    R wa = V::down(acur, V::cross(acur, anext));
+    V::take_le(w, wa, t, kv);
+    V::store(wmin + i * N, w);
+    V::store(warg + i * N, wa);
+    wcur = wnext;
+    acur = anext;
+    kv = V::add(kv, step_k);
+  }
+  mr_out = V::hmin_v(rmin_v);
+  arg_v = barg;
+  sec_v = bsec;
+  return best_v;
+}
+
+template <class V, bool kVertical, bool kBase>
+void fused_row_impl(const FusedRowArgs& a) {
+  using R = typename V::R;
+  constexpr int N = V::kLanes;
+  const ptrdiff_t cols = a.d.cols;
+  const int nd = a.p.nd, nv = nd / N;
+  const ptrdiff_t ls = nd + kFusedPad;
+  const ptrdiff_t lvs = nd + N;  // lv: each pixel's nd path costs, then N sentinels
+  const ptrdiff_t dmin = a.d.min_d;
+  const R sent = V::set1(kSentinel);
+  const R vp1 = V::set1(a.p.p1);
+  const uint8_t* g = a.g;
+  // small: the path along the row (nd, then a sentinel pad), the right winners' window: least
+  // sums and their indices (nd each, then a pad of 0xFFFF).
+  int16_t* hrow = reinterpret_cast<int16_t*>(a.small);
+  uint16_t* wmin = a.small + ls;
+  uint16_t* warg = a.small + 2 * ls;
+  for (int k = 0; k < kFusedPad; ++k) {
+    hrow[nd + k] = kSentinel;
+    wmin[nd + k] = 0xFFFFu;
+    warg[nd + k] = 0xFFFFu;
+  }
+
+  // Pass 1, x rising: the path from above (in place) and the path from the left.
+  const bool vfirst = a.gprev == nullptr;
+  int16_t* lv0 = kVertical ? a.lv + kFusedPad : nullptr;
+  if (kVertical && vfirst) {
+    // The sentinels around each pixel's path costs (written once per path start).
+    for (int k = 0; k < kFusedPad; ++k) a.lv[k] = kSentinel;
+    for (ptrdiff_t x = 0; x < cols; ++x) {
+      for (int k = 0; k < N; ++k) lv0[x * lvs + nd + k] = kSentinel;
+    }
+  }
+  R mh = sent;  // the previous pixel's least path cost from the left, in every lane
+  for (ptrdiff_t x = 0; x < cols; ++x) {
+    const uint8_t* cx = a.c + x * nd;
+    uint16_t* px = a.partial + x * nd;
+    const uint16_t* bx = kBase ? a.base + x * nd : nullptr;
+    int16_t* lvx = kVertical ? lv0 + x * lvs : nullptr;
+    int16_t* lvmin = kVertical ? a.lvmin + x : nullptr;
+    R mv_v = sent, mp2v = sent;
+    if (kVertical && !vfirst) {
+      const int mv = a.lvmin[x];
+      mv_v = V::set1(mv);
+      mp2v = V::set1(mv + p2_for(a.p, g[x], a.gprev[x]));
+    }
+    if (x == 0) {
+      if (vfirst) {
+        pass1_pixel<V, kVertical, kBase, true, true>(nv, cx, hrow, lvx, bx, px, vp1, sent, sent,
+                                                     mv_v, mp2v, mh, lvmin);
+      } else {
+        pass1_pixel<V, kVertical, kBase, true, false>(nv, cx, hrow, lvx, bx, px, vp1, sent, sent,
+                                                      mv_v, mp2v, mh, lvmin);
+      }
+      continue;
+    }
+    const R mh_v = mh;
+    const R mp2h = V::add(mh, V::set1(p2_for(a.p, g[x], g[x - 1])));
+    if (vfirst) {
+      pass1_pixel<V, kVertical, kBase, false, true>(nv, cx, hrow, lvx, bx, px, vp1, mh_v, mp2h,
+                                                    mv_v, mp2v, mh, lvmin);
+    } else {
+      pass1_pixel<V, kVertical, kBase, false, false>(nv, cx, hrow, lvx, bx, px, vp1, mh_v, mp2h,
+                                                     mv_v, mp2v, mh, lvmin);
+    }
+  }
+
+  // Pass 2, x falling: the path from the right, the sums, the winner and second best, and
+  // the right image's winners. wmin/warg lane k: right column x - dmin - k (the pixel's own
+  // candidates); one pixel to the left, every column moves down one lane: lane 0 is final
+  // (every candidate of that column has come) and the last lane starts empty. Candidates
+  // arrive with k falling, so <= keeps the lowest k of a tie.
+  for (int k = 0; k < nd; ++k) {
+    wmin[k] = 0xFFFFu;
+    warg[k] = 0;
+  }
+  uint32_t* res = a.result;
+  R mr = sent;
+  for (ptrdiff_t x = cols - 1; x >= 0; --x) {
+    const uint8_t* cx = a.c + x * nd;
+    const uint16_t* px = a.partial + x * nd;
+    const bool first = x == cols - 1;
+    if (!first) {
+      const ptrdiff_t xr = x + 1 - dmin;
+      if (xr >= 0 && xr < cols) a.rfinal[xr] = warg[0];
+    }
+    const ptrdiff_t klo = clamp_index(x - dmin - cols + 1, 0, nd);
+    const ptrdiff_t khi = clamp_index(x - dmin, -1, nd - 1);
+    const bool border = klo != 0 || khi != nd - 1;
+    const R lo_v = V::set1(static_cast<int>(klo));
+    const R span_v = V::set1(static_cast<int>(khi - klo));
+    R best_v, arg_v, sec_v;
+    if (first) {
+      best_v = pass2_pixel<V, true, true>(nv, cx, hrow, px, wmin, warg, vp1, sent, sent, lo_v,
+                                          span_v, mr, arg_v, sec_v);
+    } else {
+      const R mr_v = mr;
+      const R mp2r = V::add(mr, V::set1(p2_for(a.p, g[x], g[x + 1])));
+      if (border) {
+        best_v = pass2_pixel<V, false, true>(nv, cx, hrow, px, wmin, warg, vp1, mr_v, mp2r,
+                                             lo_v, span_v, mr, arg_v, sec_v);
+      } else {
+        best_v = pass2_pixel<V, false, false>(nv, cx, hrow, px, wmin, warg, vp1, mr_v, mp2r,
+                                              lo_v, span_v, mr, arg_v, sec_v);
+      }
+    }
+    uint32_t* rx = res + 4 * x;
+    if (klo > khi) continue;
+    const R best_b = V::hmin_v(best_v);
+    const R kb_b = V::hmin_where_eq(arg_v, best_v, best_b);
+    // The second best: the least over the lanes of each lane's least, or of its second least
+    // where the lane's least first comes at kb - 1, kb or kb + 1 (the only index of kb - 1 ..
+    // kb + 1 in that lane: a later equal least is then the second least).
+    const uint32_t sec = V::hmin(V::blend_near(best_v, sec_v, arg_v, V::sub(kb_b, V::set1(1))));
+    const uint32_t best = V::lane0(best_b);
+    const int kb = static_cast<int>(V::lane0(kb_b));
+    rx[0] = best;
+    rx[1] = static_cast<uint32_t>(kb);
+    rx[2] = sec == 0xFFFFu ? kNone : sec;
+    // The sums beside the winner (used only when both are inside: unmasked), from the sums
+    // of the other paths and the path from the right just stored.
+    auto sum_at = [&](int k) {
+      return static_cast<uint32_t>(static_cast<uint16_t>(px[k] + static_cast<uint16_t>(hrow[k])));
+    };
+    rx[3] = (kb > 0 ? sum_at(kb - 1) : 0u) | (kb + 1 < nd ? sum_at(kb + 1) << 16 : 0u);
+  }
+  // The columns still in the window are final.
+  for (int k = 0; k < nd; ++k) {
+    const ptrdiff_t xr = -dmin - k;
+    if (xr >= 0 && xr < cols) a.rfinal[xr] = warg[k];
+  }
+
+  // The checks and the sub-pixel step, as decide_row.
+  const DecideArgs& d = a.d;
+  const bool lr_on = d.lr_max_diff >= 0;
+  const float nan = std::numeric_limits<float>::quiet_NaN();
+  for (ptrdiff_t x = 0; x < cols; ++x) {
+    const ptrdiff_t klo = clamp_index(x - dmin - cols + 1, 0, nd);
+    const ptrdiff_t khi = clamp_index(x - dmin, -1, nd - 1);
+    bool ok = klo <= khi;
+    if (!d.clip_border) ok = ok && x - dmin - nd + 1 >= 0 && x - dmin <= cols - 1;
+    if (!ok) {
+      a.disp[x] = nan;
+      if (a.conf) a.conf[x] = 0.0f;
+      continue;
+    }
+    const uint32_t* rx = res + 4 * x;
+    const uint32_t best = rx[0], second = rx[2];
+    const ptrdiff_t kb = rx[1];
+    const bool has2 = second != kNone;
+    if (d.uniqueness_factor > 0 && has2) {
+      ok = static_cast<double>(second) * 100.0 > static_cast<double>(best) * d.uniqueness_factor;
+    }
+    if (ok && lr_on) {
+      const ptrdiff_t kr = a.rfinal[x - dmin - kb];
+      const ptrdiff_t diff = kb > kr ? kb - kr : kr - kb;
+      ok = static_cast<double>(diff) <= d.lr_max_diff;
+    }
+    if (!ok) {
+      a.disp[x] = nan;
+      if (a.conf) a.conf[x] = 0.0f;
+      continue;
+    }
+    float disp = static_cast<float>(dmin + kb);
+    if (d.subpixel != static_cast<int>(SubpixelFit::kNone) && kb - 1 >= klo && kb + 1 <= khi) {
+      const int32_t c0 = static_cast<int32_t>(rx[3] & 0xFFFFu);
+      const int32_t c1 = static_cast<int32_t>(best);
+      const int32_t c2 = static_cast<int32_t>(rx[3] >> 16);
+      const float num = static_cast<float>(c0 - c2);
+      float den;
+      if (d.subpixel == static_cast<int>(SubpixelFit::kParabola)) {
+        den = static_cast<float>(2 * (c0 + c2 - 2 * c1));
+      } else {
+        den = static_cast<float>(2 * (c0 - c1 > c2 - c1 ? c0 - c1 : c2 - c1));
+      }
+      if (den > 0.0f) disp = disp + num / den;
+    }
+    a.disp[x] = disp;
+    if (a.conf) {
+      a.conf[x] = !has2        ? 1.0f
+                  : second > 0 ? static_cast<float>(second - best) / static_cast<float>(second)
+                               : 0.0f;
+    }
+  }
+}
+
+
+// PathRowsFn: per pixel, every direction's step and the sum in one sweep over the
+// disparities. A path's first pixel reads a row of zeros (m = 0): L = C + min(0, ..) - 0 = C.
+inline constexpr int kZeroRow = kMaxNumDisparities + 64;
+alignas(64) const int16_t kZeros[kZeroRow] = {};
+
+template <class V, int kNv, bool kWrite>
+void path_rows_impl(const PathParams& p, const uint8_t* c, const uint8_t* g, const uint8_t* gprev,
+                    const int16_t* const* prev, int16_t* const* cur, const int* dxs,
+                    ptrdiff_t cols, ptrdiff_t x0, ptrdiff_t x1, uint16_t* s) {
+  using R = typename V::R;
+  constexpr int N = V::kLanes;
+  const int nd = p.nd, ls = p.ls, nvec = nd / N;
+  const R vp1 = V::set1(p.p1);
+  const R ones = V::set1(-1);
+  for (ptrdiff_t x = x0; x < x1; ++x) {
+    const int16_t* q[kNv];
+    int16_t* out[kNv];
+    R m_v[kNv], mp2_v[kNv], mn[kNv];
+    for (int v = 0; v < kNv; ++v) {
+      const ptrdiff_t xq = x - dxs[v];
+      out[v] = cur[v] + x * ls;
+      mn[v] = ones;
+      if (prev == nullptr || xq < 0 || xq >= cols) {
+        q[v] = kZeros;
+        m_v[v] = V::set1(0);
+        mp2_v[v] = V::set1(0);
+      } else {
+        q[v] = prev[v] + xq * ls;
+        const int m = q[v][nd + 2];
+        m_v[v] = V::set1(m);
+        mp2_v[v] = V::set1(m + p2_for(p, g[x], gprev[xq]));
+      }
+    }
+    const uint8_t* cx = c + x * nd;
+    uint16_t* sx = s + x * nd;
+    for (int i = 0; i < nvec; ++i) {
+      const R cv = V::widen(cx + i * N);
+      R acc = kWrite ? V::set1(0) : V::loadu(sx + i * N);
+      for (int v = 0; v < kNv; ++v) {
+        const int16_t* qi = q[v] + i * N;
+        const R l = step_vec<V>(V::loadu(qi), V::loadu(qi + 1), V::loadu(qi + 2), cv, vp1,
+                                mp2_v[v], m_v[v]);
+        V::storeu(out[v] + 1 + i * N, l);
+        mn[v] = V::min(mn[v], l);
+        acc = V::add(acc, l);
+      }
+      V::storeu(sx + i * N, acc);
+    }
+    for (int v = 0; v < kNv; ++v) out[v][nd + 2] = static_cast<int16_t>(V::hmin(mn[v]));
+  }
+}
+
+template <class V>
+void path_rows_v(const PathParams& p, const uint8_t* c, const uint8_t* g, const uint8_t* gprev,
+                 const int16_t* const* prev, int16_t* const* cur, int nv, const int* dxs,
+                 ptrdiff_t cols, ptrdiff_t x0, ptrdiff_t x1, uint16_t* s, bool write) {
+  if (nv == 3) {
+    if (write) {
+      path_rows_impl<V, 3, true>(p, c, g, gprev, prev, cur, dxs, cols, x0, x1, s);
+    } else {
+      path_rows_impl<V, 3, false>(p, c, g, gprev, prev, cur, dxs, cols, x0, x1, s);
+    }
+  } else if (write) {
+    path_rows_impl<V, 1, true>(p, c, g, gprev, prev, cur, dxs, cols, x0, x1, s);
+  } else {
+    path_rows_impl<V, 1, false>(p, c, g, gprev, prev, cur, dxs, cols, x0, x1, s);
+  }
+}
+
+void path_rows(const PathParams& p, const uint8_t* c, const uint8_t* g, const uint8_t* gprev,
+               const int16_t* const* prev, int16_t* const* cur, int nv, const int* dxs,
+               ptrdiff_t cols, ptrdiff_t x0, ptrdiff_t x1, uint16_t* s, bool write) {
+#if defined(__AVX512BW__)
+  if (p.nd % V512::kLanes == 0) {
+    path_rows_v<V512>(p, c, g, gprev, prev, cur, nv, dxs, cols, x0, x1, s, write);
+    return;
+  }
+#endif
+  path_rows_v<V256>(p, c, g, gprev, prev, cur, nv, dxs, cols, x0, x1, s, write);
+}
+
+template <class V>
+void fused_row_v(const FusedRowArgs& a) {
+  if (a.lv) {
+    if (a.base) {
+      fused_row_impl<V, true, true>(a);
+    } else {
+      fused_row_impl<V, true, false>(a);
+    }
+  } else if (a.base) {
+    fused_row_impl<V, false, true>(a);
+  } else {
+    fused_row_impl<V, false, false>(a);
+  }
+}
+
+void fused_row(const FusedRowArgs& a) {
+#if defined(__AVX512BW__)
+  if (a.p.nd % V512::kLanes == 0) {
+    fused_row_v<V512>(a);
+    return;
+  }
+#endif
+  fused_row_v<V256>(a);
+}
+#endif
+
+// ------------------------------------------------------------------------------------------
 // The 3x3 median of the valid disparities.
+
+// The 3x3 median of whole vectors of pixels (explicit SIMD; one template for AVX2 and
+// AVX-512): NaN becomes +inf (after every valid value), the five least of the nine are sorted
+// by bubbling, and the lower median of the n valid values is the ((n - 1) / 2)-th least.
+#if defined(__AVX2__)
+struct F256 {
+  using R = __m256;
+  static constexpr int kLanes = 8;
+  static R load(const float* p) { return _mm256_loadu_ps(p); }
+  static void store(float* p, R v) { _mm256_storeu_ps(p, v); }
+  static R set1(float v) { return _mm256_set1_ps(v); }
+  static R min(R a, R b) { return _mm256_min_ps(a, b); }
+  static R max(R a, R b) { return _mm256_max_ps(a, b); }
+  // v, or +inf where v is NaN (minps returns its second operand when either is NaN).
+  static R nan_to_inf(R v) { return _mm256_min_ps(v, _mm256_set1_ps(INFINITY)); }
+  static R count_valid(R n, R v) {
+    return _mm256_add_ps(n, _mm256_and_ps(_mm256_cmp_ps(v, v, _CMP_ORD_Q), _mm256_set1_ps(1.0f)));
+  }
+  // b where n >= t, else a.
+  static R select_ge(R a, R b, R n, float t) {
+    return _mm256_blendv_ps(a, b, _mm256_cmp_ps(n, _mm256_set1_ps(t), _CMP_GE_OQ));
+  }
+  // mid where mid is NaN, else r.
+  static R keep_nan(R mid, R r) {
+    return _mm256_blendv_ps(r, mid, _mm256_cmp_ps(mid, mid, _CMP_UNORD_Q));
+  }
+};
+#endif
+
+#if defined(__AVX512F__)
+struct F512 {
+  using R = __m512;
+  static constexpr int kLanes = 16;
+  static R load(const float* p) { return _mm512_loadu_ps(p); }
+  static void store(float* p, R v) { _mm512_storeu_ps(p, v); }
+  static R set1(float v) { return _mm512_set1_ps(v); }
+  static R min(R a, R b) { return _mm512_min_ps(a, b); }
+  static R max(R a, R b) { return _mm512_max_ps(a, b); }
+  static R nan_to_inf(R v) { return _mm512_min_ps(v, _mm512_set1_ps(INFINITY)); }
+  static R count_valid(R n, R v) {
+    return _mm512_mask_add_ps(n, _mm512_cmp_ps_mask(v, v, _CMP_ORD_Q), n, _mm512_set1_ps(1.0f));
+  }
+  static R select_ge(R a, R b, R n, float t) {
+    return _mm512_mask_blend_ps(_mm512_cmp_ps_mask(n, _mm512_set1_ps(t), _CMP_GE_OQ), a, b);
+  }
+  static R keep_nan(R mid, R r) {
+    return _mm512_mask_blend_ps(_mm512_cmp_ps_mask(mid, mid, _CMP_UNORD_Q), r, mid);
+  }
+};
+#endif
+
+#if defined(__AVX2__)
+// Columns x0 .. x1 - 1 (1 <= x0, x1 <= cols - 1) of a row with rows above and below.
+template <class F>
+ptrdiff_t median_vec(const float* up, const float* mid, const float* down, float* out,
+                     ptrdiff_t x0, ptrdiff_t x1) {
+  using R = typename F::R;
+  constexpr int N = F::kLanes;
+  ptrdiff_t x = x0;
+  for (; x + N <= x1; x += N) {
+    R v[9];
+    const float* rows[3] = {up, mid, down};
+    R n = F::set1(0.0f);
+    for (int i = 0; i < 3; ++i) {
+      for (int j = 0; j < 3; ++j) {
+        const R a = F::load(rows[i] + x - 1 + j);
+        n = F::count_valid(n, a);
+        v[3 * i + j] = F::nan_to_inf(a);
+      }
+    }
+    // Bubble the five least to the front, in order.
+    for (int i = 0; i < 5; ++i) {
+      for (int j = 8; j > i; --j) {
+        const R lo = F::min(v[j - 1], v[j]);
+        v[j] = F::max(v[j - 1], v[j]);
+        v[j - 1] = lo;
+      }
+    }
+    R r = v[0];
+    r = F::select_ge(r, v[1], n, 3.0f);
+    r = F::select_ge(r, v[2], n, 5.0f);
+    r = F::select_ge(r, v[3], n, 7.0f);
+    r = F::select_ge(r, v[4], n, 9.0f);
+    F::store(out + x, F::keep_nan(F::load(mid + x), r));
+  }
+  return x;
+}
+#endif
+
 
 // The lower median of the valid values of a window (n <= 9), by insertion.
 inline float median_slow(const float* const* rows, int nrows, ptrdiff_t x, ptrdiff_t cols) {
@@ -501,6 +1368,21 @@ void median_row(const float* up, const float* mid, const float* down, float* out
   rows[nrows++] = mid;
   if (down) rows[nrows++] = down;
   ptrdiff_t x0 = 0, x1 = 0;  // columns done by the network
+#if defined(__AVX2__)
+  if (up && down && cols >= 3) {
+    // Vectors over the inner columns, the rest one by one.
+#if defined(__AVX512F__)
+    const ptrdiff_t xv = median_vec<F512>(up, mid, down, out, 1, cols - 1);
+#else
+    const ptrdiff_t xv = median_vec<F256>(up, mid, down, out, 1, cols - 1);
+#endif
+    for (ptrdiff_t x = 0; x < cols; ++x) {
+      if (x >= 1 && x < xv) continue;
+      out[x] = mid[x] != mid[x] ? mid[x] : median_slow(rows, nrows, x, cols);
+    }
+    return;
+  }
+#endif
   if (up && down && cols >= 3) {
     x0 = 1;
     x1 = cols - 1;
@@ -546,6 +1428,19 @@ const SemiGlobalKernels& semi_global_kernels() {
       &path_row,
       &decide_row,
       &median_row,
+#if defined(__AVX2__)
+      &raw_row8,
+      &box_row8,
+      &path_rows,
+      &fused_row,
+      16,
+#else
+      nullptr,
+      nullptr,
+      nullptr,
+      nullptr,
+      0,
+#endif
   };
   return kernels;
 }

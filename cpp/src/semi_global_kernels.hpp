@@ -47,6 +47,14 @@ using PathRowFn = void (*)(const PathParams& p, const std::uint8_t* c, const std
                            std::int16_t* cur, std::ptrdiff_t cols, std::ptrdiff_t x0,
                            std::ptrdiff_t x1, int dx, std::uint16_t* s, bool write);
 
+// path_row for nv (1 or 3) directions at once, dxs[v] for prev[v] and cur[v], their path costs
+// summed into s (written when `write`, added otherwise); explicit SIMD, nd % 16 == 0 (null in
+// the baseline build).
+using PathRowsFn = void (*)(const PathParams& p, const std::uint8_t* c, const std::uint8_t* g,
+                            const std::uint8_t* gprev, const std::int16_t* const* prev,
+                            std::int16_t* const* cur, int nv, const int* dxs, std::ptrdiff_t cols,
+                            std::ptrdiff_t x0, std::ptrdiff_t x1, std::uint16_t* s, bool write);
+
 struct DecideArgs {
   std::ptrdiff_t cols;
   int nd, min_d;
@@ -67,6 +75,49 @@ using DecideRowFn = void (*)(const DecideArgs& a, const std::uint16_t* s, float*
 using MedianRowFn = void (*)(const float* up, const float* mid, const float* down, float* out,
                              std::uint8_t* flags, std::ptrdiff_t cols);
 
+// raw_row and box_row with 8-bit costs (explicit SIMD; null in the baseline build): the same
+// values, half the bytes. box_row8 may compute one of the raw rows itself, raws[fresh] (fresh
+// >= 0; that census row pair: lrow, rrow), column by column as it sums them. rev:
+// 2 * (cols + nd) + 64 bytes of scratch; ring: 3 * nd bytes of scratch.
+using RawRow8Fn = void (*)(const std::uint16_t* lrow, const std::uint16_t* rrow,
+                           std::ptrdiff_t cols, std::ptrdiff_t x0, std::ptrdiff_t x1, int radius,
+                           int nd, int min_d, std::uint8_t* rev, std::uint8_t* out);
+using BoxRow8Fn = void (*)(std::uint8_t* const* raws, int fresh, const std::uint16_t* lrow,
+                           const std::uint16_t* rrow, std::uint8_t* rev, int radius,
+                           std::ptrdiff_t cols, std::ptrdiff_t x0, std::ptrdiff_t x1, int nd,
+                           int min_d, int cmax, std::uint8_t* ring, std::uint8_t* out);
+
+// One image row's paths along the row and its decision, fused (explicit SIMD; 16 disparities
+// at a time with AVX2, 32 with AVX-512 when nd allows): pass 1 (x rising) the path from above
+// (null lv: none; in place in lv, each pixel's nd values then a pad of sentinels, its least
+// cost per pixel in lvmin; a path starts where gprev is null) and the path from the left,
+// their sum plus `base` (null: none) into `partial`; pass 2 (x falling) the path from the
+// right, the row's sums S, the winner, the second best and the right image's winners (a
+// window over the diagonal moved one lane per pixel); then the checks and the sub-pixel step.
+// Same results as path_row + horizontal_row + decide_row. c, partial and base hold nd values
+// per pixel.
+
+// The padding before the first pixel's path costs in lv and the most after each pixel's.
+inline constexpr int kFusedPad = 32;
+
+struct FusedRowArgs {
+  PathParams p;
+  DecideArgs d;
+  const std::uint8_t* c;
+  const std::uint8_t* g;
+  const std::uint8_t* gprev;  // vertical: the row above (null: the path starts here)
+  std::int16_t* lv;           // kFusedPad + cols * (nd + kFusedPad) + 64; null: no vertical path
+  std::int16_t* lvmin;        // cols
+  const std::uint16_t* base;  // null: none
+  std::uint16_t* partial;     // cols * nd scratch
+  std::uint16_t* small;       // 3 * (nd + kFusedPad) scratch (aligned to 64 bytes)
+  std::uint32_t* result;      // 4 * cols scratch
+  std::uint16_t* rfinal;      // cols scratch
+  float* disp;
+  float* conf;  // null: not wanted
+};
+using FusedRowFn = void (*)(const FusedRowArgs& a);
+
 struct SemiGlobalKernels {
   RawRowFn raw_row;
   BoxRowFn box_row;
@@ -74,6 +125,11 @@ struct SemiGlobalKernels {
   PathRowFn path_row;
   DecideRowFn decide_row;
   MedianRowFn median_row;
+  RawRow8Fn raw_row8;    // null in the baseline build
+  BoxRow8Fn box_row8;    // null in the baseline build
+  PathRowsFn path_rows;  // null in the baseline build
+  FusedRowFn fused_row;  // null in the baseline build
+  int fused_lanes;       // fused_row needs nd % fused_lanes == 0
 };
 
 #define STEREODEPTH_DECLARE_SEMI_GLOBAL_KERNELS(ns) \
