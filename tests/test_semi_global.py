@@ -457,6 +457,12 @@ def test_memory_estimate_and_refusal() -> None:
         r"needs about \d+ MiB, above max_memory_mb=5; lower num_disparities, use paths=3 ",
     ):
         sd.semi_global_match(left, right, num_disparities=512, paths=4, max_memory_mb=5)
+    # A tiny limit names a tiny need (not "about 0 MiB"); paths=3 is not offered to paths=3.
+    with pytest.raises(
+        ValueError, match=r"needs about \d+\.\d\d MiB, above max_memory_mb=0\.001;"
+    ) as e:
+        sd.semi_global_match(left, right, num_disparities=16, paths=3, max_memory_mb=0.001)
+    assert "0.00 MiB" not in str(e.value) and "use paths=3" not in str(e.value)
 
 
 # ------------------------------------------------------------------------------------------

@@ -277,13 +277,17 @@ void SemiGlobalMatcher::compute(const StereoImage& left, const StereoImage& righ
   const double need_mb = static_cast<double>(need) / 1048576.0;
   if (need_mb > p.max_memory_mb) {
     std::ostringstream msg;
-    msg.precision(0);
+    msg.precision(need_mb < 10.0 ? 2 : 0);  // no "needs about 0 MiB" for a tiny limit
     msg << std::fixed << "semi-global matching of a " << rows << "x" << cols
         << " pair with num_disparities=" << nd << " and paths=" << p.paths << " needs about "
-        << need_mb << " MiB, above max_memory_mb=" << p.max_memory_mb
-        << "; lower num_disparities, use paths=3 (a few rows per thread instead of 3 bytes per "
-           "pixel and disparity), match a smaller (cropped or downscaled) pair, or raise "
-           "max_memory_mb";
+        << need_mb << " MiB, above max_memory_mb=";
+    msg.unsetf(std::ios::floatfield);
+    msg.precision(6);
+    msg << p.max_memory_mb << "; lower num_disparities, ";
+    if (p.paths != 3) {
+      msg << "use paths=3 (a few rows per thread instead of 3 bytes per pixel and disparity), ";
+    }
+    msg << "match a smaller (cropped or downscaled) pair, or raise max_memory_mb";
     throw std::invalid_argument(msg.str());
   }
 
