@@ -705,6 +705,7 @@ void winners_generic(const RowCtx& c) {
 #if defined(STEREODEPTH_BM_AVX512)
 
 constexpr int kMaxChunks = 8;
+constexpr bool kFixedPassDoesBorder = false;  // border_band after the second pass
 
 // rotation_table()[s] lane j = (j - s) mod 32: the index of a rotation by s lanes.
 const __m512i* rotation_table() {
@@ -961,6 +962,7 @@ void winners_avx512(const RowCtx& c) {
 #elif defined(STEREODEPTH_BM_AVX2)
 
 constexpr int kMaxChunks = 16;  // dp <= 256
+constexpr bool kFixedPassDoesBorder = true;  // the border band in group_winners
 
 // The n census codes of a row (16 bits each) split into nibbles for the lookup in
 // update_col: out[i] = code & 0x0F0F and out[stride + i] = (code >> 4) & 0x0F0F, one load per
@@ -1176,6 +1178,26 @@ void winners_avx2(const RowCtx& c) {
   // chain (least cost, its lane, the uniqueness count) is long: in a loop of its own, over
   // costs already in L1, the chains of many pixels overlap, where interleaved with the
   // column-sum update the processor's window held about two pixels and waited on each.
+  // The border band (clip_border): a pixel outside xlo..xhi is matched over the disparity
+  // indices klo..khi whose right pixel lies inside the image (border_band's rule), here as
+  // lanes qlo..qhi; the others read as 0xFFFF (above every block cost), so the winner, the
+  // uniqueness data and the neighbours below come out as border_band's. Returns false when
+  // no lane is inside (the pixel stays NaN).
+  const ptrdiff_t min_d = c.min_d, nd = c.nd;
+  const bool clip_border = c.clip_border;
+  auto border_lanes = [&](ptrdiff_t x, int& qlo, int& qhi) {
+    const ptrdiff_t klo = clamp_index(x - min_d - cols + 1, 0, nd);
+    const ptrdiff_t khi = clamp_index(x - min_d, -1, nd - 1);
+    qlo = static_cast<int>(dp - 1 - khi);
+    qhi = static_cast<int>(dp - 1 - klo);
+    return klo <= khi;
+  };
+  // All ones on the lanes of vector i outside qlo..qhi.
+  auto outside = [&](int qlo, int qhi, int i) {
+    const __m256i lane = _mm256_add_epi16(iota, _mm256_set1_epi16(static_cast<short>(16 * i)));
+    return _mm256_or_si256(_mm256_cmpgt_epi16(_mm256_set1_epi16(static_cast<short>(qlo)), lane),
+                           _mm256_cmpgt_epi16(lane, _mm256_set1_epi16(static_cast<short>(qhi))));
+  };
   auto group_winners = [&](ptrdiff_t x0, ptrdiff_t x1) {
     // In two loops: the least costs first (a short chain), then the rest, which starts from
     // the least cost in memory; each loop's chain is then short enough for the processor to
@@ -1185,9 +1207,20 @@ void winners_avx2(const RowCtx& c) {
       const uint16_t* const row = recent + (x - x0) * kRow + 16;
       // The least cost, in four chains of minima (a quarter of one chain's latency).
       __m256i mins[4] = {ones, ones, ones, ones};
-      for (int i = 0; i < NC; ++i) {
-        mins[i & 3] = _mm256_min_epu16(
-            mins[i & 3], _mm256_load_si256(reinterpret_cast<const __m256i*>(row) + i));
+      if (x < xlo || x > xhi) {
+        int qlo = 0, qhi = -1;
+        if (clip_border && border_lanes(x, qlo, qhi)) {
+          for (int i = 0; i < NC; ++i) {
+            mins[0] = _mm256_min_epu16(
+                mins[0], _mm256_or_si256(_mm256_load_si256(reinterpret_cast<const __m256i*>(row) + i),
+                                         outside(qlo, qhi, i)));
+          }
+        }
+      } else {
+        for (int i = 0; i < NC; ++i) {
+          mins[i & 3] = _mm256_min_epu16(
+              mins[i & 3], _mm256_load_si256(reinterpret_cast<const __m256i*>(row) + i));
+        }
       }
       const __m256i m = _mm256_min_epu16(_mm256_min_epu16(mins[0], mins[1]),
                                          _mm256_min_epu16(mins[2], mins[3]));
@@ -1195,13 +1228,17 @@ void winners_avx2(const RowCtx& c) {
           _mm_min_epu16(_mm256_castsi256_si128(m), _mm256_extracti128_si256(m, 1)))));
     }
     for (ptrdiff_t x = x0; x <= x1; ++x) {
-      if (x < xlo || x > xhi) {
-        record_none(c, x);
-        continue;
-      }
       const uint16_t* const row = recent + (x - x0) * kRow + 16;
       __m256i V[NC];
       for (int i = 0; i < NC; ++i) V[i] = _mm256_load_si256(reinterpret_cast<const __m256i*>(row) + i);
+      int qlo = 0, qhi = dp - 1;  // the lanes searched
+      if (x < xlo || x > xhi) {
+        if (!clip_border || !border_lanes(x, qlo, qhi)) {
+          record_none(c, x);
+          continue;
+        }
+        for (int i = 0; i < NC; ++i) V[i] = _mm256_or_si256(V[i], outside(qlo, qhi, i));
+      }
       const uint32_t best = bests[x - x0];
       const __m256i bv = _mm256_set1_epi16(static_cast<short>(bests[x - x0]));
       // The winner: the highest lane holding the least cost (the lowest disparity on a tie),
@@ -1259,10 +1296,13 @@ void winners_avx2(const RowCtx& c) {
       // c0 | c2 << 16: lanes qb + 1 and qb - 1 (disparity index kb - 1 and kb + 1). Beyond
       // the lanes `recent` holds 0xFFFF where the other passes store 0: the second pass reads
       // neither (it needs 1 <= kb <= nd - 2).
+      // In the border band a neighbour outside the lanes searched reads as 0xFFFF, which
+      // the second pass takes as "no sub-pixel step" (border_band's rule).
       rec->around = 0;
       if (around) {
-        rec->around =
-            static_cast<uint32_t>(row[qb + 1]) | (static_cast<uint32_t>(row[qb - 1]) << 16);
+        const uint32_t c0 = qb + 1 <= qhi ? row[qb + 1] : kNone;
+        const uint32_t c2 = qb - 1 >= qlo ? row[qb - 1] : kNone;
+        rec->around = c0 | (c2 << 16);
       }
     }
   };
@@ -1601,7 +1641,12 @@ void decide_avx2(const RowCtx& c) {
       }
       const __m256 den = _mm256_cvtepi32_ps(_mm256_add_epi32(den_i, den_i));
       // The lanes that take the step; the others' quotients (perhaps of a zero) are dropped.
-      const __m256 use = _mm256_and_ps(_mm256_castsi256_ps(_mm256_and_si256(ok, interior(kb))),
+      // A neighbour of 0xFFFF lies outside the disparities searched (the border band, see
+      // winners_avx2): no step.
+      const __m256i both = _mm256_andnot_si256(
+          _mm256_or_si256(_mm256_cmpeq_epi32(c0, none), _mm256_cmpeq_epi32(c2, none)),
+          _mm256_and_si256(ok, interior(kb)));
+      const __m256 use = _mm256_and_ps(_mm256_castsi256_ps(both),
                                        _mm256_cmp_ps(den, _mm256_setzero_ps(), _CMP_GT_OQ));
       d = _mm256_blendv_ps(d, _mm256_add_ps(d, _mm256_div_ps(num, den)), use);
     }
@@ -1753,15 +1798,18 @@ void row_pass(const RowCtx& c) {
     counted.count_low = c.unique_min != nullptr && c.crow == nullptr;
     winners_fixed<1, Cost>(counted);
     if (!c.first_pass_only) decide(counted);
+    // The AVX2 fixed pass matches the border band itself (see winners_avx2).
+    if (c.clip_border && !kFixedPassDoesBorder) border_band(c);
   } else {
     winners_generic(c);
     if (!c.first_pass_only) decide(c);
+    if (c.clip_border) border_band(c);
   }
 #else
   winners_generic(c);
   if (!c.first_pass_only) decide_generic(c);
-#endif
   if (c.clip_border) border_band(c);
+#endif
 }
 
 // ------------------------------------------------------------------------------------------
