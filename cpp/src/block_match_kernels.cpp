@@ -20,6 +20,7 @@
 // the numpy oracle.
 #include "block_match_kernels.hpp"
 
+#include <algorithm>
 #include <cmath>
 #include <cstdint>
 #include <cstdlib>
@@ -1198,29 +1199,55 @@ void winners_avx2(const RowCtx& c) {
     return _mm256_or_si256(_mm256_cmpgt_epi16(_mm256_set1_epi16(static_cast<short>(qlo)), lane),
                            _mm256_cmpgt_epi16(lane, _mm256_set1_epi16(static_cast<short>(qhi))));
   };
+  __m256i key_low[NC];  // 15 - i in every lane (see group_winners)
+  for (int i = 0; i < NC; ++i) {
+    key_low[i] = _mm256_set1_epi16(static_cast<short>(15 - i));
+    // Kept as values: GCC would otherwise rebuild each constant in the loop (three
+    // instructions) rather than read it.
+    __asm__("" : "+x"(key_low[i]));
+  }
   auto group_winners = [&](ptrdiff_t x0, ptrdiff_t x1) {
     // In two loops: the least costs first (a short chain), then the rest, which starts from
     // the least cost in memory; each loop's chain is then short enough for the processor to
     // overlap several pixels.
     alignas(32) uint16_t bests[16];
+    alignas(32) uint16_t lanes[16];  // keyed: the winner's lane
     for (ptrdiff_t x = x0; x <= x1; ++x) {
       const uint16_t* const row = recent + (x - x0) * kRow + 16;
+      auto load = [&](int i) { return _mm256_load_si256(reinterpret_cast<const __m256i*>(row) + i); };
+      int qlo = 0, qhi = -1;
+      const bool border = x < xlo || x > xhi;
+      if (border && !(clip_border && border_lanes(x, qlo, qhi))) continue;  // no search
+      if (keyed) {
+        // The winner with its cost: keys cost << 4 | (15 - i) for vector i (every cost is
+        // below 4095, and the 0xFFFF lanes give keys of at least 0xFFF0, above every real
+        // one), so that the least key per lane is the least cost and, among equal costs, the
+        // last vector (the highest lane). Across the 16 lanes, the least key's highest lane.
+        __m256i kmin[2] = {ones, ones};
+        for (int i = 0; i < NC; ++i) {
+          __m256i v = load(i);
+          if (border) v = _mm256_or_si256(v, outside(qlo, qhi, i));
+          const __m256i key = _mm256_or_si256(_mm256_slli_epi16(v, 4), key_low[i]);
+          kmin[i & 1] = _mm256_min_epu16(kmin[i & 1], key);
+        }
+        const __m256i k = _mm256_min_epu16(kmin[0], kmin[1]);
+        const uint32_t key = static_cast<uint32_t>(_mm_cvtsi128_si32(_mm_minpos_epu16(
+                                 _mm_min_epu16(_mm256_castsi256_si128(k), _mm256_extracti128_si256(k, 1))))) &
+                             0xFFFFu;
+        const auto eq = static_cast<uint32_t>(_mm256_movemask_epi8(
+            _mm256_cmpeq_epi16(k, _mm256_set1_epi16(static_cast<short>(key)))));
+        bests[x - x0] = static_cast<uint16_t>(key >> 4);
+        lanes[x - x0] = static_cast<uint16_t>(16 * (15 - (key & 15u)) + (31 - __builtin_clz(eq)) / 2);
+        continue;
+      }
       // The least cost, in four chains of minima (a quarter of one chain's latency).
       __m256i mins[4] = {ones, ones, ones, ones};
-      if (x < xlo || x > xhi) {
-        int qlo = 0, qhi = -1;
-        if (clip_border && border_lanes(x, qlo, qhi)) {
-          for (int i = 0; i < NC; ++i) {
-            mins[0] = _mm256_min_epu16(
-                mins[0], _mm256_or_si256(_mm256_load_si256(reinterpret_cast<const __m256i*>(row) + i),
-                                         outside(qlo, qhi, i)));
-          }
+      if (border) {
+        for (int i = 0; i < NC; ++i) {
+          mins[0] = _mm256_min_epu16(mins[0], _mm256_or_si256(load(i), outside(qlo, qhi, i)));
         }
       } else {
-        for (int i = 0; i < NC; ++i) {
-          mins[i & 3] = _mm256_min_epu16(
-              mins[i & 3], _mm256_load_si256(reinterpret_cast<const __m256i*>(row) + i));
-        }
+        for (int i = 0; i < NC; ++i) mins[i & 3] = _mm256_min_epu16(mins[i & 3], load(i));
       }
       const __m256i m = _mm256_min_epu16(_mm256_min_epu16(mins[0], mins[1]),
                                          _mm256_min_epu16(mins[2], mins[3]));
@@ -1240,25 +1267,29 @@ void winners_avx2(const RowCtx& c) {
         for (int i = 0; i < NC; ++i) V[i] = _mm256_or_si256(V[i], outside(qlo, qhi, i));
       }
       const uint32_t best = bests[x - x0];
-      const __m256i bv = _mm256_set1_epi16(static_cast<short>(bests[x - x0]));
-      // The winner: the highest lane holding the least cost (the lowest disparity on a tie),
-      // branch-free (see winners_avx512), four vectors (64 lanes) at a time: the comparison
-      // masks of two vectors packed to bytes (vpacksswb interleaves their 128-bit halves,
-      // vpermq puts them back in order) give one bit per lane.
       int qb = 0;
-      for (int g = 0; g < NC; g += 4) {
-        auto eq = [&](int k) {
-          return k < NC ? _mm256_cmpeq_epi16(V[k], bv) : _mm256_setzero_si256();
-        };
-        auto bits = [&](int k) {
-          const __m256i m = _mm256_permute4x64_epi64(_mm256_packs_epi16(eq(k), eq(k + 1)), 0xD8);
-          return static_cast<std::uint64_t>(static_cast<uint32_t>(_mm256_movemask_epi8(m)));
-        };
-        std::uint64_t w = bits(g);
-        if (g + 2 < NC) w |= bits(g + 2) << 32;
-        const int top = 16 * g + 63 - __builtin_clzll(w | 1u);
-        const int found = -static_cast<int>(w != 0);  // all ones when this group holds the least
-        qb ^= (qb ^ top) & found;
+      if (keyed) {
+        qb = lanes[x - x0];
+      } else {
+        const __m256i bv = _mm256_set1_epi16(static_cast<short>(bests[x - x0]));
+        // The winner: the highest lane holding the least cost (the lowest disparity on a
+        // tie), branch-free (see winners_avx512), four vectors (64 lanes) at a time: the
+        // comparison masks of two vectors packed to bytes (vpacksswb interleaves their
+        // 128-bit halves, vpermq puts them back in order) give one bit per lane.
+        for (int g = 0; g < NC; g += 4) {
+          auto eq = [&](int k) {
+            return k < NC ? _mm256_cmpeq_epi16(V[k], bv) : _mm256_setzero_si256();
+          };
+          auto bits = [&](int k) {
+            const __m256i m = _mm256_permute4x64_epi64(_mm256_packs_epi16(eq(k), eq(k + 1)), 0xD8);
+            return static_cast<std::uint64_t>(static_cast<uint32_t>(_mm256_movemask_epi8(m)));
+          };
+          std::uint64_t w = bits(g);
+          if (g + 2 < NC) w |= bits(g + 2) << 32;
+          const int top = 16 * g + 63 - __builtin_clzll(w | 1u);
+          const int found = -static_cast<int>(w != 0);  // all ones when this group holds the least
+          qb ^= (qb ^ top) & found;
+        }
       }
       uint32_t second = kNone;
       if (count_low) {
@@ -1307,47 +1338,73 @@ void winners_avx2(const RowCtx& c) {
     }
   };
 
-  // Along the row: the block sums of each pixel go to `recent`; every 16 pixels, the right
-  // winners and the winners of those pixels.
-  for (ptrdiff_t x = 0; x < cols; ++x) {
-    if (x > 0) {
-      const ptrdiff_t xp = clamp_index(x + r, 0, cols - 1);
-      const ptrdiff_t xm = clamp_index(x - r - 1, 0, cols - 1);
-      if constexpr (sizeof(F) == 4) {
-        if (fused && x + r < cols) {
-          const CensusLeft l = census_left(x + r);
+  // Along the row, 16 pixels at a time: the block sums of each pixel go to `recent`, then
+  // the right winners and the winners of those pixels are found. A group whose columns all
+  // have their block inside the row (no clamping) and whose column sums are updated here
+  // takes the short path.
+  const bool has_pad = c.qpad > 0;
+  for (ptrdiff_t x0 = 0; x0 < cols; x0 += 16) {
+    const ptrdiff_t x1 = std::min<ptrdiff_t>(x0 + 16, cols);
+    uint16_t* row = recent + 16;
+    if (fused && x0 > r && x1 + r <= cols) {
+      for (ptrdiff_t x = x0; x < x1; ++x, row += kRow) {
+        const ptrdiff_t xp = x + r, xm = x - r - 1;
+        if constexpr (sizeof(F) == 4) {
+          const CensusLeft l = census_left(xp);
           for (int i = 0; i < NC; ++i) {
-            A[i] = _mm256_sub_epi16(_mm256_add_epi16(A[i], census_update(l, x + r, i)),
+            A[i] = _mm256_sub_epi16(_mm256_add_epi16(A[i], census_update(l, xp, i)),
                                     column(xm, i));
           }
         } else {
+          update_col(xp);
           for (int i = 0; i < NC; ++i) {
             A[i] = _mm256_sub_epi16(_mm256_add_epi16(A[i], column(xp, i)), column(xm, i));
           }
         }
+        if (has_pad) A[0] = _mm256_or_si256(A[0], padv);
+        if (texcol) tsum += texcol[xp] - texcol[xm];
+        for (int i = 0; i < NC; ++i) _mm256_store_si256(reinterpret_cast<__m256i*>(row) + i, A[i]);
+        tsums[x - x0] = tsum;
+      }
+    } else {
+      for (ptrdiff_t x = x0; x < x1; ++x, row += kRow) {
+        if (x > 0) {
+          const ptrdiff_t xp = clamp_index(x + r, 0, cols - 1);
+          const ptrdiff_t xm = clamp_index(x - r - 1, 0, cols - 1);
+          if constexpr (sizeof(F) == 4) {
+            if (fused && x + r < cols) {
+              const CensusLeft l = census_left(x + r);
+              for (int i = 0; i < NC; ++i) {
+                A[i] = _mm256_sub_epi16(_mm256_add_epi16(A[i], census_update(l, x + r, i)),
+                                        column(xm, i));
+              }
+            } else {
+              for (int i = 0; i < NC; ++i) {
+                A[i] = _mm256_sub_epi16(_mm256_add_epi16(A[i], column(xp, i)), column(xm, i));
+              }
+            }
+          } else {
+            if (fused && x + r < cols) update_col(x + r);
+            for (int i = 0; i < NC; ++i) {
+              A[i] = _mm256_sub_epi16(_mm256_add_epi16(A[i], column(xp, i)), column(xm, i));
+            }
+          }
+          A[0] = _mm256_or_si256(A[0], padv);
+          if (texcol) tsum += texcol[xp] - texcol[xm];
+        }
+        for (int i = 0; i < NC; ++i) _mm256_store_si256(reinterpret_cast<__m256i*>(row) + i, A[i]);
+        tsums[x - x0] = tsum;
+      }
+    }
+    const int n = static_cast<int>(x1 - x0);
+    if (lr_on) {
+      if (keyed) {
+        right_group_keyed<NC>(recent, rmin, rarg, x0, n);
       } else {
-        if (fused && x + r < cols) update_col(x + r);
-        for (int i = 0; i < NC; ++i) {
-          A[i] = _mm256_sub_epi16(_mm256_add_epi16(A[i], column(xp, i)), column(xm, i));
-        }
+        right_group<NC>(recent, rmin, rarg, x0, n);
       }
-      A[0] = _mm256_or_si256(A[0], padv);
-      if (texcol) tsum += texcol[xp] - texcol[xm];
     }
-    const int t = static_cast<int>(x & 15);
-    uint16_t* const row = recent + t * kRow + 16;
-    for (int i = 0; i < NC; ++i) _mm256_store_si256(reinterpret_cast<__m256i*>(row) + i, A[i]);
-    tsums[t] = tsum;
-    if (t == 15 || x == cols - 1) {
-      if (lr_on) {
-        if (keyed) {
-          right_group_keyed<NC>(recent, rmin, rarg, x - t, t + 1);
-        } else {
-          right_group<NC>(recent, rmin, rarg, x - t, t + 1);
-        }
-      }
-      group_winners(x - t, x);
-    }
+    group_winners(x0, x1 - 1);
   }
 }
 
