@@ -331,11 +331,15 @@ inline __m512i sad_cost32(__m512i l, const uint8_t* r) {
 #endif
 
 // colsum[x][q] += cost(left[x], rpad[x + q]) for every lane (the padding lanes too: their sums
-// are never read as costs).
+// are never read as costs). AVX2 census: when costs is not null, the costs also go there (the
+// row's slot of BandScratch::ring, same layout as colsum).
 template <typename Cost>
 void add_cost_row(const typename Cost::Feature* left, const typename Cost::Feature* rpad,
-                  uint16_t* colsum, ptrdiff_t cols, int dp) {
+                  uint16_t* colsum, ptrdiff_t cols, int dp, uint16_t* costs) {
   constexpr bool kCensus = sizeof(typename Cost::Feature) == 4;
+#if !defined(STEREODEPTH_BM_AVX2)
+  (void)costs;
+#endif
   for (ptrdiff_t x = 0; x < cols; ++x) {
     uint16_t* s = colsum + x * dp;
     const auto l = left[x];
@@ -364,6 +368,7 @@ void add_cost_row(const typename Cost::Feature* left, const typename Cost::Featu
       }
       auto* sp = reinterpret_cast<__m256i*>(s + q);
       _mm256_storeu_si256(sp, _mm256_add_epi16(_mm256_loadu_si256(sp), c));
+      if (costs) _mm256_storeu_si256(reinterpret_cast<__m256i*>(costs + x * dp + q), c);
     }
 #else
     (void)kCensus;
@@ -471,6 +476,9 @@ struct RowCtx {
   const void* in_quad;  // census: the padded rows regrouped (see quads_of, nibbles_of)
   const void* out_quad;
   ptrdiff_t nibble_stride;  // AVX2: elements from the low nibbles to the high ones
+  // AVX2 census: the ring slots (see BandScratch::ring) of the rows entering and leaving.
+  uint16_t* ring_in;
+  const uint16_t* ring_out;
   float* drow;
   float* crow;  // null when no confidence is wanted
 };
@@ -1078,23 +1086,22 @@ void winners_avx2(const RowCtx& c) {
   const F* out_l = static_cast<const F*>(c.out_left);
   const F* out_r = static_cast<const F*>(c.out_rpad);
   const uint16_t* in16 = static_cast<const uint16_t*>(c.in_quad);
-  const uint16_t* out16 = static_cast<const uint16_t*>(c.out_quad);
   const ptrdiff_t nib = c.nibble_stride;  // from the low nibbles to the high ones
   // Census: the left codes' nibbles of column j, entering and leaving, broadcast.
   struct CensusLeft {
-    __m256i in0, in1, out0, out1;
+    __m256i in0, in1;
   };
   // (The left rows' nibbles follow the right rows' in the same buffers, as two more rows.)
   const uint16_t* const lin16 = in16 ? in16 + 2 * nib : nullptr;
-  const uint16_t* const lout16 = out16 ? out16 + 2 * nib : nullptr;
   auto census_left = [&](ptrdiff_t j) {
     return CensusLeft{_mm256_set1_epi16(static_cast<short>(lin16[j])),
-                      _mm256_set1_epi16(static_cast<short>(lin16[nib + j])),
-                      _mm256_set1_epi16(static_cast<short>(lout16[j])),
-                      _mm256_set1_epi16(static_cast<short>(lout16[nib + j]))};
+                      _mm256_set1_epi16(static_cast<short>(lin16[nib + j]))};
   };
   // Census: vector i of column j updated, stored and returned (so the running sum need not
-  // load it back: a store forwarded to a load adds its latency to the sum's chain).
+  // load it back: a store forwarded to a load adds its latency to the sum's chain). The
+  // entering row's costs are matched and kept in the ring; the leaving row's are read from it.
+  uint16_t* const ring_in = c.ring_in;
+  const uint16_t* const ring_out = c.ring_out;
   auto census_update = [&](const CensusLeft& l, ptrdiff_t j, int i) {
     const __m256i lut = nibble_popcounts();
     // Set bits of each byte of (l ^ r): the counts of its two nibbles.
@@ -1105,10 +1112,12 @@ void winners_avx2(const RowCtx& c) {
                              _mm256_shuffle_epi8(lut, _mm256_xor_si256(l1, r1)));
     };
     auto* s = reinterpret_cast<__m256i*>(S + j * dp) + i;
-    const __m256i pin = count(l.in0, l.in1, in16 + j + 16 * i);
-    const __m256i pout = count(l.out0, l.out1, out16 + j + 16 * i);
-    const __m256i d = _mm256_maddubs_epi16(_mm256_set1_epi8(1), _mm256_sub_epi8(pin, pout));
-    const __m256i v = _mm256_add_epi16(_mm256_load_si256(s), d);
+    const __m256i cin =
+        _mm256_maddubs_epi16(_mm256_set1_epi8(1), count(l.in0, l.in1, in16 + j + 16 * i));
+    _mm256_store_si256(reinterpret_cast<__m256i*>(ring_in + j * dp) + i, cin);
+    const __m256i cout =
+        _mm256_load_si256(reinterpret_cast<const __m256i*>(ring_out + j * dp) + i);
+    const __m256i v = _mm256_add_epi16(_mm256_load_si256(s), _mm256_sub_epi16(cin, cout));
     _mm256_store_si256(s, v);
     return v;
   };
@@ -1933,13 +1942,19 @@ void match_band_impl(const MatchArgs& a, const BandScratch& s, ptrdiff_t y0, ptr
   c.first_pass_only = a.first_pass_only;
 
   const bool fused = fuses_update(dp);
+  // The ring slot of image row y (clamped), or null without a ring.
+  auto ring_slot = [&](ptrdiff_t y) -> uint16_t* {
+    if (!s.ring) return nullptr;
+    const ptrdiff_t slot = clamp_index(y, 0, rows - 1) % cost_ring_rows(r);
+    return s.ring + slot * cols * dp;
+  };
   for (ptrdiff_t y = y0; y < y1; ++y) {
     if (fresh && y == y0) {
       std::memset(s.colsum, 0, sizeof(uint16_t) * static_cast<size_t>(cols) * dp);
       if (tex_on) std::memset(s.texcol, 0, sizeof(uint32_t) * static_cast<size_t>(cols));
       for (ptrdiff_t dy = -r; dy <= r; ++dy) {
         pad_right_row(rrow(y + dy), rpad_in, cols, npad, jmin);
-        add_cost_row<Cost>(lrow(y + dy), rpad_in, s.colsum, cols, dp);
+        add_cost_row<Cost>(lrow(y + dy), rpad_in, s.colsum, cols, dp, ring_slot(y + dy));
         if (tex_on) {
           const uint8_t* t = trow(y + dy);
           for (ptrdiff_t x = 0; x < cols; ++x) s.texcol[x] += t[x];
@@ -1967,15 +1982,14 @@ void match_band_impl(const MatchArgs& a, const BandScratch& s, ptrdiff_t y0, ptr
           }
 #elif defined(STEREODEPTH_BM_AVX2)
           if constexpr (sizeof(F) == 4) {
+            // The leaving row's costs are in the ring: only the entering row is matched.
             auto* qi = static_cast<uint16_t*>(s.quad_in);
-            auto* qo = static_cast<uint16_t*>(s.quad_out);
             nibbles_of(rpad_in, qi, npad, npad);
-            nibbles_of(rpad_out, qo, npad, npad);
             nibbles_of(lrow(yin), qi + 2 * npad, cols, npad);
-            nibbles_of(lrow(yout), qo + 2 * npad, cols, npad);
             c.nibble_stride = npad;
             c.in_quad = s.quad_in;
-            c.out_quad = s.quad_out;
+            c.ring_in = ring_slot(yin);
+            c.ring_out = ring_slot(yout);
           }
 #endif
         } else {
