@@ -1216,39 +1216,16 @@ void winners_avx2(const RowCtx& c) {
     __asm__("" : "+x"(key_low[i]));
   }
   auto group_winners = [&](ptrdiff_t x0, ptrdiff_t x1) {
-    // In two loops: the least costs first (a short chain), then the rest, which starts from
-    // the least cost in memory; each loop's chain is then short enough for the processor to
-    // overlap several pixels.
+    // Without keys, in two loops: the least costs first (a short chain), then the rest, which
+    // starts from the least cost in memory; each loop's chain is then short enough for the
+    // processor to overlap several pixels.
     alignas(32) uint16_t bests[16];
-    alignas(32) uint16_t lanes[16];  // keyed: the winner's lane
-    for (ptrdiff_t x = x0; x <= x1; ++x) {
+    for (ptrdiff_t x = x0; x <= x1 && !keyed; ++x) {
       const uint16_t* const row = recent + (x - x0) * kRow + 16;
       auto load = [&](int i) { return _mm256_load_si256(reinterpret_cast<const __m256i*>(row) + i); };
       int qlo = 0, qhi = -1;
       const bool border = x < xlo || x > xhi;
       if (border && !(clip_border && border_lanes(x, qlo, qhi))) continue;  // no search
-      if (keyed) {
-        // The winner with its cost: keys cost << 4 | (15 - i) for vector i (every cost is
-        // below 4095, and the 0xFFFF lanes give keys of at least 0xFFF0, above every real
-        // one), so that the least key per lane is the least cost and, among equal costs, the
-        // last vector (the highest lane). Across the 16 lanes, the least key's highest lane.
-        __m256i kmin[2] = {ones, ones};
-        for (int i = 0; i < NC; ++i) {
-          __m256i v = load(i);
-          if (border) v = _mm256_or_si256(v, outside(qlo, qhi, i));
-          const __m256i key = _mm256_or_si256(_mm256_slli_epi16(v, 4), key_low[i]);
-          kmin[i & 1] = _mm256_min_epu16(kmin[i & 1], key);
-        }
-        const __m256i k = _mm256_min_epu16(kmin[0], kmin[1]);
-        const uint32_t key = static_cast<uint32_t>(_mm_cvtsi128_si32(_mm_minpos_epu16(
-                                 _mm_min_epu16(_mm256_castsi256_si128(k), _mm256_extracti128_si256(k, 1))))) &
-                             0xFFFFu;
-        const auto eq = static_cast<uint32_t>(_mm256_movemask_epi8(
-            _mm256_cmpeq_epi16(k, _mm256_set1_epi16(static_cast<short>(key)))));
-        bests[x - x0] = static_cast<uint16_t>(key >> 4);
-        lanes[x - x0] = static_cast<uint16_t>(16 * (15 - (key & 15u)) + (31 - __builtin_clz(eq)) / 2);
-        continue;
-      }
       // The least cost, in four chains of minima (a quarter of one chain's latency).
       __m256i mins[4] = {ones, ones, ones, ones};
       if (border) {
@@ -1275,11 +1252,30 @@ void winners_avx2(const RowCtx& c) {
         }
         for (int i = 0; i < NC; ++i) V[i] = _mm256_or_si256(V[i], outside(qlo, qhi, i));
       }
-      const uint32_t best = bests[x - x0];
+      uint32_t best = 0;
       int qb = 0;
       if (keyed) {
-        qb = lanes[x - x0];
+        // The winner with its cost in one pass: keys cost << 4 | (15 - i) for vector i (every
+        // cost is below 4095, and the 0xFFFF lanes give keys of at least 0xFFF0, above every
+        // real one), so that the least key per lane is the least cost and, among equal costs,
+        // the last vector (the highest lane); across the 16 lanes, the least key's highest
+        // lane. (One loop with the rest: its chain is short enough to overlap pixels.)
+        __m256i kmin[2] = {ones, ones};
+        for (int i = 0; i < NC; ++i) {
+          kmin[i & 1] = _mm256_min_epu16(kmin[i & 1],
+                                         _mm256_or_si256(_mm256_slli_epi16(V[i], 4), key_low[i]));
+        }
+        const __m256i k = _mm256_min_epu16(kmin[0], kmin[1]);
+        const uint32_t key =
+            static_cast<uint32_t>(_mm_cvtsi128_si32(_mm_minpos_epu16(_mm_min_epu16(
+                _mm256_castsi256_si128(k), _mm256_extracti128_si256(k, 1))))) &
+            0xFFFFu;
+        const auto eq = static_cast<uint32_t>(_mm256_movemask_epi8(
+            _mm256_cmpeq_epi16(k, _mm256_set1_epi16(static_cast<short>(key)))));
+        best = key >> 4;
+        qb = static_cast<int>(16 * (15 - (key & 15u)) + (31 - __builtin_clz(eq)) / 2);
       } else {
+        best = bests[x - x0];
         const __m256i bv = _mm256_set1_epi16(static_cast<short>(bests[x - x0]));
         // The winner: the highest lane holding the least cost (the lowest disparity on a
         // tie), branch-free (see winners_avx512), four vectors (64 lanes) at a time: the
