@@ -14,8 +14,11 @@
 // count), does step (1) for column x + r on the way (so the column sums are read back from
 // L1), rotates each pixel's costs into aligned right-winner blocks held in registers, and
 // does step (3) sixteen pixels at a time. The AVX2 build does the same with 16-lane vectors
-// (also dp <= 256), except that it updates the right winners once per 16 pixels from the
-// costs it stored, and does step (3) eight pixels at a time. Every path computes the same
+// (also dp <= 256), except that it works in groups of 16 pixels (block costs to `recent`,
+// then the right winners and the winners from there), matches the border band in the same
+// pass (border_band otherwise), reads the census costs of the row leaving the block from a
+// ring of the last rows' costs (BandScratch::ring), and does step (3) eight pixels at a
+// time. Every path computes the same
 // integers, and the floating-point steps use the same IEEE operations in the same order as
 // the numpy oracle.
 #include "block_match_kernels.hpp"
