@@ -1060,7 +1060,7 @@ void right_group_keyed(const uint16_t* recent, uint16_t* rmin, uint16_t* rarg, p
 // the column-sum update fused in, a branch-free winner, and the right winners updated per
 // group of 16 pixels (right_group) from the costs stored in `recent`, which also gives the
 // winner's neighbours.
-template <int NC, typename Cost>
+template <int NC, typename Cost, bool kRing>
 void winners_avx2(const RowCtx& c) {
   using F = typename Cost::Feature;
   // Everything the loop reads from c, in locals (see winners_avx512).
@@ -1089,20 +1089,31 @@ void winners_avx2(const RowCtx& c) {
   const F* out_l = static_cast<const F*>(c.out_left);
   const F* out_r = static_cast<const F*>(c.out_rpad);
   const uint16_t* in16 = static_cast<const uint16_t*>(c.in_quad);
+  const uint16_t* out16 = static_cast<const uint16_t*>(c.out_quad);
   const ptrdiff_t nib = c.nibble_stride;  // from the low nibbles to the high ones
-  // Census: the left codes' nibbles of column j, entering and leaving, broadcast.
+  // Census: the left codes' nibbles of column j, entering (and leaving, without the ring),
+  // broadcast.
   struct CensusLeft {
-    __m256i in0, in1;
+    __m256i in0, in1, out0, out1;
   };
   // (The left rows' nibbles follow the right rows' in the same buffers, as two more rows.)
   const uint16_t* const lin16 = in16 ? in16 + 2 * nib : nullptr;
+  const uint16_t* const lout16 = out16 ? out16 + 2 * nib : nullptr;
   auto census_left = [&](ptrdiff_t j) {
-    return CensusLeft{_mm256_set1_epi16(static_cast<short>(lin16[j])),
-                      _mm256_set1_epi16(static_cast<short>(lin16[nib + j]))};
+    CensusLeft l;
+    l.in0 = _mm256_set1_epi16(static_cast<short>(lin16[j]));
+    l.in1 = _mm256_set1_epi16(static_cast<short>(lin16[nib + j]));
+    if constexpr (!kRing) {
+      l.out0 = _mm256_set1_epi16(static_cast<short>(lout16[j]));
+      l.out1 = _mm256_set1_epi16(static_cast<short>(lout16[nib + j]));
+    }
+    return l;
   };
   // Census: vector i of column j updated, stored and returned (so the running sum need not
-  // load it back: a store forwarded to a load adds its latency to the sum's chain). The
-  // entering row's costs are matched and kept in the ring; the leaving row's are read from it.
+  // load it back: a store forwarded to a load adds its latency to the sum's chain). With the
+  // ring, the entering row's costs are matched and kept there, the leaving row's read back;
+  // without, both rows are matched (the byte counts of one minus the other's, -8 .. 8, summed
+  // in pairs by vpmaddubsw).
   uint16_t* const ring_in = c.ring_in;
   const uint16_t* const ring_out = c.ring_out;
   auto census_update = [&](const CensusLeft& l, ptrdiff_t j, int i) {
@@ -1115,12 +1126,19 @@ void winners_avx2(const RowCtx& c) {
                              _mm256_shuffle_epi8(lut, _mm256_xor_si256(l1, r1)));
     };
     auto* s = reinterpret_cast<__m256i*>(S + j * dp) + i;
-    const __m256i cin =
-        _mm256_maddubs_epi16(_mm256_set1_epi8(1), count(l.in0, l.in1, in16 + j + 16 * i));
-    _mm256_store_si256(reinterpret_cast<__m256i*>(ring_in + j * dp) + i, cin);
-    const __m256i cout =
-        _mm256_load_si256(reinterpret_cast<const __m256i*>(ring_out + j * dp) + i);
-    const __m256i v = _mm256_add_epi16(_mm256_load_si256(s), _mm256_sub_epi16(cin, cout));
+    __m256i d;
+    if constexpr (kRing) {
+      const __m256i cin =
+          _mm256_maddubs_epi16(_mm256_set1_epi8(1), count(l.in0, l.in1, in16 + j + 16 * i));
+      _mm256_store_si256(reinterpret_cast<__m256i*>(ring_in + j * dp) + i, cin);
+      d = _mm256_sub_epi16(
+          cin, _mm256_load_si256(reinterpret_cast<const __m256i*>(ring_out + j * dp) + i));
+    } else {
+      const __m256i pin = count(l.in0, l.in1, in16 + j + 16 * i);
+      const __m256i pout = count(l.out0, l.out1, out16 + j + 16 * i);
+      d = _mm256_maddubs_epi16(_mm256_set1_epi8(1), _mm256_sub_epi8(pin, pout));
+    }
+    const __m256i v = _mm256_add_epi16(_mm256_load_si256(s), d);
     _mm256_store_si256(s, v);
     return v;
   };
@@ -1431,7 +1449,11 @@ bool winners_fixed(const RowCtx& c) {
 #if defined(STEREODEPTH_BM_AVX512)
       winners_avx512<NC, Cost>(c);
 #else
-      winners_avx2<NC, Cost>(c);
+      if (sizeof(typename Cost::Feature) == 4 && c.ring_in != nullptr) {
+        winners_avx2<NC, Cost, true>(c);
+      } else {
+        winners_avx2<NC, Cost, false>(c);
+      }
 #endif
       return true;
     }
@@ -1981,10 +2003,17 @@ void match_band_impl(const MatchArgs& a, const BandScratch& s, ptrdiff_t y0, ptr
           }
 #elif defined(STEREODEPTH_BM_AVX2)
           if constexpr (sizeof(F) == 4) {
-            // The leaving row's costs are in the ring: only the entering row is matched.
+            // With the ring the leaving row's costs are read back: only the entering row is
+            // matched.
             auto* qi = static_cast<uint16_t*>(s.quad_in);
             nibbles_of(rpad_in, qi, npad, npad);
             nibbles_of(lrow(yin), qi + 2 * npad, cols, npad);
+            if (!s.ring) {
+              auto* qo = static_cast<uint16_t*>(s.quad_out);
+              nibbles_of(rpad_out, qo, npad, npad);
+              nibbles_of(lrow(yout), qo + 2 * npad, cols, npad);
+              c.out_quad = s.quad_out;
+            }
             c.nibble_stride = npad;
             c.in_quad = s.quad_in;
             c.ring_in = ring_slot(yin);

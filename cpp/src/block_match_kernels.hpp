@@ -96,14 +96,17 @@ inline constexpr std::size_t recent_size(int lanes, int dp) {
 
 inline constexpr std::ptrdiff_t cost_ring_rows(int radius) { return 2 * radius + 2; }
 
+// The most a worker's cost ring may take, in bytes; beyond, the leaving row is matched again.
+inline constexpr std::size_t kCostRingBudget = std::size_t{24} << 20;
+
 // Elements of BandScratch::ring: a build with 16 lanes (AVX2), census features (4 bytes) and
-// dp <= 256 (its fixed first pass) keeps cost_ring_rows(radius) rows of cols * dp costs.
+// dp <= 256 (its fixed first pass) keeps cost_ring_rows(radius) rows of cols * dp costs, when
+// they fit kCostRingBudget; 0 otherwise.
 inline constexpr std::size_t cost_ring_size(int lanes, std::size_t feat_size, int radius,
                                             std::ptrdiff_t cols, int dp) {
-  return lanes == 16 && feat_size == 4 && dp <= 256
-             ? static_cast<std::size_t>(cost_ring_rows(radius)) * static_cast<std::size_t>(cols) *
-                   static_cast<std::size_t>(dp)
-             : 0;
+  const std::size_t n = static_cast<std::size_t>(cost_ring_rows(radius)) *
+                        static_cast<std::size_t>(cols) * static_cast<std::size_t>(dp);
+  return lanes == 16 && feat_size == 4 && dp <= 256 && 2 * n <= kCostRingBudget ? n : 0;
 }
 
 // Elements of slack after each padded row, so vector loops may overrun.
