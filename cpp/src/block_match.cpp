@@ -104,7 +104,7 @@ class Arena {
 };
 
 detail::BandScratch carve_band(Arena& arena, std::ptrdiff_t cols, int dp, std::size_t feat_size,
-                               int lanes) {
+                               int lanes, int radius) {
   const auto c = static_cast<std::size_t>(cols);
   const std::size_t row = c + static_cast<std::size_t>(dp) + detail::kRowPad;
   detail::BandScratch s{};
@@ -120,6 +120,9 @@ detail::BandScratch carve_band(Arena& arena, std::ptrdiff_t cols, int dp, std::s
   s.texcol = arena.take<std::uint32_t>(c);
   s.records = arena.take<detail::WinnerRecord>(c + 16);
   s.recent = arena.take<std::uint16_t>(detail::recent_size(lanes, dp));
+  const std::size_t ring = detail::cost_ring_size(lanes, feat_size, radius, cols, dp);
+  s.ring = arena.take<std::uint16_t>(ring);
+  if (ring == 0) s.ring = nullptr;
   return s;
 }
 
@@ -324,7 +327,7 @@ void BlockMatcher::compute(const StereoImage& left, const StereoImage& right,
     const auto gpix = static_cast<std::size_t>((wk.g1 - wk.g0) * cols);
     Arena arena(&ws.workers[w]);
     for (int pass = 0; pass < 2; ++pass) {
-      wk.scratch = carve_band(arena, cols, dp, feat_size, k.lanes);
+      wk.scratch = carve_band(arena, cols, dp, feat_size, k.lanes, p.block_size / 2);
       wk.grey[0] = arena.take<std::uint8_t>(rgb ? gpix : 0);
       wk.grey[1] = arena.take<std::uint8_t>(rgb ? gpix : 0);
       wk.feat[0] = arena.take<std::uint8_t>(fpix * feat_size);
@@ -578,7 +581,7 @@ std::vector<std::pair<std::string, double>> BlockMatcher::stage_times(
   std::uint8_t *grey[2] = {}, *feat[2] = {}, *texture = nullptr;
   float* copy = nullptr;
   for (int pass = 0; pass < 2; ++pass) {
-    scratch = carve_band(arena, cols, dp, feat_size, k.lanes);
+    scratch = carve_band(arena, cols, dp, feat_size, k.lanes, p.block_size / 2);
     grey[0] = arena.take<std::uint8_t>(pix);
     grey[1] = arena.take<std::uint8_t>(pix);
     feat[0] = arena.take<std::uint8_t>(pix * feat_size);

@@ -14,12 +14,16 @@
 // count), does step (1) for column x + r on the way (so the column sums are read back from
 // L1), rotates each pixel's costs into aligned right-winner blocks held in registers, and
 // does step (3) sixteen pixels at a time. The AVX2 build does the same with 16-lane vectors
-// (also dp <= 256), except that it updates the right winners once per 16 pixels from the
-// costs it stored, and does step (3) eight pixels at a time. Every path computes the same
+// (also dp <= 256), except that it works in groups of 16 pixels (block costs to `recent`,
+// then the right winners and the winners from there), matches the border band in the same
+// pass (border_band otherwise), reads the census costs of the row leaving the block from a
+// ring of the last rows' costs (BandScratch::ring), and does step (3) eight pixels at a
+// time. Every path computes the same
 // integers, and the floating-point steps use the same IEEE operations in the same order as
 // the numpy oracle.
 #include "block_match_kernels.hpp"
 
+#include <algorithm>
 #include <cmath>
 #include <cstdint>
 #include <cstdlib>
@@ -330,11 +334,15 @@ inline __m512i sad_cost32(__m512i l, const uint8_t* r) {
 #endif
 
 // colsum[x][q] += cost(left[x], rpad[x + q]) for every lane (the padding lanes too: their sums
-// are never read as costs).
+// are never read as costs). AVX2 census: when costs is not null, the costs also go there (the
+// row's slot of BandScratch::ring, same layout as colsum).
 template <typename Cost>
 void add_cost_row(const typename Cost::Feature* left, const typename Cost::Feature* rpad,
-                  uint16_t* colsum, ptrdiff_t cols, int dp) {
+                  uint16_t* colsum, ptrdiff_t cols, int dp, uint16_t* costs) {
   constexpr bool kCensus = sizeof(typename Cost::Feature) == 4;
+#if !defined(STEREODEPTH_BM_AVX2)
+  (void)costs;
+#endif
   for (ptrdiff_t x = 0; x < cols; ++x) {
     uint16_t* s = colsum + x * dp;
     const auto l = left[x];
@@ -363,6 +371,7 @@ void add_cost_row(const typename Cost::Feature* left, const typename Cost::Featu
       }
       auto* sp = reinterpret_cast<__m256i*>(s + q);
       _mm256_storeu_si256(sp, _mm256_add_epi16(_mm256_loadu_si256(sp), c));
+      if (costs) _mm256_storeu_si256(reinterpret_cast<__m256i*>(costs + x * dp + q), c);
     }
 #else
     (void)kCensus;
@@ -470,6 +479,9 @@ struct RowCtx {
   const void* in_quad;  // census: the padded rows regrouped (see quads_of, nibbles_of)
   const void* out_quad;
   ptrdiff_t nibble_stride;  // AVX2: elements from the low nibbles to the high ones
+  // AVX2 census: the ring slots (see BandScratch::ring) of the rows entering and leaving.
+  uint16_t* ring_in;
+  const uint16_t* ring_out;
   float* drow;
   float* crow;  // null when no confidence is wanted
 };
@@ -705,6 +717,7 @@ void winners_generic(const RowCtx& c) {
 #if defined(STEREODEPTH_BM_AVX512)
 
 constexpr int kMaxChunks = 8;
+constexpr bool kFixedPassDoesBorder = false;  // border_band after the second pass
 
 // rotation_table()[s] lane j = (j - s) mod 32: the index of a rotation by s lanes.
 const __m512i* rotation_table() {
@@ -961,6 +974,7 @@ void winners_avx512(const RowCtx& c) {
 #elif defined(STEREODEPTH_BM_AVX2)
 
 constexpr int kMaxChunks = 16;  // dp <= 256
+constexpr bool kFixedPassDoesBorder = true;  // the border band in group_winners
 
 // The n census codes of a row (16 bits each) split into nibbles for the lookup in
 // update_col: out[i] = code & 0x0F0F and out[stride + i] = (code >> 4) & 0x0F0F, one load per
@@ -1046,7 +1060,7 @@ void right_group_keyed(const uint16_t* recent, uint16_t* rmin, uint16_t* rarg, p
 // the column-sum update fused in, a branch-free winner, and the right winners updated per
 // group of 16 pixels (right_group) from the costs stored in `recent`, which also gives the
 // winner's neighbours.
-template <int NC, typename Cost>
+template <int NC, typename Cost, bool kRing>
 void winners_avx2(const RowCtx& c) {
   using F = typename Cost::Feature;
   // Everything the loop reads from c, in locals (see winners_avx512).
@@ -1077,7 +1091,8 @@ void winners_avx2(const RowCtx& c) {
   const uint16_t* in16 = static_cast<const uint16_t*>(c.in_quad);
   const uint16_t* out16 = static_cast<const uint16_t*>(c.out_quad);
   const ptrdiff_t nib = c.nibble_stride;  // from the low nibbles to the high ones
-  // Census: the left codes' nibbles of column j, entering and leaving, broadcast.
+  // Census: the left codes' nibbles of column j, entering (and leaving, without the ring),
+  // broadcast.
   struct CensusLeft {
     __m256i in0, in1, out0, out1;
   };
@@ -1085,13 +1100,22 @@ void winners_avx2(const RowCtx& c) {
   const uint16_t* const lin16 = in16 ? in16 + 2 * nib : nullptr;
   const uint16_t* const lout16 = out16 ? out16 + 2 * nib : nullptr;
   auto census_left = [&](ptrdiff_t j) {
-    return CensusLeft{_mm256_set1_epi16(static_cast<short>(lin16[j])),
-                      _mm256_set1_epi16(static_cast<short>(lin16[nib + j])),
-                      _mm256_set1_epi16(static_cast<short>(lout16[j])),
-                      _mm256_set1_epi16(static_cast<short>(lout16[nib + j]))};
+    CensusLeft l;
+    l.in0 = _mm256_set1_epi16(static_cast<short>(lin16[j]));
+    l.in1 = _mm256_set1_epi16(static_cast<short>(lin16[nib + j]));
+    if constexpr (!kRing) {
+      l.out0 = _mm256_set1_epi16(static_cast<short>(lout16[j]));
+      l.out1 = _mm256_set1_epi16(static_cast<short>(lout16[nib + j]));
+    }
+    return l;
   };
   // Census: vector i of column j updated, stored and returned (so the running sum need not
-  // load it back: a store forwarded to a load adds its latency to the sum's chain).
+  // load it back: a store forwarded to a load adds its latency to the sum's chain). With the
+  // ring, the entering row's costs are matched and kept there, the leaving row's read back;
+  // without, both rows are matched (the byte counts of one minus the other's, -8 .. 8, summed
+  // in pairs by vpmaddubsw).
+  uint16_t* const ring_in = c.ring_in;
+  const uint16_t* const ring_out = c.ring_out;
   auto census_update = [&](const CensusLeft& l, ptrdiff_t j, int i) {
     const __m256i lut = nibble_popcounts();
     // Set bits of each byte of (l ^ r): the counts of its two nibbles.
@@ -1102,9 +1126,18 @@ void winners_avx2(const RowCtx& c) {
                              _mm256_shuffle_epi8(lut, _mm256_xor_si256(l1, r1)));
     };
     auto* s = reinterpret_cast<__m256i*>(S + j * dp) + i;
-    const __m256i pin = count(l.in0, l.in1, in16 + j + 16 * i);
-    const __m256i pout = count(l.out0, l.out1, out16 + j + 16 * i);
-    const __m256i d = _mm256_maddubs_epi16(_mm256_set1_epi8(1), _mm256_sub_epi8(pin, pout));
+    __m256i d;
+    if constexpr (kRing) {
+      const __m256i cin =
+          _mm256_maddubs_epi16(_mm256_set1_epi8(1), count(l.in0, l.in1, in16 + j + 16 * i));
+      _mm256_store_si256(reinterpret_cast<__m256i*>(ring_in + j * dp) + i, cin);
+      d = _mm256_sub_epi16(
+          cin, _mm256_load_si256(reinterpret_cast<const __m256i*>(ring_out + j * dp) + i));
+    } else {
+      const __m256i pin = count(l.in0, l.in1, in16 + j + 16 * i);
+      const __m256i pout = count(l.out0, l.out1, out16 + j + 16 * i);
+      d = _mm256_maddubs_epi16(_mm256_set1_epi8(1), _mm256_sub_epi8(pin, pout));
+    }
     const __m256i v = _mm256_add_epi16(_mm256_load_si256(s), d);
     _mm256_store_si256(s, v);
     return v;
@@ -1176,18 +1209,52 @@ void winners_avx2(const RowCtx& c) {
   // chain (least cost, its lane, the uniqueness count) is long: in a loop of its own, over
   // costs already in L1, the chains of many pixels overlap, where interleaved with the
   // column-sum update the processor's window held about two pixels and waited on each.
+  // The border band (clip_border): a pixel outside xlo..xhi is matched over the disparity
+  // indices klo..khi whose right pixel lies inside the image (border_band's rule), here as
+  // lanes qlo..qhi; the others read as 0xFFFF (above every block cost), so the winner, the
+  // uniqueness data and the neighbours below come out as border_band's. Returns false when
+  // no lane is inside (the pixel stays NaN).
+  const ptrdiff_t min_d = c.min_d, nd = c.nd;
+  const bool clip_border = c.clip_border;
+  auto border_lanes = [&](ptrdiff_t x, int& qlo, int& qhi) {
+    const ptrdiff_t klo = clamp_index(x - min_d - cols + 1, 0, nd);
+    const ptrdiff_t khi = clamp_index(x - min_d, -1, nd - 1);
+    qlo = static_cast<int>(dp - 1 - khi);
+    qhi = static_cast<int>(dp - 1 - klo);
+    return klo <= khi;
+  };
+  // All ones on the lanes of vector i outside qlo..qhi.
+  auto outside = [&](int qlo, int qhi, int i) {
+    const __m256i lane = _mm256_add_epi16(iota, _mm256_set1_epi16(static_cast<short>(16 * i)));
+    return _mm256_or_si256(_mm256_cmpgt_epi16(_mm256_set1_epi16(static_cast<short>(qlo)), lane),
+                           _mm256_cmpgt_epi16(lane, _mm256_set1_epi16(static_cast<short>(qhi))));
+  };
+  __m256i key_low[NC];  // 15 - i in every lane (see group_winners)
+  for (int i = 0; i < NC; ++i) {
+    key_low[i] = _mm256_set1_epi16(static_cast<short>(15 - i));
+    // Kept as values: GCC would otherwise rebuild each constant in the loop (three
+    // instructions) rather than read it.
+    __asm__("" : "+x"(key_low[i]));
+  }
   auto group_winners = [&](ptrdiff_t x0, ptrdiff_t x1) {
-    // In two loops: the least costs first (a short chain), then the rest, which starts from
-    // the least cost in memory; each loop's chain is then short enough for the processor to
-    // overlap several pixels.
+    // Without keys, in two loops: the least costs first (a short chain), then the rest, which
+    // starts from the least cost in memory; each loop's chain is then short enough for the
+    // processor to overlap several pixels.
     alignas(32) uint16_t bests[16];
-    for (ptrdiff_t x = x0; x <= x1; ++x) {
+    for (ptrdiff_t x = x0; x <= x1 && !keyed; ++x) {
       const uint16_t* const row = recent + (x - x0) * kRow + 16;
+      auto load = [&](int i) { return _mm256_load_si256(reinterpret_cast<const __m256i*>(row) + i); };
+      int qlo = 0, qhi = -1;
+      const bool border = x < xlo || x > xhi;
+      if (border && !(clip_border && border_lanes(x, qlo, qhi))) continue;  // no search
       // The least cost, in four chains of minima (a quarter of one chain's latency).
       __m256i mins[4] = {ones, ones, ones, ones};
-      for (int i = 0; i < NC; ++i) {
-        mins[i & 3] = _mm256_min_epu16(
-            mins[i & 3], _mm256_load_si256(reinterpret_cast<const __m256i*>(row) + i));
+      if (border) {
+        for (int i = 0; i < NC; ++i) {
+          mins[0] = _mm256_min_epu16(mins[0], _mm256_or_si256(load(i), outside(qlo, qhi, i)));
+        }
+      } else {
+        for (int i = 0; i < NC; ++i) mins[i & 3] = _mm256_min_epu16(mins[i & 3], load(i));
       }
       const __m256i m = _mm256_min_epu16(_mm256_min_epu16(mins[0], mins[1]),
                                          _mm256_min_epu16(mins[2], mins[3]));
@@ -1195,33 +1262,60 @@ void winners_avx2(const RowCtx& c) {
           _mm_min_epu16(_mm256_castsi256_si128(m), _mm256_extracti128_si256(m, 1)))));
     }
     for (ptrdiff_t x = x0; x <= x1; ++x) {
-      if (x < xlo || x > xhi) {
-        record_none(c, x);
-        continue;
-      }
       const uint16_t* const row = recent + (x - x0) * kRow + 16;
       __m256i V[NC];
       for (int i = 0; i < NC; ++i) V[i] = _mm256_load_si256(reinterpret_cast<const __m256i*>(row) + i);
-      const uint32_t best = bests[x - x0];
-      const __m256i bv = _mm256_set1_epi16(static_cast<short>(bests[x - x0]));
-      // The winner: the highest lane holding the least cost (the lowest disparity on a tie),
-      // branch-free (see winners_avx512), four vectors (64 lanes) at a time: the comparison
-      // masks of two vectors packed to bytes (vpacksswb interleaves their 128-bit halves,
-      // vpermq puts them back in order) give one bit per lane.
+      int qlo = 0, qhi = dp - 1;  // the lanes searched
+      if (x < xlo || x > xhi) {
+        if (!clip_border || !border_lanes(x, qlo, qhi)) {
+          record_none(c, x);
+          continue;
+        }
+        for (int i = 0; i < NC; ++i) V[i] = _mm256_or_si256(V[i], outside(qlo, qhi, i));
+      }
+      uint32_t best = 0;
       int qb = 0;
-      for (int g = 0; g < NC; g += 4) {
-        auto eq = [&](int k) {
-          return k < NC ? _mm256_cmpeq_epi16(V[k], bv) : _mm256_setzero_si256();
-        };
-        auto bits = [&](int k) {
-          const __m256i m = _mm256_permute4x64_epi64(_mm256_packs_epi16(eq(k), eq(k + 1)), 0xD8);
-          return static_cast<std::uint64_t>(static_cast<uint32_t>(_mm256_movemask_epi8(m)));
-        };
-        std::uint64_t w = bits(g);
-        if (g + 2 < NC) w |= bits(g + 2) << 32;
-        const int top = 16 * g + 63 - __builtin_clzll(w | 1u);
-        const int found = -static_cast<int>(w != 0);  // all ones when this group holds the least
-        qb ^= (qb ^ top) & found;
+      if (keyed) {
+        // The winner with its cost in one pass: keys cost << 4 | (15 - i) for vector i (every
+        // cost is below 4095, and the 0xFFFF lanes give keys of at least 0xFFF0, above every
+        // real one), so that the least key per lane is the least cost and, among equal costs,
+        // the last vector (the highest lane); across the 16 lanes, the least key's highest
+        // lane. (One loop with the rest: its chain is short enough to overlap pixels.)
+        __m256i kmin[2] = {ones, ones};
+        for (int i = 0; i < NC; ++i) {
+          kmin[i & 1] = _mm256_min_epu16(kmin[i & 1],
+                                         _mm256_or_si256(_mm256_slli_epi16(V[i], 4), key_low[i]));
+        }
+        const __m256i k = _mm256_min_epu16(kmin[0], kmin[1]);
+        const uint32_t key =
+            static_cast<uint32_t>(_mm_cvtsi128_si32(_mm_minpos_epu16(_mm_min_epu16(
+                _mm256_castsi256_si128(k), _mm256_extracti128_si256(k, 1))))) &
+            0xFFFFu;
+        const auto eq = static_cast<uint32_t>(_mm256_movemask_epi8(
+            _mm256_cmpeq_epi16(k, _mm256_set1_epi16(static_cast<short>(key)))));
+        best = key >> 4;
+        qb = static_cast<int>(16 * (15 - (key & 15u)) + (31 - __builtin_clz(eq)) / 2);
+      } else {
+        best = bests[x - x0];
+        const __m256i bv = _mm256_set1_epi16(static_cast<short>(bests[x - x0]));
+        // The winner: the highest lane holding the least cost (the lowest disparity on a
+        // tie), branch-free (see winners_avx512), four vectors (64 lanes) at a time: the
+        // comparison masks of two vectors packed to bytes (vpacksswb interleaves their
+        // 128-bit halves, vpermq puts them back in order) give one bit per lane.
+        for (int g = 0; g < NC; g += 4) {
+          auto eq = [&](int k) {
+            return k < NC ? _mm256_cmpeq_epi16(V[k], bv) : _mm256_setzero_si256();
+          };
+          auto bits = [&](int k) {
+            const __m256i m = _mm256_permute4x64_epi64(_mm256_packs_epi16(eq(k), eq(k + 1)), 0xD8);
+            return static_cast<std::uint64_t>(static_cast<uint32_t>(_mm256_movemask_epi8(m)));
+          };
+          std::uint64_t w = bits(g);
+          if (g + 2 < NC) w |= bits(g + 2) << 32;
+          const int top = 16 * g + 63 - __builtin_clzll(w | 1u);
+          const int found = -static_cast<int>(w != 0);  // all ones when this group holds the least
+          qb ^= (qb ^ top) & found;
+        }
       }
       uint32_t second = kNone;
       if (count_low) {
@@ -1259,55 +1353,84 @@ void winners_avx2(const RowCtx& c) {
       // c0 | c2 << 16: lanes qb + 1 and qb - 1 (disparity index kb - 1 and kb + 1). Beyond
       // the lanes `recent` holds 0xFFFF where the other passes store 0: the second pass reads
       // neither (it needs 1 <= kb <= nd - 2).
+      // In the border band a neighbour outside the lanes searched reads as 0xFFFF, which
+      // the second pass takes as "no sub-pixel step" (border_band's rule).
       rec->around = 0;
       if (around) {
-        rec->around =
-            static_cast<uint32_t>(row[qb + 1]) | (static_cast<uint32_t>(row[qb - 1]) << 16);
+        const uint32_t c0 = qb + 1 <= qhi ? row[qb + 1] : kNone;
+        const uint32_t c2 = qb - 1 >= qlo ? row[qb - 1] : kNone;
+        rec->around = c0 | (c2 << 16);
       }
     }
   };
 
-  // Along the row: the block sums of each pixel go to `recent`; every 16 pixels, the right
-  // winners and the winners of those pixels.
-  for (ptrdiff_t x = 0; x < cols; ++x) {
-    if (x > 0) {
-      const ptrdiff_t xp = clamp_index(x + r, 0, cols - 1);
-      const ptrdiff_t xm = clamp_index(x - r - 1, 0, cols - 1);
-      if constexpr (sizeof(F) == 4) {
-        if (fused && x + r < cols) {
-          const CensusLeft l = census_left(x + r);
+  // Along the row, 16 pixels at a time: the block sums of each pixel go to `recent`, then
+  // the right winners and the winners of those pixels are found. A group whose columns all
+  // have their block inside the row (no clamping) and whose column sums are updated here
+  // takes the short path.
+  const bool has_pad = c.qpad > 0;
+  for (ptrdiff_t x0 = 0; x0 < cols; x0 += 16) {
+    const ptrdiff_t x1 = std::min<ptrdiff_t>(x0 + 16, cols);
+    uint16_t* row = recent + 16;
+    if (fused && x0 > r && x1 + r <= cols) {
+      for (ptrdiff_t x = x0; x < x1; ++x, row += kRow) {
+        const ptrdiff_t xp = x + r, xm = x - r - 1;
+        if constexpr (sizeof(F) == 4) {
+          const CensusLeft l = census_left(xp);
           for (int i = 0; i < NC; ++i) {
-            A[i] = _mm256_sub_epi16(_mm256_add_epi16(A[i], census_update(l, x + r, i)),
+            A[i] = _mm256_sub_epi16(_mm256_add_epi16(A[i], census_update(l, xp, i)),
                                     column(xm, i));
           }
         } else {
+          update_col(xp);
           for (int i = 0; i < NC; ++i) {
             A[i] = _mm256_sub_epi16(_mm256_add_epi16(A[i], column(xp, i)), column(xm, i));
           }
         }
+        if (has_pad) A[0] = _mm256_or_si256(A[0], padv);
+        if (texcol) tsum += texcol[xp] - texcol[xm];
+        for (int i = 0; i < NC; ++i) _mm256_store_si256(reinterpret_cast<__m256i*>(row) + i, A[i]);
+        tsums[x - x0] = tsum;
+      }
+    } else {
+      for (ptrdiff_t x = x0; x < x1; ++x, row += kRow) {
+        if (x > 0) {
+          const ptrdiff_t xp = clamp_index(x + r, 0, cols - 1);
+          const ptrdiff_t xm = clamp_index(x - r - 1, 0, cols - 1);
+          if constexpr (sizeof(F) == 4) {
+            if (fused && x + r < cols) {
+              const CensusLeft l = census_left(x + r);
+              for (int i = 0; i < NC; ++i) {
+                A[i] = _mm256_sub_epi16(_mm256_add_epi16(A[i], census_update(l, x + r, i)),
+                                        column(xm, i));
+              }
+            } else {
+              for (int i = 0; i < NC; ++i) {
+                A[i] = _mm256_sub_epi16(_mm256_add_epi16(A[i], column(xp, i)), column(xm, i));
+              }
+            }
+          } else {
+            if (fused && x + r < cols) update_col(x + r);
+            for (int i = 0; i < NC; ++i) {
+              A[i] = _mm256_sub_epi16(_mm256_add_epi16(A[i], column(xp, i)), column(xm, i));
+            }
+          }
+          A[0] = _mm256_or_si256(A[0], padv);
+          if (texcol) tsum += texcol[xp] - texcol[xm];
+        }
+        for (int i = 0; i < NC; ++i) _mm256_store_si256(reinterpret_cast<__m256i*>(row) + i, A[i]);
+        tsums[x - x0] = tsum;
+      }
+    }
+    const int n = static_cast<int>(x1 - x0);
+    if (lr_on) {
+      if (keyed) {
+        right_group_keyed<NC>(recent, rmin, rarg, x0, n);
       } else {
-        if (fused && x + r < cols) update_col(x + r);
-        for (int i = 0; i < NC; ++i) {
-          A[i] = _mm256_sub_epi16(_mm256_add_epi16(A[i], column(xp, i)), column(xm, i));
-        }
+        right_group<NC>(recent, rmin, rarg, x0, n);
       }
-      A[0] = _mm256_or_si256(A[0], padv);
-      if (texcol) tsum += texcol[xp] - texcol[xm];
     }
-    const int t = static_cast<int>(x & 15);
-    uint16_t* const row = recent + t * kRow + 16;
-    for (int i = 0; i < NC; ++i) _mm256_store_si256(reinterpret_cast<__m256i*>(row) + i, A[i]);
-    tsums[t] = tsum;
-    if (t == 15 || x == cols - 1) {
-      if (lr_on) {
-        if (keyed) {
-          right_group_keyed<NC>(recent, rmin, rarg, x - t, t + 1);
-        } else {
-          right_group<NC>(recent, rmin, rarg, x - t, t + 1);
-        }
-      }
-      group_winners(x - t, x);
-    }
+    group_winners(x0, x1 - 1);
   }
 }
 
@@ -1326,7 +1449,11 @@ bool winners_fixed(const RowCtx& c) {
 #if defined(STEREODEPTH_BM_AVX512)
       winners_avx512<NC, Cost>(c);
 #else
-      winners_avx2<NC, Cost>(c);
+      if (sizeof(typename Cost::Feature) == 4 && c.ring_in != nullptr) {
+        winners_avx2<NC, Cost, true>(c);
+      } else {
+        winners_avx2<NC, Cost, false>(c);
+      }
 #endif
       return true;
     }
@@ -1601,7 +1728,12 @@ void decide_avx2(const RowCtx& c) {
       }
       const __m256 den = _mm256_cvtepi32_ps(_mm256_add_epi32(den_i, den_i));
       // The lanes that take the step; the others' quotients (perhaps of a zero) are dropped.
-      const __m256 use = _mm256_and_ps(_mm256_castsi256_ps(_mm256_and_si256(ok, interior(kb))),
+      // A neighbour of 0xFFFF lies outside the disparities searched (the border band, see
+      // winners_avx2): no step.
+      const __m256i both = _mm256_andnot_si256(
+          _mm256_or_si256(_mm256_cmpeq_epi32(c0, none), _mm256_cmpeq_epi32(c2, none)),
+          _mm256_and_si256(ok, interior(kb)));
+      const __m256 use = _mm256_and_ps(_mm256_castsi256_ps(both),
                                        _mm256_cmp_ps(den, _mm256_setzero_ps(), _CMP_GT_OQ));
       d = _mm256_blendv_ps(d, _mm256_add_ps(d, _mm256_div_ps(num, den)), use);
     }
@@ -1753,15 +1885,18 @@ void row_pass(const RowCtx& c) {
     counted.count_low = c.unique_min != nullptr && c.crow == nullptr;
     winners_fixed<1, Cost>(counted);
     if (!c.first_pass_only) decide(counted);
+    // The AVX2 fixed pass matches the border band itself (see winners_avx2).
+    if (c.clip_border && !kFixedPassDoesBorder) border_band(c);
   } else {
     winners_generic(c);
     if (!c.first_pass_only) decide(c);
+    if (c.clip_border) border_band(c);
   }
 #else
   winners_generic(c);
   if (!c.first_pass_only) decide_generic(c);
-#endif
   if (c.clip_border) border_band(c);
+#endif
 }
 
 // ------------------------------------------------------------------------------------------
@@ -1828,13 +1963,19 @@ void match_band_impl(const MatchArgs& a, const BandScratch& s, ptrdiff_t y0, ptr
   c.first_pass_only = a.first_pass_only;
 
   const bool fused = fuses_update(dp);
+  // The ring slot of image row y (clamped), or null without a ring.
+  auto ring_slot = [&](ptrdiff_t y) -> uint16_t* {
+    if (!s.ring) return nullptr;
+    const ptrdiff_t slot = clamp_index(y, 0, rows - 1) % cost_ring_rows(r);
+    return s.ring + slot * cols * dp;
+  };
   for (ptrdiff_t y = y0; y < y1; ++y) {
     if (fresh && y == y0) {
       std::memset(s.colsum, 0, sizeof(uint16_t) * static_cast<size_t>(cols) * dp);
       if (tex_on) std::memset(s.texcol, 0, sizeof(uint32_t) * static_cast<size_t>(cols));
       for (ptrdiff_t dy = -r; dy <= r; ++dy) {
         pad_right_row(rrow(y + dy), rpad_in, cols, npad, jmin);
-        add_cost_row<Cost>(lrow(y + dy), rpad_in, s.colsum, cols, dp);
+        add_cost_row<Cost>(lrow(y + dy), rpad_in, s.colsum, cols, dp, ring_slot(y + dy));
         if (tex_on) {
           const uint8_t* t = trow(y + dy);
           for (ptrdiff_t x = 0; x < cols; ++x) s.texcol[x] += t[x];
@@ -1862,15 +2003,21 @@ void match_band_impl(const MatchArgs& a, const BandScratch& s, ptrdiff_t y0, ptr
           }
 #elif defined(STEREODEPTH_BM_AVX2)
           if constexpr (sizeof(F) == 4) {
+            // With the ring the leaving row's costs are read back: only the entering row is
+            // matched.
             auto* qi = static_cast<uint16_t*>(s.quad_in);
-            auto* qo = static_cast<uint16_t*>(s.quad_out);
             nibbles_of(rpad_in, qi, npad, npad);
-            nibbles_of(rpad_out, qo, npad, npad);
             nibbles_of(lrow(yin), qi + 2 * npad, cols, npad);
-            nibbles_of(lrow(yout), qo + 2 * npad, cols, npad);
+            if (!s.ring) {
+              auto* qo = static_cast<uint16_t*>(s.quad_out);
+              nibbles_of(rpad_out, qo, npad, npad);
+              nibbles_of(lrow(yout), qo + 2 * npad, cols, npad);
+              c.out_quad = s.quad_out;
+            }
             c.nibble_stride = npad;
             c.in_quad = s.quad_in;
-            c.out_quad = s.quad_out;
+            c.ring_in = ring_slot(yin);
+            c.ring_out = ring_slot(yout);
           }
 #endif
         } else {
