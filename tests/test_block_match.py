@@ -536,16 +536,16 @@ def test_matcher_reuses_its_buffers_across_sizes() -> None:
 
 
 def test_thread_matcher_is_kept_per_thread_and_parameters() -> None:
-    from stereodepth.matching import thread_matcher
+    from stereodepth._methods import thread_matcher
 
-    first = thread_matcher(num_disparities=12, block_size=7)
-    assert thread_matcher(block_size=7, num_disparities=12) is first  # order does not matter
+    first = thread_matcher("bm", num_disparities=12, block_size=7)
+    assert thread_matcher("bm", block_size=7, num_disparities=12) is first  # order: no matter
     assert first.params["block_size"] == 7
-    other = thread_matcher(num_disparities=12, block_size=9)
+    other = thread_matcher("bm", num_disparities=12, block_size=9)
     assert other is not first and other.params["block_size"] == 9
-    assert thread_matcher(num_disparities=12, block_size=9) is other
+    assert thread_matcher("bm", num_disparities=12, block_size=9) is other
     with ThreadPoolExecutor(max_workers=1) as pool:
-        elsewhere = pool.submit(thread_matcher, num_disparities=12, block_size=9).result()
+        elsewhere = pool.submit(thread_matcher, "bm", num_disparities=12, block_size=9).result()
     assert elsewhere is not other
     left, right = shifted_pair((20, 50), 3, seed=40)
     np.testing.assert_array_equal(

@@ -92,7 +92,6 @@ rows were shared.
 
 from __future__ import annotations
 
-import threading
 from typing import Any
 
 import numpy as np
@@ -514,25 +513,6 @@ class StereoMatcher:
         if confidence is not None:
             return disparity, confidence
         return disparity
-
-
-_thread_state = threading.local()
-
-
-def thread_matcher(**params: Any) -> StereoMatcher:
-    """This thread's :class:`StereoMatcher` for ``params``: made on the first call and reused
-    while the parameters stay the same, so that a job matching pair after pair (the batch
-    command, the dask functions) does not allocate and fault in the matcher's buffers again
-    for every pair (a quarter of the time on a 0.35 MP pair). Each thread keeps one matcher,
-    released with the thread or when the parameters change."""
-    key = tuple(sorted(params.items(), key=lambda kv: kv[0]))
-    cached = getattr(_thread_state, "matcher", None)
-    if cached is None or cached[0] != key:
-        _thread_state.matcher = None  # release the old buffers before making the new ones
-        cached = (key, StereoMatcher(**params))
-        _thread_state.matcher = cached
-    matcher: StereoMatcher = cached[1]
-    return matcher
 
 
 def block_match(
