@@ -39,6 +39,18 @@ def _cli_names(message: str) -> str:
     )
 
 
+def flags(args: Any) -> dict[str, Any]:
+    """The raw-calibration flags of a command's parsed arguments, as the keywords of
+    :func:`check_without_calib` and :func:`raw_calibration` (both commands have them all)."""
+    return {
+        "calib_right": args.calib_right,
+        "translation_unit": args.translation_unit,
+        "no_rectify": args.no_rectify,
+        "write_rectified": args.write_rectified,
+        "alpha": args.alpha,
+    }
+
+
 def check_without_calib(
     *,
     calib_right: str | None,

@@ -205,13 +205,7 @@ def _rig(
     ]
     if args.calib is None:
         try:
-            rule.check_without_calib(
-                calib_right=args.calib_right,
-                translation_unit=args.translation_unit,
-                no_rectify=args.no_rectify,
-                write_rectified=args.write_rectified,
-                alpha=args.alpha,
-            )
+            rule.check_without_calib(**rule.flags(args))
         except ValueError as exc:
             raise _Usage(str(exc)) from None
     if args.calib is not None:
@@ -221,11 +215,7 @@ def _rig(
         try:
             stereo = rule.raw_calibration(
                 args.calib,
-                calib_right=args.calib_right,
-                translation_unit=args.translation_unit,
-                no_rectify=args.no_rectify,
-                write_rectified=args.write_rectified,
-                alpha=args.alpha,
+                **rule.flags(args),
             )
             if stereo is not None:
                 if args.threads is not None and args.threads < 0:

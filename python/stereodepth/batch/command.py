@@ -304,23 +304,13 @@ def _raw_rectification(
 
     if args.calib is None:
         try:
-            _calib_rule.check_without_calib(
-                calib_right=args.calib_right,
-                translation_unit=args.translation_unit,
-                no_rectify=args.no_rectify,
-                write_rectified=args.write_rectified,
-                alpha=args.alpha,
-            )
+            _calib_rule.check_without_calib(**_calib_rule.flags(args))
         except ValueError as exc:
             raise UsageError(str(exc)) from None
         return None
     return raw_rectification(
         args.calib,
-        calib_right=args.calib_right,
-        translation_unit=args.translation_unit,
-        no_rectify=args.no_rectify,
-        write_rectified=args.write_rectified,
-        alpha=args.alpha,
+        **_calib_rule.flags(args),
         threads=args.threads,
     )
 
