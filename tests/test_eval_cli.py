@@ -924,6 +924,21 @@ def test_sgm_method_passes_its_options(
     assert len(sgm_calls) < len(calls)  # the block matcher got none of them
 
 
+def test_json_report_records_the_matcher_options(
+    scenes_dir: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Two reports of the same methods with different options must tell which is which."""
+    argv = ["--method", "sgm", "stereodepth", "--threads", "1", "--scene", "rds-a"]
+    argv += ["--sgm-option", "paths=8", "--sgm-option", "fill=true", "--sgm-option", "p2=300"]
+    argv += ["--option", "cost=sad", "--option", "lr_max_diff=none"]
+    report = run_json(capsys, str(scenes_dir), *argv)
+    assert report["sgm_options"] == {"paths": 8, "fill": True, "p2": 300}
+    assert report["options"] == {"cost": "sad", "lr_max_diff": None}
+    assert report["opencv_options"] == {}
+    plain = run_json(capsys, str(scenes_dir), "--threads", "1", "--scene", "rds-a")
+    assert (plain["options"], plain["sgm_options"], plain["opencv_options"]) == ({}, {}, {})
+
+
 def test_time_ratios_are_medians_over_shared_scenes() -> None:
     from stereodepth.evaluation import EvalResult, Variant, format_time_ratios, time_ratios
 

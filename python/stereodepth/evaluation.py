@@ -59,7 +59,9 @@ Scores
     scene has a mask (``region`` nonocc), else over all pixels with ground truth (``all``);
     ``--no-mask`` always uses all. Percentages in the tables, fractions in ``--json``. The
     ``mean`` rows average each score over the scenes (every scene weighs the same) and the
-    times; their ``ns/(px·d)`` is the total time over the total work.
+    times; their ``ns/(px·d)`` is the total time over the total work. The ``--json`` object
+    also records the options given (``options``, ``sgm_options``, ``opencv_options``: each a
+    dict of the ``KEY=VALUE`` pairs after conversion, empty when none was given).
 """
 
 from __future__ import annotations
@@ -1078,6 +1080,10 @@ def run(args: argparse.Namespace) -> int:
             "repeat": args.repeat,
             "best_by": args.best_by,
             "channel_order": args.channel_order,
+            # The matcher options as given (after conversion), so a report says what it scored.
+            "options": options,
+            "sgm_options": sgm_options,
+            "opencv_options": opencv_options,
             "stereodepth_version": __version__,
             "opencv_version": None if cv2 is None else str(cv2.__version__),
             "notes": notes,
