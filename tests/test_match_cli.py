@@ -375,6 +375,24 @@ def test_sgm_path_with_a_stand_in_matcher(
     assert err.strip() == ("stereodepth match: error: --cost: --method sgm has no cost, got 'sad'")
 
 
+def test_sgm_summary_names_the_block_size(
+    pair: tuple[Path, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """The text and JSON summaries of --method sgm name the block size matched with, given
+    or the matcher's default, as they do for bm."""
+    if not sgm_available():
+        pytest.skip("this version of the library has no semi_global_match")
+    from stereodepth.semi_global import DEFAULT_BLOCK_SIZE
+
+    argv = ["--method", "sgm", "--num-disparities", "32", "--no-preview"]
+    code, out, err = run(capsys, *pair, *argv, "-o", f"{tmp_path}/a/", "--json")
+    assert code == 0, err
+    assert json.loads(out)["params"]["block_size"] == DEFAULT_BLOCK_SIZE
+    code, out, err = run(capsys, *pair, *argv, "--block-size", "1", "-o", f"{tmp_path}/b/")
+    assert code == 0, err
+    assert "matcher    sgm, block 1, disparities 0 to 31 px (32)" in out.splitlines()
+
+
 def test_sgm_without_the_semi_global_matcher(
     pair: tuple[Path, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:

@@ -514,6 +514,8 @@ def _print(s: dict[str, Any], left: np.ndarray) -> None:
     matcher = f"{s['method']}"
     if s["method"] == "bm":
         matcher += f", {p['cost']}, block {p['block_size']}"
+    elif "block_size" in p:
+        matcher += f", block {p['block_size']}"
     matcher += f", disparities {lo} to {lo + s['num_disparities'] - 1} px ({s['num_disparities']})"
     rows = [
         ("pair", f"{s['left']}, {s['right']} ({s['width']}x{s['height']} px, {kind})"),

@@ -211,6 +211,12 @@ def match_pair(
             confidence = out[1] if len(out) > 1 else None
         else:
             disparity = out
+        # The summary says the block it used, as for "bm": the given one, else its default.
+        if (
+            "block_size" in accepted
+            and accepted["block_size"].default is not inspect.Parameter.empty
+        ):
+            params.setdefault("block_size", accepted["block_size"].default)
     disparity = np.asarray(disparity, dtype=np.float32)
     depth = None
     if focal_px is not None and baseline_m is not None:
