@@ -553,6 +553,41 @@ def test_thread_matcher_is_kept_per_thread_and_parameters() -> None:
     )
 
 
+def test_one_shot_keeps_the_threads_matcher_and_still_checks_every_call(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """block_match reuses the calling thread's matcher while the parameters stay the same (so
+    a loop of calls costs what StereoMatcher.compute does), yet a value that equals a valid
+    one but has a type the checks refuse (16.0 for 16, 1 for True) is refused every time."""
+    from stereodepth import _methods
+
+    left, right = shifted_pair((20, 50), 3, seed=41)
+    first = sd.block_match(left, right, num_disparities=16)
+    kept = _methods._thread_state.matcher[1]
+    again = sd.block_match(left, right, num_disparities=16)
+    assert _methods._thread_state.matcher[1] is kept
+    np.testing.assert_array_equal(first, again)
+    with pytest.raises(TypeError, match=r"num_disparities must be an integer, got float 16\.0"):
+        sd.block_match(left, right, num_disparities=16.0)
+    with pytest.raises(TypeError, match="subpixel must be True, False"):
+        sd.block_match(left, right, num_disparities=16, subpixel=1)
+    np.testing.assert_array_equal(
+        sd.block_match(left, right, num_disparities=16),
+        sd.StereoMatcher(num_disparities=16).compute(left, right),
+    )
+    other = sd.block_match(left, right, num_disparities=16, block_size=5)
+    assert _methods._thread_state.matcher[1] is not kept  # new parameters: a new matcher
+    np.testing.assert_array_equal(
+        other, sd.StereoMatcher(num_disparities=16, block_size=5).compute(left, right)
+    )
+    # A pair above the size limit is not kept (its buffers would stay held).
+    from stereodepth import matching
+
+    monkeypatch.setattr(matching, "KEEP_MATCHER_MAX_PIXELS", 20 * 50 - 1)
+    sd.block_match(left, right, num_disparities=16)
+    assert _methods._thread_state.matcher is None
+
+
 def test_matcher_params_and_repr() -> None:
     m = sd.StereoMatcher(num_disparities=32, block_size=7, lr_max_diff=None)
     p = m.params

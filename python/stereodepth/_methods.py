@@ -23,6 +23,7 @@ __all__ = [
     "matcher_class",
     "matcher_keywords",
     "options_class",
+    "release_thread_matcher",
     "thread_matcher",
 ]
 
@@ -86,13 +87,23 @@ def thread_matcher(method: str, **params: Any) -> Any:
     again for every pair. Each thread keeps one matcher, released with the thread or when the
     method or parameters change. Raises the matcher's TypeError or ValueError for bad
     ``params``."""
-    key = (check_method(method), tuple(sorted(params.items(), key=lambda kv: kv[0])))
+    # The values' types are part of the key: 1 == True == 1.0, but a matcher made with one
+    # must not answer for another that its checks would refuse.
+    key = (
+        check_method(method),
+        tuple((k, type(v), v) for k, v in sorted(params.items(), key=lambda kv: kv[0])),
+    )
     cached = getattr(_thread_state, "matcher", None)
     if cached is None or cached[0] != key:
         _thread_state.matcher = None  # release the old buffers before making the new ones
         cached = (key, matcher_class(method)(**params))
         _thread_state.matcher = cached
     return cached[1]
+
+
+def release_thread_matcher() -> None:
+    """Drops this thread's matcher (:func:`thread_matcher`) and with it its buffers."""
+    _thread_state.matcher = None
 
 
 def compute_disparity(matcher: Any, left: np.ndarray, right: np.ndarray) -> np.ndarray:

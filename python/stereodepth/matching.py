@@ -515,6 +515,10 @@ class StereoMatcher:
         return disparity
 
 
+#: block_match keeps the calling thread's matcher (its buffers) for pairs up to this size.
+KEEP_MATCHER_MAX_PIXELS = 8_000_000
+
+
 def block_match(
     left: Any,
     right: Any,
@@ -601,14 +605,19 @@ def block_match(
     cost more than one disparity away from the winner (0 where the disparity is NaN).
 
     The steps, the validity rules and the limits are described in :mod:`stereodepth.matching`.
-    The GIL is released while the kernel runs. Each call sets up the matcher's buffers anew;
-    for a stream of frames, a :class:`StereoMatcher` keeps them (about a quarter less time on a
-    0.35 MP pair).
+    The GIL is released while the kernel runs. The calling thread keeps the matcher of its last
+    call (and its buffers, tens of MB for a 2 MP pair) while the parameters stay the same, so a
+    loop of calls costs what :meth:`StereoMatcher.compute` does; it is released when the
+    parameters change, the thread ends, or after a pair of more than
+    ``KEEP_MATCHER_MAX_PIXELS`` (8 MP). A :class:`StereoMatcher` keeps its buffers explicitly.
 
     Raises TypeError for a wrong type or dtype (images, parameters) and ValueError for a wrong
     value or shape, naming the parameter and what was received.
     """
-    matcher = StereoMatcher(
+    from ._methods import release_thread_matcher, thread_matcher
+
+    matcher: StereoMatcher = thread_matcher(
+        "bm",
         num_disparities=num_disparities,
         min_disparity=min_disparity,
         block_size=block_size,
@@ -625,7 +634,12 @@ def block_match(
         intensity_range=intensity_range,
         border=border,
     )
-    return matcher.compute(left, right)
+    try:
+        return matcher.compute(left, right)
+    finally:
+        shape = np.shape(left)
+        if len(shape) >= 2 and shape[0] * shape[1] > KEEP_MATCHER_MAX_PIXELS:
+            release_thread_matcher()  # do not hold a huge pair's buffers
 
 
 def to_opencv_disparity(disparity: Any, *, min_disparity: int = 0) -> np.ndarray:
