@@ -502,17 +502,28 @@ class StereoMatcher:
     def compute(self, left: Any, right: Any) -> np.ndarray | tuple[np.ndarray, np.ndarray]:
         """The float32 disparity of ``left`` (and the confidence, if the matcher was made
         with ``return_confidence=True``); see :func:`block_match`."""
-        o = self._options
-        left_arr, right_arr = as_pair(
-            left, right, channel_order=o.channel_order, intensity_range=o.intensity_range
-        )
-        shape = left_arr.shape[:2]
-        disparity = np.empty(shape, dtype=np.float32)
-        confidence = np.empty(shape, dtype=np.float32) if self._options.return_confidence else None
-        self._native.compute(left_arr, right_arr, disparity, confidence)
-        if confidence is not None:
-            return disparity, confidence
-        return disparity
+        return run_native(self._native, self._options, left, right)
+
+
+def run_native(
+    native: Any, options: Any, left: Any, right: Any, finish: Any = None
+) -> np.ndarray | tuple[np.ndarray, np.ndarray]:
+    """What both matchers' ``compute`` do: the pair checked and converted by :func:`as_pair`
+    (with ``options.channel_order`` and ``options.intensity_range``), the native kernel run
+    into new float32 maps, ``finish(disparity)`` if given, and the disparity returned (with
+    the confidence when ``options.return_confidence``)."""
+    left_arr, right_arr = as_pair(
+        left, right, channel_order=options.channel_order, intensity_range=options.intensity_range
+    )
+    shape = left_arr.shape[:2]
+    disparity = np.empty(shape, dtype=np.float32)
+    confidence = np.empty(shape, dtype=np.float32) if options.return_confidence else None
+    native.compute(left_arr, right_arr, disparity, confidence)
+    if finish is not None:
+        finish(disparity)
+    if confidence is not None:
+        return disparity, confidence
+    return disparity
 
 
 #: block_match keeps the calling thread's matcher (its buffers) for pairs up to this size.

@@ -78,10 +78,10 @@ from . import _validate as check
 from .matching import (
     MAX_ABS_MIN_DISPARITY,
     MAX_NUM_DISPARITIES,
-    as_pair,
     check_border,
     check_channel_order,
     check_intensity_range,
+    run_native,
 )
 
 __all__ = [
@@ -409,19 +409,8 @@ class SemiGlobalMatcher:
     def compute(self, left: Any, right: Any) -> np.ndarray | tuple[np.ndarray, np.ndarray]:
         """The float32 disparity of ``left`` (and the confidence, if the matcher was made
         with ``return_confidence=True``); see :func:`semi_global_match`."""
-        o = self._options
-        left_arr, right_arr = as_pair(
-            left, right, channel_order=o.channel_order, intensity_range=o.intensity_range
-        )
-        shape = left_arr.shape[:2]
-        disparity = np.empty(shape, dtype=np.float32)
-        confidence = np.empty(shape, dtype=np.float32) if self._options.return_confidence else None
-        self._native.compute(left_arr, right_arr, disparity, confidence)
-        if self._options.fill:
-            fill_background(disparity)
-        if confidence is not None:
-            return disparity, confidence
-        return disparity
+        finish = fill_background if self._options.fill else None
+        return run_native(self._native, self._options, left, right, finish)
 
 
 def semi_global_match(
