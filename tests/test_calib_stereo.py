@@ -378,6 +378,9 @@ def test_image_size_keyword(tmp_path: Path) -> None:
         read_stereo_calibration(path, image_size=(641, 480), translation_unit="mm")
     with pytest.raises(ValueError, match=r"image_size: image_size must be two whole numbers > 0"):
         read_stereo_calibration(path, image_size=(0, 480), translation_unit="mm")
+    for wrong in ("640x480", (640,), (640, "480"), (True, 480)):
+        with pytest.raises(TypeError, match=r"image_size must be \(width, height\) as two numbers"):
+            read_stereo_calibration(path, image_size=wrong, translation_unit="mm")
 
 
 def test_pyyaml_missing(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:

@@ -218,6 +218,20 @@ def _image_size_of(
 ) -> tuple[int, int]:
     """The image size from the file and/or the caller, which must agree when both are set."""
     if given is not None:
+        # The caller's own argument: a wrong type is a TypeError (a file's wrong value, and
+        # the caller's wrong numbers, stay ValueErrors naming the file or the parameter).
+        items = given.reshape(-1).tolist() if isinstance(given, np.ndarray) else given
+        if (
+            not isinstance(items, list | tuple)
+            or len(items) != 2
+            or not all(
+                isinstance(v, int | float | np.integer | np.floating) and not isinstance(v, bool)
+                for v in items
+            )
+        ):
+            raise TypeError(
+                f"image_size must be (width, height) as two numbers, got {_shown(given)}"
+            )
         given = _check_image_size(given, "image_size", "image_size")
     if found is not None and given is not None and found != given:
         raise _fail(where, f"the file gives an image size of {found}, image_size= {given}")
