@@ -523,6 +523,16 @@ GOOD = shifted_pair((8, 20), 2, seed=40)
             ValueError,
             "speckle_window must be an integer >= 0, got -1",
         ),
+        (  # above a C int: refused by name, not by the binding's argument conversion
+            {"num_disparities": 8, "speckle_window": 2**40},
+            ValueError,
+            r"speckle_window must be an integer <= 2147483647, got 1099511627776",
+        ),
+        (
+            {"num_disparities": 8, "p1": 20000, "p2": 20000},
+            ValueError,
+            r"p1 must be an integer in \[0, 16239\] for paths=3 and block_size=3",
+        ),
         (
             {"num_disparities": 8, "speckle_range": float("inf")},
             ValueError,

@@ -138,14 +138,14 @@ DEFAULT_SPECKLE_WINDOW = 100
 DEFAULT_SPECKLE_RANGE = 1.0
 
 
-class BlockMatchOptions:
-    """The checked, resolved parameters shared by the native kernel and the numpy oracle."""
+class MatcherOptions:
+    """The parameters every matcher takes (the search range, the decision's checks and
+    filters, the input conventions), checked and resolved once for all of them; each matcher's
+    options class adds its own (BlockMatchOptions, semi_global.SemiGlobalOptions)."""
 
     __slots__ = (
-        "block_size",
         "border",
         "channel_order",
-        "cost",
         "intensity_range",
         "lr_max_diff",
         "min_disparity",
@@ -154,12 +154,88 @@ class BlockMatchOptions:
         "speckle_range",
         "speckle_window",
         "subpixel",
-        "texture_sum_min",
-        "texture_threshold",
         "threads",
         "uniqueness_factor",
         "uniqueness_ratio",
     )
+
+    def _check_range(self, num_disparities: Any, min_disparity: Any) -> None:
+        nd = check.integer("num_disparities", num_disparities)
+        if not 1 <= nd <= MAX_NUM_DISPARITIES:
+            raise ValueError(
+                f"num_disparities must be an integer in [1, {MAX_NUM_DISPARITIES}], got {nd}"
+            )
+        self.num_disparities = nd
+        md = check.integer("min_disparity", min_disparity)
+        if abs(md) > MAX_ABS_MIN_DISPARITY:
+            raise ValueError(
+                f"min_disparity must be an integer in [-{MAX_ABS_MIN_DISPARITY}, "
+                f"{MAX_ABS_MIN_DISPARITY}], got {md}"
+            )
+        self.min_disparity = md
+
+    def _check_decision(
+        self,
+        *,
+        subpixel: Any,
+        default_subpixel: str,
+        uniqueness_ratio: Any,
+        lr_max_diff: Any,
+        speckle_window: Any,
+        speckle_range: Any,
+    ) -> None:
+        if isinstance(subpixel, (bool, np.bool_)):
+            self.subpixel: str | None = default_subpixel if subpixel else None
+        elif isinstance(subpixel, str):
+            if subpixel not in _SUBPIXEL_MODES:
+                raise ValueError(
+                    f"subpixel must be True, False, 'parabola' or 'equiangular', got {subpixel!r}"
+                )
+            self.subpixel = subpixel
+        else:
+            raise TypeError(
+                "subpixel must be True, False, 'parabola' or 'equiangular', "
+                f"got {type(subpixel).__name__} {subpixel!r}"
+            )
+        self.uniqueness_ratio = check.non_negative("uniqueness_ratio", uniqueness_ratio)
+        # The check is second * 100 > best * uniqueness_factor; 0 means off.
+        self.uniqueness_factor = 100.0 + self.uniqueness_ratio if self.uniqueness_ratio > 0 else 0.0
+        if lr_max_diff is None:
+            self.lr_max_diff: float | None = None
+        else:
+            self.lr_max_diff = check.non_negative("lr_max_diff", lr_max_diff)
+        self.speckle_window = check.integer(
+            "speckle_window", speckle_window, minimum=0, maximum=check.MAX_NATIVE_INT
+        )
+        self.speckle_range = check.non_negative("speckle_range", speckle_range)
+
+    def _check_io(
+        self,
+        *,
+        threads: Any,
+        return_confidence: Any,
+        channel_order: Any,
+        intensity_range: Any,
+        border: Any,
+    ) -> None:
+        self.threads = check.threads(threads)
+        self.return_confidence = check_flag("return_confidence", return_confidence)
+        self.channel_order = check_channel_order(channel_order)
+        self.intensity_range = check_intensity_range(intensity_range)
+        self.border = check_border(border)
+
+
+def check_flag(name: str, value: Any) -> bool:
+    """``value`` as a bool (bool or numpy bool only); TypeError naming ``name`` otherwise."""
+    if not isinstance(value, (bool, np.bool_)):
+        raise TypeError(f"{name} must be a bool, got {type(value).__name__} {value!r}")
+    return bool(value)
+
+
+class BlockMatchOptions(MatcherOptions):
+    """The checked, resolved parameters shared by the native kernel and the numpy oracle."""
+
+    __slots__ = ("block_size", "cost", "texture_sum_min", "texture_threshold")
 
     def __init__(
         self,
@@ -186,19 +262,7 @@ class BlockMatchOptions:
             raise ValueError(f"cost must be 'census' or 'sad', got {cost!r}")
         self.cost: str = cost
 
-        nd = check.integer("num_disparities", num_disparities)
-        if not 1 <= nd <= MAX_NUM_DISPARITIES:
-            raise ValueError(
-                f"num_disparities must be an integer in [1, {MAX_NUM_DISPARITIES}], got {nd}"
-            )
-        self.num_disparities = nd
-        md = check.integer("min_disparity", min_disparity)
-        if abs(md) > MAX_ABS_MIN_DISPARITY:
-            raise ValueError(
-                f"min_disparity must be an integer in [-{MAX_ABS_MIN_DISPARITY}, "
-                f"{MAX_ABS_MIN_DISPARITY}], got {md}"
-            )
-        self.min_disparity = md
+        self._check_range(num_disparities, min_disparity)
 
         bs = check.integer("block_size", block_size)
         limit = MAX_BLOCK_SIZE[cost]
@@ -209,45 +273,25 @@ class BlockMatchOptions:
             )
         self.block_size = bs
 
-        if isinstance(subpixel, (bool, np.bool_)):
-            self.subpixel: str | None = DEFAULT_SUBPIXEL[cost] if subpixel else None
-        elif isinstance(subpixel, str):
-            if subpixel not in _SUBPIXEL_MODES:
-                raise ValueError(
-                    f"subpixel must be True, False, 'parabola' or 'equiangular', got {subpixel!r}"
-                )
-            self.subpixel = subpixel
-        else:
-            raise TypeError(
-                "subpixel must be True, False, 'parabola' or 'equiangular', "
-                f"got {type(subpixel).__name__} {subpixel!r}"
-            )
-
-        self.uniqueness_ratio = check.non_negative("uniqueness_ratio", uniqueness_ratio)
-        # The check is second * 100 > best * uniqueness_factor; 0 means off.
-        self.uniqueness_factor = 100.0 + self.uniqueness_ratio if self.uniqueness_ratio > 0 else 0.0
+        self._check_decision(
+            subpixel=subpixel,
+            default_subpixel=DEFAULT_SUBPIXEL[cost],
+            uniqueness_ratio=uniqueness_ratio,
+            lr_max_diff=lr_max_diff,
+            speckle_window=speckle_window,
+            speckle_range=speckle_range,
+        )
         self.texture_threshold = check.non_negative("texture_threshold", texture_threshold)
         # The block's gradient sum must be >= texture_sum_min (computed once, here, so the
         # kernel and the oracle compare against the same double).
         self.texture_sum_min = self.texture_threshold * float(bs * bs)
-        if lr_max_diff is None:
-            self.lr_max_diff: float | None = None
-        else:
-            self.lr_max_diff = check.non_negative("lr_max_diff", lr_max_diff)
-        self.speckle_window = check.integer(
-            "speckle_window", speckle_window, minimum=0, maximum=check.MAX_NATIVE_INT
+        self._check_io(
+            threads=threads,
+            return_confidence=return_confidence,
+            channel_order=channel_order,
+            intensity_range=intensity_range,
+            border=border,
         )
-        self.speckle_range = check.non_negative("speckle_range", speckle_range)
-        self.threads = check.threads(threads)
-        if not isinstance(return_confidence, (bool, np.bool_)):
-            raise TypeError(
-                f"return_confidence must be a bool, got {type(return_confidence).__name__} "
-                f"{return_confidence!r}"
-            )
-        self.return_confidence = bool(return_confidence)
-        self.channel_order = check_channel_order(channel_order)
-        self.intensity_range = check_intensity_range(intensity_range)
-        self.border = check_border(border)
 
     def as_dict(self) -> dict[str, Any]:
         """The public parameters, resolved (``subpixel`` as the fit's name or None)."""

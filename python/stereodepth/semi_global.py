@@ -75,14 +75,7 @@ import numpy as np
 
 from . import _core
 from . import _validate as check
-from .matching import (
-    MAX_ABS_MIN_DISPARITY,
-    MAX_NUM_DISPARITIES,
-    check_border,
-    check_channel_order,
-    check_intensity_range,
-    run_native,
-)
+from .matching import MatcherOptions, check_flag, run_native
 
 __all__ = [
     "SemiGlobalMatcher",
@@ -98,7 +91,6 @@ BLOCK_SIZES = (1, 3)
 PATH_COUNTS = (3, 4, 8)
 #: paths=3 (one pass): the path from above starts again every STRIPE_ROWS rows.
 STRIPE_ROWS = 64
-_SUBPIXEL_MODES = ("parabola", "equiangular")
 
 # Defaults, chosen by measuring on the shared scenes among round values, each change checked
 # on both halves of the scenes and the choice by leave-one-out (bench/README.md, "Semi-global
@@ -132,32 +124,10 @@ def cost_max(block_size: int) -> int:
     return CENSUS_BITS * block_size * block_size
 
 
-class SemiGlobalOptions:
+class SemiGlobalOptions(MatcherOptions):
     """The checked, resolved parameters shared by the native kernel and the numpy oracle."""
 
-    __slots__ = (
-        "block_size",
-        "border",
-        "channel_order",
-        "fill",
-        "intensity_range",
-        "lr_max_diff",
-        "max_memory_mb",
-        "median",
-        "min_disparity",
-        "num_disparities",
-        "p1",
-        "p2",
-        "p2_step",
-        "paths",
-        "return_confidence",
-        "speckle_range",
-        "speckle_window",
-        "subpixel",
-        "threads",
-        "uniqueness_factor",
-        "uniqueness_ratio",
-    )
+    __slots__ = ("block_size", "fill", "max_memory_mb", "median", "p1", "p2", "p2_step", "paths")
 
     def __init__(
         self,
@@ -183,19 +153,7 @@ class SemiGlobalOptions:
         channel_order: Any = "rgb",
         intensity_range: Any = None,
     ) -> None:
-        nd = check.integer("num_disparities", num_disparities)
-        if not 1 <= nd <= MAX_NUM_DISPARITIES:
-            raise ValueError(
-                f"num_disparities must be an integer in [1, {MAX_NUM_DISPARITIES}], got {nd}"
-            )
-        self.num_disparities = nd
-        md = check.integer("min_disparity", min_disparity)
-        if abs(md) > MAX_ABS_MIN_DISPARITY:
-            raise ValueError(
-                f"min_disparity must be an integer in [-{MAX_ABS_MIN_DISPARITY}, "
-                f"{MAX_ABS_MIN_DISPARITY}], got {md}"
-            )
-        self.min_disparity = md
+        self._check_range(num_disparities, min_disparity)
         bs = check.integer("block_size", block_size)
         if bs not in BLOCK_SIZES:
             raise ValueError(
@@ -206,9 +164,14 @@ class SemiGlobalOptions:
         if pc not in PATH_COUNTS:
             raise ValueError(f"paths must be 3, 4 or 8, got {pc}")
         self.paths = pc
-        self.p1 = check.integer("p1", p1, minimum=0)
-        p2v = check.integer("p2", p2)
         limit = min(65535 // pc, 16383) - cost_max(bs)
+        self.p1 = check.integer("p1", p1, minimum=0)
+        if self.p1 > limit:
+            raise ValueError(
+                f"p1 must be an integer in [0, {limit}] for paths={pc} and block_size={bs} "
+                f"(p1 <= p2 <= {limit}), got {self.p1}"
+            )
+        p2v = check.integer("p2", p2)
         if not self.p1 <= p2v <= limit:
             raise ValueError(
                 f"p2 must be an integer in [p1, {limit}] = [{self.p1}, {limit}] for paths={pc} "
@@ -218,35 +181,24 @@ class SemiGlobalOptions:
             )
         self.p2 = p2v
         self.p2_step = check.integer("p2_step", p2_step, minimum=0, maximum=65535)
-        if isinstance(subpixel, (bool, np.bool_)):
-            self.subpixel: str | None = DEFAULT_SUBPIXEL if subpixel else None
-        elif isinstance(subpixel, str):
-            if subpixel not in _SUBPIXEL_MODES:
-                raise ValueError(
-                    f"subpixel must be True, False, 'parabola' or 'equiangular', got {subpixel!r}"
-                )
-            self.subpixel = subpixel
-        else:
-            raise TypeError(
-                "subpixel must be True, False, 'parabola' or 'equiangular', "
-                f"got {type(subpixel).__name__} {subpixel!r}"
-            )
-        self.uniqueness_ratio = check.non_negative("uniqueness_ratio", uniqueness_ratio)
-        self.uniqueness_factor = 100.0 + self.uniqueness_ratio if self.uniqueness_ratio > 0 else 0.0
-        if lr_max_diff is None:
-            self.lr_max_diff: float | None = None
-        else:
-            self.lr_max_diff = check.non_negative("lr_max_diff", lr_max_diff)
-        self.median = _flag("median", median)
-        self.speckle_window = check.integer("speckle_window", speckle_window, minimum=0)
-        self.speckle_range = check.non_negative("speckle_range", speckle_range)
-        self.border = check_border(border)
-        self.fill = _flag("fill", fill)
+        self._check_decision(
+            subpixel=subpixel,
+            default_subpixel=DEFAULT_SUBPIXEL,
+            uniqueness_ratio=uniqueness_ratio,
+            lr_max_diff=lr_max_diff,
+            speckle_window=speckle_window,
+            speckle_range=speckle_range,
+        )
+        self.median = check_flag("median", median)
+        self.fill = check_flag("fill", fill)
         self.max_memory_mb = check.positive("max_memory_mb", max_memory_mb)
-        self.threads = check.threads(threads)
-        self.return_confidence = _flag("return_confidence", return_confidence)
-        self.channel_order = check_channel_order(channel_order)
-        self.intensity_range = check_intensity_range(intensity_range)
+        self._check_io(
+            threads=threads,
+            return_confidence=return_confidence,
+            channel_order=channel_order,
+            intensity_range=intensity_range,
+            border=border,
+        )
 
     def as_dict(self) -> dict[str, Any]:
         """The public parameters, resolved (``subpixel`` as the fit's name or False)."""
@@ -272,12 +224,6 @@ class SemiGlobalOptions:
             "channel_order": self.channel_order,
             "intensity_range": self.intensity_range,
         }
-
-
-def _flag(name: str, value: Any) -> bool:
-    if not isinstance(value, (bool, np.bool_)):
-        raise TypeError(f"{name} must be a bool, got {type(value).__name__} {value!r}")
-    return bool(value)
 
 
 def fill_background(disparity: np.ndarray) -> np.ndarray:
