@@ -112,6 +112,7 @@ def test_to_dict_is_json_ready() -> None:
         ),
         ({"points": 1}, ValueError, "points must be an integer >= 2, got 1"),
         ({"points": 2.5}, TypeError, "points must be an integer, got float 2.5"),
+        ({"points": 10**12}, ValueError, "points must be an integer <= 100000, got 1000000000000"),
     ],
 )
 def test_chart_data_rejects(kwargs: dict[str, Any], exc: type[Exception], msg: str) -> None:

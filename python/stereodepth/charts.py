@@ -22,6 +22,9 @@ __all__ = ["Chart", "Charts", "Marker", "Series", "chart_data"]
 
 #: Points per curve.
 DEFAULT_POINTS = 200
+#: The most points a curve may have (more cannot be drawn apart; a huge count would only
+#: exhaust memory).
+MAX_POINTS = 100_000
 #: The top of the disparity axis when neither a search range nor an image width is given.
 DEFAULT_MAX_DISPARITY_PX = 256.0
 # Keep the axis range well inside float64 so that the range arithmetic cannot overflow.
@@ -139,9 +142,12 @@ def chart_data(
     ``disparity_px``. The depth error is the first-order ``StereoRig.depth_resolution_m`` for
     a 1 px step and, when ``disparity_step_px`` is not 1, for that step. The target is marked
     on both charts with the values the calculator reports. Points that are not finite and > 0
-    (a point at infinity, an underflow) are left out, as log axes cannot show them."""
+    (a point at infinity, an underflow) are left out, as log axes cannot show them.
+
+    Raises TypeError / ValueError naming the parameter for a bad value (``points`` is an
+    integer in [2, MAX_POINTS])."""
     step = check.positive("disparity_step_px", disparity_step_px)
-    n = check.integer("points", points, minimum=2)
+    n = check.integer("points", points, minimum=2, maximum=MAX_POINTS)
     target: float | None = None
     if disparity_px is not None:
         target = check.real("disparity_px", disparity_px)
