@@ -88,13 +88,15 @@ def thread_matcher(method: str, **params: Any) -> Any:
     method or parameters change. Raises the matcher's TypeError or ValueError for bad
     ``params``."""
     # The values' types are part of the key: 1 == True == 1.0, but a matcher made with one
-    # must not answer for another that its checks would refuse.
-    key = (
-        check_method(method),
-        tuple((k, type(v), v) for k, v in sorted(params.items(), key=lambda kv: kv[0])),
-    )
+    # must not answer for another that its checks would refuse. They come before the values,
+    # so that a comparison stops at a type that differs before it compares (say) a cached
+    # tuple with an array. The key is built on every one-shot call, so it is kept cheap.
+    names = tuple(sorted(params))
+    values = tuple([params[k] for k in names])
+    key = (method, names, tuple(map(type, values)), values)
     cached = getattr(_thread_state, "matcher", None)
     if cached is None or cached[0] != key:
+        check_method(method)
         _thread_state.matcher = None  # release the old buffers before making the new ones
         cached = (key, matcher_class(method)(**params))
         _thread_state.matcher = cached
