@@ -1010,3 +1010,16 @@ def test_issue_11_accuracy_targets_on_the_shared_scenes(
     assert ours["bad_2"] <= 0.7 * three_way["bad_2"]
     assert ours["bad_2"] < padded["bad_2"]
     assert ours["bad_0_5_est"] < three_way["bad_0_5_est"]
+
+
+def test_bm_is_block_matching_as_in_match_and_batch(
+    scenes_dir: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    calls: list[dict[str, Any]] = []
+    monkeypatch.setattr(matching, "StereoMatcher", fake_matcher(calls))
+    report = run_json(
+        capsys, str(scenes_dir / "rds-b"), "--method", "bm:7", "--repeat", "1", "--option",
+        "cost=sad",
+    )  # fmt: skip
+    assert [(r["method"], r["block_size"]) for r in report["results"]] == [("stereodepth", 7)]
+    assert calls and all(c["block_size"] == 7 and c["cost"] == "sad" for c in calls)

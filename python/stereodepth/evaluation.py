@@ -19,9 +19,9 @@ Disparity range
     ``--num-disparities`` overrides it for every scene.
 
 Methods
-    ``stereodepth``: :func:`stereodepth.block_match` on the images as read (RGB or grey; the
-    matcher converts), with its own defaults unless ``--block-size`` / ``--option`` say
-    otherwise.
+    ``stereodepth`` (or ``bm``, as ``match`` and ``batch`` call it):
+    :func:`stereodepth.block_match` on the images as read (RGB or grey; the matcher
+    converts), with its own defaults unless ``--block-size`` / ``--option`` say otherwise.
     ``sgm``: :func:`stereodepth.semi_global_match` with its defaults (``--block-size`` 1 or 3;
     ``--sgm-option KEY=VALUE`` passes its keyword options, as ``--option`` does for
     ``stereodepth``). The time-ratio lines compare each of ours with each peer.
@@ -734,8 +734,14 @@ def format_table(rows: Sequence[EvalResult], *, markdown: bool = False) -> str:
 # Command line
 
 
+#: Other names of eval's methods: ``bm``, as ``stereodepth match`` and ``batch`` call block
+#: matching, is eval's ``stereodepth``.
+METHOD_ALIASES = {"bm": "stereodepth"}
+
+
 def _method_spec(text: str) -> tuple[str, tuple[int, ...] | None]:
     name, _, sizes = text.partition(":")
+    name = METHOD_ALIASES.get(name, name)
     if name not in METHODS:
         raise argparse.ArgumentTypeError(
             f"method must be one of {', '.join(METHODS)} (optionally METHOD:SIZE[,SIZE...]), "
@@ -776,7 +782,8 @@ def register(subparsers: Any) -> None:
         type=_method_spec,
         default=None,
         metavar="METHOD[:SIZES]",
-        help="stereodepth (block matching), sgm (semi-global matching), opencv-bm, opencv-sgbm, "
+        help="stereodepth or bm (block matching), sgm (semi-global matching), opencv-bm, "
+        "opencv-sgbm, "
         "opencv-sgbm-3way, opencv-sgbm-hh, opencv-sgbm-3way-padded (3WAY on the pair padded on "
         "the left by N columns), each optionally with its own block sizes "
         "(opencv-bm:9,15); default: stereodepth. OpenCV methods are skipped with a note when "
