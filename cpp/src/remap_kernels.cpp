@@ -2,10 +2,10 @@
 // per instruction set (STEREODEPTH_ISA_NS); everything here stays inside that namespace.
 //
 // The scalar loop is the reference. With AVX2, eight output pixels are computed at once
-// wherever all their four neighbours are inside the image: gathers fetch the top and bottom
-// neighbour pairs (two 32-bit ones for grey, four 64-bit ones for RGB), pmaddwd forms top and
-// bot, and one 32-bit multiply blends them as top * 1024 + (bot - top) * fy, which equals the
-// specification's sum exactly.
+// wherever all their four neighbours are inside the image: scalar loads fetch the top and
+// bottom neighbour pairs (4 bytes per pixel and row for grey, 8 for RGB), pmaddwd forms top
+// and bot, and one 32-bit multiply blends them as top * 1024 + (bot - top) * fy, which equals
+// the specification's sum exactly.
 #include "remap_kernels.hpp"
 
 #include <cmath>
@@ -88,12 +88,78 @@ void remap_row_u16(const RemapRowArgs& a) { remap_u16(a, 0, a.n); }
 
 #if defined(__AVX2__)
 
+// The addresses base + ofs[k] of eight pixels (ofs: non-negative int32 offsets), and loads of
+// 4 or 8 bytes from each, as _mm256_i32gather_epi32 and _mm256_i32gather_epi64 would fetch
+// them. Scalar loads: on Zen 3 (the machine measured) they are about a third faster than the
+// gathers.
+struct Addresses8 {
+  const std::uint8_t* p[8];
+  Addresses8(const std::uint8_t* base, __m256i ofs) {
+    const __m128i lo = _mm256_castsi256_si128(ofs), hi = _mm256_extracti128_si256(ofs, 1);
+    const std::uint64_t q[4] = {
+        static_cast<std::uint64_t>(_mm_cvtsi128_si64(lo)),
+        static_cast<std::uint64_t>(_mm_extract_epi64(lo, 1)),
+        static_cast<std::uint64_t>(_mm_cvtsi128_si64(hi)),
+        static_cast<std::uint64_t>(_mm_extract_epi64(hi, 1)),
+    };
+    for (int k = 0; k < 4; ++k) {
+      p[2 * k] = base + static_cast<std::uint32_t>(q[k]);
+      p[2 * k + 1] = base + (q[k] >> 32);
+    }
+  }
+  static std::int32_t u32(const std::uint8_t* at) {
+    std::int32_t v;
+    std::memcpy(&v, at, sizeof v);
+    return v;
+  }
+  // The 4 bytes at p[k] + d, k = 0..7.
+  __m256i load32(std::ptrdiff_t d) const {
+    __m128i lo = _mm_cvtsi32_si128(u32(p[0] + d));
+    lo = _mm_insert_epi32(lo, u32(p[1] + d), 1);
+    lo = _mm_insert_epi32(lo, u32(p[2] + d), 2);
+    lo = _mm_insert_epi32(lo, u32(p[3] + d), 3);
+    __m128i hi = _mm_cvtsi32_si128(u32(p[4] + d));
+    hi = _mm_insert_epi32(hi, u32(p[5] + d), 1);
+    hi = _mm_insert_epi32(hi, u32(p[6] + d), 2);
+    hi = _mm_insert_epi32(hi, u32(p[7] + d), 3);
+    return _mm256_inserti128_si256(_mm256_castsi128_si256(lo), hi, 1);
+  }
+  // The 8 bytes at p[k] + d, k = first .. first + 3.
+  __m256i load64(int first, std::ptrdiff_t d) const {
+    const auto at = [&](int k) { return reinterpret_cast<const double*>(p[first + k] + d); };
+    const __m128d lo = _mm_loadh_pd(_mm_castsi128_pd(_mm_loadu_si64(at(0))), at(1));
+    const __m128d hi = _mm_loadh_pd(_mm_castsi128_pd(_mm_loadu_si64(at(2))), at(3));
+    return _mm256_inserti128_si256(_mm256_castsi128_si256(_mm_castpd_si128(lo)),
+                                   _mm_castpd_si128(hi), 1);
+  }
+};
+
+// Four addresses and 4-byte loads, as Addresses8 (_mm_i32gather_epi32).
+struct Addresses4 {
+  const std::uint8_t* p[4];
+  Addresses4(const std::uint8_t* base, __m128i ofs) {
+    const std::uint64_t q0 = static_cast<std::uint64_t>(_mm_cvtsi128_si64(ofs));
+    const std::uint64_t q1 = static_cast<std::uint64_t>(_mm_extract_epi64(ofs, 1));
+    p[0] = base + static_cast<std::uint32_t>(q0);
+    p[1] = base + (q0 >> 32);
+    p[2] = base + static_cast<std::uint32_t>(q1);
+    p[3] = base + (q1 >> 32);
+  }
+  __m128i load32(std::ptrdiff_t d) const {
+    __m128i v = _mm_cvtsi32_si128(Addresses8::u32(p[0] + d));
+    v = _mm_insert_epi32(v, Addresses8::u32(p[1] + d), 1);
+    v = _mm_insert_epi32(v, Addresses8::u32(p[2] + d), 2);
+    return _mm_insert_epi32(v, Addresses8::u32(p[3] + d), 3);
+  }
+};
+
 // Eight grey uint8 results from the offsets `e` of the top-left neighbours and fractions `f`;
-// `pick` moves the two neighbours of each 32-bit gather into int16 pairs.
+// `pick` moves the two neighbours in each 32-bit load into int16 pairs.
 inline __m128i blend8(const std::uint8_t* src, std::ptrdiff_t stride, __m256i e, __m256i f,
                       __m256i pick) {
-  __m256i top = _mm256_i32gather_epi32(reinterpret_cast<const int*>(src), e, 1);
-  __m256i bot = _mm256_i32gather_epi32(reinterpret_cast<const int*>(src + stride), e, 1);
+  const Addresses8 at(src, e);
+  __m256i top = at.load32(0);
+  __m256i bot = at.load32(stride);
   top = _mm256_shuffle_epi8(top, pick);
   bot = _mm256_shuffle_epi8(bot, pick);
   const __m256i fx = _mm256_and_si256(f, _mm256_set1_epi32(0xffff));
@@ -116,23 +182,21 @@ inline __m256i pick_pattern() {
                           13, -128);
 }
 
-// Eight RGB pixels from the offsets `ofs` of their top-left neighbours: four 64-bit gathers
-// (8 bytes from each top-left neighbour, holding both neighbours' R G B, in the top and bottom
-// rows, four pixels per gather), byte pairs (left, right) per channel blended by pmaddwd, then
+// Eight RGB pixels from the offsets `ofs` of their top-left neighbours: 8 bytes from each
+// top-left neighbour, holding both neighbours' R G B, in the top and bottom rows (four pixels
+// per vector), byte pairs (left, right) per channel blended by pmaddwd, then
 // the rows as in blend8. Writes 24 bytes at `o`; with `room`, 4 more that later pixels
 // overwrite.
 inline void blend_rgb8(const std::uint8_t* src, std::ptrdiff_t stride, __m256i ofs, __m256i f,
                        std::uint8_t* o, bool room) {
-  const auto* top = reinterpret_cast<const long long*>(src);
-  const auto* bottom = reinterpret_cast<const long long*>(src + stride);
-  const __m128i o03 = _mm256_castsi256_si128(ofs), o47 = _mm256_extracti128_si256(ofs, 1);
+  const Addresses8 at(src, ofs);
   // (left, right) byte pairs per channel, two pixels per 128-bit lane.
   const __m256i pairs = _mm256_setr_epi8(0, 3, 1, 4, 2, 5, 6, 7, 8, 11, 9, 12, 10, 13, 14, 15,
                                          0, 3, 1, 4, 2, 5, 6, 7, 8, 11, 9, 12, 10, 13, 14, 15);
-  const __m256i t03 = _mm256_shuffle_epi8(_mm256_i32gather_epi64(top, o03, 1), pairs);
-  const __m256i t47 = _mm256_shuffle_epi8(_mm256_i32gather_epi64(top, o47, 1), pairs);
-  const __m256i b03 = _mm256_shuffle_epi8(_mm256_i32gather_epi64(bottom, o03, 1), pairs);
-  const __m256i b47 = _mm256_shuffle_epi8(_mm256_i32gather_epi64(bottom, o47, 1), pairs);
+  const __m256i t03 = _mm256_shuffle_epi8(at.load64(0, 0), pairs);
+  const __m256i t47 = _mm256_shuffle_epi8(at.load64(4, 0), pairs);
+  const __m256i b03 = _mm256_shuffle_epi8(at.load64(0, stride), pairs);
+  const __m256i b47 = _mm256_shuffle_epi8(at.load64(4, stride), pairs);
   const __m256i fx = _mm256_and_si256(f, _mm256_set1_epi32(0xffff));
   const __m256i wx = _mm256_or_si256(_mm256_sub_epi32(_mm256_set1_epi32(kOne), fx),
                                      _mm256_slli_epi32(fx, 16));
@@ -173,8 +237,8 @@ inline void blend_rgb8(const std::uint8_t* src, std::ptrdiff_t stride, __m256i o
 }
 
 // 16-bit grey, four pixels at a time in float64: the scalar loop's operations in its order
-// (no contraction), so the results are the same bits; one 32-bit gather per row fetches both
-// neighbours of a pixel.
+// (no contraction), so the results are the same bits; one 32-bit load per pixel and row
+// fetches both neighbours.
 void remap_row_u16_avx2(const RemapRowArgs& a) {
   const std::ptrdiff_t stride = a.src_stride;
   const std::ptrdiff_t extent = (a.src_rows - 1) * stride + a.src_cols * 2;
@@ -188,8 +252,6 @@ void remap_row_u16_avx2(const RemapRowArgs& a) {
     const __m128i lo16 = _mm_set1_epi32(0xffff);
     const __m256i deinterleave = _mm256_setr_epi32(0, 2, 4, 6, 1, 3, 5, 7);
     const __m256d one = _mm256_set1_pd(1.0), top_value = _mm256_set1_pd(65535.0);
-    const int* top = reinterpret_cast<const int*>(a.src);
-    const int* bottom = reinterpret_cast<const int*>(a.src + stride);
     for (; j + 4 <= a.n; j += 4) {
       const __m256 xy = _mm256_permutevar8x32_ps(_mm256_loadu_ps(a.pos + 2 * j), deinterleave);
       const __m256d px = _mm256_cvtps_pd(_mm256_castps256_ps128(xy));
@@ -207,8 +269,9 @@ void remap_row_u16_avx2(const RemapRowArgs& a) {
         remap_u16(a, j, j + 4);
         continue;
       }
-      const __m128i t = _mm_i32gather_epi32(top, ofs, 1);
-      const __m128i b = _mm_i32gather_epi32(bottom, ofs, 1);
+      const Addresses4 at(a.src, ofs);
+      const __m128i t = at.load32(0);
+      const __m128i b = at.load32(stride);
       const __m256d p00 = _mm256_cvtepi32_pd(_mm_and_si128(t, lo16));
       const __m256d p01 = _mm256_cvtepi32_pd(_mm_srli_epi32(t, 16));
       const __m256d p10 = _mm256_cvtepi32_pd(_mm_and_si128(b, lo16));
@@ -240,7 +303,7 @@ void remap_row_u8_avx2(const RemapRowArgs& a) {
     const __m256i lim = _mm256_set1_epi32(
         (static_cast<std::int32_t>(a.src_rows - 2) << 16) |
         static_cast<std::int32_t>(static_cast<std::uint16_t>(a.src_cols - 2)));
-    // The gathers of the bottom row (4 bytes for grey, 8 for RGB) must stay inside the image.
+    // The loads of the bottom row (4 bytes for grey, 8 for RGB) must stay inside the image.
     const __m256i elim =
         _mm256_set1_epi32(static_cast<std::int32_t>(extent - stride - (CN == 1 ? 4 : 8)));
     const __m256i pick = pick_pattern();
