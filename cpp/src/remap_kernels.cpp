@@ -88,68 +88,82 @@ void remap_row_u16(const RemapRowArgs& a) { remap_u16(a, 0, a.n); }
 
 #if defined(__AVX2__)
 
-// The addresses base + ofs[k] of eight pixels (ofs: non-negative int32 offsets), and loads of
-// 4 or 8 bytes from each, as _mm256_i32gather_epi32 and _mm256_i32gather_epi64 would fetch
-// them. Scalar loads: on Zen 3 (the machine measured) they are about a third faster than the
-// gathers.
+// Loads of 4 or 8 bytes at base + ofs[k] + d for eight pixels (ofs: non-negative int32
+// offsets), as _mm256_i32gather_epi32 and _mm256_i32gather_epi64 would fetch them. Scalar
+// loads: on Zen 3 (the machine measured) they are about a third faster than the gathers. The
+// offsets stay in four 64-bit scalars (an array of them is turned by GCC into vector code
+// that stores and reloads them, slower than the gathers).
 struct Addresses8 {
-  const std::uint8_t* p[8];
-  Addresses8(const std::uint8_t* base, __m256i ofs) {
+  const std::uint8_t* base;
+  std::uint64_t q0, q1, q2, q3;  // offsets 2k (low half) and 2k + 1 (high half)
+  Addresses8(const std::uint8_t* b, __m256i ofs) : base(b) {
     const __m128i lo = _mm256_castsi256_si128(ofs), hi = _mm256_extracti128_si256(ofs, 1);
-    const std::uint64_t q[4] = {
-        static_cast<std::uint64_t>(_mm_cvtsi128_si64(lo)),
-        static_cast<std::uint64_t>(_mm_extract_epi64(lo, 1)),
-        static_cast<std::uint64_t>(_mm_cvtsi128_si64(hi)),
-        static_cast<std::uint64_t>(_mm_extract_epi64(hi, 1)),
-    };
-    for (int k = 0; k < 4; ++k) {
-      p[2 * k] = base + static_cast<std::uint32_t>(q[k]);
-      p[2 * k + 1] = base + (q[k] >> 32);
-    }
+    q0 = static_cast<std::uint64_t>(_mm_cvtsi128_si64(lo));
+    q1 = static_cast<std::uint64_t>(_mm_extract_epi64(lo, 1));
+    q2 = static_cast<std::uint64_t>(_mm_cvtsi128_si64(hi));
+    q3 = static_cast<std::uint64_t>(_mm_extract_epi64(hi, 1));
   }
   static std::int32_t u32(const std::uint8_t* at) {
     std::int32_t v;
     std::memcpy(&v, at, sizeof v);
     return v;
   }
-  // The 4 bytes at p[k] + d, k = 0..7.
+  static const std::uint8_t* even(const std::uint8_t* b, std::uint64_t q) {
+    return b + static_cast<std::uint32_t>(q);
+  }
+  static const std::uint8_t* odd(const std::uint8_t* b, std::uint64_t q) { return b + (q >> 32); }
+  // The 4 bytes at each offset + d.
   __m256i load32(std::ptrdiff_t d) const {
-    __m128i lo = _mm_cvtsi32_si128(u32(p[0] + d));
-    lo = _mm_insert_epi32(lo, u32(p[1] + d), 1);
-    lo = _mm_insert_epi32(lo, u32(p[2] + d), 2);
-    lo = _mm_insert_epi32(lo, u32(p[3] + d), 3);
-    __m128i hi = _mm_cvtsi32_si128(u32(p[4] + d));
-    hi = _mm_insert_epi32(hi, u32(p[5] + d), 1);
-    hi = _mm_insert_epi32(hi, u32(p[6] + d), 2);
-    hi = _mm_insert_epi32(hi, u32(p[7] + d), 3);
+    const std::uint8_t* b = base + d;
+    __m128i lo = _mm_cvtsi32_si128(u32(even(b, q0)));
+    lo = _mm_insert_epi32(lo, u32(odd(b, q0)), 1);
+    lo = _mm_insert_epi32(lo, u32(even(b, q1)), 2);
+    lo = _mm_insert_epi32(lo, u32(odd(b, q1)), 3);
+    __m128i hi = _mm_cvtsi32_si128(u32(even(b, q2)));
+    hi = _mm_insert_epi32(hi, u32(odd(b, q2)), 1);
+    hi = _mm_insert_epi32(hi, u32(even(b, q3)), 2);
+    hi = _mm_insert_epi32(hi, u32(odd(b, q3)), 3);
     return _mm256_inserti128_si256(_mm256_castsi128_si256(lo), hi, 1);
   }
-  // The 8 bytes at p[k] + d, k = first .. first + 3.
-  __m256i load64(int first, std::ptrdiff_t d) const {
-    const auto at = [&](int k) { return reinterpret_cast<const double*>(p[first + k] + d); };
-    const __m128d lo = _mm_loadh_pd(_mm_castsi128_pd(_mm_loadu_si64(at(0))), at(1));
-    const __m128d hi = _mm_loadh_pd(_mm_castsi128_pd(_mm_loadu_si64(at(2))), at(3));
+  // The 8 bytes at offsets 0..3 (upper: 4..7) + d.
+  __m256i load64(bool upper, std::ptrdiff_t d) const {
+    const std::uint8_t* b = base + d;
+    const std::uint64_t qa = upper ? q2 : q0, qb = upper ? q3 : q1;
+    const auto at = [](const std::uint8_t* p) { return reinterpret_cast<const double*>(p); };
+    const __m128d lo = _mm_loadh_pd(_mm_castsi128_pd(_mm_loadu_si64(even(b, qa))), at(odd(b, qa)));
+    const __m128d hi = _mm_loadh_pd(_mm_castsi128_pd(_mm_loadu_si64(even(b, qb))), at(odd(b, qb)));
     return _mm256_inserti128_si256(_mm256_castsi128_si256(_mm_castpd_si128(lo)),
                                    _mm_castpd_si128(hi), 1);
   }
 };
 
-// Four addresses and 4-byte loads, as Addresses8 (_mm_i32gather_epi32).
-struct Addresses4 {
-  const std::uint8_t* p[4];
-  Addresses4(const std::uint8_t* base, __m128i ofs) {
-    const std::uint64_t q0 = static_cast<std::uint64_t>(_mm_cvtsi128_si64(ofs));
-    const std::uint64_t q1 = static_cast<std::uint64_t>(_mm_extract_epi64(ofs, 1));
-    p[0] = base + static_cast<std::uint32_t>(q0);
-    p[1] = base + (q0 >> 32);
-    p[2] = base + static_cast<std::uint32_t>(q1);
-    p[3] = base + (q1 >> 32);
+// The source line of the bottom neighbours of a pixel at (x, y) in a row kRemapAhead rows
+// below, for a prefetch (null outside the image): the rows a band reads move down the image
+// with it, and the lines first touched there are otherwise cache misses. One prefetch per 8
+// (4) pixels. The caller issues the prefetch: a helper holding only a prefetch is deduced
+// free of side effects and its calls deleted (GCC 12).
+inline const char* bottom_line(const RemapRowArgs& a, std::ptrdiff_t x, std::ptrdiff_t y,
+                               std::ptrdiff_t bytes) {
+  if (x >= 0 && x < a.src_cols && y + 1 >= 0 && y + 1 < a.src_rows) {
+    return reinterpret_cast<const char*>(a.src + (y + 1) * a.src_stride + x * bytes);
   }
+  return nullptr;
+}
+
+// Four 4-byte loads, as Addresses8 (_mm_i32gather_epi32).
+struct Addresses4 {
+  const std::uint8_t* base;
+  std::uint64_t q0, q1;
+  Addresses4(const std::uint8_t* b, __m128i ofs)
+      : base(b),
+        q0(static_cast<std::uint64_t>(_mm_cvtsi128_si64(ofs))),
+        q1(static_cast<std::uint64_t>(_mm_extract_epi64(ofs, 1))) {}
   __m128i load32(std::ptrdiff_t d) const {
-    __m128i v = _mm_cvtsi32_si128(Addresses8::u32(p[0] + d));
-    v = _mm_insert_epi32(v, Addresses8::u32(p[1] + d), 1);
-    v = _mm_insert_epi32(v, Addresses8::u32(p[2] + d), 2);
-    return _mm_insert_epi32(v, Addresses8::u32(p[3] + d), 3);
+    const std::uint8_t* b = base + d;
+    __m128i v = _mm_cvtsi32_si128(Addresses8::u32(Addresses8::even(b, q0)));
+    v = _mm_insert_epi32(v, Addresses8::u32(Addresses8::odd(b, q0)), 1);
+    v = _mm_insert_epi32(v, Addresses8::u32(Addresses8::even(b, q1)), 2);
+    return _mm_insert_epi32(v, Addresses8::u32(Addresses8::odd(b, q1)), 3);
   }
 };
 
@@ -193,10 +207,10 @@ inline void blend_rgb8(const std::uint8_t* src, std::ptrdiff_t stride, __m256i o
   // (left, right) byte pairs per channel, two pixels per 128-bit lane.
   const __m256i pairs = _mm256_setr_epi8(0, 3, 1, 4, 2, 5, 6, 7, 8, 11, 9, 12, 10, 13, 14, 15,
                                          0, 3, 1, 4, 2, 5, 6, 7, 8, 11, 9, 12, 10, 13, 14, 15);
-  const __m256i t03 = _mm256_shuffle_epi8(at.load64(0, 0), pairs);
-  const __m256i t47 = _mm256_shuffle_epi8(at.load64(4, 0), pairs);
-  const __m256i b03 = _mm256_shuffle_epi8(at.load64(0, stride), pairs);
-  const __m256i b47 = _mm256_shuffle_epi8(at.load64(4, stride), pairs);
+  const __m256i t03 = _mm256_shuffle_epi8(at.load64(false, 0), pairs);
+  const __m256i t47 = _mm256_shuffle_epi8(at.load64(true, 0), pairs);
+  const __m256i b03 = _mm256_shuffle_epi8(at.load64(false, stride), pairs);
+  const __m256i b47 = _mm256_shuffle_epi8(at.load64(true, stride), pairs);
   const __m256i fx = _mm256_and_si256(f, _mm256_set1_epi32(0xffff));
   const __m256i wx = _mm256_or_si256(_mm256_sub_epi32(_mm256_set1_epi32(kOne), fx),
                                      _mm256_slli_epi32(fx, 16));
@@ -253,6 +267,11 @@ void remap_row_u16_avx2(const RemapRowArgs& a) {
     const __m256i deinterleave = _mm256_setr_epi32(0, 2, 4, 6, 1, 3, 5, 7);
     const __m256d one = _mm256_set1_pd(1.0), top_value = _mm256_set1_pd(65535.0);
     for (; j + 4 <= a.n; j += 4) {
+      // Clamped to [-2, side + 1]: the conversions cannot overflow.
+      if (const char* line = bottom_line(a, static_cast<std::ptrdiff_t>(a.pos_ahead[2 * j]),
+                                         static_cast<std::ptrdiff_t>(a.pos_ahead[2 * j + 1]), 2)) {
+        _mm_prefetch(line, _MM_HINT_T0);
+      }
       const __m256 xy = _mm256_permutevar8x32_ps(_mm256_loadu_ps(a.pos + 2 * j), deinterleave);
       const __m256d px = _mm256_cvtps_pd(_mm256_castps256_ps128(xy));
       const __m256d py = _mm256_cvtps_pd(_mm256_extractf128_ps(xy, 1));
@@ -310,6 +329,9 @@ void remap_row_u8_avx2(const RemapRowArgs& a) {
     const __m256i zero = _mm256_setzero_si256();
     std::uint8_t* out = static_cast<std::uint8_t*>(a.dst);
     for (; j + 8 <= a.n; j += 8) {
+      if (const char* line = bottom_line(a, a.xy_ahead[2 * j], a.xy_ahead[2 * j + 1], CN)) {
+        _mm_prefetch(line, _MM_HINT_T0);
+      }
       const __m256i xy = _mm256_loadu_si256(reinterpret_cast<const __m256i*>(a.xy + 2 * j));
       const __m256i f = _mm256_loadu_si256(reinterpret_cast<const __m256i*>(a.frac + j));
       const __m256i ofs = _mm256_madd_epi16(xy, mul);
