@@ -125,10 +125,10 @@ struct Addresses8 {
     hi = _mm_insert_epi32(hi, u32(odd(b, q3)), 3);
     return _mm256_inserti128_si256(_mm256_castsi128_si256(lo), hi, 1);
   }
-  // The 8 bytes at offsets 0..3 (upper: 4..7) + d.
-  __m256i load64(bool upper, std::ptrdiff_t d) const {
+  // The 8 bytes at offsets 0, 1 | 4, 5 (second: 2, 3 | 6, 7) + d, two per 128-bit lane.
+  __m256i load64x2(bool second, std::ptrdiff_t d) const {
     const std::uint8_t* b = base + d;
-    const std::uint64_t qa = upper ? q2 : q0, qb = upper ? q3 : q1;
+    const std::uint64_t qa = second ? q1 : q0, qb = second ? q3 : q2;
     const auto at = [](const std::uint8_t* p) { return reinterpret_cast<const double*>(p); };
     const __m128d lo = _mm_loadh_pd(_mm_castsi128_pd(_mm_loadu_si64(even(b, qa))), at(odd(b, qa)));
     const __m128d hi = _mm_loadh_pd(_mm_castsi128_pd(_mm_loadu_si64(even(b, qb))), at(odd(b, qb)));
@@ -196,57 +196,58 @@ inline __m256i pick_pattern() {
                           13, -128);
 }
 
-// Eight RGB pixels from the offsets `ofs` of their top-left neighbours: 8 bytes from each
-// top-left neighbour, holding both neighbours' R G B, in the top and bottom rows (four pixels
-// per vector), byte pairs (left, right) per channel blended by pmaddwd, then
-// the rows as in blend8. Writes 24 bytes at `o`; with `room`, 4 more that later pixels
-// overwrite.
+// Eight RGB pixels from the offsets `ofs` of their top-left neighbours and fractions `f`: 8
+// bytes from each top-left neighbour (both neighbours' R G B) in the top and bottom rows,
+// regrouped by channel with one shuffle per two pixels and two unpacks, so that pmaddwd
+// forms top and bot for 8 pixels of one channel at once with the fractions as loaded (no
+// per-pixel broadcasts, no unused fourth channel); the rows are then blended as in blend8.
+// Writes 24 bytes at `o`; with `room`, 8 more that later pixels overwrite.
 inline void blend_rgb8(const std::uint8_t* src, std::ptrdiff_t stride, __m256i ofs, __m256i f,
                        std::uint8_t* o, bool room) {
   const Addresses8 at(src, ofs);
-  // (left, right) byte pairs per channel, two pixels per 128-bit lane.
-  const __m256i pairs = _mm256_setr_epi8(0, 3, 1, 4, 2, 5, 6, 7, 8, 11, 9, 12, 10, 13, 14, 15,
-                                         0, 3, 1, 4, 2, 5, 6, 7, 8, 11, 9, 12, 10, 13, 14, 15);
-  const __m256i t03 = _mm256_shuffle_epi8(at.load64(false, 0), pairs);
-  const __m256i t47 = _mm256_shuffle_epi8(at.load64(true, 0), pairs);
-  const __m256i b03 = _mm256_shuffle_epi8(at.load64(false, stride), pairs);
-  const __m256i b47 = _mm256_shuffle_epi8(at.load64(true, stride), pairs);
+  // Per 128-bit lane, two pixels' 8 bytes [R G B R' G' B' . .] -> the (left, right) byte pairs
+  // grouped by channel: R pairs of both pixels, G pairs, B pairs, 4 zeros.
+  const __m256i group = _mm256_setr_epi8(0, 3, 8, 11, 1, 4, 9, 12, 2, 5, 10, 13, -128, -128, -128,
+                                         -128, 0, 3, 8, 11, 1, 4, 9, 12, 2, 5, 10, 13, -128, -128,
+                                         -128, -128);
+  const __m256i zero = _mm256_setzero_si256();
   const __m256i fx = _mm256_and_si256(f, _mm256_set1_epi32(0xffff));
   const __m256i wx = _mm256_or_si256(_mm256_sub_epi32(_mm256_set1_epi32(kOne), fx),
                                      _mm256_slli_epi32(fx, 16));
   const __m256i fy = _mm256_srli_epi32(f, 16);
-  // R G B and a discarded fourth value of pixels p and p + 1.
-  auto two = [&](__m128i t_pairs, __m128i b_pairs, int p) {
-    const __m256i sel = _mm256_setr_epi32(p, p, p, p, p + 1, p + 1, p + 1, p + 1);
-    const __m256i w = _mm256_permutevar8x32_epi32(wx, sel);
-    const __m256i t = _mm256_madd_epi16(_mm256_cvtepu8_epi16(t_pairs), w);
-    const __m256i b = _mm256_madd_epi16(_mm256_cvtepu8_epi16(b_pairs), w);
-    const __m256i y = _mm256_permutevar8x32_epi32(fy, sel);
-    const __m256i v = _mm256_add_epi32(_mm256_slli_epi32(t, kRemapFractionBits),
-                                       _mm256_mullo_epi32(_mm256_sub_epi32(b, t), y));
-    return _mm256_srai_epi32(_mm256_add_epi32(v, _mm256_set1_epi32(1 << (kShift - 1))), kShift);
+  // Row d's horizontal sums per channel, pixels 0-3 in the low lane and 4-7 in the high one.
+  const auto rows = [&](std::ptrdiff_t d, __m256i& r, __m256i& g, __m256i& b) {
+    const __m256i a = _mm256_shuffle_epi8(at.load64x2(false, d), group);  // pixels 0 1 | 4 5
+    const __m256i c = _mm256_shuffle_epi8(at.load64x2(true, d), group);   // pixels 2 3 | 6 7
+    const __m256i lo = _mm256_unpacklo_epi32(a, c);  // R01 R23 G01 G23
+    const __m256i hi = _mm256_unpackhi_epi32(a, c);  // B01 B23 0 0
+    r = _mm256_madd_epi16(_mm256_unpacklo_epi8(lo, zero), wx);
+    g = _mm256_madd_epi16(_mm256_unpackhi_epi8(lo, zero), wx);
+    b = _mm256_madd_epi16(_mm256_unpacklo_epi8(hi, zero), wx);
   };
-  const __m256i v01 = two(_mm256_castsi256_si128(t03), _mm256_castsi256_si128(b03), 0);
-  const __m256i v23 = two(_mm256_extracti128_si256(t03, 1), _mm256_extracti128_si256(b03, 1), 2);
-  const __m256i v45 = two(_mm256_castsi256_si128(t47), _mm256_castsi256_si128(b47), 4);
-  const __m256i v67 = two(_mm256_extracti128_si256(t47, 1), _mm256_extracti128_si256(b47, 1), 6);
-  // Bytes: lane 0 holds pixels 0 2 4 6, lane 1 pixels 1 3 5 7; put them in order, then drop
-  // every fourth byte in each lane.
-  const __m256i bytes = _mm256_packus_epi16(_mm256_packus_epi32(v01, v23),
-                                            _mm256_packus_epi32(v45, v67));
-  const __m256i ordered =
-      _mm256_permutevar8x32_epi32(bytes, _mm256_setr_epi32(0, 4, 1, 5, 2, 6, 3, 7));
-  const __m256i packed = _mm256_shuffle_epi8(
-      ordered, _mm256_setr_epi8(0, 1, 2, 4, 5, 6, 8, 9, 10, 12, 13, 14, -1, -1, -1, -1, 0, 1, 2,
-                                4, 5, 6, 8, 9, 10, 12, 13, 14, -1, -1, -1, -1));
-  const __m128i lo = _mm256_castsi256_si128(packed), hi = _mm256_extracti128_si256(packed, 1);
-  _mm_storeu_si128(reinterpret_cast<__m128i*>(o), lo);  // bytes 12..15 are rewritten below
+  __m256i tr, tg, tb, br, bg, bb;
+  rows(0, tr, tg, tb);
+  rows(stride, br, bg, bb);
+  const __m256i half = _mm256_set1_epi32(1 << (kShift - 1));
+  const auto blend = [&](__m256i t, __m256i b) {
+    const __m256i v = _mm256_add_epi32(_mm256_slli_epi32(t, kRemapFractionBits),
+                                       _mm256_mullo_epi32(_mm256_sub_epi32(b, t), fy));
+    return _mm256_srai_epi32(_mm256_add_epi32(v, half), kShift);
+  };
+  const __m256i vr = blend(tr, br), vg = blend(tg, bg), vb = blend(tb, bb);
+  // Per lane: R0-3 G0-3 B0-3 B0-3 as bytes, then interleaved, then the lanes joined.
+  const __m256i bytes = _mm256_packus_epi16(_mm256_packus_epi32(vr, vg),
+                                            _mm256_packus_epi32(vb, vb));
+  const __m256i rgb = _mm256_shuffle_epi8(
+      bytes, _mm256_setr_epi8(0, 4, 8, 1, 5, 9, 2, 6, 10, 3, 7, 11, -1, -1, -1, -1, 0, 4, 8, 1, 5,
+                              9, 2, 6, 10, 3, 7, 11, -1, -1, -1, -1));
+  const __m256i packed =
+      _mm256_permutevar8x32_epi32(rgb, _mm256_setr_epi32(0, 1, 2, 4, 5, 6, 3, 7));
   if (room) {
-    _mm_storeu_si128(reinterpret_cast<__m128i*>(o + 12), hi);
+    _mm256_storeu_si256(reinterpret_cast<__m256i*>(o), packed);
   } else {
-    _mm_storel_epi64(reinterpret_cast<__m128i*>(o + 12), hi);
-    const std::int32_t last = _mm_extract_epi32(hi, 2);
-    std::memcpy(o + 20, &last, sizeof last);
+    _mm_storeu_si128(reinterpret_cast<__m128i*>(o), _mm256_castsi256_si128(packed));
+    _mm_storel_epi64(reinterpret_cast<__m128i*>(o + 16), _mm256_extracti128_si256(packed, 1));
   }
 }
 
@@ -345,7 +346,7 @@ void remap_row_u8_avx2(const RemapRowArgs& a) {
       if constexpr (CN == 1) {
         _mm_storel_epi64(reinterpret_cast<__m128i*>(out + j), blend8(a.src, stride, ofs, f, pick));
       } else {
-        blend_rgb8(a.src, stride, ofs, f, out + 3 * j, j + 10 <= a.n);
+        blend_rgb8(a.src, stride, ofs, f, out + 3 * j, j + 11 <= a.n);
       }
     }
   }
