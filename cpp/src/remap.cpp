@@ -131,9 +131,14 @@ void RemapTable::apply(const StereoImage& src, void* dst, std::ptrdiff_t dst_row
                       a.n = cols_;
                       const bool fixed = precision_ == RemapPrecision::kFixed;
                       for (std::ptrdiff_t r = begin; r < end; ++r) {
+                        const std::ptrdiff_t ahead = r + detail::kRemapAhead < rows_
+                                                         ? r + detail::kRemapAhead
+                                                         : r;
                         a.xy = fixed ? xy_.data() + 2 * r * cols_ : nullptr;
                         a.frac = fixed ? frac_.data() + r * cols_ : nullptr;
                         a.pos = fixed ? nullptr : pos_.data() + 2 * r * cols_;
+                        a.xy_ahead = fixed ? xy_.data() + 2 * ahead * cols_ : nullptr;
+                        a.pos_ahead = fixed ? nullptr : pos_.data() + 2 * ahead * cols_;
                         a.dst = out + r * dst_row_stride;
                         kernel(a);
                       }

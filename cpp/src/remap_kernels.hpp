@@ -14,9 +14,16 @@ struct RemapRowArgs {
   const std::int16_t* xy;                          // this output row's entries (kFixed)
   const std::uint32_t* frac;
   const float* pos;                                // this output row's x, y pairs (kFloat)
+  // The xy or pos entries of a row kRemapAhead rows further down (this row's own in the last
+  // rows): the kernels prefetch the source lines it will read.
+  const std::int16_t* xy_ahead;
+  const float* pos_ahead;
   std::ptrdiff_t n;                                // output pixels in the row
   void* dst;
 };
+
+// How many output rows ahead the kernels prefetch their source lines.
+inline constexpr std::ptrdiff_t kRemapAhead = 2;
 
 using RemapRow = void (*)(const RemapRowArgs& args);
 
