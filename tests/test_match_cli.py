@@ -265,6 +265,11 @@ def bad_cases(tmp: Path, left: Path, right: Path) -> list[tuple[list[Any], str]]
             "--disparity-format png16 holds disparities up to 255.996 px, and the search "
             "reaches 271 px",
         ),
+        (
+            [left, right, "--min-disparity", "-8", "--disparity-format", "png16"],
+            "--disparity-format png16 holds no negative disparities (KITTI's d x 256, 0 for "
+            "none), and --min-disparity -8 searches them",
+        ),
         ([tmp, right], "LEFT: image is a folder, not a file"),
         ([left, tmp / "notimage.png"], "RIGHT: cannot decode image"),
         ([left, tmp / "small.png"], "LEFT and RIGHT must have the same size, got 96x64 and 90x64"),

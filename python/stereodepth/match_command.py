@@ -5,7 +5,8 @@ Outputs go to ``--out``: a folder (an existing one, or a path ending in ``/``, c
 files ``disparity.<ext>``, ``depth.<ext>``, ``disparity-preview.png``, ``depth-preview.png``
 and ``points.ply``; or a prefix (``--out results/teddy-`` writes ``results/teddy-disparity.pfm``
 and so on; its folder must exist). Formats: disparity as PFM (float32, NaN holes; default),
-``npy`` or ``png16`` (KITTI's uint16 of d x 256, 0 for holes); depth as ``npy`` (float32
+``npy`` or ``png16`` (KITTI's uint16 of d x 256, 0 for holes: 0 to 255.996 px, refused for a
+search range outside that); depth as ``npy`` (float32
 metres, NaN where unknown; default), ``pfm``, or ``png16`` (uint16 millimetres, 0 unknown).
 The previews are the colourised maps pixel for pixel with a colour bar and unit under them
 (:func:`stereodepth.save_colorized`); they need the ``plot`` extra (``--no-preview`` skips them).
@@ -363,6 +364,12 @@ def run(args: argparse.Namespace) -> int:
         raise _Usage(
             f"--disparity-format png16 holds disparities up to 255.996 px, and the search "
             f"reaches {reach - 1} px (--min-disparity + --num-disparities - 1): use pfm or npy"
+        )
+    if args.disparity_format == "png16" and args.min_disparity < 0:  # it has no negatives
+        raise _Usage(
+            f"--disparity-format png16 holds no negative disparities (KITTI's d x 256, 0 for "
+            f"none), and --min-disparity {args.min_disparity} searches them: they would be "
+            "written as holes; use pfm or npy"
         )
     want_preview = not args.no_preview
     if want_preview:

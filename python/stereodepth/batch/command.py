@@ -519,6 +519,12 @@ def run(args: argparse.Namespace) -> int:
     _check_outputs_are_not_inputs(pairs, options, [args.calib, args.calib_right])
     if args.format == "png16":  # KITTI's disparity PNG holds at most 65535 / 256 px
         lowest = int(options.matcher.get("min_disparity", 0))
+        if lowest < 0:  # and no negative disparities: they would be written as holes
+            raise UsageError(
+                f"--format png16 holds no negative disparities (KITTI's d x 256, 0 for none), "
+                f"and --min-disparity {lowest} searches them: they would be written as holes; "
+                "use --format pfm or npy"
+            )
         for pair in pairs:
             if pair.num_disparities is not None and lowest + pair.num_disparities > 256:
                 raise UsageError(
