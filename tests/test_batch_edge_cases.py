@@ -374,3 +374,25 @@ def test_the_lock_file_is_removed_when_the_job_ends(
     (out / batch.LOCK_NAME).write_text("")
     assert run(capsys, tmp_path / "in", "-o", out, "--quiet")[0] == 1
     assert not (out / batch.LOCK_NAME).exists()
+
+
+def test_a_middlebury_calibration_of_another_resolution_fails_the_pair(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A calib.txt's width and height name the images it calibrates: Middlebury's full-size
+    file beside its quarter-size images would give depths 4 times too large, silently."""
+    inp = tmp_path / "in"
+    scene(inp / "good")
+    scene(inp / "half", seed=1, calib=False)
+    (inp / "half" / "calib.txt").write_text(calib_txt().replace("width=48", "width=96"))
+    out = tmp_path / "out"
+    status, _, err = run(capsys, inp, "-o", out, "--quiet")
+    assert status == 1, err
+    assert record_of(out, "good")["status"] == "ok"
+    bad = record_of(out, "half")
+    assert bad["status"] == "failed"
+    assert bad["error"] == (
+        f"the images are 48x32 px and the calibration {inp / 'half' / 'calib.txt'} is for "
+        "96x32 px (its width and height): a calibration of another resolution gives wrong depths"
+    )
+    assert not list(out.glob("half.*.npy"))

@@ -271,6 +271,11 @@ def bad_cases(tmp: Path, left: Path, right: Path) -> list[tuple[list[Any], str]]
             "none), and --min-disparity -8 searches them",
         ),
         ([tmp, right], "LEFT: image is a folder, not a file"),
+        (
+            [left, right, "--calib", write_middlebury_calib(tmp / "big.txt", 192, 128)],
+            "LEFT and RIGHT must have the size of the calibration in --calib, 192x128 px, got "
+            "96x64 px",
+        ),
         ([left, tmp / "notimage.png"], "RIGHT: cannot decode image"),
         ([left, tmp / "small.png"], "LEFT and RIGHT must have the same size, got 96x64 and 90x64"),
         ([left, right, "--calib", tmp / "none.txt"], "--calib: calibration file not found"),

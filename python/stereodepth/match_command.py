@@ -243,6 +243,7 @@ def _rig(
             "doffs_px": float(c.doffs_px),
             "cx_px": c.cx_px,
             "cy_px": c.cy_px,
+            "image_size": getattr(c, "image_size", None),  # the file's width and height
         }
         return rig, c.num_disparities, str(args.calib), None
     if args.focal_px is None and args.baseline_mm is None:
@@ -348,8 +349,11 @@ def run(args: argparse.Namespace) -> int:
             f"LEFT and RIGHT must have the same size, got {left_img.shape[1]}x"
             f"{left_img.shape[0]} and {right_img.shape[1]}x{right_img.shape[0]} px"
         )
-    if rectifier is not None:
-        cw, ch = rectifier.image_size
+    calib_size = rectifier.image_size if rectifier is not None else (rig or {}).get("image_size")
+    if calib_size is not None:
+        # A calibration of another resolution (Middlebury's full-size calib.txt for its
+        # quarter-size images) gives depths off by the scale factor, silently.
+        cw, ch = calib_size
         if left_img.shape[:2] != (ch, cw):
             raise _Usage(
                 f"LEFT and RIGHT must have the size of the calibration in --calib, {cw}x{ch} "
