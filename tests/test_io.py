@@ -77,6 +77,47 @@ def test_read_image_rejects_floating_point_images(tmp_path: Path) -> None:
             io.read_image(tmp_path / name)
 
 
+def _png(path: Path, samples: np.ndarray, colour_type: int) -> None:
+    """A 16-bit PNG written by hand (the PNG specification; Pillow writes no 16-bit colour)."""
+    import struct
+    import zlib
+
+    def chunk(kind: bytes, data: bytes) -> bytes:
+        return (
+            struct.pack(">I", len(data)) + kind + data + struct.pack(">I", zlib.crc32(kind + data))
+        )
+
+    h, w = samples.shape[:2]
+    rows = samples.astype(">u2").reshape(h, -1).view(np.uint8)
+    raw = b"".join(b"\0" + row.tobytes() for row in rows)  # filter type 0 per row
+    ihdr = struct.pack(">IIBBBBB", w, h, 16, colour_type, 0, 0, 0)
+    path.write_bytes(
+        b"\x89PNG\r\n\x1a\n"
+        + chunk(b"IHDR", ihdr)
+        + chunk(b"IDAT", zlib.compress(raw))
+        + chunk(b"IEND", b"")
+    )
+
+
+@pytest.mark.parametrize(
+    ("colour_type", "channels", "kind"),
+    [(2, 3, "colour"), (6, 4, "colour"), (4, 2, "grey and alpha")],
+)
+def test_read_image_refuses_16_bit_colour(
+    tmp_path: Path, colour_type: int, channels: int, kind: str
+) -> None:
+    # Pillow reads 16-bit colour (and grey with alpha) as 8 bits, keeping the high byte: a
+    # 12-bit colour image (0..4095) became 0..15, almost black, and was matched as such.
+    a = np.random.default_rng(1).integers(0, 4096, (5, 6, channels), dtype=np.uint16)
+    if channels in (2, 4):
+        a[..., -1] = 65535  # opaque
+    _png(tmp_path / "c16.png", a, colour_type)
+    with pytest.raises(ValueError, match=r"c16\.png: a 16-bit " + kind + r" image .*low byte"):
+        io.read_image(tmp_path / "c16.png")
+    _png(tmp_path / "g16.png", a[..., 0], 0)  # 16-bit grey is read exactly
+    np.testing.assert_array_equal(io.read_image(tmp_path / "g16.png"), a[..., 0], strict=True)
+
+
 # --- atomic_write -----------------------------------------------------------------------------
 def test_atomic_write_replaces_only_on_success(tmp_path: Path) -> None:
     target = tmp_path / "out.bin"

@@ -67,8 +67,9 @@ def read_image(path: str | os.PathLike[str]) -> np.ndarray:
     :func:`read_pnm`, exactly, with their samples as stored (a 16-bit PPM gives (H, W, 3)
     uint16); every other format by Pillow. Palette and grey-alpha images become grey or RGB;
     an alpha channel is dropped. Raises FileNotFoundError for a missing file,
-    IsADirectoryError for a folder and ValueError naming the file when it cannot be decoded or
-    holds floating-point samples (a float TIFF or a PFM: :func:`read_pfm` reads those)."""
+    IsADirectoryError for a folder and ValueError naming the file when it cannot be decoded,
+    holds floating-point samples (a float TIFF or a PFM: :func:`read_pfm` reads those) or is
+    16-bit colour or 16-bit with alpha (Pillow would keep only the high byte of each sample)."""
     p = Path(path)
     require_file(p, "image")
     with p.open("rb") as f:
@@ -78,6 +79,16 @@ def read_image(path: str | os.PathLike[str]) -> np.ndarray:
     Image = _pil()
     try:
         with Image.open(p) as im:
+            if im.mode not in _GREY16_MODES and any(";16" in m for m in _raw_modes(im)):
+                # Pillow keeps only the high byte of these: 12-bit colour (0..4095) would
+                # become 0..15, an almost black image, silently.
+                raw = _raw_modes(im)[0]
+                raise ValueError(
+                    f"{p}: a 16-bit {'grey and alpha' if raw.startswith('LA') else 'colour'} "
+                    f"image (stored as {raw}) cannot be read without losing its low "
+                    "byte; the matchers take 16-bit grey or 8-bit colour: convert it to one "
+                    "of those"
+                )
             im.load()
             mode = im.mode
             if mode in ("I;16", "I;16B", "I;16L"):
@@ -106,6 +117,21 @@ def read_image(path: str | os.PathLike[str]) -> np.ndarray:
             return np.asarray(im.convert("RGB"), dtype=np.uint8)
     except (OSError, SyntaxError) as exc:  # Pillow's errors for truncated / corrupt files
         raise ValueError(f"cannot decode image {p}: {exc}") from exc
+
+
+_GREY16_MODES = ("I;16", "I;16B", "I;16L", "I")
+
+
+def _raw_modes(im: Any) -> list[str]:
+    """The raw modes of an opened (not yet loaded) Pillow image's tiles: how the file stores
+    its samples (``RGB;16B`` for a 16-bit colour PNG, which Pillow reads as 8-bit RGB)."""
+    modes = []
+    for tile in getattr(im, "tile", None) or ():
+        args = tile[3] if len(tile) > 3 else None
+        raw = args if isinstance(args, str) else (args[0] if isinstance(args, tuple) else None)
+        if isinstance(raw, str):
+            modes.append(raw)
+    return modes
 
 
 # --- atomic writes ----------------------------------------------------------------------------
