@@ -396,3 +396,27 @@ def test_a_middlebury_calibration_of_another_resolution_fails_the_pair(
         "96x32 px (its width and height): a calibration of another resolution gives wrong depths"
     )
     assert not list(out.glob("half.*.npy"))
+
+
+@pytest.mark.parametrize("shared", ["beside", "--calib"])
+def test_kitti_grey_pair_reads_its_own_cameras(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], shared: str
+) -> None:
+    """KITTI odometry's grey set: sequences/NN/image_0, image_1 and one calib.txt (P0 to P3).
+    The pair is cameras 0 and 1; it once got the colour pair's P2/P3 baseline, silently."""
+    seq = tmp_path / "in" / "00"
+    for sub in ("image_0", "image_1"):
+        (seq / sub).mkdir(parents=True)
+    rng = np.random.default_rng(7)
+    left = rng.integers(0, 256, SHAPE, dtype=np.uint8)
+    Image.fromarray(left).save(seq / "image_0" / "000000.png")
+    Image.fromarray(np.roll(left, -3, axis=1)).save(seq / "image_1" / "000000.png")
+    rows = {0: "0", 1: "-70", 2: "42", 3: "-35"}  # grey baseline 0.1 m, colour 0.11 m
+    calib = (seq if shared == "beside" else tmp_path) / "calib.txt"
+    calib.write_text("".join(f"P{i}: 700 0 24 {tx} 0 700 16 0 0 0 1 0\n" for i, tx in rows.items()))
+    out = tmp_path / "out"
+    extra = ["--calib", calib] if shared == "--calib" else []
+    status, _, err = run(capsys, tmp_path / "in", "-o", out, "--num-disparities", 16, *extra)
+    assert status == 0, err
+    rig = record_of(out, "00_000000")["settings"]["calibration"]
+    assert rig["baseline_m"] == pytest.approx(0.1, rel=1e-12)

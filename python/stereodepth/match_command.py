@@ -231,10 +231,12 @@ def _rig(
         if rectifier is not None:
             source = rule.calibration_source(args.calib, args.calib_right)
             return rule.rectified_rig(rectifier), None, source, rectifier
-        from .match_pair import read_calibration_file
+        from .match_pair import kitti_cameras, read_calibration_file
 
         try:
-            c = read_calibration_file(args.calib)
+            # A KITTI file holds four cameras: those of the images' folders (image_0/image_1,
+            # the grey pair, have another baseline than image_2/image_3), as batch reads them.
+            c = read_calibration_file(args.calib, kitti_cameras(args.left, args.right))
         except (OSError, ValueError) as exc:
             raise _Usage(f"--calib: {exc}") from None
         rig: dict[str, Any] = {

@@ -174,16 +174,18 @@ def _folder_pairs(root: Path, *, prefix: str | None) -> list[Pair] | None:
         shared_calib = root / "calib.txt"
         for f in _images(ld):
             calib = _kitti_calib_for(root, f.stem) if cams else None
-            kitti = cams if calib is not None else None
             if calib is None and shared_calib.is_file():
-                calib = shared_calib
+                calib = shared_calib  # KITTI odometry's sequences/NN/calib.txt, for example
             pairs.append(
                 Pair(
                     stem=_safe_stem(f.stem if prefix is None else f"{prefix}_{f.stem}"),
                     left=f,
                     right=rd / f.name,
                     calib_file=calib,
-                    kitti_cams=kitti,
+                    # The folders' cameras, for whichever KITTI file calibrates them (their
+                    # own, a shared calib.txt, --calib): the grey pair image_0/image_1 once got
+                    # the colour pair's P2/P3 baseline from all but the first.
+                    kitti_cams=cams,
                 )
             )
         return pairs
