@@ -47,9 +47,7 @@ def default_num_disparities(width_px: int) -> int:
     return int(min(256, max(16, math.ceil(width_px / 8 / 16) * 16)))
 
 
-def read_calibration_file(
-    path: str | os.PathLike[str], cams: tuple[int, int] | None = None
-) -> Any:
+def read_calibration_file(path: str | os.PathLike[str], cams: tuple[int, int] | None = None) -> Any:
     """A Middlebury ``calib.txt`` or a KITTI calibration file, with the library's reader (its
     result has ``focal_px``, ``baseline_m``, ``doffs_px``, ``cx_px``, ``cy_px`` and
     ``num_disparities``); ``cams`` the KITTI cameras (default (2, 3), the colour pair). Raises
