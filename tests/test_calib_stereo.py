@@ -103,9 +103,10 @@ def write(path: Path, text: str) -> Path:
 
 
 # --- OpenCV FileStorage -----------------------------------------------------------------------
-@pytest.mark.parametrize("ext", ["yml", "xml"])
+@pytest.mark.parametrize("ext", ["yml", "xml", "json"])
 def test_opencv_written_by_cv2(tmp_path: Path, ext: str) -> None:
-    """Files written by the real cv2.FileStorage after cv2.stereoRectify, both formats."""
+    """Files written by the real cv2.FileStorage after cv2.stereoRectify, in its three formats
+    (its JSON's matrices, objects with "type_id": "opencv-matrix", were once refused)."""
     cv2 = pytest.importorskip("cv2", reason="opencv-python-headless is not installed")
     r1, r2, p1, p2, q, _, _ = cv2.stereoRectify(K1, D1, K2, D2, (640, 480), R, T_MM.reshape(3, 1))
     path = tmp_path / f"stereo.{ext}"

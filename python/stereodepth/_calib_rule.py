@@ -4,7 +4,7 @@
 - A Middlebury ``calib.txt`` or a KITTI calibration file describes a rectified pair: it is
   matched as it is, with the rig the file gives.
 - Any other calibration :func:`stereodepth.calib.read_stereo_calibration` reads (OpenCV
-  FileStorage YAML/XML, Kalibr camchain, a pair of ROS camera_info files with
+  FileStorage YAML/XML/JSON, Kalibr camchain, a pair of ROS camera_info files with
   ``--calib-right``; ``--translation-unit`` the unit of its translations) describes a raw pair,
   rectified automatically before matching by
   :meth:`stereodepth.StereoRectifier.from_calibration` (the file's own R1, R2, P1, P2 where it

@@ -19,7 +19,7 @@ The rule for ``--calib``: the file's format says whether the pair is already rec
 - A Middlebury ``calib.txt`` or a KITTI calibration file describes a rectified pair: LEFT and
   RIGHT are matched as they are, with the rig the file gives (and Middlebury's ``ndisp``).
 - Any other calibration :func:`stereodepth.calib.read_stereo_calibration` reads (OpenCV
-  FileStorage YAML/XML, Kalibr camchain, a ROS camera_info file with ``--calib-right FILE``
+  FileStorage YAML/XML/JSON, Kalibr camchain, a ROS camera_info file with ``--calib-right FILE``
   for the right camera; ``--translation-unit`` the unit of its translations, default metres, refused
   for an OpenCV file whose baseline would then exceed 10 m)
   describes a raw pair, which is rectified automatically before matching:
@@ -101,8 +101,8 @@ def register(subparsers: Any) -> None:
         "--calib",
         metavar="FILE",
         help="Middlebury calib.txt or KITTI calib (rectified pairs: matched as given), or a raw "
-        "calibration (OpenCV FileStorage YAML/XML, Kalibr camchain, ROS camera_info): the pair "
-        "is rectified first and the depth is in the rectified left camera's frame",
+        "calibration (OpenCV FileStorage YAML/XML/JSON, Kalibr camchain, ROS camera_info): the "
+        "pair is rectified first and the depth is in the rectified left camera's frame",
     )
     r.add_argument(
         "--calib-right",

@@ -582,7 +582,7 @@ class StereoRectifier:
         **read_options: Any,
     ) -> StereoRectifier:
         """A rectifier from a calibration file: read with
-        :func:`stereodepth.calib.read_stereo_calibration` (OpenCV YAML/XML, ROS camera_info,
+        :func:`stereodepth.calib.read_stereo_calibration` (OpenCV YAML/XML/JSON, ROS camera_info,
         Kalibr camchain, Middlebury, KITTI; ``second_path`` for the right camera's file where
         the format splits them, ``read_options`` such as ``image_size`` or
         ``translation_unit`` go to the reader), then :meth:`from_calibration` with the

@@ -12,7 +12,7 @@ Precedence
 
 Raw pairs
     A ``--calib`` file that is not a Middlebury or KITTI calibration is the calibration of a
-    raw pair (OpenCV FileStorage YAML/XML, Kalibr, ROS camera_info with ``--calib-right``),
+    raw pair (OpenCV FileStorage YAML/XML/JSON, Kalibr, ROS camera_info with ``--calib-right``),
     and every pair is rectified before matching, by the rule of ``stereodepth match``
     (:mod:`stereodepth._calib_rule`): the rectifier is built once (:class:`BatchRectifier`;
     on Dask the calibration travels and each worker process builds it once), and the rig is

@@ -72,7 +72,7 @@ def register(subparsers: Any) -> None:
         "--calib",
         metavar="FILE",
         help="one calibration for every pair: Middlebury calib.txt or KITTI calib (rectified "
-        "pairs: matched as given), or a raw calibration (OpenCV FileStorage YAML/XML, Kalibr "
+        "pairs: matched as given), or a raw calibration (OpenCV FileStorage YAML/XML/JSON, Kalibr "
         "camchain, ROS camera_info): every pair is rectified first and the depth is in the "
         "rectified left camera's frame",
     )

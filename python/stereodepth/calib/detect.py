@@ -51,7 +51,7 @@ def read_stereo_calibration(
 ) -> StereoCalibration:
     """A stereo calibration from any file this module reads, the format told by content:
 
-    - OpenCV FileStorage XML (``<opencv_storage>``) or YAML (keys such as M1, K1, R, T):
+    - OpenCV FileStorage XML (``<opencv_storage>``), YAML or JSON (keys such as M1, K1, R, T):
       :func:`read_opencv_stereo_calibration`, ``second_path`` the second file when the
       calibration is split in two (intrinsics and extrinsics);
     - ROS camera_info YAML (``camera_matrix``): :func:`read_ros_stereo_calibration`, the

@@ -54,7 +54,7 @@ def read_opencv_stereo_calibration(
     image_size: tuple[int, int] | None = None,
     distortion_model: str | None = None,
 ) -> StereoCalibration:
-    """A stereo calibration saved with ``cv2.FileStorage`` (YAML or XML) after
+    """A stereo calibration saved with ``cv2.FileStorage`` (YAML, XML or JSON) after
     ``cv2.stereoCalibrate`` (and ``cv2.stereoRectify``), as OpenCV's stereo_calib sample and
     most scripts write it: ``M1``/``K1``/``cameraMatrix1``, ``D1``/``distCoeffs1``, the same
     for camera 2, ``R``, ``T``, and optionally ``R1``, ``R2``, ``P1``, ``P2``, ``Q``, the image
@@ -64,8 +64,9 @@ def read_opencv_stereo_calibration(
     is refused, and so is a file with none of these matrices).
 
     YAML needs PyYAML (``pip install "stereodepth[calib]"``); OpenCV's ``%YAML:1.0``
-    directive and ``!!opencv-matrix`` tags are understood. XML is read with
-    ``xml.etree`` (files with a DOCTYPE are refused).
+    directive and ``!!opencv-matrix`` tags are understood. FileStorage's JSON (its matrices
+    objects with ``"type_id": "opencv-matrix"``) is read as YAML, of which it is a subset. XML
+    is read with ``xml.etree`` (files with a DOCTYPE are refused).
 
     Units: OpenCV's T (and P2's last column, Q's last row) is in the unit of the
     calibration target's square size, which the file does not record: ``translation_unit``
