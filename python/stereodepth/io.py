@@ -207,6 +207,8 @@ def write_npy(path: str | os.PathLike[str], array: np.ndarray) -> None:
 def _check_2d(name: str, array: Any, dtypes: tuple[type, ...]) -> np.ndarray:
     if not isinstance(array, np.ndarray):
         raise TypeError(f"{name} must be a numpy.ndarray, got {type(array).__name__}")
+    if not array.dtype.isnative:  # a big-endian map is a map all the same
+        array = array.astype(array.dtype.newbyteorder("="))
     if array.dtype not in dtypes:
         allowed = " or ".join(np.dtype(t).name for t in dtypes)
         raise TypeError(f"{name} must have dtype {allowed}, got {array.dtype}")
