@@ -207,14 +207,14 @@ def write_npy(path: str | os.PathLike[str], array: np.ndarray) -> None:
 def _check_2d(name: str, array: Any, dtypes: tuple[type, ...]) -> np.ndarray:
     if not isinstance(array, np.ndarray):
         raise TypeError(f"{name} must be a numpy.ndarray, got {type(array).__name__}")
-    if not array.dtype.isnative:  # a big-endian map is a map all the same
-        array = array.astype(array.dtype.newbyteorder("="))
-    if array.dtype not in dtypes:
+    # A big-endian map is a map all the same: in the machine's byte order.
+    a: np.ndarray = array if array.dtype.isnative else array.astype(array.dtype.newbyteorder("="))
+    if a.dtype not in dtypes:
         allowed = " or ".join(np.dtype(t).name for t in dtypes)
-        raise TypeError(f"{name} must have dtype {allowed}, got {array.dtype}")
-    if array.ndim != 2 or 0 in array.shape:
-        raise ValueError(f"{name} must be a non-empty (H, W) array, got shape {array.shape}")
-    return array
+        raise TypeError(f"{name} must have dtype {allowed}, got {a.dtype}")
+    if a.ndim != 2 or 0 in a.shape:
+        raise ValueError(f"{name} must be a non-empty (H, W) array, got shape {a.shape}")
+    return a
 
 
 def write_png16(
