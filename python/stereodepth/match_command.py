@@ -21,7 +21,8 @@ The rule for ``--calib``: the file's format says whether the pair is already rec
 - Any other calibration :func:`stereodepth.calib.read_stereo_calibration` reads (OpenCV
   FileStorage YAML/XML/JSON, Kalibr camchain, a ROS camera_info file with ``--calib-right FILE``
   for the right camera; ``--translation-unit`` the unit of its translations, default metres, refused
-  for an OpenCV file whose baseline would then exceed 10 m)
+  for an OpenCV file whose baseline would then exceed 10 m; ``--distortion-model`` the model of
+  an OpenCV file with 4 coefficients that does not name it, refused without it)
   describes a raw pair, which is rectified automatically before matching:
   :meth:`stereodepth.StereoRectifier.from_calibration` (the file's own R1, R2, P1, P2 where
   it holds them, else Bouguet's method with alpha -1; ``--alpha A`` recomputes them with
@@ -114,6 +115,12 @@ def register(subparsers: Any) -> None:
         choices=tuple(TRANSLATION_UNITS),
         help="unit of the translations in a raw --calib file (default: metres, and an OpenCV "
         "file whose baseline would then exceed 10 m is refused as probably in mm)",
+    )
+    r.add_argument(
+        "--distortion-model",
+        choices=("plumb_bob", "equidistant"),
+        help="the distortion model of a raw OpenCV --calib file that does not say (one with 4 "
+        "coefficients: equidistant for cv2.fisheye's k1..k4, plumb_bob for k1 k2 p1 p2)",
     )
     r.add_argument(
         "--alpha",

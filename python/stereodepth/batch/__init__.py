@@ -59,7 +59,8 @@ Calibration
 
 Raw pairs
     A ``--calib`` file that is not a Middlebury or KITTI calibration (OpenCV FileStorage
-    YAML/XML/JSON, Kalibr camchain, ROS camera_info with ``--calib-right``; ``--translation-unit``)
+    YAML/XML/JSON, Kalibr camchain, ROS camera_info with ``--calib-right``; ``--translation-unit``,
+    ``--distortion-model``)
     describes raw pairs: every pair is rectified before matching, by the rule of ``stereodepth
     match`` (:mod:`stereodepth._calib_rule`, shared; ``--alpha`` too). The rectifier is built once
     (:class:`~.calibration.BatchRectifier`; on Dask the calibration is shipped and each worker

@@ -277,6 +277,7 @@ def raw_rectification(
     no_rectify: bool = False,
     write_rectified: bool = False,
     alpha: float | None = None,
+    distortion_model: str | None = None,
     threads: int | None = None,
 ) -> tuple[BatchRectifier, Calibration] | None:
     """For a raw ``--calib`` file: the job's :class:`BatchRectifier` (its rectifier built now,
@@ -295,6 +296,7 @@ def raw_rectification(
             no_rectify=no_rectify,
             write_rectified=write_rectified,
             alpha=alpha,
+            distortion_model=distortion_model,
         )
         if stereo is None:
             return None

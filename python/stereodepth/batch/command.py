@@ -88,6 +88,12 @@ def register(subparsers: Any) -> None:
         "file whose baseline would then exceed 10 m is refused as probably in mm)",
     )
     c.add_argument(
+        "--distortion-model",
+        choices=("plumb_bob", "equidistant"),
+        help="the distortion model of a raw OpenCV --calib file that does not say (one with 4 "
+        "coefficients: equidistant for cv2.fisheye's k1..k4, plumb_bob for k1 k2 p1 p2)",
+    )
+    c.add_argument(
         "--alpha",
         type=float,
         metavar="A",
