@@ -398,7 +398,7 @@ def test_a_middlebury_calibration_of_another_resolution_fails_the_pair(
     assert not list(out.glob("half.*.npy"))
 
 
-@pytest.mark.parametrize("shared", ["beside", "--calib"])
+@pytest.mark.parametrize("shared", ["beside", "--calib", "csv"])
 def test_kitti_grey_pair_reads_its_own_cameras(
     tmp_path: Path, capsys: pytest.CaptureFixture[str], shared: str
 ) -> None:
@@ -415,8 +415,12 @@ def test_kitti_grey_pair_reads_its_own_cameras(
     calib = (seq if shared == "beside" else tmp_path) / "calib.txt"
     calib.write_text("".join(f"P{i}: 700 0 24 {tx} 0 700 16 0 0 0 1 0\n" for i, tx in rows.items()))
     out = tmp_path / "out"
-    extra = ["--calib", calib] if shared == "--calib" else []
-    status, _, err = run(capsys, tmp_path / "in", "-o", out, "--num-disparities", 16, *extra)
+    extra = ["--calib", calib] if shared != "beside" else []
+    inp = tmp_path / "in"
+    if shared == "csv":  # a CSV list of KITTI images: the cameras of their folders too
+        inp = tmp_path / "pairs.csv"
+        inp.write_text("in/00/image_0/000000.png,in/00/image_1/000000.png,00_000000\n")
+    status, _, err = run(capsys, inp, "-o", out, "--num-disparities", 16, *extra)
     assert status == 0, err
     rig = record_of(out, "00_000000")["settings"]["calibration"]
     assert rig["baseline_m"] == pytest.approx(0.1, rel=1e-12)

@@ -66,13 +66,9 @@ def kitti_cameras(left: str | os.PathLike[str], right: str | os.PathLike[str]) -
     """The KITTI cameras of a pair by its images' folders, as ``stereodepth batch`` tells
     them: ``image_0``/``image_1`` (the grey pair) (0, 1), ``image_2``/``image_3`` (2, 3);
     None for any other folders."""
-    from .batch.discovery import FOLDER_PAIRS
+    from .batch.discovery import folder_cameras
 
-    folders = (Path(left).parent.name, Path(right).parent.name)
-    for left_dir, right_dir, cams in FOLDER_PAIRS:
-        if cams is not None and folders == (left_dir, right_dir):
-            return cams
-    return None
+    return folder_cameras(Path(left), Path(right))
 
 
 def prepare_pair(left: np.ndarray, right: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

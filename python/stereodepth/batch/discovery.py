@@ -245,6 +245,16 @@ def _search(
     return pairs, skipped
 
 
+def folder_cameras(left: Path, right: Path) -> tuple[int, int] | None:
+    """The KITTI cameras of a pair by its images' folders (``image_0``/``image_1``: (0, 1),
+    ``image_2``/``image_3``: (2, 3)), None for other folders: those a KITTI file is read for."""
+    folders = (left.parent.name, right.parent.name)
+    for left_dir, right_dir, cams in FOLDER_PAIRS:
+        if cams is not None and folders == (left_dir, right_dir):
+            return cams
+    return None
+
+
 def _csv_path(base: Path, cell: str) -> Path:
     p = Path(cell)
     return p if p.is_absolute() else base / p
@@ -296,6 +306,7 @@ def _csv_pairs(path: Path, names: Sequence[tuple[str, str]]) -> list[Pair]:
                         left=left,
                         right=right,
                         calib_file=calib if calib.is_file() else None,
+                        kitti_cams=folder_cameras(left, right),  # for a KITTI --calib
                     )
                 )
     except csv.Error as exc:
