@@ -424,3 +424,31 @@ def test_kitti_grey_pair_reads_its_own_cameras(
     assert status == 0, err
     rig = record_of(out, "00_000000")["settings"]["calibration"]
     assert rig["baseline_m"] == pytest.approx(0.1, rel=1e-12)
+
+
+def test_one_kitti_calib_for_grey_and_colour_pairs(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """One --calib for a CSV list of a grey (image_0/image_1) and a colour (image_2/image_3)
+    pair: each reads its own cameras (all once read those of the first pair)."""
+    seq = tmp_path / "00"
+    rng = np.random.default_rng(8)
+    left = rng.integers(0, 256, SHAPE, dtype=np.uint8)
+    for a, b in (("image_0", "image_1"), ("image_2", "image_3")):
+        for sub, image in ((a, left), (b, np.roll(left, -3, axis=1))):
+            (seq / sub).mkdir(parents=True)
+            Image.fromarray(image).save(seq / sub / "000000.png")
+    rows = {0: "0", 1: "-70", 2: "42", 3: "-35"}  # grey baseline 0.1 m, colour 0.11 m
+    calib = tmp_path / "calib.txt"
+    calib.write_text("".join(f"P{i}: 700 0 24 {tx} 0 700 16 0 0 0 1 0\n" for i, tx in rows.items()))
+    (tmp_path / "pairs.csv").write_text(
+        "00/image_0/000000.png,00/image_1/000000.png,grey\n"
+        "00/image_2/000000.png,00/image_3/000000.png,colour\n"
+    )
+    out = tmp_path / "out"
+    argv = [tmp_path / "pairs.csv", "-o", out, "--num-disparities", 16, "--calib", calib]
+    status, _, err = run(capsys, *argv)
+    assert status == 0, err
+    for stem, baseline in (("grey", 0.1), ("colour", 0.11)):
+        rig = record_of(out, stem)["settings"]["calibration"]
+        assert rig["baseline_m"] == pytest.approx(baseline, rel=1e-12), stem
