@@ -67,6 +67,27 @@ def test_read_image_missing_and_corrupt(tmp_path: Path) -> None:
             io.read_image(tmp_path / bad)
 
 
+def test_read_image_too_many_pixels_is_a_value_error(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    # A header claiming more than twice Pillow's MAX_IMAGE_PIXELS (179 megapixels; a 48 kB
+    # PNG can claim 400) raised DecompressionBombError, which no caller expects: match and
+    # eval ended in a traceback. Here the limit is lowered instead of writing such a file.
+    from stereodepth import cli
+
+    monkeypatch.setattr(Image, "MAX_IMAGE_PIXELS", 100)
+    Image.fromarray(np.zeros((20, 30), np.uint8)).save(tmp_path / "big.png")
+    with pytest.raises(ValueError, match=r"cannot decode image .*big\.png: Image size \(600 "):
+        io.read_image(tmp_path / "big.png")
+    big = str(tmp_path / "big.png")
+    assert cli.main(["match", big, big, "-o", f"{tmp_path}/", "--no-preview"]) == 2
+    err = capsys.readouterr().err
+    assert (
+        err.startswith("stereodepth match: error: LEFT: cannot decode image")
+        and err.count("\n") == 1
+    )
+
+
 def test_read_image_rejects_floating_point_images(tmp_path: Path) -> None:
     # Pillow opens float TIFF and PFM files as mode F; converting them to RGB quantised the
     # samples (0..1 became all black) instead of saying so.

@@ -67,7 +67,9 @@ def read_image(path: str | os.PathLike[str]) -> np.ndarray:
     :func:`read_pnm`, exactly, with their samples as stored (a 16-bit PPM gives (H, W, 3)
     uint16); every other format by Pillow. Palette and grey-alpha images become grey or RGB;
     an alpha channel is dropped. Raises FileNotFoundError for a missing file,
-    IsADirectoryError for a folder and ValueError naming the file when it cannot be decoded,
+    IsADirectoryError for a folder and ValueError naming the file when it cannot be decoded
+    (or is larger than Pillow opens: its ``DecompressionBombError``, twice
+    ``Image.MAX_IMAGE_PIXELS``),
     holds floating-point samples (a float TIFF or a PFM: :func:`read_pfm` reads those) or is
     16-bit colour or 16-bit with alpha (Pillow would keep only the high byte of each sample)."""
     p = Path(path)
@@ -116,6 +118,8 @@ def read_image(path: str | os.PathLike[str]) -> np.ndarray:
                 return np.asarray(im2, dtype=np.uint8)
             return np.asarray(im.convert("RGB"), dtype=np.uint8)
     except (OSError, SyntaxError) as exc:  # Pillow's errors for truncated / corrupt files
+        raise ValueError(f"cannot decode image {p}: {exc}") from exc
+    except Image.DecompressionBombError as exc:  # a header claiming over 179 megapixels
         raise ValueError(f"cannot decode image {p}: {exc}") from exc
 
 
