@@ -76,7 +76,7 @@ Output, per pair with stem S, in OUTDIR
     ``S.disparity.EXT`` and ``S.depth.EXT`` (EXT by ``--format``: ``npy`` float32 disparity in
     pixels and depth in metres, NaN where invalid; ``png`` for ``png16``: disparity x 256 as
     KITTI (0 to 255.996 px: a search range outside that is refused), depth in millimetres, 0
-    where invalid; ``pfm`` float32, NaN where invalid),
+    where invalid, 65535 for 65.535 m and farther; ``pfm`` float32, NaN where invalid),
     ``S.ply`` with ``--ply`` (binary, coloured by the left image, metres), and
     ``S.record.json`` last: the pair's record (status, inputs, calibration, options, outputs,
     density, time), written for a failed pair too. At the end, ``report.json`` (or
