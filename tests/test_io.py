@@ -155,6 +155,33 @@ def test_atomic_write_replaces_only_on_success(tmp_path: Path) -> None:
         assert names(tmp_path) == ["out.bin"]
 
 
+def test_atomic_writers_name_a_folder_in_the_way(tmp_path: Path) -> None:
+    # The rename's IsADirectoryError named the temporary file ('.d.png.stereodepth-....tmp'
+    # -> 'd.png'); now every atomic writer names the user's path, before writing anything.
+    import importlib.util
+
+    from stereodepth import StereoRig, save_colorized
+    from stereodepth.plotting import save_charts
+
+    folder = tmp_path / "d.png"
+    folder.mkdir()
+    writers = [
+        lambda: io.write_pfm(folder, np.ones((2, 2), np.float32)),
+        lambda: io.write_npy(folder, np.ones(2)),
+        lambda: io.write_png16(folder, np.ones((2, 2), np.uint16)),
+    ]
+    if importlib.util.find_spec("matplotlib") is not None:  # the plot extra
+        writers.append(lambda: save_colorized(folder, np.ones((3, 3))))
+        rig = StereoRig.from_pixels(baseline_mm=100, focal_px=700)
+        writers.append(lambda: save_charts(rig, folder))
+    for write in writers:
+        with pytest.raises(
+            IsADirectoryError, match=r"cannot write a file over a folder: .*d\.png'$"
+        ):
+            write()
+        assert names(tmp_path) == ["d.png"] and not list(folder.iterdir())
+
+
 def write_then_raise(target: Path, exc: BaseException) -> None:
     with io.atomic_write(target) as f:
         f.write(b"second, half written")

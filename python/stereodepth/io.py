@@ -8,6 +8,7 @@ whose header or size does not add up is refused, never read shifted. Needs Pillo
 from __future__ import annotations
 
 import contextlib
+import errno
 import os
 import re
 import secrets
@@ -163,8 +164,11 @@ def atomic_write(path: str | os.PathLike[str], *, text: bool = False) -> Iterato
     (atomic on POSIX and Windows); when it raises, including KeyboardInterrupt, the temporary
     file is removed and ``path`` is untouched. A process killed outright can leave a
     temporary file behind, never a partial ``path``: :func:`remove_temp_files` sweeps them.
+    Raises IsADirectoryError naming ``path`` when it is a folder, before writing anything.
     """
     p = Path(path)
+    if p.is_dir():  # else the rename's error names the temporary file, not the user's path
+        raise IsADirectoryError(errno.EISDIR, "cannot write a file over a folder", str(p))
     tmp = _temp_path(p)
     # O_EXCL: never follow or clobber anything; mode 0o666 so the umask applies as usual.
     fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_BINARY", 0), 0o666)
