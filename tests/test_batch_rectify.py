@@ -333,6 +333,15 @@ BAD: list[tuple[list[str], str]] = [
         "--distortion-model goes with --calib FILE",
     ),
     (["--calib", "{mb}", "--distortion-model", "plumb_bob"], "--distortion-model does not apply"),
+    (["--calib", "{mb}", "--image-size", "40", "24"], "--image-size does not apply to {mb}"),
+    (["--image-size", "40", "24", "--num-disparities", "16"], "--image-size goes with --calib"),
+    (
+        [
+            *("--calib", "{raw}", "--translation-unit", "mm", "--num-disparities", "16"),
+            *("--image-size", "41", "24"),
+        ],
+        "the file gives an image size of (",
+    ),
     (
         ["--calib", "{fish}", "--translation-unit", "mm", "--num-disparities", "16"],
         "{fish}: D1 has 4 coefficients, which both OpenCV's fisheye module",

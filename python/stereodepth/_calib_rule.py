@@ -33,6 +33,7 @@ RAW_ONLY_FLAGS = (
     "--calib-right",
     "--translation-unit",
     "--distortion-model",
+    "--image-size",
     "--write-rectified",
     "--alpha",
 )
@@ -41,10 +42,14 @@ RAW_ONLY_FLAGS = (
 def _cli_names(message: str) -> str:
     """A reader's message with its keyword names replaced by the commands' flags."""
     for name, flag in (
+        ("image_size: image_size must be", "--image-size must be"),
         ("second_path", "--calib-right"),
         ("translation_unit", "--translation-unit"),
         ("distortion_model=", "--distortion-model"),
         ("distortion_model does not apply", "--distortion-model does not apply"),
+        ("pass image_size=(width, height)", "pass --image-size WIDTH HEIGHT"),
+        ("image_size= ", "--image-size "),
+        ("image_size must be", "--image-size must be"),
     ):
         message = message.replace(name, flag)
     return message
@@ -57,6 +62,7 @@ def flags(args: Any) -> dict[str, Any]:
         "calib_right": args.calib_right,
         "translation_unit": args.translation_unit,
         "distortion_model": args.distortion_model,
+        "image_size": None if args.image_size is None else tuple(args.image_size),
         "no_rectify": args.no_rectify,
         "write_rectified": args.write_rectified,
         "alpha": args.alpha,
@@ -71,12 +77,14 @@ def check_without_calib(
     write_rectified: bool,
     alpha: float | None = None,
     distortion_model: str | None = None,
+    image_size: tuple[int, int] | None = None,
 ) -> None:
     """Without ``--calib``: ValueError for a flag that goes with it."""
     used = (
         ("--calib-right", calib_right is not None),
         ("--translation-unit", translation_unit is not None),
         ("--distortion-model", distortion_model is not None),
+        ("--image-size", image_size is not None),
         ("--write-rectified", write_rectified),
         ("--alpha", alpha is not None),
         ("--no-rectify", no_rectify),
@@ -100,6 +108,7 @@ def raw_calibration(
     write_rectified: bool = False,
     alpha: float | None = None,
     distortion_model: str | None = None,
+    image_size: tuple[int, int] | None = None,
 ) -> Any:
     """The :class:`stereodepth.calib.StereoCalibration` of ``--calib`` when it describes a raw
     pair (to be rectified), None when it is a Middlebury or KITTI calibration of a rectified
@@ -126,6 +135,7 @@ def raw_calibration(
             ("--calib-right", calib_right is not None),
             ("--translation-unit", translation_unit is not None),
             ("--distortion-model", distortion_model is not None),
+            ("--image-size", image_size is not None),
             ("--write-rectified", write_rectified),
             ("--alpha", alpha is not None),
         )
@@ -142,6 +152,7 @@ def raw_calibration(
             second_path=calib_right,
             translation_unit=translation_unit,
             distortion_model=distortion_model,
+            image_size=image_size,
         )
     except ImportError as exc:  # a missing extra (PyYAML): the commands exit with status 1
         raise ImportError(f"--calib: {exc}") from None

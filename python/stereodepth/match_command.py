@@ -23,7 +23,9 @@ The rule for ``--calib``: the file's format says whether the pair is already rec
   FileStorage YAML/XML/JSON, Kalibr camchain, a ROS camera_info file with ``--calib-right FILE``
   for the right camera; ``--translation-unit`` the unit of its translations, default metres, refused
   for an OpenCV file whose baseline would then exceed 10 m; ``--distortion-model`` the model of
-  an OpenCV file with 4 coefficients that does not name it, refused without it)
+  an OpenCV file with 4 coefficients that does not name it, refused without it;
+  ``--image-size`` for a file without one; ``--calib-right`` also the second file of an
+  OpenCV calibration split in two)
   describes a raw pair, which is rectified automatically before matching:
   :meth:`stereodepth.StereoRectifier.from_calibration` (the file's own R1, R2, P1, P2 where
   it holds them, else Bouguet's method with alpha -1; ``--alpha A`` recomputes them with
@@ -109,7 +111,8 @@ def register(subparsers: Any) -> None:
     r.add_argument(
         "--calib-right",
         metavar="FILE",
-        help="the right camera's ROS camera_info file (--calib is the left one's)",
+        help="the right camera's ROS camera_info file (--calib is the left one's), or the "
+        "second file of an OpenCV calibration split in two (intrinsics.yml, extrinsics.yml)",
     )
     r.add_argument(
         "--translation-unit",
@@ -122,6 +125,14 @@ def register(subparsers: Any) -> None:
         choices=("plumb_bob", "equidistant"),
         help="the distortion model of a raw OpenCV --calib file that does not say (one with 4 "
         "coefficients: equidistant for cv2.fisheye's k1..k4, plumb_bob for k1 k2 p1 p2)",
+    )
+    r.add_argument(
+        "--image-size",
+        nargs=2,
+        type=int,
+        metavar=("WIDTH", "HEIGHT"),
+        help="the raw images' size for a raw --calib file that does not give it (OpenCV's "
+        "stereo_calib sample's intrinsics.yml and extrinsics.yml, say)",
     )
     r.add_argument(
         "--alpha",

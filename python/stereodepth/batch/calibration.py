@@ -283,6 +283,7 @@ def raw_rectification(
     write_rectified: bool = False,
     alpha: float | None = None,
     distortion_model: str | None = None,
+    image_size: tuple[int, int] | None = None,
     threads: int | None = None,
 ) -> tuple[BatchRectifier, Calibration] | None:
     """For a raw ``--calib`` file: the job's :class:`BatchRectifier` (its rectifier built now,
@@ -302,6 +303,7 @@ def raw_rectification(
             write_rectified=write_rectified,
             alpha=alpha,
             distortion_model=distortion_model,
+            image_size=image_size,
         )
         if stereo is None:
             return None

@@ -79,7 +79,8 @@ def register(subparsers: Any) -> None:
     c.add_argument(
         "--calib-right",
         metavar="FILE",
-        help="the right camera's ROS camera_info file (--calib is the left one's)",
+        help="the right camera's ROS camera_info file (--calib is the left one's), or the "
+        "second file of an OpenCV calibration split in two (intrinsics.yml, extrinsics.yml)",
     )
     c.add_argument(
         "--translation-unit",
@@ -92,6 +93,14 @@ def register(subparsers: Any) -> None:
         choices=("plumb_bob", "equidistant"),
         help="the distortion model of a raw OpenCV --calib file that does not say (one with 4 "
         "coefficients: equidistant for cv2.fisheye's k1..k4, plumb_bob for k1 k2 p1 p2)",
+    )
+    c.add_argument(
+        "--image-size",
+        nargs=2,
+        type=int,
+        metavar=("WIDTH", "HEIGHT"),
+        help="the raw images' size for a raw --calib file that does not give it (OpenCV's "
+        "stereo_calib sample's intrinsics.yml and extrinsics.yml, say)",
     )
     c.add_argument(
         "--alpha",
