@@ -231,7 +231,8 @@ def stereo_rectify(
     Rectification
         ``(R1, R2, P1, P2, Q, roi1, roi2)``, equal to ``cv2.stereoRectify``'s (or
         ``cv2.fisheye.stereoRectify``'s) results to about 1e-12 relative (OpenCV 5.0),
-        computed natively in Eigen.
+        computed natively in Eigen; the ROIs within 1 pixel of OpenCV's (their edges are
+        rounded, and an edge that falls on a pixel boundary to 1e-13 may round either way).
 
     Raises
     ------
