@@ -53,6 +53,11 @@ ROWS: list[tuple[list[str], str]] = [
         ["--num-disparities", "256", "--min-disparity", "1", "--format", "png16"],
         "--format png16 holds disparities up to 255.996 px, and teddy searches up to 256 px",
     ),
+    (
+        ["--min-disparity", "-8", "--format", "png16"],
+        "--format png16 holds no negative disparities (KITTI's d x 256, 0 for none), and "
+        "--min-disparity -8 searches them",
+    ),
     # depths, calibration, runner
     (["--min-depth-m", "5", "--max-depth-m", "1"], "--max-depth-m must be >= --min-depth-m"),
     (["--max-depth-m", "0"], "--max-depth-m must be a finite number > 0, got 0.0"),

@@ -374,3 +374,81 @@ def test_the_lock_file_is_removed_when_the_job_ends(
     (out / batch.LOCK_NAME).write_text("")
     assert run(capsys, tmp_path / "in", "-o", out, "--quiet")[0] == 1
     assert not (out / batch.LOCK_NAME).exists()
+
+
+def test_a_middlebury_calibration_of_another_resolution_fails_the_pair(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A calib.txt's width and height name the images it calibrates: Middlebury's full-size
+    file beside its quarter-size images would give depths 4 times too large, silently."""
+    inp = tmp_path / "in"
+    scene(inp / "good")
+    scene(inp / "half", seed=1, calib=False)
+    (inp / "half" / "calib.txt").write_text(calib_txt().replace("width=48", "width=96"))
+    out = tmp_path / "out"
+    status, _, err = run(capsys, inp, "-o", out, "--quiet")
+    assert status == 1, err
+    assert record_of(out, "good")["status"] == "ok"
+    bad = record_of(out, "half")
+    assert bad["status"] == "failed"
+    assert bad["error"] == (
+        f"the images are 48x32 px and the calibration {inp / 'half' / 'calib.txt'} is for "
+        "96x32 px (its width and height): a calibration of another resolution gives wrong depths"
+    )
+    assert not list(out.glob("half.*.npy"))
+
+
+@pytest.mark.parametrize("shared", ["beside", "--calib", "csv"])
+def test_kitti_grey_pair_reads_its_own_cameras(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], shared: str
+) -> None:
+    """KITTI odometry's grey set: sequences/NN/image_0, image_1 and one calib.txt (P0 to P3).
+    The pair is cameras 0 and 1; it once got the colour pair's P2/P3 baseline, silently."""
+    seq = tmp_path / "in" / "00"
+    for sub in ("image_0", "image_1"):
+        (seq / sub).mkdir(parents=True)
+    rng = np.random.default_rng(7)
+    left = rng.integers(0, 256, SHAPE, dtype=np.uint8)
+    Image.fromarray(left).save(seq / "image_0" / "000000.png")
+    Image.fromarray(np.roll(left, -3, axis=1)).save(seq / "image_1" / "000000.png")
+    rows = {0: "0", 1: "-70", 2: "42", 3: "-35"}  # grey baseline 0.1 m, colour 0.11 m
+    calib = (seq if shared == "beside" else tmp_path) / "calib.txt"
+    calib.write_text("".join(f"P{i}: 700 0 24 {tx} 0 700 16 0 0 0 1 0\n" for i, tx in rows.items()))
+    out = tmp_path / "out"
+    extra = ["--calib", calib] if shared != "beside" else []
+    inp = tmp_path / "in"
+    if shared == "csv":  # a CSV list of KITTI images: the cameras of their folders too
+        inp = tmp_path / "pairs.csv"
+        inp.write_text("in/00/image_0/000000.png,in/00/image_1/000000.png,00_000000\n")
+    status, _, err = run(capsys, inp, "-o", out, "--num-disparities", 16, *extra)
+    assert status == 0, err
+    rig = record_of(out, "00_000000")["settings"]["calibration"]
+    assert rig["baseline_m"] == pytest.approx(0.1, rel=1e-12)
+
+
+def test_one_kitti_calib_for_grey_and_colour_pairs(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """One --calib for a CSV list of a grey (image_0/image_1) and a colour (image_2/image_3)
+    pair: each reads its own cameras (all once read those of the first pair)."""
+    seq = tmp_path / "00"
+    rng = np.random.default_rng(8)
+    left = rng.integers(0, 256, SHAPE, dtype=np.uint8)
+    for a, b in (("image_0", "image_1"), ("image_2", "image_3")):
+        for sub, image in ((a, left), (b, np.roll(left, -3, axis=1))):
+            (seq / sub).mkdir(parents=True)
+            Image.fromarray(image).save(seq / sub / "000000.png")
+    rows = {0: "0", 1: "-70", 2: "42", 3: "-35"}  # grey baseline 0.1 m, colour 0.11 m
+    calib = tmp_path / "calib.txt"
+    calib.write_text("".join(f"P{i}: 700 0 24 {tx} 0 700 16 0 0 0 1 0\n" for i, tx in rows.items()))
+    (tmp_path / "pairs.csv").write_text(
+        "00/image_0/000000.png,00/image_1/000000.png,grey\n"
+        "00/image_2/000000.png,00/image_3/000000.png,colour\n"
+    )
+    out = tmp_path / "out"
+    argv = [tmp_path / "pairs.csv", "-o", out, "--num-disparities", 16, "--calib", calib]
+    status, _, err = run(capsys, *argv)
+    assert status == 0, err
+    for stem, baseline in (("grey", 0.1), ("colour", 0.11)):
+        rig = record_of(out, stem)["settings"]["calibration"]
+        assert rig["baseline_m"] == pytest.approx(baseline, rel=1e-12), stem

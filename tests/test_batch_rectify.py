@@ -328,6 +328,37 @@ BAD: list[tuple[list[str], str]] = [
     ),
     (["--calib", "{garbage}", "--num-disparities", "16"], "--calib: "),
     (["--alpha", "0", "--num-disparities", "16"], "--alpha goes with --calib FILE"),
+    (
+        ["--distortion-model", "plumb_bob", "--num-disparities", "16"],
+        "--distortion-model goes with --calib FILE",
+    ),
+    (["--calib", "{mb}", "--distortion-model", "plumb_bob"], "--distortion-model does not apply"),
+    (["--calib", "{mb}", "--image-size", "40", "24"], "--image-size does not apply to {mb}"),
+    (["--image-size", "40", "24", "--num-disparities", "16"], "--image-size goes with --calib"),
+    (
+        [
+            *("--calib", "{raw}", "--translation-unit", "mm", "--num-disparities", "16"),
+            *("--image-size", "41", "24"),
+        ],
+        "the file gives an image size of (",
+    ),
+    (
+        ["--calib", "{fish}", "--translation-unit", "mm", "--num-disparities", "16"],
+        "{fish}: D1 has 4 coefficients, which both OpenCV's fisheye module",
+    ),
+    (
+        [
+            "--calib",
+            "{raw}",
+            "--translation-unit",
+            "mm",
+            "--num-disparities",
+            "16",
+            "--distortion-model",
+            "equidistant",
+        ],
+        "{raw}: D1 has 5 coefficients; the equidistant model takes 4",
+    ),
     (["--calib", "{mb}", "--alpha", "0"], "--alpha does not apply to {mb}"),
     (
         ["--calib", "{raw}", "--translation-unit", "mm", "--num-disparities", "16", "--alpha", "2"],
@@ -360,7 +391,11 @@ def test_bad_rectification_flags_exit_2(
     vertical = calib.__class__(**{**calib.__dict__, "R": np.eye(3), "T": np.array([0, 0.1, 0])})
     vertical_yaml = mr.write_opencv_yaml(tmp_path / "vertical.yml", vertical, stored=False)
     (tmp_path / "garbage.yml").write_text("stereo: [1, 2\n")
+    d = np.array([0.05, -0.01, 0.002, -0.0004])  # cv2.fisheye's k1..k4, or plumb_bob's?
+    fish = calib.__class__(**{**calib.__dict__, "D1": d, "D2": d})
+    fish_yaml = mr.write_opencv_yaml(tmp_path / "fish.yml", fish, stored=False)
     subst = {
+        "{fish}": str(fish_yaml),
         "{raw}": str(raw),
         "{mb}": str(mb),
         "{vertical}": str(vertical_yaml),

@@ -68,6 +68,32 @@ def test_minimal(tmp_path: Path) -> None:
     assert (c.doffs_px, c.width_px, c.height_px, c.ndisp) == (0.0, None, None, None)
 
 
+@pytest.mark.parametrize(
+    ("drop", "doffs"),
+    [("cam1", 129.625), ("doffs", 129.625), ("nothing", 129.625)],
+)
+def test_doffs_and_cam1_give_each_other(tmp_path: Path, drop: str, doffs: float) -> None:
+    """doffs is cam1's cx - cam0's cx: a file with only one of them gives the same rig to every
+    reader (the rectifier once took doffs 0 from a file without cam1, the calculator 129.625)."""
+    from stereodepth import StereoRectifier
+    from stereodepth.calib import read_calibration, read_stereo_calibration
+
+    p = tmp_path / "calib.txt"
+    p.write_text(CALIB if drop == "nothing" else replace(drop, None))
+    c = read_middlebury_calib(p)
+    assert c.doffs_px == doffs and c.cam1[0, 2] - c.cam0[0, 2] == doffs
+    rigs = [
+        StereoRig.from_middlebury_calib(p),
+        read_stereo_calibration(p).to_rig(),
+        StereoRectifier.from_file(p).rig,
+    ]
+    assert [r.doffs_px for r in rigs] == [doffs] * 3
+    assert read_calibration(p).doffs_px == doffs
+    # within the files' three decimals, the two agree
+    p.write_text(replace("doffs", "129.626"))
+    assert read_middlebury_calib(p).doffs_px == 129.626
+
+
 def replace(key: str, value: str | None) -> str:
     lines = [ln for ln in CALIB.splitlines() if not ln.startswith(key + "=")]
     if value is not None:
@@ -100,6 +126,11 @@ def replace(key: str, value: str | None) -> str:
         (replace("baseline", "1e999"), r"baseline must be a finite number, got '1e999'"),
         (replace("doffs", "nan"), r"doffs must be a finite number, got 'nan'"),
         (replace("doffs", ""), r"doffs must be a finite number, got ''"),
+        (
+            replace("doffs", "50"),
+            r"doffs must be cam1's cx - cam0's cx \(1310\.12 - 1180\.5 = 129\.625 px\), "
+            "got '50'",
+        ),
         (replace("width", "0"), r"width must be a whole number > 0, got '0'"),
         (replace("height", "1950.5"), r"height must be a whole number > 0, got '1950\.5'"),
         (replace("ndisp", "-280"), r"ndisp must be a whole number > 0, got '-280'"),

@@ -103,9 +103,10 @@ def write(path: Path, text: str) -> Path:
 
 
 # --- OpenCV FileStorage -----------------------------------------------------------------------
-@pytest.mark.parametrize("ext", ["yml", "xml"])
+@pytest.mark.parametrize("ext", ["yml", "xml", "json"])
 def test_opencv_written_by_cv2(tmp_path: Path, ext: str) -> None:
-    """Files written by the real cv2.FileStorage after cv2.stereoRectify, both formats."""
+    """Files written by the real cv2.FileStorage after cv2.stereoRectify, in its three formats
+    (its JSON's matrices, objects with "type_id": "opencv-matrix", were once refused)."""
     cv2 = pytest.importorskip("cv2", reason="opencv-python-headless is not installed")
     r1, r2, p1, p2, q, _, _ = cv2.stereoRectify(K1, D1, K2, D2, (640, 480), R, T_MM.reshape(3, 1))
     path = tmp_path / f"stereo.{ext}"
@@ -243,18 +244,25 @@ def test_opencv_split_files_and_units(tmp_path: Path) -> None:
 def test_opencv_distortion_forms(tmp_path: Path) -> None:
     d8 = np.array([0.1, -0.2, 0.001, 0.002, 0.03, 0.01, 0.0, 0.002])
     d14 = np.concatenate([d8, np.zeros(6)])
-    for d, want in ((D1[:4], D1[:4]), (d8, d8), (d14, d8)):
+    for d, want in ((d8, d8), (d14, d8)):
         c = read_stereo_calibration(
             write(tmp_path / "d.yml", opencv_yaml(stereo_entries(D1=d, D2=d))),
             translation_unit="mm",
         )
         np.testing.assert_array_equal(c.D1, want)
-    c = read_stereo_calibration(
-        write(tmp_path / "f.yml", opencv_yaml(stereo_entries(D1=D1[:4], D2=D2[:4]))),
-        distortion_model="equidistant",
-        translation_unit="mm",
-    )
-    assert c.distortion_model == "equidistant"
+    four = write(tmp_path / "f.yml", opencv_yaml(stereo_entries(D1=D1[:4], D2=D2[:4])))
+    for model in ("equidistant", "plumb_bob"):
+        c = read_stereo_calibration(four, distortion_model=model, translation_unit="mm")
+        assert c.distortion_model == model
+        np.testing.assert_array_equal(c.D1, D1[:4])
+    # Four coefficients without a model are OpenCV's fisheye k1..k4 as often as plumb_bob's
+    # k1 k2 p1 p2 (cv2.fisheye gives 4, cv2.stereoCalibrate 5 or more): they were read as the
+    # latter, and a fisheye pair was rectified wrongly without a word.
+    with pytest.raises(ValueError, match=r"f\.yml: D1 has 4 coefficients, which both OpenCV's"):
+        read_stereo_calibration(four, translation_unit="mm")
+    text = opencv_yaml(stereo_entries(D1=D1[:4], D2=D2[:4])) + "distortion_model: plumb_bob\n"
+    c = read_stereo_calibration(write(tmp_path / "g.yml", text), translation_unit="mm")
+    assert c.distortion_model == "plumb_bob"
 
 
 NOT_ROTATION = r"must be a rotation \(R R\^T = I and det R = \+1 within 1e-06\)"

@@ -55,13 +55,17 @@ def test_plot_with_json_keeps_stdout_json(
     [
         ("charts.txt", "--plot must name a .png, .svg or .pdf file, got"),
         ("missing/charts.png", "--plot: the folder "),
+        # a folder named like a chart: the error named a temporary file, status 1
+        ("folder.png", "--plot must name a file, got the folder "),
     ],
 )
 def test_bad_plot_path_is_one_line_and_status_2(
     tmp_path: Path, capsys: pytest.CaptureFixture[str], name: str, message: str
 ) -> None:
+    if name == "folder.png":
+        (tmp_path / name).mkdir()
     assert main(["calc", *ARM, "--disparity-px", "250", "--plot", str(tmp_path / name)]) == 2
     err = capsys.readouterr().err
     assert err.startswith(f"stereodepth calc: error: {message}")
     assert err.count("\n") == 1
-    assert list(tmp_path.iterdir()) == []
+    assert [p.name for p in tmp_path.iterdir()] == ([name] if name == "folder.png" else [])

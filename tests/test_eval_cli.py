@@ -1023,3 +1023,22 @@ def test_bm_is_block_matching_as_in_match_and_batch(
     )  # fmt: skip
     assert [(r["method"], r["block_size"]) for r in report["results"]] == [("stereodepth", 7)]
     assert calls and all(c["block_size"] == 7 and c["cost"] == "sad" for c in calls)
+
+
+@pytest.mark.parametrize(
+    ("name", "content", "fragment"),
+    [
+        ("disp_gt.npy", b"", "disp_gt.npy: not a readable .npy array (No data left in file)"),
+        ("disp_gt.npy", b"hello\n", "disp_gt.npy: not a readable .npy array"),
+        ("mask_nonocc.npy", b"\x93NUMPY\x01\x00", "mask_nonocc.npy: not a readable .npy array"),
+    ],
+)
+def test_unreadable_npy_is_one_line_naming_the_file(
+    scenes_dir: Path, capsys: pytest.CaptureFixture[str], name: str, content: bytes, fragment: str
+) -> None:
+    """An empty .npy raised EOFError (a traceback); numpy's other messages named no file."""
+    (scenes_dir / "rds-a" / name).write_bytes(content)
+    status, out, err = run_eval(capsys, str(scenes_dir), "--scene", "rds-a", "--method", "bm")
+    assert status == 2 and out == "", err
+    assert err.count("\n") == 1 and err.startswith("stereodepth eval: error: "), err
+    assert str(scenes_dir / "rds-a" / fragment) in err, err

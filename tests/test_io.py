@@ -67,6 +67,27 @@ def test_read_image_missing_and_corrupt(tmp_path: Path) -> None:
             io.read_image(tmp_path / bad)
 
 
+def test_read_image_too_many_pixels_is_a_value_error(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    # A header claiming more than twice Pillow's MAX_IMAGE_PIXELS (179 megapixels; a 48 kB
+    # PNG can claim 400) raised DecompressionBombError, which no caller expects: match and
+    # eval ended in a traceback. Here the limit is lowered instead of writing such a file.
+    from stereodepth import cli
+
+    monkeypatch.setattr(Image, "MAX_IMAGE_PIXELS", 100)
+    Image.fromarray(np.zeros((20, 30), np.uint8)).save(tmp_path / "big.png")
+    with pytest.raises(ValueError, match=r"cannot decode image .*big\.png: Image size \(600 "):
+        io.read_image(tmp_path / "big.png")
+    big = str(tmp_path / "big.png")
+    assert cli.main(["match", big, big, "-o", f"{tmp_path}/", "--no-preview"]) == 2
+    err = capsys.readouterr().err
+    assert (
+        err.startswith("stereodepth match: error: LEFT: cannot decode image")
+        and err.count("\n") == 1
+    )
+
+
 def test_read_image_rejects_floating_point_images(tmp_path: Path) -> None:
     # Pillow opens float TIFF and PFM files as mode F; converting them to RGB quantised the
     # samples (0..1 became all black) instead of saying so.
@@ -75,6 +96,47 @@ def test_read_image_rejects_floating_point_images(tmp_path: Path) -> None:
     for name in ("f.tif", "d.pfm"):
         with pytest.raises(ValueError, match=re.escape(name) + r".*floating-point image.*read_pfm"):
             io.read_image(tmp_path / name)
+
+
+def _png(path: Path, samples: np.ndarray, colour_type: int) -> None:
+    """A 16-bit PNG written by hand (the PNG specification; Pillow writes no 16-bit colour)."""
+    import struct
+    import zlib
+
+    def chunk(kind: bytes, data: bytes) -> bytes:
+        return (
+            struct.pack(">I", len(data)) + kind + data + struct.pack(">I", zlib.crc32(kind + data))
+        )
+
+    h, w = samples.shape[:2]
+    rows = samples.astype(">u2").reshape(h, -1).view(np.uint8)
+    raw = b"".join(b"\0" + row.tobytes() for row in rows)  # filter type 0 per row
+    ihdr = struct.pack(">IIBBBBB", w, h, 16, colour_type, 0, 0, 0)
+    path.write_bytes(
+        b"\x89PNG\r\n\x1a\n"
+        + chunk(b"IHDR", ihdr)
+        + chunk(b"IDAT", zlib.compress(raw))
+        + chunk(b"IEND", b"")
+    )
+
+
+@pytest.mark.parametrize(
+    ("colour_type", "channels", "kind"),
+    [(2, 3, "colour"), (6, 4, "colour"), (4, 2, "grey and alpha")],
+)
+def test_read_image_refuses_16_bit_colour(
+    tmp_path: Path, colour_type: int, channels: int, kind: str
+) -> None:
+    # Pillow reads 16-bit colour (and grey with alpha) as 8 bits, keeping the high byte: a
+    # 12-bit colour image (0..4095) became 0..15, almost black, and was matched as such.
+    a = np.random.default_rng(1).integers(0, 4096, (5, 6, channels), dtype=np.uint16)
+    if channels in (2, 4):
+        a[..., -1] = 65535  # opaque
+    _png(tmp_path / "c16.png", a, colour_type)
+    with pytest.raises(ValueError, match=r"c16\.png: a 16-bit " + kind + r" image .*low byte"):
+        io.read_image(tmp_path / "c16.png")
+    _png(tmp_path / "g16.png", a[..., 0], 0)  # 16-bit grey is read exactly
+    np.testing.assert_array_equal(io.read_image(tmp_path / "g16.png"), a[..., 0], strict=True)
 
 
 # --- atomic_write -----------------------------------------------------------------------------
@@ -91,6 +153,33 @@ def test_atomic_write_replaces_only_on_success(tmp_path: Path) -> None:
             write_then_raise(target, exc)
         assert target.read_bytes() == b"first"
         assert names(tmp_path) == ["out.bin"]
+
+
+def test_atomic_writers_name_a_folder_in_the_way(tmp_path: Path) -> None:
+    # The rename's IsADirectoryError named the temporary file ('.d.png.stereodepth-....tmp'
+    # -> 'd.png'); now every atomic writer names the user's path, before writing anything.
+    import importlib.util
+
+    from stereodepth import StereoRig, save_colorized
+    from stereodepth.plotting import save_charts
+
+    folder = tmp_path / "d.png"
+    folder.mkdir()
+    writers = [
+        lambda: io.write_pfm(folder, np.ones((2, 2), np.float32)),
+        lambda: io.write_npy(folder, np.ones(2)),
+        lambda: io.write_png16(folder, np.ones((2, 2), np.uint16)),
+    ]
+    if importlib.util.find_spec("matplotlib") is not None:  # the plot extra
+        writers.append(lambda: save_colorized(folder, np.ones((3, 3))))
+        rig = StereoRig.from_pixels(baseline_mm=100, focal_px=700)
+        writers.append(lambda: save_charts(rig, folder))
+    for write in writers:
+        with pytest.raises(
+            IsADirectoryError, match=r"cannot write a file over a folder: .*d\.png'$"
+        ):
+            write()
+        assert names(tmp_path) == ["d.png"] and not list(folder.iterdir())
 
 
 def write_then_raise(target: Path, exc: BaseException) -> None:

@@ -245,6 +245,32 @@ def test_kitti_calib_file(tmp_path: Path, capsys: pytest.CaptureFixture[str]) ->
     assert rig == {"focal_px": f, "baseline_m": baseline_m, "doffs_px": 0.0}
 
 
+@pytest.mark.parametrize(
+    ("folders", "baseline_m"),
+    [(("image_0", "image_1"), 0.1), (("image_2", "image_3"), 0.11), (("a", "b"), 0.11)],
+)
+def test_kitti_calib_cameras_follow_the_folders(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], folders: tuple[str, str], baseline_m: float
+) -> None:
+    """A KITTI file has four cameras: the grey pair image_0/image_1 (KITTI odometry's grey
+    set, with its calib.txt) has another baseline than the colour pair image_2/image_3, which
+    it once got; other folders keep the colour pair, the default."""
+    s = sample_pair(96, 64, seed=3)
+    left, right = tmp_path / folders[0] / "000000.png", tmp_path / folders[1] / "000000.png"
+    for path, image in ((left, s.left), (right, s.right)):
+        path.parent.mkdir()
+        Image.fromarray(image).save(path)
+    # made-up rig: P1 70 mm right of P0, P2 60 mm left of it, P3 50 mm right
+    rows = ((0, 0.0), (1, -70.0), (2, 42.0), (3, -35.0))
+    (tmp_path / "calib.txt").write_text(
+        "".join(f"P{i}: 700 0 48 {t} 0 700 32 0 0 0 1 0\n" for i, t in rows)
+    )
+    args = ("--calib", tmp_path / "calib.txt", "-o", tmp_path / "k-", "--json", "--no-preview")
+    code, text, err = run(capsys, left, right, *args)
+    assert code == 0, err
+    assert json.loads(text)["rig"]["baseline_m"] == pytest.approx(baseline_m, rel=1e-12)
+
+
 # --- bad input: one line, exit 2 ------------------------------------------------------------------
 @pytest.fixture
 def pair(tmp_path: Path) -> tuple[Path, Path]:
@@ -265,7 +291,17 @@ def bad_cases(tmp: Path, left: Path, right: Path) -> list[tuple[list[Any], str]]
             "--disparity-format png16 holds disparities up to 255.996 px, and the search "
             "reaches 271 px",
         ),
+        (
+            [left, right, "--min-disparity", "-8", "--disparity-format", "png16"],
+            "--disparity-format png16 holds no negative disparities (KITTI's d x 256, 0 for "
+            "none), and --min-disparity -8 searches them",
+        ),
         ([tmp, right], "LEFT: image is a folder, not a file"),
+        (
+            [left, right, "--calib", write_middlebury_calib(tmp / "big.txt", 192, 128)],
+            "LEFT and RIGHT must have the size of the calibration in --calib, 192x128 px, got "
+            "96x64 px",
+        ),
         ([left, tmp / "notimage.png"], "RIGHT: cannot decode image"),
         ([left, tmp / "small.png"], "LEFT and RIGHT must have the same size, got 96x64 and 90x64"),
         ([left, right, "--calib", tmp / "none.txt"], "--calib: calibration file not found"),

@@ -340,6 +340,12 @@ def test_bad_input_one_line_exit_2(tmp_path: Path, capsys: pytest.CaptureFixture
         (["--no-rectify"], "--no-rectify goes with --calib FILE"),
         (["--calib-right", ros], "--calib-right goes with --calib FILE"),
         (["--alpha", "0.5"], "--alpha goes with --calib FILE"),
+        (["--distortion-model", "plumb_bob"], "--distortion-model goes with --calib FILE"),
+        (["--calib", middlebury, "--distortion-model", "plumb_bob"], "--distortion-model does"),
+        (
+            ["--calib", ros, "--calib-right", ros, "--distortion-model", "plumb_bob"],
+            "--distortion-model does not apply to a ROS camera_info file",
+        ),
         (["--calib", middlebury, "--alpha", "0"], "--alpha does not apply"),
         (
             ["--calib", yaml, "--translation-unit", "mm", "--alpha", "-0.5"],
@@ -359,6 +365,80 @@ def test_bad_input_one_line_exit_2(tmp_path: Path, capsys: pytest.CaptureFixture
     )
     assert code == 2 and "size of the calibration in --calib, 96x64 px, got 80x48" in err, err
     assert not list(tmp_path.glob("x-*")) and not list(Path.cwd().glob("disparity*"))
+
+
+def test_split_opencv_files_without_a_size_take_image_size(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """OpenCV's stereo_calib sample writes intrinsics.yml and extrinsics.yml with no image
+    size: the command said "pass image_size=(width, height)", a keyword no flag gave."""
+    pytest.importorskip("yaml", reason="YAML calibrations need PyYAML (the calib extra)")
+    cv2 = pytest.importorskip("cv2", reason="opencv-python-headless is not installed")
+    s = sample_pair(96, 64)
+    left, right, c = raw_files(tmp_path, s.left, s.right)
+    parts = {
+        "intrinsics.yml": {"M1": c.K1, "D1": c.D1, "M2": c.K2, "D2": c.D2},
+        "extrinsics.yml": {"R": c.R, "T": 1000.0 * c.T},
+    }
+    for name, fields in parts.items():
+        fs = cv2.FileStorage(str(tmp_path / name), cv2.FILE_STORAGE_WRITE)
+        for key, value in fields.items():
+            fs.write(key, np.asarray(value, dtype=np.float64))
+        fs.release()
+    files = ("--calib", tmp_path / "intrinsics.yml", "--calib-right", tmp_path / "extrinsics.yml")
+    flags = (*files, "--translation-unit", "mm", "--no-preview", "--json")
+    code, out, err = run(capsys, left, right, *flags, "-o", f"{tmp_path}/a-")
+    assert code == 2 and "no image size in the file" in err, err
+    assert "pass --image-size WIDTH HEIGHT" in err and "image_size=" not in err, err
+    code, out, err = run(
+        capsys, left, right, *flags, "--image-size", "96", "64", "-o", f"{tmp_path}/b-"
+    )
+    assert code == 0, err
+    want = StereoRectifier.from_file(
+        tmp_path / "intrinsics.yml",
+        second_path=tmp_path / "extrinsics.yml",
+        translation_unit="mm",
+        image_size=(96, 64),
+    )
+    assert json.loads(out)["rig"]["focal_px"] == want.rig.focal_px
+    code, out, err = run(capsys, left, right, *flags, "--image-size", "0", "64")
+    assert code == 2 and "--image-size must be two whole numbers > 0, got (0, 64)" in err, err
+    code, out, err = run(capsys, left, right, "--image-size", "96", "64")
+    assert code == 2 and "--image-size goes with --calib FILE" in err, err
+
+
+def test_four_coefficients_need_a_model(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """An OpenCV file with 4 distortion coefficients and no distortion_model: cv2.fisheye's
+    k1..k4 or plumb_bob's k1 k2 p1 p2. It was read as the latter, so a fisheye calibration
+    rectified its pair wrongly without a word; now --distortion-model (or the file) says."""
+    pytest.importorskip("yaml", reason="YAML calibrations need PyYAML (the calib extra)")
+    s = sample_pair(96, 64)
+    left, right, c = raw_files(tmp_path, s.left, s.right)
+    d = np.array([0.05, -0.01, 0.002, -0.0004])
+    fish = c.__class__(**{**c.__dict__, "D1": d, "D2": d})
+    yaml = write_opencv_yaml(tmp_path / "fish.yml", fish, stored=False)
+    code, out, err = run(capsys, left, right, "--calib", yaml, "--translation-unit", "mm")
+    assert code == 2 and out == "", err
+    assert "fish.yml: D1 has 4 coefficients" in err and "say which with --distortion-model" in err
+    focal = {}
+    for model in ("equidistant", "plumb_bob"):
+        flags = ("--translation-unit", "mm", "--distortion-model", model, "--json")
+        code, out, err = run(
+            capsys,
+            left,
+            right,
+            "--calib",
+            yaml,
+            *flags,
+            "--no-preview",
+            "-o",
+            f"{tmp_path}/{model}-",
+        )
+        assert code == 0, err
+        want = StereoRectifier.from_file(yaml, translation_unit="mm", distortion_model=model)
+        focal[model] = json.loads(out)["rig"]["focal_px"]
+        assert focal[model] == want.rig.focal_px
+    assert focal["equidistant"] != focal["plumb_bob"]  # the model is the one asked for
 
 
 @pytest.mark.parametrize(

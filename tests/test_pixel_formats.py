@@ -571,3 +571,35 @@ def test_big_endian_uint16_is_uint16_everywhere() -> None:
     stack = [da.from_array(np.stack([a, a])) for a in big]
     got = sdd.semi_global_match(*stack, num_disparities=16).compute()
     assert_identical(got[1], sd.semi_global_match(left, right, num_disparities=16))
+
+
+def test_big_endian_disparity_maps_are_maps_everywhere(tmp_path: Path) -> None:
+    """The maps' side of the rule above: a big-endian float32, int16 (OpenCV x16) or uint16
+    (KITTI x256) disparity is converted, scored and written as the same values; it was refused
+    as "disparity must have dtype float16, float32, ... got >f4" (a float32 map all the same)."""
+    rng = np.random.default_rng(4)
+    d = (rng.random((6, 7)) * 40 + 1).astype(np.float32)
+    d[0, 0] = np.nan
+    raw = sd.to_opencv_disparity(d)
+    kitti = np.where(np.isnan(d), 0, np.rint(d * 256)).astype(np.uint16)
+    rig = {"focal_px": 700.0, "baseline_m": 0.1}
+    for a, kw in ((d, {}), (raw, {}), (kitti, {"scale": 1 / 256})):
+        big = a.astype(a.dtype.newbyteorder(">"))
+        assert not big.dtype.isnative
+        assert_identical(
+            sd.disparity_to_depth(big, **rig, **kw), sd.disparity_to_depth(a, **rig, **kw)
+        )
+        assert_identical(sd.reproject(big, **rig, **kw), sd.reproject(a, **rig, **kw))
+        assert_identical(
+            ref.disparity_to_depth(big, **rig, **kw), ref.disparity_to_depth(a, **rig, **kw)
+        )
+    assert_identical(sd.from_opencv_disparity(raw.astype(">i2")), sd.from_opencv_disparity(raw))
+    gt = d + 0.75
+    want = evaluate(d, gt)
+    assert evaluate(d.astype(">f4"), gt.astype(">f8")) == want
+    assert evaluate(raw.astype(">i2"), gt, min_disparity=0) == evaluate(raw, gt, min_disparity=0)
+    sd.io.write_disparity_png16(tmp_path / "be.png", d.astype(">f4"))
+    sd.io.write_disparity_png16(tmp_path / "le.png", d)
+    assert (tmp_path / "be.png").read_bytes() == (tmp_path / "le.png").read_bytes()
+    sd.io.write_png16(tmp_path / "mm.png", kitti.astype(">u2"))
+    np.testing.assert_array_equal(sd.io.read_image(tmp_path / "mm.png"), kitti, strict=True)

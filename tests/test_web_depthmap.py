@@ -68,12 +68,14 @@ def png_chunk(kind: bytes, data: bytes) -> bytes:
     return struct.pack(">I", len(data)) + kind + data + struct.pack(">I", zlib.crc32(kind + data))
 
 
-def png16_rgb(w: int, h: int) -> bytes:
-    """A valid 16-bit RGB PNG, written by hand (colour type 2, bit depth 16)."""
-    raw = b"".join(b"\x00" + bytes(6 * w) for _ in range(h))
+def png16_rgb(w: int, h: int, colour_type: int = 2) -> bytes:
+    """A valid 16-bit RGB PNG, written by hand (colour type 2, bit depth 16; or 4, grey and
+    alpha, fully opaque)."""
+    pixel = bytes(6) if colour_type == 2 else b"\x12\x34\xff\xff"
+    raw = b"".join(b"\x00" + pixel * w for _ in range(h))
     return (
         b"\x89PNG\r\n\x1a\n"
-        + png_chunk(b"IHDR", struct.pack(">IIBBBBB", w, h, 16, 2, 0, 0, 0))
+        + png_chunk(b"IHDR", struct.pack(">IIBBBBB", w, h, 16, colour_type, 0, 0, 0))
         + png_chunk(b"IDAT", zlib.compress(raw))
         + png_chunk(b"IEND", b"")
     )
@@ -264,6 +266,12 @@ def bad_cases(pair: Any) -> list[tuple[dict[str, Any], list[Any], str]]:
             {"left": left, "right": b64(png16_rgb(96, 72))},
             ["body", "right"],
             "right: 16-bit colour PNGs are not supported",
+        ),
+        (
+            # Pillow keeps the high byte of 16-bit grey and alpha: it was matched as 8-bit
+            {"left": left, "right": b64(png16_rgb(96, 72, colour_type=4))},
+            ["body", "right"],
+            "right: 16-bit grey and alpha PNGs are not supported",
         ),
         (
             {"left": encode(transparent), "right": right},

@@ -4,7 +4,7 @@
 - A Middlebury ``calib.txt`` or a KITTI calibration file describes a rectified pair: it is
   matched as it is, with the rig the file gives.
 - Any other calibration :func:`stereodepth.calib.read_stereo_calibration` reads (OpenCV
-  FileStorage YAML/XML, Kalibr camchain, a pair of ROS camera_info files with
+  FileStorage YAML/XML/JSON, Kalibr camchain, a pair of ROS camera_info files with
   ``--calib-right``; ``--translation-unit`` the unit of its translations) describes a raw pair,
   rectified automatically before matching by
   :meth:`stereodepth.StereoRectifier.from_calibration` (the file's own R1, R2, P1, P2 where it
@@ -29,14 +29,30 @@ from pathlib import Path
 from typing import Any
 
 #: Flags that only apply to a raw --calib file.
-RAW_ONLY_FLAGS = ("--calib-right", "--translation-unit", "--write-rectified", "--alpha")
+RAW_ONLY_FLAGS = (
+    "--calib-right",
+    "--translation-unit",
+    "--distortion-model",
+    "--image-size",
+    "--write-rectified",
+    "--alpha",
+)
 
 
 def _cli_names(message: str) -> str:
     """A reader's message with its keyword names replaced by the commands' flags."""
-    return message.replace("second_path", "--calib-right").replace(
-        "translation_unit", "--translation-unit"
-    )
+    for name, flag in (
+        ("image_size: image_size must be", "--image-size must be"),
+        ("second_path", "--calib-right"),
+        ("translation_unit", "--translation-unit"),
+        ("distortion_model=", "--distortion-model"),
+        ("distortion_model does not apply", "--distortion-model does not apply"),
+        ("pass image_size=(width, height)", "pass --image-size WIDTH HEIGHT"),
+        ("image_size= ", "--image-size "),
+        ("image_size must be", "--image-size must be"),
+    ):
+        message = message.replace(name, flag)
+    return message
 
 
 def flags(args: Any) -> dict[str, Any]:
@@ -45,6 +61,8 @@ def flags(args: Any) -> dict[str, Any]:
     return {
         "calib_right": args.calib_right,
         "translation_unit": args.translation_unit,
+        "distortion_model": args.distortion_model,
+        "image_size": None if args.image_size is None else tuple(args.image_size),
         "no_rectify": args.no_rectify,
         "write_rectified": args.write_rectified,
         "alpha": args.alpha,
@@ -58,11 +76,15 @@ def check_without_calib(
     no_rectify: bool,
     write_rectified: bool,
     alpha: float | None = None,
+    distortion_model: str | None = None,
+    image_size: tuple[int, int] | None = None,
 ) -> None:
     """Without ``--calib``: ValueError for a flag that goes with it."""
     used = (
         ("--calib-right", calib_right is not None),
         ("--translation-unit", translation_unit is not None),
+        ("--distortion-model", distortion_model is not None),
+        ("--image-size", image_size is not None),
         ("--write-rectified", write_rectified),
         ("--alpha", alpha is not None),
         ("--no-rectify", no_rectify),
@@ -85,6 +107,8 @@ def raw_calibration(
     no_rectify: bool = False,
     write_rectified: bool = False,
     alpha: float | None = None,
+    distortion_model: str | None = None,
+    image_size: tuple[int, int] | None = None,
 ) -> Any:
     """The :class:`stereodepth.calib.StereoCalibration` of ``--calib`` when it describes a raw
     pair (to be rectified), None when it is a Middlebury or KITTI calibration of a rectified
@@ -110,6 +134,8 @@ def raw_calibration(
         used = (
             ("--calib-right", calib_right is not None),
             ("--translation-unit", translation_unit is not None),
+            ("--distortion-model", distortion_model is not None),
+            ("--image-size", image_size is not None),
             ("--write-rectified", write_rectified),
             ("--alpha", alpha is not None),
         )
@@ -122,7 +148,11 @@ def raw_calibration(
         return None
     try:
         stereo = read_stereo_calibration(
-            calib, second_path=calib_right, translation_unit=translation_unit
+            calib,
+            second_path=calib_right,
+            translation_unit=translation_unit,
+            distortion_model=distortion_model,
+            image_size=image_size,
         )
     except ImportError as exc:  # a missing extra (PyYAML): the commands exit with status 1
         raise ImportError(f"--calib: {exc}") from None

@@ -263,6 +263,8 @@ def _calc(args: argparse.Namespace) -> int:
             raise UsageError(
                 f"--plot: the folder {str(out.parent)!r} does not exist, got {args.plot!r}"
             )
+        if out.is_dir():
+            raise UsageError(f"--plot must name a file, got the folder {args.plot!r}")
     rig = _rig_from_args(args)
     summary = rig.summary(
         args.disparity_px,

@@ -179,10 +179,7 @@ class Scene:
                 f"scene {self.name}: left and right images must have the same shape, "
                 f"got {left.shape} and {right.shape}"
             )
-        if self.gt_path.suffix == ".pfm":
-            gt = read_pfm(self.gt_path)
-        else:
-            gt = np.load(self.gt_path, allow_pickle=False)
+        gt = read_pfm(self.gt_path) if self.gt_path.suffix == ".pfm" else _load_npy(self.gt_path)
         if gt.dtype.kind != "f" or gt.shape != left.shape[:2]:
             raise ValueError(
                 f"{self.gt_path}: ground truth must be a float array of the image's shape "
@@ -193,13 +190,27 @@ class Scene:
             if self.mask_path.suffix == ".png":
                 mask = read_image(self.mask_path) == 255
             else:
-                mask = np.load(self.mask_path, allow_pickle=False)
+                mask = _load_npy(self.mask_path)
             if mask.dtype != np.bool_ or mask.shape != left.shape[:2]:
                 raise ValueError(
                     f"{self.mask_path}: mask must be a bool array of the image's shape "
                     f"{left.shape[:2]}, got {mask.dtype} {mask.shape}"
                 )
         return left, right, gt, mask
+
+
+def _load_npy(path: Path) -> np.ndarray:
+    """A ``.npy`` array (no pickles), or ValueError naming the file: numpy's own errors for
+    an empty, truncated or foreign file name no file (an empty one raised EOFError, a
+    traceback)."""
+    try:
+        arr = np.load(path, allow_pickle=False)
+    except (ValueError, EOFError, OSError) as exc:
+        raise ValueError(f"{path}: not a readable .npy array ({exc})") from None
+    if not isinstance(arr, np.ndarray):  # an .npz archive under a .npy name
+        arr.close()
+        raise ValueError(f"{path}: not a .npy array (an .npz archive)")
+    return arr
 
 
 def _meta_max_disparity(path: Path) -> float | None:

@@ -8,6 +8,7 @@ whose header or size does not add up is refused, never read shifted. Needs Pillo
 from __future__ import annotations
 
 import contextlib
+import errno
 import os
 import re
 import secrets
@@ -67,8 +68,11 @@ def read_image(path: str | os.PathLike[str]) -> np.ndarray:
     :func:`read_pnm`, exactly, with their samples as stored (a 16-bit PPM gives (H, W, 3)
     uint16); every other format by Pillow. Palette and grey-alpha images become grey or RGB;
     an alpha channel is dropped. Raises FileNotFoundError for a missing file,
-    IsADirectoryError for a folder and ValueError naming the file when it cannot be decoded or
-    holds floating-point samples (a float TIFF or a PFM: :func:`read_pfm` reads those)."""
+    IsADirectoryError for a folder and ValueError naming the file when it cannot be decoded
+    (or is larger than Pillow opens: its ``DecompressionBombError``, twice
+    ``Image.MAX_IMAGE_PIXELS``),
+    holds floating-point samples (a float TIFF or a PFM: :func:`read_pfm` reads those) or is
+    16-bit colour or 16-bit with alpha (Pillow would keep only the high byte of each sample)."""
     p = Path(path)
     require_file(p, "image")
     with p.open("rb") as f:
@@ -78,6 +82,16 @@ def read_image(path: str | os.PathLike[str]) -> np.ndarray:
     Image = _pil()
     try:
         with Image.open(p) as im:
+            if im.mode not in _GREY16_MODES and any(";16" in m for m in _raw_modes(im)):
+                # Pillow keeps only the high byte of these: 12-bit colour (0..4095) would
+                # become 0..15, an almost black image, silently.
+                raw = _raw_modes(im)[0]
+                raise ValueError(
+                    f"{p}: a 16-bit {'grey and alpha' if raw.startswith('LA') else 'colour'} "
+                    f"image (stored as {raw}) cannot be read without losing its low "
+                    "byte; the matchers take 16-bit grey or 8-bit colour: convert it to one "
+                    "of those"
+                )
             im.load()
             mode = im.mode
             if mode in ("I;16", "I;16B", "I;16L"):
@@ -106,6 +120,23 @@ def read_image(path: str | os.PathLike[str]) -> np.ndarray:
             return np.asarray(im.convert("RGB"), dtype=np.uint8)
     except (OSError, SyntaxError) as exc:  # Pillow's errors for truncated / corrupt files
         raise ValueError(f"cannot decode image {p}: {exc}") from exc
+    except Image.DecompressionBombError as exc:  # a header claiming over 179 megapixels
+        raise ValueError(f"cannot decode image {p}: {exc}") from exc
+
+
+_GREY16_MODES = ("I;16", "I;16B", "I;16L", "I")
+
+
+def _raw_modes(im: Any) -> list[str]:
+    """The raw modes of an opened (not yet loaded) Pillow image's tiles: how the file stores
+    its samples (``RGB;16B`` for a 16-bit colour PNG, which Pillow reads as 8-bit RGB)."""
+    modes = []
+    for tile in getattr(im, "tile", None) or ():
+        args = tile[3] if len(tile) > 3 else None
+        raw = args if isinstance(args, str) else (args[0] if isinstance(args, tuple) else None)
+        if isinstance(raw, str):
+            modes.append(raw)
+    return modes
 
 
 # --- atomic writes ----------------------------------------------------------------------------
@@ -133,8 +164,11 @@ def atomic_write(path: str | os.PathLike[str], *, text: bool = False) -> Iterato
     (atomic on POSIX and Windows); when it raises, including KeyboardInterrupt, the temporary
     file is removed and ``path`` is untouched. A process killed outright can leave a
     temporary file behind, never a partial ``path``: :func:`remove_temp_files` sweeps them.
+    Raises IsADirectoryError naming ``path`` when it is a folder, before writing anything.
     """
     p = Path(path)
+    if p.is_dir():  # else the rename's error names the temporary file, not the user's path
+        raise IsADirectoryError(errno.EISDIR, "cannot write a file over a folder", str(p))
     tmp = _temp_path(p)
     # O_EXCL: never follow or clobber anything; mode 0o666 so the umask applies as usual.
     fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_BINARY", 0), 0o666)
@@ -181,12 +215,14 @@ def write_npy(path: str | os.PathLike[str], array: np.ndarray) -> None:
 def _check_2d(name: str, array: Any, dtypes: tuple[type, ...]) -> np.ndarray:
     if not isinstance(array, np.ndarray):
         raise TypeError(f"{name} must be a numpy.ndarray, got {type(array).__name__}")
-    if array.dtype not in dtypes:
+    # A big-endian map is a map all the same: in the machine's byte order.
+    a: np.ndarray = array if array.dtype.isnative else array.astype(array.dtype.newbyteorder("="))
+    if a.dtype not in dtypes:
         allowed = " or ".join(np.dtype(t).name for t in dtypes)
-        raise TypeError(f"{name} must have dtype {allowed}, got {array.dtype}")
-    if array.ndim != 2 or 0 in array.shape:
-        raise ValueError(f"{name} must be a non-empty (H, W) array, got shape {array.shape}")
-    return array
+        raise TypeError(f"{name} must have dtype {allowed}, got {a.dtype}")
+    if a.ndim != 2 or 0 in a.shape:
+        raise ValueError(f"{name} must be a non-empty (H, W) array, got shape {a.shape}")
+    return a
 
 
 def write_png16(

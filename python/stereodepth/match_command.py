@@ -5,8 +5,10 @@ Outputs go to ``--out``: a folder (an existing one, or a path ending in ``/``, c
 files ``disparity.<ext>``, ``depth.<ext>``, ``disparity-preview.png``, ``depth-preview.png``
 and ``points.ply``; or a prefix (``--out results/teddy-`` writes ``results/teddy-disparity.pfm``
 and so on; its folder must exist). Formats: disparity as PFM (float32, NaN holes; default),
-``npy`` or ``png16`` (KITTI's uint16 of d x 256, 0 for holes); depth as ``npy`` (float32
-metres, NaN where unknown; default), ``pfm``, or ``png16`` (uint16 millimetres, 0 unknown).
+``npy`` or ``png16`` (KITTI's uint16 of d x 256, 0 for holes: 0 to 255.996 px, refused for a
+search range outside that); depth as ``npy`` (float32
+metres, NaN where unknown; default), ``pfm``, or ``png16`` (uint16 millimetres, 0 unknown,
+65535 for 65.535 m and farther).
 The previews are the colourised maps pixel for pixel with a colour bar and unit under them
 (:func:`stereodepth.save_colorized`); they need the ``plot`` extra (``--no-preview`` skips them).
 
@@ -18,9 +20,12 @@ The rule for ``--calib``: the file's format says whether the pair is already rec
 - A Middlebury ``calib.txt`` or a KITTI calibration file describes a rectified pair: LEFT and
   RIGHT are matched as they are, with the rig the file gives (and Middlebury's ``ndisp``).
 - Any other calibration :func:`stereodepth.calib.read_stereo_calibration` reads (OpenCV
-  FileStorage YAML/XML, Kalibr camchain, a ROS camera_info file with ``--calib-right FILE``
+  FileStorage YAML/XML/JSON, Kalibr camchain, a ROS camera_info file with ``--calib-right FILE``
   for the right camera; ``--translation-unit`` the unit of its translations, default metres, refused
-  for an OpenCV file whose baseline would then exceed 10 m)
+  for an OpenCV file whose baseline would then exceed 10 m; ``--distortion-model`` the model of
+  an OpenCV file with 4 coefficients that does not name it, refused without it;
+  ``--image-size`` for a file without one; ``--calib-right`` also the second file of an
+  OpenCV calibration split in two)
   describes a raw pair, which is rectified automatically before matching:
   :meth:`stereodepth.StereoRectifier.from_calibration` (the file's own R1, R2, P1, P2 where
   it holds them, else Bouguet's method with alpha -1; ``--alpha A`` recomputes them with
@@ -100,19 +105,34 @@ def register(subparsers: Any) -> None:
         "--calib",
         metavar="FILE",
         help="Middlebury calib.txt or KITTI calib (rectified pairs: matched as given), or a raw "
-        "calibration (OpenCV FileStorage YAML/XML, Kalibr camchain, ROS camera_info): the pair "
-        "is rectified first and the depth is in the rectified left camera's frame",
+        "calibration (OpenCV FileStorage YAML/XML/JSON, Kalibr camchain, ROS camera_info): the "
+        "pair is rectified first and the depth is in the rectified left camera's frame",
     )
     r.add_argument(
         "--calib-right",
         metavar="FILE",
-        help="the right camera's ROS camera_info file (--calib is the left one's)",
+        help="the right camera's ROS camera_info file (--calib is the left one's), or the "
+        "second file of an OpenCV calibration split in two (intrinsics.yml, extrinsics.yml)",
     )
     r.add_argument(
         "--translation-unit",
         choices=tuple(TRANSLATION_UNITS),
         help="unit of the translations in a raw --calib file (default: metres, and an OpenCV "
         "file whose baseline would then exceed 10 m is refused as probably in mm)",
+    )
+    r.add_argument(
+        "--distortion-model",
+        choices=("plumb_bob", "equidistant"),
+        help="the distortion model of a raw OpenCV --calib file that does not say (one with 4 "
+        "coefficients: equidistant for cv2.fisheye's k1..k4, plumb_bob for k1 k2 p1 p2)",
+    )
+    r.add_argument(
+        "--image-size",
+        nargs=2,
+        type=int,
+        metavar=("WIDTH", "HEIGHT"),
+        help="the raw images' size for a raw --calib file that does not give it (OpenCV's "
+        "stereo_calib sample's intrinsics.yml and extrinsics.yml, say)",
     )
     r.add_argument(
         "--alpha",
@@ -147,7 +167,8 @@ def register(subparsers: Any) -> None:
         "--depth-format",
         choices=tuple(DEPTH_FORMATS),
         default="npy",
-        help="npy or pfm: float32 m; png16: uint16 mm (default npy)",
+        help="npy or pfm: float32 m; png16: uint16 mm, 0 unknown, 65535 for 65.535 m and "
+        "farther (default npy)",
     )
     o.add_argument("--no-preview", action="store_true", help="skip the colour previews")
     o.add_argument(
@@ -230,10 +251,12 @@ def _rig(
         if rectifier is not None:
             source = rule.calibration_source(args.calib, args.calib_right)
             return rule.rectified_rig(rectifier), None, source, rectifier
-        from .match_pair import read_calibration_file
+        from .match_pair import kitti_cameras, read_calibration_file
 
         try:
-            c = read_calibration_file(args.calib)
+            # A KITTI file holds four cameras: those of the images' folders (image_0/image_1,
+            # the grey pair, have another baseline than image_2/image_3), as batch reads them.
+            c = read_calibration_file(args.calib, kitti_cameras(args.left, args.right))
         except (OSError, ValueError) as exc:
             raise _Usage(f"--calib: {exc}") from None
         rig: dict[str, Any] = {
@@ -242,6 +265,7 @@ def _rig(
             "doffs_px": float(c.doffs_px),
             "cx_px": c.cx_px,
             "cy_px": c.cy_px,
+            "image_size": getattr(c, "image_size", None),  # the file's width and height
         }
         return rig, c.num_disparities, str(args.calib), None
     if args.focal_px is None and args.baseline_mm is None:
@@ -347,8 +371,11 @@ def run(args: argparse.Namespace) -> int:
             f"LEFT and RIGHT must have the same size, got {left_img.shape[1]}x"
             f"{left_img.shape[0]} and {right_img.shape[1]}x{right_img.shape[0]} px"
         )
-    if rectifier is not None:
-        cw, ch = rectifier.image_size
+    calib_size = rectifier.image_size if rectifier is not None else (rig or {}).get("image_size")
+    if calib_size is not None:
+        # A calibration of another resolution (Middlebury's full-size calib.txt for its
+        # quarter-size images) gives depths off by the scale factor, silently.
+        cw, ch = calib_size
         if left_img.shape[:2] != (ch, cw):
             raise _Usage(
                 f"LEFT and RIGHT must have the size of the calibration in --calib, {cw}x{ch} "
@@ -363,6 +390,12 @@ def run(args: argparse.Namespace) -> int:
         raise _Usage(
             f"--disparity-format png16 holds disparities up to 255.996 px, and the search "
             f"reaches {reach - 1} px (--min-disparity + --num-disparities - 1): use pfm or npy"
+        )
+    if args.disparity_format == "png16" and args.min_disparity < 0:  # it has no negatives
+        raise _Usage(
+            f"--disparity-format png16 holds no negative disparities (KITTI's d x 256, 0 for "
+            f"none), and --min-disparity {args.min_disparity} searches them: they would be "
+            "written as holes; use pfm or npy"
         )
     want_preview = not args.no_preview
     if want_preview:

@@ -15,6 +15,7 @@ import math
 import os
 import time
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -25,6 +26,7 @@ __all__ = [
     "METHODS",
     "MatchResult",
     "default_num_disparities",
+    "kitti_cameras",
     "match_pair",
     "prepare_pair",
     "read_calibration_file",
@@ -45,10 +47,11 @@ def default_num_disparities(width_px: int) -> int:
     return int(min(256, max(16, math.ceil(width_px / 8 / 16) * 16)))
 
 
-def read_calibration_file(path: str | os.PathLike[str]) -> Any:
+def read_calibration_file(path: str | os.PathLike[str], cams: tuple[int, int] | None = None) -> Any:
     """A Middlebury ``calib.txt`` or a KITTI calibration file, with the library's reader (its
     result has ``focal_px``, ``baseline_m``, ``doffs_px``, ``cx_px``, ``cy_px`` and
-    ``num_disparities``). Raises FileNotFoundError or ValueError naming the file."""
+    ``num_disparities``); ``cams`` the KITTI cameras (default (2, 3), the colour pair). Raises
+    FileNotFoundError or ValueError naming the file."""
     from . import calib
 
     reader: Any = getattr(calib, "read_calibration", None)
@@ -56,7 +59,16 @@ def read_calibration_file(path: str | os.PathLike[str]) -> Any:
         from . import batch
 
         reader = batch.read_calibration
-    return reader(path)
+    return reader(path, cams)
+
+
+def kitti_cameras(left: str | os.PathLike[str], right: str | os.PathLike[str]) -> Any:
+    """The KITTI cameras of a pair by its images' folders, as ``stereodepth batch`` tells
+    them: ``image_0``/``image_1`` (the grey pair) (0, 1), ``image_2``/``image_3`` (2, 3);
+    None for any other folders."""
+    from .batch.discovery import folder_cameras
+
+    return folder_cameras(Path(left), Path(right))
 
 
 def prepare_pair(left: np.ndarray, right: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

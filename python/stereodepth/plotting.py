@@ -8,6 +8,7 @@ canvas directly (no pyplot, no global state), so it is safe from several threads
 from __future__ import annotations
 
 import contextlib
+import errno
 import os
 import tempfile
 from pathlib import Path
@@ -158,6 +159,8 @@ def save_charts(
 def _write_atomic(path: Path, write: Any) -> None:
     """Calls ``write(binary_file)`` on a temporary file beside ``path``, then renames it over
     ``path``; on any error the temporary file is removed and ``path`` is left as it was."""
+    if path.is_dir():  # else the rename's error names the temporary file, not the user's path
+        raise IsADirectoryError(errno.EISDIR, "cannot write a file over a folder", str(path))
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
     try:
         with os.fdopen(fd, "wb") as f:

@@ -231,7 +231,8 @@ def stereo_rectify(
     Rectification
         ``(R1, R2, P1, P2, Q, roi1, roi2)``, equal to ``cv2.stereoRectify``'s (or
         ``cv2.fisheye.stereoRectify``'s) results to about 1e-12 relative (OpenCV 5.0),
-        computed natively in Eigen.
+        computed natively in Eigen; the ROIs within 1 pixel of OpenCV's (their edges are
+        rounded, and an edge that falls on a pixel boundary to 1e-13 may round either way).
 
     Raises
     ------
@@ -582,7 +583,7 @@ class StereoRectifier:
         **read_options: Any,
     ) -> StereoRectifier:
         """A rectifier from a calibration file: read with
-        :func:`stereodepth.calib.read_stereo_calibration` (OpenCV YAML/XML, ROS camera_info,
+        :func:`stereodepth.calib.read_stereo_calibration` (OpenCV YAML/XML/JSON, ROS camera_info,
         Kalibr camchain, Middlebury, KITTI; ``second_path`` for the right camera's file where
         the format splits them, ``read_options`` such as ``image_size`` or
         ``translation_unit`` go to the reader), then :meth:`from_calibration` with the

@@ -59,7 +59,8 @@ Calibration
 
 Raw pairs
     A ``--calib`` file that is not a Middlebury or KITTI calibration (OpenCV FileStorage
-    YAML/XML, Kalibr camchain, ROS camera_info with ``--calib-right``; ``--translation-unit``)
+    YAML/XML/JSON, Kalibr camchain, ROS camera_info with ``--calib-right``; ``--translation-unit``,
+    ``--distortion-model``)
     describes raw pairs: every pair is rectified before matching, by the rule of ``stereodepth
     match`` (:mod:`stereodepth._calib_rule`, shared; ``--alpha`` too). The rectifier is built once
     (:class:`~.calibration.BatchRectifier`; on Dask the calibration is shipped and each worker
@@ -74,7 +75,8 @@ Raw pairs
 Output, per pair with stem S, in OUTDIR
     ``S.disparity.EXT`` and ``S.depth.EXT`` (EXT by ``--format``: ``npy`` float32 disparity in
     pixels and depth in metres, NaN where invalid; ``png`` for ``png16``: disparity x 256 as
-    KITTI, depth in millimetres, 0 where invalid; ``pfm`` float32, NaN where invalid),
+    KITTI (0 to 255.996 px: a search range outside that is refused), depth in millimetres, 0
+    where invalid, 65535 for 65.535 m and farther; ``pfm`` float32, NaN where invalid),
     ``S.ply`` with ``--ply`` (binary, coloured by the left image, metres), and
     ``S.record.json`` last: the pair's record (status, inputs, calibration, options, outputs,
     density, time), written for a failed pair too. At the end, ``report.json`` (or

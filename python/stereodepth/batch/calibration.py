@@ -12,7 +12,7 @@ Precedence
 
 Raw pairs
     A ``--calib`` file that is not a Middlebury or KITTI calibration is the calibration of a
-    raw pair (OpenCV FileStorage YAML/XML, Kalibr, ROS camera_info with ``--calib-right``),
+    raw pair (OpenCV FileStorage YAML/XML/JSON, Kalibr, ROS camera_info with ``--calib-right``),
     and every pair is rectified before matching, by the rule of ``stereodepth match``
     (:mod:`stereodepth._calib_rule`): the rectifier is built once (:class:`BatchRectifier`;
     on Dask the calibration travels and each worker process builds it once), and the rig is
@@ -70,16 +70,20 @@ def resolve_calibration(
     forgotten option is one clear error (naming where the calibration came from) rather than
     a failure per pair."""
     shared = given if given is not None else calib_rig
+    # A KITTI --calib holds four cameras: each pair reads those of its folders (a job may
+    # hold grey image_0/image_1 pairs and colour image_2/image_3 ones).
+    by_cams: dict[tuple[int, int] | None, Calibration] = {}
     if shared is None and calib_file is not None:
-        try:
-            shared = read_calibration(calib_file, pairs[0].kitti_cams if pairs else None)
-        except (OSError, ValueError) as exc:
-            raise UsageError(f"--calib: {exc}") from exc
-        shared = replace(shared, source=f"--calib {calib_file}")
+        for cams in dict.fromkeys([p.kitti_cams for p in pairs] or [None]):
+            try:
+                read = read_calibration(calib_file, cams)
+            except (OSError, ValueError) as exc:
+                raise UsageError(f"--calib: {exc}") from exc
+            by_cams[cams] = replace(read, source=f"--calib {calib_file}")
     out = []
     cache: dict[tuple[Path, tuple[int, int] | None], Calibration | str] = {}
     for p in pairs:
-        calib: Calibration | None = shared
+        calib: Calibration | None = shared if not by_cams else by_cams[p.kitti_cams]
         problem = p.problem
         if calib is None and p.calib_file is not None:
             key = (p.calib_file, p.kitti_cams)
@@ -109,7 +113,8 @@ def resolve_calibration(
                 calibration=calib,
                 num_disparities=nd,
                 problem=problem,
-                calib_file_unused=shared is not None and p.calib_file is not None,
+                calib_file_unused=(shared is not None or bool(by_cams))
+                and p.calib_file is not None,
             )
         )
     if (
@@ -277,6 +282,8 @@ def raw_rectification(
     no_rectify: bool = False,
     write_rectified: bool = False,
     alpha: float | None = None,
+    distortion_model: str | None = None,
+    image_size: tuple[int, int] | None = None,
     threads: int | None = None,
 ) -> tuple[BatchRectifier, Calibration] | None:
     """For a raw ``--calib`` file: the job's :class:`BatchRectifier` (its rectifier built now,
@@ -295,6 +302,8 @@ def raw_rectification(
             no_rectify=no_rectify,
             write_rectified=write_rectified,
             alpha=alpha,
+            distortion_model=distortion_model,
+            image_size=image_size,
         )
         if stereo is None:
             return None

@@ -72,20 +72,35 @@ def register(subparsers: Any) -> None:
         "--calib",
         metavar="FILE",
         help="one calibration for every pair: Middlebury calib.txt or KITTI calib (rectified "
-        "pairs: matched as given), or a raw calibration (OpenCV FileStorage YAML/XML, Kalibr "
+        "pairs: matched as given), or a raw calibration (OpenCV FileStorage YAML/XML/JSON, Kalibr "
         "camchain, ROS camera_info): every pair is rectified first and the depth is in the "
         "rectified left camera's frame",
     )
     c.add_argument(
         "--calib-right",
         metavar="FILE",
-        help="the right camera's ROS camera_info file (--calib is the left one's)",
+        help="the right camera's ROS camera_info file (--calib is the left one's), or the "
+        "second file of an OpenCV calibration split in two (intrinsics.yml, extrinsics.yml)",
     )
     c.add_argument(
         "--translation-unit",
         choices=tuple(TRANSLATION_UNITS),
         help="unit of the translations in a raw --calib file (default: metres, and an OpenCV "
         "file whose baseline would then exceed 10 m is refused as probably in mm)",
+    )
+    c.add_argument(
+        "--distortion-model",
+        choices=("plumb_bob", "equidistant"),
+        help="the distortion model of a raw OpenCV --calib file that does not say (one with 4 "
+        "coefficients: equidistant for cv2.fisheye's k1..k4, plumb_bob for k1 k2 p1 p2)",
+    )
+    c.add_argument(
+        "--image-size",
+        nargs=2,
+        type=int,
+        metavar=("WIDTH", "HEIGHT"),
+        help="the raw images' size for a raw --calib file that does not give it (OpenCV's "
+        "stereo_calib sample's intrinsics.yml and extrinsics.yml, say)",
     )
     c.add_argument(
         "--alpha",
@@ -106,7 +121,7 @@ def register(subparsers: Any) -> None:
         choices=sorted(FORMATS),
         default="npy",
         help="npy: float32 (NaN invalid); png16: depth in mm and disparity x 256 "
-        "(0 invalid); pfm: float32 (default npy)",
+        "(0 invalid; depth 65535 for 65.535 m and farther); pfm: float32 (default npy)",
     )
     o.add_argument(
         "--ply", action="store_true", help="also write a coloured binary PLY point cloud in metres"
@@ -519,6 +534,12 @@ def run(args: argparse.Namespace) -> int:
     _check_outputs_are_not_inputs(pairs, options, [args.calib, args.calib_right])
     if args.format == "png16":  # KITTI's disparity PNG holds at most 65535 / 256 px
         lowest = int(options.matcher.get("min_disparity", 0))
+        if lowest < 0:  # and no negative disparities: they would be written as holes
+            raise UsageError(
+                f"--format png16 holds no negative disparities (KITTI's d x 256, 0 for none), "
+                f"and --min-disparity {lowest} searches them: they would be written as holes; "
+                "use --format pfm or npy"
+            )
         for pair in pairs:
             if pair.num_disparities is not None and lowest + pair.num_disparities > 256:
                 raise UsageError(

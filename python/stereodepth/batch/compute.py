@@ -104,6 +104,13 @@ def process_pair(pair: Pair, options: BatchOptions, threads: int | None = None) 
             raise ValueError("no calibration or number of disparities for this pair")
         threads = _task_threads() if threads is None else threads
         left, right, colours, stamps = _load_pair(pair)
+        size = getattr(calib, "image_size", None)  # Middlebury's width and height
+        if options.rectification is None and size is not None and left.shape[:2] != size[::-1]:
+            raise ValueError(
+                f"the images are {left.shape[1]}x{left.shape[0]} px and the calibration "
+                f"{calib.source} is for {size[0]}x{size[1]} px (its width and height): a "
+                "calibration of another resolution gives wrong depths"
+            )
         paths = options.output_paths(pair.stem)
         if options.rectification is not None:
             # The pair as the rectified cameras see it: everything below is in their frame.

@@ -174,16 +174,18 @@ def _folder_pairs(root: Path, *, prefix: str | None) -> list[Pair] | None:
         shared_calib = root / "calib.txt"
         for f in _images(ld):
             calib = _kitti_calib_for(root, f.stem) if cams else None
-            kitti = cams if calib is not None else None
             if calib is None and shared_calib.is_file():
-                calib = shared_calib
+                calib = shared_calib  # KITTI odometry's sequences/NN/calib.txt, for example
             pairs.append(
                 Pair(
                     stem=_safe_stem(f.stem if prefix is None else f"{prefix}_{f.stem}"),
                     left=f,
                     right=rd / f.name,
                     calib_file=calib,
-                    kitti_cams=kitti,
+                    # The folders' cameras, for whichever KITTI file calibrates them (their
+                    # own, a shared calib.txt, --calib): the grey pair image_0/image_1 once got
+                    # the colour pair's P2/P3 baseline from all but the first.
+                    kitti_cams=cams,
                 )
             )
         return pairs
@@ -243,6 +245,16 @@ def _search(
     return pairs, skipped
 
 
+def folder_cameras(left: Path, right: Path) -> tuple[int, int] | None:
+    """The KITTI cameras of a pair by its images' folders (``image_0``/``image_1``: (0, 1),
+    ``image_2``/``image_3``: (2, 3)), None for other folders: those a KITTI file is read for."""
+    folders = (left.parent.name, right.parent.name)
+    for left_dir, right_dir, cams in FOLDER_PAIRS:
+        if cams is not None and folders == (left_dir, right_dir):
+            return cams
+    return None
+
+
 def _csv_path(base: Path, cell: str) -> Path:
     p = Path(cell)
     return p if p.is_absolute() else base / p
@@ -294,6 +306,7 @@ def _csv_pairs(path: Path, names: Sequence[tuple[str, str]]) -> list[Pair]:
                         left=left,
                         right=right,
                         calib_file=calib if calib.is_file() else None,
+                        kitti_cams=folder_cameras(left, right),  # for a KITTI --calib
                     )
                 )
     except csv.Error as exc:

@@ -25,8 +25,10 @@ class UsageError(ValueError):
 
 @dataclass(frozen=True)
 class Pair:
-    """One stereo pair to process. ``calib_file`` is the calibration found beside it (with the
-    KITTI cameras ``kitti_cams`` for a KITTI file); ``problem`` a reason it cannot run;
+    """One stereo pair to process. ``calib_file`` is the calibration found beside it;
+    ``kitti_cams`` the KITTI cameras of its folders (``image_2``/``image_3``: (2, 3),
+    ``image_0``/``image_1``: (0, 1)), those read from any KITTI file that calibrates it (its
+    own, a shared ``calib.txt`` or ``--calib``); ``problem`` a reason it cannot run;
     ``calib_file_unused`` says that a calibration from the command line replaced
     ``calib_file``."""
 

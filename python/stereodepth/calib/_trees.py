@@ -76,9 +76,15 @@ def _opencv_matrix(node: Any, where: str, key: str) -> np.ndarray:
     return np.array(values, dtype=np.float64).reshape(shape)
 
 
+#: FileStorage's matrix types (``!!opencv-matrix`` in YAML, ``type_id`` in XML and JSON).
+_MATRIX_TYPES = ("opencv-matrix", "opencv-nd-matrix")
+
+
 def _yaml_tree(p: Path, text: str) -> dict[str, Any]:
     """A YAML file as a dict, also OpenCV's: the ``%YAML:1.0`` directive (which YAML parsers
-    reject) dropped, ``!!opencv-matrix`` nodes as arrays. Duplicate keys are refused."""
+    reject) dropped, ``!!opencv-matrix`` nodes as arrays; FileStorage's JSON too (a YAML
+    subset: its matrices are mappings with ``"type_id": "opencv-matrix"``). Duplicate keys are
+    refused."""
     yaml = _yaml()
     where = str(p)
 
@@ -97,7 +103,14 @@ def _yaml_tree(p: Path, text: str) -> dict[str, Any]:
             if key in out:
                 raise _fail(where, f"{key} is given twice (line {key_node.start_mark.line + 1})")
             value = loader.construct_object(value_node, deep=True)
-            out[key] = _opencv_matrix(value, where, str(key)) if type(value) is RawMatrix else value
+            if type(value) is RawMatrix:
+                value = _opencv_matrix(value, where, str(key))
+            elif type(value) is dict and value.get("type_id") in _MATRIX_TYPES:
+                # FileStorage's JSON (a YAML subset): the tag is a "type_id" key
+                value = _opencv_matrix(
+                    {k: v for k, v in value.items() if k != "type_id"}, where, str(key)
+                )
+            out[key] = value
         return out
 
     def matrix(loader: Any, node: Any) -> RawMatrix:
@@ -122,7 +135,7 @@ def _yaml_tree(p: Path, text: str) -> dict[str, Any]:
 
 def _xml_value(el: ET.Element, where: str) -> Any:
     key = el.tag
-    if el.get("type_id") in ("opencv-matrix", "opencv-nd-matrix"):
+    if el.get("type_id") in _MATRIX_TYPES:
         node = {c.tag: (c.text or "").split() for c in el}
         flat: dict[str, Any] = {
             k: (v[0] if k != "data" and len(v) == 1 else v) for k, v in node.items()

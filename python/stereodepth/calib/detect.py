@@ -51,7 +51,7 @@ def read_stereo_calibration(
 ) -> StereoCalibration:
     """A stereo calibration from any file this module reads, the format told by content:
 
-    - OpenCV FileStorage XML (``<opencv_storage>``) or YAML (keys such as M1, K1, R, T):
+    - OpenCV FileStorage XML (``<opencv_storage>``), YAML or JSON (keys such as M1, K1, R, T):
       :func:`read_opencv_stereo_calibration`, ``second_path`` the second file when the
       calibration is split in two (intrinsics and extrinsics);
     - ROS camera_info YAML (``camera_matrix``): :func:`read_ros_stereo_calibration`, the
@@ -142,7 +142,8 @@ def read_stereo_calibration(
 def read_calibration(
     path: str | os.PathLike[str], cams: tuple[int, int] | None = None
 ) -> Calibration:
-    """A Middlebury ``calib.txt`` or a KITTI calibration file, told apart by their content."""
+    """A Middlebury ``calib.txt`` or a KITTI calibration file, told apart by their content.
+    A Middlebury file's ``width`` and ``height`` are the result's ``image_size``."""
     p = Path(path)
     require_file(p, "calibration file")
     text = p.read_text(errors="replace")
@@ -157,4 +158,5 @@ def read_calibration(
         cy_px=float(c.cam0[1, 2]),
         num_disparities=c.ndisp,
         source=str(p),
+        image_size=None if c.width_px is None or c.height_px is None else (c.width_px, c.height_px),
     )

@@ -33,6 +33,11 @@ class MiddleburyCalib:
         return float(self.cam0[0, 0])
 
 
+#: How far (px) ``doffs`` may be from cam1's cx - cam0's cx: the files print both to three
+#: decimals, so the two differ by at most 0.0015 px in a consistent file.
+DOFFS_TOLERANCE_PX = 0.01
+
+
 def _matrix(text: str, key: str, path: Path) -> np.ndarray:
     """``[a b c; d e f; g h i]``: a 3x3 intrinsics matrix, finite, positive focal lengths,
     last row 0 0 1."""
@@ -61,14 +66,16 @@ def read_middlebury_calib(path: str | os.PathLike[str]) -> MiddleburyCalib:
     reader does not use (``isint``, ``vmin``, ``vmax``, ``dyavg``, ``dymax``, ...).
 
     Line ends LF, CR LF or CR; spaces around ``=`` and at line ends; blank lines. The format
-    has no comments: any other line is refused. ``cam0`` and ``baseline`` are required,
-    ``cam1`` defaults to ``cam0``, ``doffs`` to 0.
+    has no comments: any other line is refused. ``cam0`` and ``baseline`` are required.
+    ``doffs`` is by definition cam1's cx - cam0's cx: without ``cam1``, cam1 is cam0 with cx
+    shifted by ``doffs``; without ``doffs``, it is that difference (0 when both are missing).
 
     Raises FileNotFoundError for a missing file and ValueError naming the file and the field
     (with the line number for a malformed line): a line that is not ``key=value``, a key
     given twice, a missing required key, a matrix that is not 3x3 with finite numbers,
     positive focal lengths and a last row 0 0 1, a baseline that is not a finite number
-    > 0, a non-finite doffs, a width, height or ndisp that is not a whole number > 0."""
+    > 0, a non-finite doffs or one that differs from cam1's cx - cam0's cx by more than
+    ``DOFFS_TOLERANCE_PX``, a width, height or ndisp that is not a whole number > 0."""
     p = Path(path)
     text = _read_text(p, "Middlebury calib.txt")
     fields: dict[str, str] = {}
@@ -103,11 +110,24 @@ def read_middlebury_calib(path: str | os.PathLike[str]) -> MiddleburyCalib:
         return int(v)
 
     cam0 = _matrix(fields["cam0"], "cam0", p)
-    cam1 = _matrix(fields["cam1"], "cam1", p) if "cam1" in fields else cam0.copy()
     baseline = number("baseline")
     if not baseline > 0:
         raise ValueError(f"{p}: baseline must be > 0 mm, got {fields['baseline']!r}")
-    doffs = number("doffs") if "doffs" in fields else 0.0
+    # doffs is cx1 - cx0 by the format's definition: the two must agree, and either one gives
+    # the other (a rig read as cam0, cam1 and one read as f, baseline, doffs are the same).
+    if "cam1" in fields:
+        cam1 = _matrix(fields["cam1"], "cam1", p)
+        cx_diff = float(cam1[0, 2] - cam0[0, 2])
+        doffs = number("doffs") if "doffs" in fields else cx_diff
+        if abs(doffs - cx_diff) > DOFFS_TOLERANCE_PX:
+            raise ValueError(
+                f"{p}: doffs must be cam1's cx - cam0's cx ({cam1[0, 2]:g} - {cam0[0, 2]:g} = "
+                f"{cx_diff:g} px), got {fields['doffs']!r}"
+            )
+    else:
+        doffs = number("doffs") if "doffs" in fields else 0.0
+        cam1 = cam0.copy()
+        cam1[0, 2] += doffs
     return MiddleburyCalib(
         cam0=cam0,
         cam1=cam1,

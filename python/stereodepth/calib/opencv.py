@@ -54,7 +54,7 @@ def read_opencv_stereo_calibration(
     image_size: tuple[int, int] | None = None,
     distortion_model: str | None = None,
 ) -> StereoCalibration:
-    """A stereo calibration saved with ``cv2.FileStorage`` (YAML or XML) after
+    """A stereo calibration saved with ``cv2.FileStorage`` (YAML, XML or JSON) after
     ``cv2.stereoCalibrate`` (and ``cv2.stereoRectify``), as OpenCV's stereo_calib sample and
     most scripts write it: ``M1``/``K1``/``cameraMatrix1``, ``D1``/``distCoeffs1``, the same
     for camera 2, ``R``, ``T``, and optionally ``R1``, ``R2``, ``P1``, ``P2``, ``Q``, the image
@@ -64,8 +64,9 @@ def read_opencv_stereo_calibration(
     is refused, and so is a file with none of these matrices).
 
     YAML needs PyYAML (``pip install "stereodepth[calib]"``); OpenCV's ``%YAML:1.0``
-    directive and ``!!opencv-matrix`` tags are understood. XML is read with
-    ``xml.etree`` (files with a DOCTYPE are refused).
+    directive and ``!!opencv-matrix`` tags are understood. FileStorage's JSON (its matrices
+    objects with ``"type_id": "opencv-matrix"``) is read as YAML, of which it is a subset. XML
+    is read with ``xml.etree`` (files with a DOCTYPE are refused).
 
     Units: OpenCV's T (and P2's last column, Q's last row) is in the unit of the
     calibration target's square size, which the file does not record: ``translation_unit``
@@ -73,14 +74,16 @@ def read_opencv_stereo_calibration(
     converted to metres. Without it (None) T is read as metres, but a T longer than
     ``MAX_IMPLICIT_BASELINE_M`` (10 m) is refused: it is far more likely millimetres read as
     metres (every depth 1000 times too large) than a 10 m rig; pass ``"m"`` to accept it.
-    Distortion: 4, 5 or 8 coefficients are the plumb_bob (radtan) model unless the file's
-    ``distortion_model`` or ``distortion_model=`` says ``"equidistant"`` (``cv2.fisheye``
-    calibrations: 4 coefficients look the same); OpenCV's 12 and 14 coefficient forms are accepted
-    when the thin prism and tilt terms are 0.
+    Distortion: 5 or 8 coefficients are the plumb_bob (radtan) model unless the file's
+    ``distortion_model`` or ``distortion_model=`` says ``"equidistant"``; 4 coefficients need
+    one of them to say which (``"equidistant"`` for ``cv2.fisheye`` calibrations, ``"plumb_bob"``
+    for k1 k2 p1 p2): read as either, the other would be rectified wrongly without a word.
+    OpenCV's 12 and 14 coefficient forms are accepted when the thin prism and tilt terms are 0.
 
     Raises FileNotFoundError for a missing file, ImportError without PyYAML, ValueError
     naming the file and the key for a missing key, a wrong shape, a non-finite value, a
-    rotation that is not one, a distortion count that does not fit the model, or an image
+    rotation that is not one, a distortion count that does not fit the model, 4 coefficients
+    without a model, or an image
     size that is missing (pass ``image_size=``) or disagrees with ``image_size=``."""
     scale = _unit(translation_unit)
     paths = [Path(path)] + ([Path(extrinsics_path)] if extrinsics_path is not None else [])
@@ -118,6 +121,10 @@ def read_opencv_stereo_calibration(
                 f"distortion_model is {model!r}, distortion_model= says {given!r}",
             )
         model = given
+    # Four coefficients are k1 k2 p1 p2 (plumb_bob) or k1 k2 k3 k4 (OpenCV's fisheye module,
+    # whose calibrations give four and nothing else; cv2.stereoCalibrate gives 5 or more):
+    # a file that does not say which is refused rather than read as either.
+    told = "distortion_model" in tree or distortion_model is not None
     out: dict[str, Any] = {}
     for field in ("K1", "K2"):
         key, value, where = get(field)  # type: ignore[misc]
@@ -133,6 +140,13 @@ def read_opencv_stereo_calibration(
                     "which the plumb_bob model does not take",
                 )
             d = d[:8]
+        if d.size == 4 and not told:
+            raise _fail(
+                where,
+                f"{key} has 4 coefficients, which both OpenCV's fisheye module (equidistant: "
+                "k1 k2 k3 k4) and the plumb_bob model (k1 k2 p1 p2) write; say which with "
+                "distortion_model= (or a distortion_model key in the file)",
+            )
         out[field] = _check_distortion(d, model, where, key)
     key, value, where = get("R")  # type: ignore[misc]
     out["R"] = _check_rotation(value, where, key)

@@ -216,6 +216,10 @@ class Calibration:
     cy_px: float | None = None
     num_disparities: int | None = None  # Middlebury's ndisp, when the file has it
     source: str = ""
+    #: (width, height) of the images the file calibrates, when it says (Middlebury's width and
+    #: height): images of another size need another calibration (focal length, doffs and
+    #: disparities scale with the resolution). Not part of :meth:`as_dict`: it changes no result.
+    image_size: tuple[int, int] | None = None
 
     def as_dict(self) -> dict[str, float | int | str | None]:
         return {

@@ -4,8 +4,8 @@
 
 - ``left``, ``right``: the images as base64 (a ``data:`` URL is accepted), PNG or JPEG,
   8-bit grey or colour or 16-bit grey (an alpha channel must be opaque and is dropped; 16-bit
-  colour is rejected); or ``"sample": true`` for the package's synthetic pair
-  (:mod:`stereodepth.sample`);
+  colour, and 16-bit grey with alpha, are rejected); or ``"sample": true`` for the package's
+  synthetic pair (:mod:`stereodepth.sample`);
 - ``rig``: the calculator's rig with its names and units (``baseline_mm`` and ``focal_px``
   with ``doffs_px``, or ``focal_mm`` and ``pixel_um``);
 - ``method`` (``bm``, or ``sgm`` where the library has it), ``num_disparities`` (default: an
@@ -139,9 +139,10 @@ def decode_image(field: str, data: bytes, limits: DepthMapLimits) -> np.ndarray:
             "too_large",
         )
     bits = _png_colour_bits(data)
-    if bits is not None and bits[0] == 16 and bits[1] in (2, 6):
+    if bits is not None and bits[0] == 16 and bits[1] in (2, 4, 6):  # Pillow: the high byte
+        kind = "grey and alpha" if bits[1] == 4 else "colour"
         raise BadInput(
-            loc, f"{field}: 16-bit colour PNGs are not supported; give 8-bit colour or 16-bit grey"
+            loc, f"{field}: 16-bit {kind} PNGs are not supported; give 8-bit colour or 16-bit grey"
         )
     with warnings.catch_warnings():
         warnings.simplefilter("error", Image.DecompressionBombWarning)
