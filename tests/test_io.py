@@ -200,6 +200,23 @@ def test_atomic_write_text_and_permissions(tmp_path: Path) -> None:
     assert target.stat().st_mode & 0o777 == 0o644  # as open() would make it, not mkstemp's 0600
 
 
+@pytest.mark.skipif(not hasattr(os, "fchmod"), reason="POSIX permissions")
+def test_atomic_writers_keep_the_permissions_of_a_file_they_replace(tmp_path: Path) -> None:
+    disparity = np.ones((4, 5), np.float32)
+    writers = {
+        "d.npy": lambda p: io.write_npy(p, disparity),
+        "d.pfm": lambda p: io.write_pfm(p, disparity),
+        "d.png": lambda p: io.write_png16(p, np.ones((4, 5), np.uint16)),
+    }
+    for name, write in writers.items():
+        target = tmp_path / name
+        target.write_bytes(b"old")
+        target.chmod(0o640)  # a user's choice (a group may read, others not)
+        write(target)
+        assert target.stat().st_mode & 0o777 == 0o640, name
+        assert target.read_bytes() != b"old"
+
+
 def test_a_killed_writer_leaves_no_partial_file(tmp_path: Path) -> None:
     """SIGKILL in the middle of a write: the target keeps its old content, a temporary file
     remains, and remove_temp_files sweeps it (and nothing else)."""

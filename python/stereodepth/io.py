@@ -161,8 +161,9 @@ def atomic_write(path: str | os.PathLike[str], *, text: bool = False) -> Iterato
     Yields a file opened for writing (binary, or UTF-8 text with ``text=True``) on a temporary
     file in the same directory (``.<name>.stereodepth-<random>.tmp``). When the block ends
     normally the data is flushed and fsynced and the temporary file renamed over ``path``
-    (atomic on POSIX and Windows); when it raises, including KeyboardInterrupt, the temporary
-    file is removed and ``path`` is untouched. A process killed outright can leave a
+    (atomic on POSIX and Windows), which keeps the permissions of a file it replaces (on
+    POSIX); when it raises, including KeyboardInterrupt, the temporary file is removed and
+    ``path`` is untouched. A process killed outright can leave a
     temporary file behind, never a partial ``path``: :func:`remove_temp_files` sweeps them.
     Raises IsADirectoryError naming ``path`` when it is a folder, before writing anything.
     """
@@ -177,6 +178,10 @@ def atomic_write(path: str | os.PathLike[str], *, text: bool = False) -> Iterato
         with f:
             yield f
             f.flush()
+            # A file replaced keeps its permissions (a new one gets 0o666 less the umask).
+            if hasattr(os, "fchmod"):  # POSIX
+                with contextlib.suppress(FileNotFoundError):
+                    os.fchmod(f.fileno(), os.stat(p).st_mode & 0o7777)
             os.fsync(f.fileno())
         os.replace(tmp, p)
     except BaseException:

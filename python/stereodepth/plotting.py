@@ -7,15 +7,13 @@ canvas directly (no pyplot, no global state), so it is safe from several threads
 
 from __future__ import annotations
 
-import contextlib
-import errno
 import os
-import tempfile
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 from . import _validate as check
 from .charts import Chart, Charts, chart_data
+from .io import atomic_write
 from .rig import StereoRig
 
 if TYPE_CHECKING:
@@ -152,32 +150,6 @@ def save_charts(
         max_disparity_px=max_disparity_px,
     )
     fig = draw_charts(charts, title=repr(rig))
-    _write_atomic(out, lambda f: fig.savefig(f, format=fmt, dpi=dpi))
+    with atomic_write(out) as f:  # never a half-written chart; a folder in the way is refused
+        fig.savefig(f, format=fmt, dpi=dpi)
     return out
-
-
-def _write_atomic(path: Path, write: Any) -> None:
-    """Calls ``write(binary_file)`` on a temporary file beside ``path``, then renames it over
-    ``path``; on any error the temporary file is removed and ``path`` is left as it was."""
-    if path.is_dir():  # else the rename's error names the temporary file, not the user's path
-        raise IsADirectoryError(errno.EISDIR, "cannot write a file over a folder", str(path))
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "wb") as f:
-            write(f)
-            f.flush()
-            os.fsync(f.fileno())
-        # mkstemp makes the file private (0600); give it the mode a new file would have.
-        mode = path.stat().st_mode & 0o777 if path.exists() else 0o666 & ~_umask()
-        os.chmod(tmp, mode)
-        os.replace(tmp, path)
-    except BaseException:
-        with contextlib.suppress(OSError):
-            os.unlink(tmp)
-        raise
-
-
-def _umask() -> int:
-    mask = os.umask(0o022)
-    os.umask(mask)
-    return mask
