@@ -505,7 +505,9 @@ def semi_global_match(
         Fill the pixels left NaN with the smaller of the nearest valid disparities to their
         left and right on the row (background interpolation; off by default).
     max_memory_mb
-        Refuse (ValueError) when the matcher would need more than this many MiB.
+        Refuse (ValueError) when the matcher's buffers, beside the images and the outputs,
+        would exceed this many MiB (the figure of :func:`memory_estimate`: a few MiB per
+        thread for ``paths=3``, about 3 bytes per pixel and disparity for 4 and 8).
     threads
         Threads to use; None or 0 for every core available. The output does not depend on it.
     return_confidence
