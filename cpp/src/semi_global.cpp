@@ -426,8 +426,7 @@ struct SemiGlobalMatcher::Workspace {
   std::vector<float> median_edges;  // rows around the boundaries of the median's bands
   std::vector<std::vector<std::uint8_t>> scratch;  // per thread
   std::vector<detail::SpeckleBand> speckle;
-  std::vector<detail::SpeckleRun> speckle_runs;
-  std::vector<std::int64_t> speckle_sizes;
+  detail::SpeckleJoin speckle_join;
 };
 
 SemiGlobalMatcher::SemiGlobalMatcher(const SemiGlobalParams& params, int threads, Isa isa)
@@ -878,7 +877,7 @@ void SemiGlobalMatcher::compute(const StereoImage& left, const StereoImage& righ
     }
     starts.push_back(rows);
     detail::speckle_finish(bk, disparity, confidence, p.speckle_window, rf, labels, starts,
-                           ws.speckle_runs, ws.speckle_sizes);
+                           ws.speckle_join);
   }
 }
 

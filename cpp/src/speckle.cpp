@@ -96,26 +96,51 @@ void speckle_band(const BlockMatchKernels& k, const ImageView<float>& disp,
 
 // Joins the labellings (bands[i]: rows starts[i] .. starts[i + 1] - 1) and clears the
 // regions of at most `window` pixels.
+//
+// 1. In each band, every run links to its root (the band's lowest index in its region, as
+//    unite() keeps the lower root), and each root's parent becomes minus the region's size in
+//    the band, capped at window + 1 (only "size > window" matters, and the cap keeps it in
+//    32 bits).
+// 2. The vertical links across each boundary between bands pair the two bands' roots; those
+//    roots (O(W) per boundary) are united in a small union-find, their sizes summed (capped)
+//    and written back to each of them.
+// 3. Each run is cleared when its root's size is at most `window`.
 void speckle_finish(const BlockMatchKernels& k, const ImageView<float>& disp,
                     const ImageView<float>& conf, int window, float rf,
                     const std::vector<SpeckleBand*>& bands,
-                    const std::vector<std::ptrdiff_t>& starts, std::vector<SpeckleRun>& all,
-                    std::vector<std::int64_t>& sizes) {
+                    const std::vector<std::ptrdiff_t>& starts, SpeckleJoin& join) {
   const std::ptrdiff_t cols = disp.cols;
   const auto words = static_cast<std::size_t>((cols + 63) / 64);
   const std::size_t nb = starts.size() - 1;
+  const std::int64_t cap = std::min<std::int64_t>(static_cast<std::int64_t>(window) + 1,
+                                                  std::numeric_limits<std::int32_t>::max());
+  auto capped = [&](std::int64_t n) { return static_cast<std::int32_t>(std::min(n, cap)); };
+  auto root_of = [](const std::vector<SpeckleRun>& runs, std::int32_t j) {
+    const std::int32_t p = runs[static_cast<std::size_t>(j)].parent;
+    return p < 0 ? j : p;
+  };
+  // 1.
+  for (std::size_t i = 0; i < nb; ++i) {
+    std::vector<SpeckleRun>& runs = bands[i]->runs;
+    const auto n = static_cast<std::int32_t>(runs.size());
+    for (std::int32_t j = 0; j < n; ++j) runs[static_cast<std::size_t>(j)].parent = find_root(runs, j);
+    for (std::int32_t j = 0; j < n; ++j) {
+      SpeckleRun& r = runs[static_cast<std::size_t>(j)];
+      const std::int64_t len = r.x1 - r.x0;
+      if (r.parent == j) {
+        r.parent = -capped(len);
+      } else {  // its root, a lower index, holds minus its size by now
+        SpeckleRun& root = runs[static_cast<std::size_t>(r.parent)];
+        root.parent = -capped(-static_cast<std::int64_t>(root.parent) + len);
+      }
+    }
+  }
+  // 2.
   std::vector<std::int32_t> offset(nb + 1, 0);
   for (std::size_t i = 0; i < nb; ++i) {
     offset[i + 1] = offset[i] + static_cast<std::int32_t>(bands[i]->runs.size());
   }
-  all.resize(static_cast<std::size_t>(offset[nb]));
-  for (std::size_t i = 0; i < nb; ++i) {
-    for (std::size_t j = 0; j < bands[i]->runs.size(); ++j) {
-      SpeckleRun r = bands[i]->runs[j];
-      r.parent += offset[i];
-      all[static_cast<std::size_t>(offset[i]) + j] = r;
-    }
-  }
+  join.pairs.clear();
   for (std::size_t i = 1; i < nb; ++i) {
     SpeckleBand& b = *bands[i];
     const std::ptrdiff_t y = starts[i];
@@ -124,22 +149,60 @@ void speckle_finish(const BlockMatchKernels& k, const ImageView<float>& disp,
     const RowStarts& below = b.first;
     const RowStarts& above = bands[i - 1]->prev;
     each_new_link(b.up.data(), below, above, words, [&](std::ptrdiff_t x) {
-      unite(all, offset[i] + below.run_at(x), offset[i - 1] + above.run_at(x));
+      join.pairs.push_back(offset[i] + root_of(b.runs, below.run_at(x)));
+      join.pairs.push_back(offset[i - 1] + root_of(bands[i - 1]->runs, above.run_at(x)));
     });
   }
-  sizes.assign(all.size(), 0);
-  for (std::size_t i = 0; i < all.size(); ++i) {
-    const std::int32_t root = find_root(all, static_cast<std::int32_t>(i));
-    all[i].parent = root;  // now every run links to its root directly
-    sizes[static_cast<std::size_t>(root)] += all[i].x1 - all[i].x0;
+  if (!join.pairs.empty()) {
+    join.ids.assign(join.pairs.begin(), join.pairs.end());
+    std::sort(join.ids.begin(), join.ids.end());
+    join.ids.erase(std::unique(join.ids.begin(), join.ids.end()), join.ids.end());
+    const std::size_t n = join.ids.size();
+    auto run = [&](std::int32_t id) -> SpeckleRun& {  // a global run id's run
+      const auto band = static_cast<std::size_t>(
+          std::upper_bound(offset.begin(), offset.end(), id) - offset.begin() - 1);
+      return bands[band]->runs[static_cast<std::size_t>(id - offset[band])];
+    };
+    auto index = [&](std::int32_t id) {
+      return static_cast<std::int32_t>(std::lower_bound(join.ids.begin(), join.ids.end(), id) -
+                                       join.ids.begin());
+    };
+    auto find = [&](std::int32_t a) {
+      while (join.parent[static_cast<std::size_t>(a)] != a) {
+        std::int32_t& pa = join.parent[static_cast<std::size_t>(a)];
+        pa = join.parent[static_cast<std::size_t>(pa)];
+        a = pa;
+      }
+      return a;
+    };
+    join.parent.resize(n);
+    join.size.assign(n, 0);
+    for (std::size_t m = 0; m < n; ++m) join.parent[m] = static_cast<std::int32_t>(m);
+    for (std::size_t q = 0; q < join.pairs.size(); q += 2) {
+      const std::int32_t a = find(index(join.pairs[q])), b = find(index(join.pairs[q + 1]));
+      if (a < b) join.parent[static_cast<std::size_t>(b)] = a;
+      if (b < a) join.parent[static_cast<std::size_t>(a)] = b;
+    }
+    for (std::size_t m = 0; m < n; ++m) {
+      const auto root = static_cast<std::size_t>(find(static_cast<std::int32_t>(m)));
+      join.size[root] = std::min(join.size[root] - run(join.ids[m]).parent, cap);
+    }
+    for (std::size_t m = 0; m < n; ++m) {
+      const auto root = static_cast<std::size_t>(find(static_cast<std::int32_t>(m)));
+      run(join.ids[m]).parent = -capped(join.size[root]);
+    }
   }
+  // 3.
   const float nan = std::numeric_limits<float>::quiet_NaN();
-  for (const SpeckleRun& run : all) {
-    if (sizes[static_cast<std::size_t>(run.parent)] > window) continue;
-    std::fill(disp.row(run.y) + run.x0, disp.row(run.y) + run.x1, nan);
-    if (conf.data) std::fill(conf.row(run.y) + run.x0, conf.row(run.y) + run.x1, 0.0f);
+  for (std::size_t i = 0; i < nb; ++i) {
+    const std::vector<SpeckleRun>& runs = bands[i]->runs;
+    for (const SpeckleRun& r : runs) {
+      const std::int32_t p = r.parent < 0 ? r.parent : runs[static_cast<std::size_t>(r.parent)].parent;
+      if (-static_cast<std::int64_t>(p) > window) continue;
+      std::fill(disp.row(r.y) + r.x0, disp.row(r.y) + r.x1, nan);
+      if (conf.data) std::fill(conf.row(r.y) + r.x0, conf.row(r.y) + r.x1, 0.0f);
+    }
   }
 }
-
 
 }  // namespace stereodepth::detail

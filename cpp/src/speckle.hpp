@@ -59,6 +59,15 @@ struct SpeckleBand {
   RowStarts first;      // the band's first row
 };
 
+// The join's scratch, kept between calls: the pairs of regions linked across band boundaries
+// and a small union-find over those regions (O(W) per boundary, nothing per run).
+struct SpeckleJoin {
+  std::vector<std::int32_t> pairs;   // global run ids of two linked roots, two per link
+  std::vector<std::int32_t> ids;     // the roots that touch a boundary, sorted
+  std::vector<std::int32_t> parent;  // union-find over ids
+  std::vector<std::int64_t> size;    // region sizes (pixels) by ids index
+};
+
 // |a - b| <= range for a float difference is |a - b| <= the largest float not above range.
 float speckle_range_f(double range);
 
@@ -67,11 +76,13 @@ void speckle_band(const BlockMatchKernels& k, const ImageView<float>& disp, std:
                   std::ptrdiff_t y1, float rf, SpeckleBand& b);
 
 // Joins the labellings (bands[i]: rows starts[i] .. starts[i + 1] - 1) and clears the
-// regions of at most `window` pixels (NaN, and 0 in conf when conf.data is not null).
+// regions of at most `window` pixels (NaN, and 0 in conf when conf.data is not null). Works
+// in place in the bands' runs (their parents are then overwritten): each band's regions are
+// sized in the band, and only the regions linked across a boundary are joined, so no copy
+// of the runs and no size per run.
 void speckle_finish(const BlockMatchKernels& k, const ImageView<float>& disp,
                     const ImageView<float>& conf, int window, float rf,
                     const std::vector<SpeckleBand*>& bands,
-                    const std::vector<std::ptrdiff_t>& starts, std::vector<SpeckleRun>& all,
-                    std::vector<std::int64_t>& sizes);
+                    const std::vector<std::ptrdiff_t>& starts, SpeckleJoin& join);
 
 }  // namespace stereodepth::detail
