@@ -98,8 +98,8 @@ void speckle_band(const BlockMatchKernels& k, const ImageView<float>& disp,
 // regions of at most `window` pixels.
 //
 // 1. In each band, every run links to its root (the band's lowest index in its region, as
-//    unite() keeps the lower root), and each root's parent becomes minus the region's size in
-//    the band, capped at window + 1 (only "size > window" matters, and the cap keeps it in
+//    unite() keeps the lower root and path halving only lowers a parent), and each root's
+//    parent becomes minus the region's size in the band, capped at window + 1 (only "size > window" matters, and the cap keeps it in
 //    32 bits).
 // 2. The vertical links across each boundary between bands pair the two bands' roots; those
 //    roots (O(W) per boundary) are united in a small union-find, their sizes summed (capped)
@@ -122,14 +122,17 @@ void speckle_finish(const BlockMatchKernels& k, const ImageView<float>& disp,
   // 1.
   for (std::size_t i = 0; i < nb; ++i) {
     std::vector<SpeckleRun>& runs = bands[i]->runs;
+    // A parent is never above its run, so in increasing order each run's parent p has been
+    // handled: p is a root (negative) or links to its root directly.
     const auto n = static_cast<std::int32_t>(runs.size());
-    for (std::int32_t j = 0; j < n; ++j) runs[static_cast<std::size_t>(j)].parent = find_root(runs, j);
     for (std::int32_t j = 0; j < n; ++j) {
       SpeckleRun& r = runs[static_cast<std::size_t>(j)];
       const std::int64_t len = r.x1 - r.x0;
       if (r.parent == j) {
         r.parent = -capped(len);
-      } else {  // its root, a lower index, holds minus its size by now
+      } else {
+        const std::int32_t q = runs[static_cast<std::size_t>(r.parent)].parent;
+        if (q >= 0) r.parent = q;
         SpeckleRun& root = runs[static_cast<std::size_t>(r.parent)];
         root.parent = -capped(-static_cast<std::int64_t>(root.parent) + len);
       }
