@@ -455,7 +455,8 @@ void SemiGlobalMatcher::compute(const StereoImage& left, const StereoImage& righ
   }
   const std::ptrdiff_t rows = left.rows, cols = left.cols;
   const int nd = p.num_disparities;
-  const std::size_t need = semi_global_memory(rows, cols, nd, p.paths, threads_, isa_, p.block_size);
+  const std::size_t need =
+      semi_global_memory(rows, cols, nd, p.paths, threads_, isa_, p.block_size);
   const double need_mb = static_cast<double>(need) / 1048576.0;
   if (need_mb > p.max_memory_mb) {
     std::ostringstream msg;

@@ -99,8 +99,8 @@ void speckle_band(const BlockMatchKernels& k, const ImageView<float>& disp,
 //
 // 1. In each band, every run links to its root (the band's lowest index in its region, as
 //    unite() keeps the lower root and path halving only lowers a parent), and each root's
-//    parent becomes minus the region's size in the band, capped at window + 1 (only "size > window" matters, and the cap keeps it in
-//    32 bits).
+//    parent becomes minus the region's size in the band, capped at window + 1 (only
+//    "size > window" matters, and the cap keeps it in 32 bits).
 // 2. The vertical links across each boundary between bands pair the two bands' roots; those
 //    roots (O(W) per boundary) are united in a small union-find, their sizes summed (capped)
 //    and written back to each of them.
@@ -200,7 +200,8 @@ void speckle_finish(const BlockMatchKernels& k, const ImageView<float>& disp,
   for (std::size_t i = 0; i < nb; ++i) {
     const std::vector<SpeckleRun>& runs = bands[i]->runs;
     for (const SpeckleRun& r : runs) {
-      const std::int32_t p = r.parent < 0 ? r.parent : runs[static_cast<std::size_t>(r.parent)].parent;
+      const std::int32_t p =
+          r.parent < 0 ? r.parent : runs[static_cast<std::size_t>(r.parent)].parent;
       if (-static_cast<std::int64_t>(p) > window) continue;
       std::fill(disp.row(r.y) + r.x0, disp.row(r.y) + r.x1, nan);
       if (conf.data) std::fill(conf.row(r.y) + r.x0, conf.row(r.y) + r.x1, 0.0f);
