@@ -255,6 +255,9 @@ class PairRows {
     return g;
   }
 
+  // The buffer census(im, ...) writes (its last row; a valid pointer before any call).
+  const std::uint16_t* last(int im) const { return cen_[im]; }
+
   // Census row y of image `im`, valid until the next call for that image.
   const std::uint16_t* census(int im, std::ptrdiff_t y) {
     if (format_ == PixelFormat::kGrey16) {
@@ -620,8 +623,8 @@ void SemiGlobalMatcher::compute(const StereoImage& left, const StereoImage& righ
                            out);
               },
               &fresh);
-          const std::uint16_t* lrow = nullptr;
-          const std::uint16_t* rrow = nullptr;
+          const std::uint16_t* lrow = src.last(0);  // unread unless fresh >= 0
+          const std::uint16_t* rrow = src.last(1);
           if (fresh >= 0) {
             const std::ptrdiff_t yf = std::clamp<std::ptrdiff_t>(y + fresh - r, 0, rows - 1);
             lrow = src.census(0, yf);
