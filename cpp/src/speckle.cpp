@@ -57,6 +57,8 @@ void speckle_band(const BlockMatchKernels& k, const ImageView<float>& disp,
   const std::ptrdiff_t cols = disp.cols;
   const auto words = static_cast<std::size_t>((cols + 63) / 64);
   b.runs.clear();
+  b.y0 = y0;
+  b.row_first.clear();
   b.valid.resize(words);
   b.left.resize(words);
   b.up.resize(words);
@@ -64,6 +66,7 @@ void speckle_band(const BlockMatchKernels& k, const ImageView<float>& disp,
     k.speckle_links(disp.row(y), y > y0 ? disp.row(y - 1) : nullptr, cols, rf, b.valid.data(),
                     b.left.data(), b.up.data());
     b.cur.set(b.valid.data(), b.left.data(), words, static_cast<std::int32_t>(b.runs.size()));
+    b.row_first.push_back(static_cast<std::int32_t>(b.runs.size()));
     for (std::size_t w = 0; w < words; ++w) {
       std::uint64_t starts = b.cur.bits[w];
       while (starts) {
@@ -79,8 +82,7 @@ void speckle_band(const BlockMatchKernels& k, const ImageView<float>& disp,
         }
         x1 = std::min(x1, cols);
         const auto id = static_cast<std::int32_t>(b.runs.size());
-        b.runs.push_back({id, static_cast<std::int32_t>(y), static_cast<std::int32_t>(x0),
-                          static_cast<std::int32_t>(x1)});
+        b.runs.push_back({id, static_cast<std::int32_t>(x0), static_cast<std::int32_t>(x1)});
       }
     }
     if (y > y0) {
@@ -92,6 +94,7 @@ void speckle_band(const BlockMatchKernels& k, const ImageView<float>& disp,
     }
     std::swap(b.cur, b.prev);
   }
+  b.row_first.push_back(static_cast<std::int32_t>(b.runs.size()));
 }
 
 // Joins the labellings (bands[i]: rows starts[i] .. starts[i + 1] - 1) and clears the
@@ -199,12 +202,17 @@ void speckle_finish(const BlockMatchKernels& k, const ImageView<float>& disp,
   const float nan = std::numeric_limits<float>::quiet_NaN();
   for (std::size_t i = 0; i < nb; ++i) {
     const std::vector<SpeckleRun>& runs = bands[i]->runs;
-    for (const SpeckleRun& r : runs) {
-      const std::int32_t p =
-          r.parent < 0 ? r.parent : runs[static_cast<std::size_t>(r.parent)].parent;
-      if (-static_cast<std::int64_t>(p) > window) continue;
-      std::fill(disp.row(r.y) + r.x0, disp.row(r.y) + r.x1, nan);
-      if (conf.data) std::fill(conf.row(r.y) + r.x0, conf.row(r.y) + r.x1, 0.0f);
+    const std::vector<std::int32_t>& row_first = bands[i]->row_first;
+    for (std::size_t row = 0; row + 1 < row_first.size(); ++row) {
+      const std::ptrdiff_t y = bands[i]->y0 + static_cast<std::ptrdiff_t>(row);
+      for (std::int32_t j = row_first[row]; j < row_first[row + 1]; ++j) {
+        const SpeckleRun& r = runs[static_cast<std::size_t>(j)];
+        const std::int32_t p =
+            r.parent < 0 ? r.parent : runs[static_cast<std::size_t>(r.parent)].parent;
+        if (-static_cast<std::int64_t>(p) > window) continue;
+        std::fill(disp.row(y) + r.x0, disp.row(y) + r.x1, nan);
+        if (conf.data) std::fill(conf.row(y) + r.x0, conf.row(y) + r.x1, 0.0f);
+      }
     }
   }
 }

@@ -21,7 +21,7 @@ namespace stereodepth::detail {
 
 struct SpeckleRun {
   std::int32_t parent;  // union-find link; a root links to itself
-  std::int32_t y, x0, x1;
+  std::int32_t x0, x1;  // columns x0 .. x1 - 1 (the row: SpeckleBand::row_first)
 };
 
 // A row's run starts, as bits, with the count of starts before each word and the index of
@@ -54,6 +54,8 @@ struct RowStarts {
 // One band's labelling.
 struct SpeckleBand {
   std::vector<SpeckleRun> runs;  // parents are indices into this vector
+  std::ptrdiff_t y0 = 0;                // the band's first row
+  std::vector<std::int32_t> row_first;  // row y0 + i: runs row_first[i] .. row_first[i + 1] - 1
   std::vector<std::uint64_t> valid, left, up;
   RowStarts cur, prev;  // after labelling, prev holds the band's last row
   RowStarts first;      // the band's first row

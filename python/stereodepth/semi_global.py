@@ -322,7 +322,7 @@ def memory_estimate(
     and 8: 3 bytes per pixel and disparity (16-bit sums, 8-bit costs), 7 per pixel (census
     and grey images) and a few rows per thread. The figure is for an RGB pair with
     ``median=True`` (grey pairs need a little less); the speckle filter's runs, which depend
-    on the disparities, are not counted (16 bytes per run of linked pixels in a row).
+    on the disparities, are not counted (12 bytes per run of linked pixels in a row).
 
     Raises ValueError for an unknown ``isa`` or one this CPU cannot run."""
     return int(
