@@ -7,8 +7,13 @@ within 1e-3 px after the sub-pixel step. Images are small so the oracle stays fa
 
 from __future__ import annotations
 
+import json
+import os
+import subprocess
+import sys
 import threading
 from concurrent.futures import ThreadPoolExecutor
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -413,9 +418,15 @@ def test_memory_estimate_and_refusal() -> None:
 
     est = memory_estimate((1080, 1920), num_disparities=256, paths=4)
     assert 3 * 1080 * 1920 * 256 <= est < 3.2 * 1080 * 1920 * 256
-    # One pass: a few MB per thread above 13 bytes per pixel.
-    one = memory_estimate((1080, 1920), num_disparities=256, paths=3, threads=2)
-    assert one < 1080 * 1920 * 13 + 2 * 8 * 2**20
+    # One pass: a few rows of W x D per thread (at most 16 bytes per column and disparity,
+    # the baseline build's 16-bit costs), nothing per pixel.
+    for isa in SUPPORTED_ISAS:
+        one = memory_estimate((1080, 1920), num_disparities=256, paths=3, threads=2, isa=isa)
+        assert 2 * 1920 * 256 * 4 < one < 2 * 1920 * 256 * 16
+        assert one == memory_estimate((4000, 1920), num_disparities=256, threads=2, isa=isa)
+        assert one > memory_estimate((1080, 1920), num_disparities=256, threads=1, isa=isa)
+        small = memory_estimate((1080, 1920), num_disparities=256, threads=2, isa=isa, block_size=1)
+        assert small < one
     left, right = shifted_pair((100, 200), 3, seed=31)
     with pytest.raises(
         ValueError,
@@ -429,6 +440,79 @@ def test_memory_estimate_and_refusal() -> None:
     ) as e:
         sd.semi_global_match(left, right, num_disparities=16, paths=3, max_memory_mb=0.001)
     assert "0.00 MiB" not in str(e.value) and "use paths=3" not in str(e.value)
+
+
+_PEAK_CHILD = """
+import json, sys
+import numpy as np
+import stereodepth as sd
+from stereodepth.semi_global import memory_estimate
+
+h, w, nd, threads, rgb = (int(a) for a in sys.argv[1:])
+rng = np.random.default_rng(3)
+wide = rng.integers(0, 256, size=(h, w + 20, 3) if rgb else (h, w + 20), dtype=np.uint8)
+left, right = np.ascontiguousarray(wide[:, :w]), np.ascontiguousarray(wide[:, 20:])
+del wide
+kw = dict(num_disparities=nd, threads=threads, speckle_window=0, return_confidence=True)
+sd.semi_global_match(left[:8, :64], right[:8, :64], **{**kw, "num_disparities": 16})
+
+def kib(field):
+    with open("/proc/self/status") as f:
+        return next(int(s.split()[1]) for s in f if s.startswith(field + ":"))
+
+with open("/proc/self/clear_refs", "w") as f:
+    f.write("5")  # the peak resident set := the resident set
+before = kib("VmRSS")
+disp, conf = sd.semi_global_match(left, right, **kw)
+growth = (kib("VmHWM") - before) * 1024 - disp.nbytes - conf.nbytes
+est = memory_estimate((h, w), num_disparities=nd, threads=threads)
+print(json.dumps({"growth": growth, "estimate": est, "valid": float(np.isfinite(disp).mean())}))
+"""
+
+
+def _peak_growth(h: int, w: int, nd: int, threads: int, rgb: bool) -> dict[str, Any]:
+    """In a fresh process: how much the peak resident set grows over one call, less the
+    outputs (so: the matcher's own buffers)."""
+    env = dict(os.environ)
+    pkg_root = str(Path(sd.__file__).resolve().parents[1])
+    env["PYTHONPATH"] = os.pathsep.join([pkg_root, env.get("PYTHONPATH", "")])
+    args = [str(v) for v in (h, w, nd, threads, int(rgb))]
+    out = subprocess.run(
+        [sys.executable, "-c", _PEAK_CHILD, *args],
+        check=True,
+        capture_output=True,
+        text=True,
+        env=env,
+    )
+    result: dict[str, Any] = json.loads(out.stdout)
+    return result
+
+
+def _can_reset_peak() -> bool:
+    try:
+        with open("/proc/self/clear_refs", "w") as f:
+            f.write("5")
+    except OSError:
+        return False
+    return True
+
+
+@pytest.mark.skipif(not _can_reset_peak(), reason="needs Linux /proc/self/clear_refs")
+@pytest.mark.parametrize("rgb", [False, True], ids=["grey", "rgb"])
+def test_single_pass_peak_memory_does_not_grow_with_the_height(rgb: bool) -> None:
+    # Issue 11: paths=3 keeps a few rows per thread and nothing image-sized beside the
+    # inputs and the outputs. Four times the rows, the same width: one byte per added pixel
+    # would be 768 KiB more; the old image-sized buffers (census, grey, the disparity before
+    # the median) were 9 to 11 bytes per pixel.
+    w, nd, threads = 1024, 64, 2
+    low, high = (_peak_growth(h, w, nd, threads, rgb) for h in (256, 1024))
+    assert low["valid"] > 0.9 and high["valid"] > 0.9  # the pair was matched
+    added = (1024 - 256) * w
+    assert high["growth"] - low["growth"] < added // 2
+    # The estimate behind max_memory_mb covers what was used, and is not far above it.
+    for m in (low, high):
+        assert m["growth"] <= m["estimate"] + 128 * 1024
+        assert m["estimate"] < m["growth"] + 512 * 1024
 
 
 # ------------------------------------------------------------------------------------------

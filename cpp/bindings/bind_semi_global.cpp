@@ -64,9 +64,16 @@ void bind_semi_global(py::module_& m) {
       .def_property_readonly("threads", &SemiGlobalMatcher::threads)
       .def_property_readonly("isa",
                              [](const SemiGlobalMatcher& self) { return isa_name(self.isa()); });
-  m.def("semi_global_memory", &semi_global_memory, py::arg("rows"), py::arg("cols"),
-        py::arg("num_disparities"), py::arg("paths"), py::arg("threads"),
-        "Bytes a semi-global match of a rows x cols pair needs.");
+  m.def(
+      "semi_global_memory",
+      [](std::ptrdiff_t rows, std::ptrdiff_t cols, int num_disparities, int paths, int threads,
+         const std::string& isa, int block_size) {
+        return semi_global_memory(rows, cols, num_disparities, paths, threads, resolve_isa(isa),
+                                  block_size);
+      },
+      py::arg("rows"), py::arg("cols"), py::arg("num_disparities"), py::arg("paths"),
+      py::arg("threads"), py::arg("isa") = "auto", py::arg("block_size") = 3,
+      "Bytes a semi-global match of a rows x cols pair allocates with the kernels of isa.");
 }
 
 }  // namespace stereodepth::bindings

@@ -184,8 +184,7 @@ struct BlockMatcher::Workspace {
 
   std::vector<ByteBuffer> workers;                // per worker: scratch, grey, feature rows
   std::vector<std::vector<SpeckleBand>> speckle;  // speckle labellings, per worker
-  std::vector<SpeckleRun> speckle_runs;
-  std::vector<std::int64_t> speckle_sizes;
+  detail::SpeckleJoin speckle_join;
 
   std::size_t bytes() const {
     std::size_t n = 0;
@@ -544,7 +543,7 @@ void BlockMatcher::compute(const StereoImage& left, const StereoImage& right,
     }
     starts.push_back(rows);
     speckle_finish(k, disparity, confidence, p.speckle_window, speckle_rf, labels, starts,
-                   ws.speckle_runs, ws.speckle_sizes);
+                   ws.speckle_join);
   }
 }
 
@@ -693,13 +692,12 @@ std::vector<std::pair<std::string, double>> BlockMatcher::stage_times(
     const float rf = speckle_range_f(p.speckle_range);
     const ImageView<float> view{copy, rows, cols, cols};
     SpeckleBand band;
-    std::vector<SpeckleRun> runs;
-    std::vector<std::int64_t> sizes;
+    detail::SpeckleJoin join;
     const std::vector<SpeckleBand*> bands = {&band};
     const std::vector<std::ptrdiff_t> starts = {0, rows};
     timed("speckle", [&] {
       speckle_band(k, view, 0, rows, rf, band);
-      speckle_finish(k, view, ImageView<float>{}, p.speckle_window, rf, bands, starts, runs, sizes);
+      speckle_finish(k, view, ImageView<float>{}, p.speckle_window, rf, bands, starts, join);
     }, [&] {
       for (std::ptrdiff_t y = 0; y < rows; ++y) {
         std::memcpy(copy + y * cols, disparity.row(y), sizeof(float) * static_cast<std::size_t>(cols));

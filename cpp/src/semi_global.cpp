@@ -121,6 +121,7 @@ template <typename T>
 struct RawRows {
   T* slot[3] = {nullptr, nullptr, nullptr};
   std::ptrdiff_t row[3] = {-1, -1, -1};
+  int slots = 3;  // the slots in use (2r + 1 suffice)
 
   // The costs of the census rows y - r .. y + r (clamped) into raws; compute(yy, out) fills
   // one slot with census row yy's costs. With `deferred` (not null), the last missing row,
@@ -144,18 +145,18 @@ struct RawRows {
       for (int i = 0; i < 2 * r + 1; ++i) {
         bool have = false;
         int uses = 0;
-        for (int s = 0; s < 3; ++s) have = have || row[s] == need[i];
+        for (int s = 0; s < slots; ++s) have = have || row[s] == need[i];
         for (int j = 0; j < 2 * r + 1; ++j) uses += need[j] == need[i] ? 1 : 0;
         if (!have) last = uses == 1 ? i : -1;
       }
     }
     for (int i = 0; i < 2 * r + 1; ++i) {
       int at = -1;
-      for (int s = 0; s < 3; ++s) {
+      for (int s = 0; s < slots; ++s) {
         if (row[s] == need[i]) at = s;
       }
       if (at < 0) {
-        for (int s = 0; s < 3 && at < 0; ++s) {
+        for (int s = 0; s < slots && at < 0; ++s) {
           if (row[s] < 0 || !needed(row[s])) at = s;
         }
         if (i == last) {
@@ -177,6 +178,157 @@ T* aligned(std::vector<std::uint8_t>& v, std::size_t count) {
   const auto addr = reinterpret_cast<std::uintptr_t>(v.data());
   return reinterpret_cast<T*>(v.data() + (64 - addr % 64) % 64);
 }
+
+std::size_t sz(std::ptrdiff_t n) { return static_cast<std::size_t>(n); }
+
+// uint16 units rounded up to whole 64-byte lines.
+std::size_t r64(std::size_t n16) { return (n16 + 31) / 32 * 32; }
+
+// Bytes aligned<>() allocates for n16 uint16 units.
+double bytes16(std::size_t n16) { return 2.0 * static_cast<double>(n16) + 64.0; }
+
+// The fused row's scratch (offsets in uint16 units, each piece 64-byte aligned): the sums of
+// the vertical path and the path from the left, the per-disparity pieces, the per-pixel
+// results.
+struct FusedScratch {
+  std::size_t small, result, rfinal, total;
+  FusedScratch(std::size_t c, int nd) {
+    small = r64(c * sz(nd));
+    result = small + r64(8 * sz(nd) + 512);
+    rfinal = result + r64(8 * c);
+    total = rfinal + r64(c);
+  }
+};
+
+// The single-pass mode's grey and census rows, computed by each thread when it needs them
+// rather than for the whole image: census row y of an image from its grey rows y - 2 .. y + 2
+// (clamped); the grey rows of an RGB pair (and the 8-bit grey of a uint16 left image, for
+// P2') in a ring of kRing rows per image, row y in slot y % kRing, so that any kRing
+// consecutive rows are there at once. Grey uint8 images are read in place.
+class PairRows {
+ public:
+  static constexpr std::ptrdiff_t kRing = 8;
+
+  static int ring_images(PixelFormat f) {
+    return f == PixelFormat::kRgb8 ? 2 : f == PixelFormat::kGrey16 ? 1 : 0;
+  }
+  // uint16 units of scratch for `cols` columns.
+  static std::size_t n16(std::size_t c, int ring_images) {
+    return r64(2 * c + 32) + 2 * r64(c + 32) + r64((sz(ring_images * kRing) * c + 1) / 2);
+  }
+
+  PairRows(const detail::BlockMatchKernels& bk, const StereoImage& left,
+           const StereoImage& right, std::uint16_t* at)
+      : bk_(bk), rows_(left.rows), cols_(left.cols), format_(left.format) {
+    const auto c = sz(cols_);
+    img_[0] = &left;
+    img_[1] = &right;
+    tmp_ = reinterpret_cast<std::uint32_t*>(at);
+    at += r64(2 * c + 32);
+    for (auto& cen : cen_) {
+      cen = at;
+      at += r64(c + 32);
+    }
+    for (int im = 0; im < 2; ++im) {
+      grey_[im] = reinterpret_cast<std::uint8_t*>(at) + sz(im * kRing) * c;
+      for (auto& t : tag_[im]) t = -1;
+    }
+  }
+
+  // Grey row y (clamped) of image `im` on the 8-bit scale.
+  const std::uint8_t* grey8(int im, std::ptrdiff_t y) {
+    y = std::clamp<std::ptrdiff_t>(y, 0, rows_ - 1);
+    const StereoImage& src = *img_[im];
+    const auto* row = static_cast<const std::uint8_t*>(src.data) + y * src.row_stride;
+    if (format_ == PixelFormat::kGrey8) return row;
+    const std::ptrdiff_t slot = y % kRing;
+    std::uint8_t* g = grey_[im] + slot * cols_;
+    if (tag_[im][slot] != y) {
+      if (format_ == PixelFormat::kRgb8) {
+        bk_.rgb_to_grey(row, g, cols_);
+      } else {
+        const auto* s16 = reinterpret_cast<const std::uint16_t*>(row);
+        for (std::ptrdiff_t x = 0; x < cols_; ++x) g[x] = static_cast<std::uint8_t>(s16[x] >> 8);
+      }
+      tag_[im][slot] = y;
+    }
+    return g;
+  }
+
+  // The buffer census(im, ...) writes (its last row; a valid pointer before any call).
+  const std::uint16_t* last(int im) const { return cen_[im]; }
+
+  // Census row y of image `im`, valid until the next call for that image.
+  const std::uint16_t* census(int im, std::ptrdiff_t y) {
+    if (format_ == PixelFormat::kGrey16) {
+      const std::uint16_t* r5[5];
+      for (int i = 0; i < 5; ++i) {
+        const std::ptrdiff_t yy = std::clamp<std::ptrdiff_t>(y + i - 2, 0, rows_ - 1);
+        r5[i] = reinterpret_cast<const std::uint16_t*>(
+            static_cast<const std::uint8_t*>(img_[im]->data) + yy * img_[im]->row_stride);
+      }
+      bk_.census_row16(r5, tmp_, cols_);
+    } else {
+      const std::uint8_t* r5[5];
+      for (int i = 0; i < 5; ++i) r5[i] = grey8(im, y + i - 2);
+      bk_.census_row8(r5, tmp_, cols_);
+    }
+    std::uint16_t* out = cen_[im];
+    for (std::ptrdiff_t x = 0; x < cols_; ++x) out[x] = static_cast<std::uint16_t>(tmp_[x]);
+    return out;
+  }
+
+ private:
+  const detail::BlockMatchKernels& bk_;
+  const StereoImage* img_[2];
+  std::ptrdiff_t rows_, cols_;
+  PixelFormat format_;
+  std::uint32_t* tmp_;
+  std::uint16_t* cen_[2];
+  std::uint8_t* grey_[2];
+  std::ptrdiff_t tag_[2][kRing];
+};
+
+// A single-pass thread's scratch with the fused row (uint16 offsets from a 64-byte aligned
+// start): the raw rows' and the box's scratch (rev), the 2r + 1 raw rows of 8-bit costs and the
+// box's ring, the row's box costs, the path from above, its least costs per pixel, the fused
+// row's scratch, the grey and census rows.
+struct FusedStripeLayout {
+  std::size_t raw, crow, lv, lvmin, fused, pair, total;
+  FusedStripeLayout(std::size_t c, int nd, int r, int ring_images) {
+    const std::size_t d = sz(nd);
+    raw = r64(c + d + 32);
+    crow = raw + r64((sz(2 * r + 1) * (c + 2) * d + 3 * d + 1) / 2);
+    lv = crow + r64((c * d + 1) / 2);
+    lvmin = lv + r64(detail::kFusedPad + c * (d + detail::kFusedPad) + 64);
+    fused = lvmin + r64(c);
+    pair = fused + FusedScratch(c, nd).total;
+    total = pair + PairRows::n16(c, ring_images);
+  }
+};
+
+// The same without the fused row (16-bit costs): rev, the box's column sums and the 2r + 1 raw
+// rows, the row's sums, rmin and rarg, the box costs, two rows of path costs, the horizontal
+// paths' scratch, the winners, the grey and census rows.
+struct PlainStripeLayout {
+  std::size_t colraw, sums, rmin, rarg, crow, rows16, tmp, winners, pair, total;
+  PlainStripeLayout(std::size_t c, int nd, int ls, int r, int ring_images) {
+    const std::size_t d = sz(nd), n_col = c * d;
+    colraw = r64(c + d);
+    sums = colraw + r64(sz(2 * r + 2) * (c + 2) * d);
+    rmin = sums + r64(n_col);
+    rarg = rmin + r64(c);
+    crow = rarg + r64(c);
+    rows16 = crow + r64((n_col + 1) / 2);
+    tmp = rows16 + r64(2 * c * sz(ls));
+    winners = tmp + r64(2 * sz(ls));
+    pair = winners + r64(2 * c);
+    total = pair + PairRows::n16(c, ring_images);
+  }
+};
+
+// The in-place median's scratch per thread: two rows as they were, the kernel's flags.
+std::size_t median_n16(std::size_t c) { return 2 * r64(2 * c) + r64((c + 1) / 2); }
 
 }  // namespace
 
@@ -224,27 +376,60 @@ void validate(const SemiGlobalParams& p) {
 }
 
 std::size_t semi_global_memory(std::ptrdiff_t rows, std::ptrdiff_t cols, int nd, int paths,
-                               int threads) {
-  const double h = static_cast<double>(rows), w = static_cast<double>(cols), d = nd;
-  const double ls = path_stride(nd);
-  const double t = std::max(1, threads);
-  double bytes = h * w * 13.0;  // census (2 x 2), grey (3), disparity before the median (4)
-  bytes += t * (w * d * 10.0 + (w + d) * 2.0 + 4.0 * ls * 2.0 + w * 14.0);  // per thread
+                               int threads, Isa isa, int block_size) {
+  // What compute() allocates for an RGB pair (grey pairs need a little less), with the median
+  // on; the speckle filter's runs, which depend on the disparities, are left out.
+  const detail::SemiGlobalKernels& k = sgm_kernels(isa);
+  const bool fused = k.fused_row != nullptr && nd % k.fused_lanes == 0;
+  const int r = block_size / 2;
+  const std::size_t c = sz(std::max<std::ptrdiff_t>(cols, 1));
+  const double h = static_cast<double>(std::max<std::ptrdiff_t>(rows, 1));
+  const double w = static_cast<double>(c), d = nd;
+  const int ls = path_stride(nd);
+  const std::ptrdiff_t nt =
+      std::max<std::ptrdiff_t>(1, std::min<std::ptrdiff_t>(std::max(1, threads), rows));
+  const double median = bytes16(median_n16(c));
+  double bytes = 2.0 * static_cast<double>(nt - 1) * w * 4.0;  // the median's band edges
   if (paths == 3) {
-    bytes += t * (w * d * 1.0 + 2.0 * w * ls * 2.0);  // a cost row and two path rows
+    // Per thread: a few rows of W x D (the stripes' threads) or the median's rows.
+    const std::ptrdiff_t stripes = (rows + kStripeRows - 1) / kStripeRows;
+    const std::ptrdiff_t ns = std::min<std::ptrdiff_t>(nt, std::max<std::ptrdiff_t>(stripes, 1));
+    const double stripe = bytes16(fused ? FusedStripeLayout(c, nd, r, 2).total
+                                        : PlainStripeLayout(c, nd, ls, r, 2).total);
+    bytes += static_cast<double>(ns) * std::max(stripe, median) +
+             static_cast<double>(nt - ns) * median;
   } else {
-    bytes += h * w * d * 3.0;                              // 16-bit sums, 8-bit costs
-    bytes += vertical_paths(paths) * 2.0 * w * ls * 2.0;  // path rows
+    // The images' census (2 x 2 bytes per pixel), the left grey for P2' (1) and the RGB
+    // pair's grey (2); the sums and the costs (3 bytes per pixel and disparity); the path rows.
+    bytes += h * w * 7.0 + 64.0 * 4;
+    bytes += h * w * d * 3.0 + 128.0;
+    bytes += bytes16(2 * sz(vertical_paths(paths)) * c * sz(ls));
+    // Per thread, the most of its stages: census, the vertical paths over a band of columns,
+    // the row's horizontal paths and decision, the median.
+    const std::ptrdiff_t nb =
+        std::max<std::ptrdiff_t>(1, std::min<std::ptrdiff_t>(std::max(1, threads), cols / 16));
+    const std::size_t band_cols = (c + sz(nb) - 1) / sz(nb);
+    const double vertical =
+        bytes16(c + sz(nd) + 32 + 4 * (band_cols + 2) * sz(nd) + sz(nd));
+    const double row = bytes16(fused ? FusedScratch(c, nd).total
+                                     : c * sz(nd) + 4 * c + 2 * sz(ls) + 32);
+    const double census = 4.0 * w + 64.0;
+    for (std::ptrdiff_t b = 0; b < std::max(nt, nb); ++b) {
+      double most = 0.0;
+      if (b < nt) most = std::max({census, row, median});
+      if (b < nb) most = std::max(most, vertical);
+      bytes += most;
+    }
   }
   return static_cast<std::size_t>(std::min(bytes, 1.8e19));
 }
 
 struct SemiGlobalMatcher::Workspace {
-  std::vector<std::uint8_t> sums, costs, census_l, census_r, grey, pgrey, pre_median, path_rows;
+  std::vector<std::uint8_t> sums, costs, census_l, census_r, grey, pgrey, path_rows;
+  std::vector<float> median_edges;  // rows around the boundaries of the median's bands
   std::vector<std::vector<std::uint8_t>> scratch;  // per thread
   std::vector<detail::SpeckleBand> speckle;
-  std::vector<detail::SpeckleRun> speckle_runs;
-  std::vector<std::int64_t> speckle_sizes;
+  detail::SpeckleJoin speckle_join;
 };
 
 SemiGlobalMatcher::SemiGlobalMatcher(const SemiGlobalParams& params, int threads, Isa isa)
@@ -273,7 +458,8 @@ void SemiGlobalMatcher::compute(const StereoImage& left, const StereoImage& righ
   }
   const std::ptrdiff_t rows = left.rows, cols = left.cols;
   const int nd = p.num_disparities;
-  const std::size_t need = semi_global_memory(rows, cols, nd, p.paths, threads_);
+  const std::size_t need =
+      semi_global_memory(rows, cols, nd, p.paths, threads_, isa_, p.block_size);
   const double need_mb = static_cast<double>(need) / 1048576.0;
   if (need_mb > p.max_memory_mb) {
     std::ostringstream msg;
@@ -303,14 +489,16 @@ void SemiGlobalMatcher::compute(const StereoImage& left, const StereoImage& righ
   const std::size_t vol = npix * static_cast<std::size_t>(nd);
   const int ls = path_stride(nd);
 
+  // paths == 3 keeps no image-sized buffer: its threads compute the grey and census rows
+  // they need (PairRows). Paths 4 and 8 keep the census and grey images.
   const bool single_pass = p.paths == 3;
+  const std::size_t whole = single_pass ? 0 : npix;
   auto* sums = aligned<std::uint16_t>(ws.sums, single_pass ? 0 : vol);
   auto* costs = aligned<std::uint8_t>(ws.costs, single_pass ? 0 : vol);
-  auto* lcen = aligned<std::uint16_t>(ws.census_l, npix);
-  auto* rcen = aligned<std::uint16_t>(ws.census_r, npix);
-  auto* grey = aligned<std::uint8_t>(ws.grey, rgb ? 2 * npix : 0);
-  auto* pgrey = aligned<std::uint8_t>(ws.pgrey, npix);  // grey levels for P2', 8-bit scale
-  float* pre = p.median ? aligned<float>(ws.pre_median, npix) : nullptr;
+  auto* lcen = aligned<std::uint16_t>(ws.census_l, whole);
+  auto* rcen = aligned<std::uint16_t>(ws.census_r, whole);
+  auto* grey = aligned<std::uint8_t>(ws.grey, rgb ? 2 * whole : 0);
+  auto* pgrey = aligned<std::uint8_t>(ws.pgrey, whole);  // grey levels for P2', 8-bit scale
 
   const std::ptrdiff_t nt = std::max<std::ptrdiff_t>(1, std::min<std::ptrdiff_t>(threads_, rows));
   const auto unt = static_cast<std::size_t>(nt);
@@ -319,10 +507,10 @@ void SemiGlobalMatcher::compute(const StereoImage& left, const StereoImage& righ
     return n * b / parts;
   };
 
-  // 0. Grey and census rows (rows split between the threads).
+  // 0. Paths 4 and 8: the grey and census images (rows split between the threads).
   const StereoImage* images[2] = {&left, &right};
   std::uint16_t* census[2] = {lcen, rcen};
-  if (rgb) {
+  if (rgb && !single_pass) {
     run_bands(nt, [&](std::ptrdiff_t b) {
       for (int im = 0; im < 2; ++im) {
         for (std::ptrdiff_t y = band(rows, nt, b); y < band(rows, nt, b + 1); ++y) {
@@ -333,7 +521,7 @@ void SemiGlobalMatcher::compute(const StereoImage& left, const StereoImage& righ
       }
     });
   }
-  run_bands(nt, [&](std::ptrdiff_t b) {
+  run_bands(single_pass ? 0 : nt, [&](std::ptrdiff_t b) {
     auto* tmp = aligned<std::uint32_t>(ws.scratch[static_cast<std::size_t>(b)],
                                        static_cast<std::size_t>(cols));
     for (int im = 0; im < 2; ++im) {
@@ -386,75 +574,67 @@ void SemiGlobalMatcher::compute(const StereoImage& left, const StereoImage& righ
 
   const auto n_col = static_cast<std::size_t>(cols) * static_cast<std::size_t>(nd);
   const bool fused = k.fused_row != nullptr && nd % k.fused_lanes == 0;
-  // The fused row's scratch (uint16 units, each piece 64-byte aligned): the sums of the
-  // vertical path and the path from the left, the pixel-sized pieces, the per-pixel results.
-  auto round64 = [](std::size_t n16) { return (n16 + 31) / 32 * 32; };
-  const std::size_t n_small = round64(8 * static_cast<std::size_t>(nd) + 512);
-  const std::size_t n_fused = round64(n_col) + n_small +
-                              round64(8 * static_cast<std::size_t>(cols)) +
-                              round64(static_cast<std::size_t>(cols));
+  const FusedScratch fs(sz(cols), nd);
+  const std::size_t n_fused = fs.total;
   auto fused_args = [&](std::uint16_t* at) {
     detail::FusedRowArgs fa{};
     fa.p = pp;
     fa.d = da;
     fa.partial = at;
-    at += round64(n_col);
-    fa.small = at;
-    at += n_small;
-    fa.result = reinterpret_cast<std::uint32_t*>(at);
-    at += round64(8 * static_cast<std::size_t>(cols));
-    fa.rfinal = at;
+    fa.small = at + fs.small;
+    fa.result = reinterpret_cast<std::uint32_t*>(at + fs.result);
+    fa.rfinal = at + fs.rfinal;
     return fa;
   };
+  const int ring_images = PairRows::ring_images(left.format);
   if (single_pass && fused) {
     // As below, with the fused row: per row the costs, then the path from above (in place in
     // one row of path costs) and the paths along the row, the sums and the decision.
     const std::ptrdiff_t stripes = (rows + kStripeRows - 1) / kStripeRows;
     const std::ptrdiff_t ns = std::min<std::ptrdiff_t>(nt, stripes);
     run_bands(ns, [&](std::ptrdiff_t b) {
-      const auto c = static_cast<std::size_t>(cols);
-      const std::size_t n_rev = round64(c + static_cast<std::size_t>(nd) + 32);
-      // uint8 raw rows and the box's ring
-      const std::size_t raw_len = (c + 2) * static_cast<std::size_t>(nd);
-      const std::size_t n_raw = round64((3 * raw_len + 3 * static_cast<std::size_t>(nd) + 1) / 2);
-      const std::size_t n_lv = round64(
-          detail::kFusedPad + c * static_cast<std::size_t>(nd + detail::kFusedPad) + 64);
-      const std::size_t n16 =
-          n_rev + n_raw + round64((n_col + 1) / 2) + n_lv + round64(c) + n_fused;
-      std::vector<std::uint8_t>& sc = ws.scratch[static_cast<std::size_t>(b)];
-      auto* rev = aligned<std::uint16_t>(sc, n16);
-      auto* raw8 = reinterpret_cast<std::uint8_t*>(rev + n_rev);
+      const auto c = sz(cols);
+      const FusedStripeLayout lay(c, nd, r, ring_images);
+      auto* rev = aligned<std::uint16_t>(ws.scratch[sz(b)], lay.total);
+      auto* rev8 = reinterpret_cast<std::uint8_t*>(rev);
+      auto* raw8 = reinterpret_cast<std::uint8_t*>(rev + lay.raw);
+      const std::size_t raw_len = (c + 2) * sz(nd);
       RawRows<std::uint8_t> raw;
-      for (int i = 0; i < 3; ++i) raw.slot[i] = raw8 + static_cast<std::size_t>(i) * raw_len;
-      std::uint8_t* ring = raw8 + 3 * raw_len;
-      auto* crow = reinterpret_cast<std::uint8_t*>(rev + n_rev + n_raw);
-      auto* lv = reinterpret_cast<std::int16_t*>(rev + n_rev + n_raw + round64((n_col + 1) / 2));
-      std::int16_t* lvmin = lv + n_lv;
-      detail::FusedRowArgs fa = fused_args(reinterpret_cast<std::uint16_t*>(lvmin + round64(c)));
+      raw.slots = 2 * r + 1;
+      for (int i = 0; i < raw.slots; ++i) raw.slot[i] = raw8 + sz(i) * raw_len;
+      std::uint8_t* ring = raw8 + sz(raw.slots) * raw_len;
+      auto* crow = reinterpret_cast<std::uint8_t*>(rev + lay.crow);
+      PairRows src(bk, left, right, rev + lay.pair);
+      detail::FusedRowArgs fa = fused_args(rev + lay.fused);
       fa.c = crow;
-      fa.lv = lv;
-      fa.lvmin = lvmin;
+      fa.lv = reinterpret_cast<std::int16_t*>(rev + lay.lv);
+      fa.lvmin = reinterpret_cast<std::int16_t*>(rev + lay.lvmin);
       for (std::ptrdiff_t st = band(stripes, ns, b); st < band(stripes, ns, b + 1); ++st) {
         const std::ptrdiff_t y0 = st * kStripeRows;
         const std::ptrdiff_t y1 = std::min<std::ptrdiff_t>(rows, y0 + kStripeRows);
         for (std::ptrdiff_t y = y0; y < y1; ++y) {
           std::uint8_t* raws[3];
           int fresh = -1;
-          auto* rev8 = reinterpret_cast<std::uint8_t*>(rev);
           raw.get(
               rows, r, y, raws,
               [&](std::ptrdiff_t yy, std::uint8_t* out) {
-                k.raw_row8(lcen + yy * cols, rcen + yy * cols, cols, 0, cols, r, nd,
-                           p.min_disparity, rev8, out);
+                const std::uint16_t* lrow = src.census(0, yy);
+                k.raw_row8(lrow, src.census(1, yy), cols, 0, cols, r, nd, p.min_disparity, rev8,
+                           out);
               },
               &fresh);
-          const std::ptrdiff_t yf =
-              fresh < 0 ? 0 : std::clamp<std::ptrdiff_t>(y + fresh - r, 0, rows - 1);
-          k.box_row8(raws, fresh, lcen + yf * cols, rcen + yf * cols, rev8, r, cols, 0, cols, nd,
-                     p.min_disparity, cmax, ring, crow);
-          fa.g = pgrey + y * cols;
-          fa.gprev = y == y0 ? nullptr : pgrey + (y - 1) * cols;
-          fa.disp = pre ? pre + y * cols : disparity.row(y);
+          const std::uint16_t* lrow = src.last(0);  // unread unless fresh >= 0
+          const std::uint16_t* rrow = src.last(1);
+          if (fresh >= 0) {
+            const std::ptrdiff_t yf = std::clamp<std::ptrdiff_t>(y + fresh - r, 0, rows - 1);
+            lrow = src.census(0, yf);
+            rrow = src.census(1, yf);
+          }
+          k.box_row8(raws, fresh, lrow, rrow, rev8, r, cols, 0, cols, nd, p.min_disparity, cmax,
+                     ring, crow);
+          fa.g = src.grey8(0, y);
+          fa.gprev = y == y0 ? nullptr : src.grey8(0, y - 1);
+          fa.disp = disparity.row(y);
           fa.conf = confidence.data ? confidence.row(y) : nullptr;
           k.fused_row(fa);
         }
@@ -468,33 +648,28 @@ void SemiGlobalMatcher::compute(const StereoImage& left, const StereoImage& righ
     const std::ptrdiff_t stripes = (rows + kStripeRows - 1) / kStripeRows;
     const std::ptrdiff_t ns = std::min<std::ptrdiff_t>(nt, stripes);
     run_bands(ns, [&](std::ptrdiff_t b) {
-      const auto c = static_cast<std::size_t>(cols);
-      const auto lsz = static_cast<std::size_t>(ls);
-      const std::size_t n_rev = c + static_cast<std::size_t>(nd);
-      const std::size_t n_raw = 4 * (c + 2) * static_cast<std::size_t>(nd);  // 3 rows, a sum
-      const std::size_t n_row = c * lsz;
-      std::vector<std::uint8_t>& sc = ws.scratch[static_cast<std::size_t>(b)];
-      // uint16 pieces: rev, colraw, total, rmin, rarg, cost row (as bytes), two path rows,
-      // horizontal scratch, winners (as uint32)
-      const std::size_t n16 = n_rev + n_raw + n_col + 2 * c + (n_col + 1) / 2 + 2 * n_row +
-                              2 * lsz + 2 * c + 64;
-      auto* rev = aligned<std::uint16_t>(sc, n16);
-      std::uint16_t* colraw = rev + n_rev;
+      const auto c = sz(cols);
+      const auto lsz = sz(ls);
+      const PlainStripeLayout lay(c, nd, ls, r, ring_images);
+      auto* rev = aligned<std::uint16_t>(ws.scratch[sz(b)], lay.total);
+      std::uint16_t* colraw = rev + lay.colraw;
       RawRows<std::uint16_t> raw;
-      const std::size_t raw_len = (c + 2) * static_cast<std::size_t>(nd);
-      for (int i = 0; i < 3; ++i) raw.slot[i] = colraw + static_cast<std::size_t>(i + 1) * raw_len;
-      std::uint16_t* total = colraw + n_raw;
-      std::uint16_t* rmin = total + n_col;
-      std::uint16_t* rarg = rmin + c;
-      auto* crow = reinterpret_cast<std::uint8_t*>(rarg + c);
-      auto* rows16 = reinterpret_cast<std::int16_t*>(rarg + c + (n_col + 1) / 2);
+      raw.slots = 2 * r + 1;
+      const std::size_t raw_len = (c + 2) * sz(nd);
+      for (int i = 0; i < raw.slots; ++i) raw.slot[i] = colraw + sz(i + 1) * raw_len;
+      std::uint16_t* total = rev + lay.sums;
+      std::uint16_t* rmin = rev + lay.rmin;
+      std::uint16_t* rarg = rev + lay.rarg;
+      auto* crow = reinterpret_cast<std::uint8_t*>(rev + lay.crow);
+      auto* rows16 = reinterpret_cast<std::int16_t*>(rev + lay.rows16);
+      const std::size_t n_row = c * lsz;
       std::int16_t* prow[2] = {rows16, rows16 + n_row};
-      std::int16_t* tmp = rows16 + 2 * n_row;
-      auto* winners = reinterpret_cast<std::uint32_t*>(
-          (reinterpret_cast<std::uintptr_t>(tmp + 2 * lsz) + 3) & ~std::uintptr_t{3});
+      auto* tmp = reinterpret_cast<std::int16_t*>(rev + lay.tmp);
+      auto* winners = reinterpret_cast<std::uint32_t*>(rev + lay.winners);
+      PairRows src(bk, left, right, rev + lay.pair);
       for (std::size_t i = 0; i < 2 * c; ++i) {
         rows16[i * lsz] = detail::kSentinel;
-        rows16[i * lsz + static_cast<std::size_t>(nd) + 1] = detail::kSentinel;
+        rows16[i * lsz + sz(nd) + 1] = detail::kSentinel;
       }
       for (std::ptrdiff_t st = band(stripes, ns, b); st < band(stripes, ns, b + 1); ++st) {
         const std::ptrdiff_t y0 = st * kStripeRows;
@@ -503,17 +678,17 @@ void SemiGlobalMatcher::compute(const StereoImage& left, const StereoImage& righ
         for (std::ptrdiff_t y = y0; y < y1; ++y) {
           std::uint16_t* raws[3];
           raw.get(rows, r, y, raws, [&](std::ptrdiff_t yy, std::uint16_t* out) {
-            k.raw_row(lcen + yy * cols, rcen + yy * cols, cols, 0, cols, r, nd, p.min_disparity,
-                      rev, out);
+            const std::uint16_t* lrow = src.census(0, yy);
+            k.raw_row(lrow, src.census(1, yy), cols, 0, cols, r, nd, p.min_disparity, rev, out);
           });
           k.box_row(raws, r, cols, 0, cols, nd, p.min_disparity, cmax, colraw, crow);
           const bool first = y == y0;
-          k.path_row(pp, crow, pgrey + y * cols, first ? nullptr : pgrey + (y - 1) * cols,
+          const std::uint8_t* g = src.grey8(0, y);
+          k.path_row(pp, crow, g, first ? nullptr : src.grey8(0, y - 1),
                      first ? nullptr : prow[1 - flip], prow[flip], cols, 0, cols, 0, total, true);
-          k.horizontal_row(pp, crow, pgrey + y * cols, cols, total, tmp);
-          float* drow = pre ? pre + y * cols : disparity.row(y);
-          k.decide_row(da, total, drow, confidence.data ? confidence.row(y) : nullptr, rmin,
-                       rarg, winners);
+          k.horizontal_row(pp, crow, g, cols, total, tmp);
+          k.decide_row(da, total, disparity.row(y), confidence.data ? confidence.row(y) : nullptr,
+                       rmin, rarg, winners);
           flip = 1 - flip;
         }
       }
@@ -629,7 +804,7 @@ void SemiGlobalMatcher::compute(const StereoImage& left, const StereoImage& righ
           fa.c = costs + static_cast<std::size_t>(y) * n_col;
           fa.base = sums + static_cast<std::size_t>(y) * n_col;
           fa.g = pgrey + y * cols;
-          fa.disp = pre ? pre + y * cols : disparity.row(y);
+          fa.disp = disparity.row(y);
           fa.conf = confidence.data ? confidence.row(y) : nullptr;
           k.fused_row(fa);
         }
@@ -650,7 +825,7 @@ void SemiGlobalMatcher::compute(const StereoImage& left, const StereoImage& righ
                     n_col * sizeof(std::uint16_t));
         k.horizontal_row(pp, costs + static_cast<std::size_t>(y) * n_col, pgrey + y * cols, cols,
                          total, tmp);
-        float* drow = pre ? pre + y * cols : disparity.row(y);
+        float* drow = disparity.row(y);
         k.decide_row(da, total, drow, confidence.data ? confidence.row(y) : nullptr, rmin, rarg,
                      winners);
       }
@@ -658,15 +833,34 @@ void SemiGlobalMatcher::compute(const StereoImage& left, const StereoImage& righ
     }
   }
 
-  // 4. The 3x3 median of the valid disparities (the lower median; NaN stays NaN).
-  if (pre) {
+  // 4. The 3x3 median of the valid disparities (the lower median; NaN stays NaN), in place:
+  //    each band of rows keeps a copy of the rows it still reads as they were; the rows on
+  //    either side of each boundary between bands are copied first.
+  if (p.median) {
+    const auto c = sz(cols);
+    ws.median_edges.resize(2 * sz(nt - 1) * c);
+    auto edge = [&](std::ptrdiff_t b, int side) {  // boundary b (1 .. nt - 1): row start - 1, start
+      return ws.median_edges.data() + (2 * sz(b - 1) + sz(side)) * c;
+    };
+    for (std::ptrdiff_t b = 1; b < nt; ++b) {
+      const std::ptrdiff_t y = band(rows, nt, b);
+      std::memcpy(edge(b, 0), disparity.row(y - 1), c * sizeof(float));
+      std::memcpy(edge(b, 1), disparity.row(y), c * sizeof(float));
+    }
     run_bands(nt, [&](std::ptrdiff_t b) {
-      auto* flags = aligned<std::uint8_t>(ws.scratch[static_cast<std::size_t>(b)],
-                                          static_cast<std::size_t>(cols));
-      for (std::ptrdiff_t y = band(rows, nt, b); y < band(rows, nt, b + 1); ++y) {
-        k.median_row(y > 0 ? pre + (y - 1) * cols : nullptr, pre + y * cols,
-                     y + 1 < rows ? pre + (y + 1) * cols : nullptr, disparity.row(y), flags,
-                     cols);
+      auto* kept = aligned<float>(ws.scratch[sz(b)], median_n16(c) / 2);
+      float* orig[2] = {kept, kept + r64(2 * c) / 2};
+      auto* flags = reinterpret_cast<std::uint8_t*>(kept + r64(2 * c));
+      const std::ptrdiff_t y0 = band(rows, nt, b), y1 = band(rows, nt, b + 1);
+      const float* up = b > 0 ? edge(b, 0) : nullptr;
+      for (std::ptrdiff_t y = y0; y < y1; ++y) {
+        float* mid = orig[y % 2];
+        std::memcpy(mid, disparity.row(y), c * sizeof(float));
+        const float* down = y + 1 < y1 ? disparity.row(y + 1)
+                            : y + 1 < rows ? edge(b + 1, 1)
+                                           : nullptr;
+        k.median_row(up, mid, down, disparity.row(y), flags, cols);
+        up = mid;
       }
     });
   }
@@ -687,7 +881,7 @@ void SemiGlobalMatcher::compute(const StereoImage& left, const StereoImage& righ
     }
     starts.push_back(rows);
     detail::speckle_finish(bk, disparity, confidence, p.speckle_window, rf, labels, starts,
-                           ws.speckle_runs, ws.speckle_sizes);
+                           ws.speckle_join);
   }
 }
 

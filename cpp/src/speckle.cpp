@@ -57,6 +57,8 @@ void speckle_band(const BlockMatchKernels& k, const ImageView<float>& disp,
   const std::ptrdiff_t cols = disp.cols;
   const auto words = static_cast<std::size_t>((cols + 63) / 64);
   b.runs.clear();
+  b.y0 = y0;
+  b.row_first.clear();
   b.valid.resize(words);
   b.left.resize(words);
   b.up.resize(words);
@@ -64,6 +66,7 @@ void speckle_band(const BlockMatchKernels& k, const ImageView<float>& disp,
     k.speckle_links(disp.row(y), y > y0 ? disp.row(y - 1) : nullptr, cols, rf, b.valid.data(),
                     b.left.data(), b.up.data());
     b.cur.set(b.valid.data(), b.left.data(), words, static_cast<std::int32_t>(b.runs.size()));
+    b.row_first.push_back(static_cast<std::int32_t>(b.runs.size()));
     for (std::size_t w = 0; w < words; ++w) {
       std::uint64_t starts = b.cur.bits[w];
       while (starts) {
@@ -79,8 +82,7 @@ void speckle_band(const BlockMatchKernels& k, const ImageView<float>& disp,
         }
         x1 = std::min(x1, cols);
         const auto id = static_cast<std::int32_t>(b.runs.size());
-        b.runs.push_back({id, static_cast<std::int32_t>(y), static_cast<std::int32_t>(x0),
-                          static_cast<std::int32_t>(x1)});
+        b.runs.push_back({id, static_cast<std::int32_t>(x0), static_cast<std::int32_t>(x1)});
       }
     }
     if (y > y0) {
@@ -92,30 +94,59 @@ void speckle_band(const BlockMatchKernels& k, const ImageView<float>& disp,
     }
     std::swap(b.cur, b.prev);
   }
+  b.row_first.push_back(static_cast<std::int32_t>(b.runs.size()));
 }
 
 // Joins the labellings (bands[i]: rows starts[i] .. starts[i + 1] - 1) and clears the
 // regions of at most `window` pixels.
+//
+// 1. In each band, every run links to its root (the band's lowest index in its region, as
+//    unite() keeps the lower root and path halving only lowers a parent), and each root's
+//    parent becomes minus the region's size in the band, capped at window + 1 (only
+//    "size > window" matters, and the cap keeps it in 32 bits).
+// 2. The vertical links across each boundary between bands pair the two bands' roots; those
+//    roots (O(W) per boundary) are united in a small union-find, their sizes summed (capped)
+//    and written back to each of them.
+// 3. Each run is cleared when its root's size is at most `window`.
 void speckle_finish(const BlockMatchKernels& k, const ImageView<float>& disp,
                     const ImageView<float>& conf, int window, float rf,
                     const std::vector<SpeckleBand*>& bands,
-                    const std::vector<std::ptrdiff_t>& starts, std::vector<SpeckleRun>& all,
-                    std::vector<std::int64_t>& sizes) {
+                    const std::vector<std::ptrdiff_t>& starts, SpeckleJoin& join) {
   const std::ptrdiff_t cols = disp.cols;
   const auto words = static_cast<std::size_t>((cols + 63) / 64);
   const std::size_t nb = starts.size() - 1;
+  const std::int64_t cap = std::min<std::int64_t>(static_cast<std::int64_t>(window) + 1,
+                                                  std::numeric_limits<std::int32_t>::max());
+  auto capped = [&](std::int64_t n) { return static_cast<std::int32_t>(std::min(n, cap)); };
+  auto root_of = [](const std::vector<SpeckleRun>& runs, std::int32_t j) {
+    const std::int32_t p = runs[static_cast<std::size_t>(j)].parent;
+    return p < 0 ? j : p;
+  };
+  // 1.
+  for (std::size_t i = 0; i < nb; ++i) {
+    std::vector<SpeckleRun>& runs = bands[i]->runs;
+    // A parent is never above its run, so in increasing order each run's parent p has been
+    // handled: p is a root (negative) or links to its root directly.
+    const auto n = static_cast<std::int32_t>(runs.size());
+    for (std::int32_t j = 0; j < n; ++j) {
+      SpeckleRun& r = runs[static_cast<std::size_t>(j)];
+      const std::int64_t len = r.x1 - r.x0;
+      if (r.parent == j) {
+        r.parent = -capped(len);
+      } else {
+        const std::int32_t q = runs[static_cast<std::size_t>(r.parent)].parent;
+        if (q >= 0) r.parent = q;
+        SpeckleRun& root = runs[static_cast<std::size_t>(r.parent)];
+        root.parent = -capped(-static_cast<std::int64_t>(root.parent) + len);
+      }
+    }
+  }
+  // 2.
   std::vector<std::int32_t> offset(nb + 1, 0);
   for (std::size_t i = 0; i < nb; ++i) {
     offset[i + 1] = offset[i] + static_cast<std::int32_t>(bands[i]->runs.size());
   }
-  all.resize(static_cast<std::size_t>(offset[nb]));
-  for (std::size_t i = 0; i < nb; ++i) {
-    for (std::size_t j = 0; j < bands[i]->runs.size(); ++j) {
-      SpeckleRun r = bands[i]->runs[j];
-      r.parent += offset[i];
-      all[static_cast<std::size_t>(offset[i]) + j] = r;
-    }
-  }
+  join.pairs.clear();
   for (std::size_t i = 1; i < nb; ++i) {
     SpeckleBand& b = *bands[i];
     const std::ptrdiff_t y = starts[i];
@@ -124,22 +155,66 @@ void speckle_finish(const BlockMatchKernels& k, const ImageView<float>& disp,
     const RowStarts& below = b.first;
     const RowStarts& above = bands[i - 1]->prev;
     each_new_link(b.up.data(), below, above, words, [&](std::ptrdiff_t x) {
-      unite(all, offset[i] + below.run_at(x), offset[i - 1] + above.run_at(x));
+      join.pairs.push_back(offset[i] + root_of(b.runs, below.run_at(x)));
+      join.pairs.push_back(offset[i - 1] + root_of(bands[i - 1]->runs, above.run_at(x)));
     });
   }
-  sizes.assign(all.size(), 0);
-  for (std::size_t i = 0; i < all.size(); ++i) {
-    const std::int32_t root = find_root(all, static_cast<std::int32_t>(i));
-    all[i].parent = root;  // now every run links to its root directly
-    sizes[static_cast<std::size_t>(root)] += all[i].x1 - all[i].x0;
+  if (!join.pairs.empty()) {
+    join.ids.assign(join.pairs.begin(), join.pairs.end());
+    std::sort(join.ids.begin(), join.ids.end());
+    join.ids.erase(std::unique(join.ids.begin(), join.ids.end()), join.ids.end());
+    const std::size_t n = join.ids.size();
+    auto run = [&](std::int32_t id) -> SpeckleRun& {  // a global run id's run
+      const auto band = static_cast<std::size_t>(
+          std::upper_bound(offset.begin(), offset.end(), id) - offset.begin() - 1);
+      return bands[band]->runs[static_cast<std::size_t>(id - offset[band])];
+    };
+    auto index = [&](std::int32_t id) {
+      return static_cast<std::int32_t>(std::lower_bound(join.ids.begin(), join.ids.end(), id) -
+                                       join.ids.begin());
+    };
+    auto find = [&](std::int32_t a) {
+      while (join.parent[static_cast<std::size_t>(a)] != a) {
+        std::int32_t& pa = join.parent[static_cast<std::size_t>(a)];
+        pa = join.parent[static_cast<std::size_t>(pa)];
+        a = pa;
+      }
+      return a;
+    };
+    join.parent.resize(n);
+    join.size.assign(n, 0);
+    for (std::size_t m = 0; m < n; ++m) join.parent[m] = static_cast<std::int32_t>(m);
+    for (std::size_t q = 0; q < join.pairs.size(); q += 2) {
+      const std::int32_t a = find(index(join.pairs[q])), b = find(index(join.pairs[q + 1]));
+      if (a < b) join.parent[static_cast<std::size_t>(b)] = a;
+      if (b < a) join.parent[static_cast<std::size_t>(a)] = b;
+    }
+    for (std::size_t m = 0; m < n; ++m) {
+      const auto root = static_cast<std::size_t>(find(static_cast<std::int32_t>(m)));
+      join.size[root] = std::min(join.size[root] - run(join.ids[m]).parent, cap);
+    }
+    for (std::size_t m = 0; m < n; ++m) {
+      const auto root = static_cast<std::size_t>(find(static_cast<std::int32_t>(m)));
+      run(join.ids[m]).parent = -capped(join.size[root]);
+    }
   }
+  // 3.
   const float nan = std::numeric_limits<float>::quiet_NaN();
-  for (const SpeckleRun& run : all) {
-    if (sizes[static_cast<std::size_t>(run.parent)] > window) continue;
-    std::fill(disp.row(run.y) + run.x0, disp.row(run.y) + run.x1, nan);
-    if (conf.data) std::fill(conf.row(run.y) + run.x0, conf.row(run.y) + run.x1, 0.0f);
+  for (std::size_t i = 0; i < nb; ++i) {
+    const std::vector<SpeckleRun>& runs = bands[i]->runs;
+    const std::vector<std::int32_t>& row_first = bands[i]->row_first;
+    for (std::size_t row = 0; row + 1 < row_first.size(); ++row) {
+      const std::ptrdiff_t y = bands[i]->y0 + static_cast<std::ptrdiff_t>(row);
+      for (std::int32_t j = row_first[row]; j < row_first[row + 1]; ++j) {
+        const SpeckleRun& r = runs[static_cast<std::size_t>(j)];
+        const std::int32_t p =
+            r.parent < 0 ? r.parent : runs[static_cast<std::size_t>(r.parent)].parent;
+        if (-static_cast<std::int64_t>(p) > window) continue;
+        std::fill(disp.row(y) + r.x0, disp.row(y) + r.x1, nan);
+        if (conf.data) std::fill(conf.row(y) + r.x0, conf.row(y) + r.x1, 0.0f);
+      }
+    }
   }
 }
-
 
 }  // namespace stereodepth::detail

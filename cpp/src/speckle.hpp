@@ -21,7 +21,7 @@ namespace stereodepth::detail {
 
 struct SpeckleRun {
   std::int32_t parent;  // union-find link; a root links to itself
-  std::int32_t y, x0, x1;
+  std::int32_t x0, x1;  // columns x0 .. x1 - 1 (the row: SpeckleBand::row_first)
 };
 
 // A row's run starts, as bits, with the count of starts before each word and the index of
@@ -54,9 +54,20 @@ struct RowStarts {
 // One band's labelling.
 struct SpeckleBand {
   std::vector<SpeckleRun> runs;  // parents are indices into this vector
+  std::ptrdiff_t y0 = 0;                // the band's first row
+  std::vector<std::int32_t> row_first;  // row y0 + i: runs row_first[i] .. row_first[i + 1] - 1
   std::vector<std::uint64_t> valid, left, up;
   RowStarts cur, prev;  // after labelling, prev holds the band's last row
   RowStarts first;      // the band's first row
+};
+
+// The join's scratch, kept between calls: the pairs of regions linked across band boundaries
+// and a small union-find over those regions (O(W) per boundary, nothing per run).
+struct SpeckleJoin {
+  std::vector<std::int32_t> pairs;   // global run ids of two linked roots, two per link
+  std::vector<std::int32_t> ids;     // the roots that touch a boundary, sorted
+  std::vector<std::int32_t> parent;  // union-find over ids
+  std::vector<std::int64_t> size;    // region sizes (pixels) by ids index
 };
 
 // |a - b| <= range for a float difference is |a - b| <= the largest float not above range.
@@ -67,11 +78,13 @@ void speckle_band(const BlockMatchKernels& k, const ImageView<float>& disp, std:
                   std::ptrdiff_t y1, float rf, SpeckleBand& b);
 
 // Joins the labellings (bands[i]: rows starts[i] .. starts[i + 1] - 1) and clears the
-// regions of at most `window` pixels (NaN, and 0 in conf when conf.data is not null).
+// regions of at most `window` pixels (NaN, and 0 in conf when conf.data is not null). Works
+// in place in the bands' runs (their parents are then overwritten): each band's regions are
+// sized in the band, and only the regions linked across a boundary are joined, so no copy
+// of the runs and no size per run.
 void speckle_finish(const BlockMatchKernels& k, const ImageView<float>& disp,
                     const ImageView<float>& conf, int window, float rf,
                     const std::vector<SpeckleBand*>& bands,
-                    const std::vector<std::ptrdiff_t>& starts, std::vector<SpeckleRun>& all,
-                    std::vector<std::int64_t>& sizes);
+                    const std::vector<std::ptrdiff_t>& starts, SpeckleJoin& join);
 
 }  // namespace stereodepth::detail

@@ -159,5 +159,11 @@ class SemiGlobalMatcher:
     def isa(self) -> str: ...
 
 def semi_global_memory(
-    rows: int, cols: int, num_disparities: int, paths: int, threads: int
+    rows: int,
+    cols: int,
+    num_disparities: int,
+    paths: int,
+    threads: int,
+    isa: str = "auto",
+    block_size: int = 3,
 ) -> int: ...

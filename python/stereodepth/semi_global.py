@@ -56,11 +56,14 @@ Steps, in the kernel and in the oracle alike:
    valid pixel stays NaN. Its confidence stays 0. This step runs in numpy after the kernel
    (:func:`fill_background`).
 
-Memory: ``paths`` 4 and 8 keep the sums ``S`` (2 bytes per pixel and disparity) and the
-costs (1 byte per pixel and disparity), plus a few rows per thread; ``paths=3`` keeps only a
-few rows of ``W * num_disparities`` per thread (O(W D), about 8 MB per thread at W = 1920,
-D = 256), beside 13 bytes per pixel for the images. :func:`memory_estimate` gives the figure,
-and the matcher refuses with ValueError above ``max_memory_mb``.
+Memory, beside the images and the outputs: ``paths=3`` keeps nothing image-sized, only a few
+rows of ``W * num_disparities`` per thread (O(W D): 3.9 MiB per thread at W = 1920, D = 256
+with the AVX2 and AVX-512 kernels, 7.5 MiB with the baseline build); each thread computes the
+grey and census rows it needs, and the median runs in place in the output. ``paths`` 4 and 8
+keep the sums ``S`` (2 bytes per pixel and disparity), the costs (1 byte per pixel and
+disparity) and the census and grey images (7 bytes per pixel), plus a few rows per thread.
+:func:`memory_estimate` gives the figure, and the matcher refuses with ValueError above
+``max_memory_mb``.
 
 Threads: the horizontal paths and the final steps split the rows, the vertical and diagonal
 paths split the columns (threads meet at every row for the diagonals); ``paths=3`` splits the
@@ -247,13 +250,32 @@ def fill_background(disparity: np.ndarray) -> np.ndarray:
 
 
 def memory_estimate(
-    shape: tuple[int, int], *, num_disparities: int, paths: int = DEFAULT_PATHS, threads: int = 1
+    shape: tuple[int, int],
+    *,
+    num_disparities: int,
+    paths: int = DEFAULT_PATHS,
+    threads: int = 1,
+    isa: str = "auto",
+    block_size: int = DEFAULT_BLOCK_SIZE,
 ) -> int:
-    """Bytes the native matcher needs for an image of ``shape`` (H, W): for ``paths`` 4 and 8,
-    3 bytes per pixel and disparity (16-bit sums, 8-bit costs); 13 per pixel (grey and census
-    images, the disparity before the median); and per thread a few rows of costs and path
-    costs."""
-    return int(_core.semi_global_memory(shape[0], shape[1], num_disparities, paths, threads))
+    """Bytes the native matcher allocates beside its inputs and outputs for a pair of
+    ``shape`` (H, W), with the kernels of ``isa`` (``"auto"``: the ones that run; the
+    matcher checks its own instruction set against ``max_memory_mb``).
+
+    ``paths=3``: per thread a few rows of W x ``num_disparities`` (about 8 bytes per column
+    and disparity with the AVX2 and AVX-512 kernels, 15 with the baseline build: 3.9 and 7.5
+    MiB at W = 1920, D = 256) and the 3x3 median's rows; nothing grows with H. ``paths`` 4
+    and 8: 3 bytes per pixel and disparity (16-bit sums, 8-bit costs), 7 per pixel (census
+    and grey images) and a few rows per thread. The figure is for an RGB pair with
+    ``median=True`` (grey pairs need a little less); the speckle filter's runs, which depend
+    on the disparities, are not counted (12 bytes per run of linked pixels in a row).
+
+    Raises ValueError for an unknown ``isa`` or one this CPU cannot run."""
+    return int(
+        _core.semi_global_memory(
+            shape[0], shape[1], num_disparities, paths, threads, isa, block_size
+        )
+    )
 
 
 class SemiGlobalMatcher:
@@ -429,7 +451,9 @@ def semi_global_match(
         Fill the pixels left NaN with the smaller of the nearest valid disparities to their
         left and right on the row (background interpolation; off by default).
     max_memory_mb
-        Refuse (ValueError) when the matcher would need more than this many MiB.
+        Refuse (ValueError) when the matcher's buffers, beside the images and the outputs,
+        would exceed this many MiB (the figure of :func:`memory_estimate`: a few MiB per
+        thread for ``paths=3``, about 3 bytes per pixel and disparity for 4 and 8).
     threads
         Threads to use; None or 0 for every core available. The output does not depend on it.
     return_confidence

@@ -36,9 +36,14 @@ struct SemiGlobalParams {
 // Throws std::invalid_argument naming the parameter, the rule and the value received.
 void validate(const SemiGlobalParams& params);
 
-// Bytes a match of a rows x cols pair needs (see SemiGlobalMatcher::compute).
+// Bytes SemiGlobalMatcher::compute allocates for a rows x cols RGB pair (grey pairs: a
+// little less) with the kernels of `isa`, the median on, the speckle filter's runs (which
+// depend on the disparities) left out. paths 3: per thread a few rows of cols x
+// num_disparities, nothing image-sized; paths 4 and 8: 3 bytes per pixel and disparity and 7
+// per pixel, beside the rows.
 std::size_t semi_global_memory(std::ptrdiff_t rows, std::ptrdiff_t cols, int num_disparities,
-                               int paths, int threads);
+                               int paths, int threads, Isa isa = default_isa(),
+                               int block_size = 3);
 
 // The matcher for per-frame use: parameters validated once, buffers kept between frames.
 // compute() may be called from several threads; the calls take turns.
