@@ -15,6 +15,7 @@
 #include <vector>
 
 #include "block_match_kernels.hpp"
+#include "module_support.hpp"
 #include "speckle.hpp"
 #include "stereodepth/parallel.hpp"
 
@@ -37,24 +38,10 @@ using detail::speckle_finish;
 using detail::speckle_range_f;
 
 const detail::BlockMatchKernels& kernels_for(Isa isa) {
-  switch (isa) {
-#if defined(STEREODEPTH_HAVE_X86_ISAS)
-    case Isa::kAvx512:
-      return detail::avx512::block_match_kernels();
-    case Isa::kAvx2:
-      return detail::avx2::block_match_kernels();
-#endif
-    default:
-      return detail::baseline::block_match_kernels();
-  }
+  return STEREODEPTH_KERNELS_FOR(isa, block_match_kernels);
 }
 
-template <typename T>
-[[noreturn]] void fail(const std::string& rule, T got) {
-  std::ostringstream msg;
-  msg << rule << ", got " << got;
-  throw std::invalid_argument(msg.str());
-}
+using detail::fail;
 
 const char* cost_name(MatchCost cost) { return cost == MatchCost::kCensus ? "census" : "sad"; }
 

@@ -6,29 +6,17 @@
 #include <string>
 
 #include "depth_kernels.hpp"
+#include "module_support.hpp"
 #include "stereodepth/parallel.hpp"
 
 namespace stereodepth {
 namespace {
 
 const detail::DepthKernels& kernels_for(Isa isa) {
-  switch (isa) {
-#if defined(STEREODEPTH_HAVE_X86_ISAS)
-    case Isa::kAvx512:
-      return detail::avx512::depth_kernels();
-    case Isa::kAvx2:
-      return detail::avx2::depth_kernels();
-#endif
-    default:
-      return detail::baseline::depth_kernels();
-  }
+  return STEREODEPTH_KERNELS_FOR(isa, depth_kernels);
 }
 
-[[noreturn]] void fail(const std::string& what, double got) {
-  std::ostringstream msg;
-  msg << what << ", got " << got;
-  throw std::invalid_argument(msg.str());
-}
+using detail::fail;
 
 detail::DepthRowParams row_params(const DepthParams& p) {
   detail::DepthRowParams r{};

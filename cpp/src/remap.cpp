@@ -5,6 +5,7 @@
 #include <stdexcept>
 #include <string>
 
+#include "module_support.hpp"
 #include "remap_kernels.hpp"
 #include "stereodepth/parallel.hpp"
 
@@ -12,16 +13,7 @@ namespace stereodepth {
 namespace {
 
 const detail::RemapKernels& kernels_for(Isa isa) {
-  switch (isa) {
-#if defined(STEREODEPTH_HAVE_X86_ISAS)
-    case Isa::kAvx512:
-      return detail::avx512::remap_kernels();
-    case Isa::kAvx2:
-      return detail::avx2::remap_kernels();
-#endif
-    default:
-      return detail::baseline::remap_kernels();
-  }
+  return STEREODEPTH_KERNELS_FOR(isa, remap_kernels);
 }
 
 // Rows per band: enough work that starting a thread is worth it.

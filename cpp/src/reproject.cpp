@@ -7,6 +7,7 @@
 #include <stdexcept>
 #include <string>
 
+#include "module_support.hpp"
 #include "reproject_kernels.hpp"
 #include "stereodepth/parallel.hpp"
 
@@ -14,23 +15,10 @@ namespace stereodepth {
 namespace {
 
 const detail::ReprojectKernels& kernels_for(Isa isa) {
-  switch (isa) {
-#if defined(STEREODEPTH_HAVE_X86_ISAS)
-    case Isa::kAvx512:
-      return detail::avx512::reproject_kernels();
-    case Isa::kAvx2:
-      return detail::avx2::reproject_kernels();
-#endif
-    default:
-      return detail::baseline::reproject_kernels();
-  }
+  return STEREODEPTH_KERNELS_FOR(isa, reproject_kernels);
 }
 
-[[noreturn]] void fail(const std::string& what, double got) {
-  std::ostringstream msg;
-  msg << what << ", got " << got;
-  throw std::invalid_argument(msg.str());
-}
+using detail::fail;
 
 int kernel_index(DisparityType type) {
   switch (type) {

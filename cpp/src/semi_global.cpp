@@ -14,6 +14,7 @@
 #include <vector>
 
 #include "block_match_kernels.hpp"
+#include "module_support.hpp"
 #include "semi_global_kernels.hpp"
 #include "speckle.hpp"
 #include "stereodepth/parallel.hpp"
@@ -26,37 +27,14 @@ namespace stereodepth {
 namespace {
 
 const detail::BlockMatchKernels& shared_kernels(Isa isa) {
-  switch (isa) {
-#if defined(STEREODEPTH_HAVE_X86_ISAS)
-    case Isa::kAvx512:
-      return detail::avx512::block_match_kernels();
-    case Isa::kAvx2:
-      return detail::avx2::block_match_kernels();
-#endif
-    default:
-      return detail::baseline::block_match_kernels();
-  }
+  return STEREODEPTH_KERNELS_FOR(isa, block_match_kernels);
 }
 
 const detail::SemiGlobalKernels& sgm_kernels(Isa isa) {
-  switch (isa) {
-#if defined(STEREODEPTH_HAVE_X86_ISAS)
-    case Isa::kAvx512:
-      return detail::avx512::semi_global_kernels();
-    case Isa::kAvx2:
-      return detail::avx2::semi_global_kernels();
-#endif
-    default:
-      return detail::baseline::semi_global_kernels();
-  }
+  return STEREODEPTH_KERNELS_FOR(isa, semi_global_kernels);
 }
 
-template <typename T>
-[[noreturn]] void fail(const std::string& rule, T got) {
-  std::ostringstream msg;
-  msg << rule << ", got " << got;
-  throw std::invalid_argument(msg.str());
-}
+using detail::fail;
 
 int cost_max(int block_size) { return 16 * block_size * block_size; }
 
