@@ -169,20 +169,43 @@ inline void census_block_avx2(const uint8_t* const* rows, ptrdiff_t x, uint32_t*
     return _mm256_loadu_si256(reinterpret_cast<const __m256i*>(p));
   };
   const __m256i c = load(rows[2] + x);
-  __m256i plane[2] = {_mm256_setzero_si256(), _mm256_setzero_si256()};
-  int bit = 15;
-  for (int dy = 0; dy < 5; ++dy) {
-    for (int dx = -2; dx <= 2; ++dx) {
-      if (!on_ring(dy, dx)) continue;
-      const __m256i v = load(rows[dy] + x + dx);
-      // v >= c (unsigned) where max(v, c) == v; the bit is set where v < c.
-      const __m256i ge = _mm256_cmpeq_epi8(_mm256_max_epu8(v, c), v);
-      const int p = 1 - bit / 8;  // plane 0: bits 8-15
-      plane[p] = _mm256_or_si256(
-          plane[p], _mm256_andnot_si256(ge, _mm256_set1_epi8(static_cast<char>(1 << (bit % 8)))));
-      --bit;
-    }
-  }
+  // Each plane gathers 8 neighbours, the first in its top bit: doubled before each one is
+  // added, it ends as the sum of ge_k << (7 - k) over its neighbours (ge_k: -1 in the bytes
+  // where the neighbour is >= the centre, else 0), which is (the bits of v < c) - 255, i.e.
+  // those bits + 1, modulo 256; so - 1 at the end. Fully unrolled, with the rows'
+  // pointers in registers (GCC 12 kept the loops over rows and columns, rebuilding each
+  // bit's constant at run time: about five times the instructions).
+  const uint8_t* const r0 = rows[0] + x;
+  const uint8_t* const r1 = rows[1] + x;
+  const uint8_t* const r2 = rows[2] + x;
+  const uint8_t* const r3 = rows[3] + x;
+  const uint8_t* const r4 = rows[4] + x;
+  auto ge = [&](const uint8_t* p) {
+    // v >= c (unsigned) where max(v, c) == v.
+    const __m256i v = load(p);
+    return _mm256_cmpeq_epi8(_mm256_max_epu8(v, c), v);
+  };
+  auto step = [](__m256i plane, __m256i g) { return _mm256_add_epi8(_mm256_add_epi8(plane, plane), g); };
+  // Bits 15 .. 8: row 0 (5 pixels), then row 1's two ends and row 2's left end.
+  __m256i hi8 = ge(r0 - 2);
+  hi8 = step(hi8, ge(r0 - 1));
+  hi8 = step(hi8, ge(r0));
+  hi8 = step(hi8, ge(r0 + 1));
+  hi8 = step(hi8, ge(r0 + 2));
+  hi8 = step(hi8, ge(r1 - 2));
+  hi8 = step(hi8, ge(r1 + 2));
+  hi8 = step(hi8, ge(r2 - 2));
+  // Bits 7 .. 0: row 2's right end, row 3's two ends, row 4 (5 pixels).
+  __m256i lo8 = ge(r2 + 2);
+  lo8 = step(lo8, ge(r3 - 2));
+  lo8 = step(lo8, ge(r3 + 2));
+  lo8 = step(lo8, ge(r4 - 2));
+  lo8 = step(lo8, ge(r4 - 1));
+  lo8 = step(lo8, ge(r4));
+  lo8 = step(lo8, ge(r4 + 1));
+  lo8 = step(lo8, ge(r4 + 2));
+  const __m256i one = _mm256_set1_epi8(1);
+  const __m256i plane[2] = {_mm256_sub_epi8(hi8, one), _mm256_sub_epi8(lo8, one)};
   // Pixels 0-7 and 16-23 (lo), 8-15 and 24-31 (hi) as 16-bit codes.
   const __m256i lo = _mm256_unpacklo_epi8(plane[1], plane[0]);
   const __m256i hi = _mm256_unpackhi_epi8(plane[1], plane[0]);
