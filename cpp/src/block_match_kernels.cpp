@@ -1259,12 +1259,18 @@ void winners_avx2(const RowCtx& c) {
     // instructions) rather than read it.
     __asm__("" : "+x"(key_low[i]));
   }
-  auto group_winners = [&](ptrdiff_t x0, ptrdiff_t x1) {
+  // kFast (std::true_type): the defaults' case, keyed, with the uniqueness count and the
+  // winner's neighbours, decided once per group rather than tested per pixel.
+  auto group_winners = [&](ptrdiff_t x0, ptrdiff_t x1, auto fast) {
+    constexpr bool kFast = decltype(fast)::value;
+    const bool keyed_ = kFast || keyed;
+    const bool count_low_ = kFast || count_low;
+    const bool around_ = kFast || around;
     // Without keys, in two loops: the least costs first (a short chain), then the rest, which
     // starts from the least cost in memory; each loop's chain is then short enough for the
     // processor to overlap several pixels.
     alignas(32) uint16_t bests[16];
-    for (ptrdiff_t x = x0; x <= x1 && !keyed; ++x) {
+    for (ptrdiff_t x = x0; x <= x1 && !keyed_; ++x) {
       const uint16_t* const row = recent + (x - x0) * kRow + 16;
       auto load = [&](int i) { return _mm256_load_si256(reinterpret_cast<const __m256i*>(row) + i); };
       int qlo = 0, qhi = -1;
@@ -1289,7 +1295,8 @@ void winners_avx2(const RowCtx& c) {
       __m256i V[NC];
       for (int i = 0; i < NC; ++i) V[i] = _mm256_load_si256(reinterpret_cast<const __m256i*>(row) + i);
       int qlo = 0, qhi = dp - 1;  // the lanes searched
-      if (x < xlo || x > xhi) {
+      const bool border = x < xlo || x > xhi;
+      if (border) {
         if (!clip_border || !border_lanes(x, qlo, qhi)) {
           record_none(c, x);
           continue;
@@ -1298,17 +1305,15 @@ void winners_avx2(const RowCtx& c) {
       }
       uint32_t best = 0;
       int qb = 0;
-      if (keyed) {
+      if (keyed_) {
         // The winner with its cost in one pass: keys cost << 4 | (15 - i) for vector i (every
         // cost is below 4095, and the 0xFFFF lanes give keys of at least 0xFFF0, above every
         // real one), so that the least key per lane is the least cost and, among equal costs,
         // the last vector (the highest lane); across the 16 lanes, the least key's highest
         // lane. (One loop with the rest: its chain is short enough to overlap pixels.)
-        __m256i kmin[2] = {ones, ones};
-        for (int i = 0; i < NC; ++i) {
-          kmin[i & 1] = _mm256_min_epu16(kmin[i & 1],
-                                         _mm256_or_si256(_mm256_slli_epi16(V[i], 4), key_low[i]));
-        }
+        auto key_of = [&](int i) { return _mm256_or_si256(_mm256_slli_epi16(V[i], 4), key_low[i]); };
+        __m256i kmin[2] = {key_of(0), NC > 1 ? key_of(1) : ones};
+        for (int i = 2; i < NC; ++i) kmin[i & 1] = _mm256_min_epu16(kmin[i & 1], key_of(i));
         const __m256i k = _mm256_min_epu16(kmin[0], kmin[1]);
         const uint32_t key =
             static_cast<uint32_t>(_mm_cvtsi128_si32(_mm_minpos_epu16(_mm_min_epu16(
@@ -1341,7 +1346,7 @@ void winners_avx2(const RowCtx& c) {
         }
       }
       uint32_t second = kNone;
-      if (count_low) {
+      if (count_low_) {
         // How many lanes cost less than the uniqueness threshold (see winners_avx512): the
         // lanes >= it are those with min(a, thr) == thr; two vectors' masks packed to bytes
         // give one bit per lane.
@@ -1378,12 +1383,20 @@ void winners_avx2(const RowCtx& c) {
       // neither (it needs 1 <= kb <= nd - 2).
       // In the border band a neighbour outside the lanes searched reads as 0xFFFF, which
       // the second pass takes as "no sub-pixel step" (border_band's rule).
-      rec->around = 0;
-      if (around) {
-        const uint32_t c0 = qb + 1 <= qhi ? row[qb + 1] : kNone;
-        const uint32_t c2 = qb - 1 >= qlo ? row[qb - 1] : kNone;
-        rec->around = c0 | (c2 << 16);
+      // Inside the border (qlo = 0, qhi = dp - 1) the tests are not needed: lanes -1 and dp
+      // of `recent` hold 0xFFFF, i.e. kNone, and a padding lane beside the winner holds its
+      // block sum ORed with 0xFFFF.
+      uint32_t around_costs = 0;
+      if (around_) {
+        if (border) {
+          const uint32_t c0 = qb + 1 <= qhi ? row[qb + 1] : kNone;
+          const uint32_t c2 = qb - 1 >= qlo ? row[qb - 1] : kNone;
+          around_costs = c0 | (c2 << 16);
+        } else {
+          around_costs = static_cast<uint32_t>(row[qb + 1]) | (static_cast<uint32_t>(row[qb - 1]) << 16);
+        }
       }
+      rec->around = around_costs;
     }
   };
 
@@ -1391,7 +1404,6 @@ void winners_avx2(const RowCtx& c) {
   // the right winners and the winners of those pixels are found. A group whose columns all
   // have their block inside the row (no clamping) and whose column sums are updated here
   // takes the short path.
-  const bool has_pad = c.qpad > 0;
   for (ptrdiff_t x0 = 0; x0 < cols; x0 += 16) {
     const ptrdiff_t x1 = std::min<ptrdiff_t>(x0 + 16, cols);
     uint16_t* row = recent + 16;
@@ -1410,7 +1422,7 @@ void winners_avx2(const RowCtx& c) {
             A[i] = _mm256_sub_epi16(_mm256_add_epi16(A[i], column(xp, i)), column(xm, i));
           }
         }
-        if (has_pad) A[0] = _mm256_or_si256(A[0], padv);
+        A[0] = _mm256_or_si256(A[0], padv);  // (padv is 0 when there is no padding)
         if (texcol) tsum += texcol[xp] - texcol[xm];
         for (int i = 0; i < NC; ++i) _mm256_store_si256(reinterpret_cast<__m256i*>(row) + i, A[i]);
         tsums[x - x0] = tsum;
@@ -1453,7 +1465,11 @@ void winners_avx2(const RowCtx& c) {
         right_group<NC>(recent, rmin, rarg, x0, n);
       }
     }
-    group_winners(x0, x1 - 1);
+    if (keyed && count_low && around) {
+      group_winners(x0, x1 - 1, std::true_type{});
+    } else {
+      group_winners(x0, x1 - 1, std::false_type{});
+    }
   }
 }
 
