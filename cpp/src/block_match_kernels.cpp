@@ -358,10 +358,10 @@ inline __m512i sad_cost32(__m512i l, const uint8_t* r) {
 
 // colsum[x][q] += cost(left[x], rpad[x + q]) for every lane (the padding lanes too: their sums
 // are never read as costs). AVX2 census: when costs is not null, the costs also go there (the
-// row's slot of BandScratch::ring, same layout as colsum).
+// row's slot of BandScratch::ring, bytes, see winners_avx2).
 template <typename Cost>
 void add_cost_row(const typename Cost::Feature* left, const typename Cost::Feature* rpad,
-                  uint16_t* colsum, ptrdiff_t cols, int dp, uint16_t* costs) {
+                  uint16_t* colsum, ptrdiff_t cols, int dp, uint8_t* costs) {
   constexpr bool kCensus = sizeof(typename Cost::Feature) == 4;
 #if !defined(STEREODEPTH_BM_AVX2)
   (void)costs;
@@ -385,7 +385,7 @@ void add_cost_row(const typename Cost::Feature* left, const typename Cost::Featu
 #elif defined(STEREODEPTH_BM_AVX2)
     const __m256i lv = kCensus ? _mm256_set1_epi32(static_cast<int>(l))
                                : _mm256_set1_epi16(static_cast<short>(l));
-    for (int q = 0; q < dp; q += 16) {
+    auto cost = [&](int q) {
       __m256i c;
       if constexpr (kCensus) {
         c = census_cost16(lv, r + q);
@@ -394,7 +394,16 @@ void add_cost_row(const typename Cost::Feature* left, const typename Cost::Featu
       }
       auto* sp = reinterpret_cast<__m256i*>(s + q);
       _mm256_storeu_si256(sp, _mm256_add_epi16(_mm256_loadu_si256(sp), c));
-      if (costs) _mm256_storeu_si256(reinterpret_cast<__m256i*>(costs + x * dp + q), c);
+      return c;
+    };
+    for (int q = 0; q < dp; q += 32) {
+      const __m256i c0 = cost(q);
+      const __m256i c1 = q + 16 < dp ? cost(q + 16) : _mm256_setzero_si256();
+      if (costs) {
+        _mm256_store_si256(
+            reinterpret_cast<__m256i*>(costs + x * cost_ring_column_bytes(dp) + q),
+            _mm256_packus_epi16(c0, c1));
+      }
     }
 #else
     (void)kCensus;
@@ -503,8 +512,8 @@ struct RowCtx {
   const void* out_quad;
   ptrdiff_t nibble_stride;  // AVX2: elements from the low nibbles to the high ones
   // AVX2 census: the ring slots (see BandScratch::ring) of the rows entering and leaving.
-  uint16_t* ring_in;
-  const uint16_t* ring_out;
+  uint8_t* ring_in;
+  const uint8_t* ring_out;
   float* drow;
   float* crow;  // null when no confidence is wanted
 };
@@ -1137,8 +1146,17 @@ void winners_avx2(const RowCtx& c) {
   // ring, the entering row's costs are matched and kept there, the leaving row's read back;
   // without, both rows are matched (the byte counts of one minus the other's, -8 .. 8, summed
   // in pairs by vpmaddubsw).
-  uint16_t* const ring_in = c.ring_in;
-  const uint16_t* const ring_out = c.ring_out;
+  // The ring holds one byte per cost: the costs of vectors i and i + 1 (i even; zeros past
+  // the last vector) as _mm256_packus_epi16 leaves them, which _mm256_unpacklo_epi8 and
+  // _mm256_unpackhi_epi8 with zeros undo; half the bytes of 16-bit costs to store and to
+  // read back (the ring exceeds L2, so they travel through L3), for one pack per pair and
+  // two unpacks. Hence a pair of vectors per call.
+  uint8_t* const ring_in = c.ring_in;
+  const uint8_t* const ring_out = c.ring_out;
+  constexpr ptrdiff_t kRingColumn = cost_ring_column_bytes(dp);
+  struct Pair {
+    __m256i v[2];
+  };
   auto census_update = [&](const CensusLeft& l, ptrdiff_t j, int i) {
     const __m256i lut = nibble_popcounts();
     // Set bits of each byte of (l ^ r): the counts of its two nibbles.
@@ -1149,27 +1167,41 @@ void winners_avx2(const RowCtx& c) {
                              _mm256_shuffle_epi8(lut, _mm256_xor_si256(l1, r1)));
     };
     auto* s = reinterpret_cast<__m256i*>(S + j * dp) + i;
-    __m256i d;
+    const bool two = i + 1 < NC;
+    __m256i d[2];
     if constexpr (kRing) {
-      const __m256i cin =
-          _mm256_maddubs_epi16(_mm256_set1_epi8(1), count(l.in0, l.in1, in16 + j + 16 * i));
-      _mm256_store_si256(reinterpret_cast<__m256i*>(ring_in + j * dp) + i, cin);
-      d = _mm256_sub_epi16(
-          cin, _mm256_load_si256(reinterpret_cast<const __m256i*>(ring_out + j * dp) + i));
+      const __m256i ones8 = _mm256_set1_epi8(1);
+      const __m256i cin0 = _mm256_maddubs_epi16(ones8, count(l.in0, l.in1, in16 + j + 16 * i));
+      const __m256i cin1 =
+          two ? _mm256_maddubs_epi16(ones8, count(l.in0, l.in1, in16 + j + 16 * (i + 1)))
+              : _mm256_setzero_si256();
+      _mm256_store_si256(reinterpret_cast<__m256i*>(ring_in + j * kRingColumn + 16 * i),
+                         _mm256_packus_epi16(cin0, cin1));
+      const __m256i out = _mm256_load_si256(
+          reinterpret_cast<const __m256i*>(ring_out + j * kRingColumn + 16 * i));
+      d[0] = _mm256_sub_epi16(cin0, _mm256_unpacklo_epi8(out, _mm256_setzero_si256()));
+      d[1] = _mm256_sub_epi16(cin1, _mm256_unpackhi_epi8(out, _mm256_setzero_si256()));
     } else {
-      const __m256i pin = count(l.in0, l.in1, in16 + j + 16 * i);
-      const __m256i pout = count(l.out0, l.out1, out16 + j + 16 * i);
-      d = _mm256_maddubs_epi16(_mm256_set1_epi8(1), _mm256_sub_epi8(pin, pout));
+      for (int h = 0; h < 1 + static_cast<int>(two); ++h) {
+        const __m256i pin = count(l.in0, l.in1, in16 + j + 16 * (i + h));
+        const __m256i pout = count(l.out0, l.out1, out16 + j + 16 * (i + h));
+        d[h] = _mm256_maddubs_epi16(_mm256_set1_epi8(1), _mm256_sub_epi8(pin, pout));
+      }
     }
-    const __m256i v = _mm256_add_epi16(_mm256_load_si256(s), d);
-    _mm256_store_si256(s, v);
-    return v;
+    Pair p;
+    p.v[0] = _mm256_add_epi16(_mm256_load_si256(s), d[0]);
+    _mm256_store_si256(s, p.v[0]);
+    if (two) {
+      p.v[1] = _mm256_add_epi16(_mm256_load_si256(s + 1), d[1]);
+      _mm256_store_si256(s + 1, p.v[1]);
+    }
+    return p;
   };
   auto update_col = [&](ptrdiff_t j) {
     auto* s = reinterpret_cast<__m256i*>(S + j * dp);
     if constexpr (sizeof(F) == 4) {
       const CensusLeft l = census_left(j);
-      for (int i = 0; i < NC; ++i) census_update(l, j, i);
+      for (int i = 0; i < NC; i += 2) census_update(l, j, i);
     } else {
       // SAD, 32 lanes of bytes at a time: |l - r| = max - min, and the entering row's cost
       // minus the leaving row's (-62 .. 62) fits a signed byte, widened for the sums. (With
@@ -1412,9 +1444,12 @@ void winners_avx2(const RowCtx& c) {
         const ptrdiff_t xp = x + r, xm = x - r - 1;
         if constexpr (sizeof(F) == 4) {
           const CensusLeft l = census_left(xp);
-          for (int i = 0; i < NC; ++i) {
-            A[i] = _mm256_sub_epi16(_mm256_add_epi16(A[i], census_update(l, xp, i)),
-                                    column(xm, i));
+          for (int i = 0; i < NC; i += 2) {
+            const Pair p = census_update(l, xp, i);
+            A[i] = _mm256_sub_epi16(_mm256_add_epi16(A[i], p.v[0]), column(xm, i));
+            if (i + 1 < NC) {
+              A[i + 1] = _mm256_sub_epi16(_mm256_add_epi16(A[i + 1], p.v[1]), column(xm, i + 1));
+            }
           }
         } else {
           update_col(xp);
@@ -1435,9 +1470,13 @@ void winners_avx2(const RowCtx& c) {
           if constexpr (sizeof(F) == 4) {
             if (fused && x + r < cols) {
               const CensusLeft l = census_left(x + r);
-              for (int i = 0; i < NC; ++i) {
-                A[i] = _mm256_sub_epi16(_mm256_add_epi16(A[i], census_update(l, x + r, i)),
-                                        column(xm, i));
+              for (int i = 0; i < NC; i += 2) {
+                const Pair p = census_update(l, x + r, i);
+                A[i] = _mm256_sub_epi16(_mm256_add_epi16(A[i], p.v[0]), column(xm, i));
+                if (i + 1 < NC) {
+                  A[i + 1] =
+                      _mm256_sub_epi16(_mm256_add_epi16(A[i + 1], p.v[1]), column(xm, i + 1));
+                }
               }
             } else {
               for (int i = 0; i < NC; ++i) {
@@ -2003,10 +2042,10 @@ void match_band_impl(const MatchArgs& a, const BandScratch& s, ptrdiff_t y0, ptr
 
   const bool fused = fuses_update(dp);
   // The ring slot of image row y (clamped), or null without a ring.
-  auto ring_slot = [&](ptrdiff_t y) -> uint16_t* {
+  auto ring_slot = [&](ptrdiff_t y) -> uint8_t* {
     if (!s.ring) return nullptr;
     const ptrdiff_t slot = clamp_index(y, 0, rows - 1) % cost_ring_rows(r);
-    return s.ring + slot * cols * dp;
+    return s.ring + slot * cols * cost_ring_column_bytes(dp);
   };
   for (ptrdiff_t y = y0; y < y1; ++y) {
     if (fresh && y == y0) {
