@@ -361,10 +361,33 @@ inline __m512i sad_cost32(__m512i l, const uint8_t* r) {
 // row's slot of BandScratch::ring, bytes, see winners_avx2).
 template <typename Cost>
 void add_cost_row(const typename Cost::Feature* left, const typename Cost::Feature* rpad,
-                  uint16_t* colsum, ptrdiff_t cols, int dp, uint8_t* costs) {
+                  uint16_t* colsum, ptrdiff_t cols, int dp, uint8_t* costs, bool byte_cols) {
   constexpr bool kCensus = sizeof(typename Cost::Feature) == 4;
 #if !defined(STEREODEPTH_BM_AVX2)
   (void)costs;
+  (void)byte_cols;
+#else
+  if constexpr (kCensus) {
+   if (byte_cols) {
+    // Census with byte column sums (see RowCtx::byte_cols): the costs, packed in pairs of
+    // vectors, go to the ring slot and are added to the sums in the same layout.
+    auto* sums = reinterpret_cast<uint8_t*>(colsum);
+    for (ptrdiff_t x = 0; x < cols; ++x) {
+      const __m256i lv = _mm256_set1_epi32(static_cast<int>(left[x]));
+      const auto* r = rpad + x;
+      for (int q = 0; q < dp; q += 32) {
+        const __m256i c0 = census_cost16(lv, r + q);
+        const __m256i c1 = q + 16 < dp ? census_cost16(lv, r + q + 16) : _mm256_setzero_si256();
+        const __m256i c8 = _mm256_packus_epi16(c0, c1);
+        const ptrdiff_t at = x * cost_ring_column_bytes(dp) + q;
+        _mm256_store_si256(reinterpret_cast<__m256i*>(costs + at), c8);
+        auto* sp = reinterpret_cast<__m256i*>(sums + at);
+        _mm256_store_si256(sp, _mm256_add_epi8(_mm256_load_si256(sp), c8));
+      }
+    }
+    return;
+   }
+  }
 #endif
   for (ptrdiff_t x = 0; x < cols; ++x) {
     uint16_t* s = colsum + x * dp;
@@ -514,6 +537,10 @@ struct RowCtx {
   // AVX2 census: the ring slots (see BandScratch::ring) of the rows entering and leaving.
   uint8_t* ring_in;
   const uint8_t* ring_out;
+  // AVX2 census with a ring and block costs of a column below 256 (block size <= 15): the
+  // column sums are bytes, laid out as the ring's slots (see winners_avx2), for every row of
+  // the band.
+  bool byte_cols;
   float* drow;
   float* crow;  // null when no confidence is wanted
 };
@@ -1092,7 +1119,7 @@ void right_group_keyed(const uint16_t* recent, uint16_t* rmin, uint16_t* rarg, p
 // the column-sum update fused in, a branch-free winner, and the right winners updated per
 // group of 16 pixels (right_group) from the costs stored in `recent`, which also gives the
 // winner's neighbours.
-template <int NC, typename Cost, bool kRing>
+template <int NC, typename Cost, bool kRing, bool kBytes>
 void winners_avx2(const RowCtx& c) {
   using F = typename Cost::Feature;
   // Everything the loop reads from c, in locals (see winners_avx512).
@@ -1197,11 +1224,45 @@ void winners_avx2(const RowCtx& c) {
     }
     return p;
   };
+  // The same with byte column sums (kBytes, see RowCtx::byte_cols): entering minus leaving
+  // costs as bytes (-16 .. 16, exact modulo 256 as the sums stay below 256), added to the
+  // sums in the ring's layout, then widened for the block sums. Half the bytes of 16-bit
+  // sums to load and store per column.
+  auto census_update_bytes = [&](const CensusLeft& l, ptrdiff_t j, int i) {
+    const __m256i lut = nibble_popcounts();
+    auto count = [&](const uint16_t* p) {
+      const __m256i r0 = _mm256_loadu_si256(reinterpret_cast<const __m256i*>(p));
+      const __m256i r1 = _mm256_loadu_si256(reinterpret_cast<const __m256i*>(p + nib));
+      return _mm256_maddubs_epi16(
+          _mm256_set1_epi8(1), _mm256_add_epi8(_mm256_shuffle_epi8(lut, _mm256_xor_si256(l.in0, r0)),
+                                               _mm256_shuffle_epi8(lut, _mm256_xor_si256(l.in1, r1))));
+    };
+    const __m256i cin0 = count(in16 + j + 16 * i);
+    const __m256i cin1 = i + 1 < NC ? count(in16 + j + 16 * (i + 1)) : _mm256_setzero_si256();
+    const __m256i c8 = _mm256_packus_epi16(cin0, cin1);
+    const ptrdiff_t at = j * kRingColumn + 16 * i;
+    _mm256_store_si256(reinterpret_cast<__m256i*>(ring_in + at), c8);
+    auto* s = reinterpret_cast<__m256i*>(reinterpret_cast<uint8_t*>(S) + at);
+    const __m256i v = _mm256_add_epi8(
+        _mm256_load_si256(s),
+        _mm256_sub_epi8(c8, _mm256_load_si256(reinterpret_cast<const __m256i*>(ring_out + at))));
+    _mm256_store_si256(s, v);
+    Pair p;
+    p.v[0] = _mm256_unpacklo_epi8(v, _mm256_setzero_si256());
+    p.v[1] = _mm256_unpackhi_epi8(v, _mm256_setzero_si256());
+    return p;
+  };
   auto update_col = [&](ptrdiff_t j) {
     auto* s = reinterpret_cast<__m256i*>(S + j * dp);
     if constexpr (sizeof(F) == 4) {
       const CensusLeft l = census_left(j);
-      for (int i = 0; i < NC; i += 2) census_update(l, j, i);
+      for (int i = 0; i < NC; i += 2) {
+        if constexpr (kBytes) {
+          census_update_bytes(l, j, i);
+        } else {
+          census_update(l, j, i);
+        }
+      }
     } else {
       // SAD, 32 lanes of bytes at a time: |l - r| = max - min, and the entering row's cost
       // minus the leaving row's (-62 .. 62) fits a signed byte, widened for the sums. (With
@@ -1230,8 +1291,16 @@ void winners_avx2(const RowCtx& c) {
   }
 
   __m256i A[NC];
+  // Vector i of column j's sums, widened from bytes with kBytes.
   auto column = [&](ptrdiff_t j, int i) {
-    return _mm256_load_si256(reinterpret_cast<const __m256i*>(S + j * dp) + i);
+    if constexpr (kBytes) {
+      const __m256i v = _mm256_load_si256(reinterpret_cast<const __m256i*>(
+          reinterpret_cast<const uint8_t*>(S) + j * kRingColumn + 16 * (i & ~1)));
+      return (i & 1) ? _mm256_unpackhi_epi8(v, _mm256_setzero_si256())
+                     : _mm256_unpacklo_epi8(v, _mm256_setzero_si256());
+    } else {
+      return _mm256_load_si256(reinterpret_cast<const __m256i*>(S + j * dp) + i);
+    }
   };
   for (int i = 0; i < NC; ++i) A[i] = _mm256_setzero_si256();
   uint32_t tsum = 0;
@@ -1445,7 +1514,12 @@ void winners_avx2(const RowCtx& c) {
         if constexpr (sizeof(F) == 4) {
           const CensusLeft l = census_left(xp);
           for (int i = 0; i < NC; i += 2) {
-            const Pair p = census_update(l, xp, i);
+            Pair p;
+            if constexpr (kBytes) {
+              p = census_update_bytes(l, xp, i);
+            } else {
+              p = census_update(l, xp, i);
+            }
             A[i] = _mm256_sub_epi16(_mm256_add_epi16(A[i], p.v[0]), column(xm, i));
             if (i + 1 < NC) {
               A[i + 1] = _mm256_sub_epi16(_mm256_add_epi16(A[i + 1], p.v[1]), column(xm, i + 1));
@@ -1471,7 +1545,12 @@ void winners_avx2(const RowCtx& c) {
             if (fused && x + r < cols) {
               const CensusLeft l = census_left(x + r);
               for (int i = 0; i < NC; i += 2) {
-                const Pair p = census_update(l, x + r, i);
+                Pair p;
+                if constexpr (kBytes) {
+                  p = census_update_bytes(l, x + r, i);
+                } else {
+                  p = census_update(l, x + r, i);
+                }
                 A[i] = _mm256_sub_epi16(_mm256_add_epi16(A[i], p.v[0]), column(xm, i));
                 if (i + 1 < NC) {
                   A[i + 1] =
@@ -1527,10 +1606,16 @@ bool winners_fixed(const RowCtx& c) {
 #if defined(STEREODEPTH_BM_AVX512)
       winners_avx512<NC, Cost>(c);
 #else
-      if (sizeof(typename Cost::Feature) == 4 && c.ring_in != nullptr) {
-        winners_avx2<NC, Cost, true>(c);
+      if constexpr (sizeof(typename Cost::Feature) == 4) {
+        if (c.byte_cols) {
+          winners_avx2<NC, Cost, true, true>(c);
+        } else if (c.ring_in != nullptr) {
+          winners_avx2<NC, Cost, true, false>(c);
+        } else {
+          winners_avx2<NC, Cost, false, false>(c);
+        }
       } else {
-        winners_avx2<NC, Cost, false>(c);
+        winners_avx2<NC, Cost, false, false>(c);
       }
 #endif
       return true;
@@ -2041,6 +2126,9 @@ void match_band_impl(const MatchArgs& a, const BandScratch& s, ptrdiff_t y0, ptr
   c.first_pass_only = a.first_pass_only;
 
   const bool fused = fuses_update(dp);
+#if defined(STEREODEPTH_BM_AVX2)
+  c.byte_cols = sizeof(F) == 4 && s.ring != nullptr && fused && (2 * r + 1) * kCensusCostMax <= 255;
+#endif
   // The ring slot of image row y (clamped), or null without a ring.
   auto ring_slot = [&](ptrdiff_t y) -> uint8_t* {
     if (!s.ring) return nullptr;
@@ -2053,7 +2141,8 @@ void match_band_impl(const MatchArgs& a, const BandScratch& s, ptrdiff_t y0, ptr
       if (tex_on) std::memset(s.texcol, 0, sizeof(uint32_t) * static_cast<size_t>(cols));
       for (ptrdiff_t dy = -r; dy <= r; ++dy) {
         pad_right_row(rrow(y + dy), rpad_in, cols, npad, jmin);
-        add_cost_row<Cost>(lrow(y + dy), rpad_in, s.colsum, cols, dp, ring_slot(y + dy));
+        add_cost_row<Cost>(lrow(y + dy), rpad_in, s.colsum, cols, dp, ring_slot(y + dy),
+                           c.byte_cols);
         if (tex_on) {
           const uint8_t* t = trow(y + dy);
           for (ptrdiff_t x = 0; x < cols; ++x) s.texcol[x] += t[x];
