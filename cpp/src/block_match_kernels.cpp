@@ -1202,10 +1202,11 @@ void winners_avx2(const RowCtx& c) {
       const __m256i cin1 =
           two ? _mm256_maddubs_epi16(ones8, count(l.in0, l.in1, in16 + j + 16 * (i + 1)))
               : _mm256_setzero_si256();
-      _mm256_store_si256(reinterpret_cast<__m256i*>(ring_in + j * kRingColumn + 16 * i),
-                         _mm256_packus_epi16(cin0, cin1));
+      // Loaded before the store: the two rows share a slot (see cost_ring_rows).
       const __m256i out = _mm256_load_si256(
           reinterpret_cast<const __m256i*>(ring_out + j * kRingColumn + 16 * i));
+      _mm256_store_si256(reinterpret_cast<__m256i*>(ring_in + j * kRingColumn + 16 * i),
+                         _mm256_packus_epi16(cin0, cin1));
       d[0] = _mm256_sub_epi16(cin0, _mm256_unpacklo_epi8(out, _mm256_setzero_si256()));
       d[1] = _mm256_sub_epi16(cin1, _mm256_unpackhi_epi8(out, _mm256_setzero_si256()));
     } else {
@@ -1241,11 +1242,11 @@ void winners_avx2(const RowCtx& c) {
     const __m256i cin1 = i + 1 < NC ? count(in16 + j + 16 * (i + 1)) : _mm256_setzero_si256();
     const __m256i c8 = _mm256_packus_epi16(cin0, cin1);
     const ptrdiff_t at = j * kRingColumn + 16 * i;
+    // Loaded before the store: the two rows share a slot (see cost_ring_rows).
+    const __m256i out = _mm256_load_si256(reinterpret_cast<const __m256i*>(ring_out + at));
     _mm256_store_si256(reinterpret_cast<__m256i*>(ring_in + at), c8);
     auto* s = reinterpret_cast<__m256i*>(reinterpret_cast<uint8_t*>(S) + at);
-    const __m256i v = _mm256_add_epi8(
-        _mm256_load_si256(s),
-        _mm256_sub_epi8(c8, _mm256_load_si256(reinterpret_cast<const __m256i*>(ring_out + at))));
+    const __m256i v = _mm256_add_epi8(_mm256_load_si256(s), _mm256_sub_epi8(c8, out));
     _mm256_store_si256(s, v);
     Pair p;
     p.v[0] = _mm256_unpacklo_epi8(v, _mm256_setzero_si256());

@@ -96,7 +96,9 @@ inline constexpr std::size_t recent_size(int lanes, int dp) {
   return lanes == 16 ? 16 * (static_cast<std::size_t>(dp) + 32) : 0;
 }
 
-inline constexpr std::ptrdiff_t cost_ring_rows(int radius) { return 2 * radius + 2; }
+// Rows y - r .. y + r: the row entering at y (y + r) takes the slot of the row leaving
+// (y - r - 1), whose costs are read before they are overwritten.
+inline constexpr std::ptrdiff_t cost_ring_rows(int radius) { return 2 * radius + 1; }
 
 // The most a worker's cost ring may take, in bytes; beyond, the leaving row is matched again.
 inline constexpr std::size_t kCostRingBudget = std::size_t{24} << 20;
