@@ -108,7 +108,7 @@ detail::BandScratch carve_band(Arena& arena, std::ptrdiff_t cols, int dp, std::s
   s.records = arena.take<detail::WinnerRecord>(c + 16);
   s.recent = arena.take<std::uint16_t>(detail::recent_size(lanes, dp));
   const std::size_t ring = detail::cost_ring_size(lanes, feat_size, radius, cols, dp);
-  s.ring = arena.take<std::uint16_t>(ring);
+  s.ring = arena.take<std::uint8_t>(ring);
   if (ring == 0) s.ring = nullptr;
   return s;
 }

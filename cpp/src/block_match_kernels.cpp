@@ -169,20 +169,43 @@ inline void census_block_avx2(const uint8_t* const* rows, ptrdiff_t x, uint32_t*
     return _mm256_loadu_si256(reinterpret_cast<const __m256i*>(p));
   };
   const __m256i c = load(rows[2] + x);
-  __m256i plane[2] = {_mm256_setzero_si256(), _mm256_setzero_si256()};
-  int bit = 15;
-  for (int dy = 0; dy < 5; ++dy) {
-    for (int dx = -2; dx <= 2; ++dx) {
-      if (!on_ring(dy, dx)) continue;
-      const __m256i v = load(rows[dy] + x + dx);
-      // v >= c (unsigned) where max(v, c) == v; the bit is set where v < c.
-      const __m256i ge = _mm256_cmpeq_epi8(_mm256_max_epu8(v, c), v);
-      const int p = 1 - bit / 8;  // plane 0: bits 8-15
-      plane[p] = _mm256_or_si256(
-          plane[p], _mm256_andnot_si256(ge, _mm256_set1_epi8(static_cast<char>(1 << (bit % 8)))));
-      --bit;
-    }
-  }
+  // Each plane gathers 8 neighbours, the first in its top bit: doubled before each one is
+  // added, it ends as the sum of ge_k << (7 - k) over its neighbours (ge_k: -1 in the bytes
+  // where the neighbour is >= the centre, else 0), which is (the bits of v < c) - 255, i.e.
+  // those bits + 1, modulo 256; so - 1 at the end. Fully unrolled, with the rows'
+  // pointers in registers (GCC 12 kept the loops over rows and columns, rebuilding each
+  // bit's constant at run time: about five times the instructions).
+  const uint8_t* const r0 = rows[0] + x;
+  const uint8_t* const r1 = rows[1] + x;
+  const uint8_t* const r2 = rows[2] + x;
+  const uint8_t* const r3 = rows[3] + x;
+  const uint8_t* const r4 = rows[4] + x;
+  auto ge = [&](const uint8_t* p) {
+    // v >= c (unsigned) where max(v, c) == v.
+    const __m256i v = load(p);
+    return _mm256_cmpeq_epi8(_mm256_max_epu8(v, c), v);
+  };
+  auto step = [](__m256i plane, __m256i g) { return _mm256_add_epi8(_mm256_add_epi8(plane, plane), g); };
+  // Bits 15 .. 8: row 0 (5 pixels), then row 1's two ends and row 2's left end.
+  __m256i hi8 = ge(r0 - 2);
+  hi8 = step(hi8, ge(r0 - 1));
+  hi8 = step(hi8, ge(r0));
+  hi8 = step(hi8, ge(r0 + 1));
+  hi8 = step(hi8, ge(r0 + 2));
+  hi8 = step(hi8, ge(r1 - 2));
+  hi8 = step(hi8, ge(r1 + 2));
+  hi8 = step(hi8, ge(r2 - 2));
+  // Bits 7 .. 0: row 2's right end, row 3's two ends, row 4 (5 pixels).
+  __m256i lo8 = ge(r2 + 2);
+  lo8 = step(lo8, ge(r3 - 2));
+  lo8 = step(lo8, ge(r3 + 2));
+  lo8 = step(lo8, ge(r4 - 2));
+  lo8 = step(lo8, ge(r4 - 1));
+  lo8 = step(lo8, ge(r4));
+  lo8 = step(lo8, ge(r4 + 1));
+  lo8 = step(lo8, ge(r4 + 2));
+  const __m256i one = _mm256_set1_epi8(1);
+  const __m256i plane[2] = {_mm256_sub_epi8(hi8, one), _mm256_sub_epi8(lo8, one)};
   // Pixels 0-7 and 16-23 (lo), 8-15 and 24-31 (hi) as 16-bit codes.
   const __m256i lo = _mm256_unpacklo_epi8(plane[1], plane[0]);
   const __m256i hi = _mm256_unpackhi_epi8(plane[1], plane[0]);
@@ -335,13 +358,36 @@ inline __m512i sad_cost32(__m512i l, const uint8_t* r) {
 
 // colsum[x][q] += cost(left[x], rpad[x + q]) for every lane (the padding lanes too: their sums
 // are never read as costs). AVX2 census: when costs is not null, the costs also go there (the
-// row's slot of BandScratch::ring, same layout as colsum).
+// row's slot of BandScratch::ring, bytes, see winners_avx2).
 template <typename Cost>
 void add_cost_row(const typename Cost::Feature* left, const typename Cost::Feature* rpad,
-                  uint16_t* colsum, ptrdiff_t cols, int dp, uint16_t* costs) {
+                  uint16_t* colsum, ptrdiff_t cols, int dp, uint8_t* costs, bool byte_cols) {
   constexpr bool kCensus = sizeof(typename Cost::Feature) == 4;
 #if !defined(STEREODEPTH_BM_AVX2)
   (void)costs;
+  (void)byte_cols;
+#else
+  if constexpr (kCensus) {
+   if (byte_cols) {
+    // Census with byte column sums (see RowCtx::byte_cols): the costs, packed in pairs of
+    // vectors, go to the ring slot and are added to the sums in the same layout.
+    auto* sums = reinterpret_cast<uint8_t*>(colsum);
+    for (ptrdiff_t x = 0; x < cols; ++x) {
+      const __m256i lv = _mm256_set1_epi32(static_cast<int>(left[x]));
+      const auto* r = rpad + x;
+      for (int q = 0; q < dp; q += 32) {
+        const __m256i c0 = census_cost16(lv, r + q);
+        const __m256i c1 = q + 16 < dp ? census_cost16(lv, r + q + 16) : _mm256_setzero_si256();
+        const __m256i c8 = _mm256_packus_epi16(c0, c1);
+        const ptrdiff_t at = x * cost_ring_column_bytes(dp) + q;
+        _mm256_store_si256(reinterpret_cast<__m256i*>(costs + at), c8);
+        auto* sp = reinterpret_cast<__m256i*>(sums + at);
+        _mm256_store_si256(sp, _mm256_add_epi8(_mm256_load_si256(sp), c8));
+      }
+    }
+    return;
+   }
+  }
 #endif
   for (ptrdiff_t x = 0; x < cols; ++x) {
     uint16_t* s = colsum + x * dp;
@@ -362,7 +408,7 @@ void add_cost_row(const typename Cost::Feature* left, const typename Cost::Featu
 #elif defined(STEREODEPTH_BM_AVX2)
     const __m256i lv = kCensus ? _mm256_set1_epi32(static_cast<int>(l))
                                : _mm256_set1_epi16(static_cast<short>(l));
-    for (int q = 0; q < dp; q += 16) {
+    auto cost = [&](int q) {
       __m256i c;
       if constexpr (kCensus) {
         c = census_cost16(lv, r + q);
@@ -371,7 +417,16 @@ void add_cost_row(const typename Cost::Feature* left, const typename Cost::Featu
       }
       auto* sp = reinterpret_cast<__m256i*>(s + q);
       _mm256_storeu_si256(sp, _mm256_add_epi16(_mm256_loadu_si256(sp), c));
-      if (costs) _mm256_storeu_si256(reinterpret_cast<__m256i*>(costs + x * dp + q), c);
+      return c;
+    };
+    for (int q = 0; q < dp; q += 32) {
+      const __m256i c0 = cost(q);
+      const __m256i c1 = q + 16 < dp ? cost(q + 16) : _mm256_setzero_si256();
+      if (costs) {
+        _mm256_store_si256(
+            reinterpret_cast<__m256i*>(costs + x * cost_ring_column_bytes(dp) + q),
+            _mm256_packus_epi16(c0, c1));
+      }
     }
 #else
     (void)kCensus;
@@ -480,8 +535,12 @@ struct RowCtx {
   const void* out_quad;
   ptrdiff_t nibble_stride;  // AVX2: elements from the low nibbles to the high ones
   // AVX2 census: the ring slots (see BandScratch::ring) of the rows entering and leaving.
-  uint16_t* ring_in;
-  const uint16_t* ring_out;
+  uint8_t* ring_in;
+  const uint8_t* ring_out;
+  // AVX2 census with a ring and block costs of a column below 256 (block size <= 15): the
+  // column sums are bytes, laid out as the ring's slots (see winners_avx2), for every row of
+  // the band.
+  bool byte_cols;
   float* drow;
   float* crow;  // null when no confidence is wanted
 };
@@ -1060,7 +1119,7 @@ void right_group_keyed(const uint16_t* recent, uint16_t* rmin, uint16_t* rarg, p
 // the column-sum update fused in, a branch-free winner, and the right winners updated per
 // group of 16 pixels (right_group) from the costs stored in `recent`, which also gives the
 // winner's neighbours.
-template <int NC, typename Cost, bool kRing>
+template <int NC, typename Cost, bool kRing, bool kBytes>
 void winners_avx2(const RowCtx& c) {
   using F = typename Cost::Feature;
   // Everything the loop reads from c, in locals (see winners_avx512).
@@ -1114,8 +1173,17 @@ void winners_avx2(const RowCtx& c) {
   // ring, the entering row's costs are matched and kept there, the leaving row's read back;
   // without, both rows are matched (the byte counts of one minus the other's, -8 .. 8, summed
   // in pairs by vpmaddubsw).
-  uint16_t* const ring_in = c.ring_in;
-  const uint16_t* const ring_out = c.ring_out;
+  // The ring holds one byte per cost: the costs of vectors i and i + 1 (i even; zeros past
+  // the last vector) as _mm256_packus_epi16 leaves them, which _mm256_unpacklo_epi8 and
+  // _mm256_unpackhi_epi8 with zeros undo; half the bytes of 16-bit costs to store and to
+  // read back (the ring exceeds L2, so they travel through L3), for one pack per pair and
+  // two unpacks. Hence a pair of vectors per call.
+  uint8_t* const ring_in = c.ring_in;
+  const uint8_t* const ring_out = c.ring_out;
+  constexpr ptrdiff_t kRingColumn = cost_ring_column_bytes(dp);
+  struct Pair {
+    __m256i v[2];
+  };
   auto census_update = [&](const CensusLeft& l, ptrdiff_t j, int i) {
     const __m256i lut = nibble_popcounts();
     // Set bits of each byte of (l ^ r): the counts of its two nibbles.
@@ -1126,27 +1194,76 @@ void winners_avx2(const RowCtx& c) {
                              _mm256_shuffle_epi8(lut, _mm256_xor_si256(l1, r1)));
     };
     auto* s = reinterpret_cast<__m256i*>(S + j * dp) + i;
-    __m256i d;
+    const bool two = i + 1 < NC;
+    __m256i d[2];
     if constexpr (kRing) {
-      const __m256i cin =
-          _mm256_maddubs_epi16(_mm256_set1_epi8(1), count(l.in0, l.in1, in16 + j + 16 * i));
-      _mm256_store_si256(reinterpret_cast<__m256i*>(ring_in + j * dp) + i, cin);
-      d = _mm256_sub_epi16(
-          cin, _mm256_load_si256(reinterpret_cast<const __m256i*>(ring_out + j * dp) + i));
+      const __m256i ones8 = _mm256_set1_epi8(1);
+      const __m256i cin0 = _mm256_maddubs_epi16(ones8, count(l.in0, l.in1, in16 + j + 16 * i));
+      const __m256i cin1 =
+          two ? _mm256_maddubs_epi16(ones8, count(l.in0, l.in1, in16 + j + 16 * (i + 1)))
+              : _mm256_setzero_si256();
+      // Loaded before the store: the two rows share a slot (see cost_ring_rows).
+      const __m256i out = _mm256_load_si256(
+          reinterpret_cast<const __m256i*>(ring_out + j * kRingColumn + 16 * i));
+      _mm256_store_si256(reinterpret_cast<__m256i*>(ring_in + j * kRingColumn + 16 * i),
+                         _mm256_packus_epi16(cin0, cin1));
+      d[0] = _mm256_sub_epi16(cin0, _mm256_unpacklo_epi8(out, _mm256_setzero_si256()));
+      d[1] = _mm256_sub_epi16(cin1, _mm256_unpackhi_epi8(out, _mm256_setzero_si256()));
     } else {
-      const __m256i pin = count(l.in0, l.in1, in16 + j + 16 * i);
-      const __m256i pout = count(l.out0, l.out1, out16 + j + 16 * i);
-      d = _mm256_maddubs_epi16(_mm256_set1_epi8(1), _mm256_sub_epi8(pin, pout));
+      for (int h = 0; h < 1 + static_cast<int>(two); ++h) {
+        const __m256i pin = count(l.in0, l.in1, in16 + j + 16 * (i + h));
+        const __m256i pout = count(l.out0, l.out1, out16 + j + 16 * (i + h));
+        d[h] = _mm256_maddubs_epi16(_mm256_set1_epi8(1), _mm256_sub_epi8(pin, pout));
+      }
     }
-    const __m256i v = _mm256_add_epi16(_mm256_load_si256(s), d);
+    Pair p;
+    p.v[0] = _mm256_add_epi16(_mm256_load_si256(s), d[0]);
+    _mm256_store_si256(s, p.v[0]);
+    if (two) {
+      p.v[1] = _mm256_add_epi16(_mm256_load_si256(s + 1), d[1]);
+      _mm256_store_si256(s + 1, p.v[1]);
+    }
+    return p;
+  };
+  // The same with byte column sums (kBytes, see RowCtx::byte_cols): entering minus leaving
+  // costs as bytes (-16 .. 16, exact modulo 256 as the sums stay below 256), added to the
+  // sums in the ring's layout, then widened for the block sums. Half the bytes of 16-bit
+  // sums to load and store per column.
+  auto census_update_bytes = [&](const CensusLeft& l, ptrdiff_t j, int i) {
+    const __m256i lut = nibble_popcounts();
+    auto count = [&](const uint16_t* p) {
+      const __m256i r0 = _mm256_loadu_si256(reinterpret_cast<const __m256i*>(p));
+      const __m256i r1 = _mm256_loadu_si256(reinterpret_cast<const __m256i*>(p + nib));
+      return _mm256_maddubs_epi16(
+          _mm256_set1_epi8(1), _mm256_add_epi8(_mm256_shuffle_epi8(lut, _mm256_xor_si256(l.in0, r0)),
+                                               _mm256_shuffle_epi8(lut, _mm256_xor_si256(l.in1, r1))));
+    };
+    const __m256i cin0 = count(in16 + j + 16 * i);
+    const __m256i cin1 = i + 1 < NC ? count(in16 + j + 16 * (i + 1)) : _mm256_setzero_si256();
+    const __m256i c8 = _mm256_packus_epi16(cin0, cin1);
+    const ptrdiff_t at = j * kRingColumn + 16 * i;
+    // Loaded before the store: the two rows share a slot (see cost_ring_rows).
+    const __m256i out = _mm256_load_si256(reinterpret_cast<const __m256i*>(ring_out + at));
+    _mm256_store_si256(reinterpret_cast<__m256i*>(ring_in + at), c8);
+    auto* s = reinterpret_cast<__m256i*>(reinterpret_cast<uint8_t*>(S) + at);
+    const __m256i v = _mm256_add_epi8(_mm256_load_si256(s), _mm256_sub_epi8(c8, out));
     _mm256_store_si256(s, v);
-    return v;
+    Pair p;
+    p.v[0] = _mm256_unpacklo_epi8(v, _mm256_setzero_si256());
+    p.v[1] = _mm256_unpackhi_epi8(v, _mm256_setzero_si256());
+    return p;
   };
   auto update_col = [&](ptrdiff_t j) {
     auto* s = reinterpret_cast<__m256i*>(S + j * dp);
     if constexpr (sizeof(F) == 4) {
       const CensusLeft l = census_left(j);
-      for (int i = 0; i < NC; ++i) census_update(l, j, i);
+      for (int i = 0; i < NC; i += 2) {
+        if constexpr (kBytes) {
+          census_update_bytes(l, j, i);
+        } else {
+          census_update(l, j, i);
+        }
+      }
     } else {
       // SAD, 32 lanes of bytes at a time: |l - r| = max - min, and the entering row's cost
       // minus the leaving row's (-62 .. 62) fits a signed byte, widened for the sums. (With
@@ -1175,8 +1292,16 @@ void winners_avx2(const RowCtx& c) {
   }
 
   __m256i A[NC];
+  // Vector i of column j's sums, widened from bytes with kBytes.
   auto column = [&](ptrdiff_t j, int i) {
-    return _mm256_load_si256(reinterpret_cast<const __m256i*>(S + j * dp) + i);
+    if constexpr (kBytes) {
+      const __m256i v = _mm256_load_si256(reinterpret_cast<const __m256i*>(
+          reinterpret_cast<const uint8_t*>(S) + j * kRingColumn + 16 * (i & ~1)));
+      return (i & 1) ? _mm256_unpackhi_epi8(v, _mm256_setzero_si256())
+                     : _mm256_unpacklo_epi8(v, _mm256_setzero_si256());
+    } else {
+      return _mm256_load_si256(reinterpret_cast<const __m256i*>(S + j * dp) + i);
+    }
   };
   for (int i = 0; i < NC; ++i) A[i] = _mm256_setzero_si256();
   uint32_t tsum = 0;
@@ -1236,12 +1361,18 @@ void winners_avx2(const RowCtx& c) {
     // instructions) rather than read it.
     __asm__("" : "+x"(key_low[i]));
   }
-  auto group_winners = [&](ptrdiff_t x0, ptrdiff_t x1) {
+  // kFast (std::true_type): the defaults' case, keyed, with the uniqueness count and the
+  // winner's neighbours, decided once per group rather than tested per pixel.
+  auto group_winners = [&](ptrdiff_t x0, ptrdiff_t x1, auto fast) {
+    constexpr bool kFast = decltype(fast)::value;
+    const bool keyed_ = kFast || keyed;
+    const bool count_low_ = kFast || count_low;
+    const bool around_ = kFast || around;
     // Without keys, in two loops: the least costs first (a short chain), then the rest, which
     // starts from the least cost in memory; each loop's chain is then short enough for the
     // processor to overlap several pixels.
     alignas(32) uint16_t bests[16];
-    for (ptrdiff_t x = x0; x <= x1 && !keyed; ++x) {
+    for (ptrdiff_t x = x0; x <= x1 && !keyed_; ++x) {
       const uint16_t* const row = recent + (x - x0) * kRow + 16;
       auto load = [&](int i) { return _mm256_load_si256(reinterpret_cast<const __m256i*>(row) + i); };
       int qlo = 0, qhi = -1;
@@ -1266,7 +1397,8 @@ void winners_avx2(const RowCtx& c) {
       __m256i V[NC];
       for (int i = 0; i < NC; ++i) V[i] = _mm256_load_si256(reinterpret_cast<const __m256i*>(row) + i);
       int qlo = 0, qhi = dp - 1;  // the lanes searched
-      if (x < xlo || x > xhi) {
+      const bool border = x < xlo || x > xhi;
+      if (border) {
         if (!clip_border || !border_lanes(x, qlo, qhi)) {
           record_none(c, x);
           continue;
@@ -1275,17 +1407,15 @@ void winners_avx2(const RowCtx& c) {
       }
       uint32_t best = 0;
       int qb = 0;
-      if (keyed) {
+      if (keyed_) {
         // The winner with its cost in one pass: keys cost << 4 | (15 - i) for vector i (every
         // cost is below 4095, and the 0xFFFF lanes give keys of at least 0xFFF0, above every
         // real one), so that the least key per lane is the least cost and, among equal costs,
         // the last vector (the highest lane); across the 16 lanes, the least key's highest
         // lane. (One loop with the rest: its chain is short enough to overlap pixels.)
-        __m256i kmin[2] = {ones, ones};
-        for (int i = 0; i < NC; ++i) {
-          kmin[i & 1] = _mm256_min_epu16(kmin[i & 1],
-                                         _mm256_or_si256(_mm256_slli_epi16(V[i], 4), key_low[i]));
-        }
+        auto key_of = [&](int i) { return _mm256_or_si256(_mm256_slli_epi16(V[i], 4), key_low[i]); };
+        __m256i kmin[2] = {key_of(0), NC > 1 ? key_of(1) : ones};
+        for (int i = 2; i < NC; ++i) kmin[i & 1] = _mm256_min_epu16(kmin[i & 1], key_of(i));
         const __m256i k = _mm256_min_epu16(kmin[0], kmin[1]);
         const uint32_t key =
             static_cast<uint32_t>(_mm_cvtsi128_si32(_mm_minpos_epu16(_mm_min_epu16(
@@ -1318,7 +1448,7 @@ void winners_avx2(const RowCtx& c) {
         }
       }
       uint32_t second = kNone;
-      if (count_low) {
+      if (count_low_) {
         // How many lanes cost less than the uniqueness threshold (see winners_avx512): the
         // lanes >= it are those with min(a, thr) == thr; two vectors' masks packed to bytes
         // give one bit per lane.
@@ -1355,12 +1485,20 @@ void winners_avx2(const RowCtx& c) {
       // neither (it needs 1 <= kb <= nd - 2).
       // In the border band a neighbour outside the lanes searched reads as 0xFFFF, which
       // the second pass takes as "no sub-pixel step" (border_band's rule).
-      rec->around = 0;
-      if (around) {
-        const uint32_t c0 = qb + 1 <= qhi ? row[qb + 1] : kNone;
-        const uint32_t c2 = qb - 1 >= qlo ? row[qb - 1] : kNone;
-        rec->around = c0 | (c2 << 16);
+      // Inside the border (qlo = 0, qhi = dp - 1) the tests are not needed: lanes -1 and dp
+      // of `recent` hold 0xFFFF, i.e. kNone, and a padding lane beside the winner holds its
+      // block sum ORed with 0xFFFF.
+      uint32_t around_costs = 0;
+      if (around_) {
+        if (border) {
+          const uint32_t c0 = qb + 1 <= qhi ? row[qb + 1] : kNone;
+          const uint32_t c2 = qb - 1 >= qlo ? row[qb - 1] : kNone;
+          around_costs = c0 | (c2 << 16);
+        } else {
+          around_costs = static_cast<uint32_t>(row[qb + 1]) | (static_cast<uint32_t>(row[qb - 1]) << 16);
+        }
       }
+      rec->around = around_costs;
     }
   };
 
@@ -1368,7 +1506,6 @@ void winners_avx2(const RowCtx& c) {
   // the right winners and the winners of those pixels are found. A group whose columns all
   // have their block inside the row (no clamping) and whose column sums are updated here
   // takes the short path.
-  const bool has_pad = c.qpad > 0;
   for (ptrdiff_t x0 = 0; x0 < cols; x0 += 16) {
     const ptrdiff_t x1 = std::min<ptrdiff_t>(x0 + 16, cols);
     uint16_t* row = recent + 16;
@@ -1377,9 +1514,17 @@ void winners_avx2(const RowCtx& c) {
         const ptrdiff_t xp = x + r, xm = x - r - 1;
         if constexpr (sizeof(F) == 4) {
           const CensusLeft l = census_left(xp);
-          for (int i = 0; i < NC; ++i) {
-            A[i] = _mm256_sub_epi16(_mm256_add_epi16(A[i], census_update(l, xp, i)),
-                                    column(xm, i));
+          for (int i = 0; i < NC; i += 2) {
+            Pair p;
+            if constexpr (kBytes) {
+              p = census_update_bytes(l, xp, i);
+            } else {
+              p = census_update(l, xp, i);
+            }
+            A[i] = _mm256_sub_epi16(_mm256_add_epi16(A[i], p.v[0]), column(xm, i));
+            if (i + 1 < NC) {
+              A[i + 1] = _mm256_sub_epi16(_mm256_add_epi16(A[i + 1], p.v[1]), column(xm, i + 1));
+            }
           }
         } else {
           update_col(xp);
@@ -1387,7 +1532,7 @@ void winners_avx2(const RowCtx& c) {
             A[i] = _mm256_sub_epi16(_mm256_add_epi16(A[i], column(xp, i)), column(xm, i));
           }
         }
-        if (has_pad) A[0] = _mm256_or_si256(A[0], padv);
+        A[0] = _mm256_or_si256(A[0], padv);  // (padv is 0 when there is no padding)
         if (texcol) tsum += texcol[xp] - texcol[xm];
         for (int i = 0; i < NC; ++i) _mm256_store_si256(reinterpret_cast<__m256i*>(row) + i, A[i]);
         tsums[x - x0] = tsum;
@@ -1400,9 +1545,18 @@ void winners_avx2(const RowCtx& c) {
           if constexpr (sizeof(F) == 4) {
             if (fused && x + r < cols) {
               const CensusLeft l = census_left(x + r);
-              for (int i = 0; i < NC; ++i) {
-                A[i] = _mm256_sub_epi16(_mm256_add_epi16(A[i], census_update(l, x + r, i)),
-                                        column(xm, i));
+              for (int i = 0; i < NC; i += 2) {
+                Pair p;
+                if constexpr (kBytes) {
+                  p = census_update_bytes(l, x + r, i);
+                } else {
+                  p = census_update(l, x + r, i);
+                }
+                A[i] = _mm256_sub_epi16(_mm256_add_epi16(A[i], p.v[0]), column(xm, i));
+                if (i + 1 < NC) {
+                  A[i + 1] =
+                      _mm256_sub_epi16(_mm256_add_epi16(A[i + 1], p.v[1]), column(xm, i + 1));
+                }
               }
             } else {
               for (int i = 0; i < NC; ++i) {
@@ -1430,7 +1584,11 @@ void winners_avx2(const RowCtx& c) {
         right_group<NC>(recent, rmin, rarg, x0, n);
       }
     }
-    group_winners(x0, x1 - 1);
+    if (keyed && count_low && around) {
+      group_winners(x0, x1 - 1, std::true_type{});
+    } else {
+      group_winners(x0, x1 - 1, std::false_type{});
+    }
   }
 }
 
@@ -1449,10 +1607,16 @@ bool winners_fixed(const RowCtx& c) {
 #if defined(STEREODEPTH_BM_AVX512)
       winners_avx512<NC, Cost>(c);
 #else
-      if (sizeof(typename Cost::Feature) == 4 && c.ring_in != nullptr) {
-        winners_avx2<NC, Cost, true>(c);
+      if constexpr (sizeof(typename Cost::Feature) == 4) {
+        if (c.byte_cols) {
+          winners_avx2<NC, Cost, true, true>(c);
+        } else if (c.ring_in != nullptr) {
+          winners_avx2<NC, Cost, true, false>(c);
+        } else {
+          winners_avx2<NC, Cost, false, false>(c);
+        }
       } else {
-        winners_avx2<NC, Cost, false>(c);
+        winners_avx2<NC, Cost, false, false>(c);
       }
 #endif
       return true;
@@ -1963,11 +2127,14 @@ void match_band_impl(const MatchArgs& a, const BandScratch& s, ptrdiff_t y0, ptr
   c.first_pass_only = a.first_pass_only;
 
   const bool fused = fuses_update(dp);
+#if defined(STEREODEPTH_BM_AVX2)
+  c.byte_cols = sizeof(F) == 4 && s.ring != nullptr && fused && (2 * r + 1) * kCensusCostMax <= 255;
+#endif
   // The ring slot of image row y (clamped), or null without a ring.
-  auto ring_slot = [&](ptrdiff_t y) -> uint16_t* {
+  auto ring_slot = [&](ptrdiff_t y) -> uint8_t* {
     if (!s.ring) return nullptr;
     const ptrdiff_t slot = clamp_index(y, 0, rows - 1) % cost_ring_rows(r);
-    return s.ring + slot * cols * dp;
+    return s.ring + slot * cols * cost_ring_column_bytes(dp);
   };
   for (ptrdiff_t y = y0; y < y1; ++y) {
     if (fresh && y == y0) {
@@ -1975,7 +2142,8 @@ void match_band_impl(const MatchArgs& a, const BandScratch& s, ptrdiff_t y0, ptr
       if (tex_on) std::memset(s.texcol, 0, sizeof(uint32_t) * static_cast<size_t>(cols));
       for (ptrdiff_t dy = -r; dy <= r; ++dy) {
         pad_right_row(rrow(y + dy), rpad_in, cols, npad, jmin);
-        add_cost_row<Cost>(lrow(y + dy), rpad_in, s.colsum, cols, dp, ring_slot(y + dy));
+        add_cost_row<Cost>(lrow(y + dy), rpad_in, s.colsum, cols, dp, ring_slot(y + dy),
+                           c.byte_cols);
         if (tex_on) {
           const uint8_t* t = trow(y + dy);
           for (ptrdiff_t x = 0; x < cols; ++x) s.texcol[x] += t[x];

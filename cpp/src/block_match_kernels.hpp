@@ -79,9 +79,11 @@ struct BandScratch {
   // AVX2: the block costs of the last 16 pixels, recent_size(lanes, dp) of them.
   std::uint16_t* recent;
   // AVX2 census, fixed first pass: the pixel costs of the last cost_ring_rows(radius) image
-  // rows (row y in slot y mod that), cols * dp each, so that a row leaving the block is read
-  // back rather than matched again; cost_ring_size(...) elements, null when that is 0.
-  std::uint16_t* ring;
+  // rows (row y in slot y mod that), so that a row leaving the block is read back rather than
+  // matched again. One byte per cost (a census cost is at most 16): column x of a slot at
+  // x * cost_ring_column_bytes(dp), its lanes as the pairs of vectors that vpackuswb makes
+  // (see winners_avx2); cost_ring_size(...) bytes, null when that is 0.
+  std::uint8_t* ring;
 };
 
 // Bytes per element of the regrouped census rows of a build with this many lanes.
@@ -94,19 +96,25 @@ inline constexpr std::size_t recent_size(int lanes, int dp) {
   return lanes == 16 ? 16 * (static_cast<std::size_t>(dp) + 32) : 0;
 }
 
-inline constexpr std::ptrdiff_t cost_ring_rows(int radius) { return 2 * radius + 2; }
+// Rows y - r .. y + r: the row entering at y (y + r) takes the slot of the row leaving
+// (y - r - 1), whose costs are read before they are overwritten.
+inline constexpr std::ptrdiff_t cost_ring_rows(int radius) { return 2 * radius + 1; }
 
 // The most a worker's cost ring may take, in bytes; beyond, the leaving row is matched again.
 inline constexpr std::size_t kCostRingBudget = std::size_t{24} << 20;
 
-// Elements of BandScratch::ring: a build with 16 lanes (AVX2), census features (4 bytes) and
-// dp <= 256 (its fixed first pass) keeps cost_ring_rows(radius) rows of cols * dp costs, when
+// Bytes of one column's costs in a ring slot: dp rounded up to 32 (whole pairs of vectors).
+inline constexpr std::ptrdiff_t cost_ring_column_bytes(int dp) { return (dp + 31) / 32 * 32; }
+
+// Bytes of BandScratch::ring: a build with 16 lanes (AVX2), census features (4 bytes) and
+// dp <= 256 (its fixed first pass) keeps cost_ring_rows(radius) rows of cols columns, when
 // they fit kCostRingBudget; 0 otherwise.
 inline constexpr std::size_t cost_ring_size(int lanes, std::size_t feat_size, int radius,
                                             std::ptrdiff_t cols, int dp) {
   const std::size_t n = static_cast<std::size_t>(cost_ring_rows(radius)) *
-                        static_cast<std::size_t>(cols) * static_cast<std::size_t>(dp);
-  return lanes == 16 && feat_size == 4 && dp <= 256 && 2 * n <= kCostRingBudget ? n : 0;
+                        static_cast<std::size_t>(cols) *
+                        static_cast<std::size_t>(cost_ring_column_bytes(dp));
+  return lanes == 16 && feat_size == 4 && dp <= 256 && n <= kCostRingBudget ? n : 0;
 }
 
 // Elements of slack after each padded row, so vector loops may overrun.
