@@ -498,6 +498,10 @@ def _can_reset_peak() -> bool:
 
 
 @pytest.mark.skipif(not _can_reset_peak(), reason="needs Linux /proc/self/clear_refs")
+@pytest.mark.skipif(
+    bool(sd.build_info()["sanitizers"]),
+    reason="a sanitizer's allocator (red zones, quarantine) is not the memory users get",
+)
 @pytest.mark.parametrize("rgb", [False, True], ids=["grey", "rgb"])
 def test_single_pass_peak_memory_does_not_grow_with_the_height(rgb: bool) -> None:
     # Issue 11: paths=3 keeps a few rows per thread and nothing image-sized beside the
