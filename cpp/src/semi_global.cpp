@@ -413,7 +413,7 @@ void SemiGlobalMatcher::compute(const StereoImage& left, const StereoImage& righ
     const std::ptrdiff_t ns = std::min<std::ptrdiff_t>(nt, stripes);
     run_bands(ns, [&](std::ptrdiff_t b) {
       const auto c = static_cast<std::size_t>(cols);
-      const std::size_t n_rev = round64(c + static_cast<std::size_t>(nd) + 32);
+      const std::size_t n_rev = round64((detail::rev8_bytes(cols, nd) + 1) / 2);
       // uint8 raw rows and the box's ring
       const std::size_t raw_len = (c + 2) * static_cast<std::size_t>(nd);
       const std::size_t n_raw = round64((3 * raw_len + 3 * static_cast<std::size_t>(nd) + 1) / 2);
@@ -444,19 +444,19 @@ void SemiGlobalMatcher::compute(const StereoImage& left, const StereoImage& righ
           raw.get(
               rows, r, y, raws,
               [&](std::ptrdiff_t yy, std::uint8_t* out) {
-                k.raw_row8(lcen + yy * cols, rcen + yy * cols, cols, 0, cols, r, nd,
-                           p.min_disparity, rev8, out);
+                k.raw_row8_t(lcen + yy * cols, rcen + yy * cols, cols, 0, cols, r, nd,
+                             p.min_disparity, rev8, out);
               },
               &fresh);
           const std::ptrdiff_t yf =
               fresh < 0 ? 0 : std::clamp<std::ptrdiff_t>(y + fresh - r, 0, rows - 1);
-          k.box_row8(raws, fresh, lcen + yf * cols, rcen + yf * cols, rev8, r, cols, 0, cols, nd,
-                     p.min_disparity, cmax, ring, crow);
+          k.box_row8_t(raws, fresh, lcen + yf * cols, rcen + yf * cols, rev8, r, cols, 0, cols,
+                       nd, p.min_disparity, cmax, ring, crow);
           fa.g = pgrey + y * cols;
           fa.gprev = y == y0 ? nullptr : pgrey + (y - 1) * cols;
           fa.disp = pre ? pre + y * cols : disparity.row(y);
           fa.conf = confidence.data ? confidence.row(y) : nullptr;
-          k.fused_row(fa);
+          k.fused_row_t(fa);
         }
       }
     });
