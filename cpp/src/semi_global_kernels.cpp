@@ -897,6 +897,14 @@ struct V256 {
     const R in = _mm256_cmpeq_epi16(_mm256_min_epu16(rel, span), rel);
     return _mm256_or_si256(v, _mm256_xor_si256(in, _mm256_set1_epi16(-1)));
   }
+  // The least of b << 16 | a over the lanes: the least b and, among its lanes, the least a.
+  static std::uint32_t min_key(R a, R b) {
+    const R m8 = _mm256_min_epu32(_mm256_unpacklo_epi16(a, b), _mm256_unpackhi_epi16(a, b));
+    __m128i m = _mm_min_epu32(_mm256_castsi256_si128(m8), _mm256_extracti128_si256(m8, 1));
+    m = _mm_min_epu32(m, _mm_shuffle_epi32(m, 0x4E));
+    m = _mm_min_epu32(m, _mm_shuffle_epi32(m, 0xB1));
+    return static_cast<std::uint32_t>(_mm_cvtsi128_si32(m));
+  }
 };
 #endif
 
@@ -963,6 +971,15 @@ struct V512 {
   static R or_outside(R v, R k, R lo, R span) {
     return _mm512_mask_mov_epi16(v, _mm512_cmpgt_epu16_mask(_mm512_sub_epi16(k, lo), span),
                                  _mm512_set1_epi16(-1));
+  }
+  static std::uint32_t min_key(R a, R b) {
+    const R m16 = _mm512_min_epu32(_mm512_unpacklo_epi16(a, b), _mm512_unpackhi_epi16(a, b));
+    const __m256i m8 =
+        _mm256_min_epu32(_mm512_castsi512_si256(m16), _mm512_extracti64x4_epi64(m16, 1));
+    __m128i m = _mm_min_epu32(_mm256_castsi256_si128(m8), _mm256_extracti128_si256(m8, 1));
+    m = _mm_min_epu32(m, _mm_shuffle_epi32(m, 0x4E));
+    m = _mm_min_epu32(m, _mm_shuffle_epi32(m, 0xB1));
+    return static_cast<std::uint32_t>(_mm_cvtsi128_si32(m));
   }
 };
 #endif
@@ -1115,7 +1132,44 @@ inline void decide_fused(const FusedRowArgs& a) {
   const DecideArgs& d = a.d;
   const bool lr_on = d.lr_max_diff >= 0;
   const float nan = std::numeric_limits<float>::quiet_NaN();
+  // The pixels with the whole range (klo = 0, khi = nd - 1): xa .. xb - 1.
+  const ptrdiff_t xa = clamp_index(dmin + nd - 1, 0, cols);
+  const ptrdiff_t xb = clamp_index(dmin + cols, xa, cols);
+  if (d.uniqueness_factor <= 0 && a.conf == nullptr) {
+    // Without the uniqueness check and the confidence, a shorter loop over those pixels: the
+    // left-right check on integers (diff <= lr_max_diff for an integer diff >= 0 is diff <=
+    // floor(lr_max_diff)), the same float steps.
+    const ptrdiff_t lr_int = !lr_on                     ? nd
+                             : d.lr_max_diff >= nd      ? nd
+                                                        : static_cast<ptrdiff_t>(d.lr_max_diff);
+    const int fit = d.subpixel;
+    const uint16_t* rfinal = a.rfinal - dmin;
+    for (ptrdiff_t x = xa; x < xb; ++x) {
+      const uint32_t* rx = res + 4 * x;
+      const ptrdiff_t kb = rx[1];
+      const ptrdiff_t kr = rfinal[x - kb];
+      const ptrdiff_t diff = kb > kr ? kb - kr : kr - kb;
+      float disp = static_cast<float>(dmin + kb);
+      if (fit != static_cast<int>(SubpixelFit::kNone) && kb >= 1 && kb + 1 <= nd - 1) {
+        const int32_t c0 = static_cast<int32_t>(rx[3] & 0xFFFFu);
+        const int32_t c1 = static_cast<int32_t>(rx[0]);
+        const int32_t c2 = static_cast<int32_t>(rx[3] >> 16);
+        const float num = static_cast<float>(c0 - c2);
+        const float den =
+            fit == static_cast<int>(SubpixelFit::kParabola)
+                ? static_cast<float>(2 * (c0 + c2 - 2 * c1))
+                : static_cast<float>(2 * (c0 - c1 > c2 - c1 ? c0 - c1 : c2 - c1));
+        if (den > 0.0f) disp = disp + num / den;
+      }
+      a.disp[x] = diff <= lr_int ? disp : nan;
+    }
+  }
+  const bool fast = d.uniqueness_factor <= 0 && a.conf == nullptr && xa < xb;
   for (ptrdiff_t x = 0; x < cols; ++x) {
+    if (fast && x == xa) {
+      x = xb - 1;
+      continue;
+    }
     const ptrdiff_t klo = clamp_index(x - dmin - cols + 1, 0, nd);
     const ptrdiff_t khi = clamp_index(x - dmin, -1, nd - 1);
     bool ok = klo <= khi;
@@ -1376,8 +1430,8 @@ inline void pass1_pixel_t(int nv_rt, const uint8_t* __restrict cx, int16_t* __re
     V::store(hrow + v * N, lh);
     V::store(lvx + v * N, lv);
     V::store(px + v * N, V::add(lh, lv));
-    hmin[v & 1] = V::min(hmin[v & 1], lh);
-    vmin[v & 1] = V::min(vmin[v & 1], lv);
+    hmin[v & 1] = v < 2 ? lh : V::min(hmin[v & 1], lh);
+    vmin[v & 1] = v < 2 ? lv : V::min(vmin[v & 1], lv);
   }
   mh_out = V::hmin_v(V::min(hmin[0], hmin[1]));
   *lvmin_out = static_cast<int16_t>(V::hmin(V::min(vmin[0], vmin[1])));
@@ -1413,10 +1467,10 @@ inline void pass2_pixel_t(int nv_rt, const uint8_t* __restrict cx, int16_t* __re
       lr = h.step(hrow, v, nv, c, vp1, mr, p2r);
     }
     V::store(hrow + v * N, lr);
-    rmin[v & 1] = V::min(rmin[v & 1], lr);
+    rmin[v & 1] = v < 2 ? lr : V::min(rmin[v & 1], lr);
     R s = V::add(V::load(px + v * N), lr);
     if constexpr (kBorder) s = V::or_outside(s, kv, lo_v, span_v);
-    if constexpr (kSecond) V::store(px + v * N, s);
+    V::store(px + v * N, s);  // for the second best and the sums beside the winner
     V::take_lt(best, barg, s, kv);
     uint16_t* wp = wmin + slot * N;
     uint16_t* ap = warg + slot * N;
@@ -1534,15 +1588,14 @@ void fused_row_t_impl(const FusedRowArgs& a) {
     }
     uint32_t* rx = res + 4 * x;
     if (klo > khi) continue;
-    const R best_b = V::hmin_v(best_v);
-    const R kb_b = V::hmin_where_eq(arg_v, best_v, best_b);
-    const uint32_t best = V::lane0(best_b);
-    const int kb = static_cast<int>(V::lane0(kb_b));
+    const uint32_t key = V::min_key(arg_v, best_v);
+    const uint32_t best = key >> 16;
+    const int kb = static_cast<int>(key & 0xFFFFu);
     rx[0] = best;
     rx[1] = static_cast<uint32_t>(kb);
     if constexpr (kSecond) {
       // The least sum more than one index away from kb (the sums, masked, are in px).
-      const R near = V::sub(kb_b, one);
+      const R near = V::set1(kb - 1);
       R s2 = ones;
       R k2 = iota_nv;
       for (int v = 0; v < nv; ++v) {
@@ -1554,17 +1607,6 @@ void fused_row_t_impl(const FusedRowArgs& a) {
     } else {
       rx[2] = kNone;
     }
-    // The sums beside the winner (used only when both are inside: unmasked).
-    auto sum_at = [&](int k) {
-      const ptrdiff_t at = (k % nv) * N + k / nv;
-      if constexpr (kSecond) {
-        return static_cast<uint32_t>(px[at]);
-      } else {
-        return static_cast<uint32_t>(
-            static_cast<uint16_t>(px[at] + static_cast<uint16_t>(hrow[at])));
-      }
-    };
-    rx[3] = (kb > 0 ? sum_at(kb - 1) : 0u) | (kb + 1 < nd ? sum_at(kb + 1) << 16 : 0u);
   }
   // The columns still in the window are final (vector v in slot (slot0 + v) mod nv).
   for (int v = 0; v < nv; ++v) {
@@ -1572,6 +1614,20 @@ void fused_row_t_impl(const FusedRowArgs& a) {
     for (int j = 0; j < N; ++j) {
       const ptrdiff_t xr = -dmin - (static_cast<ptrdiff_t>(j) * nv + v);
       if (xr >= 0 && xr < cols) a.rfinal[xr] = warg[s * N + j];
+    }
+  }
+  // The sums beside the winners, from the row's sums in partial (used only when both are
+  // inside the range, where they are not masked), away from the sweep's chains.
+  if (a.d.subpixel != static_cast<int>(SubpixelFit::kNone)) {
+    for (ptrdiff_t x = 0; x < cols; ++x) {
+      const ptrdiff_t klo = clamp_index(x - dmin - cols + 1, 0, nd);
+      const ptrdiff_t khi = clamp_index(x - dmin, -1, nd - 1);
+      uint32_t* rx = res + 4 * x;
+      const int kb = static_cast<int>(rx[1]);
+      if (klo > khi || kb - 1 < klo || kb + 1 > khi) continue;
+      const uint16_t* sx = a.partial + x * nd;
+      rx[3] = static_cast<uint32_t>(sx[((kb - 1) % nv) * N + (kb - 1) / nv]) |
+              static_cast<uint32_t>(sx[((kb + 1) % nv) * N + (kb + 1) / nv]) << 16;
     }
   }
   decide_fused(a);
