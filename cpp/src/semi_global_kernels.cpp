@@ -591,12 +591,44 @@ inline void fill_range(uint8_t* __restrict o, ptrdiff_t k0, ptrdiff_t k1, int nd
   if constexpr (kT == 0) {
     for (ptrdiff_t k = k0; k < k1; ++k) o[k] = static_cast<uint8_t>(v);
   } else {
+    // One masked store per vector (a plain loop here becomes a memset call per vector).
+    static_assert(kT == 16 || kT == 32, "16 or 32 lanes");
+    auto set1 = [](int b) {
+      if constexpr (kT == 16) {
+        return _mm_set1_epi8(static_cast<char>(b));
+      } else {
+        return _mm256_set1_epi8(static_cast<char>(b));
+      }
+    };
+    auto iota = [] {
+      if constexpr (kT == 16) {
+        return _mm_setr_epi8(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15);
+      } else {
+        return _mm256_setr_epi8(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15, 16, 17, 18,
+                                19, 20, 21, 22, 23, 24, 25, 26, 27, 28, 29, 30, 31);
+      }
+    };
+    using W = decltype(iota());
+    const W lanes = iota(), fill = set1(v);
     const ptrdiff_t nv = nd / kT;
     for (ptrdiff_t r = 0; r < nv; ++r) {
-      // Lanes j with k0 <= j * nv + r < k1.
+      // Lanes j with k0 <= j * nv + r < k1: j0 <= j < j1 (at most kT).
       const ptrdiff_t j0 = k0 > r ? (k0 - r + nv - 1) / nv : 0;
       const ptrdiff_t j1 = k1 > r ? (k1 - r + nv - 1) / nv : 0;
-      for (ptrdiff_t j = j0; j < j1; ++j) o[r * kT + j] = static_cast<uint8_t>(v);
+      if (j0 >= j1) continue;
+      uint8_t* p = o + r * kT;
+      if constexpr (kT == 16) {
+        // in: j0 <= lane < j1 (signed bytes: lanes, j0 and j1 are at most 32).
+        const W in = _mm_andnot_si128(_mm_cmpgt_epi8(set1(static_cast<int>(j0)), lanes),
+                                      _mm_cmpgt_epi8(set1(static_cast<int>(j1)), lanes));
+        const W cur = _mm_loadu_si128(reinterpret_cast<const W*>(p));
+        _mm_storeu_si128(reinterpret_cast<W*>(p), _mm_blendv_epi8(cur, fill, in));
+      } else {
+        const W in = _mm256_andnot_si256(_mm256_cmpgt_epi8(set1(static_cast<int>(j0)), lanes),
+                                         _mm256_cmpgt_epi8(set1(static_cast<int>(j1)), lanes));
+        const W cur = _mm256_loadu_si256(reinterpret_cast<const W*>(p));
+        _mm256_storeu_si256(reinterpret_cast<W*>(p), _mm256_blendv_epi8(cur, fill, in));
+      }
     }
   }
 }
@@ -1684,8 +1716,10 @@ void fused_row_t_impl(const FusedRowArgs& a) {
       const int kb = static_cast<int>(rx[1]);
       if (klo > khi || kb - 1 < klo || kb + 1 > khi) continue;
       const uint16_t* sx = a.partial + x * nd;
-      rx[3] = static_cast<uint32_t>(sx[((kb - 1) % nv) * N + (kb - 1) / nv]) |
-              static_cast<uint32_t>(sx[((kb + 1) % nv) * N + (kb + 1) / nv]) << 16;
+      const unsigned km = static_cast<unsigned>(kb - 1), kp = static_cast<unsigned>(kb + 1);
+      const unsigned unv = static_cast<unsigned>(nv);
+      rx[3] = static_cast<uint32_t>(sx[(km % unv) * N + km / unv]) |
+              static_cast<uint32_t>(sx[(kp % unv) * N + kp / unv]) << 16;
     }
   }
   decide_fused(a);
