@@ -1560,7 +1560,7 @@ inline void pass2_pixel_t(int nv_rt, const uint8_t* __restrict cx, int16_t* __re
     rmin[v & 1] = v < 2 ? lr : V::min(rmin[v & 1], lr);
     R s = V::add(V::load(px + v * N), lr);
     if constexpr (kBorder) s = V::or_outside(s, kv, lo_v, span_v);
-    V::store(px + v * N, s);  // for the second best and the sums beside the winner
+    if constexpr (kSecond) V::store(px + v * N, s);  // for the second best
     V::take_lt(best, barg, s, kv);
     uint16_t* wp = wmin + slot * N;
     uint16_t* ap = warg + slot * N;
@@ -1697,6 +1697,18 @@ void fused_row_t_impl(const FusedRowArgs& a) {
     } else {
       rx[2] = kNone;
     }
+    if (!kSecond && kb >= 1 && kb + 1 < nd) {
+      // The sums beside the winner (used only when both are inside: unmasked), from the
+      // other paths' sums and the path from the right just stored.
+      const unsigned km = static_cast<unsigned>(kb - 1), kp = static_cast<unsigned>(kb + 1);
+      const unsigned unv = static_cast<unsigned>(nv);
+      const ptrdiff_t am = (km % unv) * N + km / unv, ap = (kp % unv) * N + kp / unv;
+      auto sum = [&](ptrdiff_t at) {
+        const uint16_t v = static_cast<uint16_t>(px[at] + static_cast<uint16_t>(hrow[at]));
+        return static_cast<uint32_t>(v);
+      };
+      rx[3] = sum(am) | sum(ap) << 16;
+    }
   }
   // The columns still in the window are final (vector v in slot (slot0 + v) mod nv).
   for (int v = 0; v < nv; ++v) {
@@ -1706,9 +1718,9 @@ void fused_row_t_impl(const FusedRowArgs& a) {
       if (xr >= 0 && xr < cols) a.rfinal[xr] = warg[s * N + j];
     }
   }
-  // The sums beside the winners, from the row's sums in partial (used only when both are
-  // inside the range, where they are not masked), away from the sweep's chains.
-  if (a.d.subpixel != static_cast<int>(SubpixelFit::kNone)) {
+  // With the second best, the sums beside the winners from the row's sums kept in partial
+  // (used only when both are inside the range, where they are not masked).
+  if (kSecond && a.d.subpixel != static_cast<int>(SubpixelFit::kNone)) {
     for (ptrdiff_t x = 0; x < cols; ++x) {
       const ptrdiff_t klo = clamp_index(x - dmin - cols + 1, 0, nd);
       const ptrdiff_t khi = clamp_index(x - dmin, -1, nd - 1);
