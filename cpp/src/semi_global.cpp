@@ -275,7 +275,7 @@ struct FusedStripeLayout {
   std::size_t raw, crow, lv, lvmin, fused, pair, total;
   FusedStripeLayout(std::size_t c, int nd, int r, int ring_images) {
     const std::size_t d = sz(nd);
-    raw = r64(c + d + 32);
+    raw = r64((detail::rev8_bytes(static_cast<std::ptrdiff_t>(c), nd) + 1) / 2);
     crow = raw + r64((sz(2 * r + 1) * (c + 2) * d + 3 * d + 1) / 2);
     lv = crow + r64((c * d + 1) / 2);
     lvmin = lv + r64(detail::kFusedPad + c * (d + detail::kFusedPad) + 64);
@@ -597,8 +597,8 @@ void SemiGlobalMatcher::compute(const StereoImage& left, const StereoImage& righ
               rows, r, y, raws,
               [&](std::ptrdiff_t yy, std::uint8_t* out) {
                 const std::uint16_t* lrow = src.census(0, yy);
-                k.raw_row8(lrow, src.census(1, yy), cols, 0, cols, r, nd, p.min_disparity, rev8,
-                           out);
+                k.raw_row8_t(lrow, src.census(1, yy), cols, 0, cols, r, nd, p.min_disparity,
+                             rev8, out);
               },
               &fresh);
           const std::uint16_t* lrow = src.last(0);  // unread unless fresh >= 0
@@ -608,13 +608,13 @@ void SemiGlobalMatcher::compute(const StereoImage& left, const StereoImage& righ
             lrow = src.census(0, yf);
             rrow = src.census(1, yf);
           }
-          k.box_row8(raws, fresh, lrow, rrow, rev8, r, cols, 0, cols, nd, p.min_disparity, cmax,
-                     ring, crow);
+          k.box_row8_t(raws, fresh, lrow, rrow, rev8, r, cols, 0, cols, nd, p.min_disparity,
+                       cmax, ring, crow);
           fa.g = src.grey8(0, y);
           fa.gprev = y == y0 ? nullptr : src.grey8(0, y - 1);
           fa.disp = disparity.row(y);
           fa.conf = confidence.data ? confidence.row(y) : nullptr;
-          k.fused_row(fa);
+          k.fused_row_t(fa);
         }
       }
     });

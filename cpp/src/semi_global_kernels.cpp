@@ -492,6 +492,15 @@ struct B256 {
   static R hamming(R lo, R hi, R llo, R lhi) {
     return add(popcount(_mm256_xor_si256(lo, llo)), popcount(_mm256_xor_si256(hi, lhi)));
   }
+  // Two halves from two addresses; the low half stored alone.
+  static R load2(const void* p0, const void* p1) {
+    return _mm256_inserti128_si256(
+        _mm256_castsi128_si256(_mm_loadu_si128(static_cast<const __m128i*>(p0))),
+        _mm_loadu_si128(static_cast<const __m128i*>(p1)), 1);
+  }
+  static void store_lo(void* p, R v) {
+    _mm_storeu_si128(static_cast<__m128i*>(p), _mm256_castsi256_si128(v));
+  }
 };
 #endif
 
@@ -513,6 +522,14 @@ struct B512 {
   }
   static R hamming(R lo, R hi, R llo, R lhi) {
     return add(popcount(_mm512_xor_si512(lo, llo)), popcount(_mm512_xor_si512(hi, lhi)));
+  }
+  static R load2(const void* p0, const void* p1) {
+    return _mm512_inserti64x4(
+        _mm512_castsi256_si512(_mm256_loadu_si256(static_cast<const __m256i*>(p0))),
+        _mm256_loadu_si256(static_cast<const __m256i*>(p1)), 1);
+  }
+  static void store_lo(void* p, R v) {
+    _mm256_storeu_si256(static_cast<__m256i*>(p), _mm512_castsi512_si256(v));
   }
 };
 #endif
@@ -562,23 +579,166 @@ inline void hamming_column(uint16_t l, const uint8_t* rev, ptrdiff_t cols, ptrdi
   }
 }
 
-template <class B>
-void raw_row8_impl(const uint16_t* lrow, const uint16_t* rrow, ptrdiff_t cols, ptrdiff_t x0,
-                   ptrdiff_t x1, int radius, int nd, int min_d, uint8_t* rev, uint8_t* out) {
-  split_reversed(rrow, cols, nd, min_d, rev);
-  const ptrdiff_t n = x1 - x0 + 2 * radius;
-  for (ptrdiff_t j = 0; j < n; ++j) {
-    const ptrdiff_t x = clamp_index(x0 - radius + j, 0, cols - 1);
-    hamming_column<B>(lrow[x], rev, cols, x, nd, out + j * nd);
+// The transposed layout of a pixel's nd values for vectors of kT lanes (nv = nd / kT
+// vectors): value k at position (k % nv) * kT + k / nv, so that lane j of vector v holds
+// k = j * nv + v and the neighbours k - 1, k + 1 of vector v are vectors v - 1, v + 1 (only
+// the first and the last vector need a shift by one lane). kT == 0: the plain layout.
+// o at the positions of k = k0 .. k1 - 1 set to v (k0 == 0 or k1 == nd): in the transposed
+// layout one run of lanes per vector.
+template <int kT>
+inline void fill_range(uint8_t* __restrict o, ptrdiff_t k0, ptrdiff_t k1, int nd, int v) {
+  if (k0 >= k1) return;
+  if constexpr (kT == 0) {
+    for (ptrdiff_t k = k0; k < k1; ++k) o[k] = static_cast<uint8_t>(v);
+  } else {
+    // One masked store per vector (a plain loop here becomes a memset call per vector).
+    static_assert(kT == 16 || kT == 32, "16 or 32 lanes");
+    auto set1 = [](int b) {
+      if constexpr (kT == 16) {
+        return _mm_set1_epi8(static_cast<char>(b));
+      } else {
+        return _mm256_set1_epi8(static_cast<char>(b));
+      }
+    };
+    auto iota = [] {
+      if constexpr (kT == 16) {
+        return _mm_setr_epi8(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15);
+      } else {
+        return _mm256_setr_epi8(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15, 16, 17, 18,
+                                19, 20, 21, 22, 23, 24, 25, 26, 27, 28, 29, 30, 31);
+      }
+    };
+    using W = decltype(iota());
+    const W lanes = iota(), fill = set1(v);
+    const ptrdiff_t nv = nd / kT;
+    for (ptrdiff_t r = 0; r < nv; ++r) {
+      // Lanes j with k0 <= j * nv + r < k1: j0 <= j < j1 (at most kT).
+      const ptrdiff_t j0 = k0 > r ? (k0 - r + nv - 1) / nv : 0;
+      const ptrdiff_t j1 = k1 > r ? (k1 - r + nv - 1) / nv : 0;
+      if (j0 >= j1) continue;
+      uint8_t* p = o + r * kT;
+      if constexpr (kT == 16) {
+        // in: j0 <= lane < j1 (signed bytes: lanes, j0 and j1 are at most 32).
+        const W in = _mm_andnot_si128(_mm_cmpgt_epi8(set1(static_cast<int>(j0)), lanes),
+                                      _mm_cmpgt_epi8(set1(static_cast<int>(j1)), lanes));
+        const W cur = _mm_loadu_si128(reinterpret_cast<const W*>(p));
+        _mm_storeu_si128(reinterpret_cast<W*>(p), _mm_blendv_epi8(cur, fill, in));
+      } else {
+        const W in = _mm256_andnot_si256(_mm256_cmpgt_epi8(set1(static_cast<int>(j0)), lanes),
+                                         _mm256_cmpgt_epi8(set1(static_cast<int>(j1)), lanes));
+        const W cur = _mm256_loadu_si256(reinterpret_cast<const W*>(p));
+        _mm256_storeu_si256(reinterpret_cast<W*>(p), _mm256_blendv_epi8(cur, fill, in));
+      }
+    }
   }
 }
 
-template <class B>
+inline ptrdiff_t floor_div(ptrdiff_t a, ptrdiff_t b) {
+  const ptrdiff_t q = a / b;
+  return (a % b != 0 && (a < 0) != (b < 0)) ? q - 1 : q;
+}
+
+// The right census row for the transposed layout (kT lanes, nv = nd / kT): lane j of vector
+// v of left column x needs the right pixel x - min_d - v - j * nv (clamped to the image), i.e.
+// vector v is Z[x - v] with Z[t] lane j = right[t - min_d - j * nv]. Z is stored with t
+// falling (Z[cols - 1] first), so that a column's nv vectors are nd consecutive bytes, as in
+// the plain layout: low bytes in zlo, high bytes in zhi (rev8_bytes() of scratch in rev).
+// Built from each residue r = w mod nv's run of the right pixels q * nv + r, q falling (the
+// comb, cols + nd - 1 values), where Z[t] is kT consecutive bytes.
+struct ZRow {
+  const uint8_t* lo;
+  const uint8_t* hi;
+};
+
+inline ZRow split_z(const uint16_t* rrow, ptrdiff_t cols, int nd, int min_d, int lanes,
+                    uint8_t* rev) {
+  const int nv = nd / lanes;
+  const ptrdiff_t nz = (cols + nv - 1 + 1) * lanes;  // one spare vector after the last
+  uint8_t* zlo = rev;
+  uint8_t* zhi = rev + nz;
+  uint8_t* clo = rev + 2 * nz;
+  uint8_t* chi = clo + cols + nd;
+  ptrdiff_t base[kMaxNumDisparities / 16];
+  const ptrdiff_t wlo = -static_cast<ptrdiff_t>(min_d) - nd + 1;
+  const ptrdiff_t whi = cols - 1 - min_d;
+  ptrdiff_t off = 0;
+  for (int r = 0; r < nv; ++r) {
+    const ptrdiff_t qlo = -floor_div(r - wlo, nv);  // ceil((wlo - r) / nv)
+    const ptrdiff_t qhi = floor_div(whi - r, nv);
+    base[r] = off + qhi;  // w = q * nv + r at base[r] - q
+    for (ptrdiff_t q = qhi; q >= qlo; --q, ++off) {
+      const uint16_t v = rrow[clamp_index(q * nv + r, 0, cols - 1)];
+      clo[off] = static_cast<uint8_t>(v & 0xFF);
+      chi[off] = static_cast<uint8_t>(v >> 8);
+    }
+  }
+  // Z[t] for t = cols - 1 down to 1 - nv: w = t - min_d.
+  ptrdiff_t w = cols - 1 - min_d;
+  ptrdiff_t q = floor_div(w, nv);
+  int r = static_cast<int>(w - q * nv);
+  for (ptrdiff_t u = 0; u < cols + nv - 1; ++u) {
+    const ptrdiff_t at = base[r] - q;
+    std::memcpy(zlo + u * lanes, clo + at, static_cast<std::size_t>(lanes));
+    std::memcpy(zhi + u * lanes, chi + at, static_cast<std::size_t>(lanes));
+    if (--r < 0) {
+      r = nv - 1;
+      --q;
+    }
+  }
+  return ZRow{zlo, zhi};
+}
+
+// The pixel costs of left column x (census l) in the transposed layout (kT lanes), into o.
+template <class B, int kT>
+inline void hamming_column_t(uint16_t l, const ZRow& z, ptrdiff_t cols, ptrdiff_t x, int nd,
+                             uint8_t* __restrict o) {
+  constexpr int N = B::kLanes;
+  const uint8_t* __restrict lo = z.lo + (cols - 1 - x) * kT;
+  const uint8_t* __restrict hi = z.hi + (cols - 1 - x) * kT;
+  const typename B::R llo = B::set1(l & 0xFF), lhi = B::set1(l >> 8);
+  int k = 0;
+  for (; k + N <= nd; k += N) {
+    B::store(o + k, B::hamming(B::load(lo + k), B::load(hi + k), llo, lhi));
+  }
+  if (k < nd) {  // kT bytes left (the spare vector after Z's last one is read, not used)
+    B::store_lo(o + k, B::hamming(B::load(lo + k), B::load(hi + k), llo, lhi));
+  }
+}
+
+// kT: the layout (0 plain, else transposed for kT lanes, B of 2 * kT bytes).
+template <class B, int kT>
+void raw_row8_impl(const uint16_t* lrow, const uint16_t* rrow, ptrdiff_t cols, ptrdiff_t x0,
+                   ptrdiff_t x1, int radius, int nd, int min_d, uint8_t* rev, uint8_t* out) {
+  ZRow z{};
+  if constexpr (kT == 0) {
+    split_reversed(rrow, cols, nd, min_d, rev);
+  } else {
+    z = split_z(rrow, cols, nd, min_d, kT, rev);
+  }
+  const ptrdiff_t n = x1 - x0 + 2 * radius;
+  for (ptrdiff_t j = 0; j < n; ++j) {
+    const ptrdiff_t x = clamp_index(x0 - radius + j, 0, cols - 1);
+    if constexpr (kT == 0) {
+      hamming_column<B>(lrow[x], rev, cols, x, nd, out + j * nd);
+    } else {
+      hamming_column_t<B, kT>(lrow[x], z, cols, x, nd, out + j * nd);
+    }
+  }
+}
+
+template <class B, int kT>
 void box_row8_impl(uint8_t* const* raws, int fresh, const uint16_t* lrow, const uint16_t* rrow,
                    uint8_t* rev, int radius, ptrdiff_t cols, ptrdiff_t x0, ptrdiff_t x1, int nd,
                    int min_d, int cmax, uint8_t* ring, uint8_t* out) {
   constexpr int N = B::kLanes;
-  if (fresh >= 0) split_reversed(rrow, cols, nd, min_d, rev);
+  ZRow z{};
+  if (fresh >= 0) {
+    if constexpr (kT == 0) {
+      split_reversed(rrow, cols, nd, min_d, rev);
+    } else {
+      z = split_z(rrow, cols, nd, min_d, kT, rev);
+    }
+  }
   // The fresh row (computed here, column by column) and the others.
   uint8_t* f = fresh >= 0 ? raws[fresh] : nullptr;
   const uint8_t* other[3];
@@ -587,12 +747,17 @@ void box_row8_impl(uint8_t* const* raws, int fresh, const uint16_t* lrow, const 
     if (i != fresh) other[n_other++] = raws[i];
   }
   // Raw column j (image column clamp(x0 - r + j)): the fresh row's costs, and the column sum
-  // into ring slot j % 3 (radius 1) or the output (radius 0).
+  // into ring slot j % 3 (radius 1) or the output (radius 0). The sums go value by value, so
+  // they do not depend on the layout.
   auto column = [&](ptrdiff_t j, uint8_t* __restrict v) {
     const ptrdiff_t at = j * nd;
     if (f) {
       const ptrdiff_t x = clamp_index(x0 - radius + j, 0, cols - 1);
-      hamming_column<B>(lrow[x], rev, cols, x, nd, f + at);
+      if constexpr (kT == 0) {
+        hamming_column<B>(lrow[x], rev, cols, x, nd, f + at);
+      } else {
+        hamming_column_t<B, kT>(lrow[x], z, cols, x, nd, f + at);
+      }
     }
     if (radius == 0) {
       std::memcpy(v, (f ? f : other[0]) + at, static_cast<std::size_t>(nd));
@@ -611,11 +776,41 @@ void box_row8_impl(uint8_t* const* raws, int fresh, const uint16_t* lrow, const 
     column(0, ring);
     column(1, ring + nd);
   }
+  // With a fresh row and a 3x3 box: the fresh row's new column, its column sum and the box
+  // sum in one sweep over the disparities (the same sums, fewer loads and loops).
+  const bool one_sweep = radius == 1 && f != nullptr && nd % N == 0;
   for (ptrdiff_t x = x0; x < x1; ++x) {
     uint8_t* __restrict o = out + x * nd;
     const ptrdiff_t j = x - x0 + radius;
     if (radius == 0) {
       column(j, o);
+    } else if (one_sweep) {
+      const ptrdiff_t at = (j + 1) * nd;
+      const ptrdiff_t xc = clamp_index(x0 - radius + j + 1, 0, cols - 1);
+      const uint8_t* __restrict lo;
+      const uint8_t* __restrict hi;
+      if constexpr (kT == 0) {
+        lo = rev + (cols - 1 - xc);
+        hi = rev + (cols + nd + 32) + (cols - 1 - xc);
+      } else {
+        lo = z.lo + (cols - 1 - xc) * kT;
+        hi = z.hi + (cols - 1 - xc) * kT;
+      }
+      const uint16_t l = lrow[xc];
+      const typename B::R llo = B::set1(l & 0xFF), lhi = B::set1(l >> 8);
+      uint8_t* __restrict fo = f + at;
+      const uint8_t* __restrict b = other[0] + at;
+      const uint8_t* __restrict c = other[1] + at;
+      uint8_t* __restrict s = ring + ((j + 1) % 3) * nd;
+      const uint8_t* __restrict p = ring + ((j - 1) % 3) * nd;
+      const uint8_t* __restrict q = ring + (j % 3) * nd;
+      for (int k = 0; k < nd; k += N) {
+        const typename B::R h = B::hamming(B::load(lo + k), B::load(hi + k), llo, lhi);
+        B::store(fo + k, h);
+        const typename B::R cs = B::add(B::add(h, B::load(b + k)), B::load(c + k));
+        B::store(s + k, cs);
+        B::store(o + k, B::add(B::add(B::load(p + k), B::load(q + k)), cs));
+      }
     } else {
       column(j + 1, ring + ((j + 1) % 3) * nd);
       const uint8_t* __restrict p = ring + ((j - 1) % 3) * nd;
@@ -629,10 +824,8 @@ void box_row8_impl(uint8_t* const* raws, int fresh, const uint16_t* lrow, const 
     }
     const ptrdiff_t khi = x - min_d;
     const ptrdiff_t klo = x - min_d - cols + 1;
-    for (ptrdiff_t k = clamp_index(khi + 1, 0, nd); k < nd; ++k) o[k] = static_cast<uint8_t>(cmax);
-    for (ptrdiff_t k = 0, e = clamp_index(klo, 0, nd); k < e; ++k) {
-      o[k] = static_cast<uint8_t>(cmax);
-    }
+    fill_range<kT>(o, clamp_index(khi + 1, 0, nd), nd, nd, cmax);
+    fill_range<kT>(o, 0, clamp_index(klo, 0, nd), nd, cmax);
   }
 }
 
@@ -640,11 +833,11 @@ void raw_row8(const uint16_t* lrow, const uint16_t* rrow, ptrdiff_t cols, ptrdif
               ptrdiff_t x1, int radius, int nd, int min_d, uint8_t* rev, uint8_t* out) {
 #if defined(__AVX512BW__)
   if (nd >= B512::kLanes) {
-    raw_row8_impl<B512>(lrow, rrow, cols, x0, x1, radius, nd, min_d, rev, out);
+    raw_row8_impl<B512, 0>(lrow, rrow, cols, x0, x1, radius, nd, min_d, rev, out);
     return;
   }
 #endif
-  raw_row8_impl<B256>(lrow, rrow, cols, x0, x1, radius, nd, min_d, rev, out);
+  raw_row8_impl<B256, 0>(lrow, rrow, cols, x0, x1, radius, nd, min_d, rev, out);
 }
 
 void box_row8(uint8_t* const* raws, int fresh, const uint16_t* lrow, const uint16_t* rrow,
@@ -652,13 +845,40 @@ void box_row8(uint8_t* const* raws, int fresh, const uint16_t* lrow, const uint1
               int min_d, int cmax, uint8_t* ring, uint8_t* out) {
 #if defined(__AVX512BW__)
   if (nd >= B512::kLanes) {
-    box_row8_impl<B512>(raws, fresh, lrow, rrow, rev, radius, cols, x0, x1, nd, min_d, cmax, ring,
-                        out);
+    box_row8_impl<B512, 0>(raws, fresh, lrow, rrow, rev, radius, cols, x0, x1, nd, min_d, cmax,
+                           ring, out);
     return;
   }
 #endif
-  box_row8_impl<B256>(raws, fresh, lrow, rrow, rev, radius, cols, x0, x1, nd, min_d, cmax, ring,
-                      out);
+  box_row8_impl<B256, 0>(raws, fresh, lrow, rrow, rev, radius, cols, x0, x1, nd, min_d, cmax,
+                         ring, out);
+}
+
+// The same in the transposed layout of fused_row_t: the lanes of its vectors (32 when the
+// AVX-512 build runs V512, i.e. nd % 32 == 0; else 16).
+void raw_row8_t(const uint16_t* lrow, const uint16_t* rrow, ptrdiff_t cols, ptrdiff_t x0,
+                ptrdiff_t x1, int radius, int nd, int min_d, uint8_t* rev, uint8_t* out) {
+#if defined(__AVX512BW__)
+  if (nd % 32 == 0) {
+    raw_row8_impl<B512, 32>(lrow, rrow, cols, x0, x1, radius, nd, min_d, rev, out);
+    return;
+  }
+#endif
+  raw_row8_impl<B256, 16>(lrow, rrow, cols, x0, x1, radius, nd, min_d, rev, out);
+}
+
+void box_row8_t(uint8_t* const* raws, int fresh, const uint16_t* lrow, const uint16_t* rrow,
+                uint8_t* rev, int radius, ptrdiff_t cols, ptrdiff_t x0, ptrdiff_t x1, int nd,
+                int min_d, int cmax, uint8_t* ring, uint8_t* out) {
+#if defined(__AVX512BW__)
+  if (nd % 32 == 0) {
+    box_row8_impl<B512, 32>(raws, fresh, lrow, rrow, rev, radius, cols, x0, x1, nd, min_d, cmax,
+                            ring, out);
+    return;
+  }
+#endif
+  box_row8_impl<B256, 16>(raws, fresh, lrow, rrow, rev, radius, cols, x0, x1, nd, min_d, cmax,
+                          ring, out);
 }
 #endif
 
@@ -739,6 +959,14 @@ struct V256 {
     const R in = _mm256_cmpeq_epi16(_mm256_min_epu16(rel, span), rel);
     return _mm256_or_si256(v, _mm256_xor_si256(in, _mm256_set1_epi16(-1)));
   }
+  // The least of b << 16 | a over the lanes: the least b and, among its lanes, the least a.
+  static std::uint32_t min_key(R a, R b) {
+    const R m8 = _mm256_min_epu32(_mm256_unpacklo_epi16(a, b), _mm256_unpackhi_epi16(a, b));
+    __m128i m = _mm_min_epu32(_mm256_castsi256_si128(m8), _mm256_extracti128_si256(m8, 1));
+    m = _mm_min_epu32(m, _mm_shuffle_epi32(m, 0x4E));
+    m = _mm_min_epu32(m, _mm_shuffle_epi32(m, 0xB1));
+    return static_cast<std::uint32_t>(_mm_cvtsi128_si32(m));
+  }
 };
 #endif
 
@@ -805,6 +1033,15 @@ struct V512 {
   static R or_outside(R v, R k, R lo, R span) {
     return _mm512_mask_mov_epi16(v, _mm512_cmpgt_epu16_mask(_mm512_sub_epi16(k, lo), span),
                                  _mm512_set1_epi16(-1));
+  }
+  static std::uint32_t min_key(R a, R b) {
+    const R m16 = _mm512_min_epu32(_mm512_unpacklo_epi16(a, b), _mm512_unpackhi_epi16(a, b));
+    const __m256i m8 =
+        _mm256_min_epu32(_mm512_castsi512_si256(m16), _mm512_extracti64x4_epi64(m16, 1));
+    __m128i m = _mm_min_epu32(_mm256_castsi256_si128(m8), _mm256_extracti128_si256(m8, 1));
+    m = _mm_min_epu32(m, _mm_shuffle_epi32(m, 0x4E));
+    m = _mm_min_epu32(m, _mm_shuffle_epi32(m, 0xB1));
+    return static_cast<std::uint32_t>(_mm_cvtsi128_si32(m));
   }
 };
 #endif
@@ -947,6 +1184,161 @@ inline typename V::R pass2_pixel(int nv, const uint8_t* __restrict cx, int16_t* 
   return best_v;
 }
 
+// The checks and the sub-pixel step of a fused row, as decide_row, from a.result (per pixel:
+// best, kb, second best, the sums at kb - 1 and kb + 1) and a.rfinal (the right winners).
+inline void decide_fused(const FusedRowArgs& a) {
+  const ptrdiff_t cols = a.d.cols;
+  const int nd = a.p.nd;
+  const ptrdiff_t dmin = a.d.min_d;
+  const uint32_t* res = a.result;
+  const DecideArgs& d = a.d;
+  const bool lr_on = d.lr_max_diff >= 0;
+  const float nan = std::numeric_limits<float>::quiet_NaN();
+  // The pixels with the whole range (klo = 0, khi = nd - 1): xa .. xb - 1.
+  const ptrdiff_t xa = clamp_index(dmin + nd - 1, 0, cols);
+  const ptrdiff_t xb = clamp_index(dmin + cols, xa, cols);
+  if (d.uniqueness_factor <= 0 && a.conf == nullptr) {
+    // Without the uniqueness check and the confidence, a shorter loop over those pixels: the
+    // left-right check on integers (diff <= lr_max_diff for an integer diff >= 0 is diff <=
+    // floor(lr_max_diff)), the same float steps.
+    const ptrdiff_t lr_int = !lr_on                     ? nd
+                             : d.lr_max_diff >= nd      ? nd
+                                                        : static_cast<ptrdiff_t>(d.lr_max_diff);
+    const int fit = d.subpixel;
+    const uint16_t* rfinal = a.rfinal - dmin;
+    ptrdiff_t x0 = xa;
+#if defined(__AVX2__)
+    // Eight pixels at a time (from xa + 1: every right column x - dmin - kb read below is then
+    // >= 1, so the 32-bit gather of rfinal[j - 1 .. j] stays inside rfinal): the same integer
+    // and float steps, lanes in the pixel order 0 2 4 6 1 3 5 7 of the four-value records.
+    if (xb - xa > 8) {
+      const __m256i off = _mm256_setr_epi32(0, 2, 4, 6, 1, 3, 5, 7);
+      const __m256i order = _mm256_setr_epi32(0, 4, 1, 5, 2, 6, 3, 7);
+      const __m256i vdmin = _mm256_set1_epi32(static_cast<int>(dmin));
+      const __m256i vlr = _mm256_set1_epi32(static_cast<int>(lr_int));
+      const __m256i vtop = _mm256_set1_epi32(nd - 1);
+      const __m256i zero = _mm256_setzero_si256();
+      const __m256i low16 = _mm256_set1_epi32(0xFFFF);
+      const __m256 vnan = _mm256_set1_ps(nan);
+      const int* rbase = reinterpret_cast<const int*>(a.rfinal - 1);
+      x0 = xa + 1;
+      for (; x0 + 8 <= xb; x0 += 8) {
+        const uint32_t* rx = res + 4 * x0;
+        auto ld = [&](int i) {
+          return _mm256_loadu_si256(reinterpret_cast<const __m256i*>(rx + 8 * i));
+        };
+        const __m256i r0 = ld(0), r1 = ld(1), r2 = ld(2), r3 = ld(3);
+        const __m256i t0 = _mm256_unpacklo_epi32(r0, r1), t1 = _mm256_unpacklo_epi32(r2, r3);
+        const __m256i t2 = _mm256_unpackhi_epi32(r0, r1), t3 = _mm256_unpackhi_epi32(r2, r3);
+        const __m256i best = _mm256_unpacklo_epi64(t0, t1);
+        const __m256i kb = _mm256_unpackhi_epi64(t0, t1);
+        const __m256i nb = _mm256_unpackhi_epi64(t2, t3);
+        const __m256i xv = _mm256_add_epi32(_mm256_set1_epi32(static_cast<int>(x0)), off);
+        const __m256i j = _mm256_sub_epi32(_mm256_sub_epi32(xv, vdmin), kb);
+        const __m256i kr = _mm256_srli_epi32(_mm256_i32gather_epi32(rbase, j, 2), 16);
+        const __m256i bad =
+            _mm256_cmpgt_epi32(_mm256_abs_epi32(_mm256_sub_epi32(kb, kr)), vlr);
+        __m256 disp = _mm256_cvtepi32_ps(_mm256_add_epi32(kb, vdmin));
+        if (fit != static_cast<int>(SubpixelFit::kNone)) {
+          const __m256i c0 = _mm256_and_si256(nb, low16);
+          const __m256i c2 = _mm256_srli_epi32(nb, 16);
+          const __m256 num = _mm256_cvtepi32_ps(_mm256_sub_epi32(c0, c2));
+          __m256i den2;
+          if (fit == static_cast<int>(SubpixelFit::kParabola)) {
+            den2 = _mm256_sub_epi32(_mm256_add_epi32(c0, c2), _mm256_add_epi32(best, best));
+          } else {
+            den2 = _mm256_max_epi32(_mm256_sub_epi32(c0, best), _mm256_sub_epi32(c2, best));
+          }
+          const __m256 den = _mm256_cvtepi32_ps(_mm256_add_epi32(den2, den2));
+          const __m256i inside =
+              _mm256_and_si256(_mm256_cmpgt_epi32(kb, zero), _mm256_cmpgt_epi32(vtop, kb));
+          const __m256 use = _mm256_and_ps(_mm256_castsi256_ps(inside),
+                                           _mm256_cmp_ps(den, _mm256_setzero_ps(), _CMP_GT_OQ));
+          // Where not used: disp + 0.0f, which is disp (never -0.0f).
+          disp = _mm256_add_ps(disp, _mm256_and_ps(_mm256_div_ps(num, den), use));
+        }
+        disp = _mm256_blendv_ps(disp, vnan, _mm256_castsi256_ps(bad));
+        _mm256_storeu_ps(a.disp + x0, _mm256_permutevar8x32_ps(disp, order));
+      }
+    }
+#endif
+    for (ptrdiff_t x = xa; x < xb; ++x) {
+      if (x == xa + 1 && x0 > x) x = x0;
+      if (x >= xb) break;
+      const uint32_t* rx = res + 4 * x;
+      const ptrdiff_t kb = rx[1];
+      const ptrdiff_t kr = rfinal[x - kb];
+      const ptrdiff_t diff = kb > kr ? kb - kr : kr - kb;
+      float disp = static_cast<float>(dmin + kb);
+      if (fit != static_cast<int>(SubpixelFit::kNone) && kb >= 1 && kb + 1 <= nd - 1) {
+        const int32_t c0 = static_cast<int32_t>(rx[3] & 0xFFFFu);
+        const int32_t c1 = static_cast<int32_t>(rx[0]);
+        const int32_t c2 = static_cast<int32_t>(rx[3] >> 16);
+        const float num = static_cast<float>(c0 - c2);
+        const float den =
+            fit == static_cast<int>(SubpixelFit::kParabola)
+                ? static_cast<float>(2 * (c0 + c2 - 2 * c1))
+                : static_cast<float>(2 * (c0 - c1 > c2 - c1 ? c0 - c1 : c2 - c1));
+        if (den > 0.0f) disp = disp + num / den;
+      }
+      a.disp[x] = diff <= lr_int ? disp : nan;
+    }
+  }
+  const bool fast = d.uniqueness_factor <= 0 && a.conf == nullptr && xa < xb;
+  for (ptrdiff_t x = 0; x < cols; ++x) {
+    if (fast && x == xa) {
+      x = xb - 1;
+      continue;
+    }
+    const ptrdiff_t klo = clamp_index(x - dmin - cols + 1, 0, nd);
+    const ptrdiff_t khi = clamp_index(x - dmin, -1, nd - 1);
+    bool ok = klo <= khi;
+    if (!d.clip_border) ok = ok && x - dmin - nd + 1 >= 0 && x - dmin <= cols - 1;
+    if (!ok) {
+      a.disp[x] = nan;
+      if (a.conf) a.conf[x] = 0.0f;
+      continue;
+    }
+    const uint32_t* rx = res + 4 * x;
+    const uint32_t best = rx[0], second = rx[2];
+    const ptrdiff_t kb = rx[1];
+    const bool has2 = second != kNone;
+    if (d.uniqueness_factor > 0 && has2) {
+      ok = static_cast<double>(second) * 100.0 > static_cast<double>(best) * d.uniqueness_factor;
+    }
+    if (ok && lr_on) {
+      const ptrdiff_t kr = a.rfinal[x - dmin - kb];
+      const ptrdiff_t diff = kb > kr ? kb - kr : kr - kb;
+      ok = static_cast<double>(diff) <= d.lr_max_diff;
+    }
+    if (!ok) {
+      a.disp[x] = nan;
+      if (a.conf) a.conf[x] = 0.0f;
+      continue;
+    }
+    float disp = static_cast<float>(dmin + kb);
+    if (d.subpixel != static_cast<int>(SubpixelFit::kNone) && kb - 1 >= klo && kb + 1 <= khi) {
+      const int32_t c0 = static_cast<int32_t>(rx[3] & 0xFFFFu);
+      const int32_t c1 = static_cast<int32_t>(best);
+      const int32_t c2 = static_cast<int32_t>(rx[3] >> 16);
+      const float num = static_cast<float>(c0 - c2);
+      float den;
+      if (d.subpixel == static_cast<int>(SubpixelFit::kParabola)) {
+        den = static_cast<float>(2 * (c0 + c2 - 2 * c1));
+      } else {
+        den = static_cast<float>(2 * (c0 - c1 > c2 - c1 ? c0 - c1 : c2 - c1));
+      }
+      if (den > 0.0f) disp = disp + num / den;
+    }
+    a.disp[x] = disp;
+    if (a.conf) {
+      a.conf[x] = !has2        ? 1.0f
+                  : second > 0 ? static_cast<float>(second - best) / static_cast<float>(second)
+                               : 0.0f;
+    }
+  }
+}
+
 template <class V, bool kVertical, bool kBase>
 void fused_row_impl(const FusedRowArgs& a) {
   using R = typename V::R;
@@ -1079,60 +1471,301 @@ void fused_row_impl(const FusedRowArgs& a) {
     if (xr >= 0 && xr < cols) a.rfinal[xr] = warg[k];
   }
 
-  // The checks and the sub-pixel step, as decide_row.
-  const DecideArgs& d = a.d;
-  const bool lr_on = d.lr_max_diff >= 0;
-  const float nan = std::numeric_limits<float>::quiet_NaN();
-  for (ptrdiff_t x = 0; x < cols; ++x) {
-    const ptrdiff_t klo = clamp_index(x - dmin - cols + 1, 0, nd);
-    const ptrdiff_t khi = clamp_index(x - dmin, -1, nd - 1);
-    bool ok = klo <= khi;
-    if (!d.clip_border) ok = ok && x - dmin - nd + 1 >= 0 && x - dmin <= cols - 1;
-    if (!ok) {
-      a.disp[x] = nan;
-      if (a.conf) a.conf[x] = 0.0f;
-      continue;
-    }
-    const uint32_t* rx = res + 4 * x;
-    const uint32_t best = rx[0], second = rx[2];
-    const ptrdiff_t kb = rx[1];
-    const bool has2 = second != kNone;
-    if (d.uniqueness_factor > 0 && has2) {
-      ok = static_cast<double>(second) * 100.0 > static_cast<double>(best) * d.uniqueness_factor;
-    }
-    if (ok && lr_on) {
-      const ptrdiff_t kr = a.rfinal[x - dmin - kb];
-      const ptrdiff_t diff = kb > kr ? kb - kr : kr - kb;
-      ok = static_cast<double>(diff) <= d.lr_max_diff;
-    }
-    if (!ok) {
-      a.disp[x] = nan;
-      if (a.conf) a.conf[x] = 0.0f;
-      continue;
-    }
-    float disp = static_cast<float>(dmin + kb);
-    if (d.subpixel != static_cast<int>(SubpixelFit::kNone) && kb - 1 >= klo && kb + 1 <= khi) {
-      const int32_t c0 = static_cast<int32_t>(rx[3] & 0xFFFFu);
-      const int32_t c1 = static_cast<int32_t>(best);
-      const int32_t c2 = static_cast<int32_t>(rx[3] >> 16);
-      const float num = static_cast<float>(c0 - c2);
-      float den;
-      if (d.subpixel == static_cast<int>(SubpixelFit::kParabola)) {
-        den = static_cast<float>(2 * (c0 + c2 - 2 * c1));
-      } else {
-        den = static_cast<float>(2 * (c0 - c1 > c2 - c1 ? c0 - c1 : c2 - c1));
-      }
-      if (den > 0.0f) disp = disp + num / den;
-    }
-    a.disp[x] = disp;
-    if (a.conf) {
-      a.conf[x] = !has2        ? 1.0f
-                  : second > 0 ? static_cast<float>(second - best) / static_cast<float>(second)
-                               : 0.0f;
-    }
-  }
+  decide_fused(a);
 }
 
+
+// ------------------------------------------------------------------------------------------
+// The fused row in the transposed layout (fused_row_t, the single pass: a path from above,
+// none of base): costs, path rows, partial sums and the right winners' window hold each
+// pixel's values as nv vectors whose lane j of vector v is the disparity index k = j * nv + v.
+// The neighbours k - 1 and k + 1 of vector v are then the vectors v - 1 and v + 1 of the
+// same pixel: only vector 0's k - 1 and vector nv - 1's k + 1 need a shift by one lane (a
+// sentinel shifted in), two shifts per pixel and path instead of three per vector. One pixel
+// to the left, the right winners' window moves down one index: vector v becomes vector v - 1
+// (a ring of nv slots, nothing moves) and only the leaving vector 0 shifts down one lane to
+// become vector nv - 1. kNv: nv when known at compile time (the loops unrolled), else 0.
+
+// L(p, d) = C + min(L(q, d), L(q, d -+ 1) + P1, m + P2') - m, as min(min(L(q, d), L(q, d -+ 1)
+// + P1) - m, P2') + C: the same integers (every L(q, .) >= m), and m enters late.
+template <class V>
+inline typename V::R step_t(typename V::R lo, typename V::R a, typename V::R hi,
+                            typename V::R c, typename V::R vp1, typename V::R m,
+                            typename V::R p2) {
+  const typename V::R t = V::min(a, V::add(V::min(lo, hi), vp1));
+  return V::add(V::min(V::sub(t, m), p2), c);
+}
+
+// The state of one path over a pixel's vectors: the previous pixel's (old) vectors are read
+// from row as the new ones are written over them; lo and a roll along, first is kept for
+// the last vector's k + 1.
+template <class V>
+struct PathCursor {
+  using R = typename V::R;
+  R lo, a, first;
+  // Before vector 0 (not on a path's first pixel).
+  void start(const int16_t* row, int nv) {
+    first = V::load(row);
+    lo = V::shift_up(V::set1(kSentinel), V::load(row + (nv - 1) * V::kLanes));
+    a = first;
+  }
+  // Vector v's new path costs (v < nv - 1: the next old vector is loaded first).
+  R step(const int16_t* row, int v, int nv, R c, R vp1, R m, R p2) {
+    const R hi = v + 1 < nv ? V::load(row + (v + 1) * V::kLanes)
+                            : V::shift_down(first, V::set1(kSentinel));
+    const R l = step_t<V>(lo, a, hi, c, vp1, m, p2);
+    lo = a;
+    a = hi;
+    return l;
+  }
+};
+
+template <class V, int kNv, bool kHFirst, bool kVFirst>
+inline void pass1_pixel_t(int nv_rt, const uint8_t* __restrict cx, int16_t* __restrict hrow,
+                          int16_t* __restrict lvx, uint16_t* __restrict px, typename V::R vp1,
+                          typename V::R mh, typename V::R p2h, typename V::R mv,
+                          typename V::R p2v, typename V::R& mh_out, int16_t* lvmin_out) {
+  using R = typename V::R;
+  constexpr int N = V::kLanes;
+  const int nv = kNv ? kNv : nv_rt;
+  const R ones = V::set1(-1);
+  PathCursor<V> h, w;
+  if constexpr (!kHFirst) h.start(hrow, nv);
+  if constexpr (!kVFirst) w.start(lvx, nv);
+  R hmin[2] = {ones, ones}, vmin[2] = {ones, ones};
+#pragma GCC unroll 16
+  for (int v = 0; v < nv; ++v) {
+    const R c = V::widen(cx + v * N);
+    R lh, lv;
+    if constexpr (kHFirst) {
+      lh = c;
+    } else {
+      lh = h.step(hrow, v, nv, c, vp1, mh, p2h);
+    }
+    if constexpr (kVFirst) {
+      lv = c;
+    } else {
+      lv = w.step(lvx, v, nv, c, vp1, mv, p2v);
+    }
+    V::store(hrow + v * N, lh);
+    V::store(lvx + v * N, lv);
+    V::store(px + v * N, V::add(lh, lv));
+    hmin[v & 1] = v < 2 ? lh : V::min(hmin[v & 1], lh);
+    vmin[v & 1] = v < 2 ? lv : V::min(vmin[v & 1], lv);
+  }
+  mh_out = V::hmin_v(V::min(hmin[0], hmin[1]));
+  *lvmin_out = static_cast<int16_t>(V::hmin(V::min(vmin[0], vmin[1])));
+}
+
+// Pass 2 on one pixel: the path from the right, the sums (0xFFFF outside klo .. klo + span
+// when kBorder; into px when kSecond), the winner per lane and the right winners' window.
+template <class V, int kNv, bool kFirst, bool kBorder, bool kSecond>
+inline void pass2_pixel_t(int nv_rt, const uint8_t* __restrict cx, int16_t* __restrict hrow,
+                          uint16_t* __restrict px, uint16_t* __restrict wmin,
+                          uint16_t* __restrict warg, int slot0, typename V::R iota_nv,
+                          typename V::R vp1, typename V::R mr, typename V::R p2r,
+                          typename V::R lo_v, typename V::R span_v, typename V::R& mr_out,
+                          typename V::R& best_out, typename V::R& arg_out) {
+  using R = typename V::R;
+  constexpr int N = V::kLanes;
+  const int nv = kNv ? kNv : nv_rt;
+  const R ones = V::set1(-1);
+  const R one = V::set1(1);
+  PathCursor<V> h;
+  if constexpr (!kFirst) h.start(hrow, nv);
+  R rmin[2] = {ones, ones};
+  R best = ones, barg = V::set1(0);
+  R kv = iota_nv;
+  int slot = slot0;
+#pragma GCC unroll 16
+  for (int v = 0; v < nv; ++v) {
+    const R c = V::widen(cx + v * N);
+    R lr;
+    if constexpr (kFirst) {
+      lr = c;
+    } else {
+      lr = h.step(hrow, v, nv, c, vp1, mr, p2r);
+    }
+    V::store(hrow + v * N, lr);
+    rmin[v & 1] = v < 2 ? lr : V::min(rmin[v & 1], lr);
+    R s = V::add(V::load(px + v * N), lr);
+    if constexpr (kBorder) s = V::or_outside(s, kv, lo_v, span_v);
+    if constexpr (kSecond) V::store(px + v * N, s);  // for the second best
+    V::take_lt(best, barg, s, kv);
+    uint16_t* wp = wmin + slot * N;
+    uint16_t* ap = warg + slot * N;
+    R wv = V::load(wp), wa = V::load(ap);
+    V::take_le(wv, wa, s, kv);
+    V::store(wp, wv);
+    V::store(ap, wa);
+    slot = slot + 1 == nv ? 0 : slot + 1;
+    kv = V::add(kv, one);
+  }
+  mr_out = V::hmin_v(V::min(rmin[0], rmin[1]));
+  best_out = best;
+  arg_out = barg;
+}
+
+template <class V, int kNv, bool kSecond>
+void fused_row_t_impl(const FusedRowArgs& a) {
+  using R = typename V::R;
+  constexpr int N = V::kLanes;
+  const ptrdiff_t cols = a.d.cols;
+  const int nd = a.p.nd, nv = kNv ? kNv : nd / N;
+  const ptrdiff_t dmin = a.d.min_d;
+  const R sent = V::set1(kSentinel);
+  const R ones = V::set1(-1);
+  const R one = V::set1(1);
+  const R vp1 = V::set1(a.p.p1);
+  const uint8_t* g = a.g;
+  // small: the path along the row (nd), the right winners' window: least sums and their
+  // indices (nd each, nv slots of N lanes).
+  int16_t* hrow = reinterpret_cast<int16_t*>(a.small);
+  uint16_t* wmin = a.small + nd + kFusedPad;
+  uint16_t* warg = a.small + 2 * (nd + kFusedPad);
+
+  // Pass 1, x rising: the path from above (in place in lv, nd values per pixel) and the
+  // path from the left.
+  const bool vfirst = a.gprev == nullptr;
+  int16_t* lv0 = a.lv + kFusedPad;
+  R mh = sent;  // the previous pixel's least path cost from the left, in every lane
+  for (ptrdiff_t x = 0; x < cols; ++x) {
+    const uint8_t* cx = a.c + x * nd;
+    uint16_t* px = a.partial + x * nd;
+    int16_t* lvx = lv0 + x * nd;
+    int16_t* lvmin = a.lvmin + x;
+    if (vfirst) {
+      if (x == 0) {
+        pass1_pixel_t<V, kNv, true, true>(nv, cx, hrow, lvx, px, vp1, sent, sent, sent, sent,
+                                          mh, lvmin);
+      } else {
+        const R p2h = V::set1(p2_for(a.p, g[x], g[x - 1]));
+        pass1_pixel_t<V, kNv, false, true>(nv, cx, hrow, lvx, px, vp1, mh, p2h, sent, sent, mh,
+                                           lvmin);
+      }
+      continue;
+    }
+    const R mv = V::set1(a.lvmin[x]);
+    const R p2v = V::set1(p2_for(a.p, g[x], a.gprev[x]));
+    if (x == 0) {
+      pass1_pixel_t<V, kNv, true, false>(nv, cx, hrow, lvx, px, vp1, sent, sent, mv, p2v, mh,
+                                         lvmin);
+    } else {
+      const R p2h = V::set1(p2_for(a.p, g[x], g[x - 1]));
+      pass1_pixel_t<V, kNv, false, false>(nv, cx, hrow, lvx, px, vp1, mh, p2h, mv, p2v, mh,
+                                          lvmin);
+    }
+  }
+
+  // Pass 2, x falling: the path from the right, the sums, the winner, and the right image's
+  // winners. Step t = cols - 1 - x keeps the window's vector v in slot (v + t) mod nv; its
+  // lane j is right column x - dmin - k (k = j * nv + v); candidates arrive with k falling,
+  // so <= keeps the lowest k of a tie.
+  for (int k = 0; k < nd; ++k) {
+    wmin[k] = 0xFFFFu;
+    warg[k] = 0;
+  }
+  const R iota_nv = [&] {
+    alignas(64) uint16_t tmp[N];
+    for (int j = 0; j < N; ++j) tmp[j] = static_cast<uint16_t>(j * nv);
+    return V::load(tmp);
+  }();
+  uint32_t* res = a.result;
+  R mr = sent;
+  int slot0 = 0;  // the slot of vector 0
+  for (ptrdiff_t x = cols - 1; x >= 0; --x) {
+    const uint8_t* cx = a.c + x * nd;
+    uint16_t* px = a.partial + x * nd;
+    const ptrdiff_t klo = clamp_index(x - dmin - cols + 1, 0, nd);
+    const ptrdiff_t khi = clamp_index(x - dmin, -1, nd - 1);
+    const R lo_v = V::set1(static_cast<int>(klo));
+    const R span_v = V::set1(static_cast<int>(khi - klo));
+    R best_v, arg_v;
+    if (x == cols - 1) {
+      pass2_pixel_t<V, kNv, true, true, kSecond>(nv, cx, hrow, px, wmin, warg, slot0, iota_nv,
+                                                 vp1, sent, sent, lo_v, span_v, mr, best_v,
+                                                 arg_v);
+    } else {
+      // The leaving vector 0: lane 0 is final; the rest moves down one lane and becomes
+      // vector nv - 1 (same slot); vector v + 1 becomes vector v.
+      uint16_t* w0 = wmin + slot0 * N;
+      uint16_t* a0 = warg + slot0 * N;
+      const ptrdiff_t xr = x + 1 - dmin;
+      if (xr >= 0 && xr < cols) a.rfinal[xr] = a0[0];
+      V::store(w0, V::shift_down(V::load(w0), ones));
+      V::store(a0, V::shift_down(V::load(a0), ones));
+      slot0 = slot0 + 1 == nv ? 0 : slot0 + 1;
+      const R p2r = V::set1(p2_for(a.p, g[x], g[x + 1]));
+      if (klo != 0 || khi != nd - 1) {
+        pass2_pixel_t<V, kNv, false, true, kSecond>(nv, cx, hrow, px, wmin, warg, slot0,
+                                                    iota_nv, vp1, mr, p2r, lo_v, span_v, mr,
+                                                    best_v, arg_v);
+      } else {
+        pass2_pixel_t<V, kNv, false, false, kSecond>(nv, cx, hrow, px, wmin, warg, slot0,
+                                                     iota_nv, vp1, mr, p2r, lo_v, span_v, mr,
+                                                     best_v, arg_v);
+      }
+    }
+    uint32_t* rx = res + 4 * x;
+    if (klo > khi) continue;
+    const uint32_t key = V::min_key(arg_v, best_v);
+    const uint32_t best = key >> 16;
+    const int kb = static_cast<int>(key & 0xFFFFu);
+    rx[0] = best;
+    rx[1] = static_cast<uint32_t>(kb);
+    if constexpr (kSecond) {
+      // The least sum more than one index away from kb (the sums, masked, are in px).
+      const R near = V::set1(kb - 1);
+      R s2 = ones;
+      R k2 = iota_nv;
+      for (int v = 0; v < nv; ++v) {
+        s2 = V::min(s2, V::blend_near(V::load(px + v * N), ones, k2, near));
+        k2 = V::add(k2, one);
+      }
+      const uint32_t sec = V::hmin(s2);
+      rx[2] = sec == 0xFFFFu ? kNone : sec;
+    } else {
+      rx[2] = kNone;
+    }
+    if (!kSecond && kb >= 1 && kb + 1 < nd) {
+      // The sums beside the winner (used only when both are inside: unmasked), from the
+      // other paths' sums and the path from the right just stored.
+      const unsigned km = static_cast<unsigned>(kb - 1), kp = static_cast<unsigned>(kb + 1);
+      const unsigned unv = static_cast<unsigned>(nv);
+      const ptrdiff_t am = (km % unv) * N + km / unv, ap = (kp % unv) * N + kp / unv;
+      auto sum = [&](ptrdiff_t at) {
+        const uint16_t v = static_cast<uint16_t>(px[at] + static_cast<uint16_t>(hrow[at]));
+        return static_cast<uint32_t>(v);
+      };
+      rx[3] = sum(am) | sum(ap) << 16;
+    }
+  }
+  // The columns still in the window are final (vector v in slot (slot0 + v) mod nv).
+  for (int v = 0; v < nv; ++v) {
+    const int s = (slot0 + v) % nv;
+    for (int j = 0; j < N; ++j) {
+      const ptrdiff_t xr = -dmin - (static_cast<ptrdiff_t>(j) * nv + v);
+      if (xr >= 0 && xr < cols) a.rfinal[xr] = warg[s * N + j];
+    }
+  }
+  // With the second best, the sums beside the winners from the row's sums kept in partial
+  // (used only when both are inside the range, where they are not masked).
+  if (kSecond && a.d.subpixel != static_cast<int>(SubpixelFit::kNone)) {
+    for (ptrdiff_t x = 0; x < cols; ++x) {
+      const ptrdiff_t klo = clamp_index(x - dmin - cols + 1, 0, nd);
+      const ptrdiff_t khi = clamp_index(x - dmin, -1, nd - 1);
+      uint32_t* rx = res + 4 * x;
+      const int kb = static_cast<int>(rx[1]);
+      if (klo > khi || kb - 1 < klo || kb + 1 > khi) continue;
+      const uint16_t* sx = a.partial + x * nd;
+      const unsigned km = static_cast<unsigned>(kb - 1), kp = static_cast<unsigned>(kb + 1);
+      const unsigned unv = static_cast<unsigned>(nv);
+      rx[3] = static_cast<uint32_t>(sx[(km % unv) * N + km / unv]) |
+              static_cast<uint32_t>(sx[(kp % unv) * N + kp / unv]) << 16;
+    }
+  }
+  decide_fused(a);
+}
 
 // PathRowsFn: per pixel, every direction's step and the sum in one sweep over the
 // disparities. A path's first pixel reads a row of zeros (m = 0): L = C + min(0, ..) - 0 = C.
@@ -1238,6 +1871,42 @@ void fused_row(const FusedRowArgs& a) {
   }
 #endif
   fused_row_v<V256>(a);
+}
+
+template <class V, int kNv>
+void fused_row_t_v2(const FusedRowArgs& a) {
+  if (a.d.uniqueness_factor > 0 || a.conf != nullptr) {
+    fused_row_t_impl<V, kNv, true>(a);
+  } else {
+    fused_row_t_impl<V, kNv, false>(a);
+  }
+}
+
+template <class V>
+void fused_row_t_v(const FusedRowArgs& a) {
+  switch (a.p.nd / V::kLanes) {
+    case 4:
+      fused_row_t_v2<V, 4>(a);
+      break;
+    case 8:
+      fused_row_t_v2<V, 8>(a);
+      break;
+    case 16:
+      fused_row_t_v2<V, 16>(a);
+      break;
+    default:
+      fused_row_t_v2<V, 0>(a);
+  }
+}
+
+void fused_row_t(const FusedRowArgs& a) {
+#if defined(__AVX512BW__)
+  if (a.p.nd % V512::kLanes == 0) {
+    fused_row_t_v<V512>(a);
+    return;
+  }
+#endif
+  fused_row_t_v<V256>(a);
 }
 #endif
 
@@ -1434,12 +2103,18 @@ const SemiGlobalKernels& semi_global_kernels() {
       &path_rows,
       &fused_row,
       16,
+      &raw_row8_t,
+      &box_row8_t,
+      &fused_row_t,
 #else
       nullptr,
       nullptr,
       nullptr,
       nullptr,
       0,
+      nullptr,
+      nullptr,
+      nullptr,
 #endif
   };
   return kernels;

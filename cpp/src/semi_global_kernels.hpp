@@ -78,7 +78,13 @@ using MedianRowFn = void (*)(const float* up, const float* mid, const float* dow
 // raw_row and box_row with 8-bit costs (explicit SIMD; null in the baseline build): the same
 // values, half the bytes. box_row8 may compute one of the raw rows itself, raws[fresh] (fresh
 // >= 0; that census row pair: lrow, rrow), column by column as it sums them. rev:
-// 2 * (cols + nd) + 64 bytes of scratch; ring: 3 * nd bytes of scratch.
+// rev8_bytes(cols, nd) bytes of scratch (2 * (cols + nd) + 64 would do for the plain layout);
+// ring: 3 * nd bytes of scratch.
+inline std::size_t rev8_bytes(std::ptrdiff_t cols, int nd) {
+  // The transposed layout's right row: (cols + nd / n) vectors of n <= 32 bytes, twice, and
+  // its runs (cols + nd, twice).
+  return 66 * static_cast<std::size_t>(cols) + 4 * static_cast<std::size_t>(nd) + 128;
+}
 using RawRow8Fn = void (*)(const std::uint16_t* lrow, const std::uint16_t* rrow,
                            std::ptrdiff_t cols, std::ptrdiff_t x0, std::ptrdiff_t x1, int radius,
                            int nd, int min_d, std::uint8_t* rev, std::uint8_t* out);
@@ -130,6 +136,15 @@ struct SemiGlobalKernels {
   PathRowsFn path_rows;  // null in the baseline build
   FusedRowFn fused_row;  // null in the baseline build
   int fused_lanes;       // fused_row needs nd % fused_lanes == 0
+  // The same three in the transposed layout (null in the baseline build; nd % fused_lanes
+  // == 0): each pixel's nd values as nv vectors of n lanes (n = 32 when the AVX-512 build
+  // runs nd % 32 == 0, else 16; nv = nd / n), lane j of vector v holding disparity index
+  // j * nv + v, so that the neighbours d - 1 and d + 1 are whole vectors. raw_row8_t and
+  // box_row8_t write their costs so; fused_row_t reads c (and base) so and needs no padding
+  // in lv (nd values per pixel). Same results as raw_row8 + box_row8 + fused_row.
+  RawRow8Fn raw_row8_t;
+  BoxRow8Fn box_row8_t;
+  FusedRowFn fused_row_t;
 };
 
 #define STEREODEPTH_DECLARE_SEMI_GLOBAL_KERNELS(ns) \
