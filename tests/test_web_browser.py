@@ -652,3 +652,32 @@ def test_depth_view_bad_upload_shows_a_message_at_the_field(page: Page, tmp_path
     p.click("#run-depth")
     page.expect(p.locator("#baseline_mm-error")).to_contain_text("must be a number > 0")
     page.screenshot("web-depth-error.png")
+
+
+@pytest.mark.browser
+def test_depth_view_refuses_a_calib_of_another_size(page: Page, tmp_path: Path) -> None:
+    # The calib.txt of the full-size images with a half-size pair would scale every depth.
+    import numpy as np
+    from PIL import Image
+
+    rng = np.random.default_rng(5)
+    texture = rng.integers(0, 256, (48, 72), dtype=np.uint8)
+    Image.fromarray(texture[:, 8:]).save(tmp_path / "left.png")
+    Image.fromarray(texture[:, :64]).save(tmp_path / "right.png")
+    calib = tmp_path / "calib.txt"
+    calib.write_text(
+        "cam0=[100 0 63.5; 0 100 47.5; 0 0 1]\ndoffs=0\nbaseline=120\nwidth=128\nheight=96\n"
+    )
+    p = page.page
+    p.click("#tab-depth")
+    p.set_input_files("#calib-file", str(calib))
+    page.expect(p.locator("#calib-note")).to_contain_text("f = 100 px")
+    p.set_input_files("#left-file", str(tmp_path / "left.png"))
+    p.set_input_files("#right-file", str(tmp_path / "right.png"))
+    p.click("#run-depth")
+    error = p.locator("#calib-error")
+    page.expect(error).to_be_visible()
+    page.expect(error).to_contain_text(
+        "calib: the calib.txt is for 128\u00d796 px images, the pair is 64\u00d748 px"
+    )
+    page.expect(p.locator("#depth-status")).to_contain_text("Not computed")

@@ -179,6 +179,12 @@ def test_principal_point_for_the_points(client: TestClient, pair: Any) -> None:
     assert np.array_equal(vertex["xyz"], points[np.isfinite(points).all(axis=-1)])
 
 
+def test_calib_of_the_pairs_size_is_accepted(client: TestClient, pair: Any) -> None:
+    h, w = pair.disparity.shape
+    r = post(client, left=encode(pair.left), right=encode(pair.right), calib_size=[w, h])
+    assert r.status_code == 200, r.text
+
+
 def test_sample_pair_and_mixed_inputs(client: TestClient, pair: Any) -> None:
     r = post(client, sample=True)
     assert r.status_code == 200 and r.json()["sample"] is True
@@ -343,6 +349,17 @@ def bad_cases(pair: Any) -> list[tuple[dict[str, Any], list[Any], str]]:
         ({"sample": True, "cy_px": "inf"}, ["body", "cy_px"], "cy_px must be a finite number"),
         ({"sample": True, "cx_px": 1e308}, ["body", "cx_px"], "cx_px must be a finite number"),
         ({"sample": True, "cy_px": "-2e6"}, ["body", "cy_px"], "magnitude at most 1e+06"),
+        (  # the calib.txt of the full-size images with a smaller pair: every depth scaled
+            {"left": left, "right": right, "calib_size": [192, 144]},
+            ["body", "calib"],
+            "calib: the calib.txt is for 192\u00d7144 px images, the pair is 96\u00d772 px",
+        ),
+        (
+            {"sample": True, "calib_size": [96, "72"]},
+            ["body", "calib_size"],
+            "calib_size must be [width, height], two integers > 0, got [96, '72']",
+        ),
+        ({"sample": True, "calib_size": [0, 72]}, ["body", "calib_size"], "two integers > 0"),
     ]
 
 

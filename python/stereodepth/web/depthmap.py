@@ -14,6 +14,9 @@
 - ``cx_px``, ``cy_px``: the left camera's principal point for the 3-D points (default: the
   image centre; the page sends those of an uploaded calib.txt), each at most 1e6 px in
   magnitude (beyond, the points' x and y could overflow float32).
+- ``calib_size``: ``[width, height]`` of the images an uploaded calib.txt describes (the page
+  sends its ``width`` and ``height``); the pair must have that size, as ``stereodepth match``
+  requires, since a calibration of another resolution would scale every depth.
 
 Numbers may come as JSON numbers or as numeric strings (what the page's form fields hold);
 an integer field also takes a float with an integral value (``16.0``).
@@ -415,6 +418,23 @@ def parse_job(body: Any, limits: DepthMapLimits) -> Job:
         except BadInput as e:
             errors.append(e)
 
+    calib_size: tuple[int, int] | None = None
+    if body.get("calib_size") is not None:
+        size = body["calib_size"]
+        if (
+            not isinstance(size, list)
+            or len(size) != 2
+            or not all(isinstance(v, int) and not isinstance(v, bool) and v > 0 for v in size)
+        ):
+            errors.append(
+                BadInput(
+                    ["body", "calib_size"],
+                    f"calib_size must be [width, height], two integers > 0, got {size!r}"[:200],
+                )
+            )
+        else:
+            calib_size = (size[0], size[1])
+
     sample = body.get("sample", False)
     if not isinstance(sample, bool):
         errors.append(BadInput(["body", "sample"], f"sample must be true or false, got {sample!r}"))
@@ -444,6 +464,16 @@ def parse_job(body: Any, limits: DepthMapLimits) -> Job:
                 left, right = images["left"], images["right"]
             except ValueError as exc:
                 errors.append(BadInput(["body", "right"], str(exc)))
+            h, w = images["left"].shape[:2]
+            if calib_size is not None and calib_size != (w, h):
+                errors.append(
+                    BadInput(
+                        ["body", "calib"],
+                        f"calib: the calib.txt is for {calib_size[0]}\u00d7{calib_size[1]} px "
+                        f"images, the pair is {w}\u00d7{h} px (a calibration of another "
+                        "resolution would scale every depth): use the calib.txt of these images",
+                    )
+                )
     if errors:
         raise ExceptionGroupLike(errors)
     assert left is not None and right is not None

@@ -11,6 +11,7 @@
   let pins = [];           // pinned pixels, with the server's numbers
   let busy = false;
   let centre = null;       // the principal point of an uploaded calib.txt
+  let calibSize = null;    // [width, height] of the images that calib.txt describes
 
   // --- numbers -----------------------------------------------------------------------------
   // The shortest decimal that reads back as the same float32: numpy's repr of a float32.
@@ -134,6 +135,7 @@
     });
     if (body.ndisp) $("num_disparities").value = String(body.ndisp);
     centre = { cx_px: body.cx_px, cy_px: body.cy_px };
+    calibSize = body.width_px && body.height_px ? [body.width_px, body.height_px] : null;
     $("calib-note").textContent = `Rig from ${file.name}: f = ${g(body.focal_px)} px, B = ${g(body.baseline_mm)} mm, doffs = ${g(body.doffs_px)} px` +
       (body.ndisp ? `, ndisp = ${body.ndisp}` : "");
   }
@@ -151,6 +153,7 @@
       disparity_step_px: $("disparity_step_px").value.trim() || null,
     };
     if (centre && !sample) Object.assign(request, centre);
+    if (calibSize && !sample) request.calib_size = calibSize;
     if (sample) {
       request.sample = true;
     } else {
@@ -203,6 +206,7 @@
     window.stereodepth.setRig({ baseline_mm: s.baseline_mm, focal_px: s.focal_px, doffs_px: s.doffs_px, width_px: s.width_px });
     $("num_disparities").value = "";
     centre = null;
+    calibSize = null;
     $("calib-file").value = "";
     $("calib-note").textContent = "Middlebury calib.txt";
     await run(true);
