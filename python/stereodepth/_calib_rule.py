@@ -39,6 +39,72 @@ RAW_ONLY_FLAGS = (
 )
 
 
+def _raw_only_given(
+    calib_right: str | None,
+    translation_unit: str | None,
+    distortion_model: str | None,
+    image_size: tuple[int, int] | None,
+    write_rectified: bool,
+    alpha: float | None,
+) -> list[str]:
+    """Which of :data:`RAW_ONLY_FLAGS` were given, in that order."""
+    given = (
+        calib_right is not None,
+        translation_unit is not None,
+        distortion_model is not None,
+        image_size is not None,
+        write_rectified,
+        alpha is not None,
+    )
+    return [flag for flag, g in zip(RAW_ONLY_FLAGS, given, strict=True) if g]
+
+
+def add_raw_flags(group: Any) -> None:
+    """Adds the flags of a raw ``--calib`` file that both commands take (``--calib-right``
+    to ``--no-rectify``; each command words its own ``--calib``) to an argparse group."""
+    from .calib import TRANSLATION_UNITS
+
+    group.add_argument(
+        "--calib-right",
+        metavar="FILE",
+        help="the right camera's ROS camera_info file (--calib is the left one's), or the "
+        "second file of an OpenCV calibration split in two (intrinsics.yml, extrinsics.yml)",
+    )
+    group.add_argument(
+        "--translation-unit",
+        choices=tuple(TRANSLATION_UNITS),
+        help="unit of the translations in a raw --calib file (default: metres, and an OpenCV "
+        "file whose baseline would then exceed 10 m is refused as probably in mm)",
+    )
+    group.add_argument(
+        "--distortion-model",
+        choices=("plumb_bob", "equidistant"),
+        help="the distortion model of a raw OpenCV --calib file that does not say (one with 4 "
+        "coefficients: equidistant for cv2.fisheye's k1..k4, plumb_bob for k1 k2 p1 p2)",
+    )
+    group.add_argument(
+        "--image-size",
+        nargs=2,
+        type=int,
+        metavar=("WIDTH", "HEIGHT"),
+        help="the raw images' size for a raw --calib file that does not give it (OpenCV's "
+        "stereo_calib sample's intrinsics.yml and extrinsics.yml, say)",
+    )
+    group.add_argument(
+        "--alpha",
+        type=float,
+        metavar="A",
+        help="with a raw --calib file: recompute the rectification with this alpha (0: crop "
+        "to valid pixels, 1: keep every raw pixel, -1: OpenCV's default scaling); default: "
+        "the file's own rectification, else alpha -1",
+    )
+    group.add_argument(
+        "--no-rectify",
+        action="store_true",
+        help="never rectify: a --calib file of a raw (unrectified) pair is an error",
+    )
+
+
 def _cli_names(message: str) -> str:
     """A reader's message with its keyword names replaced by the commands' flags."""
     for name, flag in (
@@ -80,18 +146,13 @@ def check_without_calib(
     image_size: tuple[int, int] | None = None,
 ) -> None:
     """Without ``--calib``: ValueError for a flag that goes with it."""
-    used = (
-        ("--calib-right", calib_right is not None),
-        ("--translation-unit", translation_unit is not None),
-        ("--distortion-model", distortion_model is not None),
-        ("--image-size", image_size is not None),
-        ("--write-rectified", write_rectified),
-        ("--alpha", alpha is not None),
-        ("--no-rectify", no_rectify),
+    given = _raw_only_given(
+        calib_right, translation_unit, distortion_model, image_size, write_rectified, alpha
     )
-    for flag, given in used:
-        if given:
-            raise ValueError(f"{flag} goes with --calib FILE")
+    if no_rectify:
+        given.append("--no-rectify")
+    if given:
+        raise ValueError(f"{given[0]} goes with --calib FILE")
 
 
 def calibration_source(calib: str, calib_right: str | None) -> str:
@@ -131,20 +192,14 @@ def raw_calibration(
     except ValueError as exc:
         raise ValueError(f"--calib: {exc}") from None
     if rectified:
-        used = (
-            ("--calib-right", calib_right is not None),
-            ("--translation-unit", translation_unit is not None),
-            ("--distortion-model", distortion_model is not None),
-            ("--image-size", image_size is not None),
-            ("--write-rectified", write_rectified),
-            ("--alpha", alpha is not None),
+        given = _raw_only_given(
+            calib_right, translation_unit, distortion_model, image_size, write_rectified, alpha
         )
-        for flag, given in used:
-            if given:
-                raise ValueError(
-                    f"{flag} does not apply to {calib}, a Middlebury or KITTI calibration "
-                    "of a pair that is already rectified"
-                )
+        if given:
+            raise ValueError(
+                f"{given[0]} does not apply to {calib}, a Middlebury or KITTI calibration "
+                "of a pair that is already rectified"
+            )
         return None
     try:
         stereo = read_stereo_calibration(

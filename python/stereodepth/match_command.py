@@ -54,7 +54,7 @@ from typing import Any
 
 import numpy as np
 
-from .calib import TRANSLATION_UNITS
+from . import _calib_rule
 
 __all__ = ["output_paths", "register", "run"]
 
@@ -108,45 +108,7 @@ def register(subparsers: Any) -> None:
         "calibration (OpenCV FileStorage YAML/XML/JSON, Kalibr camchain, ROS camera_info): the "
         "pair is rectified first and the depth is in the rectified left camera's frame",
     )
-    r.add_argument(
-        "--calib-right",
-        metavar="FILE",
-        help="the right camera's ROS camera_info file (--calib is the left one's), or the "
-        "second file of an OpenCV calibration split in two (intrinsics.yml, extrinsics.yml)",
-    )
-    r.add_argument(
-        "--translation-unit",
-        choices=tuple(TRANSLATION_UNITS),
-        help="unit of the translations in a raw --calib file (default: metres, and an OpenCV "
-        "file whose baseline would then exceed 10 m is refused as probably in mm)",
-    )
-    r.add_argument(
-        "--distortion-model",
-        choices=("plumb_bob", "equidistant"),
-        help="the distortion model of a raw OpenCV --calib file that does not say (one with 4 "
-        "coefficients: equidistant for cv2.fisheye's k1..k4, plumb_bob for k1 k2 p1 p2)",
-    )
-    r.add_argument(
-        "--image-size",
-        nargs=2,
-        type=int,
-        metavar=("WIDTH", "HEIGHT"),
-        help="the raw images' size for a raw --calib file that does not give it (OpenCV's "
-        "stereo_calib sample's intrinsics.yml and extrinsics.yml, say)",
-    )
-    r.add_argument(
-        "--alpha",
-        type=float,
-        metavar="A",
-        help="with a raw --calib file: recompute the rectification with this alpha (0: crop "
-        "to valid pixels, 1: keep every raw pixel, -1: OpenCV's default scaling); default: "
-        "the file's own rectification, else alpha -1",
-    )
-    r.add_argument(
-        "--no-rectify",
-        action="store_true",
-        help="never rectify: a --calib file of a raw (unrectified) pair is an error",
-    )
+    _calib_rule.add_raw_flags(r)
     r.add_argument("--focal-px", type=float, metavar="PX", help="focal length in pixels")
     r.add_argument("--baseline-mm", type=float, metavar="MM", help="baseline in millimetres")
     r.add_argument(

@@ -12,10 +12,11 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any, NoReturn
 
+from .. import _calib_rule
 from .. import _validate as check
 from .._extras import require
 from .._methods import METHODS, check_method
-from ..calib import TRANSLATION_UNITS, Calibration
+from ..calib import Calibration
 from ..cli import key_value_option
 from .calibration import (
     COMMAND_LINE,
@@ -76,45 +77,7 @@ def register(subparsers: Any) -> None:
         "camchain, ROS camera_info): every pair is rectified first and the depth is in the "
         "rectified left camera's frame",
     )
-    c.add_argument(
-        "--calib-right",
-        metavar="FILE",
-        help="the right camera's ROS camera_info file (--calib is the left one's), or the "
-        "second file of an OpenCV calibration split in two (intrinsics.yml, extrinsics.yml)",
-    )
-    c.add_argument(
-        "--translation-unit",
-        choices=tuple(TRANSLATION_UNITS),
-        help="unit of the translations in a raw --calib file (default: metres, and an OpenCV "
-        "file whose baseline would then exceed 10 m is refused as probably in mm)",
-    )
-    c.add_argument(
-        "--distortion-model",
-        choices=("plumb_bob", "equidistant"),
-        help="the distortion model of a raw OpenCV --calib file that does not say (one with 4 "
-        "coefficients: equidistant for cv2.fisheye's k1..k4, plumb_bob for k1 k2 p1 p2)",
-    )
-    c.add_argument(
-        "--image-size",
-        nargs=2,
-        type=int,
-        metavar=("WIDTH", "HEIGHT"),
-        help="the raw images' size for a raw --calib file that does not give it (OpenCV's "
-        "stereo_calib sample's intrinsics.yml and extrinsics.yml, say)",
-    )
-    c.add_argument(
-        "--alpha",
-        type=float,
-        metavar="A",
-        help="with a raw --calib file: recompute the rectification with this alpha (0: crop "
-        "to valid pixels, 1: keep every raw pixel, -1: OpenCV's default scaling); default: "
-        "the file's own rectification, else alpha -1",
-    )
-    c.add_argument(
-        "--no-rectify",
-        action="store_true",
-        help="never rectify: a --calib file of a raw (unrectified) pair is an error",
-    )
+    _calib_rule.add_raw_flags(c)
     o = p.add_argument_group("output")
     o.add_argument(
         "--format",
@@ -315,8 +278,6 @@ def _raw_rectification(
 ) -> tuple[BatchRectifier, Calibration] | None:
     """The rectifier and rectified rig of a raw --calib file, None for none or a rectified
     one; the flags that go with a raw file checked (the rule of ``stereodepth match``)."""
-    from .. import _calib_rule
-
     if args.calib is None:
         try:
             _calib_rule.check_without_calib(**_calib_rule.flags(args))
