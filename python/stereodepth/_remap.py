@@ -26,16 +26,8 @@ def _array_arg(name: str, value: Any) -> np.ndarray:
     return value
 
 
-def _native(arr: np.ndarray) -> np.ndarray:
-    """``arr`` in the machine's byte order (a copy of a big-endian uint16 image or float map,
-    as FITS or PGM readers give them; the dtype checks then see what the values are)."""
-    if arr.dtype.isnative:
-        return arr
-    return arr.astype(arr.dtype.newbyteorder("="))
-
-
 def _as_image(name: str, value: Any) -> np.ndarray:
-    arr = _native(_array_arg(name, value))
+    arr = check.native_order(_array_arg(name, value))
     if arr.dtype not in (np.uint8, np.uint16):
         raise TypeError(f"{name} must have dtype uint8 or uint16, got {arr.dtype}")
     if not (arr.ndim == 2 or (arr.ndim == 3 and arr.shape[2] == 3 and arr.dtype == np.uint8)):
@@ -51,8 +43,8 @@ def _as_image(name: str, value: Any) -> np.ndarray:
 
 
 def _as_maps(map_x: Any, map_y: Any) -> tuple[np.ndarray, np.ndarray]:
-    mx = _native(_array_arg("map_x", map_x))
-    my = _native(_array_arg("map_y", map_y))
+    mx = check.native_order(_array_arg("map_x", map_x))
+    my = check.native_order(_array_arg("map_y", map_y))
     for name, m in (("map_x", mx), ("map_y", my)):
         if m.dtype not in (np.float32, np.float64):
             raise TypeError(f"{name} must have dtype float32 (or float64), got {m.dtype}")

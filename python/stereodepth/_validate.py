@@ -13,6 +13,14 @@ from typing import Any
 import numpy as np
 
 
+def native_order(arr: Any) -> Any:
+    """A numpy (or dask) array in the machine's byte order: one in the other byte order (a
+    big-endian map or image from ``np.load`` of a file written elsewhere, FITS, a PGM read by
+    hand) is converted, a copy in that case only, so that the dtype checks see what the values
+    are."""
+    return arr if arr.dtype.isnative else arr.astype(arr.dtype.newbyteorder("="))
+
+
 def _is_real(value: Any) -> bool:
     return isinstance(value, numbers.Real) and not isinstance(value, (bool, np.bool_))
 

@@ -28,6 +28,8 @@ from typing import Any
 
 import numpy as np
 
+from ._validate import native_order
+
 __all__ = ["block_match", "disparity_to_depth", "reproject", "semi_global_match"]
 
 
@@ -120,7 +122,7 @@ def _match(method: str, name: str, left: Any, right: Any, params: dict[str, Any]
 
     la, ra = _as_dask("left", left), _as_dask("right", right)
     # A big-endian uint16 stack (FITS, PGM) is uint16: matched in the machine's byte order.
-    la, ra = (a if a.dtype.isnative else a.astype(a.dtype.newbyteorder("=")) for a in (la, ra))
+    la, ra = (native_order(a) for a in (la, ra))
     if params.get("return_confidence"):
         raise TypeError("return_confidence is not accepted for dask arrays")
     if "isa" in params:

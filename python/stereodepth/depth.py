@@ -102,17 +102,12 @@ def check_min_disparity(value: Any) -> int:
     )
 
 
-def native(arr: np.ndarray) -> np.ndarray:
-    """``arr`` in the machine's byte order: a big-endian map (``np.load`` of a file written
-    on another machine, FITS, a PFM read by hand) is a float32 or int16 map all the same, as
-    the matchers take big-endian images (a copy in that case only)."""
-    return arr if arr.dtype.isnative else arr.astype(arr.dtype.newbyteorder("="))
-
-
 def as_disparity(disparity: Any, name: str = "disparity") -> np.ndarray:
     """Checks dtype and shape; never copies a numpy array in the machine's byte order (one in
     the other byte order is converted)."""
-    arr = native(disparity if isinstance(disparity, np.ndarray) else np.asarray(disparity))
+    arr: np.ndarray = check.native_order(
+        disparity if isinstance(disparity, np.ndarray) else np.asarray(disparity)
+    )
     if arr.dtype not in _DISPARITY_DTYPES:
         raise TypeError(
             f"{name} must have dtype float16, float32, float64, int16 (OpenCV, x16) or uint16 "
@@ -257,7 +252,7 @@ def from_opencv_disparity(raw: Any, *, min_disparity: int = 0) -> np.ndarray:
     ValueError for a ``min_disparity`` outside [-2047, 2048], which no OpenCV matcher can have
     (its holes, ``(minDisparity - 1) * 16``, would not fit in int16; every pixel would be NaN).
     """
-    arr = native(raw if isinstance(raw, np.ndarray) else np.asarray(raw))
+    arr: np.ndarray = check.native_order(raw if isinstance(raw, np.ndarray) else np.asarray(raw))
     if arr.dtype != np.int16:
         raise TypeError(f"raw must be OpenCV's int16 disparity (x16), got dtype {arr.dtype}")
     md = check_min_disparity(min_disparity)

@@ -18,6 +18,8 @@ from typing import IO, Any
 
 import numpy as np
 
+from ._validate import native_order
+
 __all__ = [
     "TEMP_MARKER",
     "atomic_write",
@@ -221,7 +223,7 @@ def _check_2d(name: str, array: Any, dtypes: tuple[type, ...]) -> np.ndarray:
     if not isinstance(array, np.ndarray):
         raise TypeError(f"{name} must be a numpy.ndarray, got {type(array).__name__}")
     # A big-endian map is a map all the same: in the machine's byte order.
-    a: np.ndarray = array if array.dtype.isnative else array.astype(array.dtype.newbyteorder("="))
+    a: np.ndarray = native_order(array)
     if a.dtype not in dtypes:
         allowed = " or ".join(np.dtype(t).name for t in dtypes)
         raise TypeError(f"{name} must have dtype {allowed}, got {a.dtype}")

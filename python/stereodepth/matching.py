@@ -373,8 +373,7 @@ def as_image(image: Any, name: str) -> np.ndarray:
         raise TypeError(
             f"{name} must be a numpy.ndarray ({_IMAGE_RULE}), got {type(image).__name__}"
         )
-    if not image.dtype.isnative and image.dtype.newbyteorder("=") == np.uint16:
-        image = image.astype(np.uint16)
+    image = check.native_order(image)
     if image.dtype not in (np.uint8, np.uint16):
         raise TypeError(f"{name} must be {_IMAGE_RULE}, got dtype {image.dtype}")
     if image.ndim == 3:

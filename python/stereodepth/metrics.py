@@ -25,7 +25,8 @@ from typing import Any
 
 import numpy as np
 
-from .depth import check_min_disparity, from_opencv_disparity, native
+from . import _validate as check
+from .depth import check_min_disparity, from_opencv_disparity
 
 __all__ = ["BAD_THRESHOLDS_PX", "DisparityMetrics", "evaluate"]
 
@@ -142,7 +143,9 @@ def evaluate(
     are not (H, W) or do not match.
     """
     md = None if min_disparity is None else check_min_disparity(min_disparity)
-    disparity, gt = (native(a) if isinstance(a, np.ndarray) else a for a in (disparity, gt))
+    disparity, gt = (
+        check.native_order(a) if isinstance(a, np.ndarray) else a for a in (disparity, gt)
+    )
     if md is not None and isinstance(disparity, np.ndarray) and disparity.dtype == np.int16:
         disparity = from_opencv_disparity(disparity, min_disparity=md)
     d = _float_map("disparity", disparity, "pixels, NaN for holes")
