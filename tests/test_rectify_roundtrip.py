@@ -54,7 +54,9 @@ AXIS = np.array([0.3, -0.8, 0.5])
 # 000070 -0.17 / -5.78 (mean +0.96 / +0.84: a thin margin). One bilinear resampling of the
 # original pair (shifted by (0.5, 0.5) px) costs the block matcher about as much: the
 # matchers' sensitivity to interpolation, not a geometric error (the composed maps agree to
-# 1e-3 px, checked below). Resampling with Keys' cubic instead of bilinear (cv2.INTER_CUBIC on
+# 1e-3 px, checked below). OpenCV's best configuration, SGBM 3WAY on the pair padded by D
+# columns, loses more on the same round trip (+1.48 mean, +4.70 on aloe; bench/README.md,
+# bench/rectify_round_trip.py). Resampling with Keys' cubic instead of bilinear (cv2.INTER_CUBIC on
 # our maps) lowered the mean by about 0.15 point with the earlier defaults, the worst scenes by
 # 0.9 but teddy up by 0.75: no uniform gain, so the rectifier stays bilinear.
 MAX_MEAN_EXTRA_BAD2_POINTS = 1.0
