@@ -610,6 +610,27 @@ def test_rectifier_uses_the_files_transforms_unless_asked() -> None:
     assert recomputed.P1[0, 0] != r.P1[0, 0]
 
 
+@pytest.mark.parametrize("rig_index", [1, 3])  # horizontal, vertical
+def test_rectifier_baseline_is_relative_to_p1(rig_index: int) -> None:
+    # Projections that place both rectified cameras in a third camera's frame (as KITTI's
+    # P0..P3 do: P = K [I | t], t the camera's offset) give the same rig and Q as OpenCV's
+    # P1 = [K | 0]: the baseline is P2's translation minus P1's. It used to be P2's alone,
+    # so such a file scaled every depth by (t2 - t1) / t2.
+    rig = RIGS[rig_index]
+    r = stereo_rectify(rig.K1, rig.D1, rig.K2, rig.D2, rig.size, rig.R, rig.T)
+    i = 1 if r.P2[1, 3] != 0 else 0
+    offset = np.zeros((3, 4))
+    offset[i, 3] = 0.37 * r.P1[0, 0]  # both cameras 0.37 m along the baseline from the origin
+    plain = StereoRectifier.from_calibration(calib_of(rig, R1=r.R1, R2=r.R2, P1=r.P1, P2=r.P2))
+    moved = StereoRectifier.from_calibration(
+        calib_of(rig, R1=r.R1, R2=r.R2, P1=r.P1 + offset, P2=r.P2 + offset)
+    )
+    assert moved.vertical == plain.vertical == (rig_index == 3)
+    assert moved.rig.baseline_mm == pytest.approx(plain.rig.baseline_mm, rel=1e-12)
+    assert moved.rig.baseline_mm == pytest.approx(np.linalg.norm(rig.T) * 1000, rel=1e-12)
+    np.testing.assert_allclose(moved.Q, plain.Q, rtol=1e-12, atol=1e-12)
+
+
 def test_rectifier_of_rectified_images_passes_them_through() -> None:
     k = np.array([[1000.0, 0, 600], [0, 1000.0, 180], [0, 0, 1]])
     k2 = k.copy()

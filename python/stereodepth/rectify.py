@@ -716,29 +716,32 @@ class StereoRectifier:
 
     @property
     def vertical(self) -> bool:
-        """True when the rectified baseline is along y (P2[1, 3] != 0)."""
-        return bool(self._P2[1, 3] != 0 and self._P2[0, 3] == 0)
+        """True when the rectified baseline is along y (P2[1, 3] != P1[1, 3], the x
+        translations equal)."""
+        return _baseline_axis(self._P1, self._P2) == 1
 
     @property
     def rig(self) -> StereoRig:
         """The rectified rig as a :class:`StereoRig`: ``focal_px = P1[0, 0]``, baseline
-        ``|P2[i, 3]| / P2[0, 0]`` (i = 0, or 1 for a vertical rig) in millimetres (T was in
-        metres), ``doffs_px = P2[0, 2] - P1[0, 2]`` (0 with zero_disparity), and the output
-        size.
+        ``(P1[i, 3] - P2[i, 3]) / P2[0, 0]`` (i = 0, or 1 for a vertical rig; P1[i, 3] is 0
+        as OpenCV writes it, and KITTI-style projections that place both cameras in a third
+        camera's frame give the same baseline) in millimetres (T was in metres),
+        ``doffs_px = P2[0, 2] - P1[0, 2]`` (0 with zero_disparity), and the output size.
 
         Raises ValueError when the first camera is to the right of (or, for a vertical rig,
         below) the second: its disparities would be negative."""
         f = float(self._P1[0, 0])
-        i = 1 if self.vertical else 0
-        if self._P2[i, 3] > 0:
+        i = _baseline_axis(self._P1, self._P2)
+        relative = float(self._P2[i, 3] - self._P1[i, 3])
+        if relative > 0:
             axis, side = ("x", "right of") if i == 0 else ("y", "below")
             raise ValueError(
-                f"the first camera is {side} the second (P2[{i}, 3] = "
-                f"{float(self._P2[i, 3]):g} > 0, T[{i}] > 0): its disparities along {axis} are "
+                f"the first camera is {side} the second (P2[{i}, 3] - P1[{i}, 3] = "
+                f"{relative:g} > 0, T[{i}] > 0): its disparities along {axis} are "
                 "negative, which the matchers do not search; swap the cameras (the images and "
                 "the calibration's camera 1 and camera 2)"
             )
-        baseline_m = abs(float(self._P2[i, 3])) / float(self._P2[0, 0])
+        baseline_m = -relative / float(self._P2[0, 0])
         doffs = float(self._P2[i, 2] - self._P1[i, 2])
         w, h = self._output_size
         return StereoRig.from_pixels(
@@ -758,14 +761,24 @@ class StereoRectifier:
         )
 
 
+def _baseline_axis(P1: np.ndarray, P2: np.ndarray) -> int:
+    """0 when the rectified pair's baseline is along x, 1 when along y: the row of the
+    projections' translation column in which P2 differs from P1 (P1's is 0 as OpenCV and ROS
+    write it; KITTI's projections put both cameras in a reference camera's frame)."""
+    return 1 if P2[1, 3] != P1[1, 3] and P2[0, 3] == P1[0, 3] else 0
+
+
 def _q_from_projections(P1: np.ndarray, P2: np.ndarray) -> np.ndarray:
-    """OpenCV's Q from rectified projections P1, P2 (horizontal or vertical rig)."""
+    """OpenCV's Q from rectified projections P1, P2 (horizontal or vertical rig), in the first
+    camera's frame: the baseline is P2's translation relative to P1's."""
     f = float(P1[0, 0])
-    vertical = P2[1, 3] != 0 and P2[0, 3] == 0
-    i = 1 if vertical else 0
-    t = float(P2[i, 3]) / float(P2[0, 0])
+    i = _baseline_axis(P1, P2)
+    t = float(P2[i, 3] - P1[i, 3]) / float(P2[0, 0])
     if t == 0 or not math.isfinite(t):
-        raise ValueError(f"P2 must hold the baseline in P2[{i}, 3], got {P2.tolist()}")
+        raise ValueError(
+            f"P2 must hold the baseline in P2[{i}, 3] (relative to P1[{i}, 3]), got "
+            f"P1 = {P1.tolist()}, P2 = {P2.tolist()}"
+        )
     cx1, cy1, cx2, cy2 = (float(v) for v in (P1[0, 2], P1[1, 2], P2[0, 2], P2[1, 2]))
     return np.array(
         [

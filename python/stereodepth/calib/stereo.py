@@ -143,7 +143,8 @@ class StereoCalibration:
             if p2[1, 3] != p1[1, 3]:
                 raise _fail(
                     where,
-                    "P2 is of a vertical pair (P2[1, 3] != 0): the matchers need a horizontal one",
+                    "P2 is of a vertical pair (P2[1, 3] != P1[1, 3]): the matchers need a "
+                    "horizontal one",
                 )
             focal = p1[0, 0]
             baseline = -(p2[0, 3] - p1[0, 3]) / p2[0, 0]
