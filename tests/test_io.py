@@ -42,6 +42,56 @@ def test_read_image_modes(tmp_path: Path) -> None:
     np.testing.assert_array_equal(io.read_image(tmp_path / "w.png"), g16, strict=True)
 
 
+#: EXIF orientation -> the displayed image from the stored one (EXIF 2.32, tag 0x0112: where
+#: the stored 0th row and 0th column are shown).
+EXIF_UPRIGHT = {
+    1: lambda a: a,
+    2: lambda a: a[:, ::-1],  # mirrored left-right
+    3: lambda a: a[::-1, ::-1],  # rotated 180
+    4: lambda a: a[::-1],  # mirrored top-bottom
+    5: lambda a: np.swapaxes(a, 0, 1),  # transposed
+    6: lambda a: np.rot90(a, -1),  # rotated 90 clockwise for display
+    7: lambda a: np.swapaxes(a[::-1, ::-1], 0, 1),  # transversed (the anti-diagonal)
+    8: lambda a: np.rot90(a, 1),  # rotated 90 counter-clockwise for display
+}
+
+
+@pytest.mark.parametrize("orientation", sorted(EXIF_UPRIGHT))
+@pytest.mark.parametrize("kind", ["grey", "rgb", "grey16", "tiff-rgb"])
+def test_read_image_applies_the_exif_orientation(
+    tmp_path: Path, orientation: int, kind: str
+) -> None:
+    # Phones and some cameras store the sensor's pixels and say how to turn them; OpenCV's
+    # imread and browsers turn them, and so must we: a calibration made from OpenCV-read
+    # images refers to the turned frame. Ignoring the tag matched a 90-degree-rotated pair.
+    rng = np.random.default_rng(orientation)
+    shape = {"grey": (7, 9), "rgb": (7, 9, 3), "grey16": (7, 9), "tiff-rgb": (7, 9, 3)}[kind]
+    dtype = np.uint16 if kind == "grey16" else np.uint8
+    stored = rng.integers(0, np.iinfo(dtype).max + 1, shape, dtype=dtype)
+    path = tmp_path / ("x.tiff" if kind == "tiff-rgb" else "x.png")
+    exif = Image.Exif()
+    exif[0x0112] = orientation
+    Image.fromarray(stored).save(path, exif=exif)
+    got = io.read_image(path)
+    want = np.ascontiguousarray(EXIF_UPRIGHT[orientation](stored))
+    np.testing.assert_array_equal(got, want, strict=True)
+
+
+@pytest.mark.parametrize("orientation", sorted(EXIF_UPRIGHT))
+def test_read_image_turns_as_opencv_imread(tmp_path: Path, orientation: int) -> None:
+    cv2 = pytest.importorskip("cv2", reason="the comparison with OpenCV needs opencv-python")
+    rng = np.random.default_rng(orientation)
+    rgb = rng.integers(0, 256, (7, 9, 3), dtype=np.uint8)
+    exif = Image.Exif()
+    exif[0x0112] = orientation
+    Image.fromarray(rgb).save(tmp_path / "c.png", exif=exif)
+    Image.fromarray(rgb[..., 1]).save(tmp_path / "g.png", exif=exif)
+    theirs = cv2.imread(str(tmp_path / "c.png"), cv2.IMREAD_COLOR)[..., ::-1]
+    np.testing.assert_array_equal(io.read_image(tmp_path / "c.png"), theirs)
+    theirs = cv2.imread(str(tmp_path / "g.png"), cv2.IMREAD_GRAYSCALE)
+    np.testing.assert_array_equal(io.read_image(tmp_path / "g.png"), theirs)
+
+
 def test_read_image_missing_and_corrupt(tmp_path: Path) -> None:
     with pytest.raises(FileNotFoundError, match=r"image not found: .*nope\.png"):
         io.read_image(tmp_path / "nope.png")

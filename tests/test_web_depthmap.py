@@ -135,6 +135,28 @@ def test_upload_gives_the_libraries_disparity_depth_and_points(
     assert np.array_equal(rgb, pair.left[::step, ::step][kept])
 
 
+@pytest.mark.parametrize("fmt", ["PNG", "JPEG"])
+def test_an_exif_turned_upload_is_matched_as_displayed(
+    client: TestClient, pair: Any, fmt: str
+) -> None:
+    # A phone stores the sensor's pixels and an orientation tag; the browser shows the turned
+    # image, so the server must match that one (as read_image and cv2.imread read it), not
+    # the stored pixels turned 90 degrees.
+    exif = Image.Exif()
+    exif[0x0112] = 6  # the stored image is to be rotated 90 degrees clockwise
+    stored = [np.ascontiguousarray(np.rot90(img, 1)) for img in (pair.left, pair.right)]
+    kw: dict[str, Any] = {"exif": exif, "quality": 100} if fmt == "JPEG" else {"exif": exif}
+    r = post(client, left=encode(stored[0], fmt, **kw), right=encode(stored[1], fmt, **kw))
+    assert r.status_code == 200, r.text
+    body = r.json()
+    h, w = pair.disparity.shape
+    assert (body["width"], body["height"]) == (w, h)
+    if fmt == "PNG":  # lossless: the very pair
+        nd = default_num_disparities(w)
+        expected = block_match(pair.left, pair.right, num_disparities=nd)
+        assert same(f32(body["arrays"]["disparity"], (h, w)), expected)
+
+
 def test_downloads_are_the_libraries_files(client: TestClient, pair: Any, tmp_path: Any) -> None:
     body = post(client, left=encode(pair.left), right=encode(pair.right)).json()
     h, w = pair.disparity.shape

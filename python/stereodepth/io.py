@@ -45,6 +45,26 @@ def _pil() -> Any:
     return Image
 
 
+#: The EXIF orientation tag (TIFF tag 274): how the stored pixels are to be turned for display.
+_ORIENTATION = 0x0112
+
+
+def upright(im: Any) -> Any:
+    """A loaded Pillow image turned as its EXIF orientation tag says (values 2 to 8: mirrored
+    and/or rotated by 90, 180 or 270 degrees), as ``cv2.imread`` (``IMREAD_COLOR`` and
+    ``IMREAD_GRAYSCALE``) and web browsers show it; the image itself when it has no such tag
+    or the tag is 1. Source: the EXIF 2.32 specification, tag 0x0112 (Orientation)."""
+    try:
+        orientation = im.getexif().get(_ORIENTATION, 1)
+    except (OSError, ValueError, SyntaxError):  # unreadable EXIF: as stored
+        return im
+    if orientation not in (2, 3, 4, 5, 6, 7, 8):
+        return im
+    from PIL import ImageOps
+
+    return ImageOps.exif_transpose(im)
+
+
 def require_file(path: str | os.PathLike[str], what: str) -> Path:
     """``path`` as a Path when it names an existing regular file (or a link to one).
 
@@ -69,12 +89,15 @@ def read_image(path: str | os.PathLike[str]) -> np.ndarray:
     PBM, PGM and PPM files (netpbm P1 to P6, told by their first two bytes) are read by
     :func:`read_pnm`, exactly, with their samples as stored (a 16-bit PPM gives (H, W, 3)
     uint16); every other format by Pillow. Palette and grey-alpha images become grey or RGB;
-    an alpha channel is dropped. Raises FileNotFoundError for a missing file,
-    IsADirectoryError for a folder and ValueError naming the file when it cannot be decoded
-    (or is larger than Pillow opens: its ``DecompressionBombError``, twice
-    ``Image.MAX_IMAGE_PIXELS``),
-    holds floating-point samples (a float TIFF or a PFM: :func:`read_pfm` reads those) or is
-    16-bit colour or 16-bit with alpha (Pillow would keep only the high byte of each sample)."""
+    an alpha channel is dropped. An EXIF orientation tag (JPEG, PNG, TIFF) is applied, as
+    ``cv2.imread`` applies it (:func:`upright`): the array is the image as displayed, in the
+    pixel frame a calibration made from OpenCV-read images refers to.
+
+    Raises FileNotFoundError for a missing file, IsADirectoryError for a folder and
+    ValueError naming the file when it cannot be decoded (or is larger than Pillow opens: its
+    ``DecompressionBombError``, twice ``Image.MAX_IMAGE_PIXELS``), holds floating-point
+    samples (a float TIFF or a PFM: :func:`read_pfm` reads those) or is 16-bit colour or
+    16-bit with alpha (Pillow would keep only the high byte of each sample)."""
     p = Path(path)
     require_file(p, "image")
     with p.open("rb") as f:
@@ -95,6 +118,7 @@ def read_image(path: str | os.PathLike[str]) -> np.ndarray:
                     "of those"
                 )
             im.load()
+            im = upright(im)
             mode = im.mode
             if mode in ("I;16", "I;16B", "I;16L"):
                 return np.asarray(im, dtype=np.uint16)

@@ -59,6 +59,8 @@ import numpy as np
 from fastapi import APIRouter, Request
 from fastapi.responses import JSONResponse, Response
 
+from ..io import upright
+
 __all__ = ["DEFAULT_MAX_PIXELS", "DEFAULT_MAX_UPLOAD_BYTES", "DepthMapLimits", "make_router"]
 
 #: Default limit of one uploaded image file, in bytes (20 MB).
@@ -179,6 +181,7 @@ def decode_image(field: str, data: bytes, limits: DepthMapLimits) -> np.ndarray:
             im.load()
         except (OSError, ValueError, SyntaxError) as exc:
             raise BadInput(loc, f"{field}: the image is truncated or damaged ({exc})") from None
+        im = upright(im)  # as the browser shows the file and read_image reads it
         mode = im.mode
         if mode in ("I;16", "I;16B", "I;16L"):
             return np.asarray(im, dtype=np.uint16)
