@@ -185,7 +185,14 @@ def _to_float(v: Any) -> float | None:
     (PyYAML leaves ``1e-05`` and OpenCV's ``.Nan`` as strings)."""
     if isinstance(v, bool | np.bool_):
         return None
-    if isinstance(v, int | float | np.integer | np.floating):
+    if isinstance(v, int | np.integer):
+        # YAML and JSON integers have no size limit; float() raises OverflowError beyond a
+        # double's range, where the value is as infinite as a double can say.
+        try:
+            return float(v)
+        except OverflowError:
+            return math.inf if v > 0 else -math.inf
+    if isinstance(v, float | np.floating):
         return float(v)
     if isinstance(v, str):
         s = v.strip()
