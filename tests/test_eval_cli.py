@@ -840,7 +840,28 @@ def test_rejects_bad_meta(scenes_dir: Path, capsys: pytest.CaptureFixture[str]) 
     (scenes_dir / "rds-a" / "meta.json").write_text('{"max_disp": "big"}')
     status, _, err = run_eval(capsys, str(scenes_dir))
     assert status == 2
-    assert "meta.json: max_disp must be a number >= 0, got 'big'" in err
+    assert "meta.json: max_disp must be a finite number >= 0, got 'big'" in err
+
+
+@pytest.mark.parametrize(
+    ("text", "message"),
+    [
+        # A JSON integer beyond a double's range was a traceback (OverflowError in float()),
+        # Infinity an error that did not name the file, and a list was read as no max_disp.
+        ('{"max_disp": 1' + "0" * 400 + "}", "max_disp must be a finite number >= 0, got 1000"),
+        ('{"max_disp": Infinity}', "max_disp must be a finite number >= 0, got inf"),
+        ('{"max_disp": NaN}', "max_disp must be a finite number >= 0, got nan"),
+        ("[11]", "meta.json: must be a JSON object, got list"),
+    ],
+)
+def test_rejects_meta_out_of_range(
+    scenes_dir: Path, capsys: pytest.CaptureFixture[str], text: str, message: str
+) -> None:
+    (scenes_dir / "rds-a" / "meta.json").write_text(text)
+    status, _, err = run_eval(capsys, str(scenes_dir))
+    assert status == 2
+    assert message in err and "meta.json" in err
+    assert len(err.strip().splitlines()) == 1
 
 
 def test_rejects_unreadable_meta(scenes_dir: Path, capsys: pytest.CaptureFixture[str]) -> None:

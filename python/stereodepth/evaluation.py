@@ -218,12 +218,21 @@ def _meta_max_disparity(path: Path) -> float | None:
         meta = json.loads(path.read_text())
     except (OSError, ValueError) as exc:
         raise ValueError(f"{path}: cannot read JSON: {exc}") from exc
-    value = meta.get("max_disp") if isinstance(meta, dict) else None
+    if not isinstance(meta, dict):  # a list or a number was read as "no max_disp"
+        raise ValueError(f"{path}: must be a JSON object, got {type(meta).__name__}")
+    value = meta.get("max_disp")
     if value is None:
         return None
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not value >= 0:
-        raise ValueError(f"{path}: max_disp must be a number >= 0, got {value!r}")
-    return float(value)
+    number = None
+    if isinstance(value, (int, float)) and not isinstance(value, bool):
+        try:
+            number = float(value)
+        except OverflowError:  # a JSON integer beyond a double's range
+            number = None
+    if number is None or not (math.isfinite(number) and number >= 0):
+        shown = repr(value) if len(repr(value)) <= 40 else repr(value)[:37] + "..."
+        raise ValueError(f"{path}: max_disp must be a finite number >= 0, got {shown}")
+    return number
 
 
 def _scene_at(path: Path) -> Scene | None:
