@@ -231,6 +231,27 @@ def test_a_changed_run_removes_the_outputs_it_no_longer_writes(
     assert (out / "teddy.disparity.pfm").read_bytes() == b"mine"
 
 
+@pytest.mark.parametrize(
+    "text",
+    ["[1, 2]", '"ok"', "null", '{"status": "ok", "settings": ' + "[" * 50_000 + "]" * 50_000 + "}"],
+)
+def test_a_record_that_is_not_an_object_is_redone_not_a_traceback(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], text: str
+) -> None:
+    # A record edited by hand (a JSON list, a string) raised AttributeError and one nested
+    # deeper than the recursion limit RecursionError, in all three readers of records (resume,
+    # stale outputs, discovery of an OUTDIR inside INPUT): a traceback instead of a rerun.
+    inp = tmp_path / "in"
+    out = inp / "out"  # inside INPUT: discovery reads the records too
+    scene(inp / "teddy")
+    assert run(capsys, inp, "-o", out, "--quiet")[0] == 0
+    (out / "teddy.record.json").write_text(text)
+    status, printed, err = run(capsys, inp, "-o", out)
+    assert (status, err) == (0, ""), err
+    assert "1 done" in printed
+    assert record_of(out, "teddy")["status"] == "ok"
+
+
 def test_a_pair_whose_dask_worker_kept_dying_gets_a_failed_record(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:

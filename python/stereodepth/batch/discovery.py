@@ -107,9 +107,7 @@ def _batch_outputs(d: Path) -> set[str]:
     """The names of the files in ``d`` that an earlier batch job wrote there, as its pairs'
     records (``*.record.json``) list them: a job's OUTDIR inside INPUT holds images such as
     ``S.left-rectified.png`` and ``S.right-rectified.png``, which are outputs, not pairs."""
-    import json
-
-    from .job import RECORD_SUFFIX
+    from .job import RECORD_SUFFIX, read_record
 
     names: set[str] = set()
     try:
@@ -117,8 +115,11 @@ def _batch_outputs(d: Path) -> set[str]:
     except OSError:
         return names
     for p in records:
+        record = read_record(p)
+        if record is None:
+            continue  # not a record of ours: its folder is searched as usual
         try:
-            outputs = json.loads(p.read_text(encoding="utf-8")).get("outputs") or {}
+            outputs = record.get("outputs") or {}
             names.update(Path(o["path"]).name for o in outputs.values())
         except (OSError, ValueError, TypeError, AttributeError, KeyError):
             continue  # not a record of ours: its folder is searched as usual
