@@ -698,6 +698,21 @@ def good_args() -> dict[str, Any]:
             ValueError,
             "alpha applies to pinhole models",
         ),
+        # Inputs that overflow Bouguet's method gave NaN in P1, then "P must be finite" from
+        # the maps of StereoRectifier, naming a matrix the caller never passed.
+        (
+            {
+                "K1": np.diag([1e-298, 1e-298, 1.0])
+                + np.array([[0, 0, 320], [0, 0, 240], [0, 0, 0]])
+            },
+            ValueError,
+            r"the calibration gives a non-finite rectification \(P1 = .*fx = 1e-298",
+        ),
+        (
+            {"distortion_model": "equidistant", "D1": [1e10, 0, 0, 0], "D2": np.zeros(4)},
+            ValueError,
+            r"non-finite rectification .*D1 = \[10000000000\.0, 0\.0, 0\.0, 0\.0\]",
+        ),
     ],
 )
 def test_stereo_rectify_rejects(change: dict[str, Any], exc: type, match: str) -> None:
@@ -747,6 +762,9 @@ def test_maps_and_rectifier_reject() -> None:
         stereodepth.init_undistort_rectify_map(rig.K1, rig.D1, None, np.zeros((3, 3)), (4, 4))
     with pytest.raises(TypeError, match="calib must be a StereoCalibration"):
         StereoRectifier.from_calibration(object())
+    huge = {**good_args(), "K1": rig.K1 * np.array([[1e300, 1, 1], [1, 1e300, 1], [1, 1, 1]])}
+    with pytest.raises(ValueError, match="the calibration gives a non-finite rectification"):
+        StereoRectifier(**huge)
     rect = StereoRectifier.from_calibration(calib_of(rig))
     img = np.zeros((rig.size[1], rig.size[0]), np.uint8)
     with pytest.raises(ValueError, match="left and right must have the same shape and dtype"):
