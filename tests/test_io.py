@@ -18,6 +18,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from stereodepth import io
+from stereodepth.pointcloud import write_ply
 
 Image = pytest.importorskip("PIL.Image")
 
@@ -215,6 +216,27 @@ def test_atomic_writers_keep_the_permissions_of_a_file_they_replace(tmp_path: Pa
         write(target)
         assert target.stat().st_mode & 0o777 == 0o640, name
         assert target.read_bytes() != b"old"
+
+
+def test_atomic_writers_take_names_up_to_the_file_systems_limit(tmp_path: Path) -> None:
+    # The temporary name adds 31 bytes to the target's: a name of 225 to 255 bytes (legal,
+    # say a batch stem from deep folders) failed with "File name too long" naming the
+    # temporary file. Every writer goes through atomic_write.
+    disparity = np.ones((4, 5), np.float32)
+    writers = {
+        "npy": lambda p: io.write_npy(p, disparity),
+        "pfm": lambda p: io.write_pfm(p, disparity),
+        "png": lambda p: io.write_png16(p, np.ones((4, 5), np.uint16)),
+        "ply": lambda p: write_ply(p, np.ones((2, 3), np.float32)),
+    }
+    for ext, write in writers.items():
+        for stem in ("d" * (254 - len(ext)), "\u00e9" * ((254 - len(ext)) // 2)):
+            target = tmp_path / f"{stem}.{ext}"
+            assert len(target.name.encode()) >= 253
+            write(target)
+            assert target.stat().st_size > 0
+    assert not [n for n in names(tmp_path) if n.endswith(".tmp")]
+    assert len(names(tmp_path)) == 2 * len(writers)
 
 
 def test_a_killed_writer_leaves_no_partial_file(tmp_path: Path) -> None:
