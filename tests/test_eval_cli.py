@@ -232,6 +232,29 @@ def test_middlebury_layout(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -
     assert row["metrics"]["evaluated"] == int((np.isfinite(gt) & (mask_png == 255)).sum())
 
 
+@pytest.mark.parametrize(
+    ("mask", "kind"),
+    [
+        # 65535 is not 255: every pixel was masked out and the scene scored on none of them
+        (np.full((40, 100), 65535, np.uint16), "a 16-bit image of shape (40, 100)"),
+        (np.full((40, 100, 3), 255, np.uint8), "a colour image of shape (40, 100, 3)"),
+    ],
+)
+def test_middlebury_mask_must_be_8_bit_grey(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], mask: np.ndarray, kind: str
+) -> None:
+    left, right, gt = random_dot_pair(40, 100, [7, 13], rgb=False, seed=5)
+    folder = tmp_path / "Pair"
+    folder.mkdir()
+    write_png(folder / "im0.png", left)
+    write_png(folder / "im1.png", right)
+    write_pfm(folder / "disp0GT.pfm", np.where(np.isnan(gt), np.inf, gt).astype(np.float32))
+    write_png(folder / "mask0nocc.png", mask)
+    status, _, err = run_eval(capsys, str(tmp_path))
+    assert status == 2
+    assert "mask0nocc.png: a Middlebury mask must be an 8-bit grey PNG" in err and kind in err
+
+
 # --------------------------------------------------------------------------------------------
 # OpenCV methods, checked against an independent run
 

@@ -188,7 +188,16 @@ class Scene:
         mask = None
         if self.mask_path is not None:
             if self.mask_path.suffix == ".png":
-                mask = read_image(self.mask_path) == 255
+                # Middlebury's masks are 8-bit grey, 255 = non-occluded: a 16-bit one (65535)
+                # gave an empty mask, nothing scored; a colour one a 3-channel "mask".
+                image = read_image(self.mask_path)
+                if image.dtype != np.uint8 or image.ndim != 2:
+                    kind = "16-bit" if image.dtype == np.uint16 else "colour"
+                    raise ValueError(
+                        f"{self.mask_path}: a Middlebury mask must be an 8-bit grey PNG "
+                        f"(255 = non-occluded), got a {kind} image of shape {image.shape}"
+                    )
+                mask = image == 255
             else:
                 mask = _load_npy(self.mask_path)
             if mask.dtype != np.bool_ or mask.shape != left.shape[:2]:
