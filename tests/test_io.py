@@ -239,6 +239,23 @@ def test_atomic_writers_take_names_up_to_the_file_systems_limit(tmp_path: Path) 
     assert len(names(tmp_path)) == 2 * len(writers)
 
 
+def test_atomic_writers_name_the_users_path_when_the_folder_takes_no_file(tmp_path: Path) -> None:
+    # The error of creating the temporary file named it (".d.npy.stereodepth-<hex>.tmp"), a
+    # path the user never gave: `match -o /proc/` said so.
+    disparity = np.ones((4, 5), np.float32)
+    writers = {
+        "d.npy": lambda p: io.write_npy(p, disparity),
+        "d.pfm": lambda p: io.write_pfm(p, disparity),
+        "d.png": lambda p: io.write_png16(p, np.ones((4, 5), np.uint16)),
+    }
+    for name, write in writers.items():
+        target = tmp_path / "missing" / name
+        with pytest.raises(FileNotFoundError) as info:
+            write(target)
+        assert info.value.filename == str(target)
+        assert f"cannot write {name}" in str(info.value) and ".tmp" not in str(info.value)
+
+
 def test_a_killed_writer_leaves_no_partial_file(tmp_path: Path) -> None:
     """SIGKILL in the middle of a write: the target keeps its old content, a temporary file
     remains, and remove_temp_files sweeps it (and nothing else)."""

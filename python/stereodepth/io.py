@@ -178,14 +178,20 @@ def atomic_write(path: str | os.PathLike[str], *, text: bool = False) -> Iterato
     POSIX); when it raises, including KeyboardInterrupt, the temporary file is removed and
     ``path`` is untouched. A process killed outright can leave a
     temporary file behind, never a partial ``path``: :func:`remove_temp_files` sweeps them.
-    Raises IsADirectoryError naming ``path`` when it is a folder, before writing anything.
+    Raises IsADirectoryError naming ``path`` when it is a folder, before writing anything,
+    and the OSError of a folder that takes no new file (missing, read-only) naming ``path``.
     """
     p = Path(path)
     if p.is_dir():  # else the rename's error names the temporary file, not the user's path
         raise IsADirectoryError(errno.EISDIR, "cannot write a file over a folder", str(p))
     tmp = _temp_path(p)
     # O_EXCL: never follow or clobber anything; mode 0o666 so the umask applies as usual.
-    fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_BINARY", 0), 0o666)
+    try:
+        fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_BINARY", 0), 0o666)
+    except OSError as exc:
+        # A folder that is missing, read-only or takes no new files (/proc): name the user's
+        # path, not the temporary one the user never gave.
+        raise type(exc)(exc.errno, f"cannot write {p.name}: {exc.strerror}", str(p)) from None
     try:
         f: IO[Any] = os.fdopen(fd, "w", encoding="utf-8") if text else os.fdopen(fd, "wb")
         with f:
