@@ -473,3 +473,16 @@ def test_one_kitti_calib_for_grey_and_colour_pairs(
     for stem, baseline in (("grey", 0.1), ("colour", 0.11)):
         rig = record_of(out, stem)["settings"]["calibration"]
         assert rig["baseline_m"] == pytest.approx(baseline, rel=1e-12), stem
+
+
+def test_jsonable_turns_every_non_finite_float_into_null() -> None:
+    # numpy's float32 and float16 are not Python floats: their NaN and inf went through as
+    # NaN, which the record writer (json.dump with allow_nan=False) then refused.
+    from stereodepth.batch.records import jsonable
+
+    value = {"a": np.float32("nan"), "b": [np.float16("inf"), np.float64("-inf")], "c": 1.5}
+    assert jsonable(value) == {"a": None, "b": [None, None], "c": 1.5}
+    assert json.dumps(jsonable(value), allow_nan=False) == (
+        '{"a": null, "b": [null, null], "c": 1.5}'
+    )
+    assert jsonable(np.int64(3)) == 3 and type(jsonable(np.int64(3))) is int

@@ -75,6 +75,8 @@ def completed_record(pair: Pair, options: BatchOptions) -> dict[str, Any] | None
 
 def jsonable(value: Any) -> Any:
     """JSON-safe: non-finite floats as None, tuples as lists, paths as strings."""
+    if isinstance(value, np.generic):  # first: numpy's float32 NaN is not a Python float
+        value = value.item()
     if isinstance(value, float) and not math.isfinite(value):
         return None
     if isinstance(value, dict):
@@ -83,8 +85,6 @@ def jsonable(value: Any) -> Any:
         return [jsonable(v) for v in value]
     if isinstance(value, Path):
         return str(value)
-    if isinstance(value, np.generic):
-        return value.item()
     return value
 
 
