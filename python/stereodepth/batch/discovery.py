@@ -338,6 +338,11 @@ def discover(
     skipped: list[tuple[Path, str]] = []
     if not root.exists():
         raise UsageError(f"INPUT not found: {root}")
+    if not root.is_file() and not root.is_dir():  # a pipe was "searched" as a folder
+        raise UsageError(
+            f"INPUT must be a folder or a .csv list of pairs, got {root} (not a regular file: "
+            "a device, pipe or socket)"
+        )
     if root.is_file():
         if root.suffix.lower() != ".csv":
             raise UsageError(f"INPUT must be a folder or a .csv list of pairs, got {root}")
