@@ -775,6 +775,17 @@ def test_maps_and_rectifier_reject() -> None:
         rect.maps("middle")
     with pytest.raises(ValueError, match="out_right must not overlap the image"):
         rect.rectify(img, img, out_right=img)
+    # One array for both outputs, or an output over the other image, was accepted and gave a
+    # wrong left (or right) image; the same for a calibration of a rectified pair (copies).
+    identity = StereoRectifier.from_calibration(calib_of(rig, rectified=True))
+    for r in (rect, identity):
+        left, right, out = img.copy(), img.copy(), np.empty_like(img)
+        with pytest.raises(ValueError, match="out_right must not overlap out_left"):
+            r.rectify(left, right, out_left=out, out_right=out)
+        with pytest.raises(ValueError, match="out_left must not overlap right"):
+            r.rectify(left, right, out_left=right)
+        with pytest.raises(ValueError, match="out_right must not overlap left"):
+            r.rectify(left, right, out_right=left[:, :])
 
 
 def test_plumb_bob_without_coefficients_is_the_pinhole_model() -> None:

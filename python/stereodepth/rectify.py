@@ -631,7 +631,8 @@ class StereoRectifier:
         calibration's ``image_size``. Returns two images of ``output_size`` and the input
         dtype (written into ``out_left``/``out_right`` when given), sampled as :func:`remap`
         does. For an already rectified calibration the inputs are returned as they are, or
-        copied into ``out_left``/``out_right`` when given."""
+        copied into ``out_left``/``out_right`` when given. Raises ValueError when an output
+        overlaps either image or the other output."""
         imgs = []
         for name, im in (("left", left), ("right", right)):
             arr = _as_image(name, im)
@@ -653,6 +654,15 @@ class StereoRectifier:
             _prepare_out(out_left, shape, imgs[0].dtype, imgs[0], "out_left"),
             _prepare_out(out_right, shape, imgs[1].dtype, imgs[1], "out_right"),
         )
+        # The left is written before the right is read, and both into their own buffer: an
+        # out_left over the right image, or one array for both outputs, gave a wrong image.
+        for name, out, other, other_name in (
+            ("out_left", out_left, imgs[1], "right"),
+            ("out_right", out_right, imgs[0], "left"),
+            ("out_right", out_right, outs[0], "out_left"),
+        ):
+            if out is not None and np.shares_memory(out, other):
+                raise ValueError(f"{name} must not overlap {other_name}")
         if self._identity:  # nothing to resample: the inputs, or copies in the given outputs
             given = (out_left is not None, out_right is not None)
             if not any(given):
