@@ -486,3 +486,18 @@ def test_jsonable_turns_every_non_finite_float_into_null() -> None:
         '{"a": null, "b": [null, null], "c": 1.5}'
     )
     assert jsonable(np.int64(3)) == 3 and type(jsonable(np.int64(3))) is int
+
+
+def test_a_calib_txt_ndisp_beyond_the_matchers_names_the_file(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    # The pair failed with the matcher's "num_disparities must be an integer in [1, 4096],
+    # got 5000", which named neither the calib.txt nor what to do.
+    inp, out = tmp_path / "in", tmp_path / "out"
+    d = scene(inp / "teddy")
+    (d / "calib.txt").write_text(calib_txt(ndisp=5000))
+    status, _, err = run(capsys, inp, "-o", out, "--quiet")
+    assert status == 1
+    assert f"{d / 'calib.txt'}: ndisp=5000 is more than the matchers search (4096)" in err
+    assert "give --num-disparities" in record_of(out, "teddy")["error"]
+    assert run(capsys, inp, "-o", out, "--quiet", "--num-disparities", "16")[0] == 0

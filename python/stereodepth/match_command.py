@@ -297,6 +297,16 @@ def _check_matcher_flags(args: argparse.Namespace, num_disparities: int) -> None
         ("--block-size", "block_size", args.block_size),
     )
     context: dict[str, Any] = {"num_disparities": num_disparities}
+    if args.num_disparities is None and args.calib is not None:
+        # The calibration's ndisp: its error was blamed on the first flag checked after it
+        # (--min-disparity 0, a flag not even given).
+        try:
+            checker(num_disparities=num_disparities)
+        except (TypeError, ValueError) as exc:
+            raise _Usage(
+                f"--calib {args.calib}: its ndisp={num_disparities} is no search range for "
+                f"--method {args.method} ({exc}): give --num-disparities N"
+            ) from None
     for flag, key, value in flags:
         if value is None:
             continue
