@@ -887,6 +887,20 @@ def test_rejects_meta_out_of_range(
     assert len(err.strip().splitlines()) == 1
 
 
+def test_a_search_range_beyond_the_matchers_names_its_source(
+    scenes_dir: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    # The matcher's "num_disparities must be an integer in [1, 4096], got 5008" named the
+    # scene but not where 5008 came from, nor what to do.
+    (scenes_dir / "rds-a" / "meta.json").write_text('{"max_disp": 5000}')
+    status, _, err = run_eval(capsys, str(scenes_dir), "--scene", "rds-a")
+    assert status == 2
+    assert (
+        "scene rds-a: meta.json's max_disp=5000 needs 5008 disparities, more than the "
+        "matchers search (4096): give --num-disparities"
+    ) in err
+
+
 def test_rejects_unreadable_meta(scenes_dir: Path, capsys: pytest.CaptureFixture[str]) -> None:
     (scenes_dir / "rds-a" / "meta.json").write_text("{not json")
     status, _, err = run_eval(capsys, str(scenes_dir))

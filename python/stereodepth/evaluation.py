@@ -84,6 +84,7 @@ import numpy as np
 from . import _validate as check
 from .cli import key_value_option
 from .depth import from_opencv_disparity
+from .matching import MAX_NUM_DISPARITIES
 from .metrics import DisparityMetrics, evaluate
 
 __all__ = [
@@ -558,7 +559,19 @@ def _evaluate_scene(
             if finite.size == 0:
                 raise ValueError(f"scene {scene.name}: the ground truth has no finite value")
             max_disp = max(float(finite.max()), 0.0)
+            source = f"the ground truth's largest disparity, {max_disp:g} px,"
+        elif scene.left_path.name == "left.png":
+            source = f"meta.json's max_disp={max_disp:g}"
+        else:  # Middlebury: max_disp is ndisp - 1
+            source = f"calib.txt's ndisp={max_disp + 1:g}"
         num_disparities = num_disparities_for(max_disp)
+        ours = any(v.method in ("stereodepth", "sgm") for v in variants)
+        if ours and num_disparities > MAX_NUM_DISPARITIES:  # the matcher's error named no source
+            raise ValueError(
+                f"scene {scene.name}: {source} needs {num_disparities} "
+                f"disparities, more than the matchers search ({MAX_NUM_DISPARITIES}): give "
+                "--num-disparities"
+            )
     if not use_mask:
         mask = None
     rows = []
