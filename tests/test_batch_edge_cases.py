@@ -294,6 +294,13 @@ def test_calibration_precedence_is_stated_per_pair_and_the_message_is_true(
     assert rec["calibration_not_used"] == str(inp / "a" / "calib.txt")
     assert rec["settings"]["calibration"]["focal_px"] == 650.0
     assert any("not used" in n for n in report_of(out / "report.json")["notes"])
+    # one pair: "1 pair's own calibration file", not "1 pair' own"
+    status, _, err = run(capsys, inp / "a", "-o", tmp_path / "one", *rig, "--num-disparities", "16")
+    assert (status, err) == (
+        0,
+        "stereodepth batch: note: calibration: --focal-px/--baseline-mm for every pair; 1 "
+        f"pair's own calibration file (e.g. {inp / 'a' / 'calib.txt'}) not used\n",
+    )
     # --calib FILE: named as such
     (tmp_path / "rig.txt").write_text(calib_txt(ndisp=None))
     status, _, err = run(capsys, inp, "-o", out, "--calib", tmp_path / "rig.txt")

@@ -47,10 +47,8 @@ def calibration_note(pairs: Sequence[Pair]) -> str | None:
     first = unused[0]
     source = first.calibration.source if first.calibration is not None else ""
     n = len(unused)
-    return (
-        f"calibration: {source} for every pair; {n} pair{'s' if n != 1 else ''}' own "
-        f"calibration file{'s' if n != 1 else ''} (e.g. {first.calib_file}) not used"
-    )
+    whose = "pairs' own calibration files" if n != 1 else "pair's own calibration file"
+    return f"calibration: {source} for every pair; {n} {whose} (e.g. {first.calib_file}) not used"
 
 
 def resolve_calibration(
