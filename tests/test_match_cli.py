@@ -321,6 +321,9 @@ def bad_cases(tmp: Path, left: Path, right: Path) -> list[tuple[list[Any], str]]
         ([left, right, "--ply"], "--ply needs a rig"),
         ([left, right, "-o", tmp / "missing" / "p-"], "the folder of the prefix"),
         ([left, right, "--threads", "-1"], "--threads must be an integer >= 0, got -1"),
+        # the same file twice: every disparity 0, every depth unknown (batch's CSV refuses it)
+        ([left, left], "LEFT and RIGHT are the same file"),
+        ([left, tmp / ".." / tmp.name / left.name], "LEFT and RIGHT are the same file"),
         (  # a calib.txt's ndisp out of range was blamed on --min-disparity 0, never given
             [left, right, "--calib", wide_ndisp],
             f"--calib {wide_ndisp}: its ndisp=5000 is no search range for --method bm "

@@ -353,6 +353,11 @@ def run(args: argparse.Namespace) -> int:
                 f"LEFT and RIGHT must have the size of the calibration in --calib, {cw}x{ch} "
                 f"px, got {left_img.shape[1]}x{left_img.shape[0]} px"
             )
+    if os.path.samefile(args.left, args.right):  # batch's CSV lists refuse this too
+        raise _Usage(
+            f"LEFT and RIGHT are the same file ({args.left!r} and {args.right!r}): give the "
+            "two images of the pair"
+        )
     # The search range the checks assume: the one match_pair uses (the matched width's default
     # when neither the flag nor the calibration gives one; the checks do not depend on it).
     checked_nd = args.num_disparities if args.num_disparities is not None else ndisp

@@ -261,6 +261,15 @@ def _csv_path(base: Path, cell: str) -> Path:
     return p if p.is_absolute() else base / p
 
 
+def _same_file(a: Path, b: Path) -> bool:
+    """Whether two existing paths are one file (a symbolic or hard link); False when either
+    is missing (that pair fails on its own)."""
+    try:
+        return os.path.samefile(a, b)
+    except OSError:
+        return False
+
+
 def _csv_pairs(path: Path, names: Sequence[tuple[str, str]]) -> list[Pair]:
     """The pairs of a CSV list, parsed exactly: UTF-8 (a byte-order mark is allowed), LF or
     CR LF line ends, cells stripped of surrounding spaces, empty trailing cells ignored;
@@ -293,7 +302,7 @@ def _csv_pairs(path: Path, names: Sequence[tuple[str, str]]) -> list[Pair]:
                 if len(cells) not in (2, 3) or not cells[0] or not cells[1]:
                     raise UsageError(f"{where}: expected left,right[,stem], got {','.join(row)!r}")
                 left, right = _csv_path(path.parent, cells[0]), _csv_path(path.parent, cells[1])
-                if os.path.normpath(left) == os.path.normpath(right):
+                if os.path.normpath(left) == os.path.normpath(right) or _same_file(left, right):
                     raise UsageError(f"{where}: the left and right image are the same file {left}")
                 if len(cells) == 3:
                     stem = cells[2]
