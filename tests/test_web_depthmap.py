@@ -305,6 +305,7 @@ def bad_cases(pair: Any) -> list[tuple[dict[str, Any], list[Any], str]]:
             "right must have the bit depth of left (16-bit), got 8-bit",
         ),
         ({"right": right}, ["body", "left"], "left: choose an image file"),
+        ({"left": left, "right": left}, ["body", "right"], "right: the same file as left"),
         ({"left": "%%%not base64", "right": right}, ["body", "left"], "left: not valid base64"),
         ({"left": b64(b""), "right": right}, ["body", "left"], "left: the file is empty"),
         ({"left": 5, "right": right}, ["body", "left"], "give the image file as base64"),

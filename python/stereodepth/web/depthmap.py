@@ -455,6 +455,7 @@ def parse_job(body: Any, limits: DepthMapLimits) -> Job:
         left, right, truth = s.left, s.right, s.disparity
     else:
         images: dict[str, np.ndarray] = {}
+        files: dict[str, bytes] = {}
         for field in ("left", "right"):
             if body.get(field) is None:
                 errors.append(
@@ -462,7 +463,13 @@ def parse_job(body: Any, limits: DepthMapLimits) -> Job:
                 )
                 continue
             try:
-                images[field] = decode_image(field, _b64(field, body[field]), limits)
+                files[field] = _b64(field, body[field])
+                if field == "right" and files[field] == files.get("left"):
+                    # every disparity 0, every depth unknown: `stereodepth match` refuses it too
+                    raise BadInput(
+                        ["body", "right"], "right: the same file as left; choose the other image"
+                    )
+                images[field] = decode_image(field, files[field], limits)
             except BadInput as e:
                 errors.append(e)
         if len(images) == 2:
