@@ -283,19 +283,26 @@ def stereo_rectify(
         r = _core.stereo_rectify(
             k1, d1, k2, d2, model, width, height, rot, t, a, new_w, new_h, zero_disparity
         )
+    _check_finite_rectification(r, k1, k2, d1, d2, t)
+    return Rectification(
+        r["R1"], r["R2"], r["P1"], r["P2"], r["Q"], tuple(r["roi1"]), tuple(r["roi2"])
+    )
+
+
+def _check_finite_rectification(
+    r: Any, k1: np.ndarray, k2: np.ndarray, d1: np.ndarray, d2: np.ndarray, t: np.ndarray
+) -> None:
+    """ValueError naming the inputs when R1, R2, P1, P2 or Q (``r[name]``) is not finite:
+    focal lengths near 0 or 1e300, or distortion of 1e10, overflow Bouguet's method (said
+    here, not later as "P must be finite" from the maps). Shared with the numpy oracle."""
     for key in ("R1", "R2", "P1", "P2", "Q"):
         if not np.all(np.isfinite(r[key])):
-            # Focal lengths near 0 or 1e300, or distortion of 1e10, overflow Bouguet's method:
-            # said here, naming the inputs, not later as "P must be finite" from the maps.
             raise ValueError(
                 f"the calibration gives a non-finite rectification ({key} = "
                 f"{np.asarray(r[key]).tolist()}): K1, K2, D1, D2, R and T must describe a real "
                 f"camera pair, got fx = {float(k1[0, 0])!r}, {float(k2[0, 0])!r}, "
                 f"D1 = {d1.tolist()}, D2 = {d2.tolist()}, T = {t.tolist()}"
             )
-    return Rectification(
-        r["R1"], r["R2"], r["P1"], r["P2"], r["Q"], tuple(r["roi1"]), tuple(r["roi2"])
-    )
 
 
 def init_undistort_rectify_map(
