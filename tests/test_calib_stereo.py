@@ -1044,3 +1044,23 @@ def test_integers_beyond_a_double_are_refused_naming_the_file(tmp_path: Path) ->
     text = kalibr_yaml(cams).replace("intrinsics: [458.6", f"intrinsics: [{huge}", 1)
     with pytest.raises(ValueError, match=r"camchain\.yaml: .*intrinsics"):
         read_stereo_calibration(write(tmp_path / "camchain.yaml", text))
+
+
+def test_an_empty_distortion_list_is_no_distortion(tmp_path: Path) -> None:
+    """ROS's image_geometry and OpenCV read an empty D (``data: []``) as no distortion, and
+    StereoRectifier took it so; the readers refused it ("has 0 coefficients")."""
+    empty = np.zeros(0)
+    lp, rp = ros_pair(tmp_path, {"d": empty}, {"d": empty})
+    c = read_stereo_calibration(lp, second_path=rp)
+    assert c.distortion_model == "plumb_bob"
+    np.testing.assert_array_equal(c.D1, np.zeros(5))
+    np.testing.assert_array_equal(c.D2, np.zeros(5))
+    text = opencv_yaml(stereo_entries(D1=None, D2=None)) + "D1: []\nD2: []\n"
+    c = read_stereo_calibration(write(tmp_path / "e.yml", text), translation_unit="mm")
+    np.testing.assert_array_equal(c.D1, np.zeros(5))
+    # A fisheye model's zeros are the equidistant projection, not a pinhole: still refused.
+    lp, rp = ros_pair(
+        tmp_path, {"d": empty, "model": "equidistant"}, {"d": empty, "model": "equidistant"}
+    )
+    with pytest.raises(ValueError, match=r"distortion_coefficients has 0 coefficients"):
+        read_stereo_calibration(lp, second_path=rp)

@@ -148,8 +148,13 @@ def _check_distortion(
     value: Any, model: str, where: str, key: str, named: str | None = None
 ) -> np.ndarray:
     """Distortion coefficients of ``model``; ``named`` the file's own name for the model,
-    where it fixes the count (ROS's rational_polynomial 8, Kalibr's radtan 4)."""
+    where it fixes the count (ROS's rational_polynomial 8, Kalibr's radtan 4). An empty list
+    for the pinhole models is no distortion, five zeros (OpenCV's empty distCoeffs, ROS's
+    empty D in image_geometry; the rectifier takes it so too); a fisheye model's zeros are
+    not "no distortion", so it keeps its count."""
     d = _check_array(value, where, key, (-1,))
+    if d.size == 0 and model == "plumb_bob":
+        return np.zeros(5)
     name = named.strip().lower() if named is not None else model
     counts = _NAMED_COUNTS.get(name, DISTORTION_COUNTS[model])
     if d.size not in counts:
