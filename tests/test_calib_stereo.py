@@ -1058,6 +1058,11 @@ def test_an_empty_distortion_list_is_no_distortion(tmp_path: Path) -> None:
     text = opencv_yaml(stereo_entries(D1=None, D2=None)) + "D1: []\nD2: []\n"
     c = read_stereo_calibration(write(tmp_path / "e.yml", text), translation_unit="mm")
     np.testing.assert_array_equal(c.D1, np.zeros(5))
+    # OpenCV writes an empty Mat as rows: 0, cols: 0 (refused as "shape (0, 0)")
+    text = opencv_yaml(stereo_entries(D1=np.zeros((0, 0)), D2=np.zeros((0, 0))))
+    assert "rows: 0" in text
+    c = read_stereo_calibration(write(tmp_path / "m.yml", text), translation_unit="mm")
+    np.testing.assert_array_equal(c.D2, np.zeros(5))
     # A fisheye model's zeros are the equidistant projection, not a pinhole: still refused.
     lp, rp = ros_pair(
         tmp_path, {"d": empty, "model": "equidistant"}, {"d": empty, "model": "equidistant"}

@@ -106,13 +106,13 @@ def _fail(where: str, message: str) -> ValueError:
 
 
 def _check_array(value: Any, where: str, key: str, shape: tuple[int, ...]) -> np.ndarray:
-    """``value`` as a float64 array of ``shape`` (a vector also from (1, n) or (n, 1)),
-    finite."""
+    """``value`` as a float64 array of ``shape`` (a vector also from (1, n) or (n, 1), and
+    an empty one from OpenCV's empty Mat, rows: 0 and cols: 0), finite."""
     try:
         a = np.array(value, dtype=np.float64)
     except (TypeError, ValueError) as exc:
         raise _fail(where, f"{key} must be numbers, got {_shown(value)}") from exc
-    if len(shape) == 1 and a.ndim == 2 and 1 in a.shape:
+    if len(shape) == 1 and a.ndim == 2 and (1 in a.shape or a.size == 0):
         a = a.reshape(-1)
     if a.shape != shape and not (len(shape) == 1 and shape[0] < 0 and a.ndim == 1):
         want = "(n,)" if shape[0] < 0 else str(shape)
