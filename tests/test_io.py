@@ -752,3 +752,33 @@ def test_require_file_names_a_device_as_one() -> None:
         pytest.skip("no device file to try")
     with pytest.raises(FileNotFoundError, match="image is not a regular file .*: " + os.devnull):
         require_file(os.devnull, "image")
+
+
+def test_readers_and_writers_name_a_path_that_is_not_one(tmp_path: Path) -> None:
+    # pathlib's "expected str, bytes or os.PathLike object, not int" named no parameter;
+    # write_ply, save_colorized and save_charts already said "path must be a str or ...".
+    from stereodepth import calib
+
+    a = np.zeros((2, 2), np.float32)
+    calls = {
+        "read_image": io.read_image,
+        "read_pfm": io.read_pfm,
+        "read_pnm": io.read_pnm,
+        "write_npy": lambda p: io.write_npy(p, a),
+        "write_pfm": lambda p: io.write_pfm(p, a),
+        "write_png16": lambda p: io.write_png16(p, a.astype(np.uint16)),
+        "write_disparity_png16": lambda p: io.write_disparity_png16(p, a),
+        "read_stereo_calibration": calib.read_stereo_calibration,
+        "read_middlebury_calib": calib.read_middlebury_calib,
+        "read_kitti_calib": calib.read_kitti_calib,
+        "read_calibration": calib.read_calibration,
+    }
+    for call in calls.values():
+        for bad in (123, None, b"/tmp/x.png"):
+            with pytest.raises(TypeError, match=r"^path must be a str or os\.PathLike, got "):
+                call(bad)
+    with pytest.raises(TypeError, match=r"^directory must be a str or os\.PathLike, got int"):
+        io.remove_temp_files(5)  # type: ignore[arg-type]
+    (tmp_path / "calib.txt").write_text("cam0=[1 0 0; 0 1 0; 0 0 1]\nbaseline=1\n")
+    with pytest.raises(TypeError, match=r"^second_path must be a str or os\.PathLike, got int"):
+        calib.read_stereo_calibration(tmp_path / "calib.txt", second_path=5)

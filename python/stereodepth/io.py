@@ -45,6 +45,17 @@ def _pil() -> Any:
     return Image
 
 
+def _as_path(value: Any, name: str = "path") -> Path:
+    """``value`` as a Path; TypeError naming ``name`` for anything but a str or os.PathLike
+    (pathlib's own message, "expected str, bytes or os.PathLike object, not int", named no
+    parameter; bytes paths are refused as pathlib refuses them)."""
+    if isinstance(value, str) or (
+        isinstance(value, os.PathLike) and isinstance(os.fspath(value), str)
+    ):
+        return Path(value)
+    raise TypeError(f"{name} must be a str or os.PathLike, got {type(value).__name__} {value!r}")
+
+
 def require_file(path: str | os.PathLike[str], what: str) -> Path:
     """``path`` as a Path when it names an existing regular file (or a link to one).
 
@@ -53,7 +64,7 @@ def require_file(path: str | os.PathLike[str], what: str) -> Path:
     could block on or never end) and IsADirectoryError ("{what} is a folder, not a file:
     path") for a folder, so that a user who passed a folder is not told the file is missing.
     """
-    p = Path(path)
+    p = _as_path(path)
     if p.is_dir():
         raise IsADirectoryError(f"{what} is a folder, not a file: {p}")
     if not p.is_file():
@@ -75,7 +86,7 @@ def read_image(path: str | os.PathLike[str]) -> np.ndarray:
     ``Image.MAX_IMAGE_PIXELS``),
     holds floating-point samples (a float TIFF or a PFM: :func:`read_pfm` reads those) or is
     16-bit colour or 16-bit with alpha (Pillow would keep only the high byte of each sample)."""
-    p = Path(path)
+    p = _as_path(path)
     require_file(p, "image")
     with p.open("rb") as f:
         magic = f.read(2)
@@ -181,7 +192,7 @@ def atomic_write(path: str | os.PathLike[str], *, text: bool = False) -> Iterato
     Raises IsADirectoryError naming ``path`` when it is a folder, before writing anything,
     and the OSError of a folder that takes no new file (missing, read-only) naming ``path``.
     """
-    p = Path(path)
+    p = _as_path(path)
     if p.is_dir():  # else the rename's error names the temporary file, not the user's path
         raise IsADirectoryError(errno.EISDIR, "cannot write a file over a folder", str(p))
     tmp = _temp_path(p)
@@ -218,7 +229,7 @@ def remove_temp_files(directory: str | os.PathLike[str]) -> list[Path]:
     when a process was killed mid-write. Only call it when no other process is writing there.
     Returns the paths removed."""
     removed: list[Path] = []
-    d = Path(directory)
+    d = _as_path(directory, "directory")
     if not d.is_dir():
         return removed
     for entry in d.iterdir():
@@ -323,7 +334,7 @@ def read_pfm(path: str | os.PathLike[str]) -> np.ndarray:
     Raises FileNotFoundError for a missing file, IsADirectoryError for a folder and ValueError
     naming the file and the fault: a bad magic, a non-numeric, zero or negative width or height, a
     non-numeric, zero or non-finite scale, a comment, a truncated body or extra bytes."""
-    p = Path(path)
+    p = _as_path(path)
     require_file(p, "PFM file")
     data = p.read_bytes()
     if data[:2] not in (b"PF", b"Pf") or not data[2:3].isspace():
@@ -447,7 +458,7 @@ def read_pnm(path: str | os.PathLike[str]) -> np.ndarray:
     naming the file and the fault: a bad magic (PAM, P7, is not read), non-numeric, zero or negative
     width, height or maxval, a maxval above 65535, a sample above the maxval, a truncated body or
     extra bytes."""
-    p = Path(path)
+    p = _as_path(path)
     require_file(p, "PNM file")
     data = p.read_bytes()
     kind = _PNM_KINDS.get(data[:2])

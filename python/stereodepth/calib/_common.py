@@ -83,6 +83,14 @@ ROTATION_TOLERANCE = 1e-6
 MAX_FILE_BYTES = 4 * 1024 * 1024
 
 
+def _path(value: Any, name: str = "path") -> Path:
+    """A reader's path argument as a Path, or TypeError naming ``name`` (pathlib's own
+    "expected str, bytes or os.PathLike object, not int" named no parameter)."""
+    from ..io import _as_path
+
+    return _as_path(value, name)
+
+
 def _read_text(p: Path, what: str) -> str:
     """A calibration file's text: UTF-8 (a byte-order mark is dropped), any line ends, at
     most :data:`MAX_FILE_BYTES`."""

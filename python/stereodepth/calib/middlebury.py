@@ -10,7 +10,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ._common import _INTEGER_RE, _LINE_RE, _NUMBER_RE, _image_size_of, _read_text
+from ._common import _INTEGER_RE, _LINE_RE, _NUMBER_RE, _image_size_of, _path, _read_text
 from .stereo import StereoCalibration, _rectified_calibration
 
 __all__ = ["MiddleburyCalib", "read_middlebury_calib", "read_middlebury_stereo_calibration"]
@@ -79,7 +79,7 @@ def read_middlebury_calib(path: str | os.PathLike[str]) -> MiddleburyCalib:
     from cam0's (not a rectified pair), a baseline that is not a finite number
     > 0, a non-finite doffs or one that differs from cam1's cx - cam0's cx by more than
     ``DOFFS_TOLERANCE_PX``, a width, height or ndisp that is not a whole number > 0."""
-    p = Path(path)
+    p = _path(path)
     text = _read_text(p, "Middlebury calib.txt")
     fields: dict[str, str] = {}
     for lineno, line in enumerate(text.splitlines(), start=1):
@@ -161,7 +161,7 @@ def read_middlebury_stereo_calibration(
     ``image_size=``), R1, R2, P1, P2, Q as ``cv2.stereoRectify`` lays them out (Q keeps
     doffs). Raises as :func:`read_middlebury_calib`, and ValueError when the image size is
     missing or disagrees with ``image_size=``."""
-    p = Path(path)
+    p = _path(path)
     c = read_middlebury_calib(p)
     found = (c.width_px, c.height_px) if c.width_px and c.height_px else None
     size = _image_size_of(found, image_size, str(p), "width, height")
