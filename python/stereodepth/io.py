@@ -45,17 +45,6 @@ def _pil() -> Any:
     return Image
 
 
-def _as_path(value: Any, name: str = "path") -> Path:
-    """``value`` as a Path; TypeError naming ``name`` for anything but a str or os.PathLike
-    (pathlib's own message, "expected str, bytes or os.PathLike object, not int", named no
-    parameter; bytes paths are refused as pathlib refuses them)."""
-    if isinstance(value, str) or (
-        isinstance(value, os.PathLike) and isinstance(os.fspath(value), str)
-    ):
-        return Path(value)
-    raise TypeError(f"{name} must be a str or os.PathLike, got {type(value).__name__} {value!r}")
-
-
 def require_file(path: str | os.PathLike[str], what: str) -> Path:
     """``path`` as a Path when it names an existing regular file (or a link to one).
 
@@ -72,6 +61,17 @@ def require_file(path: str | os.PathLike[str], what: str) -> Path:
             raise FileNotFoundError(f"{what} is not a regular file (a device, pipe or socket): {p}")
         raise FileNotFoundError(f"{what} not found: {p}")
     return p
+
+
+def _as_path(value: Any, name: str = "path") -> Path:
+    """``value`` as a Path; TypeError naming ``name`` for anything but a str or os.PathLike
+    (pathlib's own message, "expected str, bytes or os.PathLike object, not int", named no
+    parameter; bytes paths are refused as pathlib refuses them)."""
+    if isinstance(value, str) or (
+        isinstance(value, os.PathLike) and isinstance(os.fspath(value), str)
+    ):
+        return Path(value)
+    raise TypeError(f"{name} must be a str or os.PathLike, got {type(value).__name__} {value!r}")
 
 
 def read_image(path: str | os.PathLike[str]) -> np.ndarray:
