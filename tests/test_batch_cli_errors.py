@@ -4,6 +4,7 @@ never our classes), exit status 2, no traceback, and nothing written."""
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 import numpy as np
@@ -123,6 +124,12 @@ def test_input_and_output_errors(tmp_path: Path, capsys: pytest.CaptureFixture[s
     (tmp_path / "file").write_text("")
     (tmp_path / "empty").mkdir()
     (tmp_path / "bad.csv").write_text("a.png,b.png,c,d\n")
+    listed = tmp_path / "list.csv"  # --report over the CSV list replaced it with the report
+    listed.write_text(f"{inp}/teddy/im0.png,{inp}/teddy/im1.png,teddy\n")
+    rig = str(tmp_path / "rig.txt")  # and over the job's --calib file
+    fifo = tmp_path / "pipe.csv"  # a pipe was searched as a folder: "no stereo pairs found"
+    os.mkfifo(fifo)
+    Path(rig).write_bytes((inp / "teddy" / "calib.txt").read_bytes())
     cases = [
         ([str(tmp_path / "absent"), "-o", out], "INPUT not found"),
         ([str(tmp_path / "empty"), "-o", out], "no stereo pairs found in"),
@@ -130,6 +137,9 @@ def test_input_and_output_errors(tmp_path: Path, capsys: pytest.CaptureFixture[s
         ([str(inp), "-o", str(tmp_path / "file")], "OUTDIR must be a folder, got the file"),
         ([str(inp), "-o", str(tmp_path / "file" / "out")], "cannot be created: "),
         ([str(inp)], "the following arguments are required: -o/--output"),
+        ([str(listed), "-o", out, "--report", str(listed)], f"that is INPUT {listed}"),
+        ([str(inp), "-o", out, "--calib", rig, "--report", rig], f"that is --calib {rig}"),
+        ([str(fifo), "-o", out], "(not a regular file: a device, pipe or socket)"),
     ]
     for argv, fragment in cases:
         status, err = run([*argv, "--quiet"], capsys)

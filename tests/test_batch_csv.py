@@ -56,6 +56,17 @@ def test_bad_lines_are_refused_with_file_and_line(tmp_path: Path, text: str, mes
         batch.find_pairs(write(tmp_path, text))
 
 
+def test_a_link_to_the_left_image_is_the_same_file(tmp_path: Path) -> None:
+    # Only the spelled paths were compared: a symbolic or hard link to the left image was
+    # matched against it (disparity 0 everywhere), as `stereodepth match` did with any pair.
+    (tmp_path / "a.png").write_bytes(b"an image")
+    (tmp_path / "soft.png").symlink_to(tmp_path / "a.png")
+    (tmp_path / "hard.png").hardlink_to(tmp_path / "a.png")
+    for other in ("soft.png", "hard.png"):
+        with pytest.raises(ValueError, match=r"pairs.csv:1: the left and right image are the same"):
+            batch.find_pairs(write(tmp_path, f"a.png,{other}\n"))
+
+
 def test_a_file_that_is_not_utf8_is_refused(tmp_path: Path) -> None:
     p = tmp_path / "pairs.csv"
     p.write_bytes(b"caf\xe9.png,b.png\n")

@@ -231,6 +231,27 @@ def test_a_changed_run_removes_the_outputs_it_no_longer_writes(
     assert (out / "teddy.disparity.pfm").read_bytes() == b"mine"
 
 
+@pytest.mark.parametrize(
+    "text",
+    ["[1, 2]", '"ok"', "null", '{"status": "ok", "settings": ' + "[" * 50_000 + "]" * 50_000 + "}"],
+)
+def test_a_record_that_is_not_an_object_is_redone_not_a_traceback(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], text: str
+) -> None:
+    # A record edited by hand (a JSON list, a string) raised AttributeError and one nested
+    # deeper than the recursion limit RecursionError, in all three readers of records (resume,
+    # stale outputs, discovery of an OUTDIR inside INPUT): a traceback instead of a rerun.
+    inp = tmp_path / "in"
+    out = inp / "out"  # inside INPUT: discovery reads the records too
+    scene(inp / "teddy")
+    assert run(capsys, inp, "-o", out, "--quiet")[0] == 0
+    (out / "teddy.record.json").write_text(text)
+    status, printed, err = run(capsys, inp, "-o", out)
+    assert (status, err) == (0, ""), err
+    assert "1 done" in printed
+    assert record_of(out, "teddy")["status"] == "ok"
+
+
 def test_a_pair_whose_dask_worker_kept_dying_gets_a_failed_record(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
@@ -273,6 +294,13 @@ def test_calibration_precedence_is_stated_per_pair_and_the_message_is_true(
     assert rec["calibration_not_used"] == str(inp / "a" / "calib.txt")
     assert rec["settings"]["calibration"]["focal_px"] == 650.0
     assert any("not used" in n for n in report_of(out / "report.json")["notes"])
+    # one pair: "1 pair's own calibration file", not "1 pair' own"
+    status, _, err = run(capsys, inp / "a", "-o", tmp_path / "one", *rig, "--num-disparities", "16")
+    assert (status, err) == (
+        0,
+        "stereodepth batch: note: calibration: --focal-px/--baseline-mm for every pair; 1 "
+        f"pair's own calibration file (e.g. {inp / 'a' / 'calib.txt'}) not used\n",
+    )
     # --calib FILE: named as such
     (tmp_path / "rig.txt").write_text(calib_txt(ndisp=None))
     status, _, err = run(capsys, inp, "-o", out, "--calib", tmp_path / "rig.txt")
@@ -452,3 +480,31 @@ def test_one_kitti_calib_for_grey_and_colour_pairs(
     for stem, baseline in (("grey", 0.1), ("colour", 0.11)):
         rig = record_of(out, stem)["settings"]["calibration"]
         assert rig["baseline_m"] == pytest.approx(baseline, rel=1e-12), stem
+
+
+def test_jsonable_turns_every_non_finite_float_into_null() -> None:
+    # numpy's float32 and float16 are not Python floats: their NaN and inf went through as
+    # NaN, which the record writer (json.dump with allow_nan=False) then refused.
+    from stereodepth.batch.records import jsonable
+
+    value = {"a": np.float32("nan"), "b": [np.float16("inf"), np.float64("-inf")], "c": 1.5}
+    assert jsonable(value) == {"a": None, "b": [None, None], "c": 1.5}
+    assert json.dumps(jsonable(value), allow_nan=False) == (
+        '{"a": null, "b": [null, null], "c": 1.5}'
+    )
+    assert jsonable(np.int64(3)) == 3 and type(jsonable(np.int64(3))) is int
+
+
+def test_a_calib_txt_ndisp_beyond_the_matchers_names_the_file(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    # The pair failed with the matcher's "num_disparities must be an integer in [1, 4096],
+    # got 5000", which named neither the calib.txt nor what to do.
+    inp, out = tmp_path / "in", tmp_path / "out"
+    d = scene(inp / "teddy")
+    (d / "calib.txt").write_text(calib_txt(ndisp=5000))
+    status, _, err = run(capsys, inp, "-o", out, "--quiet")
+    assert status == 1
+    assert f"{d / 'calib.txt'}: ndisp=5000 is more than the matchers search (4096)" in err
+    assert "give --num-disparities" in record_of(out, "teddy")["error"]
+    assert run(capsys, inp, "-o", out, "--quiet", "--num-disparities", "16")[0] == 0

@@ -929,6 +929,18 @@ def test_native_layer_rejects_bad_parameters_too() -> None:
             r"disparity must be >= min_disparity \(-2047\) px or NaN",
         ),
         (np.full((2, 2), np.inf, np.float32), {}, ValueError, "disparity must be finite or NaN"),
+        (  # the message showed the rounding, "got 2048.0", as if 2047.97 were 2048
+            np.full((2, 2), 2047.97, np.float64),
+            {},
+            ValueError,
+            r"below 2048 px to fit .* format, got 2047\.97 \(2048\.0 px in sixteenths\)$",
+        ),
+        (
+            np.array([[-0.04]]),
+            {},
+            ValueError,
+            r"min_disparity \(0\) px or NaN: .* got -0\.04 px \(-0\.0625 px in sixteenths\)$",
+        ),
         (
             np.zeros((2, 2), np.float32),
             {"min_disparity": 4000},

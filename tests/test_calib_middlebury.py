@@ -119,6 +119,20 @@ def replace(key: str, value: str | None) -> str:
         (replace("cam0", "[0 0 1; 0 1 1; 0 0 1]"), r"cam0 focal lengths must be > 0"),
         (replace("cam1", "[5 0 1; 0 -5 1; 0 0 1]"), r"cam1 focal lengths must be > 0"),
         (replace("cam0", "[5 0 1; 0 5 1; 0 0 2]"), r"cam0's last row must be 0 0 1"),
+        # A skew, or a cam1 of another focal length or row, was ignored: not a rectified pair.
+        (
+            replace("cam0", "[3950.25 2 1180.5; 0 3950.25 1005.75; 0 0 1]"),
+            r"cam0 must have no skew \(its \[0, 1\] entry 0\)",
+        ),
+        (
+            replace("cam1", "[3990 0 1310.125; 0 3990 1005.75; 0 0 1]"),
+            r"cam0 and cam1 are not a rectified pair: their focal length fx differ "
+            r"\(3950\.25 and 3990\)",
+        ),
+        (
+            replace("cam1", "[3950.25 0 1310.125; 0 3950.25 1015; 0 0 1]"),
+            r"cam0 and cam1 are not a rectified pair: their cy differ \(1005\.75 and 1015\)",
+        ),
         (replace("baseline", "0"), r"baseline must be > 0 mm, got '0'"),
         (replace("baseline", "-193"), r"baseline must be > 0 mm, got '-193'"),
         (replace("baseline", "193mm"), r"baseline must be a finite number, got '193mm'"),

@@ -1026,3 +1026,46 @@ def test_a_file_too_large_for_a_calibration_is_refused_at_once(tmp_path: Path) -
     p.write_text("0.25 0.5 0.75\n")  # a small file still gets the reader's own answer
     with pytest.raises(ValueError, match="not a calibration file this reader knows"):
         read_stereo_calibration(p)
+
+
+def test_integers_beyond_a_double_are_refused_naming_the_file(tmp_path: Path) -> None:
+    """YAML and JSON integers have no size limit: one beyond a double's range raised
+    OverflowError (a traceback from `stereodepth match --calib`) instead of the reader's
+    ValueError naming the file and the key."""
+    huge = "1" + "0" * 400
+    text = opencv_yaml(stereo_entries(image_width=huge))
+    with pytest.raises(ValueError, match=r"big_w\.yml: image_width, image_height must be two"):
+        read_stereo_calibration(write(tmp_path / "big_w.yml", text), translation_unit="mm")
+    text = opencv_yaml(stereo_entries()).replace(fmt(T_MM.reshape(3, 1)), f"-{huge}, 0.0, 0.0")
+    assert huge in text
+    with pytest.raises(ValueError, match=r"big_t\.yml: T must be finite, got \[-inf, 0\.0, 0\.0\]"):
+        read_stereo_calibration(write(tmp_path / "big_t.yml", text), translation_unit="mm")
+    cams = [{"resolution": [752, 480]}, {"T": np.eye(4), "resolution": [752, 480]}]
+    text = kalibr_yaml(cams).replace("intrinsics: [458.6", f"intrinsics: [{huge}", 1)
+    with pytest.raises(ValueError, match=r"camchain\.yaml: .*intrinsics"):
+        read_stereo_calibration(write(tmp_path / "camchain.yaml", text))
+
+
+def test_an_empty_distortion_list_is_no_distortion(tmp_path: Path) -> None:
+    """ROS's image_geometry and OpenCV read an empty D (``data: []``) as no distortion, and
+    StereoRectifier took it so; the readers refused it ("has 0 coefficients")."""
+    empty = np.zeros(0)
+    lp, rp = ros_pair(tmp_path, {"d": empty}, {"d": empty})
+    c = read_stereo_calibration(lp, second_path=rp)
+    assert c.distortion_model == "plumb_bob"
+    np.testing.assert_array_equal(c.D1, np.zeros(5))
+    np.testing.assert_array_equal(c.D2, np.zeros(5))
+    text = opencv_yaml(stereo_entries(D1=None, D2=None)) + "D1: []\nD2: []\n"
+    c = read_stereo_calibration(write(tmp_path / "e.yml", text), translation_unit="mm")
+    np.testing.assert_array_equal(c.D1, np.zeros(5))
+    # OpenCV writes an empty Mat as rows: 0, cols: 0 (refused as "shape (0, 0)")
+    text = opencv_yaml(stereo_entries(D1=np.zeros((0, 0)), D2=np.zeros((0, 0))))
+    assert "rows: 0" in text
+    c = read_stereo_calibration(write(tmp_path / "m.yml", text), translation_unit="mm")
+    np.testing.assert_array_equal(c.D2, np.zeros(5))
+    # A fisheye model's zeros are the equidistant projection, not a pinhole: still refused.
+    lp, rp = ros_pair(
+        tmp_path, {"d": empty, "model": "equidistant"}, {"d": empty, "model": "equidistant"}
+    )
+    with pytest.raises(ValueError, match=r"distortion_coefficients has 0 coefficients"):
+        read_stereo_calibration(lp, second_path=rp)

@@ -354,6 +354,23 @@ def test_rejects_bad_input_before_computing(call: Any, exc: type, message: str) 
         call()
 
 
+def test_unknown_chunk_sizes_are_named_not_called_a_shape_mismatch() -> None:
+    # After boolean indexing the shape holds NaN: the matchers said "left and right must have
+    # the same shape, got (nan, 36, 50) and (nan, 36, 50)", and reproject of a (nan, W) map
+    # raised numpy's "'float' object cannot be interpreted as an integer" from its probe.
+    left, right = (da.from_array(a, chunks=(1, -1, -1)) for a in stack())
+    keep = da.from_array(np.array([True, False, True, True, False]), chunks=1)
+    for f in (sdd.block_match, sdd.semi_global_match):
+        with pytest.raises(ValueError, match=r"^left must have a known shape, got \(nan, 36, 50\)"):
+            f(left[keep], right[keep], num_disparities=16)
+    d = da.from_array(disparities()[0], chunks=(6, -1))
+    rows = da.from_array(np.arange(H) % 2 == 0, chunks=6)
+    with pytest.raises(ValueError, match=r"disparity must have a known shape.*compute_chunk_sizes"):
+        sdd.reproject(d[rows], **RIG)
+    known = left[keep].compute_chunk_sizes(), right[keep].compute_chunk_sizes()
+    assert sdd.block_match(*known, num_disparities=16).shape == (3, H, W)
+
+
 @pytest.mark.cluster
 def test_on_a_local_cluster() -> None:
     distributed = pytest.importorskip("distributed")

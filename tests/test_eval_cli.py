@@ -232,6 +232,29 @@ def test_middlebury_layout(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -
     assert row["metrics"]["evaluated"] == int((np.isfinite(gt) & (mask_png == 255)).sum())
 
 
+@pytest.mark.parametrize(
+    ("mask", "kind"),
+    [
+        # 65535 is not 255: every pixel was masked out and the scene scored on none of them
+        (np.full((40, 100), 65535, np.uint16), "a 16-bit image of shape (40, 100)"),
+        (np.full((40, 100, 3), 255, np.uint8), "a colour image of shape (40, 100, 3)"),
+    ],
+)
+def test_middlebury_mask_must_be_8_bit_grey(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], mask: np.ndarray, kind: str
+) -> None:
+    left, right, gt = random_dot_pair(40, 100, [7, 13], rgb=False, seed=5)
+    folder = tmp_path / "Pair"
+    folder.mkdir()
+    write_png(folder / "im0.png", left)
+    write_png(folder / "im1.png", right)
+    write_pfm(folder / "disp0GT.pfm", np.where(np.isnan(gt), np.inf, gt).astype(np.float32))
+    write_png(folder / "mask0nocc.png", mask)
+    status, _, err = run_eval(capsys, str(tmp_path))
+    assert status == 2
+    assert "mask0nocc.png: a Middlebury mask must be an 8-bit grey PNG" in err and kind in err
+
+
 # --------------------------------------------------------------------------------------------
 # OpenCV methods, checked against an independent run
 
@@ -840,7 +863,42 @@ def test_rejects_bad_meta(scenes_dir: Path, capsys: pytest.CaptureFixture[str]) 
     (scenes_dir / "rds-a" / "meta.json").write_text('{"max_disp": "big"}')
     status, _, err = run_eval(capsys, str(scenes_dir))
     assert status == 2
-    assert "meta.json: max_disp must be a number >= 0, got 'big'" in err
+    assert "meta.json: max_disp must be a finite number >= 0, got 'big'" in err
+
+
+@pytest.mark.parametrize(
+    ("text", "message"),
+    [
+        # A JSON integer beyond a double's range was a traceback (OverflowError in float()),
+        # Infinity an error that did not name the file, and a list was read as no max_disp.
+        ('{"max_disp": 1' + "0" * 400 + "}", "max_disp must be a finite number >= 0, got 1000"),
+        ('{"max_disp": Infinity}', "max_disp must be a finite number >= 0, got inf"),
+        ('{"max_disp": NaN}', "max_disp must be a finite number >= 0, got nan"),
+        ("[11]", "meta.json: must be a JSON object, got list"),
+    ],
+)
+def test_rejects_meta_out_of_range(
+    scenes_dir: Path, capsys: pytest.CaptureFixture[str], text: str, message: str
+) -> None:
+    (scenes_dir / "rds-a" / "meta.json").write_text(text)
+    status, _, err = run_eval(capsys, str(scenes_dir))
+    assert status == 2
+    assert message in err and "meta.json" in err
+    assert len(err.strip().splitlines()) == 1
+
+
+def test_a_search_range_beyond_the_matchers_names_its_source(
+    scenes_dir: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    # The matcher's "num_disparities must be an integer in [1, 4096], got 5008" named the
+    # scene but not where 5008 came from, nor what to do.
+    (scenes_dir / "rds-a" / "meta.json").write_text('{"max_disp": 5000}')
+    status, _, err = run_eval(capsys, str(scenes_dir), "--scene", "rds-a")
+    assert status == 2
+    assert (
+        "scene rds-a: meta.json's max_disp=5000 needs 5008 disparities, more than the "
+        "matchers search (4096): give --num-disparities"
+    ) in err
 
 
 def test_rejects_unreadable_meta(scenes_dir: Path, capsys: pytest.CaptureFixture[str]) -> None:

@@ -18,6 +18,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from stereodepth import io
+from stereodepth.pointcloud import write_ply
 
 Image = pytest.importorskip("PIL.Image")
 
@@ -265,6 +266,44 @@ def test_atomic_writers_keep_the_permissions_of_a_file_they_replace(tmp_path: Pa
         write(target)
         assert target.stat().st_mode & 0o777 == 0o640, name
         assert target.read_bytes() != b"old"
+
+
+def test_atomic_writers_take_names_up_to_the_file_systems_limit(tmp_path: Path) -> None:
+    # The temporary name adds 31 bytes to the target's: a name of 225 to 255 bytes (legal,
+    # say a batch stem from deep folders) failed with "File name too long" naming the
+    # temporary file. Every writer goes through atomic_write.
+    disparity = np.ones((4, 5), np.float32)
+    writers = {
+        "npy": lambda p: io.write_npy(p, disparity),
+        "pfm": lambda p: io.write_pfm(p, disparity),
+        "png": lambda p: io.write_png16(p, np.ones((4, 5), np.uint16)),
+        "ply": lambda p: write_ply(p, np.ones((2, 3), np.float32)),
+    }
+    for ext, write in writers.items():
+        for stem in ("d" * (254 - len(ext)), "\u00e9" * ((254 - len(ext)) // 2)):
+            target = tmp_path / f"{stem}.{ext}"
+            assert len(target.name.encode()) >= 253
+            write(target)
+            assert target.stat().st_size > 0
+    assert not [n for n in names(tmp_path) if n.endswith(".tmp")]
+    assert len(names(tmp_path)) == 2 * len(writers)
+
+
+def test_atomic_writers_name_the_users_path_when_the_folder_takes_no_file(tmp_path: Path) -> None:
+    # The error of creating the temporary file named it (".d.npy.stereodepth-<hex>.tmp"), a
+    # path the user never gave: `match -o /proc/` said so.
+    disparity = np.ones((4, 5), np.float32)
+    writers = {
+        "d.npy": lambda p: io.write_npy(p, disparity),
+        "d.pfm": lambda p: io.write_pfm(p, disparity),
+        "d.png": lambda p: io.write_png16(p, np.ones((4, 5), np.uint16)),
+    }
+    for name, write in writers.items():
+        target = tmp_path / "missing" / name
+        with pytest.raises(FileNotFoundError) as info:
+            write(target)
+        assert info.value.filename == str(target)
+        assert f"cannot write {name}" in str(info.value) and ".tmp" not in str(info.value)
 
 
 def test_a_killed_writer_leaves_no_partial_file(tmp_path: Path) -> None:
@@ -763,3 +802,33 @@ def test_require_file_names_a_device_as_one() -> None:
         pytest.skip("no device file to try")
     with pytest.raises(FileNotFoundError, match="image is not a regular file .*: " + os.devnull):
         require_file(os.devnull, "image")
+
+
+def test_readers_and_writers_name_a_path_that_is_not_one(tmp_path: Path) -> None:
+    # pathlib's "expected str, bytes or os.PathLike object, not int" named no parameter;
+    # write_ply, save_colorized and save_charts already said "path must be a str or ...".
+    from stereodepth import calib
+
+    a = np.zeros((2, 2), np.float32)
+    calls = {
+        "read_image": io.read_image,
+        "read_pfm": io.read_pfm,
+        "read_pnm": io.read_pnm,
+        "write_npy": lambda p: io.write_npy(p, a),
+        "write_pfm": lambda p: io.write_pfm(p, a),
+        "write_png16": lambda p: io.write_png16(p, a.astype(np.uint16)),
+        "write_disparity_png16": lambda p: io.write_disparity_png16(p, a),
+        "read_stereo_calibration": calib.read_stereo_calibration,
+        "read_middlebury_calib": calib.read_middlebury_calib,
+        "read_kitti_calib": calib.read_kitti_calib,
+        "read_calibration": calib.read_calibration,
+    }
+    for call in calls.values():
+        for bad in (123, None, b"/tmp/x.png"):
+            with pytest.raises(TypeError, match=r"^path must be a str or os\.PathLike, got "):
+                call(bad)
+    with pytest.raises(TypeError, match=r"^directory must be a str or os\.PathLike, got int"):
+        io.remove_temp_files(5)  # type: ignore[arg-type]
+    (tmp_path / "calib.txt").write_text("cam0=[1 0 0; 0 1 0; 0 0 1]\nbaseline=1\n")
+    with pytest.raises(TypeError, match=r"^second_path must be a str or os\.PathLike, got int"):
+        calib.read_stereo_calibration(tmp_path / "calib.txt", second_path=5)

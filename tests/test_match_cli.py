@@ -284,6 +284,8 @@ def bad_cases(tmp: Path, left: Path, right: Path) -> list[tuple[list[Any], str]]
     (tmp / "notimage.png").write_bytes(b"hello, not a PNG")
     Image.fromarray(np.zeros((64, 90, 3), np.uint8)).save(tmp / "small.png")
     (tmp / "bad_calib.txt").write_text("cam0=[1 0 0; 0 1 0]\nbaseline=100\n")
+    wide_ndisp = write_middlebury_calib(tmp / "wide.txt", 96, 64)
+    wide_ndisp.write_text(wide_ndisp.read_text().replace("ndisp=73", "ndisp=5000"))
     return [
         ([tmp / "nope.png", right], "LEFT: image not found"),
         (
@@ -319,6 +321,14 @@ def bad_cases(tmp: Path, left: Path, right: Path) -> list[tuple[list[Any], str]]
         ([left, right, "--ply"], "--ply needs a rig"),
         ([left, right, "-o", tmp / "missing" / "p-"], "the folder of the prefix"),
         ([left, right, "--threads", "-1"], "--threads must be an integer >= 0, got -1"),
+        # the same file twice: every disparity 0, every depth unknown (batch's CSV refuses it)
+        ([left, left], "LEFT and RIGHT are the same file"),
+        ([left, tmp / ".." / tmp.name / left.name], "LEFT and RIGHT are the same file"),
+        (  # a calib.txt's ndisp out of range was blamed on --min-disparity 0, never given
+            [left, right, "--calib", wide_ndisp],
+            f"--calib {wide_ndisp}: its ndisp=5000 is no search range for --method bm "
+            "(num_disparities must be an integer in [1, 4096], got 5000): give --num-disparities",
+        ),
     ]
 
 

@@ -439,6 +439,14 @@ def test_four_coefficients_need_a_model(tmp_path: Path, capsys: pytest.CaptureFi
         focal[model] = json.loads(out)["rig"]["focal_px"]
         assert focal[model] == want.rig.focal_px
     assert focal["equidistant"] != focal["plumb_bob"]  # the model is the one asked for
+    # --alpha with a fisheye file: the message named "alpha" and the balance and fov_scale
+    # keywords, which no flag gives.
+    flags = ("--translation-unit", "mm", "--distortion-model", "equidistant", "--alpha", "0")
+    code, out, err = run(capsys, left, right, "--calib", yaml, *flags, "--no-preview")
+    assert code == 2 and err.count("\n") == 1, err
+    assert (
+        "--alpha applies to pinhole calibrations; " + str(yaml) + " is an equidistant (fisheye)"
+    ) in err and "drop --alpha" in err
 
 
 @pytest.mark.parametrize(

@@ -719,6 +719,21 @@ def good_args() -> dict[str, Any]:
             ValueError,
             "alpha applies to pinhole models",
         ),
+        # Inputs that overflow Bouguet's method gave NaN in P1, then "P must be finite" from
+        # the maps of StereoRectifier, naming a matrix the caller never passed.
+        (
+            {
+                "K1": np.diag([1e-298, 1e-298, 1.0])
+                + np.array([[0, 0, 320], [0, 0, 240], [0, 0, 0]])
+            },
+            ValueError,
+            r"the calibration gives a non-finite rectification \(P1 = .*fx = 1e-298",
+        ),
+        (
+            {"distortion_model": "equidistant", "D1": [1e10, 0, 0, 0], "D2": np.zeros(4)},
+            ValueError,
+            r"non-finite rectification .*D1 = \[10000000000\.0, 0\.0, 0\.0, 0\.0\]",
+        ),
     ],
 )
 def test_stereo_rectify_rejects(change: dict[str, Any], exc: type, match: str) -> None:
@@ -726,6 +741,9 @@ def test_stereo_rectify_rejects(change: dict[str, Any], exc: type, match: str) -
     args.update(change)
     with pytest.raises(exc, match=match):
         stereo_rectify(**args)
+    if "non-finite" in match:  # the oracle said "cannot convert float NaN to integer"
+        with pytest.raises(exc, match=match):
+            reference.stereo_rectify(**args)
 
 
 @pytest.mark.parametrize(
@@ -768,6 +786,9 @@ def test_maps_and_rectifier_reject() -> None:
         stereodepth.init_undistort_rectify_map(rig.K1, rig.D1, None, np.zeros((3, 3)), (4, 4))
     with pytest.raises(TypeError, match="calib must be a StereoCalibration"):
         StereoRectifier.from_calibration(object())
+    huge = {**good_args(), "K1": rig.K1 * np.array([[1e300, 1, 1], [1, 1e300, 1], [1, 1, 1]])}
+    with pytest.raises(ValueError, match="the calibration gives a non-finite rectification"):
+        StereoRectifier(**huge)
     rect = StereoRectifier.from_calibration(calib_of(rig))
     img = np.zeros((rig.size[1], rig.size[0]), np.uint8)
     with pytest.raises(ValueError, match="left and right must have the same shape and dtype"):
@@ -778,6 +799,17 @@ def test_maps_and_rectifier_reject() -> None:
         rect.maps("middle")
     with pytest.raises(ValueError, match="out_right must not overlap the image"):
         rect.rectify(img, img, out_right=img)
+    # One array for both outputs, or an output over the other image, was accepted and gave a
+    # wrong left (or right) image; the same for a calibration of a rectified pair (copies).
+    identity = StereoRectifier.from_calibration(calib_of(rig, rectified=True))
+    for r in (rect, identity):
+        left, right, out = img.copy(), img.copy(), np.empty_like(img)
+        with pytest.raises(ValueError, match="out_right must not overlap out_left"):
+            r.rectify(left, right, out_left=out, out_right=out)
+        with pytest.raises(ValueError, match="out_left must not overlap right"):
+            r.rectify(left, right, out_left=right)
+        with pytest.raises(ValueError, match="out_right must not overlap left"):
+            r.rectify(left, right, out_right=left[:, :])
 
 
 def test_plumb_bob_without_coefficients_is_the_pinhole_model() -> None:

@@ -263,6 +263,16 @@ def test_middlebury_calib_fills_the_rig(client: TestClient) -> None:
         (item,) = r.json()["detail"]
         assert item["loc"] == ["body", "calib"] and msg in item["msg"], item
         assert "/tmp" not in item["msg"]  # the server's temporary path is not shown
+    # A lone surrogate (valid JSON, not encodable text) was a 500 writing the temporary file.
+    r = client.post(
+        "/api/calib",
+        content=b'{"calib": "cam0=[1 0 0; 0 1 0; 0 0 1]\\ud800"}',
+        headers={"content-type": "application/json"},
+    )
+    assert r.status_code == 422, r.text
+    (item,) = r.json()["detail"]
+    assert item["loc"] == ["body", "calib"]
+    assert item["msg"] == "calib: the text is not valid Unicode ('\\ud800')"
 
 
 # --- every bad input: 422 (or 413) at its field, never 500 ------------------------------------
@@ -317,6 +327,7 @@ def bad_cases(pair: Any) -> list[tuple[dict[str, Any], list[Any], str]]:
             "right must have the bit depth of left (16-bit), got 8-bit",
         ),
         ({"right": right}, ["body", "left"], "left: choose an image file"),
+        ({"left": left, "right": left}, ["body", "right"], "right: the same file as left"),
         ({"left": "%%%not base64", "right": right}, ["body", "left"], "left: not valid base64"),
         ({"left": b64(b""), "right": right}, ["body", "left"], "left: the file is empty"),
         ({"left": 5, "right": right}, ["body", "left"], "give the image file as base64"),
@@ -382,6 +393,18 @@ def bad_cases(pair: Any) -> list[tuple[dict[str, Any], list[Any], str]]:
             "calib_size must be [width, height], two integers > 0, got [96, '72']",
         ),
         ({"sample": True, "calib_size": [0, 72]}, ["body", "calib_size"], "two integers > 0"),
+        # JSON integers beyond a double's range were a 500 (OverflowError in float()).
+        ({"sample": True, "cx_px": 10**400}, ["body", "cx_px"], "cx_px must be a finite number"),
+        (
+            {"sample": True, "rig": {"baseline_mm": 10**400, "focal_px": 700}},
+            ["body", "rig", "baseline_mm"],
+            "baseline_mm must be a number > 0",
+        ),
+        (
+            {"sample": True, "disparity_step_px": -(10**400)},
+            ["body", "disparity_step_px"],
+            "disparity_step_px must be a number > 0",
+        ),
     ]
 
 

@@ -246,6 +246,13 @@ def raw_rectifier(
     from .rectify import StereoRectifier
 
     alpha = check_alpha(alpha)
+    if alpha is not None and alpha != -1 and stereo.distortion_model == "equidistant":
+        # from_calibration's message named "alpha" and the balance and fov_scale keywords,
+        # which no flag gives.
+        raise ValueError(
+            f"--alpha applies to pinhole calibrations; {calib} is an equidistant (fisheye) one, "
+            "rectified as cv2.fisheye.stereoRectify does with balance 0: drop --alpha"
+        )
     try:
         rectifier = StereoRectifier.from_calibration(stereo, threads=threads, alpha=alpha)
     except (TypeError, ValueError) as exc:

@@ -41,12 +41,20 @@ def _da() -> Any:
     return da
 
 
-def _as_dask(name: str, value: Any) -> Any:
+def _as_dask(name: str, value: Any, *, known_shape: bool = False) -> Any:
+    """``value`` checked to be a dask array; with ``known_shape``, one whose shape is known (a
+    boolean mask leaves NaN chunk sizes, which the shape checks and the frame-shaped probes
+    cannot use)."""
     da = _da()
     if not isinstance(value, da.Array):
         raise TypeError(
             f"{name} must be a dask.array.Array (wrap numpy arrays with dask.array.from_array), "
             f"got {type(value).__name__}"
+        )
+    if known_shape and any(n != n for n in value.shape):  # NaN: unknown until computed
+        raise ValueError(
+            f"{name} must have a known shape, got {value.shape} (unknown chunk sizes, as after "
+            f"boolean indexing): call {name}.compute_chunk_sizes() first"
         )
     return value
 
@@ -120,7 +128,8 @@ def _match(method: str, name: str, left: Any, right: Any, params: dict[str, Any]
     function ``name`` now, then one task per chunk of whole frames."""
     from stereodepth._methods import options_class
 
-    la, ra = _as_dask("left", left), _as_dask("right", right)
+    la = _as_dask("left", left, known_shape=True)
+    ra = _as_dask("right", right, known_shape=True)
     # A big-endian uint16 stack (FITS, PGM) is uint16: matched in the machine's byte order.
     la, ra = (native_order(a) for a in (la, ra))
     if params.get("return_confidence"):
@@ -196,7 +205,7 @@ def reproject(disparity: Any, **options: Any) -> Any:
     function (``Q`` or the rig, ``scale``, limits, ``threads``), checked now."""
     import stereodepth
 
-    d = _as_dask("disparity", disparity)
+    d = _as_dask("disparity", disparity, known_shape=True)
     if "out" in options:
         raise TypeError("out is not accepted for dask arrays (store the result instead)")
     if d.ndim not in (2, 3):

@@ -84,6 +84,7 @@ import numpy as np
 from . import _validate as check
 from .cli import key_value_option
 from .depth import from_opencv_disparity
+from .matching import MAX_NUM_DISPARITIES
 from .metrics import DisparityMetrics, evaluate
 
 __all__ = [
@@ -188,7 +189,16 @@ class Scene:
         mask = None
         if self.mask_path is not None:
             if self.mask_path.suffix == ".png":
-                mask = read_image(self.mask_path) == 255
+                # Middlebury's masks are 8-bit grey, 255 = non-occluded: a 16-bit one (65535)
+                # gave an empty mask, nothing scored; a colour one a 3-channel "mask".
+                image = read_image(self.mask_path)
+                if image.dtype != np.uint8 or image.ndim != 2:
+                    kind = "16-bit" if image.dtype == np.uint16 else "colour"
+                    raise ValueError(
+                        f"{self.mask_path}: a Middlebury mask must be an 8-bit grey PNG "
+                        f"(255 = non-occluded), got a {kind} image of shape {image.shape}"
+                    )
+                mask = image == 255
             else:
                 mask = _load_npy(self.mask_path)
             if mask.dtype != np.bool_ or mask.shape != left.shape[:2]:
@@ -218,12 +228,21 @@ def _meta_max_disparity(path: Path) -> float | None:
         meta = json.loads(path.read_text())
     except (OSError, ValueError) as exc:
         raise ValueError(f"{path}: cannot read JSON: {exc}") from exc
-    value = meta.get("max_disp") if isinstance(meta, dict) else None
+    if not isinstance(meta, dict):  # a list or a number was read as "no max_disp"
+        raise ValueError(f"{path}: must be a JSON object, got {type(meta).__name__}")
+    value = meta.get("max_disp")
     if value is None:
         return None
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not value >= 0:
-        raise ValueError(f"{path}: max_disp must be a number >= 0, got {value!r}")
-    return float(value)
+    number = None
+    if isinstance(value, (int, float)) and not isinstance(value, bool):
+        try:
+            number = float(value)
+        except OverflowError:  # a JSON integer beyond a double's range
+            number = None
+    if number is None or not (math.isfinite(number) and number >= 0):
+        shown = repr(value) if len(repr(value)) <= 40 else repr(value)[:37] + "..."
+        raise ValueError(f"{path}: max_disp must be a finite number >= 0, got {shown}")
+    return number
 
 
 def _scene_at(path: Path) -> Scene | None:
@@ -540,7 +559,19 @@ def _evaluate_scene(
             if finite.size == 0:
                 raise ValueError(f"scene {scene.name}: the ground truth has no finite value")
             max_disp = max(float(finite.max()), 0.0)
+            source = f"the ground truth's largest disparity, {max_disp:g} px,"
+        elif scene.left_path.name == "left.png":
+            source = f"meta.json's max_disp={max_disp:g}"
+        else:  # Middlebury: max_disp is ndisp - 1
+            source = f"calib.txt's ndisp={max_disp + 1:g}"
         num_disparities = num_disparities_for(max_disp)
+        ours = any(v.method in ("stereodepth", "sgm") for v in variants)
+        if ours and num_disparities > MAX_NUM_DISPARITIES:  # the matcher's error named no source
+            raise ValueError(
+                f"scene {scene.name}: {source} needs {num_disparities} "
+                f"disparities, more than the matchers search ({MAX_NUM_DISPARITIES}): give "
+                "--num-disparities"
+            )
     if not use_mask:
         mask = None
     rows = []

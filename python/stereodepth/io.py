@@ -73,7 +73,7 @@ def require_file(path: str | os.PathLike[str], what: str) -> Path:
     could block on or never end) and IsADirectoryError ("{what} is a folder, not a file:
     path") for a folder, so that a user who passed a folder is not told the file is missing.
     """
-    p = Path(path)
+    p = _as_path(path)
     if p.is_dir():
         raise IsADirectoryError(f"{what} is a folder, not a file: {p}")
     if not p.is_file():
@@ -81,6 +81,17 @@ def require_file(path: str | os.PathLike[str], what: str) -> Path:
             raise FileNotFoundError(f"{what} is not a regular file (a device, pipe or socket): {p}")
         raise FileNotFoundError(f"{what} not found: {p}")
     return p
+
+
+def _as_path(value: Any, name: str = "path") -> Path:
+    """``value`` as a Path; TypeError naming ``name`` for anything but a str or os.PathLike
+    (pathlib's own message, "expected str, bytes or os.PathLike object, not int", named no
+    parameter; bytes paths are refused as pathlib refuses them)."""
+    if isinstance(value, str) or (
+        isinstance(value, os.PathLike) and isinstance(os.fspath(value), str)
+    ):
+        return Path(value)
+    raise TypeError(f"{name} must be a str or os.PathLike, got {type(value).__name__} {value!r}")
 
 
 def read_image(path: str | os.PathLike[str]) -> np.ndarray:
@@ -98,7 +109,7 @@ def read_image(path: str | os.PathLike[str]) -> np.ndarray:
     ``DecompressionBombError``, twice ``Image.MAX_IMAGE_PIXELS``), holds floating-point
     samples (a float TIFF or a PFM: :func:`read_pfm` reads those) or is 16-bit colour or
     16-bit with alpha (Pillow would keep only the high byte of each sample)."""
-    p = Path(path)
+    p = _as_path(path)
     require_file(p, "image")
     with p.open("rb") as f:
         magic = f.read(2)
@@ -166,8 +177,19 @@ def _raw_modes(im: Any) -> list[str]:
 
 
 # --- atomic writes ----------------------------------------------------------------------------
+#: The longest file name, in bytes, of the file systems we write on (NAME_MAX on Linux and
+#: macOS; NTFS allows 255 UTF-16 units, more than 255 bytes' worth of most names).
+_NAME_MAX_BYTES = 255
+
+
 def _temp_path(p: Path) -> Path:
-    return p.with_name(f".{p.name}.{TEMP_MARKER}-{secrets.token_hex(6)}.tmp")
+    """``.<name>.stereodepth-<random>.tmp`` beside ``p``; ``<name>`` shortened (whole
+    characters) so the temporary name fits where ``p``'s own name fits: a name of 230 bytes or
+    more could not be written, and the error named the temporary file."""
+    tail = f".{TEMP_MARKER}-{secrets.token_hex(6)}.tmp"
+    room = _NAME_MAX_BYTES - 1 - len(tail.encode())
+    name = p.name.encode(errors="surrogateescape")[:room].decode(errors="ignore") or "x"
+    return p.with_name(f".{name}{tail}")
 
 
 def _fsync_dir(d: Path) -> None:
@@ -191,14 +213,20 @@ def atomic_write(path: str | os.PathLike[str], *, text: bool = False) -> Iterato
     POSIX); when it raises, including KeyboardInterrupt, the temporary file is removed and
     ``path`` is untouched. A process killed outright can leave a
     temporary file behind, never a partial ``path``: :func:`remove_temp_files` sweeps them.
-    Raises IsADirectoryError naming ``path`` when it is a folder, before writing anything.
+    Raises IsADirectoryError naming ``path`` when it is a folder, before writing anything,
+    and the OSError of a folder that takes no new file (missing, read-only) naming ``path``.
     """
-    p = Path(path)
+    p = _as_path(path)
     if p.is_dir():  # else the rename's error names the temporary file, not the user's path
         raise IsADirectoryError(errno.EISDIR, "cannot write a file over a folder", str(p))
     tmp = _temp_path(p)
     # O_EXCL: never follow or clobber anything; mode 0o666 so the umask applies as usual.
-    fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_BINARY", 0), 0o666)
+    try:
+        fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_BINARY", 0), 0o666)
+    except OSError as exc:
+        # A folder that is missing, read-only or takes no new files (/proc): name the user's
+        # path, not the temporary one the user never gave.
+        raise type(exc)(exc.errno, f"cannot write {p.name}: {exc.strerror}", str(p)) from None
     try:
         f: IO[Any] = os.fdopen(fd, "w", encoding="utf-8") if text else os.fdopen(fd, "wb")
         with f:
@@ -225,7 +253,7 @@ def remove_temp_files(directory: str | os.PathLike[str]) -> list[Path]:
     when a process was killed mid-write. Only call it when no other process is writing there.
     Returns the paths removed."""
     removed: list[Path] = []
-    d = Path(directory)
+    d = _as_path(directory, "directory")
     if not d.is_dir():
         return removed
     for entry in d.iterdir():
@@ -330,7 +358,7 @@ def read_pfm(path: str | os.PathLike[str]) -> np.ndarray:
     Raises FileNotFoundError for a missing file, IsADirectoryError for a folder and ValueError
     naming the file and the fault: a bad magic, a non-numeric, zero or negative width or height, a
     non-numeric, zero or non-finite scale, a comment, a truncated body or extra bytes."""
-    p = Path(path)
+    p = _as_path(path)
     require_file(p, "PFM file")
     data = p.read_bytes()
     if data[:2] not in (b"PF", b"Pf") or not data[2:3].isspace():
@@ -454,7 +482,7 @@ def read_pnm(path: str | os.PathLike[str]) -> np.ndarray:
     naming the file and the fault: a bad magic (PAM, P7, is not read), non-numeric, zero or negative
     width, height or maxval, a maxval above 65535, a sample above the maxval, a truncated body or
     extra bytes."""
-    p = Path(path)
+    p = _as_path(path)
     require_file(p, "PNM file")
     data = p.read_bytes()
     kind = _PNM_KINDS.get(data[:2])

@@ -297,6 +297,16 @@ def _check_matcher_flags(args: argparse.Namespace, num_disparities: int) -> None
         ("--block-size", "block_size", args.block_size),
     )
     context: dict[str, Any] = {"num_disparities": num_disparities}
+    if args.num_disparities is None and args.calib is not None:
+        # The calibration's ndisp: its error was blamed on the first flag checked after it
+        # (--min-disparity 0, a flag not even given).
+        try:
+            checker(num_disparities=num_disparities)
+        except (TypeError, ValueError) as exc:
+            raise _Usage(
+                f"--calib {args.calib}: its ndisp={num_disparities} is no search range for "
+                f"--method {args.method} ({exc}): give --num-disparities N"
+            ) from None
     for flag, key, value in flags:
         if value is None:
             continue
@@ -343,6 +353,11 @@ def run(args: argparse.Namespace) -> int:
                 f"LEFT and RIGHT must have the size of the calibration in --calib, {cw}x{ch} "
                 f"px, got {left_img.shape[1]}x{left_img.shape[0]} px"
             )
+    if os.path.samefile(args.left, args.right):  # batch's CSV lists refuse this too
+        raise _Usage(
+            f"LEFT and RIGHT are the same file ({args.left!r} and {args.right!r}): give the "
+            "two images of the pair"
+        )
     # The search range the checks assume: the one match_pair uses (the matched width's default
     # when neither the flag nor the calibration gives one; the checks do not depend on it).
     checked_nd = args.num_disparities if args.num_disparities is not None else ndisp

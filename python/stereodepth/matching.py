@@ -722,16 +722,22 @@ def to_opencv_disparity(disparity: Any, *, min_disparity: int = 0) -> np.ndarray
     scaled = np.where(finite, arr.astype(np.float64) * 16.0, 0.0)
     fixed = np.trunc(scaled + np.copysign(0.5, scaled))
     if finite.any():
+        # The messages show the value given ("below 2048 px, got 2048.0" was said of
+        # 2047.97, which rounds to 2048 px in sixteenths) and its rounding.
         lo, hi = float(fixed[finite].min()), float(fixed[finite].max())
         if hi > info.max:
+            given = float(arr[finite].max())
             raise ValueError(
-                f"disparity must be below 2048 px to fit OpenCV's int16 x16 format, got {hi / 16}"
+                f"disparity must be below 2048 px to fit OpenCV's int16 x16 format, got "
+                f"{given!r}" + (f" ({hi / 16} px in sixteenths)" if given != hi / 16 else "")
             )
         if lo < md * 16:
             # OpenCV reads every value below min_disparity * 16 as a hole: such a disparity
             # would come back as one, silently.
+            given = float(arr[finite].min())
             raise ValueError(
                 f"disparity must be >= min_disparity ({md}) px or NaN: OpenCV's format reads "
-                f"anything below min_disparity * 16 as a hole, got {lo / 16} px"
+                f"anything below min_disparity * 16 as a hole, got {given!r} px"
+                + (f" ({lo / 16} px in sixteenths)" if given != lo / 16 else "")
             )
     return np.where(finite, fixed, invalid).astype(np.int16)

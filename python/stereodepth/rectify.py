@@ -283,9 +283,26 @@ def stereo_rectify(
         r = _core.stereo_rectify(
             k1, d1, k2, d2, model, width, height, rot, t, a, new_w, new_h, zero_disparity
         )
+    _check_finite_rectification(r, k1, k2, d1, d2, t)
     return Rectification(
         r["R1"], r["R2"], r["P1"], r["P2"], r["Q"], tuple(r["roi1"]), tuple(r["roi2"])
     )
+
+
+def _check_finite_rectification(
+    r: Any, k1: np.ndarray, k2: np.ndarray, d1: np.ndarray, d2: np.ndarray, t: np.ndarray
+) -> None:
+    """ValueError naming the inputs when R1, R2, P1, P2 or Q (``r[name]``) is not finite:
+    focal lengths near 0 or 1e300, or distortion of 1e10, overflow Bouguet's method (said
+    here, not later as "P must be finite" from the maps). Shared with the numpy oracle."""
+    for key in ("R1", "R2", "P1", "P2", "Q"):
+        if not np.all(np.isfinite(r[key])):
+            raise ValueError(
+                f"the calibration gives a non-finite rectification ({key} = "
+                f"{np.asarray(r[key]).tolist()}): K1, K2, D1, D2, R and T must describe a real "
+                f"camera pair, got fx = {float(k1[0, 0])!r}, {float(k2[0, 0])!r}, "
+                f"D1 = {d1.tolist()}, D2 = {d2.tolist()}, T = {t.tolist()}"
+            )
 
 
 def init_undistort_rectify_map(
@@ -621,7 +638,8 @@ class StereoRectifier:
         calibration's ``image_size``. Returns two images of ``output_size`` and the input
         dtype (written into ``out_left``/``out_right`` when given), sampled as :func:`remap`
         does. For an already rectified calibration the inputs are returned as they are, or
-        copied into ``out_left``/``out_right`` when given."""
+        copied into ``out_left``/``out_right`` when given. Raises ValueError when an output
+        overlaps either image or the other output."""
         imgs = []
         for name, im in (("left", left), ("right", right)):
             arr = _as_image(name, im)
@@ -643,6 +661,15 @@ class StereoRectifier:
             _prepare_out(out_left, shape, imgs[0].dtype, imgs[0], "out_left"),
             _prepare_out(out_right, shape, imgs[1].dtype, imgs[1], "out_right"),
         )
+        # The left is written before the right is read, and both into their own buffer: an
+        # out_left over the right image, or one array for both outputs, gave a wrong image.
+        for name, out, other, other_name in (
+            ("out_left", out_left, imgs[1], "right"),
+            ("out_right", out_right, imgs[0], "left"),
+            ("out_right", out_right, outs[0], "out_left"),
+        ):
+            if out is not None and np.shares_memory(out, other):
+                raise ValueError(f"{name} must not overlap {other_name}")
         if self._identity:  # nothing to resample: the inputs, or copies in the given outputs
             given = (out_left is not None, out_right is not None)
             if not any(given):

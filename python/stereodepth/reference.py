@@ -438,11 +438,38 @@ def stereo_rectify(
     """Oracle of :func:`stereodepth.stereo_rectify`: Bouguet's method (cv2.stereoRectify) or,
     for ``"equidistant"``, cv2.fisheye.stereoRectify, written out in numpy step by step. Agrees
     with the native code to about 1e-12 relative (the SVD that makes R orthogonal and the sums'
-    order differ in the last bits)."""
+    order differ in the last bits). Raises as the native function does, the non-finite
+    results of extreme inputs included."""
+    # Extreme inputs overflow on the way, as in the native code: the result is checked.
+    with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
+        return _stereo_rectify(
+            K1, D1, K2, D2, image_size, R, T, alpha=alpha, new_image_size=new_image_size,
+            zero_disparity=zero_disparity, distortion_model=distortion_model, balance=balance,
+            fov_scale=fov_scale,
+        )  # fmt: skip
+
+
+def _stereo_rectify(
+    K1: Any,
+    D1: Any,
+    K2: Any,
+    D2: Any,
+    image_size: tuple[int, int],
+    R: Any,
+    T: Any,
+    *,
+    alpha: float,
+    new_image_size: tuple[int, int] | None,
+    zero_disparity: bool,
+    distortion_model: str,
+    balance: float,
+    fov_scale: float,
+) -> Any:
     from .rectify import (
         Rectification,
         _alpha,
         _camera_matrix,
+        _check_finite_rectification,
         _distortion,
         _model,
         _real_matrix,
@@ -511,6 +538,8 @@ def stereo_rectify(
         q_mat = np.array([[1, 0, 0, -c1[0]], [0, 1, 0, -c1[1]], [0, 0, 0, fc],
                           [0, 0, -1 / t_idx, (c1[0] - c2[0]) / t_idx]])  # fmt: skip
         full = (0, 0, nw, nh)
+        found = {"R1": r1, "R2": r2, "P1": p1, "P2": p2, "Q": q_mat}
+        _check_finite_rectification(found, k1, k2, d1, d2, t_in)
         return Rectification(r1, r2, p1, p2, q_mat, full, full)
 
     ratio = (nw / w / 2) if idx == 1 else (nh / h / 2)
@@ -556,6 +585,11 @@ def stereo_rectify(
     p2 = np.array([[fc, 0, c2n[0], 0], [0, fc, c2n[1], 0], [0, 0, 1, 0]])
     p2[idx, 3] = base * s
 
+    q_mat = np.array([[1, 0, 0, -c1n[0]], [0, 1, 0, -c1n[1]], [0, 0, 0, fc],
+                      [0, 0, -1 / t_idx, (c1n[idx] - c2n[idx]) / t_idx]])  # fmt: skip
+    found = {"R1": r1, "R2": r2, "P1": p1, "P2": p2, "Q": q_mat}
+    _check_finite_rectification(found, k1, k2, d1, d2, t_in)
+
     def roi(r: tuple[float, ...], c0: np.ndarray, c: np.ndarray) -> tuple[int, int, int, int]:
         x, y = int(np.ceil((r[0] - c0[0]) * s + c[0])), int(np.ceil((r[1] - c0[1]) * s + c[1]))
         x1 = min(x + int(np.floor((r[2] - r[0]) * s)), nw)
@@ -563,6 +597,4 @@ def stereo_rectify(
         x, y = max(x, 0), max(y, 0)
         return (x, y, x1 - x, y1 - y) if x1 > x and y1 > y else (0, 0, 0, 0)
 
-    q_mat = np.array([[1, 0, 0, -c1n[0]], [0, 1, 0, -c1n[1]], [0, 0, 0, fc],
-                      [0, 0, -1 / t_idx, (c1n[idx] - c2n[idx]) / t_idx]])  # fmt: skip
     return Rectification(r1, r2, p1, p2, q_mat, roi(i1, cc[0], c1n), roi(i2, cc[1], c2n))

@@ -31,6 +31,7 @@ from typing import Any
 import numpy as np
 
 from ..calib import Calibration, StereoCalibration, read_calibration
+from ..matching import MAX_NUM_DISPARITIES
 from .job import Pair, UsageError
 
 #: The source named in records for a rig given on the command line.
@@ -46,10 +47,8 @@ def calibration_note(pairs: Sequence[Pair]) -> str | None:
     first = unused[0]
     source = first.calibration.source if first.calibration is not None else ""
     n = len(unused)
-    return (
-        f"calibration: {source} for every pair; {n} pair{'s' if n != 1 else ''}' own "
-        f"calibration file{'s' if n != 1 else ''} (e.g. {first.calib_file}) not used"
-    )
+    whose = "pairs' own calibration files" if n != 1 else "pair's own calibration file"
+    return f"calibration: {source} for every pair; {n} {whose} (e.g. {first.calib_file}) not used"
 
 
 def resolve_calibration(
@@ -107,6 +106,11 @@ def resolve_calibration(
             nd = calib.num_disparities
             if nd is None:
                 problem = problem or f"no --num-disparities, and {calib.source} has no ndisp"
+            elif nd > MAX_NUM_DISPARITIES:  # the matcher's error did not say where it came from
+                problem = problem or (
+                    f"{calib.source}: ndisp={nd} is more than the matchers search "
+                    f"({MAX_NUM_DISPARITIES}): give --num-disparities"
+                )
         out.append(
             replace(
                 p,

@@ -369,9 +369,19 @@ def _report_path(args: argparse.Namespace, out_dir: Path) -> Path:
     return report
 
 
-def _check_report_is_its_own(report: Path, pairs: Sequence[Pair], options: BatchOptions) -> None:
-    """The report must not be a file a pair reads or writes, nor the lock."""
+def _check_report_is_its_own(
+    report: Path,
+    pairs: Sequence[Pair],
+    options: BatchOptions,
+    job_inputs: Sequence[tuple[str, str | None]] = (),
+) -> None:
+    """The report must not be a file a pair reads or writes, nor the lock, nor one of the
+    job's own inputs (``job_inputs``: flag and value, such as the CSV list given as INPUT or
+    the ``--calib`` file, which ``--report`` used to overwrite)."""
     r = report.resolve()
+    for flag, value in job_inputs:
+        if value is not None and Path(value).is_file() and Path(value).resolve() == r:
+            raise UsageError(f"--report {report}: that is {flag} {value}; give another file")
     in_out_dir = r.parent == options.out_dir.resolve()
     if in_out_dir and r.name == LOCK_NAME:
         raise UsageError(f"--report {report}: that is the lock file of batch jobs")
@@ -491,7 +501,12 @@ def run(args: argparse.Namespace) -> int:
         rectification=None if raw is None else raw[0],
         write_rectified=args.write_rectified,
     )
-    _check_report_is_its_own(report_path, pairs, options)
+    _check_report_is_its_own(
+        report_path,
+        pairs,
+        options,
+        [("INPUT", args.input), ("--calib", args.calib), ("--calib-right", args.calib_right)],
+    )
     _check_outputs_are_not_inputs(pairs, options, [args.calib, args.calib_right])
     if args.format == "png16":  # KITTI's disparity PNG holds at most 65535 / 256 px
         lowest = int(options.matcher.get("min_disparity", 0))

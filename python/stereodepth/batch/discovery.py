@@ -107,9 +107,7 @@ def _batch_outputs(d: Path) -> set[str]:
     """The names of the files in ``d`` that an earlier batch job wrote there, as its pairs'
     records (``*.record.json``) list them: a job's OUTDIR inside INPUT holds images such as
     ``S.left-rectified.png`` and ``S.right-rectified.png``, which are outputs, not pairs."""
-    import json
-
-    from .job import RECORD_SUFFIX
+    from .job import RECORD_SUFFIX, read_record
 
     names: set[str] = set()
     try:
@@ -117,8 +115,11 @@ def _batch_outputs(d: Path) -> set[str]:
     except OSError:
         return names
     for p in records:
+        record = read_record(p)
+        if record is None:
+            continue  # not a record of ours: its folder is searched as usual
         try:
-            outputs = json.loads(p.read_text(encoding="utf-8")).get("outputs") or {}
+            outputs = record.get("outputs") or {}
             names.update(Path(o["path"]).name for o in outputs.values())
         except (OSError, ValueError, TypeError, AttributeError, KeyError):
             continue  # not a record of ours: its folder is searched as usual
@@ -260,6 +261,15 @@ def _csv_path(base: Path, cell: str) -> Path:
     return p if p.is_absolute() else base / p
 
 
+def _same_file(a: Path, b: Path) -> bool:
+    """Whether two existing paths are one file (a symbolic or hard link); False when either
+    is missing (that pair fails on its own)."""
+    try:
+        return os.path.samefile(a, b)
+    except OSError:
+        return False
+
+
 def _csv_pairs(path: Path, names: Sequence[tuple[str, str]]) -> list[Pair]:
     """The pairs of a CSV list, parsed exactly: UTF-8 (a byte-order mark is allowed), LF or
     CR LF line ends, cells stripped of surrounding spaces, empty trailing cells ignored;
@@ -292,7 +302,7 @@ def _csv_pairs(path: Path, names: Sequence[tuple[str, str]]) -> list[Pair]:
                 if len(cells) not in (2, 3) or not cells[0] or not cells[1]:
                     raise UsageError(f"{where}: expected left,right[,stem], got {','.join(row)!r}")
                 left, right = _csv_path(path.parent, cells[0]), _csv_path(path.parent, cells[1])
-                if os.path.normpath(left) == os.path.normpath(right):
+                if os.path.normpath(left) == os.path.normpath(right) or _same_file(left, right):
                     raise UsageError(f"{where}: the left and right image are the same file {left}")
                 if len(cells) == 3:
                     stem = cells[2]
@@ -337,6 +347,11 @@ def discover(
     skipped: list[tuple[Path, str]] = []
     if not root.exists():
         raise UsageError(f"INPUT not found: {root}")
+    if not root.is_file() and not root.is_dir():  # a pipe was "searched" as a folder
+        raise UsageError(
+            f"INPUT must be a folder or a .csv list of pairs, got {root} (not a regular file: "
+            "a device, pipe or socket)"
+        )
     if root.is_file():
         if root.suffix.lower() != ".csv":
             raise UsageError(f"INPUT must be a folder or a .csv list of pairs, got {root}")

@@ -19,6 +19,19 @@ STATUSES = ("ok", "skipped", "failed", "cancelled")
 RECORD_SUFFIX = ".record.json"
 
 
+def read_record(path: Path) -> dict[str, Any] | None:
+    """A pair's record as a dict, or None for a file that is missing, unreadable, not JSON
+    (nested too deeply included) or not a JSON object: records may be edited by hand or
+    left by another program, and such a file is never a record of ours."""
+    import json
+
+    try:
+        record = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, ValueError, RecursionError):
+        return None
+    return record if isinstance(record, dict) else None
+
+
 class UsageError(ValueError):
     """A mistake in the command or its input that no pair can get past (exit status 2)."""
 

@@ -3,7 +3,6 @@ report."""
 
 from __future__ import annotations
 
-import json
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -11,7 +10,7 @@ from typing import Any
 
 import numpy as np
 
-from .job import STATUSES, BatchOptions, Pair
+from .job import STATUSES, BatchOptions, Pair, read_record
 
 
 def file_stamp(p: Path) -> dict[str, Any]:
@@ -52,9 +51,10 @@ def completed_record(pair: Pair, options: BatchOptions) -> dict[str, Any] | None
     settings, else None."""
     if pair.problem or pair.calibration is None:
         return None
-    path = options.record_path(pair.stem)
+    record = read_record(options.record_path(pair.stem))
+    if record is None:
+        return None
     try:
-        record = json.loads(path.read_text(encoding="utf-8"))
         if record.get("status") != "ok" or record.get("settings") != jsonable(
             settings_of(pair, options)
         ):
@@ -75,6 +75,8 @@ def completed_record(pair: Pair, options: BatchOptions) -> dict[str, Any] | None
 
 def jsonable(value: Any) -> Any:
     """JSON-safe: non-finite floats as None, tuples as lists, paths as strings."""
+    if isinstance(value, np.generic):  # first: numpy's float32 NaN is not a Python float
+        value = value.item()
     if isinstance(value, float) and not math.isfinite(value):
         return None
     if isinstance(value, dict):
@@ -83,8 +85,6 @@ def jsonable(value: Any) -> Any:
         return [jsonable(v) for v in value]
     if isinstance(value, Path):
         return str(value)
-    if isinstance(value, np.generic):
-        return value.item()
     return value
 
 
@@ -116,8 +116,10 @@ def earlier_outputs(pair: Pair, options: BatchOptions) -> set[Path]:
     """The files an earlier run of this pair wrote, as its record lists them, in OUTDIR: only
     the names this pair owns (:meth:`BatchOptions.owned_names`) count, whatever else a record
     edited by hand may say."""
+    record = read_record(options.record_path(pair.stem))
+    if record is None:
+        return set()
     try:
-        record = json.loads(options.record_path(pair.stem).read_text(encoding="utf-8"))
         listed = [Path(v["path"]) for v in record["outputs"].values()]
     except (OSError, ValueError, KeyError, TypeError, AttributeError):
         return set()

@@ -83,6 +83,14 @@ ROTATION_TOLERANCE = 1e-6
 MAX_FILE_BYTES = 4 * 1024 * 1024
 
 
+def _path(value: Any, name: str = "path") -> Path:
+    """A reader's path argument as a Path, or TypeError naming ``name`` (pathlib's own
+    "expected str, bytes or os.PathLike object, not int" named no parameter)."""
+    from ..io import _as_path
+
+    return _as_path(value, name)
+
+
 def _read_text(p: Path, what: str) -> str:
     """A calibration file's text: UTF-8 (a byte-order mark is dropped), any line ends, at
     most :data:`MAX_FILE_BYTES`."""
@@ -106,13 +114,13 @@ def _fail(where: str, message: str) -> ValueError:
 
 
 def _check_array(value: Any, where: str, key: str, shape: tuple[int, ...]) -> np.ndarray:
-    """``value`` as a float64 array of ``shape`` (a vector also from (1, n) or (n, 1)),
-    finite."""
+    """``value`` as a float64 array of ``shape`` (a vector also from (1, n) or (n, 1), and
+    an empty one from OpenCV's empty Mat, rows: 0 and cols: 0), finite."""
     try:
         a = np.array(value, dtype=np.float64)
     except (TypeError, ValueError) as exc:
         raise _fail(where, f"{key} must be numbers, got {_shown(value)}") from exc
-    if len(shape) == 1 and a.ndim == 2 and 1 in a.shape:
+    if len(shape) == 1 and a.ndim == 2 and (1 in a.shape or a.size == 0):
         a = a.reshape(-1)
     if a.shape != shape and not (len(shape) == 1 and shape[0] < 0 and a.ndim == 1):
         want = "(n,)" if shape[0] < 0 else str(shape)
@@ -148,8 +156,13 @@ def _check_distortion(
     value: Any, model: str, where: str, key: str, named: str | None = None
 ) -> np.ndarray:
     """Distortion coefficients of ``model``; ``named`` the file's own name for the model,
-    where it fixes the count (ROS's rational_polynomial 8, Kalibr's radtan 4)."""
+    where it fixes the count (ROS's rational_polynomial 8, Kalibr's radtan 4). An empty list
+    for the pinhole models is no distortion, five zeros (OpenCV's empty distCoeffs, ROS's
+    empty D in image_geometry; the rectifier takes it so too); a fisheye model's zeros are
+    not "no distortion", so it keeps its count."""
     d = _check_array(value, where, key, (-1,))
+    if d.size == 0 and model == "plumb_bob":
+        return np.zeros(5)
     name = named.strip().lower() if named is not None else model
     counts = _NAMED_COUNTS.get(name, DISTORTION_COUNTS[model])
     if d.size not in counts:
@@ -185,7 +198,14 @@ def _to_float(v: Any) -> float | None:
     (PyYAML leaves ``1e-05`` and OpenCV's ``.Nan`` as strings)."""
     if isinstance(v, bool | np.bool_):
         return None
-    if isinstance(v, int | float | np.integer | np.floating):
+    if isinstance(v, int | np.integer):
+        # YAML and JSON integers have no size limit; float() raises OverflowError beyond a
+        # double's range, where the value is as infinite as a double can say.
+        try:
+            return float(v)
+        except OverflowError:
+            return math.inf if v > 0 else -math.inf
+    if isinstance(v, float | np.floating):
         return float(v)
     if isinstance(v, str):
         s = v.strip()

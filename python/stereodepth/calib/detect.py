@@ -4,11 +4,10 @@ from __future__ import annotations
 
 import os
 import re
-from pathlib import Path
 from typing import Any
 
 from ..io import require_file
-from ._common import _fail, _read_text
+from ._common import _fail, _path, _read_text
 from ._trees import _yaml_tree
 from .kalibr import read_kalibr_stereo_calibration
 from .kitti import read_kitti_calib, read_kitti_stereo_calibration
@@ -37,7 +36,7 @@ def rectified_format(path: str | os.PathLike[str]) -> str | None:
     rectified pair (a Middlebury ``calib.txt``, a KITTI calibration file), told by its content
     as :func:`read_stereo_calibration` tells it; None for any other file (a raw calibration,
     to be rectified). Raises FileNotFoundError, or ValueError for a file that is not text."""
-    return _rectified_format_of(_read_text(Path(path), "calibration file"))
+    return _rectified_format_of(_read_text(_path(path), "calibration file"))
 
 
 def read_stereo_calibration(
@@ -69,7 +68,9 @@ def read_stereo_calibration(
     unknown format, a file over 4 MiB (``MAX_FILE_BYTES``: calibration files are a few kB),
     a keyword that does not apply or any fault the reader finds, and
     ImportError when a YAML file needs PyYAML."""
-    p = Path(path)
+    p = _path(path)
+    if second_path is not None:
+        second_path = _path(second_path, "second_path")
     text = _read_text(p, "calibration file")
     head = text.lstrip()
 
@@ -144,7 +145,7 @@ def read_calibration(
 ) -> Calibration:
     """A Middlebury ``calib.txt`` or a KITTI calibration file, told apart by their content.
     A Middlebury file's ``width`` and ``height`` are the result's ``image_size``."""
-    p = Path(path)
+    p = _path(path)
     require_file(p, "calibration file")
     text = p.read_text(errors="replace")
     if re.search(r"^\s*P(_rect_0)?\d\s*:", text, flags=re.MULTILINE):

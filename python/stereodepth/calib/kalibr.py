@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import os
-from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -18,6 +17,7 @@ from ._common import (
     _check_rotation,
     _fail,
     _image_size_of,
+    _path,
     _read_text,
     _unit,
 )
@@ -52,7 +52,7 @@ def read_kalibr_stereo_calibration(
     different distortion models or resolutions."""
     scale = _unit(translation_unit)
     first, second = _check_cameras(cameras)
-    p = Path(path)
+    p = _path(path)
     where = str(p)
     tree = _yaml_tree(p, _read_text(p, "Kalibr camchain"))
 

@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ._common import _check_cameras, _check_image_size, _image_size_of, _read_text
+from ._common import _check_cameras, _check_image_size, _image_size_of, _path, _read_text
 from .stereo import Calibration, StereoCalibration, _rectified_calibration
 
 __all__ = ["read_kitti_calib", "read_kitti_stereo_calibration"]
@@ -109,7 +109,7 @@ def read_kitti_calib(path: str | os.PathLike[str], cams: tuple[int, int] = (2, 3
 
     Raises FileNotFoundError, and ValueError naming the file, the line and what was wrong
     (see the module's documentation for the rules)."""
-    p = Path(path)
+    p = _path(path)
     lc, rc = cams
     if lc == rc:
         raise ValueError(f"cams must be two different KITTI cameras, got {cams}")
@@ -143,7 +143,7 @@ def read_kitti_stereo_calibration(
     module's documentation for the rules), and for an image size that is missing or
     disagrees with ``image_size=``."""
     first, second = _check_cameras(cameras)
-    p = Path(path)
+    p = _path(path)
     fields = _fields(p)
     pl, pr, baseline = _rectified_pair(p, fields, first, second)
     size_key = f"S_rect_0{first}"

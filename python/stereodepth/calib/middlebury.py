@@ -10,7 +10,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ._common import _INTEGER_RE, _LINE_RE, _NUMBER_RE, _image_size_of, _read_text
+from ._common import _INTEGER_RE, _LINE_RE, _NUMBER_RE, _image_size_of, _path, _read_text
 from .stereo import StereoCalibration, _rectified_calibration
 
 __all__ = ["MiddleburyCalib", "read_middlebury_calib", "read_middlebury_stereo_calibration"]
@@ -56,6 +56,8 @@ def _matrix(text: str, key: str, path: Path) -> np.ndarray:
         raise ValueError(f"{path}: {key} focal lengths must be > 0, got {text!r}")
     if k[2].tolist() != [0.0, 0.0, 1.0] or k[1, 0] != 0:
         raise ValueError(f"{path}: {key}'s last row must be 0 0 1, got {text!r}")
+    if k[0, 1] != 0:  # a rectified view has no skew; it was ignored, as if it were 0
+        raise ValueError(f"{path}: {key} must have no skew (its [0, 1] entry 0), got {text!r}")
     return k
 
 
@@ -73,10 +75,11 @@ def read_middlebury_calib(path: str | os.PathLike[str]) -> MiddleburyCalib:
     Raises FileNotFoundError for a missing file and ValueError naming the file and the field
     (with the line number for a malformed line): a line that is not ``key=value``, a key
     given twice, a missing required key, a matrix that is not 3x3 with finite numbers,
-    positive focal lengths and a last row 0 0 1, a baseline that is not a finite number
+    positive focal lengths, no skew and a last row 0 0 1, a cam1 whose fx, fy or cy differ
+    from cam0's (not a rectified pair), a baseline that is not a finite number
     > 0, a non-finite doffs or one that differs from cam1's cx - cam0's cx by more than
     ``DOFFS_TOLERANCE_PX``, a width, height or ndisp that is not a whole number > 0."""
-    p = Path(path)
+    p = _path(path)
     text = _read_text(p, "Middlebury calib.txt")
     fields: dict[str, str] = {}
     for lineno, line in enumerate(text.splitlines(), start=1):
@@ -117,6 +120,16 @@ def read_middlebury_calib(path: str | os.PathLike[str]) -> MiddleburyCalib:
     # the other (a rig read as cam0, cam1 and one read as f, baseline, doffs are the same).
     if "cam1" in fields:
         cam1 = _matrix(fields["cam1"], "cam1", p)
+        # The rectified views share f and cy (the format's [f 0 cx; 0 f cy; 0 0 1], rows
+        # aligned), as read_kitti_calib requires of its pairs: a cam1 that differs was ignored,
+        # and its pair matched and converted to depth as if it were rectified.
+        for name, i, j in (("focal length fx", 0, 0), ("focal length fy", 1, 1), ("cy", 1, 2)):
+            a, b = float(cam0[i, j]), float(cam1[i, j])
+            if abs(a - b) > 1e-6 * max(abs(a), abs(b)) + 1e-9:
+                raise ValueError(
+                    f"{p}: cam0 and cam1 are not a rectified pair: their {name} differ "
+                    f"({a:g} and {b:g})"
+                )
         cx_diff = float(cam1[0, 2] - cam0[0, 2])
         doffs = number("doffs") if "doffs" in fields else cx_diff
         if abs(doffs - cx_diff) > DOFFS_TOLERANCE_PX:
@@ -148,7 +161,7 @@ def read_middlebury_stereo_calibration(
     ``image_size=``), R1, R2, P1, P2, Q as ``cv2.stereoRectify`` lays them out (Q keeps
     doffs). Raises as :func:`read_middlebury_calib`, and ValueError when the image size is
     missing or disagrees with ``image_size=``."""
-    p = Path(path)
+    p = _path(path)
     c = read_middlebury_calib(p)
     found = (c.width_px, c.height_px) if c.width_px and c.height_px else None
     size = _image_size_of(found, image_size, str(p), "width, height")

@@ -4,7 +4,6 @@
 from __future__ import annotations
 
 import os
-from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -18,6 +17,7 @@ from ._common import (
     _check_rotation,
     _fail,
     _image_size_of,
+    _path,
     _shown,
     _unit,
 )
@@ -86,7 +86,9 @@ def read_opencv_stereo_calibration(
     without a model, or an image
     size that is missing (pass ``image_size=``) or disagrees with ``image_size=``."""
     scale = _unit(translation_unit)
-    paths = [Path(path)] + ([Path(extrinsics_path)] if extrinsics_path is not None else [])
+    paths = [_path(path)] + (
+        [_path(extrinsics_path, "extrinsics_path")] if extrinsics_path is not None else []
+    )
     tree: dict[str, Any] = {}
     origin: dict[str, str] = {}
     for p in paths:

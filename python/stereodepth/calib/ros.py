@@ -16,6 +16,7 @@ from ._common import (
     _check_rotation,
     _fail,
     _image_size_of,
+    _path,
     _read_text,
     _unit,
 )
@@ -82,8 +83,8 @@ def read_ros_stereo_calibration(
     different distortion models, image sizes or rectified focal lengths, a right camera
     with no offset or files given in the wrong order."""
     scale = _unit(translation_unit)
-    left = _ros_camera(Path(left_path), scale)
-    right = _ros_camera(Path(right_path), scale)
+    left = _ros_camera(_path(left_path, "left_path"), scale)
+    right = _ros_camera(_path(right_path, "right_path"), scale)
     where = f"{left['where']} + {right['where']}"
     if left["model"] != right["model"]:
         raise _fail(where, f"distortion_model differs: {left['model']!r} and {right['model']!r}")

@@ -263,8 +263,15 @@ def _number(loc: list[str], name: str, value: Any, rule_text: str) -> float | No
             v = float(value)
         except ValueError:
             raise BadInput(loc, f"{name} must be {rule_text}, got {value[:40]!r}") from None
-    elif isinstance(value, (int, float)):
-        v = float(value)
+    elif isinstance(value, float):
+        v = value
+    elif isinstance(value, int):
+        # JSON integers have no size limit: one beyond a double's range is out of every
+        # field's range (float() would raise OverflowError, a 500), not a number to use.
+        try:
+            v = float(value)
+        except OverflowError:
+            v = math.inf if value > 0 else -math.inf
     else:
         raise BadInput(loc, f"{name} must be {rule_text}, got {value!r}")
     return v
@@ -451,6 +458,7 @@ def parse_job(body: Any, limits: DepthMapLimits) -> Job:
         left, right, truth = s.left, s.right, s.disparity
     else:
         images: dict[str, np.ndarray] = {}
+        files: dict[str, bytes] = {}
         for field in ("left", "right"):
             if body.get(field) is None:
                 errors.append(
@@ -458,7 +466,13 @@ def parse_job(body: Any, limits: DepthMapLimits) -> Job:
                 )
                 continue
             try:
-                images[field] = decode_image(field, _b64(field, body[field]), limits)
+                files[field] = _b64(field, body[field])
+                if field == "right" and files[field] == files.get("left"):
+                    # every disparity 0, every depth unknown: `stereodepth match` refuses it too
+                    raise BadInput(
+                        ["body", "right"], "right: the same file as left; choose the other image"
+                    )
+                images[field] = decode_image(field, files[field], limits)
             except BadInput as e:
                 errors.append(e)
         if len(images) == 2:
@@ -861,6 +875,12 @@ def parse_calib(text: Any) -> dict[str, Any]:
         raise BadInput(loc, "calib: give the text of a Middlebury calib.txt")
     if len(text) > 100_000:
         raise BadInput(loc, "calib: a calib.txt is a few lines; this file is too large")
+    try:
+        text.encode("utf-8")
+    except UnicodeEncodeError as exc:  # a lone surrogate ("\ud800" in the JSON): no text file
+        raise BadInput(
+            loc, f"calib: the text is not valid Unicode ({text[exc.start : exc.end]!r})"
+        ) from None
     with tempfile.TemporaryDirectory(prefix="stereodepth-web-") as tmp:
         path = Path(tmp) / "calib.txt"
         path.write_text(text, encoding="utf-8")
