@@ -457,7 +457,8 @@ def test_markdown_table(scenes_dir: Path, capsys: pytest.CaptureFixture[str]) ->
     assert cells[0][:3] == ["scene", "method", "block"]
     assert cells[1][:6] == ["---", "---", "---", "---:", "---", "---:"]  # numbers to the right
     assert "bad-2 %" in cells[0]
-    assert "ns/(px·d)" in cells[0]
+    assert "ns/(px*d)" in cells[0]
+    assert out.isascii()  # a terminal or log in ASCII (PYTHONIOENCODING=ascii) prints it all
     assert [c[2] for c in cells[2:6]] == ["9", "15", cells[4][2], "5"]
     assert cells[4][2] in ("best=9", "best=15")
     assert [(c[0], c[1], c[2]) for c in cells[-4:]] == [
@@ -496,6 +497,17 @@ def test_text_table_matches_json(scenes_dir: Path, capsys: pytest.CaptureFixture
         assert float(t[header.index("avgerr px")]) == pytest.approx(
             row["metrics"]["avgerr"], abs=0.0051
         )
+
+
+def test_tables_are_ascii(scenes_dir: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    # The header said ns/(px\u00b7d): under an ASCII locale or PYTHONIOENCODING=ascii (CI logs,
+    # cron) printing the table raised UnicodeEncodeError after every scene had been matched.
+    for extra in ((), ("--markdown",)):
+        status, out, err = run_eval(
+            capsys, str(scenes_dir), "--method", "bm", "--repeat", "1", *extra
+        )
+        assert status == 0, err
+        assert out.isascii() and err.isascii(), [c for c in out + err if not c.isascii()]
 
 
 # --------------------------------------------------------------------------------------------

@@ -157,6 +157,23 @@ def test_an_exif_turned_upload_is_matched_as_displayed(
         assert same(f32(body["arrays"]["disparity"], (h, w)), expected)
 
 
+def test_wrapped_base64_is_read(client: TestClient, pair: Any) -> None:
+    # GNU base64 and openssl wrap at 76 columns (MIME, RFC 2045), with \n or \r\n: the same
+    # pair, the same disparity (it used to be "not valid base64").
+    plain = post(client, left=encode(pair.left), right=encode(pair.right)).json()
+    left = encode(pair.left)
+    wrapped = "\n".join(left[i : i + 76] for i in range(0, len(left), 76)) + "\n"
+    right = encode(pair.right)
+    crlf = "data:image/png;base64," + "\r\n".join(
+        right[i : i + 64] for i in range(0, len(right), 64)
+    )
+    r = post(client, left=wrapped, right=crlf)
+    assert r.status_code == 200, r.text
+    assert r.json()["arrays"]["disparity"] == plain["arrays"]["disparity"]
+    bad = post(client, left=wrapped.replace("\n", "\n!", 1), right=right)
+    assert bad.status_code == 422 and "not valid base64" in bad.text
+
+
 def test_downloads_are_the_libraries_files(client: TestClient, pair: Any, tmp_path: Any) -> None:
     body = post(client, left=encode(pair.left), right=encode(pair.right)).json()
     h, w = pair.disparity.shape

@@ -50,7 +50,7 @@ Timing
     Each method is run once to warm up, then ``--repeat`` times (default 3); the time is the
     median. It covers the whole conversion from the images as read to a float disparity map
     with NaN holes (for OpenCV: grey conversion, matching and the x16 decoding).
-    ``ns/(px·d)`` is that time divided by width x height x num_disparities. Threads: ``--threads``
+    ``ns/(px*d)`` is that time divided by width x height x num_disparities. Threads: ``--threads``
     (default: every core this process may use) for both the stereodepth matcher and OpenCV
     (``cv2.setNumThreads``; restored afterwards).
 
@@ -59,7 +59,7 @@ Scores
     scene has a mask (``region`` nonocc), else over all pixels with ground truth (``all``);
     ``--no-mask`` always uses all. Percentages in the tables, fractions in ``--json``. The
     ``mean`` rows average each score over the scenes (every scene weighs the same) and the
-    times; their ``ns/(px·d)`` is the total time over the total work. The ``--json`` object
+    times; their ``ns/(px*d)`` is the total time over the total work. The ``--json`` object
     also records the options given (``options``, ``sgm_options``, ``opencv_options``: each a
     dict of the ``KEY=VALUE`` pairs after conversion, empty when none was given).
 """
@@ -626,7 +626,7 @@ _COLUMNS = (
     "region",
     *(c[0] for c in _METRIC_COLUMNS),
     "time ms",
-    "ns/(px·d)",
+    "ns/(px*d)",
 )
 
 

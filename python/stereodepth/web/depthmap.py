@@ -223,6 +223,9 @@ def _b64(field: str, value: Any) -> bytes:
         head, sep, text = text.partition(",")
         if not sep or ";base64" not in head:
             raise BadInput(loc, f"{field}: a data URL must be base64")
+    if any(c in text for c in " \t\r\n"):
+        # MIME base64 (RFC 2045; GNU base64, openssl) wraps its lines: the breaks carry nothing.
+        text = "".join(text.split())
     try:
         return base64.b64decode(text, validate=True)
     except (binascii.Error, ValueError):
