@@ -280,3 +280,19 @@ def test_extreme_numbers_answer_or_raise_value_error(b: float, f: float, p: floa
         assert all(v is None or v >= 0 for v in row.values())
     rig.table(disparity_step_px=0.5).to_text()
     assert rig.required_baseline_mm(1e300, 1e-300) >= 0
+
+
+def test_rigs_compare_by_value() -> None:
+    # Two rigs built from the same values are equal (a set or dict key works); the repr,
+    # eval'd, gives an equal rig; any value that differs makes them unequal.
+    a = StereoRig(baseline_mm=120, focal_mm=4, pixel_um=2, width_px=640, height_px=480)
+    b = StereoRig(baseline_mm=120.0, focal_mm=4.0, pixel_um=2.0, width_px=640, height_px=480)
+    assert a == b and hash(a) == hash(b) and len({a, b}) == 1
+    assert eval(repr(a), {"StereoRig": StereoRig}) == a
+    p = StereoRig.from_pixels(baseline_mm=120, focal_px=2000, doffs_px=3.5, width_px=640)
+    assert eval(repr(p), {"StereoRig": StereoRig}) == p
+    assert p != StereoRig.from_pixels(baseline_mm=120, focal_px=2000, width_px=640)
+    assert a != StereoRig(baseline_mm=120, focal_mm=4, pixel_um=2, width_px=640)
+    assert a != StereoRig(baseline_mm=121, focal_mm=4, pixel_um=2, width_px=640, height_px=480)
+    assert a != StereoRig.from_pixels(baseline_mm=120, focal_px=2000, width_px=640, height_px=480)
+    assert a != "a rig" and a != (120, 4, 2)

@@ -251,6 +251,19 @@ class StereoRig:
         maker = "StereoRig" if self._focal_mm is not None else "StereoRig.from_pixels"
         return f"{maker}({core})"
 
+    def _key(self) -> tuple[Any, ...]:
+        return tuple(getattr(self, name) for name in self.__slots__)
+
+    def __eq__(self, other: object) -> bool:
+        """Rigs are equal when they were given the same values (a rig in millimetres and
+        micrometres is not equal to its :meth:`from_pixels` twin, whose focal_mm is None)."""
+        if not isinstance(other, StereoRig):
+            return NotImplemented
+        return self._key() == other._key()
+
+    def __hash__(self) -> int:
+        return hash(self._key())
+
     @property
     def _bf_m_px(self) -> float:
         """Baseline (m) times focal length (px): depth (m) times disparity (px)."""
