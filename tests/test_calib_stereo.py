@@ -452,6 +452,32 @@ def ros_pair(
     )
 
 
+def test_a_size_of_0_x_0_is_not_known(tmp_path: Path) -> None:
+    # camera_info_manager writes image_width: 0, image_height: 0 when it does not know the size
+    # (and some drivers publish it so): that is no size, which image_size= (--image-size)
+    # then gives, as for a file without the keys; 0 x 480 stays an error.
+    lp, rp = ros_pair(tmp_path, {"size": (0, 0)}, {"size": (0, 0)})
+    with pytest.raises(ValueError, match=r"no image size in the file .*pass image_size="):
+        read_stereo_calibration(lp, second_path=rp)
+    c = read_stereo_calibration(lp, second_path=rp, image_size=(640, 480))
+    assert c.image_size == (640, 480)
+    lp, rp = ros_pair(tmp_path, {"size": (0, 0)})  # the other file has it
+    assert read_stereo_calibration(lp, second_path=rp).image_size == (640, 480)
+    for fmt_, text in (
+        ("yml", opencv_yaml(stereo_entries(image_width=0, image_height=0))),
+        ("xml", opencv_xml(stereo_entries(image_width=0, image_height=0))),
+        (
+            "yml",
+            opencv_yaml(stereo_entries(image_width=None, image_height=None, imageSize="[ 0, 0 ]")),
+        ),
+    ):
+        path = write(tmp_path / f"zero.{fmt_}", text)
+        with pytest.raises(ValueError, match=r"no image size in the file"):
+            read_stereo_calibration(path, translation_unit="mm")
+        c = read_stereo_calibration(path, translation_unit="mm", image_size=(640, 480))
+        assert c.image_size == (640, 480)
+
+
 def test_ros_pair(tmp_path: Path) -> None:
     lp, rp = ros_pair(tmp_path)
     c = read_stereo_calibration(lp, second_path=rp)

@@ -195,12 +195,23 @@ def _require(tree: dict[str, Any], names: tuple[str, ...], where: str) -> tuple[
     return hit
 
 
+def _unset_size(value: Any) -> bool:
+    """A size written as 0 x 0: how ROS camera_info (and camera_info_manager's defaults) say
+    the size is not known."""
+    try:
+        w, h = value.reshape(-1).tolist() if isinstance(value, np.ndarray) else value
+    except (TypeError, ValueError):
+        return False
+    return not isinstance(w, bool) and not isinstance(h, bool) and w == 0 and h == 0
+
+
 def _file_image_size(tree: dict[str, Any], where: str) -> tuple[int, int] | None:
-    """The image size under the names calibration tools use, if any."""
+    """The image size under the names calibration tools use, if any; None when absent or
+    written as 0 x 0 (not known: the caller's image_size then gives it)."""
     hit = _lookup(tree, ("image_size", "imageSize", "img_size", "resolution"), where)
     if hit is not None:
         key, value = hit
-        return _check_image_size(value, where, key)
+        return None if _unset_size(value) else _check_image_size(value, where, key)
     for wk, hk in (
         ("image_width", "image_height"),
         ("imageWidth", "imageHeight"),
@@ -211,6 +222,8 @@ def _file_image_size(tree: dict[str, Any], where: str) -> tuple[int, int] | None
                 raise _fail(
                     where, f"{wk} and {hk} go together, got only {wk if wk in tree else hk}"
                 )
+            if _unset_size((tree[wk], tree[hk])):
+                return None
             return _check_image_size((tree[wk], tree[hk]), where, f"{wk}, {hk}")
     return None
 
