@@ -282,6 +282,27 @@ def test_outputs_equal_the_direct_computation(tmp_path: Path, fmt: str) -> None:
     assert temp_files(out) == []
 
 
+def test_ply_of_12_bit_pairs_is_coloured_as_matched(tmp_path: Path) -> None:
+    # 12-bit images in 16-bit PNGs: the points took the high byte of the left image (0..15, a
+    # black cloud); they now take its min-max stretch, as the matcher sees it.
+    from stereodepth.colormap import to_uint8
+
+    d = tmp_path / "in" / "scene00"
+    d.mkdir(parents=True)
+    left, right = random_pair(0, 3, rgb=False)
+    left16, right16 = left.astype(np.uint16) * 16, right.astype(np.uint16) * 16
+    io.write_png16(d / "im0.png", left16)
+    io.write_png16(d / "im1.png", right16)
+    (d / "calib.txt").write_text(calib_text())
+    out = tmp_path / "out"
+    assert run_cli("batch", tmp_path / "in", "-o", out, "--ply", "--quiet") == 0
+    ply = (out / "scene00.ply").read_bytes()
+    body = ply[ply.index(b"end_header\n") + len(b"end_header\n") :]
+    rgb = np.frombuffer(body, dtype=[("xyz", "<f4", 3), ("rgb", "u1", 3)])["rgb"]
+    assert len(rgb) > 0 and rgb.max() > 200
+    assert set(np.unique(rgb)) <= set(np.unique(to_uint8(left16)))
+
+
 @pytest.mark.parametrize("fmt", ["npy", "png16"])
 def test_preview_writes_the_colour_images_of_both_maps(tmp_path: Path, fmt: str) -> None:
     pytest.importorskip("matplotlib")

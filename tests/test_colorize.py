@@ -197,3 +197,25 @@ def test_without_matplotlib_one_line_with_the_install_hint(monkeypatch: pytest.M
     with pytest.raises(ImportError) as info:
         colorize(np.ones((2, 2)))
     assert str(info.value) == 'colour maps need matplotlib: pip install "stereodepth[plot]"'
+
+
+def test_to_uint8_stretches_16_bit_images_as_the_matchers_do() -> None:
+    from stereodepth.colormap import to_uint8
+
+    rng = np.random.default_rng(3)
+    twelve = rng.integers(100, 4096, (5, 7)).astype(np.uint16)  # a Mono12 camera's range
+    twelve[0, 0], twelve[0, 1] = 100, 4095
+    got = to_uint8(twelve)
+    assert got.dtype == np.uint8 and got.shape == twelve.shape
+    want = np.floor((twelve.astype(np.float64) - 100) * 255 / (4095 - 100) + 0.5)
+    assert np.abs(got.astype(np.float64) - want).max() <= 1  # float32 rounding at .5 ties
+    assert got.min() == 0 and got.max() == 255  # the high byte gave 0..15
+    rgb16 = np.dstack([twelve, twelve // 2, twelve * 16])  # one stretch for all channels
+    assert to_uint8(rgb16).shape == rgb16.shape and to_uint8(rgb16).max() == 255
+    flat = np.full((2, 3), 0x1234, np.uint16)
+    assert (to_uint8(flat) == 0x12).all()  # constant: its high byte
+    u8 = np.arange(6, dtype=np.uint8).reshape(2, 3)
+    assert to_uint8(u8) is u8
+    assert to_uint8(np.zeros((0, 4), np.uint16)).shape == (0, 4)
+    with pytest.raises(TypeError, match="image must have dtype uint8 or uint16, got float32"):
+        to_uint8(np.zeros((2, 2), np.float32))

@@ -483,3 +483,30 @@ def test_a_failed_write_leaves_no_outputs(
     code, _, err = run(capsys, *pair, *rig, "-o", f"{out}/")
     assert code == 1 and "No space left on device" in err and err.count("\n") == 1
     assert list(out.iterdir()) == []
+
+
+def test_ply_of_a_12_bit_pair_is_coloured_as_matched(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    # A Mono12 camera's pair (0..4095 in uint16): the points used to take the high byte of
+    # the left image, 0..15, a black cloud; they now take its min-max stretch, the matcher's.
+    from stereodepth.colormap import to_uint8
+    from stereodepth.io import write_png16
+
+    s = sample_pair(96, 72, seed=9)
+    grey = s.left if s.left.ndim == 2 else s.left.mean(axis=-1).astype(np.uint8)
+    grey_r = s.right if s.right.ndim == 2 else s.right.mean(axis=-1).astype(np.uint8)
+    left16, right16 = grey.astype(np.uint16) * 16, grey_r.astype(np.uint16) * 16
+    write_png16(tmp_path / "l.png", left16)
+    write_png16(tmp_path / "r.png", right16)
+    rig = ["--focal-px", "100", "--baseline-mm", "100", "--no-preview", "--ply"]
+    code, _, err = run(capsys, tmp_path / "l.png", tmp_path / "r.png", *rig, "-o", tmp_path / "m-")
+    assert code == 0, err
+    d = read_pfm(tmp_path / "m-disparity.pfm")
+    ok = np.isfinite(reproject(d, focal_px=100.0, baseline_m=0.1)).all(axis=-1)
+    data = (tmp_path / "m-points.ply").read_bytes()
+    body = data[data.index(b"end_header\n") + len(b"end_header\n") :]
+    vertex = np.frombuffer(body, dtype=[("xyz", "<f4", 3), ("rgb", "u1", 3)])
+    colours = to_uint8(left16)[ok]
+    assert np.array_equal(vertex["rgb"], np.repeat(colours[:, None], 3, axis=1))
+    assert colours.max() > 200  # not the high byte (at most 15)

@@ -157,6 +157,30 @@ def test_an_exif_turned_upload_is_matched_as_displayed(
         assert same(f32(body["arrays"]["disparity"], (h, w)), expected)
 
 
+def test_a_12_bit_upload_is_shown_as_matched(client: TestClient, pair: Any) -> None:
+    # A Mono12 pair in 16-bit PNGs: the page's image and the points' colours took the high
+    # byte (0..15: black); they are now the min-max stretch the matcher applies.
+    from stereodepth.colormap import to_uint8
+
+    grey = [np.asarray(Image.fromarray(img).convert("L")) for img in (pair.left, pair.right)]
+    l16, r16 = (g.astype(np.uint16) * 16 for g in grey)
+    files = []
+    for img in (l16, r16):
+        buf = io.BytesIO()
+        Image.fromarray(img).save(buf, format="PNG")
+        files.append(base64.b64encode(buf.getvalue()).decode())
+    r = post(client, left=files[0], right=files[1])
+    assert r.status_code == 200, r.text
+    body = r.json()
+    _, _, data = body["images"]["left"].partition(",")
+    with Image.open(io.BytesIO(base64.b64decode(data))) as im:
+        shown = np.asarray(im.convert("L"))
+    np.testing.assert_array_equal(shown, to_uint8(l16))
+    assert shown.max() > 200
+    rgb = np.frombuffer(base64.b64decode(body["points"]["rgb"]), np.uint8)
+    assert rgb.max() > 200
+
+
 def test_wrapped_base64_is_read(client: TestClient, pair: Any) -> None:
     # GNU base64 and openssl wrap at 76 columns (MIME, RFC 2045), with \n or \r\n: the same
     # pair, the same disparity (it used to be "not valid base64").

@@ -22,7 +22,14 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["LUT_SIZE", "colorize", "colorize_limits", "colormap_lut", "save_colorized"]
+__all__ = [
+    "LUT_SIZE",
+    "colorize",
+    "colorize_limits",
+    "colormap_lut",
+    "save_colorized",
+    "to_uint8",
+]
 
 #: How many colours a colour map is sampled at: values fall into LUT_SIZE equal bins.
 LUT_SIZE = 256
@@ -268,6 +275,28 @@ def preview_image(
     lo, hi = colorize_limits(values, vmin=vmin, vmax=vmax)
     strip = colorbar_strip(rgb.shape[1], vmin=lo, vmax=hi, label=label, cmap=cmap)
     return np.concatenate([rgb, strip], axis=0)
+
+
+def to_uint8(image: Any) -> np.ndarray:
+    """An image as uint8 for display or point colours, the shape kept: uint8 as it is; uint16
+    (grey or RGB) stretched from its own min..max to 0..255 (rounded), the stretch the
+    matchers apply before matching (:mod:`stereodepth.matching`, step 1), so that a 12-bit
+    or narrow-band image shows what was matched instead of its high byte (0..15 for 12-bit
+    data: black); a constant uint16 image keeps its high byte. Raises TypeError for another
+    dtype."""
+    a = np.asarray(image)
+    if a.dtype == np.uint8:
+        return a
+    if a.dtype != np.uint16:
+        raise TypeError(f"image must have dtype uint8 or uint16, got {a.dtype}")
+    if a.size == 0:
+        return a.astype(np.uint8)
+    lo, hi = int(a.min()), int(a.max())
+    if hi == lo:
+        return (a >> 8).astype(np.uint8)
+    scaled = (a.astype(np.float32) - lo) * np.float32(255.0 / (hi - lo))
+    out: np.ndarray = np.rint(scaled).astype(np.uint8)
+    return out
 
 
 def png_bytes(rgb: np.ndarray, *, compress_level: int = 6) -> bytes:

@@ -514,7 +514,10 @@ def _write_outputs(
             cx_px=rig["cx_px"],
             cy_px=rig["cy_px"],
         )
-        write_ply(out["ply"], points, left_img, comment="stereodepth match")
+        from .colormap import to_uint8
+
+        # 16-bit images coloured as matched (min-max stretch), not by their high byte.
+        write_ply(out["ply"], points, to_uint8(left_img), comment="stereodepth match")
 
 
 def _print(s: dict[str, Any], left: np.ndarray) -> None:

@@ -162,8 +162,13 @@ def process_pair(pair: Pair, options: BatchOptions, threads: int | None = None) 
                 threads=threads,
             )
             stem = pair.stem.encode("ascii", "backslashreplace").decode("ascii")
+            from ..colormap import to_uint8  # 16-bit: coloured as matched, not by the high byte
+
             n = write_ply(
-                paths["ply"], points, colours, comment=f"stereodepth {__version__}: {stem}, metres"
+                paths["ply"],
+                points,
+                to_uint8(colours),
+                comment=f"stereodepth {__version__}: {stem}, metres",
             )
             outputs["ply_points"] = n
         if "disparity_preview" in paths:

@@ -544,10 +544,11 @@ class Stored:
 
 
 def _display(image: np.ndarray) -> np.ndarray:
-    """An image as 8-bit for the page: 16-bit grey keeps its high byte."""
-    if image.dtype == np.uint16:
-        return (image >> 8).astype(np.uint8)
-    return image
+    """An image as 8-bit for the page and the points' colours: 16-bit grey stretched from its
+    min..max as the matchers stretch it (:func:`stereodepth.colormap.to_uint8`)."""
+    from ..colormap import to_uint8
+
+    return to_uint8(image)
 
 
 def _data_url(rgb: np.ndarray) -> str:
