@@ -74,6 +74,9 @@ PYBIND11_MODULE(_core, m) {
     return info;
   });
 
+  m.def("_cgroup_cpu_limit", &cgroup_cpu_limit, py::arg("root"),
+        "The control groups' CPU quota read below root, in whole CPUs; 0 for none (tests).");
+
   bindings::bind_depth(m);
   bindings::bind_block_match(m);
   bindings::bind_semi_global(m);

@@ -84,6 +84,22 @@ class Barrier {
   std::atomic<std::uint64_t> gen_{0};
 };
 
+// The threads a call runs. Paths 4 and 8 run at most one per CPU this process may use
+// (default_threads()), whatever `threads` asks: their vertical passes split the columns into
+// bands that meet at every row, and a band whose thread waits for a core holds every other
+// band up at each row (16 threads on 2 cores took 8 to 20 times as long as 2). The single
+// pass (paths 3) hands out stripes and keeps the count asked for. The output does not
+// depend on it.
+int team_threads(int threads, int paths) {
+  const int n = std::max(1, threads);
+  return paths == 3 ? n : std::min(n, default_threads());
+}
+
+// Paths 4 and 8: the bands of columns of the vertical passes, one thread each.
+std::ptrdiff_t vertical_bands(int threads, std::ptrdiff_t cols) {
+  return std::max<std::ptrdiff_t>(1, std::min<std::ptrdiff_t>(threads, cols / 16));
+}
+
 // Runs fn(b) for b in [0, n), each on its own thread (the caller's is the first).
 template <typename Fn>
 void run_bands(std::ptrdiff_t n, Fn fn) {
@@ -355,6 +371,7 @@ void validate(const SemiGlobalParams& p) {
 
 std::size_t semi_global_memory(std::ptrdiff_t rows, std::ptrdiff_t cols, int nd, int paths,
                                int threads, Isa isa, int block_size) {
+  threads = team_threads(threads, paths);
   // What compute() allocates for an RGB pair (grey pairs need a little less), with the median
   // on; the speckle filter's runs, which depend on the disparities, are left out.
   const detail::SemiGlobalKernels& k = sgm_kernels(isa);
@@ -384,8 +401,7 @@ std::size_t semi_global_memory(std::ptrdiff_t rows, std::ptrdiff_t cols, int nd,
     bytes += bytes16(2 * sz(vertical_paths(paths)) * c * sz(ls));
     // Per thread, the most of its stages: census, the vertical paths over a band of columns,
     // the row's horizontal paths and decision, the median.
-    const std::ptrdiff_t nb =
-        std::max<std::ptrdiff_t>(1, std::min<std::ptrdiff_t>(std::max(1, threads), cols / 16));
+    const std::ptrdiff_t nb = vertical_bands(threads, cols);
     const std::size_t band_cols = (c + sz(nb) - 1) / sz(nb);
     const double vertical =
         bytes16(c + sz(nd) + 32 + 4 * (band_cols + 2) * sz(nd) + sz(nd));
@@ -438,6 +454,7 @@ void SemiGlobalMatcher::compute(const StereoImage& left, const StereoImage& righ
   const int nd = p.num_disparities;
   const std::size_t need =
       semi_global_memory(rows, cols, nd, p.paths, threads_, isa_, p.block_size);
+  const int threads = team_threads(threads_, p.paths);
   const double need_mb = static_cast<double>(need) / 1048576.0;
   if (need_mb > p.max_memory_mb) {
     std::ostringstream msg;
@@ -478,7 +495,7 @@ void SemiGlobalMatcher::compute(const StereoImage& left, const StereoImage& righ
   auto* grey = aligned<std::uint8_t>(ws.grey, rgb ? 2 * whole : 0);
   auto* pgrey = aligned<std::uint8_t>(ws.pgrey, whole);  // grey levels for P2', 8-bit scale
 
-  const std::ptrdiff_t nt = std::max<std::ptrdiff_t>(1, std::min<std::ptrdiff_t>(threads_, rows));
+  const std::ptrdiff_t nt = std::max<std::ptrdiff_t>(1, std::min<std::ptrdiff_t>(threads, rows));
   const auto unt = static_cast<std::size_t>(nt);
   if (ws.scratch.size() < unt) ws.scratch.resize(unt);
   auto band = [](std::ptrdiff_t n, std::ptrdiff_t parts, std::ptrdiff_t b) {
@@ -677,8 +694,7 @@ void SemiGlobalMatcher::compute(const StereoImage& left, const StereoImage& righ
     //    when the diagonals read the previous row across band edges. The way down writes the
     //    sums, the way up adds to them.
     {
-      const std::ptrdiff_t nb =
-          std::max<std::ptrdiff_t>(1, std::min<std::ptrdiff_t>(threads_, cols / 16));
+      const std::ptrdiff_t nb = vertical_bands(threads, cols);
       if (ws.scratch.size() < static_cast<std::size_t>(nb)) {
         ws.scratch.resize(static_cast<std::size_t>(nb));
       }

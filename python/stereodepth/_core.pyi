@@ -5,6 +5,7 @@ import numpy as np
 __version__: str
 
 def build_info() -> dict[str, Any]: ...
+def _cgroup_cpu_limit(root: str) -> int: ...
 def disparity_to_depth(
     disparity: np.ndarray,
     out: np.ndarray,

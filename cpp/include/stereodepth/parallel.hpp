@@ -6,11 +6,22 @@
 
 #include <cstddef>
 #include <functional>
+#include <string>
 
 namespace stereodepth {
 
-// The number of CPUs this process may run on (its affinity mask), at least 1.
+// The number of CPUs this process may use, at least 1: its affinity mask, lowered to its
+// control group's CPU quota when one is set (cgroup_cpu_limit), as a container's
+// `--cpus 2` on a 64-core host gives 2, not 64.
 int default_threads();
+
+// The CPU quota of this process's control groups, rounded up to whole CPUs, or 0 when none
+// is set: cgroup v2 `cpu.max` ("quota period") and cgroup v1 `cpu.cfs_quota_us` over
+// `cpu.cfs_period_us`, of the process's group (from /proc/self/cgroup) and each group above
+// it, the smallest. The files are read below `root` ("/" for this system; tests give a
+// folder laid out the same way). Sources: the kernel's cgroup-v2.rst ("cpu.max") and
+// sched-bwc.rst (CFS bandwidth control).
+int cgroup_cpu_limit(const std::string& root);
 
 // 0 means default_threads(); a negative count throws std::invalid_argument.
 int resolve_threads(int requested);

@@ -1,0 +1,118 @@
+"""The default thread count: the CPUs the process may use, lowered to its control group's CPU
+quota (a container started with ``--cpus 2`` on a 64-core host must not run 64 threads: the
+semi-global matcher's 8-path passes, which meet after every row, ran 8 to 20 times slower
+with more threads than cores). ``_cgroup_cpu_limit`` reads the files below a root folder, so
+the tests lay out fake ``/proc/self/cgroup`` and ``/sys/fs/cgroup`` trees (cgroup v2 and v1)."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import stereodepth
+from stereodepth import _core
+
+
+def tree(root: Path, files: dict[str, str]) -> str:
+    for rel, text in files.items():
+        p = root / rel
+        p.parent.mkdir(parents=True, exist_ok=True)
+        p.write_text(text)
+    return str(root)
+
+
+@pytest.mark.parametrize(
+    ("files", "cpus"),
+    [
+        # cgroup v2: the process's group and its parents; the smallest quota wins, rounded up.
+        (
+            {
+                "proc/self/cgroup": "0::/app/job\n",
+                "sys/fs/cgroup/app/job/cpu.max": "200000 100000\n",
+            },
+            2,
+        ),
+        (
+            {
+                "proc/self/cgroup": "0::/app/job\n",
+                "sys/fs/cgroup/app/job/cpu.max": "150000 100000\n",
+            },
+            2,
+        ),
+        (
+            {
+                "proc/self/cgroup": "0::/app/job\n",
+                "sys/fs/cgroup/app/job/cpu.max": "50000 100000\n",
+            },
+            1,
+        ),
+        (
+            {
+                "proc/self/cgroup": "0::/app/job\n",
+                "sys/fs/cgroup/app/job/cpu.max": "max 100000\n",
+                "sys/fs/cgroup/app/cpu.max": "300000 100000\n",
+                "sys/fs/cgroup/cpu.max": "800000 100000\n",
+            },
+            3,
+        ),
+        ({"proc/self/cgroup": "0::/\n", "sys/fs/cgroup/cpu.max": "max 100000\n"}, 0),
+        ({"proc/self/cgroup": "0::/\n"}, 0),  # no cpu controller file: no limit
+        # A container's namespace: its group is "/" and the mount is its own group.
+        ({"proc/self/cgroup": "0::/\n", "sys/fs/cgroup/cpu.max": "400000 100000\n"}, 4),
+        # cgroup v1, the cpu controller mounted alone or with cpuacct.
+        (
+            {
+                "proc/self/cgroup": "4:memory:/x\n2:cpu,cpuacct:/docker/abc\n1:name=systemd:/\n",
+                "sys/fs/cgroup/cpu,cpuacct/docker/abc/cpu.cfs_quota_us": "250000\n",
+                "sys/fs/cgroup/cpu,cpuacct/docker/abc/cpu.cfs_period_us": "100000\n",
+            },
+            3,
+        ),
+        (
+            {
+                "proc/self/cgroup": "3:cpu:/\n",
+                "sys/fs/cgroup/cpu/cpu.cfs_quota_us": "-1\n",
+                "sys/fs/cgroup/cpu/cpu.cfs_period_us": "100000\n",
+            },
+            0,
+        ),
+        # Unreadable or odd content is no limit, never an error.
+        ({"proc/self/cgroup": "0::/\n", "sys/fs/cgroup/cpu.max": "lots 100000\n"}, 0),
+        ({"proc/self/cgroup": "0::/\n", "sys/fs/cgroup/cpu.max": "100000 0\n"}, 0),
+        ({"proc/self/cgroup": "garbage\n\n::\n"}, 0),
+        ({}, 0),
+    ],
+)
+def test_cgroup_cpu_limit(tmp_path: Path, files: dict[str, str], cpus: int) -> None:
+    assert _core._cgroup_cpu_limit(tree(tmp_path, files)) == cpus
+
+
+def test_default_threads_is_the_cpus_this_process_may_use() -> None:
+    n = stereodepth.build_info()["default_threads"]
+    affinity = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
+    quota = _core._cgroup_cpu_limit("/")
+    assert n == (min(affinity, quota) if quota else affinity)
+
+
+@pytest.mark.parametrize("paths", [4, 8])
+def test_semi_global_vertical_passes_use_at_most_one_thread_per_cpu(paths: int) -> None:
+    # The 8- and 4-path modes meet at every row: more threads than CPUs only wait for each
+    # other, so the matcher runs at most default_threads() bands (the memory estimate, which
+    # counts what is allocated, says so), with the same output.
+    from stereodepth.semi_global import memory_estimate
+
+    cpus = stereodepth.build_info()["default_threads"]
+    shape = (40, 640)
+    same = memory_estimate(shape, num_disparities=64, paths=paths, threads=cpus)
+    assert memory_estimate(shape, num_disparities=64, paths=paths, threads=cpus + 14) == same
+    if cpus > 1:
+        assert memory_estimate(shape, num_disparities=64, paths=paths, threads=1) < same
+    rng = np.random.default_rng(5)
+    left = rng.integers(0, 256, shape, dtype=np.uint8)
+    right = np.roll(left, -7, axis=1)
+    one = stereodepth.semi_global_match(left, right, num_disparities=64, paths=paths, threads=1)
+    many = stereodepth.semi_global_match(left, right, num_disparities=64, paths=paths, threads=16)
+    np.testing.assert_array_equal(one, many)
