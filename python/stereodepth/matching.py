@@ -632,8 +632,9 @@ def block_match(
         Remove connected regions of at most ``speckle_window`` pixels whose neighbouring
         disparities differ by at most ``speckle_range`` px; ``speckle_window=0`` turns it off.
     threads
-        Threads to split the rows over; None or 0 for every core available. The output does
-        not depend on it.
+        Threads to split the rows over; None or 0 for every core available (the affinity
+        mask, lowered to a container's CPU quota: ``stereodepth.build_info()
+        ["default_threads"]``). The output does not depend on it.
     return_confidence
         Also return the confidence map (see below).
     channel_order

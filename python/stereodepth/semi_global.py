@@ -455,7 +455,10 @@ def semi_global_match(
         would exceed this many MiB (the figure of :func:`memory_estimate`: a few MiB per
         thread for ``paths=3``, about 3 bytes per pixel and disparity for 4 and 8).
     threads
-        Threads to use; None or 0 for every core available. The output does not depend on it.
+        Threads to use; None or 0 for every core available (the affinity mask, lowered to a
+        container's CPU quota: ``stereodepth.build_info()["default_threads"]``). Paths 4 and 8
+        use at most that many, whatever is asked (their passes meet at every row). The
+        output does not depend on it.
     return_confidence
         Also return the confidence, ``(second - best) / second`` of the path sums.
     channel_order, intensity_range
