@@ -1363,8 +1363,13 @@ void winners_avx2(const RowCtx& c) {
   }
   // kFast (std::true_type): the defaults' case, keyed, with the uniqueness count and the
   // winner's neighbours, decided once per group rather than tested per pixel.
-  auto group_winners = [&](ptrdiff_t x0, ptrdiff_t x1, auto fast) {
+  // kInner (std::true_type): every pixel of the group has its whole search range in the
+  // image (xlo <= x0, x1 <= xhi), so none takes the border band's masks. Tested per pixel,
+  // GCC computed those masks (lane compares against qlo and qhi, about 20 instructions) for
+  // every pixel and ORed them in, branch-free.
+  auto group_winners = [&](ptrdiff_t x0, ptrdiff_t x1, auto fast, auto inner) {
     constexpr bool kFast = decltype(fast)::value;
+    constexpr bool kInner = decltype(inner)::value;
     const bool keyed_ = kFast || keyed;
     const bool count_low_ = kFast || count_low;
     const bool around_ = kFast || around;
@@ -1376,7 +1381,7 @@ void winners_avx2(const RowCtx& c) {
       const uint16_t* const row = recent + (x - x0) * kRow + 16;
       auto load = [&](int i) { return _mm256_load_si256(reinterpret_cast<const __m256i*>(row) + i); };
       int qlo = 0, qhi = -1;
-      const bool border = x < xlo || x > xhi;
+      const bool border = !kInner && (x < xlo || x > xhi);
       if (border && !(clip_border && border_lanes(x, qlo, qhi))) continue;  // no search
       // The least cost, in four chains of minima (a quarter of one chain's latency).
       __m256i mins[4] = {ones, ones, ones, ones};
@@ -1397,7 +1402,7 @@ void winners_avx2(const RowCtx& c) {
       __m256i V[NC];
       for (int i = 0; i < NC; ++i) V[i] = _mm256_load_si256(reinterpret_cast<const __m256i*>(row) + i);
       int qlo = 0, qhi = dp - 1;  // the lanes searched
-      const bool border = x < xlo || x > xhi;
+      const bool border = !kInner && (x < xlo || x > xhi);
       if (border) {
         if (!clip_border || !border_lanes(x, qlo, qhi)) {
           record_none(c, x);
@@ -1585,9 +1590,13 @@ void winners_avx2(const RowCtx& c) {
       }
     }
     if (keyed && count_low && around) {
-      group_winners(x0, x1 - 1, std::true_type{});
+      if (x0 >= xlo && x1 - 1 <= xhi) {
+        group_winners(x0, x1 - 1, std::true_type{}, std::true_type{});
+      } else {
+        group_winners(x0, x1 - 1, std::true_type{}, std::false_type{});
+      }
     } else {
-      group_winners(x0, x1 - 1, std::false_type{});
+      group_winners(x0, x1 - 1, std::false_type{}, std::false_type{});
     }
   }
 }
