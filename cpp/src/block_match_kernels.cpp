@@ -1397,7 +1397,66 @@ void winners_avx2(const RowCtx& c) {
       bests[x - x0] = static_cast<uint16_t>(_mm_cvtsi128_si32(_mm_minpos_epu16(
           _mm_min_epu16(_mm256_castsi256_si128(m), _mm256_extracti128_si256(m, 1)))));
     }
-    for (ptrdiff_t x = x0; x <= x1; ++x) {
+    ptrdiff_t xstart = x0;
+    if constexpr (kFast && kInner) {
+      // Two pixels at a time, each step for both before the next, so that the second
+      // pixel's work sits beside the first's long chain (minima, vphminposuw, the key in a
+      // general register, the threshold's load, the count).
+      constexpr int kP = 2;
+      for (; xstart + kP - 1 <= x1; xstart += kP) {
+        const uint16_t* rows_[kP];
+        __m256i k[kP];
+        __m128i m[kP];
+        uint32_t key[kP], best[kP], eq[kP], high[kP];
+        int qb[kP];
+        for (int p = 0; p < kP; ++p) rows_[p] = recent + (xstart + p - x0) * kRow + 16;
+        auto lv = [&](int p, int i) {
+          return _mm256_load_si256(reinterpret_cast<const __m256i*>(rows_[p]) + i);
+        };
+        for (int p = 0; p < kP; ++p) {
+          auto key_of = [&](int i) { return _mm256_or_si256(_mm256_slli_epi16(lv(p, i), 4), key_low[i]); };
+          __m256i kmin[2] = {key_of(0), NC > 1 ? key_of(1) : ones};
+          for (int i = 2; i < NC; ++i) kmin[i & 1] = _mm256_min_epu16(kmin[i & 1], key_of(i));
+          k[p] = _mm256_min_epu16(kmin[0], kmin[1]);
+        }
+        for (int p = 0; p < kP; ++p) {
+          m[p] = _mm_minpos_epu16(
+              _mm_min_epu16(_mm256_castsi256_si128(k[p]), _mm256_extracti128_si256(k[p], 1)));
+        }
+        for (int p = 0; p < kP; ++p) {
+          key[p] = static_cast<uint32_t>(_mm_cvtsi128_si32(m[p])) & 0xFFFFu;
+          eq[p] = static_cast<uint32_t>(
+              _mm256_movemask_epi8(_mm256_cmpeq_epi16(k[p], _mm256_broadcastw_epi16(m[p]))));
+        }
+        for (int p = 0; p < kP; ++p) {
+          best[p] = key[p] >> 4;
+          qb[p] = static_cast<int>(16 * (15 - (key[p] & 15u)) + (31 - __builtin_clz(eq[p])) / 2);
+        }
+        for (int p = 0; p < kP; ++p) {
+          const __m256i thr = _mm256_set1_epi32(static_cast<int>(unique_min[best[p]]));
+          auto at_least = [&](int i) {
+            return _mm256_cmpeq_epi16(_mm256_min_epu16(lv(p, i), thr), thr);
+          };
+          high[p] = 0;
+          for (int i = 0; i < NC; i += 2) {
+            const __m256i mk = _mm256_packs_epi16(at_least(i), i + 1 < NC ? at_least(i + 1) : ones);
+            high[p] += static_cast<uint32_t>(__builtin_popcount(
+                static_cast<uint32_t>(_mm256_movemask_epi8(mk))));
+          }
+        }
+        for (int p = 0; p < kP; ++p) {
+          const ptrdiff_t x = xstart + p;
+          WinnerRecord* rec = records + x;
+          rec->best = static_cast<uint16_t>(best[p]);
+          rec->second = static_cast<uint16_t>(static_cast<uint32_t>(16 * (NC + (NC & 1))) - high[p]);
+          rec->kbest = dp - 1 - qb[p];
+          rec->tsum = tsums[x - x0];
+          rec->around = static_cast<uint32_t>(rows_[p][qb[p] + 1]) |
+                        (static_cast<uint32_t>(rows_[p][qb[p] - 1]) << 16);
+        }
+      }
+    }
+    for (ptrdiff_t x = xstart; x <= x1; ++x) {
       const uint16_t* const row = recent + (x - x0) * kRow + 16;
       __m256i V[NC];
       for (int i = 0; i < NC; ++i) V[i] = _mm256_load_si256(reinterpret_cast<const __m256i*>(row) + i);
