@@ -1890,7 +1890,76 @@ void decide_avx2(const RowCtx& c) {
   const int lr_int = c.lr_max_diff >= 65536.0 ? 65536 : static_cast<int>(std::floor(c.lr_max_diff));
   // The transpose below leaves the pixels in the order 0, 2, 4, 6, 1, 3, 5, 7.
   const __m256i unshuffle = _mm256_setr_epi32(0, 4, 1, 5, 2, 6, 3, 7);
-  for (ptrdiff_t x = 0; x < cols; x += 8) {
+  ptrdiff_t xstart = 0;
+  if (c.count_low && c.lr_on && c.texcol == nullptr && c.crow == nullptr && sub) {
+    // The defaults' case, 16 pixels at a time: each step for both groups of 8 before the
+    // next, so that the two groups' gathers (the threshold, the right winner) overlap rather
+    // than each group waiting on its own. The same arithmetic as the loop below.
+    constexpr int kU = 2;
+    const __m256i nd2 = _mm256_set1_epi32(c.nd - 2);
+    const __m256i lr_v = _mm256_set1_epi32(lr_int);
+    const __m256i dp1 = _mm256_set1_epi32(dp - 1);
+    const __m256i mind = _mm256_set1_epi32(c.min_d);
+    for (; xstart + 8 * kU <= cols; xstart += 8 * kU) {
+      __m256i f0[kU], kb[kU], nb[kU], ok[kU], thr[kU], g[kU], iv[kU];
+      for (int u = 0; u < kU; ++u) {
+        const __m256i* rv = reinterpret_cast<const __m256i*>(c.rec + xstart + 8 * u);
+        const __m256i r0 = _mm256_loadu_si256(rv), r1 = _mm256_loadu_si256(rv + 1);
+        const __m256i r2 = _mm256_loadu_si256(rv + 2), r3 = _mm256_loadu_si256(rv + 3);
+        const __m256i t0 = _mm256_unpacklo_epi32(r0, r1), t1 = _mm256_unpackhi_epi32(r0, r1);
+        const __m256i t2 = _mm256_unpacklo_epi32(r2, r3), t3 = _mm256_unpackhi_epi32(r2, r3);
+        f0[u] = _mm256_permutevar8x32_epi32(_mm256_unpacklo_epi64(t0, t2), unshuffle);
+        kb[u] = _mm256_permutevar8x32_epi32(_mm256_unpackhi_epi64(t0, t2), unshuffle);
+        nb[u] = _mm256_permutevar8x32_epi32(_mm256_unpackhi_epi64(t1, t3), unshuffle);
+        ok[u] = _mm256_xor_si256(_mm256_cmpeq_epi32(_mm256_and_si256(f0[u], low16), none), all);
+      }
+      for (int u = 0; u < kU; ++u) {
+        thr[u] = _mm256_mask_i32gather_epi32(zero, reinterpret_cast<const int*>(c.unique_min),
+                                             _mm256_and_si256(f0[u], low16), ok[u], 4);
+      }
+      for (int u = 0; u < kU; ++u) {
+        const __m256i t = _mm256_and_si256(thr[u], low16);
+        const __m256i c0 = _mm256_and_si256(nb[u], low16);
+        const __m256i c2 = _mm256_srli_epi32(nb[u], 16);
+        const __m256i low0 =
+            _mm256_and_si256(_mm256_cmpgt_epi32(kb[u], zero), _mm256_cmpgt_epi32(t, c0));
+        const __m256i low2 =
+            _mm256_andnot_si256(_mm256_cmpgt_epi32(kb[u], nd2), _mm256_cmpgt_epi32(t, c2));
+        const __m256i near = _mm256_sub_epi32(_mm256_sub_epi32(_mm256_set1_epi32(1), low0), low2);
+        ok[u] = _mm256_and_si256(ok[u], _mm256_cmpeq_epi32(_mm256_srli_epi32(f0[u], 16), near));
+        const __m256i xs = _mm256_add_epi32(_mm256_set1_epi32(static_cast<int>(xstart + 8 * u)), iota);
+        iv[u] = _mm256_sub_epi32(_mm256_add_epi32(xs, dp1), kb[u]);
+      }
+      for (int u = 0; u < kU; ++u) {
+        g[u] = _mm256_mask_i32gather_epi32(zero, reinterpret_cast<const int*>(c.rarg), iv[u], ok[u], 2);
+      }
+      for (int u = 0; u < kU; ++u) {
+        const __m256i kr = _mm256_and_si256(_mm256_add_epi32(_mm256_sub_epi32(g[u], iv[u]), dp1), low16);
+        const __m256i diff = _mm256_abs_epi32(_mm256_sub_epi32(kb[u], kr));
+        ok[u] = _mm256_andnot_si256(_mm256_cmpgt_epi32(diff, lr_v), ok[u]);
+        const __m256i b = _mm256_and_si256(f0[u], low16);
+        const __m256i c0 = _mm256_and_si256(nb[u], low16);
+        const __m256i c2 = _mm256_srli_epi32(nb[u], 16);
+        __m256 d = _mm256_cvtepi32_ps(_mm256_add_epi32(kb[u], mind));
+        const __m256 num = _mm256_cvtepi32_ps(_mm256_sub_epi32(c0, c2));
+        __m256i den_i;
+        if (parabola) {
+          den_i = _mm256_sub_epi32(_mm256_add_epi32(c0, c2), _mm256_add_epi32(b, b));
+        } else {
+          den_i = _mm256_max_epi32(_mm256_sub_epi32(c0, b), _mm256_sub_epi32(c2, b));
+        }
+        const __m256 den = _mm256_cvtepi32_ps(_mm256_add_epi32(den_i, den_i));
+        const __m256i both = _mm256_andnot_si256(
+            _mm256_or_si256(_mm256_cmpeq_epi32(c0, none), _mm256_cmpeq_epi32(c2, none)),
+            _mm256_and_si256(ok[u], interior(kb[u])));
+        const __m256 use = _mm256_and_ps(_mm256_castsi256_ps(both),
+                                         _mm256_cmp_ps(den, _mm256_setzero_ps(), _CMP_GT_OQ));
+        d = _mm256_blendv_ps(d, _mm256_add_ps(d, _mm256_div_ps(num, den)), use);
+        _mm256_storeu_ps(c.drow + xstart + 8 * u, _mm256_blendv_ps(nan, d, _mm256_castsi256_ps(ok[u])));
+      }
+    }
+  }
+  for (ptrdiff_t x = xstart; x < cols; x += 8) {
     const int n = static_cast<int>(cols - x < 8 ? cols - x : 8);
     const __m256i lanes = _mm256_cmpgt_epi32(_mm256_set1_epi32(n), iota);
     // 8 records, two per vector: a 4 x 4 transpose in each 128-bit half gives the fields of
