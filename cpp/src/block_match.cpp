@@ -4,23 +4,15 @@
 #include <atomic>
 #include <chrono>
 #include <cmath>
-#include <condition_variable>
 #include <cstdint>
 #include <cstring>
-#include <exception>
-#include <functional>
 #include <limits>
 #include <memory>
 #include <mutex>
 #include <sstream>
 #include <stdexcept>
 #include <string>
-#include <thread>
 #include <vector>
-
-#if defined(__linux__)
-#include <unistd.h>
-#endif
 
 #include "block_match_kernels.hpp"
 #include "module_support.hpp"
@@ -172,129 +164,6 @@ void validate(const BlockMatchParams& p) {
   }
 }
 
-
-// Threads kept with a workspace between calls, so that a call on several threads wakes
-// parked threads rather than starting new ones (std::thread start and join took 30-75 us on
-// the 2-core VM the block matcher was tuned on, 2-8 % of a 1-3 ms call; waking a parked
-// thread about 10-20 us, overlapped with the caller's own band). run(n, fn) calls fn(0) on
-// the calling thread and fn(1) .. fn(n - 1) on kept threads, then waits for all of them and
-// rethrows the first exception. One run at a time (the matcher's mutex serialises its calls).
-// After a fork the child finds no threads of its parent's: a team started by another process
-// is abandoned (leaked, never joined) and a new one started.
-class Team {
- public:
-  Team() = default;
-  Team(const Team&) = delete;
-  Team& operator=(const Team&) = delete;
-  ~Team() {
-    if (!state_ || state_->pid != current_pid()) {
-      (void)state_.release();  // (another process's threads: nothing to join here)
-      return;
-    }
-    {
-      std::lock_guard<std::mutex> lock(state_->mutex);
-      state_->stop = true;
-    }
-    state_->wake.notify_all();
-    for (auto& t : state_->threads) t.join();
-  }
-
-  void run(std::size_t n, const std::function<void(std::size_t)>& fn) {
-    if (n <= 1) {
-      fn(0);
-      return;
-    }
-    if (state_ && state_->pid != current_pid()) (void)state_.release();
-    if (!state_) {
-      state_ = std::make_unique<State>();
-      state_->pid = current_pid();
-    }
-    State& st = *state_;
-    while (st.threads.size() < n - 1) {
-      const std::size_t index = st.threads.size() + 1;
-      st.threads.emplace_back([&st, index] { st.serve(index); });
-    }
-    st.errors.assign(n, nullptr);
-    {
-      std::lock_guard<std::mutex> lock(st.mutex);
-      st.job = &fn;
-      st.n = n;
-      st.pending.store(n - 1);
-      ++st.generation;
-    }
-    st.wake.notify_all();
-    try {
-      fn(0);
-    } catch (...) {
-      st.errors[0] = std::current_exception();
-    }
-    // The others usually finish about when this thread does (they steal its rows): wait a
-    // little before sleeping, as a sleeping caller wakes 10-20 us after the last one ends.
-    const auto spin_end = std::chrono::steady_clock::now() + std::chrono::microseconds(50);
-    while (st.pending.load() != 0 && std::chrono::steady_clock::now() < spin_end) {
-#if defined(__x86_64__) || defined(__i386__)
-      __builtin_ia32_pause();
-#endif
-    }
-    if (st.pending.load() != 0) {
-      std::unique_lock<std::mutex> lock(st.mutex);
-      st.done.wait(lock, [&] { return st.pending.load() == 0; });
-    }
-    st.job = nullptr;
-    for (auto& e : st.errors) {
-      if (e) std::rethrow_exception(e);
-    }
-  }
-
- private:
-  static long current_pid() {
-#if defined(__linux__)
-    return static_cast<long>(::getpid());
-#else
-    return 0;
-#endif
-  }
-
-  struct State {
-    long pid = 0;
-    std::vector<std::thread> threads;
-    std::mutex mutex;
-    std::condition_variable wake, done;
-    const std::function<void(std::size_t)>* job = nullptr;
-    std::size_t n = 0;
-    std::uint64_t generation = 0;
-    bool stop = false;
-    std::atomic<std::size_t> pending{0};
-    std::vector<std::exception_ptr> errors;
-
-    void serve(std::size_t index) {
-      std::uint64_t seen = 0;
-      for (;;) {
-        const std::function<void(std::size_t)>* fn = nullptr;
-        {
-          std::unique_lock<std::mutex> lock(mutex);
-          wake.wait(lock, [&] { return stop || generation != seen; });
-          if (stop) return;
-          seen = generation;
-          if (index >= n) continue;  // a run with fewer threads
-          fn = job;
-        }
-        try {
-          (*fn)(index);
-        } catch (...) {
-          errors[index] = std::current_exception();
-        }
-        if (pending.fetch_sub(1) == 1) {
-          // Under the mutex, so the caller cannot test `pending` and then sleep past this.
-          std::lock_guard<std::mutex> lock(mutex);
-          done.notify_one();
-        }
-      }
-    }
-  };
-  std::unique_ptr<State> state_;
-};
-
 struct BlockMatcher::Workspace {
   ~Workspace() {
     for (auto& w : workers) STEREODEPTH_UNPOISON(w.bytes.get(), w.size);
@@ -303,7 +172,6 @@ struct BlockMatcher::Workspace {
   std::vector<ByteBuffer> workers;                // per worker: scratch, grey, feature rows
   std::vector<std::vector<SpeckleBand>> speckle;  // speckle labellings, per worker
   detail::SpeckleJoin speckle_join;
-  Team team;  // the threads of the workers after the first
 
   std::size_t bytes() const {
     std::size_t n = 0;
@@ -639,12 +507,15 @@ void BlockMatcher::compute(const StereoImage& left, const StereoImage& right,
   // machine a thread that starts late finds its band done rather than holding the call up.
   std::vector<std::atomic<bool>> started(nw);
   for (auto& f : started) f.store(false);
-  ws.team.run(nw, [&](std::size_t first) {
-    for (std::size_t k = 0; k < nw; ++k) {
-      const std::size_t w = (first + k) % nw;
-      if (!started[w].exchange(true)) run_worker(w);
-    }
-  });
+  parallel_for_rows(static_cast<std::ptrdiff_t>(nw), static_cast<int>(nw), 1,
+                    [&](std::ptrdiff_t b, std::ptrdiff_t e) {
+                      for (std::ptrdiff_t first = b; first < e; ++first) {
+                        for (std::size_t k = 0; k < nw; ++k) {
+                          const std::size_t w = (static_cast<std::size_t>(first) + k) % nw;
+                          if (!started[w].exchange(true)) run_worker(w);
+                        }
+                      }
+                    });
 
   // 3. The speckle filter: join the segments, clear the small regions.
   if (speckle) {
