@@ -1573,7 +1573,39 @@ void winners_avx2(const RowCtx& c) {
   for (ptrdiff_t x0 = 0; x0 < cols; x0 += 16) {
     const ptrdiff_t x1 = std::min<ptrdiff_t>(x0 + 16, cols);
     uint16_t* row = recent + 16;
-    if (fused && x0 > r && x1 + r <= cols) {
+    constexpr bool kSplitRow = sizeof(F) == 4 && kBytes && NC >= 8;
+    if (kSplitRow && fused && x0 > r && x1 + r <= cols) {
+     if constexpr (kSplitRow) {
+      // Many vectors (ndisp >= 128): the group's pixels in two passes over the lanes, each
+      // with its half of the running sums, which then fit the 16 registers with the
+      // constants (in one pass GCC kept several in memory, a store and a load per pixel).
+      // The passes touch different lanes of the same columns: the same sums as one pass.
+      constexpr int kSplit = (NC / 2 + 1) / 2 * 2;  // an even number of vectors first
+      auto pass = [&](auto ib_, auto ie_) {
+        constexpr int ib = decltype(ib_)::value, ie = decltype(ie_)::value;
+        uint16_t* rowp = recent + 16;
+        for (ptrdiff_t x = x0; x < x1; ++x, rowp += kRow) {
+          const ptrdiff_t xp = x + r, xm = x - r - 1;
+          const CensusLeft l = census_left(xp);
+          for (int i = ib; i < ie; i += 2) {
+            const Pair p = census_update_bytes(l, xp, i);
+            A[i] = _mm256_sub_epi16(_mm256_add_epi16(A[i], p.v[0]), column(xm, i));
+            if (i + 1 < NC) {
+              A[i + 1] = _mm256_sub_epi16(_mm256_add_epi16(A[i + 1], p.v[1]), column(xm, i + 1));
+            }
+          }
+          if constexpr (ib == 0) A[0] = _mm256_or_si256(A[0], padv);
+          for (int i = ib; i < ie; ++i) _mm256_store_si256(reinterpret_cast<__m256i*>(rowp) + i, A[i]);
+          if constexpr (ib == 0) {
+            if (texcol) tsum += texcol[xp] - texcol[xm];
+            tsums[x - x0] = tsum;
+          }
+        }
+      };
+      pass(std::integral_constant<int, 0>{}, std::integral_constant<int, kSplit>{});
+      pass(std::integral_constant<int, kSplit>{}, std::integral_constant<int, NC>{});
+     }
+    } else if (fused && x0 > r && x1 + r <= cols) {
       for (ptrdiff_t x = x0; x < x1; ++x, row += kRow) {
         const ptrdiff_t xp = x + r, xm = x - r - 1;
         if constexpr (sizeof(F) == 4) {
