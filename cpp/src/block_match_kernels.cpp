@@ -1363,8 +1363,13 @@ void winners_avx2(const RowCtx& c) {
   }
   // kFast (std::true_type): the defaults' case, keyed, with the uniqueness count and the
   // winner's neighbours, decided once per group rather than tested per pixel.
-  auto group_winners = [&](ptrdiff_t x0, ptrdiff_t x1, auto fast) {
+  // kInner (std::true_type): every pixel of the group has its whole search range in the
+  // image (xlo <= x0, x1 <= xhi), so none takes the border band's masks. Tested per pixel,
+  // GCC computed those masks (lane compares against qlo and qhi, about 20 instructions) for
+  // every pixel and ORed them in, branch-free.
+  auto group_winners = [&](ptrdiff_t x0, ptrdiff_t x1, auto fast, auto inner) {
     constexpr bool kFast = decltype(fast)::value;
+    constexpr bool kInner = decltype(inner)::value;
     const bool keyed_ = kFast || keyed;
     const bool count_low_ = kFast || count_low;
     const bool around_ = kFast || around;
@@ -1376,7 +1381,7 @@ void winners_avx2(const RowCtx& c) {
       const uint16_t* const row = recent + (x - x0) * kRow + 16;
       auto load = [&](int i) { return _mm256_load_si256(reinterpret_cast<const __m256i*>(row) + i); };
       int qlo = 0, qhi = -1;
-      const bool border = x < xlo || x > xhi;
+      const bool border = !kInner && (x < xlo || x > xhi);
       if (border && !(clip_border && border_lanes(x, qlo, qhi))) continue;  // no search
       // The least cost, in four chains of minima (a quarter of one chain's latency).
       __m256i mins[4] = {ones, ones, ones, ones};
@@ -1392,12 +1397,71 @@ void winners_avx2(const RowCtx& c) {
       bests[x - x0] = static_cast<uint16_t>(_mm_cvtsi128_si32(_mm_minpos_epu16(
           _mm_min_epu16(_mm256_castsi256_si128(m), _mm256_extracti128_si256(m, 1)))));
     }
-    for (ptrdiff_t x = x0; x <= x1; ++x) {
+    ptrdiff_t xstart = x0;
+    if constexpr (kFast && kInner) {
+      // Two pixels at a time, each step for both before the next, so that the second
+      // pixel's work sits beside the first's long chain (minima, vphminposuw, the key in a
+      // general register, the threshold's load, the count).
+      constexpr int kP = 2;
+      for (; xstart + kP - 1 <= x1; xstart += kP) {
+        const uint16_t* rows_[kP];
+        __m256i k[kP];
+        __m128i m[kP];
+        uint32_t key[kP], best[kP], eq[kP], high[kP];
+        int qb[kP];
+        for (int p = 0; p < kP; ++p) rows_[p] = recent + (xstart + p - x0) * kRow + 16;
+        auto lv = [&](int p, int i) {
+          return _mm256_load_si256(reinterpret_cast<const __m256i*>(rows_[p]) + i);
+        };
+        for (int p = 0; p < kP; ++p) {
+          auto key_of = [&](int i) { return _mm256_or_si256(_mm256_slli_epi16(lv(p, i), 4), key_low[i]); };
+          __m256i kmin[2] = {key_of(0), NC > 1 ? key_of(1) : ones};
+          for (int i = 2; i < NC; ++i) kmin[i & 1] = _mm256_min_epu16(kmin[i & 1], key_of(i));
+          k[p] = _mm256_min_epu16(kmin[0], kmin[1]);
+        }
+        for (int p = 0; p < kP; ++p) {
+          m[p] = _mm_minpos_epu16(
+              _mm_min_epu16(_mm256_castsi256_si128(k[p]), _mm256_extracti128_si256(k[p], 1)));
+        }
+        for (int p = 0; p < kP; ++p) {
+          key[p] = static_cast<uint32_t>(_mm_cvtsi128_si32(m[p])) & 0xFFFFu;
+          eq[p] = static_cast<uint32_t>(
+              _mm256_movemask_epi8(_mm256_cmpeq_epi16(k[p], _mm256_broadcastw_epi16(m[p]))));
+        }
+        for (int p = 0; p < kP; ++p) {
+          best[p] = key[p] >> 4;
+          qb[p] = static_cast<int>(16 * (15 - (key[p] & 15u)) + (31 - __builtin_clz(eq[p])) / 2);
+        }
+        for (int p = 0; p < kP; ++p) {
+          const __m256i thr = _mm256_set1_epi32(static_cast<int>(unique_min[best[p]]));
+          auto at_least = [&](int i) {
+            return _mm256_cmpeq_epi16(_mm256_min_epu16(lv(p, i), thr), thr);
+          };
+          high[p] = 0;
+          for (int i = 0; i < NC; i += 2) {
+            const __m256i mk = _mm256_packs_epi16(at_least(i), i + 1 < NC ? at_least(i + 1) : ones);
+            high[p] += static_cast<uint32_t>(__builtin_popcount(
+                static_cast<uint32_t>(_mm256_movemask_epi8(mk))));
+          }
+        }
+        for (int p = 0; p < kP; ++p) {
+          const ptrdiff_t x = xstart + p;
+          WinnerRecord* rec = records + x;
+          rec->best = static_cast<uint16_t>(best[p]);
+          rec->second = static_cast<uint16_t>(static_cast<uint32_t>(16 * (NC + (NC & 1))) - high[p]);
+          rec->kbest = dp - 1 - qb[p];
+          rec->tsum = tsums[x - x0];
+          rec->around = static_cast<uint32_t>(rows_[p][qb[p] + 1]) |
+                        (static_cast<uint32_t>(rows_[p][qb[p] - 1]) << 16);
+        }
+      }
+    }
+    for (ptrdiff_t x = xstart; x <= x1; ++x) {
       const uint16_t* const row = recent + (x - x0) * kRow + 16;
       __m256i V[NC];
       for (int i = 0; i < NC; ++i) V[i] = _mm256_load_si256(reinterpret_cast<const __m256i*>(row) + i);
       int qlo = 0, qhi = dp - 1;  // the lanes searched
-      const bool border = x < xlo || x > xhi;
+      const bool border = !kInner && (x < xlo || x > xhi);
       if (border) {
         if (!clip_border || !border_lanes(x, qlo, qhi)) {
           record_none(c, x);
@@ -1509,7 +1573,39 @@ void winners_avx2(const RowCtx& c) {
   for (ptrdiff_t x0 = 0; x0 < cols; x0 += 16) {
     const ptrdiff_t x1 = std::min<ptrdiff_t>(x0 + 16, cols);
     uint16_t* row = recent + 16;
-    if (fused && x0 > r && x1 + r <= cols) {
+    constexpr bool kSplitRow = sizeof(F) == 4 && kBytes && NC >= 8;
+    if (kSplitRow && fused && x0 > r && x1 + r <= cols) {
+     if constexpr (kSplitRow) {
+      // Many vectors (ndisp >= 128): the group's pixels in two passes over the lanes, each
+      // with its half of the running sums, which then fit the 16 registers with the
+      // constants (in one pass GCC kept several in memory, a store and a load per pixel).
+      // The passes touch different lanes of the same columns: the same sums as one pass.
+      constexpr int kSplit = (NC / 2 + 1) / 2 * 2;  // an even number of vectors first
+      auto pass = [&](auto ib_, auto ie_) {
+        constexpr int ib = decltype(ib_)::value, ie = decltype(ie_)::value;
+        uint16_t* rowp = recent + 16;
+        for (ptrdiff_t x = x0; x < x1; ++x, rowp += kRow) {
+          const ptrdiff_t xp = x + r, xm = x - r - 1;
+          const CensusLeft l = census_left(xp);
+          for (int i = ib; i < ie; i += 2) {
+            const Pair p = census_update_bytes(l, xp, i);
+            A[i] = _mm256_sub_epi16(_mm256_add_epi16(A[i], p.v[0]), column(xm, i));
+            if (i + 1 < NC) {
+              A[i + 1] = _mm256_sub_epi16(_mm256_add_epi16(A[i + 1], p.v[1]), column(xm, i + 1));
+            }
+          }
+          if constexpr (ib == 0) A[0] = _mm256_or_si256(A[0], padv);
+          for (int i = ib; i < ie; ++i) _mm256_store_si256(reinterpret_cast<__m256i*>(rowp) + i, A[i]);
+          if constexpr (ib == 0) {
+            if (texcol) tsum += texcol[xp] - texcol[xm];
+            tsums[x - x0] = tsum;
+          }
+        }
+      };
+      pass(std::integral_constant<int, 0>{}, std::integral_constant<int, kSplit>{});
+      pass(std::integral_constant<int, kSplit>{}, std::integral_constant<int, NC>{});
+     }
+    } else if (fused && x0 > r && x1 + r <= cols) {
       for (ptrdiff_t x = x0; x < x1; ++x, row += kRow) {
         const ptrdiff_t xp = x + r, xm = x - r - 1;
         if constexpr (sizeof(F) == 4) {
@@ -1585,9 +1681,13 @@ void winners_avx2(const RowCtx& c) {
       }
     }
     if (keyed && count_low && around) {
-      group_winners(x0, x1 - 1, std::true_type{});
+      if (x0 >= xlo && x1 - 1 <= xhi) {
+        group_winners(x0, x1 - 1, std::true_type{}, std::true_type{});
+      } else {
+        group_winners(x0, x1 - 1, std::true_type{}, std::false_type{});
+      }
     } else {
-      group_winners(x0, x1 - 1, std::false_type{});
+      group_winners(x0, x1 - 1, std::false_type{}, std::false_type{});
     }
   }
 }
@@ -1822,7 +1922,76 @@ void decide_avx2(const RowCtx& c) {
   const int lr_int = c.lr_max_diff >= 65536.0 ? 65536 : static_cast<int>(std::floor(c.lr_max_diff));
   // The transpose below leaves the pixels in the order 0, 2, 4, 6, 1, 3, 5, 7.
   const __m256i unshuffle = _mm256_setr_epi32(0, 4, 1, 5, 2, 6, 3, 7);
-  for (ptrdiff_t x = 0; x < cols; x += 8) {
+  ptrdiff_t xstart = 0;
+  if (c.count_low && c.lr_on && c.texcol == nullptr && c.crow == nullptr && sub) {
+    // The defaults' case, 16 pixels at a time: each step for both groups of 8 before the
+    // next, so that the two groups' gathers (the threshold, the right winner) overlap rather
+    // than each group waiting on its own. The same arithmetic as the loop below.
+    constexpr int kU = 2;
+    const __m256i nd2 = _mm256_set1_epi32(c.nd - 2);
+    const __m256i lr_v = _mm256_set1_epi32(lr_int);
+    const __m256i dp1 = _mm256_set1_epi32(dp - 1);
+    const __m256i mind = _mm256_set1_epi32(c.min_d);
+    for (; xstart + 8 * kU <= cols; xstart += 8 * kU) {
+      __m256i f0[kU], kb[kU], nb[kU], ok[kU], thr[kU], g[kU], iv[kU];
+      for (int u = 0; u < kU; ++u) {
+        const __m256i* rv = reinterpret_cast<const __m256i*>(c.rec + xstart + 8 * u);
+        const __m256i r0 = _mm256_loadu_si256(rv), r1 = _mm256_loadu_si256(rv + 1);
+        const __m256i r2 = _mm256_loadu_si256(rv + 2), r3 = _mm256_loadu_si256(rv + 3);
+        const __m256i t0 = _mm256_unpacklo_epi32(r0, r1), t1 = _mm256_unpackhi_epi32(r0, r1);
+        const __m256i t2 = _mm256_unpacklo_epi32(r2, r3), t3 = _mm256_unpackhi_epi32(r2, r3);
+        f0[u] = _mm256_permutevar8x32_epi32(_mm256_unpacklo_epi64(t0, t2), unshuffle);
+        kb[u] = _mm256_permutevar8x32_epi32(_mm256_unpackhi_epi64(t0, t2), unshuffle);
+        nb[u] = _mm256_permutevar8x32_epi32(_mm256_unpackhi_epi64(t1, t3), unshuffle);
+        ok[u] = _mm256_xor_si256(_mm256_cmpeq_epi32(_mm256_and_si256(f0[u], low16), none), all);
+      }
+      for (int u = 0; u < kU; ++u) {
+        thr[u] = _mm256_mask_i32gather_epi32(zero, reinterpret_cast<const int*>(c.unique_min),
+                                             _mm256_and_si256(f0[u], low16), ok[u], 4);
+      }
+      for (int u = 0; u < kU; ++u) {
+        const __m256i t = _mm256_and_si256(thr[u], low16);
+        const __m256i c0 = _mm256_and_si256(nb[u], low16);
+        const __m256i c2 = _mm256_srli_epi32(nb[u], 16);
+        const __m256i low0 =
+            _mm256_and_si256(_mm256_cmpgt_epi32(kb[u], zero), _mm256_cmpgt_epi32(t, c0));
+        const __m256i low2 =
+            _mm256_andnot_si256(_mm256_cmpgt_epi32(kb[u], nd2), _mm256_cmpgt_epi32(t, c2));
+        const __m256i near = _mm256_sub_epi32(_mm256_sub_epi32(_mm256_set1_epi32(1), low0), low2);
+        ok[u] = _mm256_and_si256(ok[u], _mm256_cmpeq_epi32(_mm256_srli_epi32(f0[u], 16), near));
+        const __m256i xs = _mm256_add_epi32(_mm256_set1_epi32(static_cast<int>(xstart + 8 * u)), iota);
+        iv[u] = _mm256_sub_epi32(_mm256_add_epi32(xs, dp1), kb[u]);
+      }
+      for (int u = 0; u < kU; ++u) {
+        g[u] = _mm256_mask_i32gather_epi32(zero, reinterpret_cast<const int*>(c.rarg), iv[u], ok[u], 2);
+      }
+      for (int u = 0; u < kU; ++u) {
+        const __m256i kr = _mm256_and_si256(_mm256_add_epi32(_mm256_sub_epi32(g[u], iv[u]), dp1), low16);
+        const __m256i diff = _mm256_abs_epi32(_mm256_sub_epi32(kb[u], kr));
+        ok[u] = _mm256_andnot_si256(_mm256_cmpgt_epi32(diff, lr_v), ok[u]);
+        const __m256i b = _mm256_and_si256(f0[u], low16);
+        const __m256i c0 = _mm256_and_si256(nb[u], low16);
+        const __m256i c2 = _mm256_srli_epi32(nb[u], 16);
+        __m256 d = _mm256_cvtepi32_ps(_mm256_add_epi32(kb[u], mind));
+        const __m256 num = _mm256_cvtepi32_ps(_mm256_sub_epi32(c0, c2));
+        __m256i den_i;
+        if (parabola) {
+          den_i = _mm256_sub_epi32(_mm256_add_epi32(c0, c2), _mm256_add_epi32(b, b));
+        } else {
+          den_i = _mm256_max_epi32(_mm256_sub_epi32(c0, b), _mm256_sub_epi32(c2, b));
+        }
+        const __m256 den = _mm256_cvtepi32_ps(_mm256_add_epi32(den_i, den_i));
+        const __m256i both = _mm256_andnot_si256(
+            _mm256_or_si256(_mm256_cmpeq_epi32(c0, none), _mm256_cmpeq_epi32(c2, none)),
+            _mm256_and_si256(ok[u], interior(kb[u])));
+        const __m256 use = _mm256_and_ps(_mm256_castsi256_ps(both),
+                                         _mm256_cmp_ps(den, _mm256_setzero_ps(), _CMP_GT_OQ));
+        d = _mm256_blendv_ps(d, _mm256_add_ps(d, _mm256_div_ps(num, den)), use);
+        _mm256_storeu_ps(c.drow + xstart + 8 * u, _mm256_blendv_ps(nan, d, _mm256_castsi256_ps(ok[u])));
+      }
+    }
+  }
+  for (ptrdiff_t x = xstart; x < cols; x += 8) {
     const int n = static_cast<int>(cols - x < 8 ? cols - x : 8);
     const __m256i lanes = _mm256_cmpgt_epi32(_mm256_set1_epi32(n), iota);
     // 8 records, two per vector: a 4 x 4 transpose in each 128-bit half gives the fields of
