@@ -777,40 +777,65 @@ void box_row8_impl(uint8_t* const* raws, int fresh, const uint16_t* lrow, const 
     column(1, ring + nd);
   }
   // With a fresh row and a 3x3 box: the fresh row's new column, its column sum and the box
-  // sum in one sweep over the disparities (the same sums, fewer loads and loops).
-  const bool one_sweep = radius == 1 && f != nullptr && nd % N == 0;
+  // sum in one sweep over the disparities (the same sums, fewer loads and loops). The ring's
+  // three column sums rotate by pointer (no index mod 3 per column), the row pointers advance
+  // by nd, and the border fill runs only for the columns whose range leaves the right image.
+  if (radius == 1 && f != nullptr && nd % N == 0) {
+    uint8_t* p = ring;  // the column sums of raw columns j - 1, j and (new) j + 1
+    uint8_t* q = ring + nd;
+    uint8_t* s = ring + 2 * nd;
+    const ptrdiff_t step = kT == 0 ? 1 : kT;
+    const uint8_t* __restrict zlo;
+    const uint8_t* __restrict zhi;
+    if constexpr (kT == 0) {
+      zlo = rev;
+      zhi = rev + (cols + nd + 32);
+    } else {
+      zlo = z.lo;
+      zhi = z.hi;
+    }
+    // Raw column j + 1 = x - x0 + 2 is image column x + 1 (clamped).
+    uint8_t* fo = f + 2 * nd;
+    const uint8_t* b = other[0] + 2 * nd;
+    const uint8_t* c = other[1] + 2 * nd;
+    for (ptrdiff_t x = x0; x < x1; ++x) {
+      uint8_t* __restrict o = out + x * nd;
+      const ptrdiff_t xc = x + 1 < cols ? x + 1 : cols - 1;
+      const uint8_t* __restrict lo = zlo + (cols - 1 - xc) * step;
+      const uint8_t* __restrict hi = zhi + (cols - 1 - xc) * step;
+      const uint16_t l = lrow[xc];
+      const typename B::R llo = B::set1(l & 0xFF), lhi = B::set1(l >> 8);
+      const uint8_t* __restrict pk = p;
+      const uint8_t* __restrict qk = q;
+      uint8_t* __restrict sk = s;
+      for (int k = 0; k < nd; k += N) {
+        const typename B::R h = B::hamming(B::load(lo + k), B::load(hi + k), llo, lhi);
+        B::store(fo + k, h);
+        const typename B::R cs = B::add(B::add(h, B::load(b + k)), B::load(c + k));
+        B::store(sk + k, cs);
+        B::store(o + k, B::add(B::add(B::load(pk + k), B::load(qk + k)), cs));
+      }
+      uint8_t* const t = p;
+      p = q;
+      q = s;
+      s = t;
+      fo += nd;
+      b += nd;
+      c += nd;
+      const ptrdiff_t khi = x - min_d;
+      const ptrdiff_t klo = x - min_d - cols + 1;
+      if (khi + 1 < nd || klo > 0) {
+        fill_range<kT>(o, clamp_index(khi + 1, 0, nd), nd, nd, cmax);
+        fill_range<kT>(o, 0, clamp_index(klo, 0, nd), nd, cmax);
+      }
+    }
+    return;
+  }
   for (ptrdiff_t x = x0; x < x1; ++x) {
     uint8_t* __restrict o = out + x * nd;
     const ptrdiff_t j = x - x0 + radius;
     if (radius == 0) {
       column(j, o);
-    } else if (one_sweep) {
-      const ptrdiff_t at = (j + 1) * nd;
-      const ptrdiff_t xc = clamp_index(x0 - radius + j + 1, 0, cols - 1);
-      const uint8_t* __restrict lo;
-      const uint8_t* __restrict hi;
-      if constexpr (kT == 0) {
-        lo = rev + (cols - 1 - xc);
-        hi = rev + (cols + nd + 32) + (cols - 1 - xc);
-      } else {
-        lo = z.lo + (cols - 1 - xc) * kT;
-        hi = z.hi + (cols - 1 - xc) * kT;
-      }
-      const uint16_t l = lrow[xc];
-      const typename B::R llo = B::set1(l & 0xFF), lhi = B::set1(l >> 8);
-      uint8_t* __restrict fo = f + at;
-      const uint8_t* __restrict b = other[0] + at;
-      const uint8_t* __restrict c = other[1] + at;
-      uint8_t* __restrict s = ring + ((j + 1) % 3) * nd;
-      const uint8_t* __restrict p = ring + ((j - 1) % 3) * nd;
-      const uint8_t* __restrict q = ring + (j % 3) * nd;
-      for (int k = 0; k < nd; k += N) {
-        const typename B::R h = B::hamming(B::load(lo + k), B::load(hi + k), llo, lhi);
-        B::store(fo + k, h);
-        const typename B::R cs = B::add(B::add(h, B::load(b + k)), B::load(c + k));
-        B::store(s + k, cs);
-        B::store(o + k, B::add(B::add(B::load(p + k), B::load(q + k)), cs));
-      }
     } else {
       column(j + 1, ring + ((j + 1) % 3) * nd);
       const uint8_t* __restrict p = ring + ((j - 1) % 3) * nd;
