@@ -726,6 +726,52 @@ void raw_row8_impl(const uint16_t* lrow, const uint16_t* rrow, ptrdiff_t cols, p
   }
 }
 
+// box_row8_impl's one sweep for nd = M vectors (M small enough for the register file): the
+// sums of the last two column sums (P) and the last one (Q) stay in registers from one
+// column to the next, so no ring of column sums is stored and read back. fo, b, c: the
+// fresh and the other two raw rows at raw column j + 1 of the first column x0.
+template <class B, int M, int kT>
+void box_sweep_regs(const uint8_t* zlo, const uint8_t* zhi, const uint16_t* lrow,
+                    ptrdiff_t cols, ptrdiff_t x0, ptrdiff_t x1, int min_d, int cmax,
+                    const uint8_t* ring, uint8_t* fo, const uint8_t* b, const uint8_t* c,
+                    uint8_t* out) {
+  using R = typename B::R;
+  constexpr int N = B::kLanes;
+  constexpr int nd = M * N;
+  constexpr ptrdiff_t step = kT == 0 ? 1 : kT;
+  R pv[M], qv[M];
+  for (int m = 0; m < M; ++m) {
+    const R p = B::load(ring + m * N), q = B::load(ring + nd + m * N);
+    pv[m] = B::add(p, q);
+    qv[m] = q;
+  }
+  for (ptrdiff_t x = x0; x < x1; ++x) {
+    uint8_t* __restrict o = out + x * nd;
+    const ptrdiff_t xc = x + 1 < cols ? x + 1 : cols - 1;
+    const ptrdiff_t zat = (cols - 1 - xc) * step;
+    const uint16_t l = lrow[xc];
+    const R llo = B::set1(l & 0xFF), lhi = B::set1(l >> 8);
+#pragma GCC unroll 8
+    for (int m = 0; m < M; ++m) {
+      const R h = B::hamming(B::load(zlo + zat + m * N), B::load(zhi + zat + m * N), llo, lhi);
+      B::store(fo + m * N, h);
+      const R cs = B::add(B::add(h, B::load(b + m * N)), B::load(c + m * N));
+      B::store(o + m * N, B::add(pv[m], cs));
+      pv[m] = B::add(qv[m], cs);
+      qv[m] = cs;
+    }
+    fo += nd;
+    b += nd;
+    c += nd;
+    const ptrdiff_t khi = x - min_d;
+    const ptrdiff_t klo = x - min_d - cols + 1;
+    if (khi + 1 < nd || klo > 0) {
+      fill_range<kT>(o, clamp_index(khi + 1, 0, nd), nd, nd, cmax);
+      fill_range<kT>(o, 0, clamp_index(klo, 0, nd), nd, cmax);
+    }
+  }
+}
+
 template <class B, int kT>
 void box_row8_impl(uint8_t* const* raws, int fresh, const uint16_t* lrow, const uint16_t* rrow,
                    uint8_t* rev, int radius, ptrdiff_t cols, ptrdiff_t x0, ptrdiff_t x1, int nd,
@@ -798,6 +844,14 @@ void box_row8_impl(uint8_t* const* raws, int fresh, const uint16_t* lrow, const 
     uint8_t* fo = f + 2 * nd;
     const uint8_t* b = other[0] + 2 * nd;
     const uint8_t* c = other[1] + 2 * nd;
+    if (nd == 2 * N) {
+      box_sweep_regs<B, 2, kT>(zlo, zhi, lrow, cols, x0, x1, min_d, cmax, ring, fo, b, c, out);
+      return;
+    }
+    if (nd == 4 * N) {
+      box_sweep_regs<B, 4, kT>(zlo, zhi, lrow, cols, x0, x1, min_d, cmax, ring, fo, b, c, out);
+      return;
+    }
     for (ptrdiff_t x = x0; x < x1; ++x) {
       uint8_t* __restrict o = out + x * nd;
       const ptrdiff_t xc = x + 1 < cols ? x + 1 : cols - 1;
