@@ -12,6 +12,7 @@
 
 #include "semi_global_kernels.hpp"
 
+#include <algorithm>
 #include <cmath>
 #include <cstdint>
 #include <cstring>
@@ -659,17 +660,67 @@ inline ZRow split_z(const uint16_t* rrow, ptrdiff_t cols, int nd, int min_d, int
   uint8_t* clo = rev + 2 * nz;
   uint8_t* chi = clo + cols + nd;
   ptrdiff_t base[kMaxNumDisparities / 16];
+  ptrdiff_t qlos[kMaxNumDisparities / 16], qhis[kMaxNumDisparities / 16];
   const ptrdiff_t wlo = -static_cast<ptrdiff_t>(min_d) - nd + 1;
   const ptrdiff_t whi = cols - 1 - min_d;
   ptrdiff_t off = 0;
   for (int r = 0; r < nv; ++r) {
-    const ptrdiff_t qlo = -floor_div(r - wlo, nv);  // ceil((wlo - r) / nv)
-    const ptrdiff_t qhi = floor_div(whi - r, nv);
-    base[r] = off + qhi;  // w = q * nv + r at base[r] - q
-    for (ptrdiff_t q = qhi; q >= qlo; --q, ++off) {
+    qlos[r] = -floor_div(r - wlo, nv);  // ceil((wlo - r) / nv)
+    qhis[r] = floor_div(whi - r, nv);
+    base[r] = off + qhis[r];  // w = q * nv + r at base[r] - q
+    off += qhis[r] - qlos[r] + 1;
+  }
+  // With nv = 8, the q of whole blocks of 8 inside every run and the image (w = q * 8 + r
+  // in 0 .. cols - 1) by 8x8 transposes of the right row: q from qb0 to qb1 - 1.
+  ptrdiff_t qb0 = 0, qb1 = 0;
+  if (nv == 8 && cols >= 8) {
+    ptrdiff_t q0 = 0, q1 = cols / 8;  // rows q * 8 .. q * 8 + 7 inside the image
+    for (int r = 0; r < nv; ++r) {
+      q0 = std::max(q0, qlos[r]);
+      q1 = std::min(q1, qhis[r] + 1);
+    }
+    if (q1 - q0 >= 8) {
+      qb0 = q0;
+      qb1 = q0 + (q1 - q0) / 8 * 8;
+      // Each block's run r: the values for q = q0 + 7 down to q0, at base[r] - q0 - 7 on;
+      // the shuffle reverses the eight words and puts their low bytes first.
+      const __m128i rev_split =
+          _mm_setr_epi8(14, 12, 10, 8, 6, 4, 2, 0, 15, 13, 11, 9, 7, 5, 3, 1);
+      for (ptrdiff_t q = qb0; q < qb1; q += 8) {
+        __m128i a[8];
+        for (int i = 0; i < 8; ++i) {
+          a[i] = _mm_loadu_si128(reinterpret_cast<const __m128i*>(rrow + (q + i) * 8));
+        }
+        const __m128i t0 = _mm_unpacklo_epi16(a[0], a[1]), t1 = _mm_unpackhi_epi16(a[0], a[1]);
+        const __m128i t2 = _mm_unpacklo_epi16(a[2], a[3]), t3 = _mm_unpackhi_epi16(a[2], a[3]);
+        const __m128i t4 = _mm_unpacklo_epi16(a[4], a[5]), t5 = _mm_unpackhi_epi16(a[4], a[5]);
+        const __m128i t6 = _mm_unpacklo_epi16(a[6], a[7]), t7 = _mm_unpackhi_epi16(a[6], a[7]);
+        const __m128i u0 = _mm_unpacklo_epi32(t0, t2), u1 = _mm_unpackhi_epi32(t0, t2);
+        const __m128i u2 = _mm_unpacklo_epi32(t1, t3), u3 = _mm_unpackhi_epi32(t1, t3);
+        const __m128i u4 = _mm_unpacklo_epi32(t4, t6), u5 = _mm_unpackhi_epi32(t4, t6);
+        const __m128i u6 = _mm_unpacklo_epi32(t5, t7), u7 = _mm_unpackhi_epi32(t5, t7);
+        const __m128i col[8] = {_mm_unpacklo_epi64(u0, u4), _mm_unpackhi_epi64(u0, u4),
+                                _mm_unpacklo_epi64(u1, u5), _mm_unpackhi_epi64(u1, u5),
+                                _mm_unpacklo_epi64(u2, u6), _mm_unpackhi_epi64(u2, u6),
+                                _mm_unpacklo_epi64(u3, u7), _mm_unpackhi_epi64(u3, u7)};
+        for (int r = 0; r < 8; ++r) {
+          const __m128i b = _mm_shuffle_epi8(col[r], rev_split);
+          const ptrdiff_t at = base[r] - q - 7;
+          _mm_storel_epi64(reinterpret_cast<__m128i*>(clo + at), b);
+          _mm_storel_epi64(reinterpret_cast<__m128i*>(chi + at), _mm_unpackhi_epi64(b, b));
+        }
+      }
+    }
+  }
+  for (int r = 0; r < nv; ++r) {
+    for (ptrdiff_t q = qhis[r]; q >= qlos[r]; --q) {
+      if (q < qb1 && q >= qb0) {
+        q = qb0;  // the blocks' q are done; --q goes on below them
+        continue;
+      }
       const uint16_t v = rrow[clamp_index(q * nv + r, 0, cols - 1)];
-      clo[off] = static_cast<uint8_t>(v & 0xFF);
-      chi[off] = static_cast<uint8_t>(v >> 8);
+      clo[base[r] - q] = static_cast<uint8_t>(v & 0xFF);
+      chi[base[r] - q] = static_cast<uint8_t>(v >> 8);
     }
   }
   // Z[t] for t = cols - 1 down to 1 - nv: w = t - min_d.
