@@ -670,11 +670,12 @@ inline ZRow split_z(const uint16_t* rrow, ptrdiff_t cols, int nd, int min_d, int
     base[r] = off + qhis[r];  // w = q * nv + r at base[r] - q
     off += qhis[r] - qlos[r] + 1;
   }
-  // With nv = 8, the q of whole blocks of 8 inside every run and the image (w = q * 8 + r
-  // in 0 .. cols - 1) by 8x8 transposes of the right row: q from qb0 to qb1 - 1.
+  // With nv a multiple of 8, the q of whole blocks of 8 inside every run and the image
+  // (w = q * nv + r in 0 .. cols - 1) by 8x8 transposes of the right row (nv / 8 per block
+  // of 8 rows, of residues g .. g + 7 each): q from qb0 to qb1 - 1.
   ptrdiff_t qb0 = 0, qb1 = 0;
-  if (nv == 8 && cols >= 8) {
-    ptrdiff_t q0 = 0, q1 = cols / 8;  // rows q * 8 .. q * 8 + 7 inside the image
+  if (nv % 8 == 0 && cols >= nv) {
+    ptrdiff_t q0 = 0, q1 = cols / nv;  // rows q * nv .. q * nv + nv - 1 inside the image
     for (int r = 0; r < nv; ++r) {
       q0 = std::max(q0, qlos[r]);
       q1 = std::min(q1, qhis[r] + 1);
@@ -686,10 +687,11 @@ inline ZRow split_z(const uint16_t* rrow, ptrdiff_t cols, int nd, int min_d, int
       // the shuffle reverses the eight words and puts their low bytes first.
       const __m128i rev_split =
           _mm_setr_epi8(14, 12, 10, 8, 6, 4, 2, 0, 15, 13, 11, 9, 7, 5, 3, 1);
-      for (ptrdiff_t q = qb0; q < qb1; q += 8) {
+      // Residues g .. g + 7 of the rows q .. q + 7.
+      auto transpose = [&](ptrdiff_t q, int g) {
         __m128i a[8];
         for (int i = 0; i < 8; ++i) {
-          a[i] = _mm_loadu_si128(reinterpret_cast<const __m128i*>(rrow + (q + i) * 8));
+          a[i] = _mm_loadu_si128(reinterpret_cast<const __m128i*>(rrow + (q + i) * nv + g));
         }
         const __m128i t0 = _mm_unpacklo_epi16(a[0], a[1]), t1 = _mm_unpackhi_epi16(a[0], a[1]);
         const __m128i t2 = _mm_unpacklo_epi16(a[2], a[3]), t3 = _mm_unpackhi_epi16(a[2], a[3]);
@@ -705,9 +707,16 @@ inline ZRow split_z(const uint16_t* rrow, ptrdiff_t cols, int nd, int min_d, int
                                 _mm_unpacklo_epi64(u3, u7), _mm_unpackhi_epi64(u3, u7)};
         for (int r = 0; r < 8; ++r) {
           const __m128i b = _mm_shuffle_epi8(col[r], rev_split);
-          const ptrdiff_t at = base[r] - q - 7;
+          const ptrdiff_t at = base[g + r] - q - 7;
           _mm_storel_epi64(reinterpret_cast<__m128i*>(clo + at), b);
           _mm_storel_epi64(reinterpret_cast<__m128i*>(chi + at), _mm_unpackhi_epi64(b, b));
+        }
+      };
+      for (ptrdiff_t q = qb0; q < qb1; q += 8) {
+        if (nv == 8) {
+          transpose(q, 0);
+        } else {
+          for (int g = 0; g < nv; g += 8) transpose(q, g);
         }
       }
     }
