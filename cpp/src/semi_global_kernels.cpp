@@ -12,6 +12,7 @@
 
 #include "semi_global_kernels.hpp"
 
+#include <algorithm>
 #include <cmath>
 #include <cstdint>
 #include <cstring>
@@ -659,17 +660,76 @@ inline ZRow split_z(const uint16_t* rrow, ptrdiff_t cols, int nd, int min_d, int
   uint8_t* clo = rev + 2 * nz;
   uint8_t* chi = clo + cols + nd;
   ptrdiff_t base[kMaxNumDisparities / 16];
+  ptrdiff_t qlos[kMaxNumDisparities / 16], qhis[kMaxNumDisparities / 16];
   const ptrdiff_t wlo = -static_cast<ptrdiff_t>(min_d) - nd + 1;
   const ptrdiff_t whi = cols - 1 - min_d;
   ptrdiff_t off = 0;
   for (int r = 0; r < nv; ++r) {
-    const ptrdiff_t qlo = -floor_div(r - wlo, nv);  // ceil((wlo - r) / nv)
-    const ptrdiff_t qhi = floor_div(whi - r, nv);
-    base[r] = off + qhi;  // w = q * nv + r at base[r] - q
-    for (ptrdiff_t q = qhi; q >= qlo; --q, ++off) {
+    qlos[r] = -floor_div(r - wlo, nv);  // ceil((wlo - r) / nv)
+    qhis[r] = floor_div(whi - r, nv);
+    base[r] = off + qhis[r];  // w = q * nv + r at base[r] - q
+    off += qhis[r] - qlos[r] + 1;
+  }
+  // With nv a multiple of 8, the q of whole blocks of 8 inside every run and the image
+  // (w = q * nv + r in 0 .. cols - 1) by 8x8 transposes of the right row (nv / 8 per block
+  // of 8 rows, of residues g .. g + 7 each): q from qb0 to qb1 - 1.
+  ptrdiff_t qb0 = 0, qb1 = 0;
+  if (nv % 8 == 0 && cols >= nv) {
+    ptrdiff_t q0 = 0, q1 = cols / nv;  // rows q * nv .. q * nv + nv - 1 inside the image
+    for (int r = 0; r < nv; ++r) {
+      q0 = std::max(q0, qlos[r]);
+      q1 = std::min(q1, qhis[r] + 1);
+    }
+    if (q1 - q0 >= 8) {
+      qb0 = q0;
+      qb1 = q0 + (q1 - q0) / 8 * 8;
+      // Each block's run r: the values for q = q0 + 7 down to q0, at base[r] - q0 - 7 on;
+      // the shuffle reverses the eight words and puts their low bytes first.
+      const __m128i rev_split =
+          _mm_setr_epi8(14, 12, 10, 8, 6, 4, 2, 0, 15, 13, 11, 9, 7, 5, 3, 1);
+      // Residues g .. g + 7 of the rows q .. q + 7.
+      auto transpose = [&](ptrdiff_t q, int g) {
+        __m128i a[8];
+        for (int i = 0; i < 8; ++i) {
+          a[i] = _mm_loadu_si128(reinterpret_cast<const __m128i*>(rrow + (q + i) * nv + g));
+        }
+        const __m128i t0 = _mm_unpacklo_epi16(a[0], a[1]), t1 = _mm_unpackhi_epi16(a[0], a[1]);
+        const __m128i t2 = _mm_unpacklo_epi16(a[2], a[3]), t3 = _mm_unpackhi_epi16(a[2], a[3]);
+        const __m128i t4 = _mm_unpacklo_epi16(a[4], a[5]), t5 = _mm_unpackhi_epi16(a[4], a[5]);
+        const __m128i t6 = _mm_unpacklo_epi16(a[6], a[7]), t7 = _mm_unpackhi_epi16(a[6], a[7]);
+        const __m128i u0 = _mm_unpacklo_epi32(t0, t2), u1 = _mm_unpackhi_epi32(t0, t2);
+        const __m128i u2 = _mm_unpacklo_epi32(t1, t3), u3 = _mm_unpackhi_epi32(t1, t3);
+        const __m128i u4 = _mm_unpacklo_epi32(t4, t6), u5 = _mm_unpackhi_epi32(t4, t6);
+        const __m128i u6 = _mm_unpacklo_epi32(t5, t7), u7 = _mm_unpackhi_epi32(t5, t7);
+        const __m128i col[8] = {_mm_unpacklo_epi64(u0, u4), _mm_unpackhi_epi64(u0, u4),
+                                _mm_unpacklo_epi64(u1, u5), _mm_unpackhi_epi64(u1, u5),
+                                _mm_unpacklo_epi64(u2, u6), _mm_unpackhi_epi64(u2, u6),
+                                _mm_unpacklo_epi64(u3, u7), _mm_unpackhi_epi64(u3, u7)};
+        for (int r = 0; r < 8; ++r) {
+          const __m128i b = _mm_shuffle_epi8(col[r], rev_split);
+          const ptrdiff_t at = base[g + r] - q - 7;
+          _mm_storel_epi64(reinterpret_cast<__m128i*>(clo + at), b);
+          _mm_storel_epi64(reinterpret_cast<__m128i*>(chi + at), _mm_unpackhi_epi64(b, b));
+        }
+      };
+      for (ptrdiff_t q = qb0; q < qb1; q += 8) {
+        if (nv == 8) {
+          transpose(q, 0);
+        } else {
+          for (int g = 0; g < nv; g += 8) transpose(q, g);
+        }
+      }
+    }
+  }
+  for (int r = 0; r < nv; ++r) {
+    for (ptrdiff_t q = qhis[r]; q >= qlos[r]; --q) {
+      if (q < qb1 && q >= qb0) {
+        q = qb0;  // the blocks' q are done; --q goes on below them
+        continue;
+      }
       const uint16_t v = rrow[clamp_index(q * nv + r, 0, cols - 1)];
-      clo[off] = static_cast<uint8_t>(v & 0xFF);
-      chi[off] = static_cast<uint8_t>(v >> 8);
+      clo[base[r] - q] = static_cast<uint8_t>(v & 0xFF);
+      chi[base[r] - q] = static_cast<uint8_t>(v >> 8);
     }
   }
   // Z[t] for t = cols - 1 down to 1 - nv: w = t - min_d.
@@ -726,6 +786,52 @@ void raw_row8_impl(const uint16_t* lrow, const uint16_t* rrow, ptrdiff_t cols, p
   }
 }
 
+// box_row8_impl's one sweep for nd = M vectors (M small enough for the register file): the
+// sums of the last two column sums (P) and the last one (Q) stay in registers from one
+// column to the next, so no ring of column sums is stored and read back. fo, b, c: the
+// fresh and the other two raw rows at raw column j + 1 of the first column x0.
+template <class B, int M, int kT>
+void box_sweep_regs(const uint8_t* zlo, const uint8_t* zhi, const uint16_t* lrow,
+                    ptrdiff_t cols, ptrdiff_t x0, ptrdiff_t x1, int min_d, int cmax,
+                    const uint8_t* ring, uint8_t* fo, const uint8_t* b, const uint8_t* c,
+                    uint8_t* out) {
+  using R = typename B::R;
+  constexpr int N = B::kLanes;
+  constexpr int nd = M * N;
+  constexpr ptrdiff_t step = kT == 0 ? 1 : kT;
+  R pv[M], qv[M];
+  for (int m = 0; m < M; ++m) {
+    const R p = B::load(ring + m * N), q = B::load(ring + nd + m * N);
+    pv[m] = B::add(p, q);
+    qv[m] = q;
+  }
+  for (ptrdiff_t x = x0; x < x1; ++x) {
+    uint8_t* __restrict o = out + x * nd;
+    const ptrdiff_t xc = x + 1 < cols ? x + 1 : cols - 1;
+    const ptrdiff_t zat = (cols - 1 - xc) * step;
+    const uint16_t l = lrow[xc];
+    const R llo = B::set1(l & 0xFF), lhi = B::set1(l >> 8);
+#pragma GCC unroll 8
+    for (int m = 0; m < M; ++m) {
+      const R h = B::hamming(B::load(zlo + zat + m * N), B::load(zhi + zat + m * N), llo, lhi);
+      B::store(fo + m * N, h);
+      const R cs = B::add(B::add(h, B::load(b + m * N)), B::load(c + m * N));
+      B::store(o + m * N, B::add(pv[m], cs));
+      pv[m] = B::add(qv[m], cs);
+      qv[m] = cs;
+    }
+    fo += nd;
+    b += nd;
+    c += nd;
+    const ptrdiff_t khi = x - min_d;
+    const ptrdiff_t klo = x - min_d - cols + 1;
+    if (khi + 1 < nd || klo > 0) {
+      fill_range<kT>(o, clamp_index(khi + 1, 0, nd), nd, nd, cmax);
+      fill_range<kT>(o, 0, clamp_index(klo, 0, nd), nd, cmax);
+    }
+  }
+}
+
 template <class B, int kT>
 void box_row8_impl(uint8_t* const* raws, int fresh, const uint16_t* lrow, const uint16_t* rrow,
                    uint8_t* rev, int radius, ptrdiff_t cols, ptrdiff_t x0, ptrdiff_t x1, int nd,
@@ -777,40 +883,73 @@ void box_row8_impl(uint8_t* const* raws, int fresh, const uint16_t* lrow, const 
     column(1, ring + nd);
   }
   // With a fresh row and a 3x3 box: the fresh row's new column, its column sum and the box
-  // sum in one sweep over the disparities (the same sums, fewer loads and loops).
-  const bool one_sweep = radius == 1 && f != nullptr && nd % N == 0;
+  // sum in one sweep over the disparities (the same sums, fewer loads and loops). The ring's
+  // three column sums rotate by pointer (no index mod 3 per column), the row pointers advance
+  // by nd, and the border fill runs only for the columns whose range leaves the right image.
+  if (radius == 1 && f != nullptr && nd % N == 0) {
+    uint8_t* p = ring;  // the column sums of raw columns j - 1, j and (new) j + 1
+    uint8_t* q = ring + nd;
+    uint8_t* s = ring + 2 * nd;
+    const ptrdiff_t step = kT == 0 ? 1 : kT;
+    const uint8_t* __restrict zlo;
+    const uint8_t* __restrict zhi;
+    if constexpr (kT == 0) {
+      zlo = rev;
+      zhi = rev + (cols + nd + 32);
+    } else {
+      zlo = z.lo;
+      zhi = z.hi;
+    }
+    // Raw column j + 1 = x - x0 + 2 is image column x + 1 (clamped).
+    uint8_t* fo = f + 2 * nd;
+    const uint8_t* b = other[0] + 2 * nd;
+    const uint8_t* c = other[1] + 2 * nd;
+    if (nd == 2 * N) {
+      box_sweep_regs<B, 2, kT>(zlo, zhi, lrow, cols, x0, x1, min_d, cmax, ring, fo, b, c, out);
+      return;
+    }
+    if (nd == 4 * N) {
+      box_sweep_regs<B, 4, kT>(zlo, zhi, lrow, cols, x0, x1, min_d, cmax, ring, fo, b, c, out);
+      return;
+    }
+    for (ptrdiff_t x = x0; x < x1; ++x) {
+      uint8_t* __restrict o = out + x * nd;
+      const ptrdiff_t xc = x + 1 < cols ? x + 1 : cols - 1;
+      const uint8_t* __restrict lo = zlo + (cols - 1 - xc) * step;
+      const uint8_t* __restrict hi = zhi + (cols - 1 - xc) * step;
+      const uint16_t l = lrow[xc];
+      const typename B::R llo = B::set1(l & 0xFF), lhi = B::set1(l >> 8);
+      const uint8_t* __restrict pk = p;
+      const uint8_t* __restrict qk = q;
+      uint8_t* __restrict sk = s;
+      for (int k = 0; k < nd; k += N) {
+        const typename B::R h = B::hamming(B::load(lo + k), B::load(hi + k), llo, lhi);
+        B::store(fo + k, h);
+        const typename B::R cs = B::add(B::add(h, B::load(b + k)), B::load(c + k));
+        B::store(sk + k, cs);
+        B::store(o + k, B::add(B::add(B::load(pk + k), B::load(qk + k)), cs));
+      }
+      uint8_t* const t = p;
+      p = q;
+      q = s;
+      s = t;
+      fo += nd;
+      b += nd;
+      c += nd;
+      const ptrdiff_t khi = x - min_d;
+      const ptrdiff_t klo = x - min_d - cols + 1;
+      if (khi + 1 < nd || klo > 0) {
+        fill_range<kT>(o, clamp_index(khi + 1, 0, nd), nd, nd, cmax);
+        fill_range<kT>(o, 0, clamp_index(klo, 0, nd), nd, cmax);
+      }
+    }
+    return;
+  }
   for (ptrdiff_t x = x0; x < x1; ++x) {
     uint8_t* __restrict o = out + x * nd;
     const ptrdiff_t j = x - x0 + radius;
     if (radius == 0) {
       column(j, o);
-    } else if (one_sweep) {
-      const ptrdiff_t at = (j + 1) * nd;
-      const ptrdiff_t xc = clamp_index(x0 - radius + j + 1, 0, cols - 1);
-      const uint8_t* __restrict lo;
-      const uint8_t* __restrict hi;
-      if constexpr (kT == 0) {
-        lo = rev + (cols - 1 - xc);
-        hi = rev + (cols + nd + 32) + (cols - 1 - xc);
-      } else {
-        lo = z.lo + (cols - 1 - xc) * kT;
-        hi = z.hi + (cols - 1 - xc) * kT;
-      }
-      const uint16_t l = lrow[xc];
-      const typename B::R llo = B::set1(l & 0xFF), lhi = B::set1(l >> 8);
-      uint8_t* __restrict fo = f + at;
-      const uint8_t* __restrict b = other[0] + at;
-      const uint8_t* __restrict c = other[1] + at;
-      uint8_t* __restrict s = ring + ((j + 1) % 3) * nd;
-      const uint8_t* __restrict p = ring + ((j - 1) % 3) * nd;
-      const uint8_t* __restrict q = ring + (j % 3) * nd;
-      for (int k = 0; k < nd; k += N) {
-        const typename B::R h = B::hamming(B::load(lo + k), B::load(hi + k), llo, lhi);
-        B::store(fo + k, h);
-        const typename B::R cs = B::add(B::add(h, B::load(b + k)), B::load(c + k));
-        B::store(s + k, cs);
-        B::store(o + k, B::add(B::add(B::load(p + k), B::load(q + k)), cs));
-      }
     } else {
       column(j + 1, ring + ((j + 1) % 3) * nd);
       const uint8_t* __restrict p = ring + ((j - 1) % 3) * nd;
