@@ -158,11 +158,18 @@ void undistort_rectangles(const CameraModel& cam, const Eigen::Matrix3d& R,
   outer = {ox0, oy0, ox1 - ox0, oy1 - oy0};
 }
 
-Rect clip_rect(int x, int y, int w, int h, int width, int height) {
-  const int x0 = std::max(x, 0), y0 = std::max(y, 0);
-  const int x1 = std::min(x + w, width), y1 = std::min(y + h, height);
+// The rectangle (x, y, w, h), whole numbers given as doubles, clipped to the image; empty when
+// nothing of it is inside or a value is not finite (a degenerate calibration, which
+// stereo_rectify's caller reports by name). In doubles: converting an infinite, NaN or huge
+// value to int is undefined behaviour (UBSan stops there), and x + w could overflow an int.
+Rect clip_rect(double x, double y, double w, double h, int width, int height) {
+  if (!std::isfinite(x) || !std::isfinite(y) || !std::isfinite(w) || !std::isfinite(h)) return {};
+  const double x0 = std::max(x, 0.0), y0 = std::max(y, 0.0);
+  const double x1 = std::min(x + w, static_cast<double>(width));
+  const double y1 = std::min(y + h, static_cast<double>(height));
   if (x1 - x0 <= 0 || y1 - y0 <= 0) return {};
-  return {x0, y0, x1 - x0, y1 - y0};
+  return {static_cast<int>(x0), static_cast<int>(y0), static_cast<int>(x1 - x0),
+          static_cast<int>(y1 - y0)};
 }
 
 bool finite(const Eigen::MatrixXd& m) { return m.allFinite(); }
@@ -390,14 +397,12 @@ StereoRectification stereo_rectify(const CameraModel& cam1, const CameraModel& c
   pp(idx, 3) = 0.;
   out.P1 = pp;
 
-  out.roi1 = clip_rect(static_cast<int>(std::ceil((inner1.x - cx1_0) * s + cx1)),
-                       static_cast<int>(std::ceil((inner1.y - cy1_0) * s + cy1)),
-                       static_cast<int>(std::floor(inner1.width * s)),
-                       static_cast<int>(std::floor(inner1.height * s)), new_w, new_h);
-  out.roi2 = clip_rect(static_cast<int>(std::ceil((inner2.x - cx2_0) * s + cx2)),
-                       static_cast<int>(std::ceil((inner2.y - cy2_0) * s + cy2)),
-                       static_cast<int>(std::floor(inner2.width * s)),
-                       static_cast<int>(std::floor(inner2.height * s)), new_w, new_h);
+  out.roi1 = clip_rect(std::ceil((inner1.x - cx1_0) * s + cx1),
+                       std::ceil((inner1.y - cy1_0) * s + cy1), std::floor(inner1.width * s),
+                       std::floor(inner1.height * s), new_w, new_h);
+  out.roi2 = clip_rect(std::ceil((inner2.x - cx2_0) * s + cx2),
+                       std::ceil((inner2.y - cy2_0) * s + cy2), std::floor(inner2.width * s),
+                       std::floor(inner2.height * s), new_w, new_h);
 
   out.Q << 1, 0, 0, -cx1,  //
       0, 1, 0, -cy1,       //
