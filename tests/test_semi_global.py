@@ -24,6 +24,7 @@ import stereodepth as sd
 from stereodepth import reference as ref
 from stereodepth._reference_block_match import grey
 from stereodepth.io import read_image
+from stereodepth.semi_global import stripe_starts
 
 SUPPORTED_ISAS: list[str] = list(sd.build_info()["supported_isas"])
 
@@ -196,10 +197,38 @@ def test_odd_shapes_match_oracle(shape: tuple[int, int], nd: int, md: int, paths
         assert_agree(native, ref.semi_global_match(left, right, **kw), subpixel=True)
 
 
+@pytest.mark.parametrize(
+    ("rows", "starts"),
+    [
+        (1, [0]),
+        (64, [0]),
+        (65, [0, 32]),
+        (128, [0, 64]),
+        (129, [0, 32, 64, 96]),  # ceil(129 / 64) = 3 is odd: 4 stripes
+        (150, [0, 37, 75, 112]),
+        (288, [0, 48, 96, 144, 192, 240]),
+        (720, list(range(0, 720, 60))),  # not 11 stripes of 64 and one of 16
+    ],
+)
+def test_stripe_starts(rows: int, starts: list[int]) -> None:
+    assert stripe_starts(rows) == starts
+
+
+@pytest.mark.parametrize("rows", range(1, 400))
+def test_stripes_are_even_and_at_most_64_rows(rows: int) -> None:
+    starts = stripe_starts(rows)
+    heights = np.diff([*starts, rows])
+    assert heights.max() <= 64 and heights.max() - heights.min() <= 1
+    assert len(starts) == 1 or len(starts) % 2 == 0
+    assert len(starts) <= -(-rows // 64) + 1
+
+
 @pytest.mark.parametrize("threads", [1, 2, 3])
-def test_single_pass_stripes_match_oracle(threads: int) -> None:
-    # paths=3 restarts the path from above every 64 rows: three stripes here.
-    left, right, _ = slanted_pair((150, 50), d0=5.0, dx=0.04, dy=0.03, seed=16)
+@pytest.mark.parametrize("rows", [150, 129, 67])
+def test_single_pass_stripes_match_oracle(threads: int, rows: int) -> None:
+    # paths=3 restarts the path from above at each stripe: 4, 4 and 2 stripes of unequal
+    # heights here (stripe_starts).
+    left, right, _ = slanted_pair((rows, 50), d0=5.0, dx=0.04, dy=0.03, seed=16)
     kw: dict[str, Any] = {"num_disparities": 16, "paths": 3, "return_confidence": True}
     assert_agree(
         sd.semi_global_match(left, right, threads=threads, **kw),

@@ -43,8 +43,18 @@ int path_stride(int nd) { return (nd + 3 + 15) / 16 * 16; }
 
 int vertical_paths(int paths) { return paths == 8 ? 3 : 1; }
 
-// paths == 3: the rows of a stripe, whose path from above starts at its first row.
+// paths == 3: the stripes, whose path from above starts at their first row. ceil(rows / 64)
+// of them, one more when that is odd and above 1, of nearly equal height (stripe s starts at
+// row s * rows / n), so that two threads get the same number of rows: at 1280 x 720, twelve
+// stripes of 60 rows rather than eleven of 64 and one of 16 (a ceiling of 1.875x on the
+// speed-up from one thread to two). semi_global.py's stripe_starts states the same rule.
 constexpr std::ptrdiff_t kStripeRows = 64;
+
+std::ptrdiff_t stripe_count(std::ptrdiff_t rows) {
+  std::ptrdiff_t n = std::max<std::ptrdiff_t>(1, (rows + kStripeRows - 1) / kStripeRows);
+  if (n > 1 && n % 2 == 1) ++n;
+  return n;
+}
 
 // Threads meet at every row (the diagonal paths read the previous row across band edges).
 // A row's share takes tens of microseconds, about what waking a blocked thread costs, so a
@@ -387,8 +397,8 @@ std::size_t semi_global_memory(std::ptrdiff_t rows, std::ptrdiff_t cols, int nd,
   double bytes = 2.0 * static_cast<double>(nt - 1) * w * 4.0;  // the median's band edges
   if (paths == 3) {
     // Per thread: a few rows of W x D (the stripes' threads) or the median's rows.
-    const std::ptrdiff_t stripes = (rows + kStripeRows - 1) / kStripeRows;
-    const std::ptrdiff_t ns = std::min<std::ptrdiff_t>(nt, std::max<std::ptrdiff_t>(stripes, 1));
+    const std::ptrdiff_t stripes = stripe_count(rows);
+    const std::ptrdiff_t ns = std::min<std::ptrdiff_t>(nt, stripes);
     const double stripe = bytes16(fused ? FusedStripeLayout(c, nd, r, 2).total
                                         : PlainStripeLayout(c, nd, ls, r, 2).total);
     bytes += static_cast<double>(ns) * std::max(stripe, median) +
@@ -585,8 +595,9 @@ void SemiGlobalMatcher::compute(const StereoImage& left, const StereoImage& righ
   if (single_pass && fused) {
     // As below, with the fused row: per row the costs, then the path from above (in place in
     // one row of path costs) and the paths along the row, the sums and the decision.
-    const std::ptrdiff_t stripes = (rows + kStripeRows - 1) / kStripeRows;
+    const std::ptrdiff_t stripes = stripe_count(rows);
     const std::ptrdiff_t ns = std::min<std::ptrdiff_t>(nt, stripes);
+    std::atomic<std::ptrdiff_t> next_stripe{0};  // handed out in order, one at a time
     run_bands(ns, [&](std::ptrdiff_t b) {
       const auto c = sz(cols);
       const FusedStripeLayout lay(c, nd, r, ring_images);
@@ -604,9 +615,8 @@ void SemiGlobalMatcher::compute(const StereoImage& left, const StereoImage& righ
       fa.c = crow;
       fa.lv = reinterpret_cast<std::int16_t*>(rev + lay.lv);
       fa.lvmin = reinterpret_cast<std::int16_t*>(rev + lay.lvmin);
-      for (std::ptrdiff_t st = band(stripes, ns, b); st < band(stripes, ns, b + 1); ++st) {
-        const std::ptrdiff_t y0 = st * kStripeRows;
-        const std::ptrdiff_t y1 = std::min<std::ptrdiff_t>(rows, y0 + kStripeRows);
+      for (std::ptrdiff_t st = next_stripe++; st < stripes; st = next_stripe++) {
+        const std::ptrdiff_t y0 = band(rows, stripes, st), y1 = band(rows, stripes, st + 1);
         for (std::ptrdiff_t y = y0; y < y1; ++y) {
           std::uint8_t* raws[3];
           int fresh = -1;
@@ -636,12 +646,13 @@ void SemiGlobalMatcher::compute(const StereoImage& left, const StereoImage& righ
       }
     });
   } else if (single_pass) {
-    // paths == 3, one pass: stripes of kStripeRows rows (the last one shorter), each matched
+    // paths == 3, one pass: stripes of at most kStripeRows rows (stripe_count), each matched
     // top to bottom by one thread with the path from above restarting at its first row, so
     // the output does not depend on the number of threads; per row, the costs, the path from
     // above, the paths along the row and the decision, all in row buffers.
-    const std::ptrdiff_t stripes = (rows + kStripeRows - 1) / kStripeRows;
+    const std::ptrdiff_t stripes = stripe_count(rows);
     const std::ptrdiff_t ns = std::min<std::ptrdiff_t>(nt, stripes);
+    std::atomic<std::ptrdiff_t> next_stripe{0};  // handed out in order, one at a time
     run_bands(ns, [&](std::ptrdiff_t b) {
       const auto c = sz(cols);
       const auto lsz = sz(ls);
@@ -666,9 +677,8 @@ void SemiGlobalMatcher::compute(const StereoImage& left, const StereoImage& righ
         rows16[i * lsz] = detail::kSentinel;
         rows16[i * lsz + sz(nd) + 1] = detail::kSentinel;
       }
-      for (std::ptrdiff_t st = band(stripes, ns, b); st < band(stripes, ns, b + 1); ++st) {
-        const std::ptrdiff_t y0 = st * kStripeRows;
-        const std::ptrdiff_t y1 = std::min<std::ptrdiff_t>(rows, y0 + kStripeRows);
+      for (std::ptrdiff_t st = next_stripe++; st < stripes; st = next_stripe++) {
+        const std::ptrdiff_t y0 = band(rows, stripes, st), y1 = band(rows, stripes, st + 1);
         int flip = 0;
         for (std::ptrdiff_t y = y0; y < y1; ++y) {
           std::uint16_t* raws[3];

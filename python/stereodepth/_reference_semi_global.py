@@ -15,7 +15,7 @@ import numpy as np
 
 from ._reference_block_match import box_sum, census, grey, popcount, speckle_filter
 from .matching import as_pair
-from .semi_global import STRIPE_ROWS, SemiGlobalOptions, cost_max, fill_background
+from .semi_global import SemiGlobalOptions, cost_max, fill_background, stripe_starts
 
 __all__ = ["semi_global_match"]
 
@@ -67,10 +67,15 @@ def _step(
 
 
 def path_costs(
-    c: np.ndarray, g: np.ndarray, dy: int, dx: int, o: SemiGlobalOptions, stripe: int = 0
+    c: np.ndarray,
+    g: np.ndarray,
+    dy: int,
+    dx: int,
+    o: SemiGlobalOptions,
+    restarts: frozenset[int] = frozenset(),
 ) -> np.ndarray:
-    """L_r for the direction (dy, dx), in scan order (int64, like c); with ``stripe`` > 0 (a
-    downward path only), the path starts again at every row y with y % stripe == 0."""
+    """L_r for the direction (dy, dx), in scan order (int64, like c); a downward path starts
+    again at every row in ``restarts``."""
     h, w, _ = c.shape
     lr = np.empty_like(c)
     if dy == 0:
@@ -86,7 +91,7 @@ def path_costs(
     has = (xq >= 0) & (xq <= w - 1)
     xqc = np.clip(xq, 0, w - 1)
     for i, y in enumerate(ys):
-        if i == 0 or (stripe > 0 and y % stripe == 0):
+        if i == 0 or y in restarts:
             lr[y] = c[y]
             continue
         q = y - dy
@@ -133,10 +138,10 @@ def semi_global_match(
 
     c = costs(gl, gr, o)
     dirs = {3: PATHS_3, 4: PATHS_4, 8: PATHS_8}[o.paths]
-    stripe = STRIPE_ROWS if o.paths == 3 else 0
+    restarts = frozenset(stripe_starts(h)) if o.paths == 3 else frozenset()
     s = np.zeros_like(c)
     for dy, dx in dirs:
-        s += path_costs(c, ig, dy, dx, o, stripe)
+        s += path_costs(c, ig, dy, dx, o, restarts)
 
     inside = np.broadcast_to(candidate_inside(w, dmin, nd)[None], (h, w, nd))
     sentinel = np.int64(1) << np.int64(40)

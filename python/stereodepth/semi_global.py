@@ -28,8 +28,11 @@ Steps, in the kernel and in the oracle alike:
    ``min_disparity + num_disparities - 1`` columns).
 4. Paths: for each direction r (``paths=4``: from the left, the right, above and below;
    ``paths=8`` adds the four diagonals; ``paths=3``, one pass over the image: from the left,
-   the right and above, the path from above starting again every 64 rows, at rows
-   ``y % 64 == 0``, so that stripes of 64 rows can be matched in parallel), in scan order,
+   the right and above, the path from above starting again at the first row of each stripe,
+   so that the stripes can be matched in parallel: the ``H`` rows make
+   ``n = ceil(H / 64)`` stripes, one more when that is odd and above 1 (an even count
+   shares evenly between two cores), stripe ``s`` being rows ``floor(s * H / n)`` to
+   ``floor((s + 1) * H / n) - 1``; :func:`stripe_starts`), in scan order,
    ``L_r(p, d) = C(p, d) + min(L_r(q, d), L_r(q, d - 1) + P1, L_r(q, d + 1) + P1,
    m + P2') - m`` where ``q = p - r`` is the previous pixel on the path and ``m`` the least
    ``L_r(q, .)``; at the first pixel of a path ``L_r(p, d) = C(p, d)``. ``P2'`` adapts to the
@@ -92,8 +95,20 @@ CENSUS_BITS = 16
 #: The box sizes of the pixel cost (costs are stored in 8 bits: 16 * 3**2 = 144).
 BLOCK_SIZES = (1, 3)
 PATH_COUNTS = (3, 4, 8)
-#: paths=3 (one pass): the path from above starts again every STRIPE_ROWS rows.
+#: paths=3 (one pass): the most rows of a stripe, whose path from above starts at its first row.
 STRIPE_ROWS = 64
+
+
+def stripe_starts(rows: int) -> list[int]:
+    """The first row of each stripe of ``paths=3`` (the rows where its path from above starts
+    again), for an image of ``rows`` rows: ``n = ceil(rows / 64)`` stripes, one more when
+    ``n`` is odd and above 1, of nearly equal height (``floor(s * rows / n)`` for stripe
+    ``s``), so that two threads get the same number of rows. ``[0]`` for ``rows <= 64``."""
+    n = max(1, -(-rows // STRIPE_ROWS))
+    if n > 1 and n % 2 == 1:
+        n += 1
+    return [s * rows // n for s in range(n)]
+
 
 # Defaults, chosen by measuring on the shared scenes among round values, each change checked
 # on both halves of the scenes and the choice by leave-one-out (bench/README.md, "Semi-global
@@ -427,7 +442,8 @@ def semi_global_match(
         Grey levels of intensity step between neighbours that halve ``p2``
         (``P2' = max(p1, p2 * p2_step // (p2_step + step))``); 0 keeps ``p2`` everywhere.
     paths
-        3 (one pass: along the row and from above, restarting every 64 rows; least memory),
+        3 (one pass: along the row and from above, restarting at each stripe of at most 64
+        rows; least memory),
         4 (horizontal and vertical) or 8 (and the diagonals).
     subpixel
         ``True`` (the default) or ``"equiangular"``: the V-shaped fit, which suits census
