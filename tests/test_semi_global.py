@@ -379,6 +379,23 @@ def test_each_isa_matches_the_scalar_path(isa: str, paths: int) -> None:
         np.testing.assert_array_equal(a[1], b[1])
 
 
+@pytest.mark.parametrize("isa", SUPPORTED_ISAS)
+@pytest.mark.parametrize("nd", range(16, 288, 16))
+def test_every_vector_count_of_the_fused_row_matches_the_scalar_path(isa: str, nd: int) -> None:
+    # paths=3 with ndisp a multiple of 16 takes the fused row, compiled once per vector count
+    # (1 to 12 and 16 with AVX2) and once for any other count; uniqueness and confidence take
+    # its other instance.
+    left, right, _ = slanted_pair((37, 300), d0=0.4 * nd, dx=0.05, dy=0.02, seed=nd)
+    for kw in (
+        {"num_disparities": nd, "uniqueness_ratio": 0},
+        {"num_disparities": nd, "min_disparity": -5, "uniqueness_ratio": 10,
+         "return_confidence": True},
+    ):  # fmt: skip
+        a = sd.SemiGlobalMatcher(isa="baseline", paths=3, **kw).compute(left, right)
+        b = sd.SemiGlobalMatcher(isa=isa, paths=3, **kw).compute(left, right)
+        np.testing.assert_array_equal(a, b)
+
+
 def test_unknown_isa_is_rejected() -> None:
     with pytest.raises(ValueError, match="isa must be one of"):
         sd.SemiGlobalMatcher(num_disparities=8, isa="sse9")

@@ -2023,12 +2023,44 @@ void fused_row_t_v2(const FusedRowArgs& a) {
 
 template <class V>
 void fused_row_t_v(const FusedRowArgs& a) {
+  // One instance per vector count up to 12, and 16: with nv a constant the loops over the
+  // vectors unroll, worth up to 1.5x over the run-time count (ndisp 80 and 112 on AVX2).
   switch (a.p.nd / V::kLanes) {
+    case 1:
+      fused_row_t_v2<V, 1>(a);
+      break;
+    case 2:
+      fused_row_t_v2<V, 2>(a);
+      break;
+    case 3:
+      fused_row_t_v2<V, 3>(a);
+      break;
     case 4:
       fused_row_t_v2<V, 4>(a);
       break;
+    case 5:
+      fused_row_t_v2<V, 5>(a);
+      break;
+    case 6:
+      fused_row_t_v2<V, 6>(a);
+      break;
+    case 7:
+      fused_row_t_v2<V, 7>(a);
+      break;
     case 8:
       fused_row_t_v2<V, 8>(a);
+      break;
+    case 9:
+      fused_row_t_v2<V, 9>(a);
+      break;
+    case 10:
+      fused_row_t_v2<V, 10>(a);
+      break;
+    case 11:
+      fused_row_t_v2<V, 11>(a);
+      break;
+    case 12:
+      fused_row_t_v2<V, 12>(a);
       break;
     case 16:
       fused_row_t_v2<V, 16>(a);
