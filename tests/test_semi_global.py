@@ -371,7 +371,7 @@ def test_candidates_outside_the_image_never_win() -> None:
 @pytest.mark.parametrize("paths", [3, 4, 8])
 def test_each_isa_matches_the_scalar_path(isa: str, paths: int) -> None:
     left, right, _ = slanted_pair((64, 150), d0=9.0, dx=0.1, dy=-0.03, seed=14)
-    for nd in (7, 16, 33, 64, 100):
+    for nd in (7, 16, 32, 33, 48, 64, 80, 96, 100, 160):
         kw: dict[str, Any] = {"num_disparities": nd, "paths": paths, "return_confidence": True}
         a = sd.SemiGlobalMatcher(isa="baseline", **kw).compute(left, right)
         b = sd.SemiGlobalMatcher(isa=isa, **kw).compute(left, right)

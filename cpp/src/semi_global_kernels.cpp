@@ -926,13 +926,25 @@ void box_row8_impl(uint8_t* const* raws, int fresh, const uint16_t* lrow, const 
     uint8_t* fo = f + 2 * nd;
     const uint8_t* b = other[0] + 2 * nd;
     const uint8_t* c = other[1] + 2 * nd;
-    if (nd == 2 * N) {
-      box_sweep_regs<B, 2, kT>(zlo, zhi, lrow, cols, x0, x1, min_d, cmax, ring, fo, b, c, out);
-      return;
-    }
-    if (nd == 4 * N) {
-      box_sweep_regs<B, 4, kT>(zlo, zhi, lrow, cols, x0, x1, min_d, cmax, ring, fo, b, c, out);
-      return;
+    // Up to 5 vectors the two sums per vector fit the 16 registers of AVX2.
+    switch (nd / N) {
+      case 1:
+        box_sweep_regs<B, 1, kT>(zlo, zhi, lrow, cols, x0, x1, min_d, cmax, ring, fo, b, c, out);
+        return;
+      case 2:
+        box_sweep_regs<B, 2, kT>(zlo, zhi, lrow, cols, x0, x1, min_d, cmax, ring, fo, b, c, out);
+        return;
+      case 3:
+        box_sweep_regs<B, 3, kT>(zlo, zhi, lrow, cols, x0, x1, min_d, cmax, ring, fo, b, c, out);
+        return;
+      case 4:
+        box_sweep_regs<B, 4, kT>(zlo, zhi, lrow, cols, x0, x1, min_d, cmax, ring, fo, b, c, out);
+        return;
+      case 5:
+        box_sweep_regs<B, 5, kT>(zlo, zhi, lrow, cols, x0, x1, min_d, cmax, ring, fo, b, c, out);
+        return;
+      default:
+        break;
     }
     for (ptrdiff_t x = x0; x < x1; ++x) {
       uint8_t* __restrict o = out + x * nd;
