@@ -237,6 +237,25 @@ def test_single_pass_stripes_match_oracle(threads: int, rows: int) -> None:
     )
 
 
+@pytest.mark.parametrize("isa", SUPPORTED_ISAS)
+@pytest.mark.parametrize(("rows", "nd"), [(150, 20), (257, 20), (257, 16)])
+def test_each_stripe_loop_matches_oracle(isa: str, rows: int, nd: int) -> None:
+    # paths=3 has two stripe loops: the plain one (the baseline kernels, or ndisp not a
+    # multiple of 16) and the fused row's (AVX2 and up, ndisp 16). Both hand out 4 (150 rows)
+    # or 6 (257 rows: ceil(257 / 64) = 5 is odd) stripes one at a time, several per thread.
+    left, right, _ = slanted_pair((rows, 40), d0=6.0, dx=0.05, dy=0.02, seed=rows + nd)
+    kw: dict[str, Any] = {
+        "num_disparities": nd,
+        "min_disparity": -2,
+        "paths": 3,
+        "return_confidence": True,
+    }
+    expected = ref.semi_global_match(left, right, **kw)
+    for threads in (1, 2, 3):
+        native = sd.SemiGlobalMatcher(isa=isa, threads=threads, **kw).compute(left, right)
+        assert_agree(native, expected, subpixel=True)
+
+
 @pytest.mark.parametrize("paths", [3, 4, 8])
 def test_largest_p2_and_many_disparities_do_not_overflow(paths: int) -> None:
     # Path costs reach 144 + p2 < 2**14 and sums paths * (144 + p2) <= 65535 on a pair that
