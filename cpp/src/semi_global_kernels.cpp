@@ -523,7 +523,6 @@ struct B128 {
   static R hamming(R lo, R hi, R llo, R lhi) {
     return add(popcount(_mm_xor_si128(lo, llo)), popcount(_mm_xor_si128(hi, lhi)));
   }
-  static void store_lo(void* p, R v) { _mm_storel_epi64(static_cast<R*>(p), v); }
 };
 #endif
 
@@ -782,8 +781,12 @@ inline void hamming_column_t(uint16_t l, const ZRow& z, ptrdiff_t cols, ptrdiff_
   for (; k + N <= nd; k += N) {
     B::store(o + k, B::hamming(B::load(lo + k), B::load(hi + k), llo, lhi));
   }
-  if (k < nd) {  // kT bytes left (the spare vector after Z's last one is read, not used)
-    B::store_lo(o + k, B::hamming(B::load(lo + k), B::load(hi + k), llo, lhi));
+  if constexpr (N == 2 * kT) {
+    if (k < nd) {  // kT bytes left (the spare vector after Z's last one is read, not used)
+      B::store_lo(o + k, B::hamming(B::load(lo + k), B::load(hi + k), llo, lhi));
+    }
+  } else {
+    static_assert(N == kT, "vectors of kT or 2 * kT bytes");  // nd % kT == 0: no tail
   }
 }
 
