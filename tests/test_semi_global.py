@@ -24,7 +24,7 @@ import stereodepth as sd
 from stereodepth import reference as ref
 from stereodepth._reference_block_match import grey
 from stereodepth.io import read_image
-from stereodepth.semi_global import stripe_starts
+from stereodepth.semi_global import run_disparities, stripe_starts
 
 SUPPORTED_ISAS: list[str] = list(sd.build_info()["supported_isas"])
 
@@ -413,6 +413,32 @@ def test_every_vector_count_of_the_fused_row_matches_the_scalar_path(isa: str, n
         a = sd.SemiGlobalMatcher(isa="baseline", paths=3, **kw).compute(left, right)
         b = sd.SemiGlobalMatcher(isa=isa, paths=3, **kw).compute(left, right)
         np.testing.assert_array_equal(a, b)
+
+
+@pytest.mark.parametrize("isa", SUPPORTED_ISAS)
+@pytest.mark.parametrize(("nd", "md"), [(5, -7), (3, -30), (21, -40), (17, -5), (33, 8)])
+@pytest.mark.parametrize("lr_max_diff", [1.0, None])
+def test_disparities_not_a_multiple_of_16_match_oracle(
+    isa: str, nd: int, md: int, lr_max_diff: float | None
+) -> None:
+    # paths=3 runs its paths over ndisp rounded up to 16; the extra candidates never win. With
+    # every disparity negative, the pixels at the right edge have no candidate inside the
+    # image while their extra candidates' right columns are inside: they must stay out of the
+    # right image's winners (they once made the left-right check fail there).
+    left, right = shifted_pair((23, 90), 3, seed=nd)
+    kw: dict[str, Any] = {
+        "num_disparities": nd,
+        "min_disparity": md,
+        "lr_max_diff": lr_max_diff,
+        "return_confidence": True,
+    }
+    native = sd.SemiGlobalMatcher(isa=isa, **kw).compute(left, right)
+    assert_agree(native, ref.semi_global_match(left, right, **kw), subpixel=True)
+
+
+def test_run_disparities() -> None:
+    assert [run_disparities(n, 3) for n in (1, 15, 16, 17, 60, 4096)] == [16, 16, 16, 32, 64, 4096]
+    assert [run_disparities(n, p) for n in (1, 17) for p in (4, 8)] == [1, 1, 17, 17]
 
 
 def test_unknown_isa_is_rejected() -> None:

@@ -386,7 +386,7 @@ void decide_row(const DecideArgs& a, const uint16_t* s, float* disp, float* conf
     for (ptrdiff_t x = 0; x < cols; ++x) {
       ptrdiff_t klo, khi;
       range(x, klo, khi);
-      const uint16_t* __restrict sx = s + x * nd;
+      const uint16_t* __restrict sx = s + x * a.stride;
       uint16_t* __restrict rm = rmin + (cols - 1 - x + dmin + klo);
       uint16_t* __restrict ra = rarg + (cols - 1 - x + dmin + klo);
       const ptrdiff_t n = khi - klo + 1;
@@ -409,7 +409,7 @@ void decide_row(const DecideArgs& a, const uint16_t* s, float* disp, float* conf
   for (ptrdiff_t x = 0; x < cols; ++x) {
     ptrdiff_t klo, khi;
     range(x, klo, khi);
-    const uint16_t* __restrict sx = s + x * nd;
+    const uint16_t* __restrict sx = s + x * a.stride;
     bool ok = klo <= khi;
     if (!a.clip_border) ok = ok && x - dmin - nd + 1 >= 0 && x - dmin <= cols - 1;
     if (!ok) {
@@ -1369,7 +1369,7 @@ inline typename V::R pass2_pixel(int nv, const uint8_t* __restrict cx, int16_t* 
 // best, kb, second best, the sums at kb - 1 and kb + 1) and a.rfinal (the right winners).
 inline void decide_fused(const FusedRowArgs& a) {
   const ptrdiff_t cols = a.d.cols;
-  const int nd = a.p.nd;
+  const int nd = a.d.nd;  // the disparities that may win (a.p.nd may be more)
   const ptrdiff_t dmin = a.d.min_d;
   const uint32_t* res = a.result;
   const DecideArgs& d = a.d;
@@ -1793,6 +1793,7 @@ void fused_row_t_impl(const FusedRowArgs& a) {
   constexpr int N = V::kLanes;
   const ptrdiff_t cols = a.d.cols;
   const int nd = a.p.nd, nv = kNv ? kNv : nd / N;
+  const int ndw = a.d.nd;  // the disparities that may win (<= nd)
   const ptrdiff_t dmin = a.d.min_d;
   const R sent = V::set1(kSentinel);
   const R ones = V::set1(-1);
@@ -1857,10 +1858,15 @@ void fused_row_t_impl(const FusedRowArgs& a) {
   for (ptrdiff_t x = cols - 1; x >= 0; --x) {
     const uint8_t* cx = a.c + x * nd;
     uint16_t* px = a.partial + x * nd;
-    const ptrdiff_t klo = clamp_index(x - dmin - cols + 1, 0, nd);
-    const ptrdiff_t khi = clamp_index(x - dmin, -1, nd - 1);
-    const R lo_v = V::set1(static_cast<int>(klo));
-    const R span_v = V::set1(static_cast<int>(khi - klo));
+    // The candidates that may win: inside the image and below a.d.nd (the sums of the others
+    // are 0xFFFF; with a.d.nd < nd every pixel takes the border's instance).
+    const ptrdiff_t klo = clamp_index(x - dmin - cols + 1, 0, ndw);
+    const ptrdiff_t khi = clamp_index(x - dmin, -1, ndw - 1);
+    // No candidate (klo > khi): lo = 0xFFFF, span 0 masks every lane (k - lo = k + 1 > 0),
+    // so that the candidates above ndw, whose right columns may lie inside the image, stay
+    // out of the right winners.
+    const R lo_v = V::set1(klo > khi ? 0xFFFF : static_cast<int>(klo));
+    const R span_v = V::set1(klo > khi ? 0 : static_cast<int>(khi - klo));
     R best_v, arg_v;
     if (x == cols - 1) {
       pass2_pixel_t<V, kNv, true, true, kSecond>(nv, cx, hrow, px, wmin, warg, slot0, iota_nv,
@@ -1933,8 +1939,8 @@ void fused_row_t_impl(const FusedRowArgs& a) {
   // (used only when both are inside the range, where they are not masked).
   if (kSecond && a.d.subpixel != static_cast<int>(SubpixelFit::kNone)) {
     for (ptrdiff_t x = 0; x < cols; ++x) {
-      const ptrdiff_t klo = clamp_index(x - dmin - cols + 1, 0, nd);
-      const ptrdiff_t khi = clamp_index(x - dmin, -1, nd - 1);
+      const ptrdiff_t klo = clamp_index(x - dmin - cols + 1, 0, ndw);
+      const ptrdiff_t khi = clamp_index(x - dmin, -1, ndw - 1);
       uint32_t* rx = res + 4 * x;
       const int kb = static_cast<int>(rx[1]);
       if (klo > khi || kb - 1 < klo || kb + 1 > khi) continue;

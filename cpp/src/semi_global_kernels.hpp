@@ -57,7 +57,8 @@ using PathRowsFn = void (*)(const PathParams& p, const std::uint8_t* c, const st
 
 struct DecideArgs {
   std::ptrdiff_t cols;
-  int nd, min_d;
+  int nd, min_d;             // nd: the disparities that may win
+  int stride;                // sums per pixel in a row of sums (>= nd; see run_disparities)
   int subpixel;              // SubpixelFit
   double uniqueness_factor;  // 0: off
   double lr_max_diff;        // negative: off

@@ -15,7 +15,13 @@ import numpy as np
 
 from ._reference_block_match import box_sum, census, grey, popcount, speckle_filter
 from .matching import as_pair
-from .semi_global import SemiGlobalOptions, cost_max, fill_background, stripe_starts
+from .semi_global import (
+    SemiGlobalOptions,
+    cost_max,
+    fill_background,
+    run_disparities,
+    stripe_starts,
+)
 
 __all__ = ["semi_global_match"]
 
@@ -32,18 +38,18 @@ def candidate_inside(w: int, min_disparity: int, num_disparities: int) -> np.nda
     return inside
 
 
-def costs(gl: np.ndarray, gr: np.ndarray, o: SemiGlobalOptions) -> np.ndarray:
-    """C[y, x, k]: box sums of the census Hamming distances, candidates outside the right
-    image at the largest cost (int64)."""
+def costs(gl: np.ndarray, gr: np.ndarray, o: SemiGlobalOptions, nd: int) -> np.ndarray:
+    """C[y, x, k] for k < nd: box sums of the census Hamming distances, candidates outside
+    the right image at the largest cost (int64)."""
     h, w = gl.shape
     fl, fr = census(gl), census(gr)
-    pix = np.empty((h, w, o.num_disparities), dtype=np.int64)
+    pix = np.empty((h, w, nd), dtype=np.int64)
     x = np.arange(w)
-    for k in range(o.num_disparities):
+    for k in range(nd):
         xr = np.clip(x - (o.min_disparity + k), 0, w - 1)
         pix[:, :, k] = popcount(fl ^ fr[:, xr])
     c = box_sum(pix, o.block_size // 2)
-    inside = candidate_inside(w, o.min_disparity, o.num_disparities)
+    inside = candidate_inside(w, o.min_disparity, nd)
     out: np.ndarray = np.where(inside[None], c, np.int64(cost_max(o.block_size)))
     return out
 
@@ -136,12 +142,15 @@ def semi_global_match(
     ks = np.arange(nd)
     d_of_k = dmin + ks
 
-    c = costs(gl, gr, o)
+    # The paths run over run_disparities(nd, paths) >= nd candidates; only the first nd may
+    # win.
+    c = costs(gl, gr, o, run_disparities(nd, o.paths))
     dirs = {3: PATHS_3, 4: PATHS_4, 8: PATHS_8}[o.paths]
     restarts = frozenset(stripe_starts(h)) if o.paths == 3 else frozenset()
     s = np.zeros_like(c)
     for dy, dx in dirs:
         s += path_costs(c, ig, dy, dx, o, restarts)
+    s = s[:, :, :nd]
 
     inside = np.broadcast_to(candidate_inside(w, dmin, nd)[None], (h, w, nd))
     sentinel = np.int64(1) << np.int64(40)

@@ -41,7 +41,12 @@ Steps, in the kernel and in the oracle alike:
    that halves P2; 0 turns the adaptation off, ``P2' = P2``). The subtraction of ``m`` keeps
    ``L_r <= C_max + P2``, so each path fits 16 bits (``C_max + P2 < 2**14``, checked) and
    their sum ``S(p, d) = sum_r L_r(p, d)`` fits in 16 bits when
-   ``paths * (16 * block_size**2 + p2) <= 65535`` (checked).
+   ``paths * (16 * block_size**2 + p2) <= 65535`` (checked). With ``paths=3`` the costs and
+   paths run over ``num_disparities`` rounded up to a multiple of 16 (:func:`run_disparities`:
+   the lanes of the SIMD kernels' vectors, so that any ``num_disparities`` runs at their
+   speed); the candidates above ``num_disparities`` take part in the paths (in ``m`` and as
+   neighbours ``d + 1``) but, as candidates outside the image, never win and are no
+   neighbours of the sub-pixel fit; steps 5 on see ``num_disparities`` candidates.
 5. Winner, uniqueness, left-right check, sub-pixel fit and confidence on ``S`` by the block
    matcher's rules (:mod:`stereodepth.matching`, steps 4-6), over the candidates inside the
    image: the least sum, the lowest disparity on a tie; every sum more than one disparity
@@ -97,6 +102,14 @@ BLOCK_SIZES = (1, 3)
 PATH_COUNTS = (3, 4, 8)
 #: paths=3 (one pass): the most rows of a stripe, whose path from above starts at its first row.
 STRIPE_ROWS = 64
+
+
+def run_disparities(num_disparities: int, paths: int) -> int:
+    """The disparities whose costs and paths are computed: for ``paths=3``,
+    ``num_disparities`` rounded up to a multiple of 16 (the lanes of the SIMD kernels'
+    vectors), of which only the first ``num_disparities`` may win (step 4 of this module's
+    description); ``num_disparities`` itself for ``paths`` 4 and 8."""
+    return -(-num_disparities // 16) * 16 if paths == 3 else num_disparities
 
 
 def stripe_starts(rows: int) -> list[int]:
