@@ -418,10 +418,11 @@ def test_every_vector_count_of_the_fused_row_matches_the_scalar_path(isa: str, n
 @pytest.mark.parametrize("isa", SUPPORTED_ISAS)
 @pytest.mark.parametrize(("nd", "md"), [(5, -7), (3, -30), (21, -40), (17, -5), (33, 8)])
 @pytest.mark.parametrize("lr_max_diff", [1.0, None])
+@pytest.mark.parametrize("paths", [3, 4, 8])
 def test_disparities_not_a_multiple_of_16_match_oracle(
-    isa: str, nd: int, md: int, lr_max_diff: float | None
+    isa: str, nd: int, md: int, lr_max_diff: float | None, paths: int
 ) -> None:
-    # paths=3 runs its paths over ndisp rounded up to 16; the extra candidates never win. With
+    # The paths run over ndisp rounded up to 16; the extra candidates never win. With
     # every disparity negative, the pixels at the right edge have no candidate inside the
     # image while their extra candidates' right columns are inside: they must stay out of the
     # right image's winners (they once made the left-right check fail there).
@@ -430,6 +431,7 @@ def test_disparities_not_a_multiple_of_16_match_oracle(
         "num_disparities": nd,
         "min_disparity": md,
         "lr_max_diff": lr_max_diff,
+        "paths": paths,
         "return_confidence": True,
     }
     native = sd.SemiGlobalMatcher(isa=isa, **kw).compute(left, right)
@@ -437,8 +439,7 @@ def test_disparities_not_a_multiple_of_16_match_oracle(
 
 
 def test_run_disparities() -> None:
-    assert [run_disparities(n, 3) for n in (1, 15, 16, 17, 60, 4096)] == [16, 16, 16, 32, 64, 4096]
-    assert [run_disparities(n, p) for n in (1, 17) for p in (4, 8)] == [1, 1, 17, 17]
+    assert [run_disparities(n) for n in (1, 15, 16, 17, 60, 4096)] == [16, 16, 16, 32, 64, 4096]
 
 
 def test_unknown_isa_is_rejected() -> None:

@@ -50,11 +50,11 @@ int vertical_paths(int paths) { return paths == 8 ? 3 : 1; }
 // speed-up from one thread to two). semi_global.py's stripe_starts states the same rule.
 constexpr std::ptrdiff_t kStripeRows = 64;
 
-// paths == 3: the disparities its costs and paths run over, num_disparities rounded up to a
-// multiple of 16 (the lanes of the SIMD kernels' vectors); the ones above num_disparities
-// take part in the paths but never win (the decision treats them as outside the image).
-// Without this, a num_disparities of 60 ran the plain kernels at 3-4x the time of 64.
-int run_disparities(int nd, int paths) { return paths == 3 ? (nd + 15) / 16 * 16 : nd; }
+// The disparities the costs and paths run over: num_disparities rounded up to a multiple of
+// 16 (the lanes of the SIMD kernels' vectors); the ones above num_disparities take part in the
+// paths but never win (the decision treats them as outside the image). Without this, a
+// num_disparities of 60 ran the plain kernels at 3-4x the time of 64 (paths 4 and 8: 2-3x).
+int run_disparities(int nd) { return (nd + 15) / 16 * 16; }
 
 std::ptrdiff_t stripe_count(std::ptrdiff_t rows) {
   std::ptrdiff_t n = std::max<std::ptrdiff_t>(1, (rows + kStripeRows - 1) / kStripeRows);
@@ -388,7 +388,7 @@ void validate(const SemiGlobalParams& p) {
 std::size_t semi_global_memory(std::ptrdiff_t rows, std::ptrdiff_t cols, int nd, int paths,
                                int threads, Isa isa, int block_size) {
   threads = team_threads(threads, paths);
-  nd = run_disparities(nd, paths);
+  nd = run_disparities(nd);
   // What compute() allocates for an RGB pair (grey pairs need a little less), with the median
   // on; the speckle filter's runs, which depend on the disparities, are left out.
   const detail::SemiGlobalKernels& k = sgm_kernels(isa);
@@ -469,7 +469,7 @@ void SemiGlobalMatcher::compute(const StereoImage& left, const StereoImage& righ
   }
   const std::ptrdiff_t rows = left.rows, cols = left.cols;
   const int nd_win = p.num_disparities;  // the disparities that may win
-  const int nd = run_disparities(nd_win, p.paths);
+  const int nd = run_disparities(nd_win);
   const std::size_t need =
       semi_global_memory(rows, cols, nd_win, p.paths, threads_, isa_, p.block_size);
   const int threads = team_threads(threads_, p.paths);

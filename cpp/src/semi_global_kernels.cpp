@@ -1526,6 +1526,7 @@ void fused_row_impl(const FusedRowArgs& a) {
   constexpr int N = V::kLanes;
   const ptrdiff_t cols = a.d.cols;
   const int nd = a.p.nd, nv = nd / N;
+  const int ndw = a.d.nd;  // the disparities that may win (<= nd)
   const ptrdiff_t ls = nd + kFusedPad;
   const ptrdiff_t lvs = nd + N;  // lv: each pixel's nd path costs, then N sentinels
   const ptrdiff_t dmin = a.d.min_d;
@@ -1606,11 +1607,12 @@ void fused_row_impl(const FusedRowArgs& a) {
       const ptrdiff_t xr = x + 1 - dmin;
       if (xr >= 0 && xr < cols) a.rfinal[xr] = warg[0];
     }
-    const ptrdiff_t klo = clamp_index(x - dmin - cols + 1, 0, nd);
-    const ptrdiff_t khi = clamp_index(x - dmin, -1, nd - 1);
+    // The candidates that may win, as in fused_row_t_impl (no candidate: every lane masked).
+    const ptrdiff_t klo = clamp_index(x - dmin - cols + 1, 0, ndw);
+    const ptrdiff_t khi = clamp_index(x - dmin, -1, ndw - 1);
     const bool border = klo != 0 || khi != nd - 1;
-    const R lo_v = V::set1(static_cast<int>(klo));
-    const R span_v = V::set1(static_cast<int>(khi - klo));
+    const R lo_v = V::set1(klo > khi ? 0xFFFF : static_cast<int>(klo));
+    const R span_v = V::set1(klo > khi ? 0 : static_cast<int>(khi - klo));
     R best_v, arg_v, sec_v;
     if (first) {
       best_v = pass2_pixel<V, true, true>(nv, cx, hrow, px, wmin, warg, vp1, sent, sent, lo_v,

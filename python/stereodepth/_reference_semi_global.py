@@ -142,9 +142,8 @@ def semi_global_match(
     ks = np.arange(nd)
     d_of_k = dmin + ks
 
-    # The paths run over run_disparities(nd, paths) >= nd candidates; only the first nd may
-    # win.
-    c = costs(gl, gr, o, run_disparities(nd, o.paths))
+    # The paths run over run_disparities(nd) >= nd candidates; only the first nd may win.
+    c = costs(gl, gr, o, run_disparities(nd))
     dirs = {3: PATHS_3, 4: PATHS_4, 8: PATHS_8}[o.paths]
     restarts = frozenset(stripe_starts(h)) if o.paths == 3 else frozenset()
     s = np.zeros_like(c)

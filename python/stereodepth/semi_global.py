@@ -41,8 +41,8 @@ Steps, in the kernel and in the oracle alike:
    that halves P2; 0 turns the adaptation off, ``P2' = P2``). The subtraction of ``m`` keeps
    ``L_r <= C_max + P2``, so each path fits 16 bits (``C_max + P2 < 2**14``, checked) and
    their sum ``S(p, d) = sum_r L_r(p, d)`` fits in 16 bits when
-   ``paths * (16 * block_size**2 + p2) <= 65535`` (checked). With ``paths=3`` the costs and
-   paths run over ``num_disparities`` rounded up to a multiple of 16 (:func:`run_disparities`:
+   ``paths * (16 * block_size**2 + p2) <= 65535`` (checked). The costs and paths run over
+   ``num_disparities`` rounded up to a multiple of 16 (:func:`run_disparities`:
    the lanes of the SIMD kernels' vectors, so that any ``num_disparities`` runs at their
    speed); the candidates above ``num_disparities`` take part in the paths (in ``m`` and as
    neighbours ``d + 1``) but, as candidates outside the image, never win and are no
@@ -70,6 +70,7 @@ with the AVX2 and AVX-512 kernels, 7.5 MiB with the baseline build); each thread
 grey and census rows it needs, and the median runs in place in the output. ``paths`` 4 and 8
 keep the sums ``S`` (2 bytes per pixel and disparity), the costs (1 byte per pixel and
 disparity) and the census and grey images (7 bytes per pixel), plus a few rows per thread.
+The disparities counted are ``num_disparities`` rounded up to a multiple of 16 (step 4).
 :func:`memory_estimate` gives the figure, and the matcher refuses with ValueError above
 ``max_memory_mb``.
 
@@ -104,12 +105,11 @@ PATH_COUNTS = (3, 4, 8)
 STRIPE_ROWS = 64
 
 
-def run_disparities(num_disparities: int, paths: int) -> int:
-    """The disparities whose costs and paths are computed: for ``paths=3``,
-    ``num_disparities`` rounded up to a multiple of 16 (the lanes of the SIMD kernels'
-    vectors), of which only the first ``num_disparities`` may win (step 4 of this module's
-    description); ``num_disparities`` itself for ``paths`` 4 and 8."""
-    return -(-num_disparities // 16) * 16 if paths == 3 else num_disparities
+def run_disparities(num_disparities: int) -> int:
+    """The disparities whose costs and paths are computed: ``num_disparities`` rounded up to a
+    multiple of 16 (the lanes of the SIMD kernels' vectors), of which only the first
+    ``num_disparities`` may win (step 4 of this module's description)."""
+    return -(-num_disparities // 16) * 16
 
 
 def stripe_starts(rows: int) -> list[int]:
@@ -296,7 +296,8 @@ def memory_estimate(
     and 8: 3 bytes per pixel and disparity (16-bit sums, 8-bit costs), 7 per pixel (census
     and grey images) and a few rows per thread. The figure is for an RGB pair with
     ``median=True`` (grey pairs need a little less); the speckle filter's runs, which depend
-    on the disparities, are not counted (12 bytes per run of linked pixels in a row).
+    on the disparities, are not counted (12 bytes per run of linked pixels in a row). The
+    disparities are counted rounded up to a multiple of 16 (:func:`run_disparities`).
 
     Raises ValueError for an unknown ``isa`` or one this CPU cannot run."""
     return int(
