@@ -442,6 +442,20 @@ def test_run_disparities() -> None:
     assert [run_disparities(n) for n in (1, 15, 16, 17, 60, 4096)] == [16, 16, 16, 32, 64, 4096]
 
 
+@pytest.mark.parametrize(
+    ("fn", "value", "error"),
+    [
+        (run_disparities, 0, ValueError),
+        (run_disparities, 16.0, TypeError),
+        (stripe_starts, 0, ValueError),
+        (stripe_starts, "64", TypeError),
+    ],
+)
+def test_rules_reject_bad_counts(fn: Any, value: Any, error: type[Exception]) -> None:
+    with pytest.raises(error, match="must be an integer"):
+        fn(value)
+
+
 def test_unknown_isa_is_rejected() -> None:
     with pytest.raises(ValueError, match="isa must be one of"):
         sd.SemiGlobalMatcher(num_disparities=8, isa="sse9")
@@ -503,6 +517,40 @@ def test_confidence_is_in_unit_interval_and_zero_on_holes() -> None:
 
 # ------------------------------------------------------------------------------------------
 # Memory
+
+
+@pytest.mark.parametrize(
+    ("shape", "kw", "error", "fragment"),
+    [
+        ((0, 10), {}, ValueError, "shape[0] must be an integer >= 1, got 0"),
+        ((10, -2), {}, ValueError, "shape[1] must be an integer >= 1, got -2"),
+        ((2.5, 3), {}, TypeError, "shape[0] must be an integer, got float 2.5"),
+        ((3,), {}, ValueError, "shape must be (H, W), two integers, got (3,)"),
+        ("ab", {}, TypeError, "shape must be a tuple (H, W), got str 'ab'"),
+        ((10, 20), {"num_disparities": 0}, ValueError, "num_disparities"),
+        ((10, 20), {"paths": 5}, ValueError, "paths must be 3, 4 or 8, got 5"),
+        ((10, 20), {"threads": -1}, ValueError, "threads must be an integer >= 0, got -1"),
+        ((10, 20), {"isa": 3}, TypeError, "isa must be a str, got int 3"),
+    ],
+)
+def test_memory_estimate_rejects_bad_input(
+    shape: Any, kw: dict[str, Any], error: type[Exception], fragment: str
+) -> None:
+    # It passed shapes and parameters straight to the native call: (0, 10) and (-1, 5) gave
+    # a figure, (2.5, 3) pybind11's signature dump, (3,) an IndexError.
+    from stereodepth.semi_global import memory_estimate
+
+    with pytest.raises(error) as info:
+        memory_estimate(shape, **{"num_disparities": 64, **kw})
+    assert fragment in str(info.value)
+
+
+def test_memory_estimate_threads_none_is_every_core() -> None:
+    from stereodepth.semi_global import memory_estimate
+
+    cores = sd.build_info()["default_threads"]
+    est = memory_estimate((480, 640), num_disparities=64, threads=None)
+    assert est == memory_estimate((480, 640), num_disparities=64, threads=cores)
 
 
 def test_memory_estimate_and_refusal() -> None:

@@ -108,15 +108,19 @@ STRIPE_ROWS = 64
 def run_disparities(num_disparities: int) -> int:
     """The disparities whose costs and paths are computed: ``num_disparities`` rounded up to a
     multiple of 16 (the lanes of the SIMD kernels' vectors), of which only the first
-    ``num_disparities`` may win (step 4 of this module's description)."""
-    return -(-num_disparities // 16) * 16
+    ``num_disparities`` may win (step 4 of this module's description). Raises TypeError or
+    ValueError for a ``num_disparities`` that is not an integer >= 1."""
+    nd = check.integer("num_disparities", num_disparities, minimum=1)
+    return -(-nd // 16) * 16
 
 
 def stripe_starts(rows: int) -> list[int]:
     """The first row of each stripe of ``paths=3`` (the rows where its path from above starts
     again), for an image of ``rows`` rows: ``n = ceil(rows / 64)`` stripes, one more when
     ``n`` is odd and above 1, of nearly equal height (``floor(s * rows / n)`` for stripe
-    ``s``), so that two threads get the same number of rows. ``[0]`` for ``rows <= 64``."""
+    ``s``), so that two threads get the same number of rows. ``[0]`` for ``rows <= 64``.
+    Raises TypeError or ValueError for a ``rows`` that is not an integer >= 1."""
+    rows = check.integer("rows", rows, minimum=1)
     n = max(1, -(-rows // STRIPE_ROWS))
     if n > 1 and n % 2 == 1:
         n += 1
@@ -282,7 +286,7 @@ def memory_estimate(
     *,
     num_disparities: int,
     paths: int = DEFAULT_PATHS,
-    threads: int = 1,
+    threads: int | None = 1,
     isa: str = "auto",
     block_size: int = DEFAULT_BLOCK_SIZE,
 ) -> int:
@@ -299,11 +303,25 @@ def memory_estimate(
     on the disparities, are not counted (12 bytes per run of linked pixels in a row). The
     disparities are counted rounded up to a multiple of 16 (:func:`run_disparities`).
 
-    Raises ValueError for an unknown ``isa`` or one this CPU cannot run."""
+    Raises TypeError or ValueError for a ``shape`` that is not two integers >= 1 and for the
+    parameters :func:`semi_global_match` refuses, naming the parameter; ValueError for an
+    unknown ``isa`` or one this CPU cannot run."""
+    if not isinstance(shape, (tuple, list)):
+        raise TypeError(f"shape must be a tuple (H, W), got {type(shape).__name__} {shape!r}")
+    if len(shape) != 2:
+        raise ValueError(f"shape must be (H, W), two integers, got {shape!r}")
+    h, w = (
+        check.integer(f"shape[{i}]", v, minimum=1, maximum=check.MAX_NATIVE_INT)
+        for i, v in enumerate(shape)
+    )
+    o = SemiGlobalOptions(
+        num_disparities=num_disparities, paths=paths, block_size=block_size, threads=threads
+    )
+    if not isinstance(isa, str):
+        raise TypeError(f"isa must be a str, got {type(isa).__name__} {isa!r}")
+    threads_n = o.threads or check.available_cores()  # None or 0: every core, as the matcher
     return int(
-        _core.semi_global_memory(
-            shape[0], shape[1], num_disparities, paths, threads, isa, block_size
-        )
+        _core.semi_global_memory(h, w, o.num_disparities, o.paths, threads_n, isa, o.block_size)
     )
 
 
