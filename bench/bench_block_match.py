@@ -134,23 +134,7 @@ def hd_pair() -> dict[str, Any]:
     }
 
 
-def alternate(first: Any, second: Any, rounds: int) -> tuple[list[float], list[float]]:
-    """Each call's times in seconds over `rounds` rounds of two calls, their order swapped
-    every round, so that each call follows the other as often as itself: a call right after
-    another matcher's finds its own buffers out of the cache (about 8 % slower on Tsukuba),
-    whichever matcher it is."""
-    import time
-
-    took: tuple[list[float], list[float]] = ([], [])
-    for i in range(rounds):
-        for k in (0, 1) if i % 2 == 0 else (1, 0):
-            t0 = time.perf_counter()
-            (first, second)[k]()
-            took[k].append(time.perf_counter() - t0)
-    return took
-
-
-def test_speed_vs_opencv_interleaved() -> None:
+def test_speed_vs_opencv_interleaved(alternate: Any) -> None:
     """Per scene, the median over rounds of stereodepth's time over StereoBM's (block 9, the
     same grey images, ndisp and 2 threads), and of the one-shot block_match's time over
     StereoMatcher.compute's; the targets are a median over scenes <= 0.4, the same on a

@@ -223,23 +223,7 @@ def test_oracle_crop(benchmark: Any, impl: Any, impl_name: str) -> None:
 # beside it).
 
 
-def interleaved(calls: dict[str, Any], rounds: int) -> dict[str, np.ndarray]:
-    """Runs the calls in turn for `rounds` rounds, the order rotating every round (so that no
-    call always follows the same one); each call's times in seconds."""
-    import time
-
-    names = list(calls)
-    took: dict[str, list[float]] = {n: [] for n in names}
-    for i in range(rounds):
-        k = i % len(names)
-        for name in names[k:] + names[:k]:
-            t0 = time.perf_counter()
-            calls[name]()
-            took[name].append(time.perf_counter() - t0)
-    return {n: np.asarray(v) for n, v in took.items()}
-
-
-def test_speed_vs_sgbm_interleaved() -> None:
+def test_speed_vs_sgbm_interleaved(alternate: Any) -> None:
     """Per scene and on the 1280 x 720 pair (ndisp 128): the default mode (paths=3) against
     SGBM 3WAY, the median over rounds of the time ratio (issue 11's target: at most 0.33); on
     the 1280 x 720 pair also paths=8 against MODE_HH (at most 0.2). Both matchers made once,
@@ -269,22 +253,23 @@ def test_speed_vs_sgbm_interleaved() -> None:
         want = ours.compute(left, right)
         theirs.compute(left, right)
         n = rounds if mode == "3way" else max(3, rounds // 3)
-        t = interleaved(
-            {
-                "ours": lambda m=ours, a=left, b=right: m.compute(a, b),
-                "opencv": lambda m=theirs, a=left, b=right: m.compute(a, b),
-            },
-            n,
+        mine, other = (
+            np.asarray(t)
+            for t in alternate(
+                lambda m=ours, a=left, b=right: m.compute(a, b),
+                lambda m=theirs, a=left, b=right: m.compute(a, b),
+                n,
+            )
         )
         np.testing.assert_array_equal(ours.compute(left, right), want)
-        ratio = float(np.median(t["ours"] / t["opencv"]))
-        least = float(t["ours"].min() / t["opencv"].min())
+        ratio = float(np.median(mine / other))
+        least = float(mine.min() / other.min())
         if s is not hd:
             scene_ratios.append(ratio)
-        ns = 1e9 * float(np.median(t["ours"])) / (w * h * nd)
+        ns = 1e9 * float(np.median(mine)) / (w * h * nd)
         print(
-            f"| {s['name']} | {w} x {h} x {nd} | {paths} | {1e3 * np.median(t['ours']):.2f} | "
-            f"{mode.upper()} | {1e3 * np.median(t['opencv']):.2f} | {ratio:.3f} | "
+            f"| {s['name']} | {w} x {h} x {nd} | {paths} | {1e3 * np.median(mine):.2f} | "
+            f"{mode.upper()} | {1e3 * np.median(other):.2f} | {ratio:.3f} | "
             f"{least:.3f} | {ns:.3f} |"
         )
     if scene_ratios:

@@ -1918,6 +1918,27 @@ void decide_avx2(const RowCtx& c) {
     return _mm256_andnot_si256(_mm256_cmpgt_epi32(kb, _mm256_set1_epi32(c.nd - 2)),
                                _mm256_cmpgt_epi32(kb, zero));
   };
+  // The sub-pixel step of the disparities d (winner kb, its cost b, its neighbours' c0 and c2)
+  // in the lanes of ok that have both neighbours and a positive denominator. The other lanes'
+  // quotients (perhaps of a zero) are dropped. A neighbour of 0xFFFF lies outside the
+  // disparities searched (the border band, see winners_avx2): no step.
+  auto subpixel_step = [&](__m256 d, __m256i kb, __m256i b, __m256i c0, __m256i c2,
+                           __m256i ok) {
+    const __m256 num = _mm256_cvtepi32_ps(_mm256_sub_epi32(c0, c2));
+    __m256i den_i;
+    if (parabola) {
+      den_i = _mm256_sub_epi32(_mm256_add_epi32(c0, c2), _mm256_add_epi32(b, b));
+    } else {
+      den_i = _mm256_max_epi32(_mm256_sub_epi32(c0, b), _mm256_sub_epi32(c2, b));
+    }
+    const __m256 den = _mm256_cvtepi32_ps(_mm256_add_epi32(den_i, den_i));
+    const __m256i both = _mm256_andnot_si256(
+        _mm256_or_si256(_mm256_cmpeq_epi32(c0, none), _mm256_cmpeq_epi32(c2, none)),
+        _mm256_and_si256(ok, interior(kb)));
+    const __m256 use = _mm256_and_ps(_mm256_castsi256_ps(both),
+                                     _mm256_cmp_ps(den, _mm256_setzero_ps(), _CMP_GT_OQ));
+    return _mm256_blendv_ps(d, _mm256_add_ps(d, _mm256_div_ps(num, den)), use);
+  };
   // See decide_avx512.
   const int lr_int = c.lr_max_diff >= 65536.0 ? 65536 : static_cast<int>(std::floor(c.lr_max_diff));
   // The transpose below leaves the pixels in the order 0, 2, 4, 6, 1, 3, 5, 7.
@@ -1972,21 +1993,8 @@ void decide_avx2(const RowCtx& c) {
         const __m256i b = _mm256_and_si256(f0[u], low16);
         const __m256i c0 = _mm256_and_si256(nb[u], low16);
         const __m256i c2 = _mm256_srli_epi32(nb[u], 16);
-        __m256 d = _mm256_cvtepi32_ps(_mm256_add_epi32(kb[u], mind));
-        const __m256 num = _mm256_cvtepi32_ps(_mm256_sub_epi32(c0, c2));
-        __m256i den_i;
-        if (parabola) {
-          den_i = _mm256_sub_epi32(_mm256_add_epi32(c0, c2), _mm256_add_epi32(b, b));
-        } else {
-          den_i = _mm256_max_epi32(_mm256_sub_epi32(c0, b), _mm256_sub_epi32(c2, b));
-        }
-        const __m256 den = _mm256_cvtepi32_ps(_mm256_add_epi32(den_i, den_i));
-        const __m256i both = _mm256_andnot_si256(
-            _mm256_or_si256(_mm256_cmpeq_epi32(c0, none), _mm256_cmpeq_epi32(c2, none)),
-            _mm256_and_si256(ok[u], interior(kb[u])));
-        const __m256 use = _mm256_and_ps(_mm256_castsi256_ps(both),
-                                         _mm256_cmp_ps(den, _mm256_setzero_ps(), _CMP_GT_OQ));
-        d = _mm256_blendv_ps(d, _mm256_add_ps(d, _mm256_div_ps(num, den)), use);
+        const __m256 d = subpixel_step(_mm256_cvtepi32_ps(_mm256_add_epi32(kb[u], mind)), kb[u],
+                                       b, c0, c2, ok[u]);
         _mm256_storeu_ps(c.drow + xstart + 8 * u, _mm256_blendv_ps(nan, d, _mm256_castsi256_ps(ok[u])));
       }
     }
@@ -2051,25 +2059,7 @@ void decide_avx2(const RowCtx& c) {
       ok = _mm256_andnot_si256(_mm256_cmpgt_epi32(diff, _mm256_set1_epi32(lr_int)), ok);
     }
     __m256 d = _mm256_cvtepi32_ps(_mm256_add_epi32(kb, _mm256_set1_epi32(c.min_d)));
-    if (sub) {
-      const __m256 num = _mm256_cvtepi32_ps(_mm256_sub_epi32(c0, c2));
-      __m256i den_i;
-      if (parabola) {
-        den_i = _mm256_sub_epi32(_mm256_add_epi32(c0, c2), _mm256_add_epi32(b, b));
-      } else {
-        den_i = _mm256_max_epi32(_mm256_sub_epi32(c0, b), _mm256_sub_epi32(c2, b));
-      }
-      const __m256 den = _mm256_cvtepi32_ps(_mm256_add_epi32(den_i, den_i));
-      // The lanes that take the step; the others' quotients (perhaps of a zero) are dropped.
-      // A neighbour of 0xFFFF lies outside the disparities searched (the border band, see
-      // winners_avx2): no step.
-      const __m256i both = _mm256_andnot_si256(
-          _mm256_or_si256(_mm256_cmpeq_epi32(c0, none), _mm256_cmpeq_epi32(c2, none)),
-          _mm256_and_si256(ok, interior(kb)));
-      const __m256 use = _mm256_and_ps(_mm256_castsi256_ps(both),
-                                       _mm256_cmp_ps(den, _mm256_setzero_ps(), _CMP_GT_OQ));
-      d = _mm256_blendv_ps(d, _mm256_add_ps(d, _mm256_div_ps(num, den)), use);
-    }
+    if (sub) d = subpixel_step(d, kb, b, c0, c2, ok);
     const __m256 okf = _mm256_castsi256_ps(ok);
     // A masked store only for the row's tail: vmaskmovps is microcoded on AMD processors.
     auto store = [&](float* p, __m256 v) {

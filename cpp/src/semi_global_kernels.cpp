@@ -857,6 +857,25 @@ void box_sweep_regs(const uint8_t* zlo, const uint8_t* zhi, const uint16_t* lrow
   }
 }
 
+// box_sweep_regs for the vector count m when 1 <= m <= kMax (one instance each); false for
+// any other m.
+template <class B, int kT, int kMax, int M = 1>
+bool box_sweep_regs_upto(int m, const uint8_t* zlo, const uint8_t* zhi, const uint16_t* lrow,
+                         ptrdiff_t cols, ptrdiff_t x0, ptrdiff_t x1, int min_d, int cmax,
+                         const uint8_t* ring, uint8_t* fo, const uint8_t* b, const uint8_t* c,
+                         uint8_t* out) {
+  if constexpr (M > kMax) {
+    return false;
+  } else {
+    if (m == M) {
+      box_sweep_regs<B, M, kT>(zlo, zhi, lrow, cols, x0, x1, min_d, cmax, ring, fo, b, c, out);
+      return true;
+    }
+    return box_sweep_regs_upto<B, kT, kMax, M + 1>(m, zlo, zhi, lrow, cols, x0, x1, min_d, cmax,
+                                                   ring, fo, b, c, out);
+  }
+}
+
 template <class B, int kT>
 void box_row8_impl(uint8_t* const* raws, int fresh, const uint16_t* lrow, const uint16_t* rrow,
                    uint8_t* rev, int radius, ptrdiff_t cols, ptrdiff_t x0, ptrdiff_t x1, int nd,
@@ -930,24 +949,9 @@ void box_row8_impl(uint8_t* const* raws, int fresh, const uint16_t* lrow, const 
     const uint8_t* b = other[0] + 2 * nd;
     const uint8_t* c = other[1] + 2 * nd;
     // Up to 5 vectors the two sums per vector fit the 16 registers of AVX2.
-    switch (nd / N) {
-      case 1:
-        box_sweep_regs<B, 1, kT>(zlo, zhi, lrow, cols, x0, x1, min_d, cmax, ring, fo, b, c, out);
-        return;
-      case 2:
-        box_sweep_regs<B, 2, kT>(zlo, zhi, lrow, cols, x0, x1, min_d, cmax, ring, fo, b, c, out);
-        return;
-      case 3:
-        box_sweep_regs<B, 3, kT>(zlo, zhi, lrow, cols, x0, x1, min_d, cmax, ring, fo, b, c, out);
-        return;
-      case 4:
-        box_sweep_regs<B, 4, kT>(zlo, zhi, lrow, cols, x0, x1, min_d, cmax, ring, fo, b, c, out);
-        return;
-      case 5:
-        box_sweep_regs<B, 5, kT>(zlo, zhi, lrow, cols, x0, x1, min_d, cmax, ring, fo, b, c, out);
-        return;
-      default:
-        break;
+    if (box_sweep_regs_upto<B, kT, 5>(nd / N, zlo, zhi, lrow, cols, x0, x1, min_d, cmax, ring, fo,
+                                      b, c, out)) {
+      return;
     }
     for (ptrdiff_t x = x0; x < x1; ++x) {
       uint8_t* __restrict o = out + x * nd;
@@ -2071,53 +2075,22 @@ void fused_row_t_v2(const FusedRowArgs& a) {
   }
 }
 
-template <class V>
+// fused_row_t_v2 with the vector count nv as a constant when kNv <= nv <= 12 or nv == 16, so
+// that the loops over the vectors unroll (whole calls 1.2-1.3x faster than with the run-time
+// count at ndisp 16, 32, 80 and 160 with AVX2); larger counts take the run-time one.
+template <class V, int kNv = 1>
 void fused_row_t_v(const FusedRowArgs& a) {
-  // One instance per vector count up to 12, and 16: with nv a constant the loops over the
-  // vectors unroll (whole calls 1.2-1.3x faster than with the run-time count at ndisp 16, 32,
-  // 80 and 160 with AVX2); larger counts take the run-time one.
-  switch (a.p.nd / V::kLanes) {
-    case 1:
-      fused_row_t_v2<V, 1>(a);
-      break;
-    case 2:
-      fused_row_t_v2<V, 2>(a);
-      break;
-    case 3:
-      fused_row_t_v2<V, 3>(a);
-      break;
-    case 4:
-      fused_row_t_v2<V, 4>(a);
-      break;
-    case 5:
-      fused_row_t_v2<V, 5>(a);
-      break;
-    case 6:
-      fused_row_t_v2<V, 6>(a);
-      break;
-    case 7:
-      fused_row_t_v2<V, 7>(a);
-      break;
-    case 8:
-      fused_row_t_v2<V, 8>(a);
-      break;
-    case 9:
-      fused_row_t_v2<V, 9>(a);
-      break;
-    case 10:
-      fused_row_t_v2<V, 10>(a);
-      break;
-    case 11:
-      fused_row_t_v2<V, 11>(a);
-      break;
-    case 12:
-      fused_row_t_v2<V, 12>(a);
-      break;
-    case 16:
-      fused_row_t_v2<V, 16>(a);
-      break;
-    default:
-      fused_row_t_v2<V, 0>(a);
+  const int nv = a.p.nd / V::kLanes;
+  if constexpr (kNv <= 12) {
+    if (nv == kNv) {
+      fused_row_t_v2<V, kNv>(a);
+    } else {
+      fused_row_t_v<V, kNv + 1>(a);
+    }
+  } else if (nv == 16) {
+    fused_row_t_v2<V, 16>(a);
+  } else {
+    fused_row_t_v2<V, 0>(a);
   }
 }
 

@@ -11,6 +11,12 @@ from typing import Any
 
 import numpy as np
 
+from ..io import _as_path
+
+# A reader's path argument as a Path, or TypeError naming the parameter (pathlib's own
+# "expected str, bytes or os.PathLike object, not int" named none).
+_path = _as_path
+
 _NUMBER = r"[-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?"
 
 
@@ -81,14 +87,6 @@ ROTATION_TOLERANCE = 1e-6
 #: larger file is another kind (a point cloud, a log) given by mistake, which the YAML parser
 #: would take minutes over (about 3 s per MB).
 MAX_FILE_BYTES = 4 * 1024 * 1024
-
-
-def _path(value: Any, name: str = "path") -> Path:
-    """A reader's path argument as a Path, or TypeError naming ``name`` (pathlib's own
-    "expected str, bytes or os.PathLike object, not int" named no parameter)."""
-    from ..io import _as_path
-
-    return _as_path(value, name)
 
 
 def _read_text(p: Path, what: str) -> str:
