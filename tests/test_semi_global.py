@@ -23,6 +23,7 @@ from synthetic_pairs import shifted_pair, slanted_pair
 import stereodepth as sd
 from stereodepth import reference as ref
 from stereodepth._reference_block_match import grey
+from stereodepth._reference_semi_global import median3
 from stereodepth.io import read_image
 from stereodepth.semi_global import run_disparities, stripe_starts
 
@@ -396,6 +397,32 @@ def test_each_isa_matches_the_scalar_path(isa: str, paths: int) -> None:
         b = sd.SemiGlobalMatcher(isa=isa, **kw).compute(left, right)
         np.testing.assert_array_equal(a[0], b[0])
         np.testing.assert_array_equal(a[1], b[1])
+
+
+@pytest.mark.parametrize("isa", SUPPORTED_ISAS)
+@pytest.mark.parametrize("width", [1, 2, 3, 8, 9, 10, 11, 17, 18, 19, 33, 41, 150])
+def test_median_stage_is_the_oracles_median(isa: str, width: int) -> None:
+    # The median kernel alone: the matcher with it equals the oracle's median3 of the same
+    # matcher's output without it, bit for bit. The widths put every column of a row on each
+    # of the kernel's ways (whole vectors, the overlapping tail vector, the scalar edges), and
+    # the noisy pair leaves NaN in some windows and none in others, so that both the network
+    # for nine valid values and the ranks for fewer are taken.
+    left, right, _ = slanted_pair((23, 160), d0=9.0, dx=0.1, dy=-0.03, seed=width)
+    rng = np.random.default_rng(width)
+    noise = rng.integers(0, 256, size=left.shape).astype(np.uint8)
+    right = np.where(rng.random(left.shape) < 0.15, noise, right).astype(np.uint8)
+    left, right = np.ascontiguousarray(left[:, -width:]), np.ascontiguousarray(right[:, -width:])
+    kw: dict[str, Any] = {"num_disparities": 16, "speckle_window": 0, "isa": isa, "threads": 2}
+    raw = sd.SemiGlobalMatcher(median=False, **kw).compute(left, right)
+    filtered = sd.SemiGlobalMatcher(median=True, **kw).compute(left, right)
+    assert isinstance(raw, np.ndarray) and isinstance(filtered, np.ndarray)
+    if width >= 18:
+        # Both kinds of window occur (else the test would not reach both ways).
+        p = np.pad(np.isnan(raw), 1)
+        h = raw.shape[0]
+        nans = sum(p[dy : dy + h, dx : dx + width] for dy in range(3) for dx in range(3))
+        assert (nans[1:-1, 1:-1] == 0).any() and (nans[1:-1, 1:-1] > 0).any()
+    np.testing.assert_array_equal(filtered, median3(raw))
 
 
 @pytest.mark.parametrize("isa", SUPPORTED_ISAS)

@@ -2120,6 +2120,9 @@ struct F256 {
   static R set1(float v) { return _mm256_set1_ps(v); }
   static R min(R a, R b) { return _mm256_min_ps(a, b); }
   static R max(R a, R b) { return _mm256_max_ps(a, b); }
+  static R add(R a, R b) { return _mm256_add_ps(a, b); }
+  // Whether no lane of v is NaN.
+  static bool none_nan(R v) { return _mm256_movemask_ps(_mm256_cmp_ps(v, v, _CMP_UNORD_Q)) == 0; }
   // v, or +inf where v is NaN (minps returns its second operand when either is NaN).
   static R nan_to_inf(R v) { return _mm256_min_ps(v, _mm256_set1_ps(INFINITY)); }
   static R count_valid(R n, R v) {
@@ -2145,6 +2148,8 @@ struct F512 {
   static R set1(float v) { return _mm512_set1_ps(v); }
   static R min(R a, R b) { return _mm512_min_ps(a, b); }
   static R max(R a, R b) { return _mm512_max_ps(a, b); }
+  static R add(R a, R b) { return _mm512_add_ps(a, b); }
+  static bool none_nan(R v) { return _mm512_cmp_ps_mask(v, v, _CMP_UNORD_Q) == 0; }
   static R nan_to_inf(R v) { return _mm512_min_ps(v, _mm512_set1_ps(INFINITY)); }
   static R count_valid(R n, R v) {
     return _mm512_mask_add_ps(n, _mm512_cmp_ps_mask(v, v, _CMP_ORD_Q), n, _mm512_set1_ps(1.0f));
@@ -2169,13 +2174,41 @@ ptrdiff_t median_vec(const float* up, const float* mid, const float* down, float
   for (; x + N <= x1; x += N) {
     R v[9];
     const float* rows[3] = {up, mid, down};
-    R n = F::set1(0.0f);
     for (int i = 0; i < 3; ++i) {
-      for (int j = 0; j < 3; ++j) {
-        const R a = F::load(rows[i] + x - 1 + j);
-        n = F::count_valid(n, a);
-        v[3 * i + j] = F::nan_to_inf(a);
+      for (int j = 0; j < 3; ++j) v[3 * i + j] = F::load(rows[i] + x - 1 + j);
+    }
+    {
+      // Every window whole (their sum is not NaN: disparities are finite or NaN): the median
+      // of nine from the three sorted columns, the median of (the greatest of the columns'
+      // least, the median of their middles, the least of their greatest); min and max pick
+      // one of the values, so the result is that value exactly, as by sorting.
+      R sum = v[0];
+      for (int i = 1; i < 9; ++i) sum = F::add(sum, v[i]);
+      if (F::none_nan(sum)) {
+        R c[9];
+        for (int j = 0; j < 3; ++j) {
+          R a = v[j], b = v[3 + j], d = v[6 + j];
+          R t = F::min(a, b);
+          b = F::max(a, b);
+          a = t;
+          t = F::min(b, d);
+          d = F::max(b, d);
+          b = F::max(a, t);
+          a = F::min(a, t);
+          c[j] = a, c[3 + j] = b, c[6 + j] = d;
+        }
+        auto med3 = [](R a, R b, R d) { return F::max(F::min(a, b), F::min(F::max(a, b), d)); };
+        const R lo = F::max(F::max(c[0], c[1]), c[2]);
+        const R md = med3(c[3], c[4], c[5]);
+        const R hi = F::min(F::min(c[6], c[7]), c[8]);
+        F::store(out + x, med3(lo, md, hi));
+        continue;
       }
+    }
+    R n = F::set1(0.0f);
+    for (int i = 0; i < 9; ++i) {
+      n = F::count_valid(n, v[i]);
+      v[i] = F::nan_to_inf(v[i]);
     }
     // Bubble the five least to the front, in order.
     for (int i = 0; i < 5; ++i) {
@@ -2236,14 +2269,22 @@ void median_row(const float* up, const float* mid, const float* down, float* out
   if (up && down && cols >= 3) {
     // Vectors over the inner columns, the rest one by one.
 #if defined(__AVX512F__)
-    const ptrdiff_t xv = median_vec<F512>(up, mid, down, out, 1, cols - 1);
+    using F = F512;
 #else
-    const ptrdiff_t xv = median_vec<F256>(up, mid, down, out, 1, cols - 1);
+    using F = F256;
 #endif
-    for (ptrdiff_t x = 0; x < cols; ++x) {
-      if (x >= 1 && x < xv) continue;
-      out[x] = mid[x] != mid[x] ? mid[x] : median_slow(rows, nrows, x, cols);
+    ptrdiff_t xv = median_vec<F>(up, mid, down, out, 1, cols - 1);
+    if (xv < cols - 1 && cols - 2 >= F::kLanes) {
+      // The tail: one more vector ending at the last inner column (overlapping the previous
+      // one, whose columns it computes again, identically).
+      median_vec<F>(up, mid, down, out, cols - 1 - F::kLanes, cols - 1);
+      xv = cols - 1;
     }
+    auto one = [&](ptrdiff_t x) {
+      out[x] = mid[x] != mid[x] ? mid[x] : median_slow(rows, nrows, x, cols);
+    };
+    one(0);
+    for (ptrdiff_t x = std::max<ptrdiff_t>(xv, 1); x < cols; ++x) one(x);
     return;
   }
 #endif
