@@ -2313,7 +2313,13 @@ void match_band_impl(const MatchArgs& a, const BandScratch& s, ptrdiff_t y0, ptr
       const ptrdiff_t yout = clamp_index(y - r - 1, 0, rows - 1);
       if (yin != yout) {
         pad_right_row(rrow(yin), rpad_in, cols, npad, jmin);
-        pad_right_row(rrow(yout), rpad_out, cols, npad, jmin);
+        // The leaving row's right features, where they are matched again (not with the
+        // AVX2 build's ring of census costs).
+        bool out_matched = true;
+#if defined(STEREODEPTH_BM_AVX2)
+        out_matched = !(fused && sizeof(F) == 4 && s.ring);
+#endif
+        if (out_matched) pad_right_row(rrow(yout), rpad_out, cols, npad, jmin);
         if (fused) {
           c.in_left = lrow(yin);
           c.in_rpad = rpad_in;
