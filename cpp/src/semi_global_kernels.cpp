@@ -743,14 +743,31 @@ inline ZRow split_z(const uint16_t* rrow, ptrdiff_t cols, int nd, int min_d, int
     }
   }
   for (int r = 0; r < nv; ++r) {
-    for (ptrdiff_t q = qhis[r]; q >= qlos[r]; --q) {
-      if (q < qb1 && q >= qb0) {
-        q = qb0;  // the blocks' q are done; --q goes on below them
-        continue;
-      }
-      const uint16_t v = rrow[clamp_index(q * nv + r, 0, cols - 1)];
-      clo[base[r] - q] = static_cast<uint8_t>(v & 0xFF);
-      chi[base[r] - q] = static_cast<uint8_t>(v >> 8);
+    // The run's q not done by the blocks: qhis[r] down to qb1, then qb0 - 1 down to qlos[r]
+    // (all of them without blocks), in three parts each: right of the image (its last
+    // pixel), inside it, left of it (its first pixel). In locals, as the byte stores may
+    // alias base[] for the compiler.
+    uint8_t* __restrict lo = clo + base[r];
+    uint8_t* __restrict hi = chi + base[r];
+    const ptrdiff_t qin_hi = floor_div(cols - 1 - r, nv);  // the last q inside the image
+    const ptrdiff_t qin_lo = -floor_div(r, nv);             // the first (ceil(-r / nv))
+    auto put = [&](ptrdiff_t q, uint16_t v) {
+      lo[-q] = static_cast<uint8_t>(v & 0xFF);
+      hi[-q] = static_cast<uint8_t>(v >> 8);
+    };
+    auto part = [&](ptrdiff_t qa, ptrdiff_t qb) {  // q = qa down to qb
+      ptrdiff_t q = qa;
+      for (; q >= qb && q > qin_hi; --q) put(q, rrow[cols - 1]);
+      const ptrdiff_t qstop = std::max(qb, qin_lo);
+      const uint16_t* __restrict src = rrow + r;
+      for (; q >= qstop; --q) put(q, src[q * nv]);
+      for (; q >= qb; --q) put(q, rrow[0]);
+    };
+    if (qb1 > qb0) {
+      part(qhis[r], std::max(qb1, qlos[r]));
+      part(std::min(qb0 - 1, qhis[r]), qlos[r]);
+    } else {
+      part(qhis[r], qlos[r]);
     }
   }
   // Z[t] for t = cols - 1 down to 1 - nv: w = t - min_d.
