@@ -116,3 +116,76 @@ def test_semi_global_vertical_passes_use_at_most_one_thread_per_cpu(paths: int) 
     one = stereodepth.semi_global_match(left, right, num_disparities=64, paths=paths, threads=1)
     many = stereodepth.semi_global_match(left, right, num_disparities=64, paths=paths, threads=16)
     np.testing.assert_array_equal(one, many)
+
+
+@pytest.mark.skipif(not hasattr(os, "fork"), reason="needs os.fork")
+def test_matchers_run_in_a_forked_child() -> None:
+    # The kernels keep worker threads between calls; a child forked after they started has
+    # none of them (fork copies only the calling thread) and must still match, on several
+    # threads, without waiting for workers that do not exist.
+    import time
+    import warnings
+
+    rng = np.random.default_rng(5)
+    left = rng.integers(0, 256, size=(96, 80), dtype=np.uint8)
+    right = np.roll(left, -4, axis=1)
+    sgm = stereodepth.SemiGlobalMatcher(num_disparities=16, threads=2)
+    bm = stereodepth.StereoMatcher(num_disparities=16, threads=3)
+    want = (sgm.compute(left, right), bm.compute(left, right))
+    with warnings.catch_warnings():
+        # Python 3.12 warns on fork() in any process with threads (numpy's BLAS has some).
+        warnings.simplefilter("ignore", DeprecationWarning)
+        pid = os.fork()
+    if pid == 0:  # the child: exit code 0 when both agree, never return into pytest
+        code = 1
+        try:
+            for _ in range(3):
+                got = (sgm.compute(left, right), bm.compute(left, right))
+                pairs = zip(got, want, strict=True)
+                if not all(np.array_equal(a, b, equal_nan=True) for a, b in pairs):
+                    break
+            else:
+                code = 0
+        finally:
+            os._exit(code)
+    deadline = time.monotonic() + 60
+    while True:
+        done, status = os.waitpid(pid, os.WNOHANG)
+        if done:
+            break
+        if time.monotonic() > deadline:
+            os.kill(pid, 9)
+            os.waitpid(pid, 0)
+            pytest.fail("the forked child hung in a multi-threaded call")
+        time.sleep(0.05)
+    assert os.waitstatus_to_exitcode(status) == 0
+
+
+def test_python_threads_share_the_kernels_workers() -> None:
+    # Many Python threads, each asking for more native threads than there are cores, at once:
+    # every result equals the one-thread result (the bands of concurrent calls share the kept
+    # workers, and each call runs the bands no worker has taken).
+    from concurrent.futures import ThreadPoolExecutor
+
+    rng = np.random.default_rng(6)
+    pairs = []
+    for i in range(6):
+        left = rng.integers(0, 256, size=(40 + 7 * i, 70), dtype=np.uint8)
+        pairs.append((left, np.roll(left, -3, axis=1)))
+    makers = [
+        lambda t: stereodepth.SemiGlobalMatcher(num_disparities=16, threads=t),
+        lambda t: stereodepth.SemiGlobalMatcher(num_disparities=16, paths=8, threads=t),
+        lambda t: stereodepth.StereoMatcher(num_disparities=16, threads=t),
+    ]
+    want = [[make(1).compute(a, b) for a, b in pairs] for make in makers]
+
+    def job(k: int) -> bool:
+        make = makers[k % len(makers)]
+        m = make(4)
+        return all(
+            np.array_equal(m.compute(a, b), w, equal_nan=True)
+            for (a, b), w in zip(pairs, want[k % len(makers)], strict=True)
+        )
+
+    with ThreadPoolExecutor(max_workers=8) as ex:
+        assert all(ex.map(job, range(24)))
