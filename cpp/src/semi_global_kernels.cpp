@@ -13,6 +13,7 @@
 #include "semi_global_kernels.hpp"
 
 #include <algorithm>
+#include <type_traits>
 #include <cmath>
 #include <cstdint>
 #include <cstring>
@@ -893,6 +894,84 @@ bool box_sweep_regs_upto(int m, const uint8_t* zlo, const uint8_t* zhi, const ui
   }
 }
 
+// box_sweep_regs for nd = 32 * M2 + 16 (an odd multiple of 16, which B256 alone cannot
+// cover): M2 vectors of 32 bytes and one of 16 at the end. The sums are byte by byte, so the
+// width of the vectors does not change them (box_sweep_regs<B128, 2 * M2 + 1> gives the same
+// bytes with almost twice the instructions).
+template <int M2, int kT>
+void box_sweep_mixed(const uint8_t* zlo, const uint8_t* zhi, const uint16_t* lrow,
+                     ptrdiff_t cols, ptrdiff_t x0, ptrdiff_t x1, int min_d, int cmax,
+                     const uint8_t* ring, uint8_t* fo, const uint8_t* b, const uint8_t* c,
+                     uint8_t* out) {
+  using W = B256;
+  using T = B128;
+  constexpr int nd = 32 * M2 + 16;
+  constexpr ptrdiff_t t0 = 32 * M2;  // the 16-byte vector's offset
+  constexpr ptrdiff_t step = kT == 0 ? 1 : kT;
+  typename W::R pv[M2], qv[M2];
+  for (int m = 0; m < M2; ++m) {
+    const typename W::R p = W::load(ring + m * 32), q = W::load(ring + nd + m * 32);
+    pv[m] = W::add(p, q);
+    qv[m] = q;
+  }
+  typename T::R pt = T::add(T::load(ring + t0), T::load(ring + nd + t0));
+  typename T::R qt = T::load(ring + nd + t0);
+  for (ptrdiff_t x = x0; x < x1; ++x) {
+    uint8_t* __restrict o = out + x * nd;
+    const ptrdiff_t xc = x + 1 < cols ? x + 1 : cols - 1;
+    const ptrdiff_t zat = (cols - 1 - xc) * step;
+    const uint16_t l = lrow[xc];
+    const typename W::R llo = W::set1(l & 0xFF), lhi = W::set1(l >> 8);
+#pragma GCC unroll 8
+    for (int m = 0; m < M2; ++m) {
+      const typename W::R h =
+          W::hamming(W::load(zlo + zat + m * 32), W::load(zhi + zat + m * 32), llo, lhi);
+      W::store(fo + m * 32, h);
+      const typename W::R cs = W::add(W::add(h, W::load(b + m * 32)), W::load(c + m * 32));
+      W::store(o + m * 32, W::add(pv[m], cs));
+      pv[m] = W::add(qv[m], cs);
+      qv[m] = cs;
+    }
+    {
+      const typename T::R h = T::hamming(T::load(zlo + zat + t0), T::load(zhi + zat + t0),
+                                         _mm256_castsi256_si128(llo), _mm256_castsi256_si128(lhi));
+      T::store(fo + t0, h);
+      const typename T::R cs = T::add(T::add(h, T::load(b + t0)), T::load(c + t0));
+      T::store(o + t0, T::add(pt, cs));
+      pt = T::add(qt, cs);
+      qt = cs;
+    }
+    fo += nd;
+    b += nd;
+    c += nd;
+    const ptrdiff_t khi = x - min_d;
+    const ptrdiff_t klo = x - min_d - cols + 1;
+    if (khi + 1 < nd || klo > 0) {
+      fill_range<kT>(o, clamp_index(khi + 1, 0, nd), nd, nd, cmax);
+      fill_range<kT>(o, 0, clamp_index(klo, 0, nd), nd, cmax);
+    }
+  }
+}
+
+// box_sweep_mixed for nd = 32 * m2 + 16 when 1 <= m2 <= kMax (one instance each); false for
+// any other m2.
+template <int kT, int kMax, int M2 = 1>
+bool box_sweep_mixed_upto(int m2, const uint8_t* zlo, const uint8_t* zhi, const uint16_t* lrow,
+                          ptrdiff_t cols, ptrdiff_t x0, ptrdiff_t x1, int min_d, int cmax,
+                          const uint8_t* ring, uint8_t* fo, const uint8_t* b, const uint8_t* c,
+                          uint8_t* out) {
+  if constexpr (M2 > kMax) {
+    return false;
+  } else {
+    if (m2 == M2) {
+      box_sweep_mixed<M2, kT>(zlo, zhi, lrow, cols, x0, x1, min_d, cmax, ring, fo, b, c, out);
+      return true;
+    }
+    return box_sweep_mixed_upto<kT, kMax, M2 + 1>(m2, zlo, zhi, lrow, cols, x0, x1, min_d, cmax,
+                                                  ring, fo, b, c, out);
+  }
+}
+
 template <class B, int kT>
 void box_row8_impl(uint8_t* const* raws, int fresh, const uint16_t* lrow, const uint16_t* rrow,
                    uint8_t* rev, int radius, ptrdiff_t cols, ptrdiff_t x0, ptrdiff_t x1, int nd,
@@ -965,6 +1044,13 @@ void box_row8_impl(uint8_t* const* raws, int fresh, const uint16_t* lrow, const 
     uint8_t* fo = f + 2 * nd;
     const uint8_t* b = other[0] + 2 * nd;
     const uint8_t* c = other[1] + 2 * nd;
+    if constexpr (std::is_same_v<B, B128>) {
+      // nd an odd multiple of 16 from 48 on: 32-byte vectors and a 16-byte one (up to 144).
+      if (nd % 32 == 16 && box_sweep_mixed_upto<kT, 4>(nd / 32, zlo, zhi, lrow, cols, x0, x1,
+                                                       min_d, cmax, ring, fo, b, c, out)) {
+        return;
+      }
+    }
     // Up to 5 vectors the two sums per vector fit the 16 registers of AVX2.
     if (box_sweep_regs_upto<B, kT, 5>(nd / N, zlo, zhi, lrow, cols, x0, x1, min_d, cmax, ring, fo,
                                       b, c, out)) {
