@@ -1849,7 +1849,7 @@ inline void pass1_pixel_t(int nv_rt, const uint8_t* __restrict cx, int16_t* __re
 
 // Pass 2 on one pixel: the path from the right, the sums (0xFFFF outside klo .. klo + span
 // when kBorder; into px when kSecond), the winner per lane and the right winners' window.
-template <class V, int kNv, bool kFirst, bool kBorder, bool kSecond>
+template <class V, int kNv, bool kFirst, bool kBorder, bool kSecond, int kSlot0 = -1>
 inline void pass2_pixel_t(int nv_rt, const uint8_t* __restrict cx, int16_t* __restrict hrow,
                           uint16_t* __restrict px, uint16_t* __restrict wmin,
                           uint16_t* __restrict warg, int slot0, typename V::R iota_nv,
@@ -1882,19 +1882,39 @@ inline void pass2_pixel_t(int nv_rt, const uint8_t* __restrict cx, int16_t* __re
     if constexpr (kBorder) s = V::or_outside(s, kv, lo_v, span_v);
     if constexpr (kSecond) V::store(px + v * N, s);  // for the second best
     V::take_lt(best, barg, s, kv);
-    uint16_t* wp = wmin + slot * N;
-    uint16_t* ap = warg + slot * N;
+    // With kSlot0 (slot0 known at compile time) every slot is a constant of the unrolled
+    // loop: no index arithmetic per vector.
+    const int sl = kSlot0 >= 0 ? (kSlot0 + v) % (kNv > 0 ? kNv : 1) : slot;
+    uint16_t* wp = wmin + sl * N;
+    uint16_t* ap = warg + sl * N;
     R wv = V::load(wp), wa = V::load(ap);
     V::take_le(wv, wa, s, kv);
     V::store(wp, wv);
     V::store(ap, wa);
-    slot = slot + 1 == nv ? 0 : slot + 1;
+    if constexpr (kSlot0 < 0) slot = slot + 1 == nv ? 0 : slot + 1;
     kv = V::add(kv, one);
   }
   mr_out = V::hmin_v(V::min(rmin[0], rmin[1]));
   best_out = best;
   arg_out = barg;
 }
+
+// fn(std::integral_constant<int, value>{}) for value in 0 .. kN - 1 (the last for any other).
+template <int kN, int S = 0, class Fn>
+inline void with_constant(int value, Fn&& fn) {
+  if constexpr (S + 1 >= kN) {
+    fn(std::integral_constant<int, S>{});
+  } else {
+    if (value == S) {
+      fn(std::integral_constant<int, S>{});
+      return;
+    }
+    with_constant<kN, S + 1>(value, fn);
+  }
+}
+
+// The vector counts whose pass 2 gets one instance per window slot (the code grows as nv^2).
+constexpr int kConstSlotsMax = 10;
 
 template <class V, int kNv, bool kSecond>
 void fused_row_t_impl(const FusedRowArgs& a) {
@@ -1996,6 +2016,13 @@ void fused_row_t_impl(const FusedRowArgs& a) {
         pass2_pixel_t<V, kNv, false, true, kSecond>(nv, cx, hrow, px, wmin, warg, slot0,
                                                     iota_nv, vp1, mr, p2r, lo_v, span_v, mr,
                                                     best_v, arg_v);
+      } else if constexpr (kNv >= 2 && kNv <= kConstSlotsMax) {
+        // One instance per slot0 (it cycles through 0 .. nv - 1, so the branch predicts).
+        with_constant<kNv>(slot0, [&](auto s0) {
+          pass2_pixel_t<V, kNv, false, false, kSecond, decltype(s0)::value>(
+              nv, cx, hrow, px, wmin, warg, slot0, iota_nv, vp1, mr, p2r, lo_v, span_v, mr,
+              best_v, arg_v);
+        });
       } else {
         pass2_pixel_t<V, kNv, false, false, kSecond>(nv, cx, hrow, px, wmin, warg, slot0,
                                                      iota_nv, vp1, mr, p2r, lo_v, span_v, mr,
