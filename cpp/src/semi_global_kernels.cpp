@@ -1984,6 +1984,12 @@ void fused_row_t_impl(const FusedRowArgs& a) {
   uint32_t* res = a.result;
   R mr = sent;
   int slot0 = 0;  // the slot of vector 0
+  // With kNv: where index k sits in the transposed layout, (k % nv) * N + k / nv, for the
+  // winner's neighbours (a table rather than a division and a remainder per pixel).
+  uint16_t at_of[kNv > 0 ? kNv * N : 1];
+  if constexpr (kNv > 0) {
+    for (int k = 0; k < kNv * N; ++k) at_of[k] = static_cast<uint16_t>((k % kNv) * N + k / kNv);
+  }
   for (ptrdiff_t x = cols - 1; x >= 0; --x) {
     const uint8_t* cx = a.c + x * nd;
     uint16_t* px = a.partial + x * nd;
@@ -2055,7 +2061,14 @@ void fused_row_t_impl(const FusedRowArgs& a) {
       // other paths' sums and the path from the right just stored.
       const unsigned km = static_cast<unsigned>(kb - 1), kp = static_cast<unsigned>(kb + 1);
       const unsigned unv = static_cast<unsigned>(nv);
-      const ptrdiff_t am = (km % unv) * N + km / unv, ap = (kp % unv) * N + kp / unv;
+      ptrdiff_t am, ap;
+      if constexpr (kNv > 0) {
+        am = at_of[km];
+        ap = at_of[kp];
+      } else {
+        am = (km % unv) * N + km / unv;
+        ap = (kp % unv) * N + kp / unv;
+      }
       auto sum = [&](ptrdiff_t at) {
         const uint16_t v = static_cast<uint16_t>(px[at] + static_cast<uint16_t>(hrow[at]));
         return static_cast<uint32_t>(v);
