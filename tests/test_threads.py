@@ -189,3 +189,18 @@ def test_python_threads_share_the_kernels_workers() -> None:
 
     with ThreadPoolExecutor(max_workers=8) as ex:
         assert all(ex.map(job, range(24)))
+
+
+@pytest.mark.skipif(not os.path.isdir("/proc/self/task"), reason="needs Linux /proc")
+def test_many_requested_threads_keep_a_bounded_pool() -> None:
+    # threads=200 splits the work into 200 bands (the same result as 1 thread), but the kept
+    # workers stop at twice the CPUs (at least 8): the rest of the bands run on the caller.
+    rng = np.random.default_rng(7)
+    left = rng.integers(0, 256, size=(400, 64), dtype=np.uint8)
+    right = np.roll(left, -2, axis=1)
+    want = stereodepth.StereoMatcher(num_disparities=16, threads=1).compute(left, right)
+    before = len(os.listdir("/proc/self/task"))
+    got = stereodepth.StereoMatcher(num_disparities=16, threads=200).compute(left, right)
+    after = len(os.listdir("/proc/self/task"))
+    np.testing.assert_array_equal(got, want)
+    assert after - before <= max(8, 2 * (os.cpu_count() or 1))

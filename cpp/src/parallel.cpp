@@ -166,11 +166,13 @@ struct Job {
 };
 
 // Worker threads kept between calls: starting and joining a std::thread per call cost 30 to
-// 75 us on the virtual machines measured (the semi-global matcher has three parallel steps per
-// call), waking a waiting one a fraction of that. Workers are started on demand, up to the
-// most bands any call asked for, and wait on a condition variable while there is no work.
-// They are detached and never stopped; the pool is never destroyed (a static destructor
-// joining threads at interpreter exit could wait forever).
+// 75 us on the virtual machines measured, and the semi-global matcher has three parallel
+// steps per call (paths 4 and 8 more). Workers are started on demand, up to the most bands
+// any call asked for less one, but at most max_workers() (more threads than CPUs gain nothing;
+// a call with more bands runs the rest on its own thread, with the same results), and wait on
+// a condition variable while there is no work. They are detached and never stopped; the pool
+// is never destroyed (a static destructor joining threads at interpreter exit could wait
+// forever).
 struct Pool {
   std::mutex m;
   std::condition_variable work;  // a job was queued
@@ -210,6 +212,12 @@ struct Pool {
   }
 };
 
+// Twice the CPUs, at least 8.
+int max_workers() {
+  static const int n = std::max(8, 2 * static_cast<int>(std::thread::hardware_concurrency()));
+  return n;
+}
+
 Pool* g_pool = nullptr;
 std::once_flag g_pool_once;
 
@@ -247,7 +255,7 @@ void parallel_for_rows(std::ptrdiff_t rows, int threads, std::ptrdiff_t min_rows
   Pool& p = pool();
   {
     std::lock_guard<std::mutex> lock(p.m);
-    p.grow(static_cast<int>(std::min<std::ptrdiff_t>(bands - 1, 1 << 16)));
+    p.grow(static_cast<int>(std::min<std::ptrdiff_t>(bands - 1, max_workers())));
     p.jobs.push_back(&job);
   }
   for (std::ptrdiff_t b = 1; b < bands; ++b) p.work.notify_one();

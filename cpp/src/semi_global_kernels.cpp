@@ -13,11 +13,11 @@
 #include "semi_global_kernels.hpp"
 
 #include <algorithm>
-#include <type_traits>
 #include <cmath>
 #include <cstdint>
 #include <cstring>
 #include <limits>
+#include <type_traits>
 #include <utility>
 
 #include "stereodepth/block_match.hpp"
@@ -2252,8 +2252,10 @@ void fused_row_t(const FusedRowArgs& a) {
 // The 3x3 median of the valid disparities.
 
 // The 3x3 median of whole vectors of pixels (explicit SIMD; one template for AVX2 and
-// AVX-512): NaN becomes +inf (after every valid value), the five least of the nine are sorted
-// by bubbling, and the lower median of the n valid values is the ((n - 1) / 2)-th least.
+// AVX-512). When no window of the vector holds NaN (most of them), the median of nine by their
+// sorted columns; else NaN becomes +inf (after every valid value), the five least of the nine
+// are sorted by bubbling, and the lower median of the n valid values is the ((n - 1) / 2)-th
+// least.
 #if defined(__AVX2__)
 struct F256 {
   using R = __m256;
