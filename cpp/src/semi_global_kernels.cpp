@@ -2000,10 +2000,15 @@ void fused_row_t_impl(const FusedRowArgs& a) {
     // No candidate (klo > khi): lo = 0xFFFF, span 0 masks every lane (k - lo = k + 1 > 0),
     // so that the candidates above ndw, whose right columns may lie inside the image, stay
     // out of the right winners.
-    const R lo_v = V::set1(klo > khi ? 0xFFFF : static_cast<int>(klo));
-    const R span_v = V::set1(klo > khi ? 0 : static_cast<int>(khi - klo));
+    // (Made only for the pixels that take the border's instance.)
+    auto lo_span = [&](R& lo_v, R& span_v) {
+      lo_v = V::set1(klo > khi ? 0xFFFF : static_cast<int>(klo));
+      span_v = V::set1(klo > khi ? 0 : static_cast<int>(khi - klo));
+    };
+    R lo_v = ones, span_v = ones;
     R best_v, arg_v;
     if (x == cols - 1) {
+      lo_span(lo_v, span_v);
       pass2_pixel_t<V, kNv, true, true, kSecond>(nv, cx, hrow, px, wmin, warg, slot0, iota_nv,
                                                  vp1, sent, sent, lo_v, span_v, mr, best_v,
                                                  arg_v);
@@ -2019,6 +2024,7 @@ void fused_row_t_impl(const FusedRowArgs& a) {
       slot0 = slot0 + 1 == nv ? 0 : slot0 + 1;
       const R p2r = V::set1(p2_for(a.p, g[x], g[x + 1]));
       if (klo != 0 || khi != nd - 1) {
+        lo_span(lo_v, span_v);
         pass2_pixel_t<V, kNv, false, true, kSecond>(nv, cx, hrow, px, wmin, warg, slot0,
                                                     iota_nv, vp1, mr, p2r, lo_v, span_v, mr,
                                                     best_v, arg_v);
