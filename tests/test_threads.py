@@ -189,3 +189,54 @@ def test_python_threads_share_the_kernels_workers() -> None:
 
     with ThreadPoolExecutor(max_workers=8) as ex:
         assert all(ex.map(job, range(24)))
+
+
+_REFUSED_THREADS = """
+import resource, sys
+import numpy as np
+import stereodepth
+
+rng = np.random.default_rng(7)
+left = rng.integers(0, 256, size=(24, 64), dtype=np.uint8)
+right = np.roll(left, -3, axis=1)
+m1 = stereodepth.SemiGlobalMatcher(num_disparities=16, paths=8, threads=1)
+m2 = stereodepth.SemiGlobalMatcher(num_disparities=16, paths=8, threads=2)
+want = m1.compute(left, right)
+with open("/proc/self/status") as f:
+    vm = next(int(line.split()[1]) for line in f if line.startswith("VmSize:")) * 1024
+# A few MiB more than the process has mapped: too little for a thread's stack (8 MiB).
+resource.setrlimit(resource.RLIMIT_AS, (vm + (6 << 20), resource.getrlimit(resource.RLIMIT_AS)[1]))
+try:
+    got = m2.compute(left, right)
+except (RuntimeError, MemoryError) as e:
+    print("refused:", e)
+    sys.exit(0)
+sys.exit(0 if np.array_equal(got, want, equal_nan=True) else 1)
+"""
+
+
+@pytest.mark.skipif(
+    not os.path.exists("/proc/self/status"), reason="needs Linux's /proc/self/status"
+)
+def test_semi_global_does_not_hang_when_threads_are_refused() -> None:
+    # The 8-path mode's vertical bands meet at a barrier every row, so each band needs a thread
+    # of its own at once: the kept workers ran a band only when one was free, and a call whose
+    # worker could not be started (here: no address space for its stack) waited at the barrier
+    # forever. It must return the right output or raise, in a fresh process (a forked one
+    # reuses the stacks of its parent's threads).
+    import subprocess
+    import sys
+
+    if stereodepth.build_info()["default_threads"] < 2:
+        pytest.skip("the 8-path mode runs one band on one CPU")
+    try:
+        run = subprocess.run(
+            [sys.executable, "-c", _REFUSED_THREADS],
+            capture_output=True,
+            text=True,
+            timeout=60,
+            env={**os.environ, "PYTHONPATH": os.pathsep.join(sys.path)},
+        )
+    except subprocess.TimeoutExpired:
+        pytest.fail("the matcher hung when a worker thread could not be started")
+    assert run.returncode == 0, run.stderr
