@@ -240,3 +240,49 @@ def test_semi_global_does_not_hang_when_threads_are_refused() -> None:
     except subprocess.TimeoutExpired:
         pytest.fail("the matcher hung when a worker thread could not be started")
     assert run.returncode == 0, run.stderr
+
+
+_EXIT_DURING_CALLS = """
+import threading, time
+import numpy as np
+import stereodepth
+
+rng = np.random.default_rng(8)
+left = rng.integers(0, 256, size=(48, 96), dtype=np.uint8)
+right = np.roll(left, -3, axis=1)
+started = threading.Barrier(3)
+
+
+def loop(make):
+    m = make()
+    started.wait()
+    while True:
+        m.compute(left, right)
+
+
+for make in (
+    lambda: stereodepth.StereoMatcher(num_disparities=16, threads=2),
+    lambda: stereodepth.SemiGlobalMatcher(num_disparities=16, threads=2),
+):
+    threading.Thread(target=loop, args=(make,), daemon=True).start()
+started.wait()
+time.sleep(0.3)
+"""
+
+
+def test_interpreter_exits_cleanly_while_daemon_threads_are_in_kernels() -> None:
+    # At exit CPython ends daemon threads that ask for the GIL back; a thread coming back from
+    # a kernel then must not take the process down (it aborted in std::terminate, exit -6).
+    import subprocess
+    import sys
+
+    for _ in range(3):
+        run = subprocess.run(
+            [sys.executable, "-c", _EXIT_DURING_CALLS],
+            capture_output=True,
+            text=True,
+            timeout=60,
+            env={**os.environ, "PYTHONPATH": os.pathsep.join(sys.path)},
+        )
+        assert run.returncode == 0, run.stderr
+        assert "terminate" not in run.stderr
