@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import os
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -286,3 +287,62 @@ def test_interpreter_exits_cleanly_while_daemon_threads_are_in_kernels() -> None
         )
         assert run.returncode == 0, run.stderr
         assert "terminate" not in run.stderr
+
+
+@pytest.mark.skipif(not hasattr(os, "fork"), reason="needs os.fork")
+def test_fork_while_other_threads_are_in_kernels() -> None:
+    # fork() from one Python thread while two others are inside multi-threaded kernel calls
+    # (their bands on the kept workers, the pool's lock taken and released all the while): the
+    # child has none of those threads and must still match on several threads, 8-path bands
+    # that meet at a barrier included. The child makes its own matchers: a matcher locks
+    # itself during a call, and a child forked mid-call inherits that lock held.
+    import threading
+    import time
+    import warnings
+
+    rng = np.random.default_rng(9)
+    left = rng.integers(0, 256, size=(48, 96), dtype=np.uint8)
+    right = np.roll(left, -3, axis=1)
+    makers = [
+        lambda: stereodepth.SemiGlobalMatcher(num_disparities=16, paths=8, threads=2),
+        lambda: stereodepth.StereoMatcher(num_disparities=16, threads=3),
+    ]
+    want = [make().compute(left, right) for make in makers]
+    stop = threading.Event()
+
+    def busy(make: Any) -> None:
+        m = make()
+        while not stop.is_set():
+            m.compute(left, right)
+
+    threads = [threading.Thread(target=busy, args=(make,)) for make in makers]
+    for t in threads:
+        t.start()
+    try:
+        for _ in range(10):
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore", DeprecationWarning)
+                pid = os.fork()
+            if pid == 0:  # the child: never return into pytest
+                code = 1
+                try:
+                    got = [make().compute(left, right) for make in makers]
+                    pairs = zip(got, want, strict=True)
+                    code = 0 if all(np.array_equal(a, b, equal_nan=True) for a, b in pairs) else 1
+                finally:
+                    os._exit(code)
+            deadline = time.monotonic() + 30
+            while True:
+                done, status = os.waitpid(pid, os.WNOHANG)
+                if done:
+                    break
+                if time.monotonic() > deadline:
+                    os.kill(pid, 9)
+                    os.waitpid(pid, 0)
+                    pytest.fail("a child forked during kernel calls hung")
+                time.sleep(0.01)
+            assert os.waitstatus_to_exitcode(status) == 0
+    finally:
+        stop.set()
+        for t in threads:
+            t.join()
