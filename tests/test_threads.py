@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import os
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -204,3 +205,159 @@ def test_many_requested_threads_keep_a_bounded_pool() -> None:
     after = len(os.listdir("/proc/self/task"))
     np.testing.assert_array_equal(got, want)
     assert after - before <= max(8, 2 * (os.cpu_count() or 1))
+
+
+_REFUSED_THREADS = """
+import resource, sys
+import numpy as np
+import stereodepth
+
+rng = np.random.default_rng(7)
+left = rng.integers(0, 256, size=(24, 64), dtype=np.uint8)
+right = np.roll(left, -3, axis=1)
+m1 = stereodepth.SemiGlobalMatcher(num_disparities=16, paths=8, threads=1)
+m2 = stereodepth.SemiGlobalMatcher(num_disparities=16, paths=8, threads=2)
+want = m1.compute(left, right)
+with open("/proc/self/status") as f:
+    vm = next(int(line.split()[1]) for line in f if line.startswith("VmSize:")) * 1024
+# A few MiB more than the process has mapped: too little for a thread's stack (8 MiB).
+resource.setrlimit(resource.RLIMIT_AS, (vm + (6 << 20), resource.getrlimit(resource.RLIMIT_AS)[1]))
+try:
+    got = m2.compute(left, right)
+except (RuntimeError, MemoryError) as e:
+    print("refused:", e)
+    sys.exit(0)
+sys.exit(0 if np.array_equal(got, want, equal_nan=True) else 1)
+"""
+
+
+@pytest.mark.skipif(
+    not os.path.exists("/proc/self/status"), reason="needs Linux's /proc/self/status"
+)
+def test_semi_global_does_not_hang_when_threads_are_refused() -> None:
+    # The 8-path mode's vertical bands meet at a barrier every row, so each band needs a thread
+    # of its own at once: the kept workers ran a band only when one was free, and a call whose
+    # worker could not be started (here: no address space for its stack) waited at the barrier
+    # forever. It must return the right output or raise, in a fresh process (a forked one
+    # reuses the stacks of its parent's threads).
+    import subprocess
+    import sys
+
+    if stereodepth.build_info()["default_threads"] < 2:
+        pytest.skip("the 8-path mode runs one band on one CPU")
+    try:
+        run = subprocess.run(
+            [sys.executable, "-c", _REFUSED_THREADS],
+            capture_output=True,
+            text=True,
+            timeout=60,
+            env={**os.environ, "PYTHONPATH": os.pathsep.join(sys.path)},
+        )
+    except subprocess.TimeoutExpired:
+        pytest.fail("the matcher hung when a worker thread could not be started")
+    assert run.returncode == 0, run.stderr
+
+
+_EXIT_DURING_CALLS = """
+import threading, time
+import numpy as np
+import stereodepth
+
+rng = np.random.default_rng(8)
+left = rng.integers(0, 256, size=(48, 96), dtype=np.uint8)
+right = np.roll(left, -3, axis=1)
+started = threading.Barrier(3)
+
+
+def loop(make):
+    m = make()
+    started.wait()
+    while True:
+        m.compute(left, right)
+
+
+for make in (
+    lambda: stereodepth.StereoMatcher(num_disparities=16, threads=2),
+    lambda: stereodepth.SemiGlobalMatcher(num_disparities=16, threads=2),
+):
+    threading.Thread(target=loop, args=(make,), daemon=True).start()
+started.wait()
+time.sleep(0.3)
+"""
+
+
+def test_interpreter_exits_cleanly_while_daemon_threads_are_in_kernels() -> None:
+    # At exit CPython ends daemon threads that ask for the GIL back; a thread coming back from
+    # a kernel then must not take the process down (it aborted in std::terminate, exit -6).
+    import subprocess
+    import sys
+
+    for _ in range(3):
+        run = subprocess.run(
+            [sys.executable, "-c", _EXIT_DURING_CALLS],
+            capture_output=True,
+            text=True,
+            timeout=60,
+            env={**os.environ, "PYTHONPATH": os.pathsep.join(sys.path)},
+        )
+        assert run.returncode == 0, run.stderr
+        assert "terminate" not in run.stderr
+
+
+@pytest.mark.skipif(not hasattr(os, "fork"), reason="needs os.fork")
+def test_fork_while_other_threads_are_in_kernels() -> None:
+    # fork() from one Python thread while two others are inside multi-threaded kernel calls
+    # (their bands on the kept workers, the pool's lock taken and released all the while): the
+    # child has none of those threads and must still match on several threads, 8-path bands
+    # that meet at a barrier included. The child makes its own matchers: a matcher locks
+    # itself during a call, and a child forked mid-call inherits that lock held.
+    import threading
+    import time
+    import warnings
+
+    rng = np.random.default_rng(9)
+    left = rng.integers(0, 256, size=(48, 96), dtype=np.uint8)
+    right = np.roll(left, -3, axis=1)
+    makers = [
+        lambda: stereodepth.SemiGlobalMatcher(num_disparities=16, paths=8, threads=2),
+        lambda: stereodepth.StereoMatcher(num_disparities=16, threads=3),
+    ]
+    want = [make().compute(left, right) for make in makers]
+    stop = threading.Event()
+
+    def busy(make: Any) -> None:
+        m = make()
+        while not stop.is_set():
+            m.compute(left, right)
+
+    threads = [threading.Thread(target=busy, args=(make,)) for make in makers]
+    for t in threads:
+        t.start()
+    try:
+        for _ in range(10):
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore", DeprecationWarning)
+                pid = os.fork()
+            if pid == 0:  # the child: never return into pytest
+                code = 1
+                try:
+                    got = [make().compute(left, right) for make in makers]
+                    pairs = zip(got, want, strict=True)
+                    code = 0 if all(np.array_equal(a, b, equal_nan=True) for a, b in pairs) else 1
+                finally:
+                    os._exit(code)
+            deadline = time.monotonic() + 30
+            while True:
+                done, status = os.waitpid(pid, os.WNOHANG)
+                if done:
+                    break
+                if time.monotonic() > deadline:
+                    os.kill(pid, 9)
+                    os.waitpid(pid, 0)
+                    pytest.fail("a child forked during kernel calls hung")
+                time.sleep(0.01)
+            assert os.waitstatus_to_exitcode(status) == 0
+    finally:
+        stop.set()
+        for t in threads:
+            t.join()

@@ -79,7 +79,7 @@ void compute_py(BlockMatcher& self, const py::array& left, const py::array& righ
     conf_arr = py::reinterpret_borrow<py::array>(confidence);
     c = output_view(conf_arr, "confidence");
   }
-  py::gil_scoped_release release;
+  ReleaseGil release;
   self.compute(l, r, d, c);
 }
 
@@ -91,7 +91,7 @@ py::dict stage_times_py(BlockMatcher& self, const py::array& left, const py::arr
   const ImageView<float> d = output_view(disparity, "disparity");
   std::vector<std::pair<std::string, double>> times;
   {
-    py::gil_scoped_release release;
+    ReleaseGil release;
     times = self.stage_times(l, r, d, repeats);
   }
   py::dict out;

@@ -14,6 +14,23 @@ namespace stereodepth::bindings {
 
 namespace py = pybind11;
 
+// Releases the GIL for a kernel call, like py::gil_scoped_release, but takes it back in a
+// destructor that may throw. At interpreter exit CPython 3.11 ends a daemon thread that asks
+// for the GIL back with pthread_exit, which unwinds the thread's stack (abi::__forced_unwind,
+// which pybind11 lets through); begun in gil_scoped_release's noexcept destructor, that
+// unwinding called std::terminate and the whole process aborted ("terminate called without an
+// active exception") whenever a daemon thread was inside a kernel at exit.
+class ReleaseGil {
+ public:
+  ReleaseGil() : state_(PyEval_SaveThread()) {}
+  ReleaseGil(const ReleaseGil&) = delete;
+  ReleaseGil& operator=(const ReleaseGil&) = delete;
+  ~ReleaseGil() noexcept(false) { PyEval_RestoreThread(state_); }
+
+ private:
+  PyThreadState* state_;
+};
+
 inline std::string shape_str(const py::array& a) {
   std::string s = "(";
   for (py::ssize_t i = 0; i < a.ndim(); ++i) {

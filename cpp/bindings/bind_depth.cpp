@@ -53,11 +53,11 @@ void disparity_to_depth_py(const py::array& disparity, py::array& out, double fo
   const int nthreads = resolve_threads(threads);
   if (out.dtype().equal(py::dtype::of<float>())) {
     auto view = writable_stack<float>(out, "out");
-    py::gil_scoped_release release;
+    ReleaseGil release;
     disparity_to_depth(in, view, p, nthreads, chosen);
   } else if (out.dtype().equal(py::dtype::of<std::uint16_t>())) {
     auto view = writable_stack<std::uint16_t>(out, "out");
-    py::gil_scoped_release release;
+    ReleaseGil release;
     disparity_to_depth(in, view, p, nthreads, chosen);
   } else {
     throw py::type_error("out must have dtype float32 or uint16, got " + dtype_str(out));

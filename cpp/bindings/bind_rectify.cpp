@@ -98,7 +98,7 @@ py::dict stereo_rectify_py(const Doubles& K1, const Doubles& D1, const Doubles& 
   p.zero_disparity = zero_disparity;
   StereoRectification r;
   {
-    py::gil_scoped_release release;
+    ReleaseGil release;
     r = stereo_rectify(c1, c2, width, height, Rm, Tv, p);
   }
   return rectification_dict(r, r.vertical);
@@ -120,7 +120,7 @@ py::dict fisheye_stereo_rectify_py(const Doubles& K1, const Doubles& D1, const D
   p.zero_disparity = zero_disparity;
   StereoRectification r;
   {
-    py::gil_scoped_release release;
+    ReleaseGil release;
     r = fisheye_stereo_rectify(c1, c2, width, height, Rm, Tv, p);
   }
   return rectification_dict(r, false);
@@ -161,7 +161,7 @@ void init_undistort_rectify_map_py(const Doubles& K, const Doubles& D, const std
   const ImageView<float> mx = float_view(map_x, "map_x");
   const ImageView<float> my = float_view(map_y, "map_y");
   const int n = resolve_threads(threads);
-  py::gil_scoped_release release;
+  ReleaseGil release;
   init_undistort_rectify_map(cam, Rm, Pm, mx, my, n);
 }
 
@@ -177,7 +177,7 @@ void apply_py(const RemapTable& self, const py::array& src, py::array& out, int 
   const Isa chosen = resolve_isa(isa);
   const int n = resolve_threads(threads);
   void* dst = out.mutable_data();
-  py::gil_scoped_release release;
+  ReleaseGil release;
   self.apply(s, dst, o.row_stride, n, chosen);
 }
 
@@ -219,7 +219,7 @@ void bind_rectify(py::module_& m) {
              const ImageView<const float> my{map_y.data(), map_y.shape(0), map_y.shape(1),
                                              map_y.shape(1)};
              const int n = resolve_threads(threads);
-             py::gil_scoped_release release;
+             ReleaseGil release;
              return std::make_unique<RemapTable>(mx, my, src_rows, src_cols, prec, n);
            }),
            py::arg("map_x"), py::arg("map_y"), py::arg("src_rows"), py::arg("src_cols"),

@@ -65,7 +65,7 @@ void reproject_py(const py::array& disparity, py::array& out, const py::array& q
                               3 * s.cols, s.rows * 3 * s.cols, 3 * s.cols};
   const Isa chosen = resolve_isa(isa);
   const int nthreads = resolve_threads(threads);
-  py::gil_scoped_release release;
+  ReleaseGil release;
   reproject(in, view, p, nthreads, chosen);
 }
 

@@ -20,7 +20,7 @@ void compute_py(SemiGlobalMatcher& self, const py::array& left, const py::array&
     conf_arr = py::reinterpret_borrow<py::array>(confidence);
     c = output_view(conf_arr, "confidence");
   }
-  py::gil_scoped_release release;
+  ReleaseGil release;
   self.compute(l, r, d, c);
 }
 

@@ -169,7 +169,8 @@ struct Job {
 // 75 us on the virtual machines measured, and the semi-global matcher has three parallel
 // steps per call (paths 4 and 8 more). Workers are started on demand, up to the most bands
 // any call asked for less one, but at most max_workers() (more threads than CPUs gain nothing;
-// a call with more bands runs the rest on its own thread, with the same results), and wait on
+// a call with more bands runs the rest on its own thread, with the same results; bands that
+// must run at once, run_bands_together, get a thread each whatever their number), and wait on
 // a condition variable while there is no work. They are detached and never stopped; the pool
 // is never destroyed (a static destructor joining threads at interpreter exit could wait
 // forever).
@@ -199,16 +200,18 @@ struct Pool {
       left.notify_all();
     }
   }
-  // Up to n workers (fewer if the system refuses threads: the callers then run more bands).
-  void grow(int n) {
+  // Up to n workers (fewer if the system refuses threads: the callers then run more bands);
+  // whether there are n.
+  bool grow(std::ptrdiff_t n) {
     while (workers < n) {
       try {
         std::thread([this] { worker(); }).detach();
       } catch (const std::system_error&) {
-        return;
+        return false;
       }
       ++workers;
     }
+    return true;
   }
 };
 
@@ -237,16 +240,10 @@ Pool& pool() {
 
 }  // namespace
 
-void parallel_for_rows(std::ptrdiff_t rows, int threads, std::ptrdiff_t min_rows_per_band,
-                       const std::function<void(std::ptrdiff_t, std::ptrdiff_t)>& fn) {
-  if (rows <= 0) return;
-  min_rows_per_band = std::max<std::ptrdiff_t>(min_rows_per_band, 1);
-  std::ptrdiff_t bands = std::max(1, threads);
-  bands = std::min(bands, std::max<std::ptrdiff_t>(1, rows / min_rows_per_band));
-  if (bands == 1) {
-    fn(0, rows);
-    return;
-  }
+namespace {
+
+void run_job(std::ptrdiff_t rows, std::ptrdiff_t bands, bool together,
+             const std::function<void(std::ptrdiff_t, std::ptrdiff_t)>& fn) {
   Job job;
   job.fn = &fn;
   job.rows = rows;
@@ -255,7 +252,18 @@ void parallel_for_rows(std::ptrdiff_t rows, int threads, std::ptrdiff_t min_rows
   Pool& p = pool();
   {
     std::lock_guard<std::mutex> lock(p.m);
-    p.grow(static_cast<int>(std::min<std::ptrdiff_t>(bands - 1, max_workers())));
+    // A `together` job's bands wait for each other, so each needs a thread of its own: with
+    // fewer than bands - 1 workers (the system refused threads) the caller's band would wait
+    // for a band no thread can take, forever. With enough, every band gets one: an idle
+    // worker takes the first job in the queue with an unclaimed band, so a worker runs a
+    // later job's band only once every earlier job's bands are all claimed, and those finish
+    // (no band of a job waits for a later job).
+    if (!p.grow(together ? bands - 1 : std::min<std::ptrdiff_t>(bands - 1, max_workers())) &&
+        together) {
+      throw std::system_error(std::make_error_code(std::errc::resource_unavailable_try_again),
+                              "cannot start a thread for each of the " + std::to_string(bands) +
+                                  " bands that must run at once");
+    }
     p.jobs.push_back(&job);
   }
   for (std::ptrdiff_t b = 1; b < bands; ++b) p.work.notify_one();
@@ -271,6 +279,32 @@ void parallel_for_rows(std::ptrdiff_t rows, int threads, std::ptrdiff_t min_rows
   for (auto& e : job.errors) {
     if (e) std::rethrow_exception(e);
   }
+}
+
+}  // namespace
+
+void parallel_for_rows(std::ptrdiff_t rows, int threads, std::ptrdiff_t min_rows_per_band,
+                       const std::function<void(std::ptrdiff_t, std::ptrdiff_t)>& fn) {
+  if (rows <= 0) return;
+  min_rows_per_band = std::max<std::ptrdiff_t>(min_rows_per_band, 1);
+  std::ptrdiff_t bands = std::max(1, threads);
+  bands = std::min(bands, std::max<std::ptrdiff_t>(1, rows / min_rows_per_band));
+  if (bands == 1) {
+    fn(0, rows);
+    return;
+  }
+  run_job(rows, bands, false, fn);
+}
+
+void run_bands_together(std::ptrdiff_t n, const std::function<void(std::ptrdiff_t)>& fn) {
+  if (n <= 0) return;
+  if (n == 1) {
+    fn(0);
+    return;
+  }
+  run_job(n, n, true, [&](std::ptrdiff_t b0, std::ptrdiff_t b1) {
+    for (std::ptrdiff_t b = b0; b < b1; ++b) fn(b);
+  });
 }
 
 }  // namespace stereodepth

@@ -729,7 +729,8 @@ void SemiGlobalMatcher::compute(const StereoImage& left, const StereoImage& righ
       const int dxs[3] = {0, 1, -1};
       for (int dy : {1, -1}) {
         Barrier barrier(nb);
-        run_bands(nb, [&](std::ptrdiff_t b) {
+        // The bands meet at the barrier: each needs its own thread, all at once.
+        run_bands_together(nb, [&](std::ptrdiff_t b) {
           const std::ptrdiff_t x0 = band(cols, nb, b), x1 = band(cols, nb, b + 1);
           std::uint16_t* rev = nullptr;
           std::uint16_t* colraw = nullptr;

@@ -33,4 +33,11 @@ int resolve_threads(int requested);
 void parallel_for_rows(std::ptrdiff_t rows, int threads, std::ptrdiff_t min_rows_per_band,
                        const std::function<void(std::ptrdiff_t, std::ptrdiff_t)>& fn);
 
+// Calls fn(b) for b in [0, n), every band on its own thread and all of them at once (the
+// calling thread runs band 0), for bands that wait for each other (a barrier at every row):
+// parallel_for_rows may run two bands one after the other on one thread, which would never
+// return then. Throws std::system_error when the threads cannot be started, and rethrows a
+// band's exception like parallel_for_rows.
+void run_bands_together(std::ptrdiff_t n, const std::function<void(std::ptrdiff_t)>& fn);
+
 }  // namespace stereodepth
