@@ -17,6 +17,23 @@ import stereodepth
 from stereodepth import _core
 
 
+def child_exit_code(pid: int, timeout: float, hung: str) -> int:
+    """The exit code of forked child `pid`; the test fails with `hung` (the child killed) when
+    it has not exited within `timeout` seconds."""
+    import time
+
+    deadline = time.monotonic() + timeout
+    while True:
+        done, status = os.waitpid(pid, os.WNOHANG)
+        if done:
+            return os.waitstatus_to_exitcode(status)
+        if time.monotonic() > deadline:
+            os.kill(pid, 9)
+            os.waitpid(pid, 0)
+            pytest.fail(hung)
+        time.sleep(0.01)
+
+
 def tree(root: Path, files: dict[str, str]) -> str:
     for rel, text in files.items():
         p = root / rel
@@ -124,7 +141,6 @@ def test_matchers_run_in_a_forked_child() -> None:
     # The kernels keep worker threads between calls; a child forked after they started has
     # none of them (fork copies only the calling thread) and must still match, on several
     # threads, without waiting for workers that do not exist.
-    import time
     import warnings
 
     rng = np.random.default_rng(5)
@@ -149,17 +165,7 @@ def test_matchers_run_in_a_forked_child() -> None:
                 code = 0
         finally:
             os._exit(code)
-    deadline = time.monotonic() + 60
-    while True:
-        done, status = os.waitpid(pid, os.WNOHANG)
-        if done:
-            break
-        if time.monotonic() > deadline:
-            os.kill(pid, 9)
-            os.waitpid(pid, 0)
-            pytest.fail("the forked child hung in a multi-threaded call")
-        time.sleep(0.05)
-    assert os.waitstatus_to_exitcode(status) == 0
+    assert child_exit_code(pid, 60, "the forked child hung in a multi-threaded call") == 0
 
 
 def test_python_threads_share_the_kernels_workers() -> None:
@@ -312,7 +318,6 @@ def test_fork_while_other_threads_are_in_kernels() -> None:
     # that meet at a barrier included. The child makes its own matchers: a matcher locks
     # itself during a call, and a child forked mid-call inherits that lock held.
     import threading
-    import time
     import warnings
 
     rng = np.random.default_rng(9)
@@ -346,17 +351,7 @@ def test_fork_while_other_threads_are_in_kernels() -> None:
                     code = 0 if all(np.array_equal(a, b, equal_nan=True) for a, b in pairs) else 1
                 finally:
                     os._exit(code)
-            deadline = time.monotonic() + 30
-            while True:
-                done, status = os.waitpid(pid, os.WNOHANG)
-                if done:
-                    break
-                if time.monotonic() > deadline:
-                    os.kill(pid, 9)
-                    os.waitpid(pid, 0)
-                    pytest.fail("a child forked during kernel calls hung")
-                time.sleep(0.01)
-            assert os.waitstatus_to_exitcode(status) == 0
+            assert child_exit_code(pid, 30, "a child forked during kernel calls hung") == 0
     finally:
         stop.set()
         for t in threads:

@@ -238,10 +238,6 @@ Pool& pool() {
   return *g_pool;
 }
 
-}  // namespace
-
-namespace {
-
 void run_job(std::ptrdiff_t rows, std::ptrdiff_t bands, bool together,
              const std::function<void(std::ptrdiff_t, std::ptrdiff_t)>& fn) {
   Job job;

@@ -13,6 +13,7 @@
 #include "semi_global_kernels.hpp"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstdint>
 #include <cstring>
@@ -656,6 +657,19 @@ inline void fill_range(uint8_t* __restrict o, ptrdiff_t k0, ptrdiff_t k1, int nd
   }
 }
 
+// The box's output column x: the disparities whose right pixel leaves the image (outside
+// klo .. khi, as in raw_row) set to cmax; only columns of the border bands have any.
+template <int kT>
+inline void fill_border_column(uint8_t* __restrict o, ptrdiff_t x, ptrdiff_t cols, int nd,
+                               int min_d, int cmax) {
+  const ptrdiff_t khi = x - min_d;
+  const ptrdiff_t klo = x - min_d - cols + 1;
+  if (khi + 1 < nd || klo > 0) {
+    fill_range<kT>(o, clamp_index(khi + 1, 0, nd), nd, nd, cmax);
+    fill_range<kT>(o, 0, clamp_index(klo, 0, nd), nd, cmax);
+  }
+}
+
 inline ptrdiff_t floor_div(ptrdiff_t a, ptrdiff_t b) {
   const ptrdiff_t q = a / b;
   return (a % b != 0 && (a < 0) != (b < 0)) ? q - 1 : q;
@@ -866,12 +880,7 @@ void box_sweep_regs(const uint8_t* zlo, const uint8_t* zhi, const uint16_t* lrow
     fo += nd;
     b += nd;
     c += nd;
-    const ptrdiff_t khi = x - min_d;
-    const ptrdiff_t klo = x - min_d - cols + 1;
-    if (khi + 1 < nd || klo > 0) {
-      fill_range<kT>(o, clamp_index(khi + 1, 0, nd), nd, nd, cmax);
-      fill_range<kT>(o, 0, clamp_index(klo, 0, nd), nd, cmax);
-    }
+    fill_border_column<kT>(o, x, cols, nd, min_d, cmax);
   }
 }
 
@@ -944,12 +953,7 @@ void box_sweep_mixed(const uint8_t* zlo, const uint8_t* zhi, const uint16_t* lro
     fo += nd;
     b += nd;
     c += nd;
-    const ptrdiff_t khi = x - min_d;
-    const ptrdiff_t klo = x - min_d - cols + 1;
-    if (khi + 1 < nd || klo > 0) {
-      fill_range<kT>(o, clamp_index(khi + 1, 0, nd), nd, nd, cmax);
-      fill_range<kT>(o, 0, clamp_index(klo, 0, nd), nd, cmax);
-    }
+    fill_border_column<kT>(o, x, cols, nd, min_d, cmax);
   }
 }
 
@@ -1080,12 +1084,7 @@ void box_row8_impl(uint8_t* const* raws, int fresh, const uint16_t* lrow, const 
       fo += nd;
       b += nd;
       c += nd;
-      const ptrdiff_t khi = x - min_d;
-      const ptrdiff_t klo = x - min_d - cols + 1;
-      if (khi + 1 < nd || klo > 0) {
-        fill_range<kT>(o, clamp_index(khi + 1, 0, nd), nd, nd, cmax);
-        fill_range<kT>(o, 0, clamp_index(klo, 0, nd), nd, cmax);
-      }
+      fill_border_column<kT>(o, x, cols, nd, min_d, cmax);
     }
     return;
   }
@@ -1105,10 +1104,7 @@ void box_row8_impl(uint8_t* const* raws, int fresh, const uint16_t* lrow, const 
       }
       for (; k < nd; ++k) o[k] = static_cast<uint8_t>(p[k] + q[k] + s[k]);
     }
-    const ptrdiff_t khi = x - min_d;
-    const ptrdiff_t klo = x - min_d - cols + 1;
-    fill_range<kT>(o, clamp_index(khi + 1, 0, nd), nd, nd, cmax);
-    fill_range<kT>(o, 0, clamp_index(klo, 0, nd), nd, cmax);
+    fill_border_column<kT>(o, x, cols, nd, min_d, cmax);
   }
 }
 
@@ -1986,10 +1982,11 @@ void fused_row_t_impl(const FusedRowArgs& a) {
   int slot0 = 0;  // the slot of vector 0
   // With kNv: where index k sits in the transposed layout, (k % nv) * N + k / nv, for the
   // winner's neighbours (a table rather than a division and a remainder per pixel).
-  uint16_t at_of[kNv > 0 ? kNv * N : 1];
-  if constexpr (kNv > 0) {
-    for (int k = 0; k < kNv * N; ++k) at_of[k] = static_cast<uint16_t>((k % kNv) * N + k / kNv);
-  }
+  static const auto at_of = [] {  // once per instance
+    std::array<uint16_t, (kNv > 0 ? kNv * N : 1)> t{};
+    for (int k = 0; k < kNv * N; ++k) t[k] = static_cast<uint16_t>((k % kNv) * N + k / kNv);
+    return t;
+  }();
   for (ptrdiff_t x = cols - 1; x >= 0; --x) {
     const uint8_t* cx = a.c + x * nd;
     uint16_t* px = a.partial + x * nd;
