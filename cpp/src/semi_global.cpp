@@ -727,6 +727,14 @@ void SemiGlobalMatcher::compute(const StereoImage& left, const StereoImage& righ
             detail::kSentinel;
       }
       const int dxs[3] = {0, 1, -1};
+      // Each band's scratch is sized here, before the bands start: an allocation that failed
+      // inside a band would leave the other bands waiting at the barrier for ever.
+      const std::size_t n_rev = sz(cols) + sz(nd) + 32;
+      auto band_scratch = [&](std::ptrdiff_t b) {
+        const std::size_t n_raw = sz(band(cols, nb, b + 1) - band(cols, nb, b) + 2) * sz(nd);
+        return aligned<std::uint16_t>(ws.scratch[sz(b)], n_rev + 4 * n_raw + sz(nd));
+      };
+      for (std::ptrdiff_t b = 0; b < nb; ++b) band_scratch(b);
       for (int dy : {1, -1}) {
         Barrier barrier(nb);
         // The bands meet at the barrier: each needs its own thread, all at once.
@@ -738,12 +746,8 @@ void SemiGlobalMatcher::compute(const StereoImage& left, const StereoImage& righ
           RawRows<std::uint8_t> raw8;  // with the 8-bit cost kernels
           std::uint8_t* ring = nullptr;
           if (dy > 0) {
-            const std::size_t n_rev =
-                static_cast<std::size_t>(cols) + static_cast<std::size_t>(nd) + 32;
-            const std::size_t n_raw =
-                static_cast<std::size_t>(x1 - x0 + 2) * static_cast<std::size_t>(nd);
-            rev = aligned<std::uint16_t>(ws.scratch[static_cast<std::size_t>(b)],
-                                         n_rev + 4 * n_raw + static_cast<std::size_t>(nd));
+            const std::size_t n_raw = sz(x1 - x0 + 2) * sz(nd);
+            rev = band_scratch(b);  // sized already: no allocation here
             colraw = rev + n_rev;
             for (int j = 0; j < 3; ++j) {
               raw.slot[j] = colraw + static_cast<std::size_t>(j + 1) * n_raw;
