@@ -337,6 +337,40 @@ def test_block_size_limits_are_exported() -> None:
 
 
 # ------------------------------------------------------------------------------------------
+@pytest.mark.parametrize("isa", SUPPORTED_ISAS)
+@pytest.mark.parametrize("min_disparity", [-40, -9])
+def test_right_border_band_winners_on_the_range_edge_match_oracle(
+    isa: str, min_disparity: int
+) -> None:
+    # Negative disparities: the search ranges of the right columns leave the right image on
+    # their low side. On unrelated noise many winners fall on the lowest candidate inside the
+    # image, whose neighbour outside the range must read as "none" and leave the disparity
+    # integral (border_band's rule). The uniqueness check stays on (a tiny ratio), as the
+    # SIMD passes take their fastest path only with it.
+    rng = np.random.default_rng(31)
+    left = rng.integers(0, 256, (23, 97), dtype=np.uint8)
+    right = rng.integers(0, 256, (23, 97), dtype=np.uint8)
+    kw: dict[str, Any] = {
+        "num_disparities": 48,
+        "min_disparity": min_disparity,
+        "uniqueness_ratio": 0.01,
+        "lr_max_diff": None,
+        "speckle_window": 0,
+    }
+    native = sd.StereoMatcher(isa=isa, **kw).compute(left, right)
+    assert_agree(native, ref.block_match(left, right, **kw), subpixel=True)
+    np.testing.assert_array_equal(
+        native, sd.StereoMatcher(isa="baseline", **kw).compute(left, right)
+    )
+    # The case this test is for occurs: integral winners on the lowest candidate of a clipped
+    # range, in the band where the range is clipped.
+    x = np.arange(97)
+    low = np.maximum(x - 96, min_disparity)  # the least disparity whose right pixel is inside
+    band = x - 96 > min_disparity
+    on_edge = (native == low) & band
+    assert on_edge.sum() >= 3
+
+
 # Instruction sets and threads
 
 
