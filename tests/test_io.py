@@ -11,6 +11,7 @@ import sys
 import tempfile
 import textwrap
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -361,6 +362,14 @@ def test_png16_compress_level(tmp_path: Path) -> None:
         io.write_png16(tmp_path / "x.png", a, compress_level=10)
     with pytest.raises(TypeError, match=r"compress_level must be an integer, got 1\.5"):
         io.write_png16(tmp_path / "x.png", a, compress_level=1.5)  # type: ignore[arg-type]
+    with pytest.raises(TypeError, match=r"compress_level must be an integer, got True"):
+        io.write_png16(tmp_path / "x.png", a, compress_level=True)
+    with pytest.raises(TypeError, match=r"compress_level must be an integer, got np\.True_"):
+        io.write_png16(tmp_path / "x.png", a, compress_level=np.True_)  # type: ignore[arg-type]
+    assert names(tmp_path) == ["0.png", "1.png", "9.png"]
+    # numpy integers are integers (every other integer parameter of the package takes them).
+    io.write_png16(tmp_path / "np.png", a, compress_level=np.int64(9))  # type: ignore[arg-type]
+    assert (tmp_path / "np.png").read_bytes() == (tmp_path / "9.png").read_bytes()
 
 
 def test_png16_round_trip_and_extremes(tmp_path: Path) -> None:
@@ -700,14 +709,42 @@ def test_read_pnm_missing(tmp_path: Path) -> None:
             ValueError,
             "scale must be a finite number > 0, got 0.0",
         ),
+        # A str reached numpy's isfinite (a TypeError naming no parameter); a bool was
+        # written as the scale 1.0.
+        (
+            np.zeros((2, 2), np.float32),
+            {"scale": "1"},
+            TypeError,
+            "scale must be a real number, got str '1'",
+        ),
+        (
+            np.zeros((2, 2), np.float32),
+            {"scale": True},
+            TypeError,
+            "scale must be a real number, got bool True",
+        ),
+        (
+            np.zeros((2, 2), np.float32),
+            {"scale": float("nan")},
+            ValueError,
+            "scale must be a finite number > 0, got nan",
+        ),
     ],
 )
 def test_write_pfm_rejects(
-    tmp_path: Path, array: np.ndarray, kwargs: dict[str, float], exc: type, message: str
+    tmp_path: Path, array: np.ndarray, kwargs: dict[str, Any], exc: type, message: str
 ) -> None:
     with pytest.raises(exc, match=message):
         io.write_pfm(tmp_path / "x.pfm", array, **kwargs)
     assert names(tmp_path) == []
+
+
+def test_write_pfm_numpy_scale(tmp_path: Path) -> None:
+    # A scale from numpy (np.float32 from a header array) is a real number like any other.
+    a = np.arange(6, dtype=np.float32).reshape(2, 3)
+    io.write_pfm(tmp_path / "x.pfm", a, scale=np.float32(0.5))
+    assert (tmp_path / "x.pfm").read_bytes().startswith(b"Pf\n3 2\n-0.5\n")
+    np.testing.assert_array_equal(io.read_pfm(tmp_path / "x.pfm"), a, strict=True)
 
 
 # --- exact or refused, for any data: property tests --------------------------------------------
