@@ -234,3 +234,58 @@ def test_write_ply_to_a_missing_folder_names_the_path(tmp_path: Path) -> None:
     with pytest.raises(TypeError, match=r"path must be a str or os\.PathLike, got int 3"):
         write_ply(3, np.zeros((2, 3), np.float32))  # type: ignore[arg-type]
     assert list(tmp_path.iterdir()) == []
+
+
+RIG_PX = ["--focal-px", "700", "--baseline-mm", "120", "--num-disparities", "16"]
+
+
+EMPTY_PATH_CASES: list[tuple[list[str], str]] = [
+    (["calc", *ARM, "--plot", ""], "--plot"),
+    (["eval", ""], "DIR"),
+    (["match", "", "right.png", *RIG_PX], "LEFT"),
+    (["match", "left.png", "", *RIG_PX], "RIGHT"),
+    (["match", "left.png", "right.png", *RIG_PX, "-o", ""], "-o/--out"),
+    (["match", "left.png", "right.png", "--calib", ""], "--calib"),
+    (["match", "left.png", "right.png", *RIG_PX, "--calib-right", ""], "--calib-right"),
+    (["batch", "", "-o", "out", *RIG_PX], "INPUT"),
+    (["batch", ".", "-o", "", *RIG_PX], "-o/--output"),
+    (["batch", ".", "-o", "out", "--calib", ""], "--calib"),
+    (["batch", ".", "-o", "out", *RIG_PX, "--report", ""], "--report"),
+]
+
+
+@pytest.mark.parametrize(
+    ("argv", "argument"),
+    EMPTY_PATH_CASES,
+    ids=[f"{argv[0]} {argument}" for argv, argument in EMPTY_PATH_CASES],
+)
+def test_empty_path_is_a_usage_error_not_the_current_folder(
+    argv: list[str],
+    argument: str,
+    tmp_path: Path,
+    monkeypatch: pytest.MonkeyPatch,
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    """pathlib reads "" as ".": ``batch "$IN" -o "$OUT"`` with a variable unset matched every
+    pair under the current folder or wrote into it, ``eval ""`` scored it, ``calc --plot ""``
+    wrote no charts without a word, and ``match L ""`` said "RIGHT: image is a folder, not a
+    file: .". Now each is argparse's one line naming the argument, and nothing is written."""
+    image = pytest.importorskip("PIL.Image")
+    import numpy as np
+
+    rng = np.random.default_rng(0)
+    left = rng.integers(0, 256, (24, 40), dtype=np.uint8)
+    image.fromarray(left).save(tmp_path / "left.png")
+    image.fromarray(np.roll(left, -2, axis=1)).save(tmp_path / "right.png")
+    before = sorted(p.name for p in tmp_path.iterdir())
+    monkeypatch.chdir(tmp_path)
+    try:
+        status = main(argv)
+    except SystemExit as exc:  # argparse exits itself
+        status = exc.code  # type: ignore[assignment]
+    out, err = capsys.readouterr()
+    assert status == 2, err
+    assert out == ""
+    assert err.splitlines() == [err.strip()], err
+    assert f"argument {argument}: expected a path, got ''" in err
+    assert sorted(p.name for p in tmp_path.iterdir()) == before

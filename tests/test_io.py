@@ -869,3 +869,39 @@ def test_readers_and_writers_name_a_path_that_is_not_one(tmp_path: Path) -> None
     (tmp_path / "calib.txt").write_text("cam0=[1 0 0; 0 1 0; 0 0 1]\nbaseline=1\n")
     with pytest.raises(TypeError, match=r"^second_path must be a str or os\.PathLike, got int"):
         calib.read_stereo_calibration(tmp_path / "calib.txt", second_path=5)
+
+
+def test_empty_path_is_refused_not_the_current_folder(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """pathlib reads "" as "." (the current folder): read_image("") said "image is a folder,
+    not a file: .", and a writer's error named '.' too. Every reader and writer of the package
+    refuses "" by its parameter's name, before touching anything."""
+    import stereodepth
+    from stereodepth import calib
+    from stereodepth.plotting import save_charts
+
+    monkeypatch.chdir(tmp_path)
+    a = np.zeros((2, 3), np.float32)
+    rig = stereodepth.StereoRig.from_pixels(baseline_mm=100.0, focal_px=700.0)
+    calls = {
+        "read_image": lambda: io.read_image(""),
+        "read_pfm": lambda: io.read_pfm(""),
+        "read_pnm": lambda: io.read_pnm(""),
+        "write_pfm": lambda: io.write_pfm("", a),
+        "write_npy": lambda: io.write_npy("", a),
+        "write_png16": lambda: io.write_png16("", a.astype(np.uint16)),
+        "write_disparity_png16": lambda: io.write_disparity_png16("", a),
+        "atomic_write": lambda: io.atomic_write("").__enter__(),
+        "write_ply": lambda: write_ply("", np.zeros((2, 3))),
+        "save_charts": lambda: save_charts(rig, ""),
+        "read_stereo_calibration": lambda: calib.read_stereo_calibration(""),
+        "from_middlebury_calib": lambda: stereodepth.StereoRig.from_middlebury_calib(""),
+        "StereoRectifier.from_file": lambda: stereodepth.StereoRectifier.from_file(""),
+    }
+    for name, call in calls.items():
+        with pytest.raises(ValueError, match=r"^path must not be empty, got ''$"):
+            call()
+        assert list(tmp_path.iterdir()) == [], name
+    with pytest.raises(ValueError, match=r"^directory must not be empty, got ''$"):
+        io.remove_temp_files("")

@@ -87,7 +87,11 @@ def require_file(path: str | os.PathLike[str], what: str) -> Path:
 def _as_path(value: Any, name: str = "path") -> Path:
     """``value`` as a Path; TypeError naming ``name`` for anything but a str or os.PathLike
     (pathlib's own message, "expected str, bytes or os.PathLike object, not int", named no
-    parameter; bytes paths are refused as pathlib refuses them)."""
+    parameter; bytes paths are refused as pathlib refuses them), ValueError for an empty str
+    (pathlib reads "" as ".", the current folder: an unset variable in a script read or
+    wrote there, or was told "is a folder, not a file: .")."""
+    if isinstance(value, str) and not value:
+        raise ValueError(f"{name} must not be empty, got ''")
     if isinstance(value, str) or (
         isinstance(value, os.PathLike) and isinstance(os.fspath(value), str)
     ):

@@ -55,6 +55,7 @@ from typing import Any
 import numpy as np
 
 from . import _calib_rule
+from .cli import path_arg
 
 __all__ = ["output_paths", "register", "run"]
 
@@ -80,8 +81,8 @@ def register(subparsers: Any) -> None:
             "then every output is of the rectified left camera, in its frame."
         ),
     )
-    p.add_argument("left", metavar="LEFT", help="the left image (PNG, JPEG, ...)")
-    p.add_argument("right", metavar="RIGHT", help="the right image, the same size")
+    p.add_argument("left", type=path_arg, metavar="LEFT", help="the left image (PNG, JPEG, ...)")
+    p.add_argument("right", type=path_arg, metavar="RIGHT", help="the right image, the same size")
     m = p.add_argument_group("the matcher")
     m.add_argument(
         "--method",
@@ -103,6 +104,7 @@ def register(subparsers: Any) -> None:
     r = p.add_argument_group("the rig (for depth)")
     r.add_argument(
         "--calib",
+        type=path_arg,
         metavar="FILE",
         help="Middlebury calib.txt or KITTI calib (rectified pairs: matched as given), or a raw "
         "calibration (OpenCV FileStorage YAML/XML/JSON, Kalibr camchain, ROS camera_info): the "
@@ -118,6 +120,7 @@ def register(subparsers: Any) -> None:
     o.add_argument(
         "-o",
         "--out",
+        type=path_arg,
         default=".",
         metavar="PATH",
         help="a folder (existing, or ending in /) or a file-name prefix (default: .)",

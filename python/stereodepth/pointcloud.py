@@ -286,6 +286,8 @@ def write_ply(
     if not isinstance(path, (str, os.PathLike)):
         raise TypeError(f"path must be a str or os.PathLike, got {type(path).__name__} {path!r}")
     target = os.fspath(path)
+    if not target:  # "" is not the current folder
+        raise ValueError("path must not be empty, got ''")
     folder = os.path.dirname(os.path.abspath(target))
     if not os.path.isdir(folder):
         raise FileNotFoundError(

@@ -17,7 +17,7 @@ from .. import _validate as check
 from .._extras import require
 from .._methods import METHODS, check_method
 from ..calib import Calibration
-from ..cli import key_value_option
+from ..cli import key_value_option, path_arg
 from .calibration import (
     COMMAND_LINE,
     BatchRectifier,
@@ -46,10 +46,11 @@ def register(subparsers: Any) -> None:
     )
     # One line for an argparse error too, like every other error of the command.
     p.error = _one_line_error(p)
-    p.add_argument("input", metavar="INPUT", help="a folder of pairs or a CSV list")
+    p.add_argument("input", type=path_arg, metavar="INPUT", help="a folder of pairs or a CSV list")
     p.add_argument(
         "-o",
         "--output",
+        type=path_arg,
         required=True,
         metavar="OUTDIR",
         help="the folder for the outputs (created if needed)",
@@ -71,6 +72,7 @@ def register(subparsers: Any) -> None:
     c.add_argument("--cy-px", type=float, help="left principal point y for --ply")
     c.add_argument(
         "--calib",
+        type=path_arg,
         metavar="FILE",
         help="one calibration for every pair: Middlebury calib.txt or KITTI calib (rectified "
         "pairs: matched as given), or a raw calibration (OpenCV FileStorage YAML/XML/JSON, Kalibr "
@@ -105,6 +107,7 @@ def register(subparsers: Any) -> None:
     o.add_argument("--max-depth-m", type=float, help="depths farther than this are invalid")
     o.add_argument(
         "--report",
+        type=path_arg,
         metavar="FILE",
         help="the JSON report (default OUTDIR/report.json); its folder must exist",
     )
