@@ -147,6 +147,27 @@ def test_input_and_output_errors(tmp_path: Path, capsys: pytest.CaptureFixture[s
     assert not (tmp_path / "out").exists()
 
 
+def test_a_name_too_long_for_the_file_system_is_refused_before_any_work(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """OUTDIR failed when it was made ("[Errno 36] File name too long", exit status 1, no
+    option named; ``out/<long>/x`` left ``out`` behind), and a --report name only after every
+    pair had been matched. 256 bytes: one more than NAME_MAX, in two-byte characters too."""
+    inp = scene(tmp_path)
+    out = tmp_path / "out"
+    long = "x" * 256
+    for argv, fragment in (
+        (["-o", str(tmp_path / long)], "OUTDIR '"),
+        (["-o", str(out / long / "x")], "OUTDIR '"),
+        (["-o", str(out), "--report", str(tmp_path / f"{long}.json")], "--report '"),
+        (["-o", str(out), "--report", str(tmp_path / ("\u00e9" * 128))], "--report '"),
+    ):
+        status, err = run([str(inp), *argv, "--quiet"], capsys)
+        assert_one_line(status, err, fragment)
+        assert "a name in it is " in err and "more than a file name may be (255 bytes)" in err
+        assert sorted(p.name for p in tmp_path.iterdir()) == ["in"]
+
+
 def test_an_unreachable_scheduler_names_the_flag_and_leaves_no_outdir(
     tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
 ) -> None:

@@ -184,7 +184,7 @@ def _raw_modes(im: Any) -> list[str]:
 # --- atomic writes ----------------------------------------------------------------------------
 #: The longest file name, in bytes, of the file systems we write on (NAME_MAX on Linux and
 #: macOS; NTFS allows 255 UTF-16 units, more than 255 bytes' worth of most names).
-_NAME_MAX_BYTES = 255
+NAME_MAX_BYTES = 255
 
 
 def _temp_path(p: Path) -> Path:
@@ -192,7 +192,7 @@ def _temp_path(p: Path) -> Path:
     characters) so the temporary name fits where ``p``'s own name fits: a name of 230 bytes or
     more could not be written, and the error named the temporary file."""
     tail = f".{TEMP_MARKER}-{secrets.token_hex(6)}.tmp"
-    room = _NAME_MAX_BYTES - 1 - len(tail.encode())
+    room = NAME_MAX_BYTES - 1 - len(tail.encode())
     name = p.name.encode(errors="surrogateescape")[:room].decode(errors="ignore") or "x"
     return p.with_name(f".{name}{tail}")
 
