@@ -153,7 +153,19 @@ def register(subparsers: Any) -> None:
 def output_paths(out: str, names: list[str]) -> dict[str, Path]:
     """Where each output goes: ``out`` as a folder (existing, or ending in a separator: made)
     or as a prefix of the file names (its folder must exist). An output name taken by a folder
-    is refused before anything is written."""
+    is refused before anything is written, and so is a prefix that makes a name longer than a
+    file name may be (it was "[Errno 36] File name too long", exit status 1, naming no
+    option)."""
+    from .io import NAME_MAX_BYTES
+
+    for part in (Path(out + n).name for n in names):  # the folders' names: cli.path_arg
+        size = len(os.fsencode(part))
+        if size > NAME_MAX_BYTES:
+            shown = part if len(part) <= 60 else part[:57] + "..."
+            raise _Usage(
+                f"--out: the name {shown!r} is {size} bytes long, more than a file name may be "
+                f"({NAME_MAX_BYTES} bytes)"
+            )
     is_dir = out.endswith(("/", os.sep)) or Path(out).is_dir()
     if is_dir:
         folder = Path(out)

@@ -342,26 +342,8 @@ def _check_depth_range(args: argparse.Namespace) -> None:
         )
 
 
-def _names_fit(path: Path, what: str) -> None:
-    """Raises UsageError for a name in ``path`` longer than a file name may be (255 bytes):
-    OUTDIR failed when it was made, with an error naming no option, and a --report name
-    after every pair had been matched."""
-    from ..io import NAME_MAX_BYTES
-
-    for part in path.parts:
-        size = len(os.fsencode(part))
-        if size > NAME_MAX_BYTES:
-            text = str(path)
-            shown = text if len(text) <= 80 else text[:77] + "..."
-            raise UsageError(
-                f"{what} {shown!r}: a name in it is {size} bytes long, more than a file name "
-                f"may be ({NAME_MAX_BYTES} bytes)"
-            )
-
-
 def _writable_folder(path: Path, what: str) -> None:
     """Raises UsageError unless ``path`` is, or can be created as, a folder we may write in."""
-    _names_fit(path, what)
     if path.exists() and not path.is_dir():
         raise UsageError(f"{what} must be a folder, got the file {path}")
     existing = path.absolute()
@@ -379,7 +361,6 @@ def _report_path(args: argparse.Namespace, out_dir: Path) -> Path:
     if args.report is None:
         return out_dir / "report.json"
     report = Path(args.report)
-    _names_fit(report, "--report")
     if report.is_dir():
         raise UsageError(f"--report must be a file, got the folder {report}")
     folder = report.parent
