@@ -190,3 +190,35 @@ def test_an_unreachable_scheduler_names_the_flag_and_leaves_no_outdir(
         "connect to tcp://127.0.0.1:9 after 10 s",
     )
     assert not (tmp_path / "out").exists()
+
+
+@pytest.mark.parametrize("link", ["symlink", "hardlink"])
+@pytest.mark.parametrize("layout", ["kitti", "pair_names"])
+def test_a_pair_of_one_file_found_in_folders_is_refused(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], link: str, layout: str
+) -> None:
+    """A CSV line naming one file twice was refused, but a folder's pair linked to one file
+    (KITTI's image_3/x.png a link to image_2/x.png, or --pair-names naming a link to the left
+    image) was matched with itself: every disparity 0, status ok, exit status 0."""
+    inp = tmp_path / "in"
+    rng = np.random.default_rng(0)
+    left = rng.integers(0, 256, (24, 40), dtype=np.uint8)
+    if layout == "kitti":
+        (inp / "image_2").mkdir(parents=True)
+        (inp / "image_3").mkdir()
+        src, dst = inp / "image_2" / "000000_10.png", inp / "image_3" / "000000_10.png"
+        extra: list[str] = []
+    else:
+        (inp / "s").mkdir(parents=True)
+        src, dst = inp / "s" / "a.png", inp / "s" / "b.png"
+        extra = ["--pair-names", "a", "b"]
+    Image.fromarray(left).save(src)
+    if link == "symlink":
+        dst.symlink_to(src)
+    else:
+        os.link(src, dst)
+    out = tmp_path / "out"
+    argv = [str(inp), "-o", str(out), "--focal-px", "700", "--baseline-mm", "100"]
+    status, err = run([*argv, "--num-disparities", "16", *extra, "--quiet"], capsys)
+    assert_one_line(status, err, f"the left and right image are the same file ({src} and {dst})")
+    assert not out.exists()

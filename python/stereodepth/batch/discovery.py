@@ -339,6 +339,7 @@ def discover(
 
     Pairs whose right image is missing are returned too (they fail when processed, and the
     report names them). Raises UsageError when nothing is found (naming what was skipped),
+    for a pair whose left and right image are one file (a link),
     when two pairs would write the same outputs (stems equal but for case included: they
     collide on case-insensitive file systems), or for bad ``pair_names``."""
     root = Path(input_path)
@@ -358,6 +359,15 @@ def discover(
         pairs = _csv_pairs(root, names)
     else:
         pairs, skipped = _search(root, names, [Path(p) for p in exclude])
+        for p in pairs:
+            # A link (image_3/x.png linked to image_2/x.png, --pair-names naming a link to
+            # the left image) matched the image with itself: every disparity 0, "ok". The
+            # rule of a CSV list's line.
+            if _same_file(p.left, p.right):
+                raise UsageError(
+                    f"pair {p.stem!r}: the left and right image are the same file ({p.left} "
+                    f"and {p.right})"
+                )
     found = Discovery(pairs, skipped)
     if not pairs:
         tokens = ", ".join(f"{a}/{b}" for a, b in names)
