@@ -508,3 +508,21 @@ def test_a_calib_txt_ndisp_beyond_the_matchers_names_the_file(
     assert f"{d / 'calib.txt'}: ndisp=5000 is more than the matchers search (4096)" in err
     assert "give --num-disparities" in record_of(out, "teddy")["error"]
     assert run(capsys, inp, "-o", out, "--quiet", "--num-disparities", "16")[0] == 0
+
+
+def test_a_folder_reached_twice_through_a_link_is_searched_once(tmp_path: Path) -> None:
+    """``in/d/loop -> ..`` made the search walk INPUT again under d/loop: every pair was
+    matched a second time, under another stem (d_loop_teddy), and a link to a scene folder
+    matched that scene twice."""
+    inp = tmp_path / "in"
+    scene(inp / "teddy")
+    (inp / "d").mkdir()
+    (inp / "d" / "loop").symlink_to("..", target_is_directory=True)
+    (inp / "z_again").symlink_to("teddy", target_is_directory=True)
+    found = batch.discover(inp)
+    assert [p.stem for p in found.pairs] == ["teddy"]
+    skipped = {path.relative_to(inp).as_posix(): why for path, why in found.skipped}
+    assert skipped == {
+        "d/loop": f"the same folder as {inp} (a link): not searched again",
+        "z_again": f"the same folder as {inp / 'teddy'} (a link): not searched again",
+    }

@@ -204,6 +204,9 @@ def _search(
     excluded = {p.resolve() for p in exclude}
     pairs: list[Pair] = []
     skipped: list[tuple[Path, str]] = []
+    # Each folder is searched once: a link to a folder searched already (``d/loop -> ..``)
+    # matched its pairs again under other stems.
+    searched: dict[Path, Path] = {root.resolve(): root}
 
     def visit(d: Path, rel: tuple[str, ...]) -> None:
         prefix = "_".join(rel) if rel else None
@@ -230,9 +233,15 @@ def _search(
                     )
                 )
         for sub in _subfolders(d):
-            if sub.resolve() in excluded:
+            real = sub.resolve()
+            if real in excluded:
                 if _images(sub):
                     skipped.append((sub, "the output folder (-o): not searched"))
+                continue
+            if real in searched:
+                skipped.append(
+                    (sub, f"the same folder as {searched[real]} (a link): not searched again")
+                )
                 continue
             if len(rel) >= SEARCH_DEPTH:
                 if _images(sub) or _subfolders(sub):
@@ -240,6 +249,7 @@ def _search(
                         (sub, f"not searched: more than {SEARCH_DEPTH} levels below INPUT")
                     )
                 continue
+            searched[real] = sub
             visit(sub, (*rel, sub.name))
 
     visit(root, ())
