@@ -519,6 +519,8 @@ A23 = np.arange(6, dtype=np.float32).reshape(2, 3)
         (b"Pf\n0 2\n-1\n", r"PFM width must be a whole number > 0, got '0'"),
         (b"Pf\n3 0\n-1\n", r"PFM height must be a whole number > 0, got '0'"),
         (b"Pf\n3.0 2\n-1\n" + bytes(24), r"PFM width must be a whole number > 0, got '3.0'"),
+        # int() refuses over 4300 digits, in a message naming no file
+        (b"Pf\n" + b"9" * 5000 + b" 2\n-1\n", r"PFM width must be a whole number > 0, got 5000 d"),
         (b"Pf\n3 2\n0\n" + bytes(24), r"bad PFM scale '0': it must be finite and not 0"),
         (b"Pf\n3 2\n-0.0\n" + bytes(24), r"bad PFM scale '-0.0'"),
         (b"Pf\n3 2\n-1e999\n" + bytes(24), r"bad PFM scale '-1e999'"),
@@ -677,6 +679,10 @@ def test_pnm_plain_and_bitmaps(tmp_path: Path) -> None:
         (b"P2\n1 1\n255#c\n1", r"PGM header must end with whitespace, got b'#c"),
         (b"P1\n2 1\n0 2\n", r"PBM samples must be 0 or 1, got b'2'"),
         (b"P1\n2 1\n0\n", r"2x1 PBM needs 2 samples, got 1"),
+        (
+            b"P5\n2 1\n" + b"1" * 4400 + b"\n\x00\x00",
+            r"PGM maxval must be a whole number > 0, got 4400",
+        ),
     ],
 )
 def test_read_pnm_rejects(tmp_path: Path, content: bytes, message: str) -> None:

@@ -437,6 +437,8 @@ def _header_tokens(
 
 
 def _size(p: Path, token: str, name: str, what: str) -> int:
+    if token.isdigit() and len(token.lstrip("0")) > 18:  # int() refuses 4300 digits
+        raise ValueError(f"{p}: {what} {name} must be a whole number > 0, got {len(token)} digits")
     if not token.isdigit() or not token.isascii() or int(token) <= 0:
         raise ValueError(f"{p}: {what} {name} must be a whole number > 0, got {token!r}")
     return int(token)
