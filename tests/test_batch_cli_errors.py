@@ -222,3 +222,24 @@ def test_a_pair_of_one_file_found_in_folders_is_refused(
     status, err = run([*argv, "--num-disparities", "16", *extra, "--quiet"], capsys)
     assert_one_line(status, err, f"the left and right image are the same file ({src} and {dst})")
     assert not out.exists()
+
+
+def test_a_stem_too_long_for_its_file_names_is_refused_before_any_work(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A pair's stem joins its folders' names: 120 + 1 + 130 bytes of them made every output
+    name longer than a file name may be, and the pair was matched, then failed to write every
+    file, its record included, on every run of the job."""
+    inp = tmp_path / "in"
+    deep = inp / ("a" * 120) / ("b" * 130)
+    deep.mkdir(parents=True)
+    rng = np.random.default_rng(0)
+    left = rng.integers(0, 256, (24, 40), dtype=np.uint8)
+    Image.fromarray(left).save(deep / "left.png")
+    Image.fromarray(np.roll(left, -2, axis=1)).save(deep / "right.png")
+    out = tmp_path / "out"
+    argv = [str(inp), "-o", str(out), "--focal-px", "700", "--baseline-mm", "100"]
+    status, err = run([*argv, "--num-disparities", "16", "--quiet"], capsys)
+    assert_one_line(status, err, "would be longer than a file name may be (255 bytes)")
+    assert "give it a shorter stem in a CSV list" in err
+    assert not out.exists()

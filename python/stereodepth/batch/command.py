@@ -403,7 +403,8 @@ def _check_outputs_are_not_inputs(
 ) -> None:
     """No file a pair may write or remove as stale (:meth:`BatchOptions.owned_names`) is an
     input of any pair or the job (images, calibration files): a CSV list naming
-    ``OUTDIR/S.left-rectified.png`` as S's left image had it overwritten by its rectification."""
+    ``OUTDIR/S.left-rectified.png`` as S's left image had it overwritten by its rectification;
+    and every such name fits in a file name."""
     inputs: dict[Path, str] = {}
     for c in calib_files:
         if c is not None:
@@ -412,8 +413,19 @@ def _check_outputs_are_not_inputs(
         for f in (p.left, p.right, p.calib_file):
             if f is not None:
                 inputs[f.resolve()] = str(f)
+    from ..io import NAME_MAX_BYTES
+
     out_dir = options.out_dir.resolve()
     for p in pairs:
+        longest = max(options.owned_names(p.stem), key=lambda n: len(os.fsencode(n)))
+        if len(os.fsencode(longest)) > NAME_MAX_BYTES:
+            # Its folders' names joined: the pair was matched, then failed to write every
+            # file, its record included ([Errno 36]), on every run.
+            raise UsageError(
+                f"pair {p.stem[:40]!r}...: its output names, such as {longest[-40:]!r}, would "
+                f"be longer than a file name may be ({NAME_MAX_BYTES} bytes): give it a "
+                "shorter stem in a CSV list"
+            )
         for name in sorted(options.owned_names(p.stem)):
             hit = inputs.get(out_dir / name)
             if hit is not None:
