@@ -513,3 +513,22 @@ def test_ply_of_a_12_bit_pair_is_coloured_as_matched(
     colours = to_uint8(left16)[ok]
     assert np.array_equal(vertex["rgb"], np.repeat(colours[:, None], 3, axis=1))
     assert colours.max() > 200  # not the high byte (at most 15)
+
+
+def test_a_refused_pair_leaves_no_new_out_folder(
+    tmp_path: Path, pair: tuple[Path, Path], capsys: pytest.CaptureFixture[str]
+) -> None:
+    """--out's new folders were made before the pair was matched, and stayed, empty, when
+    the matcher refused it (here the left image given twice, as a copy)."""
+    left, _ = pair
+    Image.open(left).save(tmp_path / "copy.png", compress_level=9)
+    out = tmp_path / "new" / "deeper"
+    before = sorted(p.name for p in tmp_path.iterdir())
+    code, _, err = run(capsys, left, tmp_path / "copy.png", "-o", f"{out}/")
+    assert code == 2, err
+    assert "right is the left image again" in err
+    assert sorted(p.name for p in tmp_path.iterdir()) == before
+    # an existing folder stays, as it was
+    out.mkdir(parents=True)
+    code, _, err = run(capsys, left, tmp_path / "copy.png", "-o", f"{out}/")
+    assert code == 2 and out.is_dir() and list(out.iterdir()) == []

@@ -44,6 +44,7 @@ The rule for ``--calib``: the file's format says whether the pair is already rec
 from __future__ import annotations
 
 import argparse
+import contextlib
 import dataclasses
 import json
 import os
@@ -148,6 +149,19 @@ def register(subparsers: Any) -> None:
     )
     o.add_argument("--json", action="store_true", help="print the summary as one JSON object")
     p.set_defaults(func=run)
+
+
+def _missing_folders(out: str) -> list[Path]:
+    """The folders :func:`output_paths` would make for ``out`` (a folder that does not exist
+    yet and its missing parents), deepest first; none for a prefix."""
+    if not out.endswith(("/", os.sep)) and not Path(out).is_dir():
+        return []
+    missing = []
+    folder = Path(out).absolute()
+    while not folder.exists() and folder != folder.parent:
+        missing.append(folder)
+        folder = folder.parent
+    return missing
 
 
 def output_paths(out: str, names: list[str]) -> dict[str, Path]:
@@ -408,47 +422,56 @@ def run(args: argparse.Namespace) -> int:
     if args.write_rectified:
         names["left_rectified"] = "left-rectified.png"
         names["right_rectified"] = "right-rectified.png"
+    made = _missing_folders(args.out)  # what output_paths makes of a new --out folder
     paths = output_paths(args.out, list(names.values()))
-    out = {key: paths[name] for key, name in names.items()}
-    _refuse_overwriting_inputs(args, out)
-
-    rectify_s = None
-    if rectifier is not None:
-        # The pair as the rectified cameras see it; everything below is in their frame.
-        left_img, right_img = prepare_pair(left_img, right_img)
-        t0 = time.perf_counter()
-        left_img, right_img = rectifier.rectify(left_img, right_img)
-        rectify_s = time.perf_counter() - t0
-    vertical = rectifier is not None and rectifier.vertical
-    rows_left, rows_right = rule.along_rows(vertical, left_img, right_img)
-    result = match_pair(
-        rows_left,
-        rows_right,
-        method=args.method,
-        num_disparities=args.num_disparities if args.num_disparities is not None else ndisp,
-        min_disparity=args.min_disparity,
-        block_size=args.block_size,
-        cost=args.cost,
-        focal_px=None if rig is None else rig["focal_px"],
-        baseline_m=None if rig is None else rig["baseline_m"],
-        doffs_px=0.0 if rig is None else rig["doffs_px"],
-        threads=args.threads,
-    )
-    if vertical:  # back in the rectified images' orientation
-        result = dataclasses.replace(
-            result,
-            disparity=rule.from_rows(True, result.disparity),
-            confidence=rule.from_rows(True, result.confidence),
-            depth=rule.from_rows(True, result.depth),
-        )
     try:
-        _write_outputs(args, out, result, rig, left_img, right_img)
+        out = {key: paths[name] for key, name in names.items()}
+        _refuse_overwriting_inputs(args, out)
+
+        rectify_s = None
+        if rectifier is not None:
+            # The pair as the rectified cameras see it; everything below is in their frame.
+            left_img, right_img = prepare_pair(left_img, right_img)
+            t0 = time.perf_counter()
+            left_img, right_img = rectifier.rectify(left_img, right_img)
+            rectify_s = time.perf_counter() - t0
+        vertical = rectifier is not None and rectifier.vertical
+        rows_left, rows_right = rule.along_rows(vertical, left_img, right_img)
+        result = match_pair(
+            rows_left,
+            rows_right,
+            method=args.method,
+            num_disparities=args.num_disparities if args.num_disparities is not None else ndisp,
+            min_disparity=args.min_disparity,
+            block_size=args.block_size,
+            cost=args.cost,
+            focal_px=None if rig is None else rig["focal_px"],
+            baseline_m=None if rig is None else rig["baseline_m"],
+            doffs_px=0.0 if rig is None else rig["doffs_px"],
+            threads=args.threads,
+        )
+        if vertical:  # back in the rectified images' orientation
+            result = dataclasses.replace(
+                result,
+                disparity=rule.from_rows(True, result.disparity),
+                confidence=rule.from_rows(True, result.confidence),
+                depth=rule.from_rows(True, result.depth),
+            )
+        try:
+            _write_outputs(args, out, result, rig, left_img, right_img)
+        except BaseException:
+            # A run that fails leaves none of its outputs: a new disparity beside an old depth
+            # would pass for one result.
+            for path in out.values():
+                if path.is_file():
+                    path.unlink()
+            raise
     except BaseException:
-        # A run that fails leaves none of its outputs: a new disparity beside an old depth
-        # would pass for one result.
-        for path in out.values():
-            if path.is_file():
-                path.unlink()
+        # A failed run (the matcher refused the pair, a write failed) leaves no new
+        # empty --out folder behind: it left one, made before the pair was matched.
+        for folder in made:
+            with contextlib.suppress(OSError):
+                folder.rmdir()  # only when empty
         raise
     summary = result.summary()
     summary.update(
