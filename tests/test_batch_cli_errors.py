@@ -147,6 +147,27 @@ def test_input_and_output_errors(tmp_path: Path, capsys: pytest.CaptureFixture[s
     assert not (tmp_path / "out").exists()
 
 
+def test_a_name_too_long_for_the_file_system_is_refused_before_any_work(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """OUTDIR failed when it was made ("[Errno 36] File name too long", exit status 1, no
+    option named; ``out/<long>/x`` left ``out`` behind), and a --report name only after every
+    pair had been matched. 256 bytes: one more than NAME_MAX, in two-byte characters too."""
+    inp = scene(tmp_path)
+    out = tmp_path / "out"
+    long = "x" * 256
+    for argv, fragment in (
+        (["-o", str(tmp_path / long)], "argument -o/--output: the name 'xxx"),
+        (["-o", str(out / long / "x")], "argument -o/--output: the name 'xxx"),
+        (["-o", str(out), "--report", str(tmp_path / f"{long}.json")], "argument --report: "),
+        (["-o", str(out), "--report", str(tmp_path / ("\u00e9" * 128))], "argument --report: "),
+    ):
+        status, err = run([str(inp), *argv, "--quiet"], capsys)
+        assert_one_line(status, err, fragment)
+        assert "bytes long, more than a file name may be (255 bytes)" in err
+        assert sorted(p.name for p in tmp_path.iterdir()) == ["in"]
+
+
 def test_an_unreachable_scheduler_names_the_flag_and_leaves_no_outdir(
     tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
 ) -> None:
@@ -169,3 +190,56 @@ def test_an_unreachable_scheduler_names_the_flag_and_leaves_no_outdir(
         "connect to tcp://127.0.0.1:9 after 10 s",
     )
     assert not (tmp_path / "out").exists()
+
+
+@pytest.mark.parametrize("link", ["symlink", "hardlink"])
+@pytest.mark.parametrize("layout", ["kitti", "pair_names"])
+def test_a_pair_of_one_file_found_in_folders_is_refused(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], link: str, layout: str
+) -> None:
+    """A CSV line naming one file twice was refused, but a folder's pair linked to one file
+    (KITTI's image_3/x.png a link to image_2/x.png, or --pair-names naming a link to the left
+    image) was matched with itself: every disparity 0, status ok, exit status 0."""
+    inp = tmp_path / "in"
+    rng = np.random.default_rng(0)
+    left = rng.integers(0, 256, (24, 40), dtype=np.uint8)
+    if layout == "kitti":
+        (inp / "image_2").mkdir(parents=True)
+        (inp / "image_3").mkdir()
+        src, dst = inp / "image_2" / "000000_10.png", inp / "image_3" / "000000_10.png"
+        extra: list[str] = []
+    else:
+        (inp / "s").mkdir(parents=True)
+        src, dst = inp / "s" / "a.png", inp / "s" / "b.png"
+        extra = ["--pair-names", "a", "b"]
+    Image.fromarray(left).save(src)
+    if link == "symlink":
+        dst.symlink_to(src)
+    else:
+        os.link(src, dst)
+    out = tmp_path / "out"
+    argv = [str(inp), "-o", str(out), "--focal-px", "700", "--baseline-mm", "100"]
+    status, err = run([*argv, "--num-disparities", "16", *extra, "--quiet"], capsys)
+    assert_one_line(status, err, f"the left and right image are the same file ({src} and {dst})")
+    assert not out.exists()
+
+
+def test_a_stem_too_long_for_its_file_names_is_refused_before_any_work(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A pair's stem joins its folders' names: 120 + 1 + 130 bytes of them made every output
+    name longer than a file name may be, and the pair was matched, then failed to write every
+    file, its record included, on every run of the job."""
+    inp = tmp_path / "in"
+    deep = inp / ("a" * 120) / ("b" * 130)
+    deep.mkdir(parents=True)
+    rng = np.random.default_rng(0)
+    left = rng.integers(0, 256, (24, 40), dtype=np.uint8)
+    Image.fromarray(left).save(deep / "left.png")
+    Image.fromarray(np.roll(left, -2, axis=1)).save(deep / "right.png")
+    out = tmp_path / "out"
+    argv = [str(inp), "-o", str(out), "--focal-px", "700", "--baseline-mm", "100"]
+    status, err = run([*argv, "--num-disparities", "16", "--quiet"], capsys)
+    assert_one_line(status, err, "would be longer than a file name may be (255 bytes)")
+    assert "give it a shorter stem in a CSV list" in err
+    assert not out.exists()

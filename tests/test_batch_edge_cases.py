@@ -508,3 +508,43 @@ def test_a_calib_txt_ndisp_beyond_the_matchers_names_the_file(
     assert f"{d / 'calib.txt'}: ndisp=5000 is more than the matchers search (4096)" in err
     assert "give --num-disparities" in record_of(out, "teddy")["error"]
     assert run(capsys, inp, "-o", out, "--quiet", "--num-disparities", "16")[0] == 0
+
+
+def test_a_folder_reached_twice_through_a_link_is_searched_once(tmp_path: Path) -> None:
+    """``in/d/loop -> ..`` made the search walk INPUT again under d/loop: every pair was
+    matched a second time, under another stem (d_loop_teddy), and a link to a scene folder
+    matched that scene twice."""
+    inp = tmp_path / "in"
+    scene(inp / "teddy")
+    (inp / "d").mkdir()
+    (inp / "d" / "loop").symlink_to("..", target_is_directory=True)
+    (inp / "z_again").symlink_to("teddy", target_is_directory=True)
+    found = batch.discover(inp)
+    assert [p.stem for p in found.pairs] == ["teddy"]
+    skipped = {path.relative_to(inp).as_posix(): why for path, why in found.skipped}
+    assert skipped == {
+        "d/loop": f"the same folder as {inp} (a link): not searched again",
+        "z_again": f"the same folder as {inp / 'teddy'} (a link): not searched again",
+    }
+
+
+def test_a_copy_of_the_left_image_as_right_fails_that_pair(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A copy (not a link, which discovery refuses) of the left image as the right one was
+    matched with itself: every disparity 0, status ok. It fails alone, with the reason."""
+    inp = tmp_path / "in"
+    scene(inp / "good")
+    save_pair(inp / "copy", "im0.png", "im1.png")
+    Image.open(inp / "copy" / "im0.png").save(inp / "copy" / "im1.png", compress_level=9)
+    (inp / "copy" / "calib.txt").write_text(calib_txt())
+    out = tmp_path / "out"
+    status, _, _ = run(capsys, inp, "-o", out, "--quiet")
+    assert status == 1
+    assert record_of(out, "good")["status"] == "ok"
+    failed = record_of(out, "copy")
+    assert failed["status"] == "failed"
+    assert "left and right are the same image (every pixel equal)" in failed["error"]
+    assert sorted(p.name for p in out.iterdir() if p.name.startswith("copy")) == [
+        "copy.record.json"
+    ]

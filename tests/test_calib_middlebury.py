@@ -149,6 +149,11 @@ def replace(key: str, value: str | None) -> str:
         (replace("height", "1950.5"), r"height must be a whole number > 0, got '1950\.5'"),
         (replace("ndisp", "-280"), r"ndisp must be a whole number > 0, got '-280'"),
         (replace("ndisp", "lots"), r"ndisp must be a whole number > 0, got 'lots'"),
+        # int() refuses over 4300 digits, in a message naming neither the file nor the key
+        (replace("width", "9" * 5000), r"width must be a whole number > 0, got 5000 digits"),
+        (replace("ndisp", "1" * 4301), r"ndisp must be a whole number > 0, got 4301 digits"),
+        # and a long value is shown shortened
+        (replace("ndisp", "x" * 5000), r"ndisp must be a whole number > 0, got 'x{20,120}\.\.\."),
     ],
 )
 def test_rejects(tmp_path: Path, text: str, message: str) -> None:

@@ -731,6 +731,16 @@ def test_kalibr_rejects_cameras(tmp_path: Path) -> None:
     ):
         with pytest.raises(ValueError, match=message):
             read_stereo_calibration(path, cameras=cameras)  # type: ignore[arg-type]
+    # A wrong type is a TypeError (bool was refused as a ValueError); numpy integers, as
+    # every other integer parameter of the package takes them, were refused.
+    for cameras in ((0, True), (0, "1"), (0.0, 1)):
+        with pytest.raises(TypeError, match=r"cameras must be two whole numbers >= 0, got"):
+            read_stereo_calibration(path, cameras=cameras)  # type: ignore[arg-type]
+    np_cams = (np.int64(1), np.uint8(0))
+    c10 = read_stereo_calibration(path, cameras=np_cams)  # type: ignore[arg-type]
+    ref = read_stereo_calibration(path, cameras=(1, 0))
+    for key in ("K1", "D1", "K2", "D2", "R", "T"):
+        np.testing.assert_array_equal(getattr(c10, key), getattr(ref, key), strict=True)
 
 
 # --- Middlebury and KITTI: already rectified ----------------------------------------------------

@@ -234,3 +234,110 @@ def test_write_ply_to_a_missing_folder_names_the_path(tmp_path: Path) -> None:
     with pytest.raises(TypeError, match=r"path must be a str or os\.PathLike, got int 3"):
         write_ply(3, np.zeros((2, 3), np.float32))  # type: ignore[arg-type]
     assert list(tmp_path.iterdir()) == []
+
+
+RIG_PX = ["--focal-px", "700", "--baseline-mm", "120", "--num-disparities", "16"]
+
+
+EMPTY_PATH_CASES: list[tuple[list[str], str]] = [
+    (["calc", *ARM, "--plot", ""], "--plot"),
+    (["eval", ""], "DIR"),
+    (["match", "", "right.png", *RIG_PX], "LEFT"),
+    (["match", "left.png", "", *RIG_PX], "RIGHT"),
+    (["match", "left.png", "right.png", *RIG_PX, "-o", ""], "-o/--out"),
+    (["match", "left.png", "right.png", "--calib", ""], "--calib"),
+    (["match", "left.png", "right.png", *RIG_PX, "--calib-right", ""], "--calib-right"),
+    (["batch", "", "-o", "out", *RIG_PX], "INPUT"),
+    (["batch", ".", "-o", "", *RIG_PX], "-o/--output"),
+    (["batch", ".", "-o", "out", "--calib", ""], "--calib"),
+    (["batch", ".", "-o", "out", *RIG_PX, "--report", ""], "--report"),
+]
+
+
+@pytest.mark.parametrize(
+    ("argv", "argument"),
+    EMPTY_PATH_CASES,
+    ids=[f"{argv[0]} {argument}" for argv, argument in EMPTY_PATH_CASES],
+)
+def test_empty_path_is_a_usage_error_not_the_current_folder(
+    argv: list[str],
+    argument: str,
+    tmp_path: Path,
+    monkeypatch: pytest.MonkeyPatch,
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    """pathlib reads "" as ".": ``batch "$IN" -o "$OUT"`` with a variable unset matched every
+    pair under the current folder or wrote into it, ``eval ""`` scored it, ``calc --plot ""``
+    wrote no charts without a word, and ``match L ""`` said "RIGHT: image is a folder, not a
+    file: .". Now each is argparse's one line naming the argument, and nothing is written."""
+    image = pytest.importorskip("PIL.Image")
+    import numpy as np
+
+    rng = np.random.default_rng(0)
+    left = rng.integers(0, 256, (24, 40), dtype=np.uint8)
+    image.fromarray(left).save(tmp_path / "left.png")
+    image.fromarray(np.roll(left, -2, axis=1)).save(tmp_path / "right.png")
+    before = sorted(p.name for p in tmp_path.iterdir())
+    monkeypatch.chdir(tmp_path)
+    try:
+        status = main(argv)
+    except SystemExit as exc:  # argparse exits itself
+        status = exc.code  # type: ignore[assignment]
+    out, err = capsys.readouterr()
+    assert status == 2, err
+    assert out == ""
+    assert err.splitlines() == [err.strip()], err
+    assert f"argument {argument}: expected a path, got ''" in err
+    assert sorted(p.name for p in tmp_path.iterdir()) == before
+
+
+LONG_NAME = "x" * 256  # one byte more than a file name may be (NAME_MAX)
+LONG_PATH_CASES: list[tuple[list[str], str]] = [
+    (["calc", *ARM, "--plot", f"{LONG_NAME}.png"], "argument --plot: "),
+    (["eval", LONG_NAME], "argument DIR: "),
+    (["match", LONG_NAME, "right.png", *RIG_PX], "argument LEFT: "),
+    (["match", "left.png", f"d/{LONG_NAME}/r.png", *RIG_PX], "argument RIGHT: "),
+    (["match", "left.png", "right.png", "--calib", LONG_NAME], "argument --calib: "),
+    (["match", "left.png", "right.png", *RIG_PX, "-o", f"{LONG_NAME}/"], "argument -o/--out: "),
+    # a prefix that fits, whose output names do not: "prefix" + "disparity.pfm"
+    (["match", "left.png", "right.png", *RIG_PX, "-o", "p" * 250], "--out: the name 'ppp"),
+    (["batch", LONG_NAME, "-o", "out", *RIG_PX], "argument INPUT: "),
+    (["batch", ".", "-o", "out", "--calib", LONG_NAME], "argument --calib: "),
+]
+
+
+@pytest.mark.parametrize(
+    ("argv", "fragment"),
+    LONG_PATH_CASES,
+    ids=[f"{argv[0]} {fragment.split(':')[0]}" for argv, fragment in LONG_PATH_CASES],
+)
+def test_a_name_too_long_for_a_file_is_a_usage_error(
+    argv: list[str],
+    fragment: str,
+    tmp_path: Path,
+    monkeypatch: pytest.MonkeyPatch,
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    """Each was pathlib's "[Errno 36] File name too long: '<the whole name>'" with exit
+    status 1, naming no argument (a match prefix only once the pair had been read)."""
+    image = pytest.importorskip("PIL.Image")
+    import numpy as np
+
+    rng = np.random.default_rng(0)
+    left = rng.integers(0, 256, (24, 40), dtype=np.uint8)
+    image.fromarray(left).save(tmp_path / "left.png")
+    image.fromarray(np.roll(left, -2, axis=1)).save(tmp_path / "right.png")
+    before = sorted(p.name for p in tmp_path.iterdir())
+    monkeypatch.chdir(tmp_path)
+    try:
+        status = main(argv)
+    except SystemExit as exc:  # argparse exits itself
+        status = exc.code  # type: ignore[assignment]
+    out, err = capsys.readouterr()
+    assert status == 2, err
+    assert out == ""
+    assert err.splitlines() == [err.strip()], err
+    assert fragment in err
+    assert "bytes long, more than a file name may be (255 bytes)" in err
+    assert "Errno" not in err
+    assert sorted(p.name for p in tmp_path.iterdir()) == before

@@ -11,6 +11,7 @@ import sys
 import tempfile
 import textwrap
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -361,6 +362,14 @@ def test_png16_compress_level(tmp_path: Path) -> None:
         io.write_png16(tmp_path / "x.png", a, compress_level=10)
     with pytest.raises(TypeError, match=r"compress_level must be an integer, got 1\.5"):
         io.write_png16(tmp_path / "x.png", a, compress_level=1.5)  # type: ignore[arg-type]
+    with pytest.raises(TypeError, match=r"compress_level must be an integer, got True"):
+        io.write_png16(tmp_path / "x.png", a, compress_level=True)
+    with pytest.raises(TypeError, match=r"compress_level must be an integer, got np\.True_"):
+        io.write_png16(tmp_path / "x.png", a, compress_level=np.True_)  # type: ignore[arg-type]
+    assert names(tmp_path) == ["0.png", "1.png", "9.png"]
+    # numpy integers are integers (every other integer parameter of the package takes them).
+    io.write_png16(tmp_path / "np.png", a, compress_level=np.int64(9))  # type: ignore[arg-type]
+    assert (tmp_path / "np.png").read_bytes() == (tmp_path / "9.png").read_bytes()
 
 
 def test_png16_round_trip_and_extremes(tmp_path: Path) -> None:
@@ -510,6 +519,8 @@ A23 = np.arange(6, dtype=np.float32).reshape(2, 3)
         (b"Pf\n0 2\n-1\n", r"PFM width must be a whole number > 0, got '0'"),
         (b"Pf\n3 0\n-1\n", r"PFM height must be a whole number > 0, got '0'"),
         (b"Pf\n3.0 2\n-1\n" + bytes(24), r"PFM width must be a whole number > 0, got '3.0'"),
+        # int() refuses over 4300 digits, in a message naming no file
+        (b"Pf\n" + b"9" * 5000 + b" 2\n-1\n", r"PFM width must be a whole number > 0, got 5000 d"),
         (b"Pf\n3 2\n0\n" + bytes(24), r"bad PFM scale '0': it must be finite and not 0"),
         (b"Pf\n3 2\n-0.0\n" + bytes(24), r"bad PFM scale '-0.0'"),
         (b"Pf\n3 2\n-1e999\n" + bytes(24), r"bad PFM scale '-1e999'"),
@@ -668,6 +679,10 @@ def test_pnm_plain_and_bitmaps(tmp_path: Path) -> None:
         (b"P2\n1 1\n255#c\n1", r"PGM header must end with whitespace, got b'#c"),
         (b"P1\n2 1\n0 2\n", r"PBM samples must be 0 or 1, got b'2'"),
         (b"P1\n2 1\n0\n", r"2x1 PBM needs 2 samples, got 1"),
+        (
+            b"P5\n2 1\n" + b"1" * 4400 + b"\n\x00\x00",
+            r"PGM maxval must be a whole number > 0, got 4400",
+        ),
     ],
 )
 def test_read_pnm_rejects(tmp_path: Path, content: bytes, message: str) -> None:
@@ -700,14 +715,42 @@ def test_read_pnm_missing(tmp_path: Path) -> None:
             ValueError,
             "scale must be a finite number > 0, got 0.0",
         ),
+        # A str reached numpy's isfinite (a TypeError naming no parameter); a bool was
+        # written as the scale 1.0.
+        (
+            np.zeros((2, 2), np.float32),
+            {"scale": "1"},
+            TypeError,
+            "scale must be a real number, got str '1'",
+        ),
+        (
+            np.zeros((2, 2), np.float32),
+            {"scale": True},
+            TypeError,
+            "scale must be a real number, got bool True",
+        ),
+        (
+            np.zeros((2, 2), np.float32),
+            {"scale": float("nan")},
+            ValueError,
+            "scale must be a finite number > 0, got nan",
+        ),
     ],
 )
 def test_write_pfm_rejects(
-    tmp_path: Path, array: np.ndarray, kwargs: dict[str, float], exc: type, message: str
+    tmp_path: Path, array: np.ndarray, kwargs: dict[str, Any], exc: type, message: str
 ) -> None:
     with pytest.raises(exc, match=message):
         io.write_pfm(tmp_path / "x.pfm", array, **kwargs)
     assert names(tmp_path) == []
+
+
+def test_write_pfm_numpy_scale(tmp_path: Path) -> None:
+    # A scale from numpy (np.float32 from a header array) is a real number like any other.
+    a = np.arange(6, dtype=np.float32).reshape(2, 3)
+    io.write_pfm(tmp_path / "x.pfm", a, scale=np.float32(0.5))
+    assert (tmp_path / "x.pfm").read_bytes().startswith(b"Pf\n3 2\n-0.5\n")
+    np.testing.assert_array_equal(io.read_pfm(tmp_path / "x.pfm"), a, strict=True)
 
 
 # --- exact or refused, for any data: property tests --------------------------------------------
@@ -832,3 +875,39 @@ def test_readers_and_writers_name_a_path_that_is_not_one(tmp_path: Path) -> None
     (tmp_path / "calib.txt").write_text("cam0=[1 0 0; 0 1 0; 0 0 1]\nbaseline=1\n")
     with pytest.raises(TypeError, match=r"^second_path must be a str or os\.PathLike, got int"):
         calib.read_stereo_calibration(tmp_path / "calib.txt", second_path=5)
+
+
+def test_empty_path_is_refused_not_the_current_folder(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """pathlib reads "" as "." (the current folder): read_image("") said "image is a folder,
+    not a file: .", and a writer's error named '.' too. Every reader and writer of the package
+    refuses "" by its parameter's name, before touching anything."""
+    import stereodepth
+    from stereodepth import calib
+    from stereodepth.plotting import save_charts
+
+    monkeypatch.chdir(tmp_path)
+    a = np.zeros((2, 3), np.float32)
+    rig = stereodepth.StereoRig.from_pixels(baseline_mm=100.0, focal_px=700.0)
+    calls = {
+        "read_image": lambda: io.read_image(""),
+        "read_pfm": lambda: io.read_pfm(""),
+        "read_pnm": lambda: io.read_pnm(""),
+        "write_pfm": lambda: io.write_pfm("", a),
+        "write_npy": lambda: io.write_npy("", a),
+        "write_png16": lambda: io.write_png16("", a.astype(np.uint16)),
+        "write_disparity_png16": lambda: io.write_disparity_png16("", a),
+        "atomic_write": lambda: io.atomic_write("").__enter__(),
+        "write_ply": lambda: write_ply("", np.zeros((2, 3))),
+        "save_charts": lambda: save_charts(rig, ""),
+        "read_stereo_calibration": lambda: calib.read_stereo_calibration(""),
+        "from_middlebury_calib": lambda: stereodepth.StereoRig.from_middlebury_calib(""),
+        "StereoRectifier.from_file": lambda: stereodepth.StereoRectifier.from_file(""),
+    }
+    for name, call in calls.items():
+        with pytest.raises(ValueError, match=r"^path must not be empty, got ''$"):
+            call()
+        assert list(tmp_path.iterdir()) == [], name
+    with pytest.raises(ValueError, match=r"^directory must not be empty, got ''$"):
+        io.remove_temp_files("")

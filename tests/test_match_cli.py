@@ -284,6 +284,7 @@ def bad_cases(tmp: Path, left: Path, right: Path) -> list[tuple[list[Any], str]]
     (tmp / "notimage.png").write_bytes(b"hello, not a PNG")
     Image.fromarray(np.zeros((64, 90, 3), np.uint8)).save(tmp / "small.png")
     (tmp / "bad_calib.txt").write_text("cam0=[1 0 0; 0 1 0]\nbaseline=100\n")
+    Image.open(left).save(tmp / "copy.png", compress_level=9)  # other bytes, same pixels
     wide_ndisp = write_middlebury_calib(tmp / "wide.txt", 96, 64)
     wide_ndisp.write_text(wide_ndisp.read_text().replace("ndisp=73", "ndisp=5000"))
     return [
@@ -324,6 +325,8 @@ def bad_cases(tmp: Path, left: Path, right: Path) -> list[tuple[list[Any], str]]
         # the same file twice: every disparity 0, every depth unknown (batch's CSV refuses it)
         ([left, left], "LEFT and RIGHT are the same file"),
         ([left, tmp / ".." / tmp.name / left.name], "LEFT and RIGHT are the same file"),
+        # a copy of the left image (another file, the same pixels): matched as if a pair
+        ([left, tmp / "copy.png"], "right is the left image again (every pixel equal)"),
         (  # a calib.txt's ndisp out of range was blamed on --min-disparity 0, never given
             [left, right, "--calib", wide_ndisp],
             f"--calib {wide_ndisp}: its ndisp=5000 is no search range for --method bm "
@@ -510,3 +513,22 @@ def test_ply_of_a_12_bit_pair_is_coloured_as_matched(
     colours = to_uint8(left16)[ok]
     assert np.array_equal(vertex["rgb"], np.repeat(colours[:, None], 3, axis=1))
     assert colours.max() > 200  # not the high byte (at most 15)
+
+
+def test_a_refused_pair_leaves_no_new_out_folder(
+    tmp_path: Path, pair: tuple[Path, Path], capsys: pytest.CaptureFixture[str]
+) -> None:
+    """--out's new folders were made before the pair was matched, and stayed, empty, when
+    the matcher refused it (here the left image given twice, as a copy)."""
+    left, _ = pair
+    Image.open(left).save(tmp_path / "copy.png", compress_level=9)
+    out = tmp_path / "new" / "deeper"
+    before = sorted(p.name for p in tmp_path.iterdir())
+    code, _, err = run(capsys, left, tmp_path / "copy.png", "-o", f"{out}/")
+    assert code == 2, err
+    assert "right is the left image again" in err
+    assert sorted(p.name for p in tmp_path.iterdir()) == before
+    # an existing folder stays, as it was
+    out.mkdir(parents=True)
+    code, _, err = run(capsys, left, tmp_path / "copy.png", "-o", f"{out}/")
+    assert code == 2 and out.is_dir() and list(out.iterdir()) == []

@@ -547,3 +547,11 @@ def test_write_ply_rejects(
     with pytest.raises(exc, match=message):
         stereodepth.write_ply(tmp_path / "x.ply", points, colors, comment=comment)
     assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize("comment", [5, b"bytes", ["a", "b"]])
+def test_write_ply_comment_not_text(tmp_path: Path, comment: Any) -> None:
+    # A wrong type was a ValueError (the rule of the package: TypeError for a wrong type).
+    with pytest.raises(TypeError, match=r"comment must be a str, got "):
+        stereodepth.write_ply(tmp_path / "x.ply", np.zeros((4, 3)), comment=comment)
+    assert list(tmp_path.iterdir()) == []

@@ -222,6 +222,17 @@ def test_downloads_are_the_libraries_files(client: TestClient, pair: Any, tmp_pa
     assert client.get("/api/depthmap/nope/points.ply").status_code == 404
     r = client.get(f"/api/depthmap/{body['id']}/point", params={"x": w, "y": 0})
     assert r.status_code == 422 and r.json()["detail"][0]["loc"] == ["query", "x"]
+    # Not an integer, or missing: pydantic's message named neither the parameter nor the value.
+    for params, msg in (
+        ({"x": "1.5", "y": 0}, "x must be an integer, got 1.5"),
+        ({"x": 0, "y": "1e3"}, "y must be an integer, got 1e3"),
+        ({"x": "", "y": 0}, "x must be an integer, got an empty value"),
+        ({"x": "left", "y": 0}, "x must be an integer, got 'left'"),
+        ({"y": 0}, "x is required"),
+    ):
+        r = client.get(f"/api/depthmap/{body['id']}/point", params=params)
+        assert r.status_code == 422, r.text
+        assert [e["msg"] for e in r.json()["detail"]] == [msg]
 
 
 def test_principal_point_for_the_points(client: TestClient, pair: Any) -> None:
@@ -369,6 +380,11 @@ def bad_cases(pair: Any) -> list[tuple[dict[str, Any], list[Any], str]]:
         ),
         ({"right": right}, ["body", "left"], "left: choose an image file"),
         ({"left": left, "right": left}, ["body", "right"], "right: the same file as left"),
+        (  # other bytes, the same pixels: matched with itself, every disparity 0
+            {"left": left, "right": encode(pair.left, compress_level=9)},
+            ["body", "right"],
+            "right is the left image again (every pixel equal)",
+        ),
         ({"left": "%%%not base64", "right": right}, ["body", "left"], "left: not valid base64"),
         ({"left": b64(b""), "right": right}, ["body", "left"], "left: the file is empty"),
         ({"left": 5, "right": right}, ["body", "left"], "give the image file as base64"),

@@ -28,6 +28,8 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
+from .cli import path_arg
+
 #: Flags that only apply to a raw --calib file.
 RAW_ONLY_FLAGS = (
     "--calib-right",
@@ -66,6 +68,7 @@ def add_raw_flags(group: Any) -> None:
 
     group.add_argument(
         "--calib-right",
+        type=path_arg,
         metavar="FILE",
         help="the right camera's ROS camera_info file (--calib is the left one's), or the "
         "second file of an OpenCV calibration split in two (intrinsics.yml, extrinsics.yml)",

@@ -40,6 +40,29 @@ def one_line(text: object) -> str:
     return "; ".join(line.strip() for line in str(text).strip().splitlines() if line.strip())
 
 
+def path_arg(value: str) -> str:
+    """An argparse ``type`` for a file or folder argument: an empty one (``-o "$OUT"`` with
+    OUT unset) is a usage error naming the argument, not the current folder, which pathlib
+    makes of "", and so is one with a name longer than a file name may be (it was
+    "[Errno 36] File name too long" with exit status 1 and no argument named; batch's OUTDIR
+    and --report only once they were written)."""
+    from pathlib import Path
+
+    from .io import NAME_MAX_BYTES
+
+    if not value:
+        raise argparse.ArgumentTypeError("expected a path, got ''")
+    for part in Path(value).parts:
+        size = len(os.fsencode(part))
+        if size > NAME_MAX_BYTES:
+            shown = part if len(part) <= 60 else part[:57] + "..."
+            raise argparse.ArgumentTypeError(
+                f"the name {shown!r} is {size} bytes long, more than a file name may be "
+                f"({NAME_MAX_BYTES} bytes)"
+            )
+    return value
+
+
 class ArgumentParser(argparse.ArgumentParser):
     """argparse, with usage errors in one line: ``PROG: error: MESSAGE (see PROG --help)``,
     exit status 2. Subcommand parsers inherit the class (add_subparsers uses the parent's)."""
@@ -227,6 +250,7 @@ def _add_calc(sub: Any) -> None:
     fmt.add_argument("--markdown", action="store_true", help="print the table as Markdown")
     o.add_argument(
         "--plot",
+        type=path_arg,
         metavar="FILE",
         help="write the two charts to this file: PNG, SVG or PDF by its suffix (.png, .svg, "
         ".pdf; needs the 'plot' extra)",

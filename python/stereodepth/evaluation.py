@@ -82,7 +82,7 @@ from typing import Any
 import numpy as np
 
 from . import _validate as check
-from .cli import key_value_option
+from .cli import key_value_option, path_arg
 from .depth import from_opencv_disparity
 from .matching import MAX_NUM_DISPARITIES
 from .metrics import DisparityMetrics, evaluate
@@ -816,7 +816,9 @@ def register(subparsers: Any) -> None:
             "(meta.json max_disp, else calib.txt ndisp-1, else the ground truth's maximum)."
         ),
     )
-    p.add_argument("dir", metavar="DIR", help="a folder of scene folders (or one scene folder)")
+    p.add_argument(
+        "dir", type=path_arg, metavar="DIR", help="a folder of scene folders (or one scene folder)"
+    )
     m = p.add_argument_group("methods")
     m.add_argument(
         "--method",

@@ -18,6 +18,7 @@ from typing import IO, Any
 
 import numpy as np
 
+from . import _validate as check
 from ._validate import native_order
 
 __all__ = [
@@ -86,7 +87,11 @@ def require_file(path: str | os.PathLike[str], what: str) -> Path:
 def _as_path(value: Any, name: str = "path") -> Path:
     """``value`` as a Path; TypeError naming ``name`` for anything but a str or os.PathLike
     (pathlib's own message, "expected str, bytes or os.PathLike object, not int", named no
-    parameter; bytes paths are refused as pathlib refuses them)."""
+    parameter; bytes paths are refused as pathlib refuses them), ValueError for an empty str
+    (pathlib reads "" as ".", the current folder: an unset variable in a script read or
+    wrote there, or was told "is a folder, not a file: .")."""
+    if isinstance(value, str) and not value:
+        raise ValueError(f"{name} must not be empty, got ''")
     if isinstance(value, str) or (
         isinstance(value, os.PathLike) and isinstance(os.fspath(value), str)
     ):
@@ -179,7 +184,7 @@ def _raw_modes(im: Any) -> list[str]:
 # --- atomic writes ----------------------------------------------------------------------------
 #: The longest file name, in bytes, of the file systems we write on (NAME_MAX on Linux and
 #: macOS; NTFS allows 255 UTF-16 units, more than 255 bytes' worth of most names).
-_NAME_MAX_BYTES = 255
+NAME_MAX_BYTES = 255
 
 
 def _temp_path(p: Path) -> Path:
@@ -187,7 +192,7 @@ def _temp_path(p: Path) -> Path:
     characters) so the temporary name fits where ``p``'s own name fits: a name of 230 bytes or
     more could not be written, and the error named the temporary file."""
     tail = f".{TEMP_MARKER}-{secrets.token_hex(6)}.tmp"
-    room = _NAME_MAX_BYTES - 1 - len(tail.encode())
+    room = NAME_MAX_BYTES - 1 - len(tail.encode())
     name = p.name.encode(errors="surrogateescape")[:room].decode(errors="ignore") or "x"
     return p.with_name(f".{name}{tail}")
 
@@ -293,14 +298,18 @@ def write_png16(
     ``compress_level`` is zlib's, 0 to 9. The default 1 writes a depth map about 4 times as
     fast as Pillow's default 6, in files 10 to 20 % larger."""
     a = _check_2d("array", array, (np.uint16,))
-    if isinstance(compress_level, bool) or not isinstance(compress_level, int):
+    # numpy integers too (a level read from an array or a config); bool and float are not.
+    if isinstance(compress_level, (bool, np.bool_)) or not isinstance(
+        compress_level, (int, np.integer)
+    ):
         raise TypeError(f"compress_level must be an integer, got {compress_level!r}")
-    if not 0 <= compress_level <= 9:
-        raise ValueError(f"compress_level must be an integer in [0, 9], got {compress_level}")
+    level = int(compress_level)
+    if not 0 <= level <= 9:
+        raise ValueError(f"compress_level must be an integer in [0, 9], got {level}")
     Image = _pil()
     im = Image.fromarray(np.ascontiguousarray(a))  # mode I;16
     with atomic_write(path) as f:
-        im.save(f, format="PNG", compress_level=compress_level)
+        im.save(f, format="PNG", compress_level=level)
 
 
 def write_disparity_png16(path: str | os.PathLike[str], disparity: np.ndarray) -> None:
@@ -326,14 +335,18 @@ def write_pfm(path: str | os.PathLike[str], array: np.ndarray, *, scale: float =
     """A (H, W) or (H, W, 3) float array as PFM (float32, little-endian), atomically.
 
     PFM stores rows bottom to top; NaN and infinities are kept as they are (Middlebury's tools
-    read infinity as "unknown"; stereodepth writes NaN)."""
+    read infinity as "unknown"; stereodepth writes NaN).
+
+    Raises TypeError for a non-float ``array`` or a ``scale`` that is not a real number (a
+    str, a bool) and ValueError for another shape or a ``scale`` that is not finite and > 0,
+    writing nothing."""
     a = np.asarray(array)
     if a.dtype.kind != "f":
         raise TypeError(f"array must have a float dtype, got {a.dtype}")
     if not (a.ndim == 2 or (a.ndim == 3 and a.shape[2] == 3)) or 0 in a.shape:
         raise ValueError(f"array must have shape (H, W) or (H, W, 3), got {a.shape}")
-    if not (np.isfinite(scale) and scale > 0):
-        raise ValueError(f"scale must be a finite number > 0, got {scale!r}")
+    # A str or bool scale reached numpy (a TypeError naming no parameter) or was written as 1.
+    scale = check.positive("scale", scale)
     kind = "Pf" if a.ndim == 2 else "PF"
     height, width = a.shape[:2]
     header = f"{kind}\n{width} {height}\n{-float(scale)}\n".encode("ascii")
@@ -424,6 +437,8 @@ def _header_tokens(
 
 
 def _size(p: Path, token: str, name: str, what: str) -> int:
+    if token.isdigit() and len(token.lstrip("0")) > 18:  # int() refuses 4300 digits
+        raise ValueError(f"{p}: {what} {name} must be a whole number > 0, got {len(token)} digits")
     if not token.isdigit() or not token.isascii() or int(token) <= 0:
         raise ValueError(f"{p}: {what} {name} must be a whole number > 0, got {token!r}")
     return int(token)

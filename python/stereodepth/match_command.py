@@ -44,6 +44,7 @@ The rule for ``--calib``: the file's format says whether the pair is already rec
 from __future__ import annotations
 
 import argparse
+import contextlib
 import dataclasses
 import json
 import os
@@ -55,6 +56,7 @@ from typing import Any
 import numpy as np
 
 from . import _calib_rule
+from .cli import path_arg
 
 __all__ = ["output_paths", "register", "run"]
 
@@ -80,8 +82,8 @@ def register(subparsers: Any) -> None:
             "then every output is of the rectified left camera, in its frame."
         ),
     )
-    p.add_argument("left", metavar="LEFT", help="the left image (PNG, JPEG, ...)")
-    p.add_argument("right", metavar="RIGHT", help="the right image, the same size")
+    p.add_argument("left", type=path_arg, metavar="LEFT", help="the left image (PNG, JPEG, ...)")
+    p.add_argument("right", type=path_arg, metavar="RIGHT", help="the right image, the same size")
     m = p.add_argument_group("the matcher")
     m.add_argument(
         "--method",
@@ -103,6 +105,7 @@ def register(subparsers: Any) -> None:
     r = p.add_argument_group("the rig (for depth)")
     r.add_argument(
         "--calib",
+        type=path_arg,
         metavar="FILE",
         help="Middlebury calib.txt or KITTI calib (rectified pairs: matched as given), or a raw "
         "calibration (OpenCV FileStorage YAML/XML/JSON, Kalibr camchain, ROS camera_info): the "
@@ -118,6 +121,7 @@ def register(subparsers: Any) -> None:
     o.add_argument(
         "-o",
         "--out",
+        type=path_arg,
         default=".",
         metavar="PATH",
         help="a folder (existing, or ending in /) or a file-name prefix (default: .)",
@@ -147,10 +151,35 @@ def register(subparsers: Any) -> None:
     p.set_defaults(func=run)
 
 
+def _missing_folders(out: str) -> list[Path]:
+    """The folders :func:`output_paths` would make for ``out`` (a folder that does not exist
+    yet and its missing parents), deepest first; none for a prefix."""
+    if not out.endswith(("/", os.sep)) and not Path(out).is_dir():
+        return []
+    missing = []
+    folder = Path(out).absolute()
+    while not folder.exists() and folder != folder.parent:
+        missing.append(folder)
+        folder = folder.parent
+    return missing
+
+
 def output_paths(out: str, names: list[str]) -> dict[str, Path]:
     """Where each output goes: ``out`` as a folder (existing, or ending in a separator: made)
     or as a prefix of the file names (its folder must exist). An output name taken by a folder
-    is refused before anything is written."""
+    is refused before anything is written, and so is a prefix that makes a name longer than a
+    file name may be (it was "[Errno 36] File name too long", exit status 1, naming no
+    option)."""
+    from .io import NAME_MAX_BYTES
+
+    for part in (Path(out + n).name for n in names):  # the folders' names: cli.path_arg
+        size = len(os.fsencode(part))
+        if size > NAME_MAX_BYTES:
+            shown = part if len(part) <= 60 else part[:57] + "..."
+            raise _Usage(
+                f"--out: the name {shown!r} is {size} bytes long, more than a file name may be "
+                f"({NAME_MAX_BYTES} bytes)"
+            )
     is_dir = out.endswith(("/", os.sep)) or Path(out).is_dir()
     if is_dir:
         folder = Path(out)
@@ -393,47 +422,56 @@ def run(args: argparse.Namespace) -> int:
     if args.write_rectified:
         names["left_rectified"] = "left-rectified.png"
         names["right_rectified"] = "right-rectified.png"
+    made = _missing_folders(args.out)  # what output_paths makes of a new --out folder
     paths = output_paths(args.out, list(names.values()))
-    out = {key: paths[name] for key, name in names.items()}
-    _refuse_overwriting_inputs(args, out)
-
-    rectify_s = None
-    if rectifier is not None:
-        # The pair as the rectified cameras see it; everything below is in their frame.
-        left_img, right_img = prepare_pair(left_img, right_img)
-        t0 = time.perf_counter()
-        left_img, right_img = rectifier.rectify(left_img, right_img)
-        rectify_s = time.perf_counter() - t0
-    vertical = rectifier is not None and rectifier.vertical
-    rows_left, rows_right = rule.along_rows(vertical, left_img, right_img)
-    result = match_pair(
-        rows_left,
-        rows_right,
-        method=args.method,
-        num_disparities=args.num_disparities if args.num_disparities is not None else ndisp,
-        min_disparity=args.min_disparity,
-        block_size=args.block_size,
-        cost=args.cost,
-        focal_px=None if rig is None else rig["focal_px"],
-        baseline_m=None if rig is None else rig["baseline_m"],
-        doffs_px=0.0 if rig is None else rig["doffs_px"],
-        threads=args.threads,
-    )
-    if vertical:  # back in the rectified images' orientation
-        result = dataclasses.replace(
-            result,
-            disparity=rule.from_rows(True, result.disparity),
-            confidence=rule.from_rows(True, result.confidence),
-            depth=rule.from_rows(True, result.depth),
-        )
     try:
-        _write_outputs(args, out, result, rig, left_img, right_img)
+        out = {key: paths[name] for key, name in names.items()}
+        _refuse_overwriting_inputs(args, out)
+
+        rectify_s = None
+        if rectifier is not None:
+            # The pair as the rectified cameras see it; everything below is in their frame.
+            left_img, right_img = prepare_pair(left_img, right_img)
+            t0 = time.perf_counter()
+            left_img, right_img = rectifier.rectify(left_img, right_img)
+            rectify_s = time.perf_counter() - t0
+        vertical = rectifier is not None and rectifier.vertical
+        rows_left, rows_right = rule.along_rows(vertical, left_img, right_img)
+        result = match_pair(
+            rows_left,
+            rows_right,
+            method=args.method,
+            num_disparities=args.num_disparities if args.num_disparities is not None else ndisp,
+            min_disparity=args.min_disparity,
+            block_size=args.block_size,
+            cost=args.cost,
+            focal_px=None if rig is None else rig["focal_px"],
+            baseline_m=None if rig is None else rig["baseline_m"],
+            doffs_px=0.0 if rig is None else rig["doffs_px"],
+            threads=args.threads,
+        )
+        if vertical:  # back in the rectified images' orientation
+            result = dataclasses.replace(
+                result,
+                disparity=rule.from_rows(True, result.disparity),
+                confidence=rule.from_rows(True, result.confidence),
+                depth=rule.from_rows(True, result.depth),
+            )
+        try:
+            _write_outputs(args, out, result, rig, left_img, right_img)
+        except BaseException:
+            # A run that fails leaves none of its outputs: a new disparity beside an old depth
+            # would pass for one result.
+            for path in out.values():
+                if path.is_file():
+                    path.unlink()
+            raise
     except BaseException:
-        # A run that fails leaves none of its outputs: a new disparity beside an old depth
-        # would pass for one result.
-        for path in out.values():
-            if path.is_file():
-                path.unlink()
+        # A failed run (the matcher refused the pair, a write failed) leaves no new
+        # empty --out folder behind: it left one, made before the pair was matched.
+        for folder in made:
+            with contextlib.suppress(OSError):
+                folder.rmdir()  # only when empty
         raise
     summary = result.summary()
     summary.update(

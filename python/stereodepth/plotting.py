@@ -137,6 +137,8 @@ def save_charts(
     renamed over ``path``. Bad arguments raise before anything is written."""
     if not isinstance(path, (str, os.PathLike)):
         raise TypeError(f"path must be a str or os.PathLike, got {type(path).__name__} {path!r}")
+    if not os.fspath(path):  # Path("") is "."
+        raise ValueError("path must not be empty, got ''")
     out = Path(path)
     fmt = _format(out)
     if not out.parent.is_dir():

@@ -276,8 +276,9 @@ def write_ply(
 
     Vertex properties: float x, y, z, and uchar red, green, blue when coloured.
 
-    Raises ValueError for a finite coordinate beyond float32's range (about 3.4e38), TypeError
-    for a ``path`` that is not a str or os.PathLike, FileNotFoundError
+    Raises ValueError for a finite coordinate beyond float32's range (about 3.4e38) or a
+    ``comment`` that is not ASCII, TypeError for a ``path`` that is not a str or os.PathLike
+    or a ``comment`` that is not a str, FileNotFoundError
     (naming ``path``) when its folder does not exist, before any work, and OSError naming
     ``path`` when it cannot be written; ``path`` is then left as it was."""
     from .io import atomic_write
@@ -285,6 +286,8 @@ def write_ply(
     if not isinstance(path, (str, os.PathLike)):
         raise TypeError(f"path must be a str or os.PathLike, got {type(path).__name__} {path!r}")
     target = os.fspath(path)
+    if not target:  # "" is not the current folder
+        raise ValueError("path must not be empty, got ''")
     folder = os.path.dirname(os.path.abspath(target))
     if not os.path.isdir(folder):
         raise FileNotFoundError(
@@ -292,7 +295,9 @@ def write_ply(
         )
     if os.path.isdir(target):
         raise IsADirectoryError(errno.EISDIR, "cannot write the PLY file over a folder", target)
-    if comment is not None and not (isinstance(comment, str) and comment.isascii()):
+    if comment is not None and not isinstance(comment, str):
+        raise TypeError(f"comment must be a str, got {type(comment).__name__} {comment!r}")
+    if comment is not None and not comment.isascii():
         raise ValueError(f"comment must be ASCII text (PLY headers are ASCII), got {comment!r}")
     pts = np.asarray(points)
     if pts.dtype.kind not in "iuf":

@@ -17,7 +17,7 @@ from .. import _validate as check
 from .._extras import require
 from .._methods import METHODS, check_method
 from ..calib import Calibration
-from ..cli import key_value_option
+from ..cli import key_value_option, path_arg
 from .calibration import (
     COMMAND_LINE,
     BatchRectifier,
@@ -46,10 +46,11 @@ def register(subparsers: Any) -> None:
     )
     # One line for an argparse error too, like every other error of the command.
     p.error = _one_line_error(p)
-    p.add_argument("input", metavar="INPUT", help="a folder of pairs or a CSV list")
+    p.add_argument("input", type=path_arg, metavar="INPUT", help="a folder of pairs or a CSV list")
     p.add_argument(
         "-o",
         "--output",
+        type=path_arg,
         required=True,
         metavar="OUTDIR",
         help="the folder for the outputs (created if needed)",
@@ -71,6 +72,7 @@ def register(subparsers: Any) -> None:
     c.add_argument("--cy-px", type=float, help="left principal point y for --ply")
     c.add_argument(
         "--calib",
+        type=path_arg,
         metavar="FILE",
         help="one calibration for every pair: Middlebury calib.txt or KITTI calib (rectified "
         "pairs: matched as given), or a raw calibration (OpenCV FileStorage YAML/XML/JSON, Kalibr "
@@ -105,6 +107,7 @@ def register(subparsers: Any) -> None:
     o.add_argument("--max-depth-m", type=float, help="depths farther than this are invalid")
     o.add_argument(
         "--report",
+        type=path_arg,
         metavar="FILE",
         help="the JSON report (default OUTDIR/report.json); its folder must exist",
     )
@@ -400,7 +403,8 @@ def _check_outputs_are_not_inputs(
 ) -> None:
     """No file a pair may write or remove as stale (:meth:`BatchOptions.owned_names`) is an
     input of any pair or the job (images, calibration files): a CSV list naming
-    ``OUTDIR/S.left-rectified.png`` as S's left image had it overwritten by its rectification."""
+    ``OUTDIR/S.left-rectified.png`` as S's left image had it overwritten by its rectification;
+    and every such name fits in a file name."""
     inputs: dict[Path, str] = {}
     for c in calib_files:
         if c is not None:
@@ -409,8 +413,19 @@ def _check_outputs_are_not_inputs(
         for f in (p.left, p.right, p.calib_file):
             if f is not None:
                 inputs[f.resolve()] = str(f)
+    from ..io import NAME_MAX_BYTES
+
     out_dir = options.out_dir.resolve()
     for p in pairs:
+        longest = max(options.owned_names(p.stem), key=lambda n: len(os.fsencode(n)))
+        if len(os.fsencode(longest)) > NAME_MAX_BYTES:
+            # Its folders' names joined: the pair was matched, then failed to write every
+            # file, its record included ([Errno 36]), on every run.
+            raise UsageError(
+                f"pair {p.stem[:40]!r}...: its output names, such as {longest[-40:]!r}, would "
+                f"be longer than a file name may be ({NAME_MAX_BYTES} bytes): give it a "
+                "shorter stem in a CSV list"
+            )
         for name in sorted(options.owned_names(p.stem)):
             hit = inputs.get(out_dir / name)
             if hit is not None:

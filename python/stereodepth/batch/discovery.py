@@ -204,6 +204,9 @@ def _search(
     excluded = {p.resolve() for p in exclude}
     pairs: list[Pair] = []
     skipped: list[tuple[Path, str]] = []
+    # Each folder is searched once: a link to a folder searched already (``d/loop -> ..``)
+    # matched its pairs again under other stems.
+    searched: dict[Path, Path] = {root.resolve(): root}
 
     def visit(d: Path, rel: tuple[str, ...]) -> None:
         prefix = "_".join(rel) if rel else None
@@ -230,9 +233,15 @@ def _search(
                     )
                 )
         for sub in _subfolders(d):
-            if sub.resolve() in excluded:
+            real = sub.resolve()
+            if real in excluded:
                 if _images(sub):
                     skipped.append((sub, "the output folder (-o): not searched"))
+                continue
+            if real in searched:
+                skipped.append(
+                    (sub, f"the same folder as {searched[real]} (a link): not searched again")
+                )
                 continue
             if len(rel) >= SEARCH_DEPTH:
                 if _images(sub) or _subfolders(sub):
@@ -240,6 +249,7 @@ def _search(
                         (sub, f"not searched: more than {SEARCH_DEPTH} levels below INPUT")
                     )
                 continue
+            searched[real] = sub
             visit(sub, (*rel, sub.name))
 
     visit(root, ())
@@ -339,6 +349,7 @@ def discover(
 
     Pairs whose right image is missing are returned too (they fail when processed, and the
     report names them). Raises UsageError when nothing is found (naming what was skipped),
+    for a pair whose left and right image are one file (a link),
     when two pairs would write the same outputs (stems equal but for case included: they
     collide on case-insensitive file systems), or for bad ``pair_names``."""
     root = Path(input_path)
@@ -358,6 +369,15 @@ def discover(
         pairs = _csv_pairs(root, names)
     else:
         pairs, skipped = _search(root, names, [Path(p) for p in exclude])
+        for p in pairs:
+            # A link (image_3/x.png linked to image_2/x.png, --pair-names naming a link to
+            # the left image) matched the image with itself: every disparity 0, "ok". The
+            # rule of a CSV list's line.
+            if _same_file(p.left, p.right):
+                raise UsageError(
+                    f"pair {p.stem!r}: the left and right image are the same file ({p.left} "
+                    f"and {p.right})"
+                )
     found = Discovery(pairs, skipped)
     if not pairs:
         tokens = ", ".join(f"{a}/{b}" for a, b in names)

@@ -265,8 +265,14 @@ def _check_cameras(cameras: Any, name: str = "cameras") -> tuple[int, int]:
     except (TypeError, ValueError):
         raise ValueError(f"{name} must be two camera numbers, got {cameras!r}") from None
     for c in (a, b):
-        if isinstance(c, bool) or not isinstance(c, int) or c < 0:
+        # numpy integers too (camera numbers read from an array); bool is not a number here.
+        if isinstance(c, (bool, np.bool_)) or not isinstance(c, (int, np.integer)):
+            raise TypeError(
+                f"{name} must be two whole numbers >= 0, got {cameras!r} (a {type(c).__name__})"
+            )
+        if c < 0:
             raise ValueError(f"{name} must be two whole numbers >= 0, got {cameras!r}")
+    a, b = int(a), int(b)
     if a == b:
         raise ValueError(f"{name} must be two different cameras, got {cameras!r}")
     return a, b

@@ -49,7 +49,8 @@ def read_kalibr_stereo_calibration(
     and the key (``cam1.T_cn_cnm1``) for a missing key, a wrong shape, a non-finite value, a
     transform whose rotation is not one or whose last row is not 0 0 0 1, an unsupported
     camera model, a distortion count that does not fit the model, and cameras with
-    different distortion models or resolutions."""
+    different distortion models or resolutions; TypeError for ``cameras`` that are not
+    integers."""
     scale = _unit(translation_unit)
     first, second = _check_cameras(cameras)
     p = _path(path)

@@ -141,7 +141,7 @@ def read_kitti_stereo_calibration(
 
     Raises FileNotFoundError, and ValueError naming the file, the line and the key (see the
     module's documentation for the rules), and for an image size that is missing or
-    disagrees with ``image_size=``."""
+    disagrees with ``image_size=``; TypeError for ``cameras`` that are not integers."""
     first, second = _check_cameras(cameras)
     p = _path(path)
     fields = _fields(p)

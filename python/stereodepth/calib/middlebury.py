@@ -10,10 +10,21 @@ from pathlib import Path
 
 import numpy as np
 
-from ._common import _INTEGER_RE, _LINE_RE, _NUMBER_RE, _image_size_of, _path, _read_text
+from ._common import (
+    _INTEGER_RE,
+    _LINE_RE,
+    _NUMBER_RE,
+    _image_size_of,
+    _path,
+    _read_text,
+    _shown,
+)
 from .stereo import StereoCalibration, _rectified_calibration
 
 __all__ = ["MiddleburyCalib", "read_middlebury_calib", "read_middlebury_stereo_calibration"]
+
+#: More digits than any width, height or ndisp has (int() refuses over 4300).
+_MAX_DIGITS = 18
 
 
 @dataclass(frozen=True)
@@ -108,8 +119,11 @@ def read_middlebury_calib(path: str | os.PathLike[str]) -> MiddleburyCalib:
         if key not in fields:
             return None
         v = fields[key]
+        if _INTEGER_RE.fullmatch(v) is not None and len(v.lstrip("0")) > _MAX_DIGITS:
+            # int() refuses more than 4300 digits with a message naming neither file nor key
+            raise ValueError(f"{p}: {key} must be a whole number > 0, got {len(v)} digits")
         if _INTEGER_RE.fullmatch(v) is None or int(v) <= 0:
-            raise ValueError(f"{p}: {key} must be a whole number > 0, got {v!r}")
+            raise ValueError(f"{p}: {key} must be a whole number > 0, got {_shown(v)}")
         return int(v)
 
     cam0 = _matrix(fields["cam0"], "cam0", p)

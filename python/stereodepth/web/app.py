@@ -291,6 +291,14 @@ def _request_error(err: dict[str, Any]) -> dict[str, Any]:
     name = loc[1] if len(loc) > 1 and isinstance(loc[1], str) else None
     field = FIELDS.get(name) if name is not None else None
     if field is None:
+        # The depth-map view's own parameters (the point query's x and y): pydantic's
+        # "Input should be a valid integer, unable to parse string as an integer" named
+        # neither the parameter nor what it got.
+        if name is not None and kind == "missing":
+            return {"loc": loc, "msg": f"{name} is required", "type": kind}
+        if name is not None and kind.startswith("int_"):
+            msg = f"{name} must be an integer, got {_shown(err.get('input'))}"
+            return {"loc": loc, "msg": msg, "type": kind}
         return {"loc": loc, "msg": str(err.get("msg", "invalid input")), "type": kind}
     if kind == "missing":
         msg = f"{field.name} is required"
