@@ -526,25 +526,3 @@ def test_a_folder_reached_twice_through_a_link_is_searched_once(tmp_path: Path) 
         "d/loop": f"the same folder as {inp} (a link): not searched again",
         "z_again": f"the same folder as {inp / 'teddy'} (a link): not searched again",
     }
-
-
-def test_a_copy_of_the_left_image_as_right_fails_that_pair(
-    tmp_path: Path, capsys: pytest.CaptureFixture[str]
-) -> None:
-    """A copy (not a link, which discovery refuses) of the left image as the right one was
-    matched with itself: every disparity 0, status ok. It fails alone, with the reason."""
-    inp = tmp_path / "in"
-    scene(inp / "good")
-    save_pair(inp / "copy", "im0.png", "im1.png")
-    Image.open(inp / "copy" / "im0.png").save(inp / "copy" / "im1.png", compress_level=9)
-    (inp / "copy" / "calib.txt").write_text(calib_txt())
-    out = tmp_path / "out"
-    status, _, _ = run(capsys, inp, "-o", out, "--quiet")
-    assert status == 1
-    assert record_of(out, "good")["status"] == "ok"
-    failed = record_of(out, "copy")
-    assert failed["status"] == "failed"
-    assert "left and right are the same image (every pixel equal)" in failed["error"]
-    assert sorted(p.name for p in out.iterdir() if p.name.startswith("copy")) == [
-        "copy.record.json"
-    ]

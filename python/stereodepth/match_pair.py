@@ -74,8 +74,7 @@ def kitti_cameras(left: str | os.PathLike[str], right: str | os.PathLike[str]) -
 def prepare_pair(left: np.ndarray, right: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """The pair as the matcher takes it, checked by the rule :func:`stereodepth.block_match`
     and ``stereodepth batch`` follow: the same size, both colour or both grey, the same bit
-    depth; and two images, not one twice. Raises ValueError naming ``right`` (the one
-    compared)."""
+    depth. Raises ValueError naming ``right`` (the one compared)."""
     if left.shape[:2] != right.shape[:2]:
         raise ValueError(
             f"right must have the size of left, {left.shape[1]}x{left.shape[0]} px, got "
@@ -95,12 +94,6 @@ def prepare_pair(left: np.ndarray, right: np.ndarray) -> tuple[np.ndarray, np.nd
         raise ValueError(
             f"right must have the bit depth of left ({bits.get(left.dtype, left.dtype)}), got "
             f"{bits.get(right.dtype, right.dtype)}"
-        )
-    if np.array_equal(left, right):
-        # A copy of the left image (not the same file, which is refused before reading):
-        # every disparity 0 and every depth unknown, reported as a result.
-        raise ValueError(
-            "right is the left image again (every pixel equal): give the other image of the pair"
         )
     return left, right
 

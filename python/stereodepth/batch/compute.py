@@ -42,10 +42,6 @@ def _load_pair(pair: Pair) -> tuple[np.ndarray, np.ndarray, np.ndarray, dict[str
             f"left and right differ in size: {left.shape[1]}x{left.shape[0]} and "
             f"{right.shape[1]}x{right.shape[0]} px"
         )
-    if left.dtype == right.dtype and np.array_equal(left, right):  # a copy, not a link
-        raise ValueError(
-            "left and right are the same image (every pixel equal): every disparity would be 0"
-        )
     colours = left
     if left.ndim != right.ndim:
 
