@@ -516,14 +516,14 @@ def test_a_refused_pair_leaves_no_new_out_folder(
     tmp_path: Path, pair: tuple[Path, Path], capsys: pytest.CaptureFixture[str]
 ) -> None:
     """--out's new folders were made before the pair was matched, and stayed, empty, when
-    the matcher refused it (here the left image given twice, as a copy)."""
+    the pair was refused (here a grey right image beside a colour left one)."""
     left, _ = pair
-    Image.open(left).save(tmp_path / "copy.png", compress_level=9)
+    Image.open(left).convert("L").save(tmp_path / "copy.png")
     out = tmp_path / "new" / "deeper"
     before = sorted(p.name for p in tmp_path.iterdir())
     code, _, err = run(capsys, left, tmp_path / "copy.png", "-o", f"{out}/")
     assert code == 2, err
-    assert "right is the left image again" in err
+    assert "right must be colour (RGB) as left is" in err
     assert sorted(p.name for p in tmp_path.iterdir()) == before
     # an existing folder stays, as it was
     out.mkdir(parents=True)
