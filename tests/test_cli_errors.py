@@ -239,6 +239,35 @@ def test_write_ply_to_a_missing_folder_names_the_path(tmp_path: Path) -> None:
 RIG_PX = ["--focal-px", "700", "--baseline-mm", "120", "--num-disparities", "16"]
 
 
+def usage_error_beside_a_pair(
+    argv: list[str],
+    tmp_path: Path,
+    monkeypatch: pytest.MonkeyPatch,
+    capsys: pytest.CaptureFixture[str],
+) -> str:
+    """Runs ``argv`` in ``tmp_path`` holding a small left.png and right.png; asserts a one-line
+    usage error (status 2, nothing on stdout) that wrote nothing there, and returns it."""
+    image = pytest.importorskip("PIL.Image")
+    import numpy as np
+
+    rng = np.random.default_rng(0)
+    left = rng.integers(0, 256, (24, 40), dtype=np.uint8)
+    image.fromarray(left).save(tmp_path / "left.png")
+    image.fromarray(np.roll(left, -2, axis=1)).save(tmp_path / "right.png")
+    before = sorted(p.name for p in tmp_path.iterdir())
+    monkeypatch.chdir(tmp_path)
+    try:
+        status = main(argv)
+    except SystemExit as exc:  # argparse exits itself
+        status = exc.code  # type: ignore[assignment]
+    out, err = capsys.readouterr()
+    assert status == 2, err
+    assert out == ""
+    assert err.splitlines() == [err.strip()], err
+    assert sorted(p.name for p in tmp_path.iterdir()) == before
+    return err
+
+
 EMPTY_PATH_CASES: list[tuple[list[str], str]] = [
     (["calc", *ARM, "--plot", ""], "--plot"),
     (["eval", ""], "DIR"),
@@ -270,25 +299,8 @@ def test_empty_path_is_a_usage_error_not_the_current_folder(
     pair under the current folder or wrote into it, ``eval ""`` scored it, ``calc --plot ""``
     wrote no charts without a word, and ``match L ""`` said "RIGHT: image is a folder, not a
     file: .". Now each is argparse's one line naming the argument, and nothing is written."""
-    image = pytest.importorskip("PIL.Image")
-    import numpy as np
-
-    rng = np.random.default_rng(0)
-    left = rng.integers(0, 256, (24, 40), dtype=np.uint8)
-    image.fromarray(left).save(tmp_path / "left.png")
-    image.fromarray(np.roll(left, -2, axis=1)).save(tmp_path / "right.png")
-    before = sorted(p.name for p in tmp_path.iterdir())
-    monkeypatch.chdir(tmp_path)
-    try:
-        status = main(argv)
-    except SystemExit as exc:  # argparse exits itself
-        status = exc.code  # type: ignore[assignment]
-    out, err = capsys.readouterr()
-    assert status == 2, err
-    assert out == ""
-    assert err.splitlines() == [err.strip()], err
+    err = usage_error_beside_a_pair(argv, tmp_path, monkeypatch, capsys)
     assert f"argument {argument}: expected a path, got ''" in err
-    assert sorted(p.name for p in tmp_path.iterdir()) == before
 
 
 LONG_NAME = "x" * 256  # one byte more than a file name may be (NAME_MAX)
@@ -320,24 +332,7 @@ def test_a_name_too_long_for_a_file_is_a_usage_error(
 ) -> None:
     """Each was pathlib's "[Errno 36] File name too long: '<the whole name>'" with exit
     status 1, naming no argument (a match prefix only once the pair had been read)."""
-    image = pytest.importorskip("PIL.Image")
-    import numpy as np
-
-    rng = np.random.default_rng(0)
-    left = rng.integers(0, 256, (24, 40), dtype=np.uint8)
-    image.fromarray(left).save(tmp_path / "left.png")
-    image.fromarray(np.roll(left, -2, axis=1)).save(tmp_path / "right.png")
-    before = sorted(p.name for p in tmp_path.iterdir())
-    monkeypatch.chdir(tmp_path)
-    try:
-        status = main(argv)
-    except SystemExit as exc:  # argparse exits itself
-        status = exc.code  # type: ignore[assignment]
-    out, err = capsys.readouterr()
-    assert status == 2, err
-    assert out == ""
-    assert err.splitlines() == [err.strip()], err
+    err = usage_error_beside_a_pair(argv, tmp_path, monkeypatch, capsys)
     assert fragment in err
     assert "bytes long, more than a file name may be (255 bytes)" in err
     assert "Errno" not in err
-    assert sorted(p.name for p in tmp_path.iterdir()) == before

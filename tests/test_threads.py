@@ -7,6 +7,8 @@ the tests lay out fake ``/proc/self/cgroup`` and ``/sys/fs/cgroup`` trees (cgrou
 from __future__ import annotations
 
 import os
+import subprocess
+import sys
 from pathlib import Path
 from typing import Any
 
@@ -32,6 +34,18 @@ def child_exit_code(pid: int, timeout: float, hung: str) -> int:
             os.waitpid(pid, 0)
             pytest.fail(hung)
         time.sleep(0.01)
+
+
+def run_python(code: str) -> subprocess.CompletedProcess[str]:
+    """``code`` run by a fresh interpreter that imports this stereodepth (the test's sys.path),
+    its output captured; subprocess.TimeoutExpired after 60 s."""
+    return subprocess.run(
+        [sys.executable, "-c", code],
+        capture_output=True,
+        text=True,
+        timeout=60,
+        env={**os.environ, "PYTHONPATH": os.pathsep.join(sys.path)},
+    )
 
 
 def tree(root: Path, files: dict[str, str]) -> str:
@@ -246,19 +260,10 @@ def test_semi_global_does_not_hang_when_threads_are_refused() -> None:
     # worker could not be started (here: no address space for its stack) waited at the barrier
     # forever. It must return the right output or raise, in a fresh process (a forked one
     # reuses the stacks of its parent's threads).
-    import subprocess
-    import sys
-
     if stereodepth.build_info()["default_threads"] < 2:
         pytest.skip("the 8-path mode runs one band on one CPU")
     try:
-        run = subprocess.run(
-            [sys.executable, "-c", _REFUSED_THREADS],
-            capture_output=True,
-            text=True,
-            timeout=60,
-            env={**os.environ, "PYTHONPATH": os.pathsep.join(sys.path)},
-        )
+        run = run_python(_REFUSED_THREADS)
     except subprocess.TimeoutExpired:
         pytest.fail("the matcher hung when a worker thread could not be started")
     assert run.returncode == 0, run.stderr
@@ -295,17 +300,8 @@ time.sleep(0.3)
 def test_interpreter_exits_cleanly_while_daemon_threads_are_in_kernels() -> None:
     # At exit CPython ends daemon threads that ask for the GIL back; a thread coming back from
     # a kernel then must not take the process down (it aborted in std::terminate, exit -6).
-    import subprocess
-    import sys
-
     for _ in range(3):
-        run = subprocess.run(
-            [sys.executable, "-c", _EXIT_DURING_CALLS],
-            capture_output=True,
-            text=True,
-            timeout=60,
-            env={**os.environ, "PYTHONPATH": os.pathsep.join(sys.path)},
-        )
+        run = run_python(_EXIT_DURING_CALLS)
         assert run.returncode == 0, run.stderr
         assert "terminate" not in run.stderr
 

@@ -730,9 +730,12 @@ void SemiGlobalMatcher::compute(const StereoImage& left, const StereoImage& righ
       // Each band's scratch is sized here, before the bands start: an allocation that failed
       // inside a band would leave the other bands waiting at the barrier for ever.
       const std::size_t n_rev = sz(cols) + sz(nd) + 32;
+      // A band's rows of raw costs: its columns and one either side, nd each.
+      auto raw_len = [&](std::ptrdiff_t b) {
+        return sz(band(cols, nb, b + 1) - band(cols, nb, b) + 2) * sz(nd);
+      };
       auto band_scratch = [&](std::ptrdiff_t b) {
-        const std::size_t n_raw = sz(band(cols, nb, b + 1) - band(cols, nb, b) + 2) * sz(nd);
-        return aligned<std::uint16_t>(ws.scratch[sz(b)], n_rev + 4 * n_raw + sz(nd));
+        return aligned<std::uint16_t>(ws.scratch[sz(b)], n_rev + 4 * raw_len(b) + sz(nd));
       };
       for (std::ptrdiff_t b = 0; b < nb; ++b) band_scratch(b);
       for (int dy : {1, -1}) {
@@ -746,7 +749,7 @@ void SemiGlobalMatcher::compute(const StereoImage& left, const StereoImage& righ
           RawRows<std::uint8_t> raw8;  // with the 8-bit cost kernels
           std::uint8_t* ring = nullptr;
           if (dy > 0) {
-            const std::size_t n_raw = sz(x1 - x0 + 2) * sz(nd);
+            const std::size_t n_raw = raw_len(b);
             rev = band_scratch(b);  // sized already: no allocation here
             colraw = rev + n_rev;
             for (int j = 0; j < 3; ++j) {

@@ -48,19 +48,28 @@ def path_arg(value: str) -> str:
     and --report only once they were written)."""
     from pathlib import Path
 
-    from .io import NAME_MAX_BYTES
-
     if not value:
         raise argparse.ArgumentTypeError("expected a path, got ''")
     for part in Path(value).parts:
-        size = len(os.fsencode(part))
-        if size > NAME_MAX_BYTES:
-            shown = part if len(part) <= 60 else part[:57] + "..."
-            raise argparse.ArgumentTypeError(
-                f"the name {shown!r} is {size} bytes long, more than a file name may be "
-                f"({NAME_MAX_BYTES} bytes)"
-            )
+        problem = name_too_long(part)
+        if problem is not None:
+            raise argparse.ArgumentTypeError(problem)
     return value
+
+
+def name_too_long(name: str) -> str | None:
+    """Why ``name`` (one file or folder name, no separators) cannot be a file name, or None:
+    more bytes than NAME_MAX (:data:`stereodepth.io.NAME_MAX_BYTES`)."""
+    from .io import NAME_MAX_BYTES
+
+    size = len(os.fsencode(name))
+    if size <= NAME_MAX_BYTES:
+        return None
+    shown = name if len(name) <= 60 else name[:57] + "..."
+    return (
+        f"the name {shown!r} is {size} bytes long, more than a file name may be "
+        f"({NAME_MAX_BYTES} bytes)"
+    )
 
 
 class ArgumentParser(argparse.ArgumentParser):

@@ -56,7 +56,7 @@ from typing import Any
 import numpy as np
 
 from . import _calib_rule
-from .cli import path_arg
+from .cli import name_too_long, path_arg
 
 __all__ = ["output_paths", "register", "run"]
 
@@ -170,16 +170,10 @@ def output_paths(out: str, names: list[str]) -> dict[str, Path]:
     is refused before anything is written, and so is a prefix that makes a name longer than a
     file name may be (it was "[Errno 36] File name too long", exit status 1, naming no
     option)."""
-    from .io import NAME_MAX_BYTES
-
     for part in (Path(out + n).name for n in names):  # the folders' names: cli.path_arg
-        size = len(os.fsencode(part))
-        if size > NAME_MAX_BYTES:
-            shown = part if len(part) <= 60 else part[:57] + "..."
-            raise _Usage(
-                f"--out: the name {shown!r} is {size} bytes long, more than a file name may be "
-                f"({NAME_MAX_BYTES} bytes)"
-            )
+        problem = name_too_long(part)
+        if problem is not None:
+            raise _Usage(f"--out: {problem}")
     is_dir = out.endswith(("/", os.sep)) or Path(out).is_dir()
     if is_dir:
         folder = Path(out)
