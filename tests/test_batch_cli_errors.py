@@ -147,6 +147,23 @@ def test_input_and_output_errors(tmp_path: Path, capsys: pytest.CaptureFixture[s
     assert not (tmp_path / "out").exists()
 
 
+def test_an_outdir_the_system_refuses_to_make_is_a_usage_error(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Under /proc (and /sys) the checks before the work pass (the parent is a writable
+    folder to os.access) but making the folder fails: that was Python's "[Errno 2] ..." with
+    exit status 1 and no option named."""
+    target = Path("/proc/stereodepth-no-such-process/out")
+    if not Path("/proc/self").is_dir():
+        pytest.skip("needs Linux's /proc")
+    inp = scene(tmp_path)
+    status, err = run([str(inp), "-o", str(target), "--quiet"], capsys)
+    # As root the folder is attempted and refused; as another user the check before the
+    # work already finds /proc not writable. Either way one line naming OUTDIR, exit 2.
+    assert_one_line(status, err, f"OUTDIR {target}")
+    assert "Errno" not in err
+
+
 def test_a_name_too_long_for_the_file_system_is_refused_before_any_work(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:

@@ -245,7 +245,10 @@ def run_batch(
     check_runner(scheduler=scheduler, workers=workers, threads=threads, progress=progress)
     out_dir = options.out_dir
     created = not out_dir.exists()
-    out_dir.mkdir(parents=True, exist_ok=True)
+    try:
+        out_dir.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:  # what the command's checks cannot foresee (/proc, /sys, full disk)
+        raise UsageError(f"OUTDIR {out_dir} cannot be created: {exc.strerror or exc}") from None
     try:
         return _run_locked(pairs, options, scheduler, workers, threads, progress, on_result, notes)
     except UsageError:
