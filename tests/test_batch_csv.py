@@ -72,3 +72,17 @@ def test_a_file_that_is_not_utf8_is_refused(tmp_path: Path) -> None:
     p.write_bytes(b"caf\xe9.png,b.png\n")
     with pytest.raises(ValueError, match=r"pairs.csv: not UTF-8 text"):
         batch.find_pairs(p)
+
+
+def test_a_quoted_cell_after_a_space_is_unquoted(tmp_path: Path) -> None:
+    # 'a.png, "b 1.png"' (a space after the comma, as lists are written by hand) kept the
+    # quotes as part of the path: the pair failed later with a missing '"b 1.png"'.
+    pairs = batch.find_pairs(write(tmp_path, 'imgs/a0.png,  "imgs/a 1.png", "frame, a"\n'))
+    assert [(p.stem, p.left, p.right) for p in pairs] == [
+        ("frame, a", tmp_path / "imgs/a0.png", tmp_path / "imgs/a 1.png")
+    ]
+
+
+def test_text_after_a_closing_quote_is_refused_with_file_and_line(tmp_path: Path) -> None:
+    with pytest.raises(ValueError, match=r"pairs.csv:2: not a valid CSV line"):
+        batch.find_pairs(write(tmp_path, 'a.png,b.png\nc.png,"d.png" ,s\n'))

@@ -28,9 +28,10 @@ Input
     dropped silently.
 
     A CSV file lists ``left,right[,stem]`` per line, UTF-8, LF or CR LF line ends; cells are
-    stripped of spaces; an optional header ``left,right[,stem]`` comes first; blank lines and
-    lines whose first cell starts with ``#`` are skipped; relative paths are relative to the
-    CSV file. Any other line is an error naming the file and line.
+    stripped of spaces (a quoted cell may follow spaces: ``a.png, "b 1.png"``); an optional
+    header ``left,right[,stem]`` comes first; blank lines and lines whose first cell starts
+    with ``#`` are skipped; relative paths are relative to the CSV file. Any other line is an
+    error naming the file and line.
 
 Images
     Images are read by Pillow: colour images come as RGB (``--channel-order bgr`` for files

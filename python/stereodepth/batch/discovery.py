@@ -282,7 +282,8 @@ def _same_file(a: Path, b: Path) -> bool:
 
 def _csv_pairs(path: Path, names: Sequence[tuple[str, str]]) -> list[Pair]:
     """The pairs of a CSV list, parsed exactly: UTF-8 (a byte-order mark is allowed), LF or
-    CR LF line ends, cells stripped of surrounding spaces, empty trailing cells ignored;
+    CR LF line ends, cells stripped of surrounding spaces (a quoted cell may follow spaces,
+    ``a.png, "b 1.png"``; text after its closing quote is refused), empty trailing cells ignored;
     blank lines and lines whose first cell starts with ``#`` are skipped; an optional header
     ``left,right[,stem]`` first. Anything else raises UsageError (a ValueError) naming the
     file, the line and what was wrong."""
@@ -292,7 +293,9 @@ def _csv_pairs(path: Path, names: Sequence[tuple[str, str]]) -> list[Pair]:
     header_allowed = True
     try:
         with path.open(newline="", encoding="utf-8-sig") as fh:
-            reader = csv.reader(fh, strict=True)
+            # skipinitialspace: a quote after spaces opens a quoted cell (else the quotes were
+            # kept as part of the path, and the pair failed later as a missing file).
+            reader = csv.reader(fh, strict=True, skipinitialspace=True)
             for row in reader:
                 where = f"{path}:{reader.line_num}"
                 cells = [c.strip() for c in row]
