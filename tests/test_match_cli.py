@@ -310,6 +310,11 @@ def bad_cases(tmp: Path, left: Path, right: Path) -> list[tuple[list[Any], str]]
         ([left, right, "--calib", tmp / "bad_calib.txt"], "cam0 must be a 3x3 matrix"),
         ([left, right, "--calib", tmp / "bad_calib.txt", "--focal-px", "700"], "not both"),
         ([left, right, "--focal-px", "700"], "--baseline-mm is required with --focal-px"),
+        # a flag given as 0 is given: alone it was an IndexError (a traceback, exit 1), and
+        # beside --calib it was ignored without a word
+        ([left, right, "--focal-px", "0"], "--baseline-mm is required with --focal-px"),
+        ([left, right, "--baseline-mm", "0"], "--focal-px is required with --baseline-mm"),
+        ([left, right, "--calib", wide_ndisp, "--baseline-mm", "0"], "not both"),
         ([left, right, "--focal-px", "-7", "--baseline-mm", "100"], "--focal-px must be a finite"),
         ([left, right, "--doffs-px", "3"], "--doffs-px goes with --focal-px"),
         (

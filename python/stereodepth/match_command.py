@@ -206,8 +206,12 @@ def _rig(
     :mod:`stereodepth._calib_rule`'s, shared with ``stereodepth batch``."""
     from . import _calib_rule as rule
 
+    # "is not None": a flag given as 0 is given (and refused below); "if v" left it out, so
+    # --focal-px 0 alone was an IndexError and beside --calib was silently ignored.
     given = [
-        n for n, v in (("--focal-px", args.focal_px), ("--baseline-mm", args.baseline_mm)) if v
+        n
+        for n, v in (("--focal-px", args.focal_px), ("--baseline-mm", args.baseline_mm))
+        if v is not None
     ]
     if args.calib is None:
         try:
