@@ -477,6 +477,34 @@ def test_ctrl_c_stops_cleanly_and_the_next_run_resumes(tmp_path: Path) -> None:
         )
 
 
+def test_an_interrupted_forced_run_reports_what_it_did_not_redo_as_cancelled(
+    tmp_path: Path,
+) -> None:
+    # --force redoes every pair; when it was interrupted, the pairs it never reached were
+    # reported "ok" (with the time of the run before), as their old complete records said.
+    inp, out = tmp_path / "in", tmp_path / "out"
+    middlebury_folder(inp, 8)
+    pairs = batch.resolve_calibration(batch.find_pairs(inp))
+    first = batch.run_batch(pairs, batch.BatchOptions(out_dir=out))
+    assert first.counts["ok"] == 8
+    before = {p.name: p.stat().st_mtime_ns for p in out.glob("*.record.json")}
+
+    def stop(record: dict[str, Any]) -> None:
+        raise KeyboardInterrupt
+
+    report = batch.run_batch(pairs, batch.BatchOptions(out_dir=out, force=True), on_result=stop)
+    assert report.interrupted
+    redone = {
+        p.name.removesuffix(".record.json")
+        for p in out.glob("*.record.json")
+        if p.stat().st_mtime_ns != before[p.name]
+    }
+    statuses = {r["stem"]: r["status"] for r in report.pairs}
+    assert 1 <= len(redone) < 8
+    assert {s for s, st in statuses.items() if st == "ok"} == redone
+    assert {s for s, st in statuses.items() if st == "cancelled"} == set(statuses) - redone
+
+
 HALF_WRITE = """
 import os, sys, time
 import numpy as np

@@ -278,6 +278,7 @@ def _run_locked(
     removed = 0
     interrupted = False
     runner = "embedded"
+    before: dict[int, tuple[int, int, int] | None] = {}  # the records of the pairs to do
     with _exclusive(out_dir):
         bar = _Progress(len(pairs), progress)
 
@@ -294,6 +295,7 @@ def _run_locked(
                 earlier = None if options.force else completed_record(p, options)
                 if earlier is None:
                     todo.append((i, p))
+                    before[i] = _record_stamp(p, options)
                     continue
                 keep = ("time_s", "density", "width", "height", "outputs")
                 head = record_head(p, "skipped", options=options)
@@ -317,8 +319,11 @@ def _run_locked(
     for i, p in enumerate(pairs):
         rec = records[i]
         if rec is None:
-            # Interrupted: a pair whose result did not reach us may have finished anyway.
-            earlier = completed_record(p, options)
+            # Interrupted: a pair whose result did not reach us may have finished anyway, its
+            # record then rewritten by this job. A record as it was before (--force, which
+            # redoes complete pairs) is the run before's: this job did not redo that pair.
+            same = _record_stamp(p, options) == before.get(i)
+            earlier = None if same else completed_record(p, options)
             rec = record_head(p, "cancelled", options=options)
             if earlier is not None:
                 rec.update(
@@ -340,6 +345,16 @@ def _run_locked(
         matcher_options=matcher_options(options),
         rectification=None if options.rectification is None else options.rectification.as_dict(),
     )
+
+
+def _record_stamp(pair: Pair, options: BatchOptions) -> tuple[int, int, int] | None:
+    """(inode, size, mtime_ns) of a pair's record, None when it is missing: a record
+    rewritten (atomically: a new file) has another stamp."""
+    try:
+        st = options.record_path(pair.stem).stat()
+    except OSError:
+        return None
+    return (st.st_ino, st.st_size, st.st_mtime_ns)
 
 
 @contextlib.contextmanager
