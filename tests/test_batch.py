@@ -3,6 +3,7 @@ resuming, Ctrl-C and kill -9, and the same job on a real Dask LocalCluster."""
 
 from __future__ import annotations
 
+import io as io_module
 import json
 import os
 import signal
@@ -503,6 +504,15 @@ def test_an_interrupted_forced_run_reports_what_it_did_not_redo_as_cancelled(
     assert 1 <= len(redone) < 8
     assert {s for s, st in statuses.items() if st == "ok"} == redone
     assert {s for s, st in statuses.items() if st == "cancelled"} == set(statuses) - redone
+    # "run the same command again to resume": with --force that starts over, and without it
+    # the pairs not reached are skipped (their earlier outputs are complete)
+    assert report.as_dict()["force"] is True
+    text = io_module.StringIO()
+    batch.print_summary(report, out / "report.json", file=text)
+    assert "interrupted: --force redoes every pair, so the same command starts over" in (
+        text.getvalue()
+    )
+    assert "run the same command again to resume" not in text.getvalue()
 
 
 HALF_WRITE = """

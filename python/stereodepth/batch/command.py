@@ -452,7 +452,15 @@ def print_summary(report: BatchReport, report_path: Path, file: Any = None) -> N
         f"({rate}{report.runner})",
         file=out,
     )
-    if report.interrupted:
+    if report.interrupted and report.force and c["cancelled"]:
+        # The same command would start over; without --force the pairs it did not reach are
+        # skipped (their earlier outputs are complete): no command resumes a forced run.
+        print(
+            "interrupted: --force redoes every pair, so the same command starts over; without "
+            "--force, the pairs cancelled keep the outputs of the run before",
+            file=out,
+        )
+    elif report.interrupted:
         print("interrupted: run the same command again to resume", file=out)
     for rec in report.failed:
         print(f"  failed {rec['stem']}: {rec['error']}", file=out)

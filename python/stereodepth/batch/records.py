@@ -153,6 +153,7 @@ class BatchReport:
     method: str = "bm"
     matcher_options: dict[str, Any] = field(default_factory=dict)
     rectification: dict[str, Any] | None = None
+    force: bool = False  # --force: every pair was to be redone
 
     @property
     def counts(self) -> dict[str, int]:
@@ -178,6 +179,7 @@ class BatchReport:
                 "started": self.started,
                 "elapsed_s": self.elapsed_s,
                 "interrupted": self.interrupted,
+                "force": self.force,
                 "counts": self.counts,
                 "exit_status": self.exit_status,
                 "notes": self.notes,

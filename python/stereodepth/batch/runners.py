@@ -344,6 +344,7 @@ def _run_locked(
         method=options.method,
         matcher_options=matcher_options(options),
         rectification=None if options.rectification is None else options.rectification.as_dict(),
+        force=options.force,
     )
 
 
