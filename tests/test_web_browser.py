@@ -591,6 +591,35 @@ def test_depth_view_sample_pair(page: Page) -> None:
 
 
 @pytest.mark.browser
+def test_depth_view_reads_the_corner_pixels(page: Page) -> None:
+    # The maps' frames had rounded corners that clipped the image: the corner pixels were
+    # neither drawn nor under the cursor (the readout kept the last pixel read).
+    import math
+
+    p = page.page
+    p.click("#tab-depth")
+    p.click("#use-sample")
+    page.expect(p.locator("#depth-status")).to_contain_text("Done: 320\u00d7240 px", timeout=60_000)
+    w, h = 320, 240
+    for key in ("left", "disparity", "depth"):
+        selector = f"#img-{key}"
+        p.locator(selector).scroll_into_view_if_needed()
+        box = p.locator(selector).bounding_box()
+        left, top = math.ceil(box["x"]), math.ceil(box["y"])
+        right = math.ceil(box["x"] + box["width"]) - 1
+        bottom = math.ceil(box["y"] + box["height"]) - 1
+        for cx, cy in ((left, top), (right, top), (left, bottom), (right, bottom)):
+            x, y = _hover(p, selector, w // 2, h // 2, w, h)  # away from the corner first
+            page.expect(p.locator("#ro-x")).to_have_text(str(x))
+            p.mouse.move(cx, cy)
+            x = math.floor((cx - box["x"]) * w / box["width"])
+            y = math.floor((cy - box["y"]) * h / box["height"])
+            assert (x in (0, 1, w - 2, w - 1)) and (y in (0, 1, h - 2, h - 1))
+            page.expect(p.locator("#ro-x")).to_have_text(str(x))
+            page.expect(p.locator("#ro-y")).to_have_text(str(y))
+
+
+@pytest.mark.browser
 @pytest.mark.data
 def test_depth_view_shared_scene_with_calib(
     page: Page, tmp_path: Path, stereo_data_dir: Path
