@@ -173,6 +173,22 @@ def test_nested_scenes_and_a_kitti_set_among_them_are_found(
     )
 
 
+def test_right_images_without_a_left_one_are_listed_as_skipped(tmp_path: Path) -> None:
+    # A right image whose left one is missing (or named otherwise) went missing silently.
+    inp = tmp_path / "in"
+    (inp / "left").mkdir(parents=True)
+    (inp / "right").mkdir()
+    for name in ("0001.png", "0002.png"):
+        save_pair(inp, f"left/{name}", f"right/{name}")
+    Image.fromarray(np.zeros(SHAPE, np.uint8)).save(inp / "right" / "0003.png")
+    Image.fromarray(np.zeros(SHAPE, np.uint8)).save(inp / "right" / "0004.jpg")
+    found = batch.discover(inp)
+    assert [p.stem for p in found.pairs] == ["0001", "0002"]
+    assert found.skipped == [
+        (inp / "right", "2 images with no left image of the same name in left (0003.png, 0004.jpg)")
+    ]
+
+
 def test_nothing_found_says_what_was_skipped(tmp_path: Path) -> None:
     save_pair(tmp_path / "in" / "shots", "a.png", "b.png")
     with pytest.raises(

@@ -164,16 +164,34 @@ def _kitti_calib_for(root: Path, stem: str) -> Path | None:
     return None
 
 
-def _folder_pairs(root: Path, *, prefix: str | None) -> list[Pair] | None:
+def _folder_pairs(
+    root: Path, *, prefix: str | None
+) -> tuple[list[Pair], list[tuple[Path, str]]] | None:
     """The pairs of a folder holding left and right sub-folders (KITTI's ``image_2`` and
-    ``image_3``...), or None when it holds none."""
+    ``image_3``...) and the right sub-folder's images that have no left image of their name
+    (skipped, with the reason), or None when it holds no such sub-folders."""
     for left_dir, right_dir, cams in FOLDER_PAIRS:
         ld, rd = root / left_dir, root / right_dir
         if not (ld.is_dir() and rd.is_dir()):
             continue
         pairs = []
         shared_calib = root / "calib.txt"
-        for f in _images(ld):
+        lefts = _images(ld)
+        names = {f.name for f in lefts}
+        alone = [f.name for f in _images(rd) if f.name not in names]
+        skipped = []
+        if alone:
+            # A right image whose left one is missing or named otherwise (0001.jpg beside
+            # 0001.png) went missing silently.
+            shown = ", ".join(alone[:3]) + (f" and {len(alone) - 3} more" if len(alone) > 3 else "")
+            skipped.append(
+                (
+                    rd,
+                    f"{len(alone)} image{'s' if len(alone) != 1 else ''} with no left image of "
+                    f"the same name in {left_dir} ({shown})",
+                )
+            )
+        for f in lefts:
             calib = _kitti_calib_for(root, f.stem) if cams else None
             if calib is None and shared_calib.is_file():
                 calib = shared_calib  # KITTI odometry's sequences/NN/calib.txt, for example
@@ -189,7 +207,7 @@ def _folder_pairs(root: Path, *, prefix: str | None) -> list[Pair] | None:
                     kitti_cams=cams,
                 )
             )
-        return pairs
+        return pairs, skipped
     return None
 
 
@@ -212,7 +230,8 @@ def _search(
         prefix = "_".join(rel) if rel else None
         layout = _folder_pairs(d, prefix=prefix)
         if layout is not None:
-            pairs.extend(layout)
+            pairs.extend(layout[0])
+            skipped.extend(layout[1])
             return
         found = _scene_pairs(d, names, prefix=prefix)
         pairs.extend(found)
