@@ -718,6 +718,46 @@ def test_a_worker_killed_mid_job_and_the_job_completes(tmp_path: Path, local_clu
 
 
 @pytest.mark.cluster
+def test_relative_paths_reach_a_scheduler_whose_workers_work_elsewhere(tmp_path: Path) -> None:
+    # INPUT and OUTDIR given relative to the command's folder were sent to the cluster as
+    # they were: a worker in another folder found no images (every pair failed) or would
+    # have written the outputs into its own folder.
+    distributed = pytest.importorskip("distributed")
+    middlebury_folder(tmp_path / "in", 2)
+    assert Path.cwd() != tmp_path  # the workers below run in this process, in its folder
+    with distributed.LocalCluster(
+        n_workers=1,
+        processes=False,
+        protocol="tcp",
+        threads_per_worker=1,
+        host="127.0.0.1",
+        dashboard_address="127.0.0.1:0",
+    ) as cluster:
+        argv = ["batch", "in", "-o", "out", "--quiet", "--scheduler", cluster.scheduler_address]
+        proc = subprocess.run(
+            [
+                sys.executable,
+                "-c",
+                f"import sys; from stereodepth import cli; sys.exit(cli.main({argv!r}))",
+            ],
+            cwd=tmp_path,
+            capture_output=True,
+            text=True,
+            timeout=120,
+            env={**os.environ, "PYTHONPATH": os.pathsep.join(sys.path)},
+        )
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    report = report_of(tmp_path / "out")
+    assert report["counts"]["ok"] == 2
+    for name in ("scene00", "scene01"):
+        np.testing.assert_array_equal(
+            np.load(tmp_path / "out" / f"{name}.depth.npy"),
+            expected_maps(tmp_path / "in" / name)[1],
+            strict=True,
+        )
+
+
+@pytest.mark.cluster
 def test_workers_option_starts_a_local_cluster(tmp_path: Path) -> None:
     pytest.importorskip("distributed")
     inp = tmp_path / "in"

@@ -99,7 +99,8 @@ Running
     core for the matcher. ``--workers N`` starts a local Dask cluster of N worker processes
     (loopback only) and ``--scheduler tcp://HOST:PORT`` uses an existing dask.distributed
     cluster, whose workers must see INPUT and OUTDIR at the same paths and have stereodepth
-    installed. A worker that dies mid-pair is replaced and the pair is run again.
+    installed (relative paths are made absolute first: the workers run in folders of their
+    own). A worker that dies mid-pair is replaced and the pair is run again.
 
 Errors
     Everything no pair could get past is checked before the first pair: the options (matcher

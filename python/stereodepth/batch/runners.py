@@ -243,6 +243,10 @@ def run_batch(
     and the report says ``interrupted``. Writes ``<stem>.*`` files into ``options.out_dir``;
     the caller writes the report."""
     check_runner(scheduler=scheduler, workers=workers, threads=threads, progress=progress)
+    if scheduler is not None:
+        # The cluster's workers run in folders of their own: paths relative to this one
+        # found no images there (every pair failed) or wrote the outputs elsewhere.
+        pairs, options = _absolute(pairs, options)
     out_dir = options.out_dir
     created = not out_dir.exists()
     try:
@@ -256,6 +260,25 @@ def run_batch(
             with contextlib.suppress(OSError):
                 out_dir.rmdir()
         raise
+
+
+def _absolute(pairs: Sequence[Pair], options: BatchOptions) -> tuple[list[Pair], BatchOptions]:
+    """The pairs' images and calibration files and OUTDIR as absolute paths (links kept)."""
+    import dataclasses
+
+    def absolute(p: Path | None) -> Path | None:
+        return None if p is None else Path(os.path.abspath(p))
+
+    done = [
+        dataclasses.replace(
+            p,
+            left=Path(os.path.abspath(p.left)),
+            right=Path(os.path.abspath(p.right)),
+            calib_file=absolute(p.calib_file),
+        )
+        for p in pairs
+    ]
+    return done, dataclasses.replace(options, out_dir=Path(os.path.abspath(options.out_dir)))
 
 
 def _run_locked(
