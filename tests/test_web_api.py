@@ -402,3 +402,37 @@ def test_page_and_its_files_are_served_from_here(client: TestClient) -> None:
     assert js.headers["content-type"].startswith("text/javascript")
     assert len(js.content) > 1_000_000 and b"plotly" in js.content[:2000].lower()
     assert client.get("/docs").status_code == 404  # Swagger UI would load from a CDN
+
+
+@pytest.mark.parametrize(
+    ("query", "loc", "msg"),
+    [
+        (  # a misspelt parameter was ignored: the answer came without the disparity asked for
+            "baseline_mm=120&focal_px=700&disparity=30",
+            "disparity",
+            "disparity is not a parameter of /api/calc, got '30' (its parameters: baseline_mm, ",
+        ),
+        (  # the same parameter twice: the last one was used without a word
+            "baseline_mm=120&focal_px=700&baseline_mm=200",
+            "baseline_mm",
+            "baseline_mm is given 2 times ('120', '200'): give it once",
+        ),
+    ],
+    ids=["unknown", "twice"],
+)
+def test_unknown_and_repeated_parameters_are_refused(
+    client: TestClient, query: str, loc: str, msg: str
+) -> None:
+    r = client.get(f"/api/calc?{query}")
+    assert r.status_code == 422, r.text
+    (err,) = r.json()["detail"]
+    assert err["loc"] == ["query", loc]
+    assert err["msg"].startswith(msg), err["msg"]
+
+
+def test_the_table_disparities_may_repeat(client: TestClient) -> None:
+    r = client.get(
+        "/api/calc?baseline_mm=120&focal_px=700&table_disparities_px=7&table_disparities_px=14"
+    )
+    assert r.status_code == 200, r.text
+    assert [row["disparity_px"] for row in r.json()["summary"]["table"]] == [7, 14]

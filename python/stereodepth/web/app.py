@@ -27,7 +27,7 @@ from pathlib import Path
 from typing import Annotated, Any
 
 import numpy as np
-from fastapi import APIRouter, FastAPI, Query, Request
+from fastapi import APIRouter, Depends, FastAPI, Query, Request
 from fastapi.exceptions import RequestValidationError
 from fastapi.responses import FileResponse, JSONResponse, Response
 from fastapi.staticfiles import StaticFiles
@@ -288,6 +288,8 @@ def _request_error(err: dict[str, Any]) -> dict[str, Any]:
     """FastAPI's parse and range errors, reworded in the library's style."""
     loc = [p for p in err.get("loc", ()) if isinstance(p, (str, int))]
     kind = str(err.get("type", "value_error"))
+    if kind in ("extra_forbidden", "repeated"):  # _only_known_parameters's, worded already
+        return {"loc": loc, "msg": str(err.get("msg")), "type": kind}
     name = loc[1] if len(loc) > 1 and isinstance(loc[1], str) else None
     field = FIELDS.get(name) if name is not None else None
     if field is None:
@@ -428,6 +430,27 @@ def calculate(
 
 # --- the API ------------------------------------------------------------------------------
 _api = APIRouter()
+_REPEATABLE = {"table_disparities_px"}
+
+
+def _only_known_parameters(request: Request) -> None:
+    """422 for a parameter /api/calc does not have (a misspelt one was ignored: the answer
+    came without it) or a single-valued one given more than once (the last one was used)."""
+    errors = []
+    for name in dict.fromkeys(request.query_params.keys()):
+        values = request.query_params.getlist(name)
+        shown = ", ".join(repr(v[:40]) for v in values[:3])
+        if name not in FIELDS:
+            msg = (
+                f"{name[:40]} is not a parameter of /api/calc, got {shown} (its parameters: "
+                f"{', '.join(FIELDS)})"
+            )
+            errors.append({"loc": ("query", name[:40]), "msg": msg, "type": "extra_forbidden"})
+        elif len(values) > 1 and name not in _REPEATABLE:
+            msg = f"{name} is given {len(values)} times ({shown}): give it once"
+            errors.append({"loc": ("query", name), "msg": msg, "type": "repeated"})
+    if errors:
+        raise RequestValidationError(errors)
 
 
 @_api.get(
@@ -435,6 +458,9 @@ _api = APIRouter()
     response_model=CalcResponse,
     responses={422: {"model": ErrorResponse, "description": "Bad input"}},
     summary="Depth, depth resolution, field of view, table and charts of a stereo rig",
+    description="Unknown parameters, and a parameter other than table_disparities_px given "
+    "more than once, answer 422 at that parameter.",
+    dependencies=[Depends(_only_known_parameters)],
 )
 def calc(
     baseline_mm: Annotated[float, FIELDS["baseline_mm"].query()],
