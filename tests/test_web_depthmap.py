@@ -457,6 +457,19 @@ def bad_cases(pair: Any) -> list[tuple[dict[str, Any], list[Any], str]]:
             ["body", "disparity_step_px"],
             "disparity_step_px must be a number > 0",
         ),
+        # Misspelt fields were ignored: the default search range, or a rig without its doffs
+        # (every depth wrong), without a word.
+        (
+            {"sample": True, "num_disparity": 64},
+            ["body", "num_disparity"],
+            "num_disparity is not a field of /api/depthmap, got 64 (its fields: left, right, ",
+        ),
+        (
+            {"sample": True, "rig": {**RIG, "doffs": 31.3}},
+            ["body", "rig", "doffs"],
+            "doffs is not a field of rig, got 31.3 (its fields: baseline_mm, focal_mm, pixel_um, "
+            "focal_px, doffs_px)",
+        ),
     ]
 
 

@@ -19,7 +19,8 @@
   requires, since a calibration of another resolution would scale every depth.
 
 Numbers may come as JSON numbers or as numeric strings (what the page's form fields hold);
-an integer field also takes a float with an integral value (``16.0``).
+an integer field also takes a float with an integral value (``16.0``). A field not named
+here, in the request or in ``rig`` (a misspelt ``doffs``), answers 422 at that field.
 
 The answer has the summary (size, density, time, ranges), the images as PNG data URLs (the
 left image, the colourised disparity and depth), the colour bars (limits and the colour table),
@@ -250,6 +251,35 @@ class Job:
 
 
 _RIG_NAMES = ("baseline_mm", "focal_mm", "pixel_um", "focal_px", "doffs_px")
+#: The fields of the request (any other is refused: a misspelt one was ignored silently).
+_BODY_NAMES = (
+    "left",
+    "right",
+    "sample",
+    "rig",
+    "method",
+    "num_disparities",
+    "block_size",
+    "cost",
+    "disparity_step_px",
+    "cx_px",
+    "cy_px",
+    "calib_size",
+)
+
+
+def _unknown(loc: list[str], what: str, given: dict[str, Any], known: tuple[str, ...]) -> list[Any]:
+    """BadInput for each key of ``given`` not in ``known``."""
+    return [
+        BadInput(
+            [*loc, str(k)[:40]],
+            f"{str(k)[:40]} is not a field of {what}, got {repr(v)[:40]} (its fields: "
+            f"{', '.join(known)})",
+            "extra_forbidden",
+        )
+        for k, v in given.items()
+        if k not in known
+    ]
 
 
 #: The largest magnitude of cx_px / cy_px (px): a principal point is near the image.
@@ -287,7 +317,7 @@ def _rig_of(body: dict[str, Any]) -> Any:
     if not isinstance(raw, dict):
         raise BadInput(["body", "rig"], "rig must be an object with the calculator's fields")
     values: dict[str, float | None] = {}
-    errors: list[BadInput] = []
+    errors: list[BadInput] = _unknown(["body", "rig"], "rig", raw, _RIG_NAMES)
     for name in _RIG_NAMES:
         f = FIELDS[name]
         loc = ["body", "rig", name]
@@ -371,7 +401,7 @@ def parse_job(body: Any, limits: DepthMapLimits) -> Job:
 
     if not isinstance(body, dict):
         raise BadInput(["body"], "the request must be a JSON object")
-    errors: list[BadInput] = []
+    errors: list[BadInput] = _unknown(["body"], "/api/depthmap", body, _BODY_NAMES)
     try:
         rig = _rig_of(body)
     except BadInput as e:
