@@ -45,6 +45,10 @@ ROWS: list[tuple[list[str], str]] = [
     (["--option", "return_confidence=true"], "--option return_confidence: not available"),
     (["--option", "num_disparities=4"], "--option num_disparities: use --num-disparities"),
     (["--option", "foo"], "argument --option: expected KEY=VALUE with KEY a name, got 'foo'"),
+    (  # the same option twice: the last one was used without a word
+        ["--option", "subpixel=true", "--option", "subpixel=false"],
+        "--option subpixel is given twice (True and False): give it once",
+    ),
     (["--block-size", "4"], "--block-size 4: block_size must be an odd integer in [3, 63]"),
     (["--cost", "sad", "--block-size", "41"], "--block-size 41: block_size must be an odd"),
     (["--min-disparity", "99999"], "--min-disparity 99999: min_disparity must be an integer"),

@@ -235,6 +235,10 @@ def _matcher_options(args: argparse.Namespace) -> dict[str, Any]:
             )
         if key not in known:
             raise not_an_option(f"--option {key}", key)
+        if key in opts:  # the last one was used without a word
+            raise UsageError(
+                f"--option {key} is given twice ({opts[key]!r} and {value!r}): give it once"
+            )
         opts[key] = value
         typed[key] = f"--option {key}"
     for key, flag in _FLAGS.items():
