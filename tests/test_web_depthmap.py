@@ -157,6 +157,29 @@ def test_an_exif_turned_upload_is_matched_as_displayed(
         assert same(f32(body["arrays"]["disparity"], (h, w)), expected)
 
 
+def test_a_jpeg_with_a_second_image_is_read_as_its_first(client: TestClient, pair: Any) -> None:
+    # Phone photos (a gain map, a depth map) and stereo cameras' .MPO files hold a second
+    # image after the first; Pillow calls them MPO, and they were refused as "not a JPEG".
+    # The first image is the photo (what browsers and read_image show).
+    from PIL import JpegImagePlugin
+
+    def mpo(a: np.ndarray) -> bytes:
+        buf = io.BytesIO()
+        extra = Image.fromarray(np.ascontiguousarray(a[::2, ::2]))
+        Image.fromarray(a).save(buf, "MPO", save_all=True, append_images=[extra], quality=95)
+        return buf.getvalue()
+
+    files = [mpo(pair.left), mpo(pair.right)]
+    assert Image.open(io.BytesIO(files[0])).format == "MPO"
+    r = post(client, left=b64(files[0]), right=b64(files[1]))
+    assert r.status_code == 200, r.text
+    # The first image, decoded by Pillow's plain JPEG reader (which stops after it).
+    first = [np.asarray(JpegImagePlugin.JpegImageFile(io.BytesIO(f))) for f in files]
+    h, w = pair.disparity.shape
+    expected = block_match(*first, num_disparities=default_num_disparities(w))
+    assert same(f32(r.json()["arrays"]["disparity"], (h, w)), expected)
+
+
 def test_a_12_bit_upload_is_shown_as_matched(client: TestClient, pair: Any) -> None:
     # A Mono12 pair in 16-bit PNGs: the page's image and the points' colours took the high
     # byte (0..15: black); they are now the min-max stretch the matcher applies.

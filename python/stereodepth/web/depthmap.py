@@ -2,8 +2,9 @@
 
 ``POST /api/depthmap`` takes one JSON object:
 
-- ``left``, ``right``: the images as base64 (a ``data:`` URL is accepted), PNG or JPEG,
-  8-bit grey or colour or 16-bit grey (an alpha channel must be opaque and is dropped; 16-bit
+- ``left``, ``right``: the images as base64 (a ``data:`` URL is accepted), PNG or JPEG (a
+  JPEG with more images after it, MPO, as phones and stereo cameras write: its first), 8-bit
+  grey or colour or 16-bit grey (an alpha channel must be opaque and is dropped; 16-bit
   colour, and 16-bit grey with alpha, are rejected); or ``"sample": true`` for the package's
   synthetic pair (:mod:`stereodepth.sample`);
 - ``rig``: the calculator's rig with its names and units (``baseline_mm`` and ``focal_px``
@@ -168,7 +169,9 @@ def decode_image(field: str, data: bytes, limits: DepthMapLimits) -> np.ndarray:
         except (OSError, ValueError, SyntaxError) as exc:
             raise BadInput(loc, f"{field}: not a readable image ({exc})") from None
     with im:
-        if im.format not in _FORMATS:
+        # MPO: a JPEG followed by more images (a phone photo's gain or depth map, a stereo
+        # camera's second view); Pillow reads its first, the photo browsers show.
+        if im.format not in _FORMATS and im.format != "MPO":
             raise BadInput(loc, f"{field}: must be a PNG or JPEG image, got {im.format}")
         w, h = im.size
         if w * h > limits.max_pixels:
