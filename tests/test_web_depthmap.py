@@ -252,6 +252,8 @@ def test_downloads_are_the_libraries_files(client: TestClient, pair: Any, tmp_pa
         ({"x": "", "y": 0}, "x must be an integer, got an empty value"),
         ({"x": "left", "y": 0}, "x must be an integer, got 'left'"),
         ({"y": 0}, "x is required"),
+        # twice: the last one was used without a word
+        ({"x": [0, 5], "y": 0}, "x is given 2 times ('0', '5'): give it once"),
     ):
         r = client.get(f"/api/depthmap/{body['id']}/point", params=params)
         assert r.status_code == 422, r.text

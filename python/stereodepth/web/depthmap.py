@@ -858,8 +858,19 @@ def make_router(limits: DepthMapLimits) -> APIRouter:
         return JSONResponse(answer)
 
     @router.get("/api/depthmap/{key}/point", summary="One pixel's disparity, depth and 3-D point")
-    def point(key: str, x: int, y: int) -> Response:
-
+    def point(key: str, x: int, y: int, request: Request) -> Response:
+        twice = [
+            BadInput(
+                ["query", n],
+                f"{n} is given {len(vs)} times ({', '.join(repr(v[:40]) for v in vs[:3])}): "
+                "give it once",
+                "repeated",
+            )
+            for n in ("x", "y")
+            if len(vs := request.query_params.getlist(n)) > 1
+        ]
+        if twice:  # the last one was used without a word
+            return _error_response(twice)
         stored = results.get(key)
         if stored is None:
             return _error_response([BadInput(["path", "key"], "no such result (or too old)")], 404)
