@@ -455,6 +455,11 @@ def bad_cases(pair: Any) -> list[tuple[dict[str, Any], list[Any], str]]:
             "disparity_step_px must be a number > 0",
         ),
         ({"sample": "yes"}, ["body", "sample"], "sample must be true or false"),
+        (  # the uploads were ignored without a word: the answer was the sample's
+            {"sample": True, "left": left},
+            ["body", "left"],
+            "left: give the images or sample: true, not both",
+        ),
         ({"sample": True, "cx_px": "abc"}, ["body", "cx_px"], "cx_px must be a finite number"),
         ({"sample": True, "cy_px": "inf"}, ["body", "cy_px"], "cy_px must be a finite number"),
         ({"sample": True, "cx_px": 1e308}, ["body", "cx_px"], "cx_px must be a finite number"),

@@ -5,8 +5,8 @@
 - ``left``, ``right``: the images as base64 (a ``data:`` URL is accepted), PNG or JPEG (a
   JPEG with more images after it, MPO, as phones and stereo cameras write: its first), 8-bit
   grey or colour or 16-bit grey (an alpha channel must be opaque and is dropped; 16-bit
-  colour, and 16-bit grey with alpha, are rejected); or ``"sample": true`` for the package's
-  synthetic pair (:mod:`stereodepth.sample`);
+  colour, and 16-bit grey with alpha, are rejected); or, without them, ``"sample": true``
+  for the package's synthetic pair (:mod:`stereodepth.sample`);
 - ``rig``: the calculator's rig with its names and units (``baseline_mm`` and ``focal_px``
   with ``doffs_px``, or ``focal_mm`` and ``pixel_um``);
 - ``method`` (``bm``, or ``sgm`` where the library has it), ``num_disparities`` (default: an
@@ -490,6 +490,11 @@ def parse_job(body: Any, limits: DepthMapLimits) -> Job:
     if sample:
         from ..sample import sample_pair
 
+        errors.extend(  # else they were ignored: the answer was the sample's
+            BadInput(["body", f], f"{f}: give the images or sample: true, not both")
+            for f in ("left", "right")
+            if body.get(f) is not None
+        )
         s = sample_pair()
         left, right, truth = s.left, s.right, s.disparity
     else:
