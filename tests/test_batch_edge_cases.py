@@ -225,6 +225,31 @@ def test_a_failed_rerun_says_failed_and_leaves_no_stale_output(
     assert report_of(out / "report.json")["pairs"][0]["status"] == "failed"
 
 
+def test_a_pair_failing_between_two_writes_leaves_no_output_and_a_failed_record(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    # A folder where the depth goes: the disparity was written, then the depth failed, then
+    # removing the pair's files stopped at that folder (IsADirectoryError): the new disparity
+    # stayed without a record, and the error blamed the record.
+    inp, out = tmp_path / "in", tmp_path / "out"
+    scene(inp / "teddy")
+    scene(inp / "bear", seed=1)
+    (out / "teddy.depth.npy").mkdir(parents=True)
+    status, _, err = run(capsys, inp, "-o", out, "--quiet")
+    assert status == 1
+    assert (
+        f"failed teddy: [Errno 21] cannot write a file over a folder: '{out}/teddy.depth.npy'\n"
+        in err
+    )
+    assert "could not be written" not in err
+    record = record_of(out, "teddy")
+    assert record["status"] == "failed" and "cannot write a file over a folder" in record["error"]
+    assert record["removed"] == [str(out / "teddy.disparity.npy")]
+    assert {p.name for p in out.glob("teddy.*")} == {"teddy.record.json", "teddy.depth.npy"}
+    assert (out / "teddy.depth.npy").is_dir()  # not ours to remove
+    assert record_of(out, "bear")["status"] == "ok"
+
+
 def test_a_changed_run_removes_the_outputs_it_no_longer_writes(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:

@@ -128,9 +128,13 @@ def earlier_outputs(pair: Pair, options: BatchOptions) -> set[Path]:
 
 
 def remove_files(paths: set[Path]) -> list[str]:
-    """Removes the files that exist among ``paths``; returns their paths, sorted."""
+    """Removes the files that exist among ``paths``; returns their paths, sorted. A folder at
+    one of them is no file of ours and is left (unlink raised IsADirectoryError there, and the
+    files after it stayed)."""
     removed = []
     for p in sorted(paths):
+        if p.is_dir() and not p.is_symlink():
+            continue
         try:
             p.unlink()
         except FileNotFoundError:
