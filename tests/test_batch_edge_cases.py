@@ -189,6 +189,25 @@ def test_right_images_without_a_left_one_are_listed_as_skipped(tmp_path: Path) -
     ]
 
 
+def test_a_grey_pair_beside_the_colour_pair_is_listed_as_skipped(tmp_path: Path) -> None:
+    # KITTI's image_0/image_1 beside image_2/image_3: only the colour pairs are used, and the
+    # grey ones went missing silently.
+    inp = tmp_path / "in"
+    kitti_set(inp)
+    (inp / "image_0").mkdir()
+    (inp / "image_1").mkdir()
+    save_pair(inp, "image_0/000000_10.png", "image_1/000000_10.png")
+    found = batch.discover(inp)
+    assert [(p.stem, p.kitti_cams) for p in found.pairs] == [("000000_10", (2, 3))]
+    assert found.skipped == [
+        (
+            inp / "image_0",
+            "image_0/image_1 beside image_2/image_3, which are used (a CSV list names the "
+            "others' pairs)",
+        )
+    ]
+
+
 def test_nothing_found_says_what_was_skipped(tmp_path: Path) -> None:
     save_pair(tmp_path / "in" / "shots", "a.png", "b.png")
     with pytest.raises(

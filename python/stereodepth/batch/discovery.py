@@ -179,7 +179,20 @@ def _folder_pairs(
         lefts = _images(ld)
         names = {f.name for f in lefts}
         alone = [f.name for f in _images(rd) if f.name not in names]
-        skipped = []
+        skipped = [
+            # Only the first layout is used: KITTI's grey pair beside its colour pair went
+            # missing silently (their frames share names, so both would write one stem).
+            (
+                root / other_left,
+                f"{other_left}/{other_right} beside {left_dir}/{right_dir}, which are used "
+                "(a CSV list names the others' pairs)",
+            )
+            for other_left, other_right, _ in FOLDER_PAIRS
+            if other_left != left_dir
+            and (root / other_left).is_dir()
+            and (root / other_right).is_dir()
+            and _images(root / other_left)
+        ]
         if alone:
             # A right image whose left one is missing or named otherwise (0001.jpg beside
             # 0001.png) went missing silently.
