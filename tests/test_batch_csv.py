@@ -86,3 +86,13 @@ def test_a_quoted_cell_after_a_space_is_unquoted(tmp_path: Path) -> None:
 def test_text_after_a_closing_quote_is_refused_with_file_and_line(tmp_path: Path) -> None:
     with pytest.raises(ValueError, match=r"pairs.csv:2: not a valid CSV line"):
         batch.find_pairs(write(tmp_path, 'a.png,b.png\nc.png,"d.png" ,s\n'))
+
+
+@pytest.mark.parametrize("text", ["", "left,right,stem\n", "# nothing yet\n\n"])
+def test_a_list_without_pairs_is_called_a_list(tmp_path: Path, text: str) -> None:
+    # It was "no stereo pairs found in pairs.csv (searched 3 levels of folders): expected
+    # image_2/image_3 ... or a CSV list", about folders, for a CSV list.
+    with pytest.raises(
+        ValueError, match=r"^no stereo pairs in the CSV list .*pairs.csv: it has no left,right line"
+    ):
+        batch.find_pairs(write(tmp_path, text))

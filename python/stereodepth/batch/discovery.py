@@ -414,6 +414,11 @@ def discover(
                     f"and {p.right})"
                 )
     found = Discovery(pairs, skipped)
+    if not pairs and root.is_file():  # not "searched 3 levels of folders ... or a CSV list"
+        raise UsageError(
+            f"no stereo pairs in the CSV list {root}: it has no left,right line (only a "
+            "header, comments or blank lines)"
+        )
     if not pairs:
         tokens = ", ".join(f"{a}/{b}" for a, b in names)
         why = "; ".join(found.skipped_text(3))
