@@ -208,6 +208,37 @@ def test_a_grey_pair_beside_the_colour_pair_is_listed_as_skipped(tmp_path: Path)
     ]
 
 
+def test_a_scene_beside_left_and_right_folders_is_listed_as_skipped(tmp_path: Path) -> None:
+    # The other sub-folders of a folder of left/right sub-folders are not searched: a scene
+    # there went missing silently.
+    inp = tmp_path / "in"
+    (inp / "left").mkdir(parents=True)
+    (inp / "right").mkdir()
+    save_pair(inp, "left/0001.png", "right/0001.png")
+    scene(inp / "teddy")
+    (inp / "calib").mkdir()  # no images: not listed
+    found = batch.discover(inp)
+    assert [p.stem for p in found.pairs] == ["0001"]
+    assert found.skipped == [
+        (inp / "teddy", "not searched: beside left/right (a CSV list names its pairs)")
+    ]
+
+
+def test_left_and_right_folders_of_folders_say_why_no_pair_is_found(tmp_path: Path) -> None:
+    # left/seq1/0001.png: "no stereo pairs found ... expected ... left/right folders" named
+    # the very layout it had, and no reason.
+    inp = tmp_path / "in"
+    (inp / "left" / "seq1").mkdir(parents=True)
+    (inp / "right" / "seq1").mkdir(parents=True)
+    save_pair(inp, "left/seq1/0001.png", "right/seq1/0001.png")
+    with pytest.raises(
+        batch.UsageError,
+        match=r"no stereo pairs found .*; skipped .*left: no images in it, only folders \(which "
+        r"are not searched\)$",
+    ):
+        batch.find_pairs(inp)
+
+
 def test_nothing_found_says_what_was_skipped(tmp_path: Path) -> None:
     save_pair(tmp_path / "in" / "shots", "a.png", "b.png")
     with pytest.raises(

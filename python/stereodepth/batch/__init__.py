@@ -12,8 +12,9 @@ Input
 
     - a folder holding sub-folders of left and right images with the same file names,
       ``image_2``/``image_3`` (KITTI colour), ``image_0``/``image_1`` (KITTI grey) or
-      ``left``/``right``, is one set of pairs (its own sub-folders are not searched; of two
-      such layouts side by side, the first in this order is used, the other listed); KITTI
+      ``left``/``right``, is one set of pairs (its other sub-folders are not searched, and
+      those holding images are listed; of two such layouts side by side, the first in this
+      order is used, the other listed); KITTI
       calibration is read from ``calib/<frame>.txt`` (2012) or
       ``calib_cam_to_cam/<frame>.txt`` (2015), the frame being the file name without its
       ``_10``/``_11`` suffix;

@@ -166,7 +166,7 @@ def _kitti_calib_for(root: Path, stem: str) -> Path | None:
 
 def _folder_pairs(
     root: Path, *, prefix: str | None
-) -> tuple[list[Pair], list[tuple[Path, str]]] | None:
+) -> tuple[list[Pair], list[tuple[Path, str]], tuple[str, str]] | None:
     """The pairs of a folder holding left and right sub-folders (KITTI's ``image_2`` and
     ``image_3``...) and the right sub-folder's images that have no left image of their name
     (skipped, with the reason), or None when it holds no such sub-folders."""
@@ -204,6 +204,8 @@ def _folder_pairs(
                     f"the same name in {left_dir} ({shown})",
                 )
             )
+        if not lefts and _subfolders(ld):  # left/seq1/0001.png: "no pairs", and no reason
+            skipped.append((ld, "no images in it, only folders (which are not searched)"))
         for f in lefts:
             calib = _kitti_calib_for(root, f.stem) if cams else None
             if calib is None and shared_calib.is_file():
@@ -220,7 +222,7 @@ def _folder_pairs(
                     kitti_cams=cams,
                 )
             )
-        return pairs, skipped
+        return pairs, skipped, (left_dir, right_dir)
     return None
 
 
@@ -245,6 +247,18 @@ def _search(
         if layout is not None:
             pairs.extend(layout[0])
             skipped.extend(layout[1])
+            # Its other sub-folders are not searched: one holding images (a scene beside
+            # left/right) went missing silently.
+            left_dir, right_dir = layout[2]
+            noted = {path for path, _ in skipped}
+            noted |= {d / r for left, r, _ in FOLDER_PAIRS if d / left in noted}  # image_1 too
+            for sub in _subfolders(d):
+                if sub.name in (left_dir, right_dir) or sub in noted:
+                    continue
+                if sub.resolve() in excluded or not _images(sub) or _batch_outputs(sub):
+                    continue
+                why = f"not searched: beside {left_dir}/{right_dir} (a CSV list names its pairs)"
+                skipped.append((sub, why))
             return
         found = _scene_pairs(d, names, prefix=prefix)
         pairs.extend(found)
