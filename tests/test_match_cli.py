@@ -271,6 +271,26 @@ def test_kitti_calib_cameras_follow_the_folders(
     assert json.loads(text)["rig"]["baseline_m"] == pytest.approx(baseline_m, rel=1e-12)
 
 
+def test_kitti_grey_cameras_from_inside_the_left_folder(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    # Run from inside image_0 with LEFT given as "000000.png": its folder was "" (the
+    # relative path's parent), so the colour pair's baseline was used for the grey pair.
+    s = sample_pair(96, 64, seed=3)
+    for folder, image in (("image_0", s.left), ("image_1", s.right)):
+        (tmp_path / folder).mkdir()
+        Image.fromarray(image).save(tmp_path / folder / "000000.png")
+    rows = ((0, 0.0), (1, -70.0), (2, 42.0), (3, -35.0))  # grey pair 0.1 m, colour 0.11 m
+    (tmp_path / "calib.txt").write_text(
+        "".join(f"P{i}: 700 0 48 {t} 0 700 32 0 0 0 1 0\n" for i, t in rows)
+    )
+    monkeypatch.chdir(tmp_path / "image_0")
+    args = ("--calib", "../calib.txt", "-o", tmp_path / "k-", "--json", "--no-preview")
+    code, text, err = run(capsys, "000000.png", "../image_1/000000.png", *args)
+    assert code == 0, err
+    assert json.loads(text)["rig"]["baseline_m"] == pytest.approx(0.1, rel=1e-12)
+
+
 # --- bad input: one line, exit 2 ------------------------------------------------------------------
 @pytest.fixture
 def pair(tmp_path: Path) -> tuple[Path, Path]:

@@ -305,7 +305,8 @@ def _search(
 def folder_cameras(left: Path, right: Path) -> tuple[int, int] | None:
     """The KITTI cameras of a pair by its images' folders (``image_0``/``image_1``: (0, 1),
     ``image_2``/``image_3``: (2, 3)), None for other folders: those a KITTI file is read for."""
-    folders = (left.parent.name, right.parent.name)
+    # absolute: "000000.png" run from inside image_0 has the folder "" as given
+    folders = (Path(os.path.abspath(left)).parent.name, Path(os.path.abspath(right)).parent.name)
     for left_dir, right_dir, cams in FOLDER_PAIRS:
         if cams is not None and folders == (left_dir, right_dir):
             return cams
