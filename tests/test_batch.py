@@ -515,6 +515,30 @@ def test_an_interrupted_forced_run_reports_what_it_did_not_redo_as_cancelled(
     assert "run the same command again to resume" not in text.getvalue()
 
 
+def test_pairs_an_interrupted_job_never_started_are_cancelled_not_ok(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    # Ctrl-C while the job was still checking which pairs were done: the pairs it had not
+    # looked at yet were reported "ok" from the run before's records, though it ran none.
+    inp, out = tmp_path / "in", tmp_path / "out"
+    middlebury_folder(inp, 3)
+    pairs = batch.resolve_calibration(batch.find_pairs(inp))
+    assert batch.run_batch(pairs, batch.BatchOptions(out_dir=out)).counts["ok"] == 3
+    real = batch.runners.completed_record
+    calls = []
+
+    def interrupted_at_the_second(pair: Any, options: Any) -> Any:
+        calls.append(pair.stem)
+        if len(calls) == 2:
+            raise KeyboardInterrupt
+        return real(pair, options)
+
+    monkeypatch.setattr(batch.runners, "completed_record", interrupted_at_the_second)
+    report = batch.run_batch(pairs, batch.BatchOptions(out_dir=out))
+    assert report.interrupted
+    assert [r["status"] for r in report.pairs] == ["skipped", "cancelled", "cancelled"]
+
+
 HALF_WRITE = """
 import os, sys, time
 import numpy as np

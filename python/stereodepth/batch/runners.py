@@ -344,9 +344,10 @@ def _run_locked(
         if rec is None:
             # Interrupted: a pair whose result did not reach us may have finished anyway, its
             # record then rewritten by this job. A record as it was before (--force, which
-            # redoes complete pairs) is the run before's: this job did not redo that pair.
-            same = _record_stamp(p, options) == before.get(i)
-            earlier = None if same else completed_record(p, options)
+            # redoes complete pairs), or of a pair this job never started, is the run
+            # before's: this job did not redo that pair.
+            redone = i in before and _record_stamp(p, options) != before[i]
+            earlier = completed_record(p, options) if redone else None
             rec = record_head(p, "cancelled", options=options)
             if earlier is not None:
                 rec.update(
