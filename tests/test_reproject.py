@@ -549,6 +549,28 @@ def test_write_ply_rejects(
     assert list(tmp_path.iterdir()) == []
 
 
+@pytest.mark.parametrize(
+    ("points", "colors", "name"),
+    [
+        ([[0.0, 0.0, 1.0], [1.0, 2.0]], None, "points"),
+        ([[0.0, 0.0, 1.0], [1.0, 2.0, 3.0]], [[1, 2, 3], [4, 5]], "colors"),
+    ],
+)
+def test_write_ply_ragged_list_names_the_parameter(
+    tmp_path: Path, points: Any, colors: Any, name: str
+) -> None:
+    # A ragged list got numpy's "setting an array element with a sequence", naming nothing.
+    with pytest.raises(ValueError, match=rf"^{name} must be a rectangular array .* got list \["):
+        stereodepth.write_ply(tmp_path / "x.ply", points, colors)
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_write_ply_takes_python_lists(tmp_path: Path) -> None:
+    path = tmp_path / "l.ply"
+    assert stereodepth.write_ply(path, [[0.5, -1.0, 2.0], [1.0, 2.0, 3.0]]) == 2
+    assert stereodepth.write_ply(path, [[0.5, -1.0, 2.0]], np.array([[1, 2, 3]], np.uint8)) == 1
+
+
 @pytest.mark.parametrize("comment", [5, b"bytes", ["a", "b"]])
 def test_write_ply_comment_not_text(tmp_path: Path, comment: Any) -> None:
     # A wrong type was a ValueError (the rule of the package: TypeError for a wrong type).

@@ -243,9 +243,26 @@ _PLY_VERTEX_RGB = np.dtype(
 )
 
 
+def _as_array(name: str, value: Any) -> np.ndarray:
+    """``value`` as a numpy array; a ragged nested list (rows of different lengths) or an
+    object numpy cannot turn into an array is a ValueError naming ``name``, not numpy's own
+    "setting an array element with a sequence"."""
+    if isinstance(value, np.ndarray):
+        return value
+    try:
+        return np.asarray(value)
+    except (ValueError, TypeError) as exc:
+        shown = repr(value)
+        shown = shown if len(shown) <= 80 else shown[:77] + "..."
+        raise ValueError(
+            f"{name} must be a rectangular array (every row of the same length), got "
+            f"{type(value).__name__} {shown}"
+        ) from exc
+
+
 def _colours_u8(colors: Any, n_points_shape: tuple[int, ...]) -> np.ndarray:
     """Colours as (..., 3) uint8: grey is repeated, uint16 keeps its high byte."""
-    c = np.asarray(colors)
+    c = _as_array("colors", colors)
     if c.dtype not in (np.uint8, np.uint16):
         raise TypeError(f"colors must have dtype uint8 or uint16, got {c.dtype}")
     if c.shape == n_points_shape:
@@ -276,11 +293,11 @@ def write_ply(
 
     Vertex properties: float x, y, z, and uchar red, green, blue when coloured.
 
-    Raises ValueError for a finite coordinate beyond float32's range (about 3.4e38) or a
-    ``comment`` that is not ASCII, TypeError for a ``path`` that is not a str or os.PathLike
-    or a ``comment`` that is not a str, FileNotFoundError
-    (naming ``path``) when its folder does not exist, before any work, and OSError naming
-    ``path`` when it cannot be written; ``path`` is then left as it was."""
+    Raises ValueError for a finite coordinate beyond float32's range (about 3.4e38), a ragged
+    nested list as ``points`` or ``colors``, or a ``comment`` that is not ASCII, TypeError
+    for a ``path`` that is not a str or os.PathLike or a ``comment`` that is not a str,
+    FileNotFoundError (naming ``path``) when its folder does not exist, before any work, and
+    OSError naming ``path`` when it cannot be written; ``path`` is then left as it was."""
     from .io import atomic_write
 
     if not isinstance(path, (str, os.PathLike)):
@@ -299,7 +316,7 @@ def write_ply(
         raise TypeError(f"comment must be a str, got {type(comment).__name__} {comment!r}")
     if comment is not None and not comment.isascii():
         raise ValueError(f"comment must be ASCII text (PLY headers are ASCII), got {comment!r}")
-    pts = np.asarray(points)
+    pts = _as_array("points", points)
     if pts.dtype.kind not in "iuf":
         raise TypeError(f"points must be a real array, got dtype {pts.dtype}")
     if pts.ndim < 2 or pts.shape[-1] != 3:
