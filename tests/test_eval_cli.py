@@ -958,6 +958,25 @@ def test_rejects_non_bool_mask(
     ) in err
 
 
+def test_rejects_negative_gt_naming_the_file(
+    scenes_dir: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    # A ground truth with -5 in it was scored silently.
+    monkeypatch.setattr(matching, "StereoMatcher", fake_matcher([]))
+    gt = np.full((64, 150), 4.0, dtype=np.float32)
+    gt[3, 7] = -5.0
+    np.save(scenes_dir / "rds-b" / "disp_gt.npy", gt)
+    status, out, err = run_eval(capsys, str(scenes_dir), "--scene", "rds-b")
+    assert status == 2 and out == ""
+    lines = err.strip().splitlines()
+    assert len(lines) == 1
+    assert (
+        "disp_gt.npy: ground truth must be >= 0 where it is finite (KITTI and Middlebury have no "
+        "negative disparity; mark unknown pixels with NaN or inf, and decode KITTI's 0 to NaN), "
+        "got -5.0 at row 3, column 7 (1 negative pixel)"
+    ) in lines[0]
+
+
 def test_rejects_gt_without_values(
     scenes_dir: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
 ) -> None:

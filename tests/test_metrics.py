@@ -99,7 +99,7 @@ def test_random_against_loops(dtype: type, with_mask: bool, shape: tuple[int, in
     data=hnp.arrays(
         np.float32,
         st.tuples(st.integers(1, 6), st.integers(1, 6)),
-        elements=st.floats(-10, 80, width=32) | st.just(np.nan) | st.just(np.inf),
+        elements=st.floats(0, 80, width=32) | st.just(np.nan) | st.just(np.inf),
     ),
     noise=st.lists(st.floats(-6, 6, width=32) | st.just(np.nan), min_size=36, max_size=36),
 )
@@ -141,6 +141,36 @@ def test_nan_gt_is_not_evaluated() -> None:
     d = np.array([[100.0, 3.0, 100.0]], dtype=np.float32)
     m = evaluate(d, gt)
     assert (m.evaluated, m.estimated, m.bad_0_5, m.avgerr) == (1, 1, 0.0, 0.0)
+
+
+def test_negative_ground_truth_is_refused_naming_the_pixel() -> None:
+    # A GT of -5 was scored silently (an estimate of 0 counted as 5 px off).
+    gt = np.array([[1.0, 2.0, -5.0], [np.nan, -0.5, 3.0]], dtype=np.float32)
+    d = np.zeros((2, 3), dtype=np.float32)
+    with pytest.raises(
+        ValueError,
+        match=r"^gt must be >= 0 where it is finite \(KITTI and Middlebury .*\), got -5.0 at row "
+        r"0, column 2 \(2 negative pixels\); pass min_disparity < 0",
+    ):
+        evaluate(d, gt)
+    # Only the evaluated pixels count: masked out, the negative values are not scored.
+    mask = np.array([[True, True, False], [True, False, True]])
+    assert evaluate(d, gt, mask).evaluated == 3
+    # -inf is non-finite: unknown, as NaN and inf.
+    assert evaluate(d[:1, :2], np.array([[-np.inf, 2.0]], np.float32)).evaluated == 1
+
+
+def test_negative_ground_truth_with_a_negative_search_range() -> None:
+    # A matcher that searched from -8 px: negative true disparities are real. By hand: the
+    # estimates -4.5, 1.0, -9 (below -8: a hole) against -5, 1, -7: errors 0.5, 0; one hole.
+    gt = np.array([[-5.0, 1.0, -7.0]])
+    d = np.array([[-4.5, 1.0, -9.0]])
+    m = evaluate(d, gt, min_disparity=-8)
+    assert (m.evaluated, m.estimated) == (3, 2)
+    assert m.avgerr == pytest.approx(0.25)
+    assert m.bad_0_5 == pytest.approx(1 / 3)  # the hole; 0.5 is not more than 0.5
+    with pytest.raises(ValueError, match="gt must be >= 0"):
+        evaluate(d, gt, min_disparity=0)
 
 
 def test_mask_selects_pixels() -> None:

@@ -5,6 +5,14 @@ The convention is the one of the Middlebury stereo evaluation, also used by our 
 
 - The *evaluated* pixels are those whose ground truth is finite and, when a mask is given,
   where the mask is true (typically the non-occluded pixels).
+- Ground truth marks unknown pixels with NaN or inf (Middlebury's PFM files write inf).
+  The datasets' integer encodings use 0 for "unknown" (KITTI's uint16 PNG, Middlebury's
+  2001-2006 PNGs): decode those to NaN first, since a float 0 is a valid disparity (a point at
+  infinity). Neither dataset has negative disparities, and no convention uses a negative
+  value as a marker we could honour silently, so a negative evaluated ground truth is an error
+  (ValueError naming ``gt``, the value and its pixel) unless the matcher searched negative
+  disparities (``min_disparity < 0``: a rig whose principal points differ, where negative
+  true disparities are real).
 - An evaluated pixel has an *estimate* when its disparity is finite; NaN (or any non-finite
   value) is a hole. OpenCV's int16 output (disparity x 16) is read with the matcher's
   ``min_disparity``: raw values below ``min_disparity * 16`` are holes (OpenCV writes
@@ -28,7 +36,7 @@ import numpy as np
 from . import _validate as check
 from .depth import check_min_disparity, from_opencv_disparity
 
-__all__ = ["BAD_THRESHOLDS_PX", "DisparityMetrics", "evaluate"]
+__all__ = ["BAD_THRESHOLDS_PX", "DisparityMetrics", "evaluate", "negative_ground_truth"]
 
 #: The error thresholds of the bad-pixel rates, in pixels.
 BAD_THRESHOLDS_PX: tuple[float, ...] = (0.5, 1.0, 2.0, 4.0)
@@ -108,6 +116,26 @@ def _float_map(name: str, value: Any, what: str) -> np.ndarray:
     return arr
 
 
+def negative_ground_truth(gt: np.ndarray, where: np.ndarray | None = None) -> str | None:
+    """Why ``gt`` (a float disparity map) is not ground truth a harness should score, or
+    None: the first negative finite value (within ``where``, a bool array of its shape, when
+    given), its pixel and how many there are. See the module docstring for the rule."""
+    with np.errstate(invalid="ignore"):
+        negative = np.isfinite(gt) & (gt < 0)
+    if where is not None:
+        negative &= where
+    count = int(np.count_nonzero(negative))
+    if count == 0:
+        return None
+    row, col = (int(i) for i in np.argwhere(negative)[0])
+    return (
+        f"must be >= 0 where it is finite (KITTI and Middlebury have no negative disparity; "
+        f"mark unknown pixels with NaN or inf, and decode KITTI's 0 to NaN), got "
+        f"{float(gt[row, col])!r} at row {row}, column {col} ({count} negative pixel"
+        f"{'s' if count > 1 else ''})"
+    )
+
+
 def evaluate(
     disparity: Any, gt: Any, mask: Any = None, *, min_disparity: int | None = None
 ) -> DisparityMetrics:
@@ -122,7 +150,8 @@ def evaluate(
         uint16 (x256) is rejected: convert it with ``/ 256`` and 0 to NaN.
     gt
         (H, W) floating-point ground-truth disparity; non-finite values (NaN, or inf as in
-        Middlebury's PFM files) mark unknown pixels, which are not evaluated.
+        Middlebury's PFM files) mark unknown pixels, which are not evaluated. Evaluated values
+        must be >= 0 unless ``min_disparity`` is negative (see the module docstring).
     mask
         Optional (H, W) bool array: only pixels where it is true are evaluated (for example
         the non-occluded pixels).
@@ -131,7 +160,8 @@ def evaluate(
         holes. int16 input needs it: it is OpenCV's ``minDisparity``, and raw values below
         ``min_disparity * 16`` are holes, as :func:`stereodepth.from_opencv_disparity` decodes
         them (the score must not guess the hole marker, so there is no default here). For
-        float input there is no lower limit unless it is given.
+        float input there is no lower limit unless it is given. A negative value also admits
+        negative ground truth.
 
     Returns
     -------
@@ -140,7 +170,8 @@ def evaluate(
 
     Raises TypeError for a disparity that is neither float nor int16, a non-float ground
     truth, a non-bool mask or a non-integer ``min_disparity``, and ValueError for shapes that
-    are not (H, W) or do not match.
+    are not (H, W) or do not match, or for a negative evaluated ground truth (without a
+    negative ``min_disparity``).
     """
     md = None if min_disparity is None else check_min_disparity(min_disparity)
     disparity, gt = (
@@ -163,6 +194,12 @@ def evaluate(
         if m.shape != d.shape:
             raise ValueError(f"mask must have the shape of disparity {d.shape}, got {m.shape}")
         evaluated &= m
+    if md is None or md >= 0:
+        problem = negative_ground_truth(g, evaluated)
+        if problem is not None:
+            raise ValueError(
+                f"gt {problem}; pass min_disparity < 0 if the matcher searched negative disparities"
+            )
 
     n_eval = int(np.count_nonzero(evaluated))
     est = d[evaluated].astype(np.float64)
