@@ -339,6 +339,13 @@ D = np.ones((2, 3), np.float32)
         (np.ones(5, np.float32), {}, ValueError, r"shape \(H, W\) or \(N, H, W\), got \(5,\)"),
         (np.ones((1, 1, 1, 1), np.float32), {}, ValueError, r"got \(1, 1, 1, 1\)"),
         ("text", {}, TypeError, "disparity must have dtype"),
+        # A ragged list got numpy's "setting an array element with a sequence".
+        (
+            [[1.0, 2.0], [3.0]],
+            {},
+            ValueError,
+            r"^disparity must be a rectangular array .* got list \[\[1.0, 2.0\], \[3.0\]\]$",
+        ),
         (D, {"focal_px": 0.0}, ValueError, "focal_px must be a finite number > 0, got 0.0"),
         (D, {"focal_px": -5}, ValueError, "focal_px .* got -5"),
         (D, {"focal_px": float("nan")}, ValueError, "focal_px .* got nan"),

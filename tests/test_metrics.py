@@ -283,6 +283,12 @@ def test_rejects_non_bool_mask() -> None:
         evaluate(np.zeros((2, 2)), np.zeros((2, 2)), np.ones((2, 2), np.uint8))
 
 
+def test_rejects_ragged_mask_naming_it() -> None:
+    # It got numpy's "setting an array element with a sequence".
+    with pytest.raises(ValueError, match=r"^mask must be a rectangular array .* got list "):
+        evaluate(np.zeros((2, 2)), np.zeros((2, 2)), [[True, False], [True]])
+
+
 def test_rejects_mask_shape() -> None:
     with pytest.raises(
         ValueError, match=r"^mask must have the shape of disparity \(2, 2\), got \(2, 3\)$"

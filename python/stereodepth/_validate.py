@@ -85,6 +85,24 @@ def threads(value: Any) -> int:
     return integer("threads", value, minimum=0, maximum=MAX_NATIVE_INT)
 
 
+def array(name: str, value: Any) -> np.ndarray:
+    """``value`` as a numpy array (a numpy array as it is); a ragged nested list (rows of
+    different lengths) or anything else numpy cannot turn into an array is a ValueError naming
+    ``name`` and showing the value, not numpy's own "setting an array element with a sequence"
+    or "inhomogeneous shape"."""
+    if isinstance(value, np.ndarray):
+        return value
+    try:
+        return np.asarray(value)
+    except (ValueError, TypeError) as exc:
+        shown = repr(value)
+        shown = shown if len(shown) <= 80 else shown[:77] + "..."
+        raise ValueError(
+            f"{name} must be a rectangular array (every row of the same length), got "
+            f"{type(value).__name__} {shown}"
+        ) from exc
+
+
 def real_array(name: str, value: Any) -> np.ndarray:
     """A scalar or array of real numbers as a float64 array (NaN and inf allowed)."""
     if isinstance(value, (bool, np.bool_)):

@@ -105,9 +105,7 @@ def check_min_disparity(value: Any) -> int:
 def as_disparity(disparity: Any, name: str = "disparity") -> np.ndarray:
     """Checks dtype and shape; never copies a numpy array in the machine's byte order (one in
     the other byte order is converted)."""
-    arr: np.ndarray = check.native_order(
-        disparity if isinstance(disparity, np.ndarray) else np.asarray(disparity)
-    )
+    arr: np.ndarray = check.native_order(check.array(name, disparity))
     if arr.dtype not in _DISPARITY_DTYPES:
         raise TypeError(
             f"{name} must have dtype float16, float32, float64, int16 (OpenCV, x16) or uint16 "
@@ -249,12 +247,15 @@ def from_opencv_disparity(raw: Any, *, min_disparity: int = 0) -> np.ndarray:
     :func:`stereodepth.to_opencv_disparity` with the same ``min_disparity``.
 
     Raises TypeError unless ``raw`` is an int16 array and ``min_disparity`` an integer, and
-    ValueError for a ``min_disparity`` outside [-2047, 2048], which no OpenCV matcher can have
+    ValueError for a ``raw`` whose shape is not (H, W) or (N, H, W) (as every disparity map
+    here), or a ``min_disparity`` outside [-2047, 2048], which no OpenCV matcher can have
     (its holes, ``(minDisparity - 1) * 16``, would not fit in int16; every pixel would be NaN).
     """
-    arr: np.ndarray = check.native_order(raw if isinstance(raw, np.ndarray) else np.asarray(raw))
+    arr: np.ndarray = check.native_order(check.array("raw", raw))
     if arr.dtype != np.int16:
         raise TypeError(f"raw must be OpenCV's int16 disparity (x16), got dtype {arr.dtype}")
+    if arr.ndim not in (2, 3):  # a 0-d one failed inside numpy ("does not support item ...")
+        raise ValueError(f"raw must have shape (H, W) or (N, H, W), got {arr.shape}")
     md = check_min_disparity(min_disparity)
     if not -2047 <= md <= 2048:  # as to_opencv_disparity: beyond, OpenCV's holes overflow int16
         raise ValueError(

@@ -188,7 +188,7 @@ def evaluate(
         raise ValueError(f"gt must have the shape of disparity {d.shape}, got {g.shape}")
     evaluated = np.isfinite(g)
     if mask is not None:
-        m = mask if isinstance(mask, np.ndarray) else np.asarray(mask)
+        m = check.array("mask", mask)
         if m.dtype != np.bool_:
             raise TypeError(f"mask must be a bool array, got dtype {m.dtype}")
         if m.shape != d.shape:

@@ -243,26 +243,9 @@ _PLY_VERTEX_RGB = np.dtype(
 )
 
 
-def _as_array(name: str, value: Any) -> np.ndarray:
-    """``value`` as a numpy array; a ragged nested list (rows of different lengths) or an
-    object numpy cannot turn into an array is a ValueError naming ``name``, not numpy's own
-    "setting an array element with a sequence"."""
-    if isinstance(value, np.ndarray):
-        return value
-    try:
-        return np.asarray(value)
-    except (ValueError, TypeError) as exc:
-        shown = repr(value)
-        shown = shown if len(shown) <= 80 else shown[:77] + "..."
-        raise ValueError(
-            f"{name} must be a rectangular array (every row of the same length), got "
-            f"{type(value).__name__} {shown}"
-        ) from exc
-
-
 def _colours_u8(colors: Any, n_points_shape: tuple[int, ...]) -> np.ndarray:
     """Colours as (..., 3) uint8: grey is repeated, uint16 keeps its high byte."""
-    c = _as_array("colors", colors)
+    c = check.array("colors", colors)
     if c.dtype not in (np.uint8, np.uint16):
         raise TypeError(f"colors must have dtype uint8 or uint16, got {c.dtype}")
     if c.shape == n_points_shape:
@@ -316,7 +299,7 @@ def write_ply(
         raise TypeError(f"comment must be a str, got {type(comment).__name__} {comment!r}")
     if comment is not None and not comment.isascii():
         raise ValueError(f"comment must be ASCII text (PLY headers are ASCII), got {comment!r}")
-    pts = _as_array("points", points)
+    pts = check.array("points", points)
     if pts.dtype.kind not in "iuf":
         raise TypeError(f"points must be a real array, got dtype {pts.dtype}")
     if pts.ndim < 2 or pts.shape[-1] != 3:
