@@ -357,6 +357,39 @@ def test_ground_truth_point_cloud_of_a_real_scene(stereo_scenes: list[Any]) -> N
         ({"Q": np.eye(3)}, ValueError, r"Q must be a 4x4 matrix, got shape \(3, 3\)"),
         ({"Q": np.full((4, 4), np.nan)}, ValueError, "Q must be finite"),
         ({"Q": [["a"] * 4] * 4}, TypeError, "Q must be a 4x4 array of real numbers"),
+        # A complex Q lost its imaginary part with only a ComplexWarning; a bool one was 0/1.
+        (
+            {"Q": np.eye(4) * (1 + 1j)},
+            TypeError,
+            "Q must be a 4x4 array of real numbers, got dtype complex128",
+        ),
+        ({"Q": np.eye(4, dtype=bool)}, TypeError, "got dtype bool"),
+        ({"Q": np.array([[None] * 4] * 4)}, TypeError, "got dtype object"),
+        # A singular Q silently gave every point NaN (W = 0) or flattened the scene.
+        ({"Q": np.zeros((4, 4))}, ValueError, r"Q must be invertible \(rank 4\), got rank 0"),
+        (
+            {"Q": [[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 0, 1], [0, 0, 0, 1]]},
+            ValueError,
+            r"Q must be invertible \(rank 4\), got rank 3",
+        ),
+        # The rig's Q overflowed: "Q must be finite, got inf", naming no parameter given.
+        (
+            {**RIG, "focal_px": 1e300, "baseline_m": 1e300},
+            ValueError,
+            r"focal_px \* baseline_m must be a finite double > 0 \(an entry of Q\), got "
+            r"focal_px=1e\+300 and baseline_m=1e\+300, whose product is inf",
+        ),
+        (
+            {**RIG, "focal_px": 1e-200, "baseline_m": 1e-200},
+            ValueError,
+            r"focal_px \* baseline_m must be a finite double > 0 .* product is 0.0",
+        ),
+        (
+            {**RIG, "baseline_m": 1e300, "cx_px": 1e10},
+            ValueError,
+            r"cx_px \* baseline_m must be a finite double \(an entry of Q\), got "
+            r"cx_px=10000000000.0",
+        ),
         (
             {"Q": np.eye(4), "focal_px": 700.0},
             ValueError,

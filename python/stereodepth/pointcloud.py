@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import errno
+import math
 import os
 from typing import Any
 
@@ -27,12 +28,24 @@ def q_matrix(
          [0, 0, 1,  doffs]]
 
     Then Z = f B / (d + doffs), X = (x - cx) B / (d + doffs), Y = (y - cy) B / (d + doffs), in
-    metres. ``doffs_px`` is cx_right - cx_left (Middlebury's ``doffs``; 0 for most rigs)."""
+    metres. ``doffs_px`` is cx_right - cx_left (Middlebury's ``doffs``; 0 for most rigs).
+
+    ValueError, naming the two parameters, when a product (``focal_px * baseline_m``,
+    ``cx_px * baseline_m``, ``cy_px * baseline_m``) overflows a double, or when
+    ``focal_px * baseline_m`` rounds to 0 (every Z would be 0)."""
     f = check.positive("focal_px", focal_px)
     b = check.positive("baseline_m", baseline_m)
     cx = check.finite("cx_px", cx_px)
     cy = check.finite("cy_px", cy_px)
     doffs = check.finite("doffs_px", doffs_px)
+    for name, value in (("focal_px", f), ("cx_px", cx), ("cy_px", cy)):
+        product = value * b
+        if not math.isfinite(product) or (name == "focal_px" and product == 0.0):
+            raise ValueError(
+                f"{name} * baseline_m must be a finite double{' > 0' if name == 'focal_px' else ''}"
+                f" (an entry of Q), got {name}={value!r} and baseline_m={b!r}, whose product is "
+                f"{product!r}"
+            )
     return np.array(
         [
             [b, 0.0, 0.0, -cx * b],
@@ -117,14 +130,24 @@ class ReprojectOptions:
 
 
 def _as_q(Q: Any) -> np.ndarray:
+    """Q as a float64 4x4 matrix: real (a complex one lost its imaginary part with only a
+    ComplexWarning; a bool one was read as 0 and 1), finite and invertible."""
     try:
-        q = np.array(Q, dtype=np.float64)
+        raw = np.asarray(Q)
     except (TypeError, ValueError) as exc:
         raise TypeError(f"Q must be a 4x4 array of real numbers, got {Q!r}") from exc
+    if raw.dtype.kind not in "iuf":
+        raise TypeError(f"Q must be a 4x4 array of real numbers, got dtype {raw.dtype}")
+    q = raw.astype(np.float64)
     if q.shape != (4, 4):
         raise ValueError(f"Q must be a 4x4 matrix, got shape {q.shape}")
     if not np.isfinite(q).all():
         raise ValueError(f"Q must be finite, got {q.tolist()}")
+    rank = int(np.linalg.matrix_rank(q))
+    if rank < 4:
+        # A singular Q maps every pixel onto a plane or a line (all zeros: W = 0, every point
+        # invalid): no reprojection matrix is (cv2.stereoRectify's has rank 4).
+        raise ValueError(f"Q must be invertible (rank 4), got rank {rank}: {q.tolist()}")
     return q
 
 
@@ -181,6 +204,8 @@ def reproject(
     Q
         OpenCV's 4x4 reprojection matrix (from ``cv2.stereoRectify``):
         [X Y Z W]^T = Q [x y d 1]^T. The points come out in the units of its translation.
+        Real (int or float; TypeError for bool, complex or object), finite and invertible
+        (ValueError otherwise: a singular Q flattens the scene onto a plane or a line).
     focal_px, baseline_m, cx_px, cy_px, doffs_px
         Instead of Q: the rectified rig (see :func:`q_matrix`); points in metres, the camera
         at the origin, x right, y down, z forward. ``cx_px`` and ``cy_px`` (the left
