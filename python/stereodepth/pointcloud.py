@@ -121,6 +121,7 @@ class ReprojectOptions:
             max_depth_m=max_depth_m,
             invalid_value=invalid_value,
             min_disparity=min_disparity,
+            check_rig=False,  # reproject computes in float64, with Q's numbers
         )
         self.scale = o.scale
         self.min_depth_m = o.min_depth_m
