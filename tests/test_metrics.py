@@ -173,6 +173,29 @@ def test_negative_ground_truth_with_a_negative_search_range() -> None:
         evaluate(d, gt, min_disparity=0)
 
 
+def test_huge_errors_do_not_overflow_where_the_result_fits() -> None:
+    # By hand: errors 1.7e308 and 0. avgerr = 8.5e307; rms = 1.7e308 / sqrt(2) (the square
+    # overflowed, with a RuntimeWarning, an error under -W error).
+    m = evaluate(np.array([[1.7e308, 3.0]]), np.array([[1.0, 3.0]]))
+    assert m.avgerr == pytest.approx(8.5e307, rel=1e-12)
+    assert m.rms == pytest.approx(1.7e308 / math.sqrt(2), rel=1e-12)
+    assert (m.bad_4, m.bad_4_est) == (0.5, 0.5)
+    # An error beyond a double (-1.7e308 against 1.7e308) is inf, as documented, no warning.
+    m = evaluate(np.array([[-1.7e308, 3.0]]), np.array([[1.7e308, 3.0]]))
+    assert (m.avgerr, m.rms, m.bad_0_5) == (math.inf, math.inf, 0.5)
+
+
+def test_min_disparity_beyond_float16_keeps_its_meaning() -> None:
+    # -70000 does not fit in float16 (numpy warned "overflow encountered in cast"): nothing
+    # finite is below it; +70000: everything is.
+    d = np.array([[1.0, -3.0, np.inf]], np.float16)
+    gt = np.array([[1.0, 2.0, 2.0]], np.float16)
+    low = evaluate(d, gt, min_disparity=-70000)
+    assert (low.evaluated, low.estimated, low.avgerr) == (3, 2, pytest.approx(2.5))
+    high = evaluate(d, gt, min_disparity=70000)
+    assert (high.evaluated, high.estimated, high.bad_0_5) == (3, 0, 1.0)
+
+
 def test_mask_selects_pixels() -> None:
     gt = np.zeros((2, 2), dtype=np.float32)
     d = np.array([[0.0, 9.0], [np.nan, 0.0]], dtype=np.float32)

@@ -23,11 +23,14 @@ The convention is the one of the Middlebury stereo evaluation, also used by our 
 - ``density`` is the fraction of evaluated pixels with an estimate; ``avgerr`` and ``rms`` are
   the mean and root-mean-square absolute error over those pixels.
 
-Fractions are in [0, 1] (multiply by 100 for percent). Errors are computed in float64.
+Fractions are in [0, 1] (multiply by 100 for percent). Errors are computed in float64; an
+error beyond a double's range (an estimate of -1e308 against 1e308) is ``inf``, and so are
+``avgerr`` and ``rms`` then.
 """
 
 from __future__ import annotations
 
+import math
 from dataclasses import asdict, dataclass
 from typing import Any
 
@@ -181,7 +184,9 @@ def evaluate(
         disparity = from_opencv_disparity(disparity, min_disparity=md)
     d = _float_map("disparity", disparity, "pixels, NaN for holes")
     if md is not None:
-        with np.errstate(invalid="ignore"):
+        # A min_disparity beyond the dtype's range (-70000 against float16) rounds to -inf or
+        # inf in the comparison, which keeps its meaning; numpy warned "overflow in cast".
+        with np.errstate(invalid="ignore", over="ignore"):
             d = np.where(d < md, np.nan, d)
     g = _float_map("gt", gt, "pixels, NaN where unknown")
     if g.shape != d.shape:
@@ -204,8 +209,18 @@ def evaluate(
     n_eval = int(np.count_nonzero(evaluated))
     est = d[evaluated].astype(np.float64)
     ok = np.isfinite(est)
-    err = np.abs(est[ok] - g[evaluated][ok].astype(np.float64))
+    with np.errstate(over="ignore"):  # an error beyond a double's range is inf
+        err = np.abs(est[ok] - g[evaluated][ok].astype(np.float64))
     n_est = int(err.size)
+    # The mean and RMS scaled by the largest error, so that neither the sum nor the squares
+    # overflow where the result fits (errors of 1e200 px squared to inf with a warning).
+    top = float(err.max()) if n_est else 0.0
+    if 0.0 < top < math.inf:
+        scaled = err / top
+        avgerr = top * float(scaled.mean())
+        rms = top * math.sqrt(float(np.mean(scaled * scaled)))
+    else:  # no estimate (NaN below), every error 0, or an infinite error (inf)
+        avgerr = rms = top
     nan = float("nan")
 
     def frac(count: int, total: int) -> float:
@@ -229,6 +244,6 @@ def evaluate(
         bad_1_est=bad["bad_1_est"],
         bad_2_est=bad["bad_2_est"],
         bad_4_est=bad["bad_4_est"],
-        avgerr=float(err.mean()) if n_est else nan,
-        rms=float(np.sqrt(np.mean(err * err))) if n_est else nan,
+        avgerr=avgerr if n_est else nan,
+        rms=rms if n_est else nan,
     )
