@@ -116,6 +116,22 @@ def test_markdown_table(capsys: pytest.CaptureFixture[str]) -> None:
             ["--baseline-mm", "100", "--focal-px", "1e300", "--table-disparities-px", "1e-30"],
             "--table-disparities-px must give a depth",
         ),
+        # A warning on stderr before the error line ("RuntimeWarning: overflow encountered in
+        # add"): 1e308 + 1e308 px is beyond a double; the depth, 100 / inf, rounds to 0.
+        (
+            [
+                "--baseline-mm",
+                "100",
+                "--focal-px",
+                "1000",
+                "--doffs-px",
+                "1e308",
+                "--disparity-px",
+                "1e308",
+            ],
+            "--disparity-px must give a depth (B*f / (d + doffs), B*f = 100.0 m*px) that a "
+            "double can hold (it overflows to inf or rounds to 0), got 1e+308, which gives 0.0 m",
+        ),
     ],
 )
 def test_bad_input_is_one_line_and_status_2(args: list[str], message: str) -> None:
@@ -137,6 +153,18 @@ def test_huge_but_representable_results_are_printed(capsys: pytest.CaptureFixtur
     assert out["depth_resolution_m"] == pytest.approx(1e302, rel=1e-12)
     assert out["depth_resolution_exact_m"] == pytest.approx(1e302 - 1e302 / 2, rel=1e-12)
     assert out["table"][0]["depth_resolution_m"] == pytest.approx(1e302, rel=1e-12)
+
+
+def test_doffs_near_minus_the_largest_double(capsys: pytest.CaptureFixture[str]) -> None:
+    # Every default table disparity (1 to 256 px) is below -doffs = 1e308 px: the table's one
+    # row was math.ceil(1e308), a Python int numpy stored as an object array: "the table's
+    # disparity must be a real number or array, got ndarray with dtype object", exit 2.
+    # By hand: d = 1e308 px with doffs -1e308 is d + doffs = 0, a point at infinity.
+    args = ["--baseline-mm", "100", "--focal-px", "1000", "--doffs-px", "-1e308", "--json"]
+    assert main(["calc", *args]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["table"] == [{"disparity_px": 1e308, "depth_m": None, "depth_resolution_m": None}]
+    assert out["max_depth_m"] is None  # inf: 1 px is beyond infinity here
 
 
 def test_unparseable_number_is_status_2() -> None:

@@ -291,7 +291,8 @@ class StereoRig:
     # --- disparity and depth ---------------------------------------------------------------
     def _disparity(self, name: str, disparity_px: ArrayLike) -> np.ndarray:
         d = check.real_array(name, disparity_px)
-        den = d + self._doffs_px
+        with np.errstate(over="ignore"):  # 1e308 + 1e308: inf, > 0 (its depth is checked later)
+            den = d + self._doffs_px
         bad = ~np.isfinite(d) | (d < 0) | (den < 0)
         if np.any(bad):
             first = d[bad].flat[0] if d.ndim else d
@@ -497,7 +498,8 @@ class StereoRig:
             limit = self._width_px - 1 if self._width_px is not None else math.inf
             lowest = max(0.0, -self._doffs_px)
             ds = [float(d) for d in DEFAULT_TABLE_DISPARITIES_PX if lowest <= d <= limit]
-            ds = ds or [max(1.0, math.ceil(lowest))]
+            # (A float: math.ceil of 1e308 is an int numpy stores as an object array.)
+            ds = ds or [max(1.0, float(math.ceil(lowest)))]
         else:
             arr = check.real_array("disparities_px", disparities_px)
             if arr.ndim != 1 or arr.size == 0:
