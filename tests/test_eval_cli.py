@@ -773,7 +773,15 @@ def test_shared_scene_stereodepth(
     ("argv", "message"),
     [
         (["--repeat", "0"], "--repeat must be an integer >= 1, got 0"),
-        (["--threads", "-1"], "--threads must be an integer >= 0 (0: every core), got -1"),
+        (
+            ["--threads", "-1"],
+            "--threads must be an integer in [0, 2147483647] (0: every core), got -1",
+        ),
+        # Beyond a C int it was the matcher's "threads must be ...", after reading the scene.
+        (
+            ["--threads", str(2**31)],
+            "--threads must be an integer in [0, 2147483647] (0: every core), got 2147483648",
+        ),
         (
             ["--num-disparities", "20"],
             "--num-disparities must be a positive multiple of 16, got 20",

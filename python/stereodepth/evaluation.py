@@ -1023,8 +1023,12 @@ def run(args: argparse.Namespace) -> int:
     require("PIL.Image", "reading images")  # before any work: one line with the install hint
     if args.repeat < 1:
         raise ValueError(f"--repeat must be an integer >= 1, got {args.repeat}")
-    if args.threads < 0:
-        raise ValueError(f"--threads must be an integer >= 0 (0: every core), got {args.threads}")
+    if not 0 <= args.threads <= check.MAX_NATIVE_INT:  # beyond: the matcher's own message,
+        # naming threads rather than --threads, after the scene had been read
+        raise ValueError(
+            f"--threads must be an integer in [0, {check.MAX_NATIVE_INT}] (0: every core), "
+            f"got {args.threads}"
+        )
     if args.num_disparities is not None and (
         args.num_disparities < 16 or args.num_disparities % 16
     ):
