@@ -352,6 +352,13 @@ D = np.ones((2, 3), np.float32)
         (D, {"focal_px": float("inf")}, ValueError, "focal_px .* got inf"),
         (D, {"focal_px": "700"}, TypeError, "focal_px must be a real number, got str"),
         (D, {"focal_px": True}, TypeError, "focal_px must be a real number, got bool"),
+        # Python's OverflowError "int too large to convert to float", naming nothing.
+        (
+            D,
+            {"focal_px": 10**400},
+            ValueError,
+            "^focal_px must be within the range of a double .*, got an integer of 401 digits$",
+        ),
         (D, {"baseline_m": 0}, ValueError, "baseline_m must be a finite number > 0, got 0"),
         (D, {"baseline_m": None}, TypeError, "baseline_m must be a real number, got NoneType"),
         (D, {"doffs_px": float("nan")}, ValueError, "doffs_px must be finite, got nan"),

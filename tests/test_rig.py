@@ -233,6 +233,12 @@ def test_rejected_rig(kwargs, exc, match) -> None:
         (lambda r: r.table([]), ValueError, "disparities_px must be a non-empty 1-D sequence"),
         (lambda r: r.table([1, -1]), ValueError, "disparities_px must be finite and >= 0"),
         (lambda r: r.summary("x"), TypeError, "disparity_px must be a real number, got str"),
+        (
+            lambda r: r.summary(10**400),
+            ValueError,
+            "disparity_px must be within the range of a double",
+        ),
+        (lambda r: r.min_depth_m(2**1024), ValueError, "max_disparity_px must be within the"),
     ],
 )
 def test_rejected_questions(call, exc, match) -> None:

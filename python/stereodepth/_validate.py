@@ -29,7 +29,13 @@ def real(name: str, value: Any) -> float:
     """A real scalar (int or float, not bool) as float; may be NaN or infinite."""
     if not _is_real(value):
         raise TypeError(f"{name} must be a real number, got {type(value).__name__} {value!r}")
-    return float(value)
+    try:
+        return float(value)
+    except OverflowError:  # an int beyond a double: was Python's "int too large to convert"
+        shown = str(value) if len(str(value)) <= 40 else f"an integer of {len(str(value))} digits"
+        raise ValueError(
+            f"{name} must be within the range of a double (about 1.8e308), got {shown}"
+        ) from None
 
 
 def finite(name: str, value: Any) -> float:
