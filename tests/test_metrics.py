@@ -265,8 +265,22 @@ def test_rejects_uint16_disparity_with_conversion_hint() -> None:
 
 
 def test_rejects_integer_gt() -> None:
-    with pytest.raises(TypeError, match=r"^gt must be a floating-point array .*got dtype uint8$"):
-        evaluate(np.zeros((2, 2), np.float32), np.zeros((2, 2), np.uint8))
+    with pytest.raises(TypeError, match=r"^gt must be a floating-point array .*got dtype int32$"):
+        evaluate(np.zeros((2, 2), np.float32), np.zeros((2, 2), np.int32))
+
+
+@pytest.mark.parametrize(
+    ("dtype", "hint"),
+    [
+        (np.uint16, r"; KITTI's PNG encoding must be converted first: .* / 256 with "),
+        (np.uint8, r"; Middlebury's 2001-2006 PNGs store d \* s .*d\[raw == 0\] = np.nan$"),
+    ],
+)
+def test_integer_gt_gets_the_datasets_decoding(dtype: type, hint: str) -> None:
+    # The datasets' integer ground truth marks unknown pixels with 0: it must be decoded
+    # (0 to NaN) before scoring; the message said only "got dtype uint16".
+    with pytest.raises(TypeError, match=rf"^gt must be a floating-point array .*{hint}"):
+        evaluate(np.zeros((2, 2), np.float32), np.zeros((2, 2), dtype))
 
 
 def test_rejects_bool_disparity() -> None:

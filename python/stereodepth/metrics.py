@@ -106,10 +106,16 @@ def _float_map(name: str, value: Any, what: str) -> np.ndarray:
                 "min_disparity (its holes are the values below min_disparity * 16), or convert "
                 "with stereodepth.from_opencv_disparity(raw, min_disparity=...)"
             )
-        elif name == "disparity" and arr.dtype == np.uint16:
+        elif arr.dtype == np.uint16:
             hint = (
                 "; KITTI's PNG encoding must be converted first: "
                 "d = raw.astype(np.float32) / 256 with d[raw == 0] = np.nan"
+            )
+        elif name == "gt" and arr.dtype == np.uint8:
+            hint = (
+                "; Middlebury's 2001-2006 PNGs store d * s (s = 8 for tsukuba and venus, 4 for "
+                "the later sets) with 0 unknown: d = raw.astype(np.float32) / s with "
+                "d[raw == 0] = np.nan"
             )
         raise TypeError(
             f"{name} must be a floating-point array ({what}), got dtype {arr.dtype}{hint}"
