@@ -995,6 +995,33 @@ def test_rejects_gt_without_values(
     assert "scene rds-b: the ground truth has no finite value" in err
 
 
+@pytest.mark.parametrize("with_meta", [False, True])
+def test_rejects_a_scene_with_nothing_to_score(
+    scenes_dir: Path,
+    capsys: pytest.CaptureFixture[str],
+    monkeypatch: pytest.MonkeyPatch,
+    with_meta: bool,
+) -> None:
+    # An all-False mask, or an all-NaN ground truth beside a meta.json max_disp, gave a row
+    # of dashes and exit status 0.
+    monkeypatch.setattr(matching, "StereoMatcher", fake_matcher([]))
+    scene = scenes_dir / "rds-a"
+    if with_meta:
+        (scene / "meta.json").write_text('{"max_disp": 12}')
+        np.save(scene / "disp_gt.npy", np.full((64, 128), np.nan, dtype=np.float32))
+        want = "scene rds-a: the ground truth has no finite value"
+    else:
+        np.save(scene / "mask_nonocc.npy", np.zeros((64, 128), dtype=bool))
+        known = int(np.isfinite(np.load(scene / "disp_gt.npy")).sum())
+        want = f"mask_nonocc.npy: the mask selects none of the {known} pixels with ground truth"
+    status, out, err = run_eval(capsys, str(scenes_dir), "--scene", "rds-a")
+    assert status == 2 and out == ""
+    assert want in err and len(err.strip().splitlines()) == 1
+    if not with_meta:
+        status, _, _ = run_eval(capsys, str(scenes_dir), "--scene", "rds-a", "--no-mask")
+        assert status == 0
+
+
 def test_sgm_method_passes_its_options(
     scenes_dir: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
 ) -> None:

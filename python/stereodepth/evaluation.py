@@ -579,6 +579,15 @@ def _evaluate_scene(
             )
     if not use_mask:
         mask = None
+    # A scene with no pixel to score gave a row of dashes (NaN) and exit status 0.
+    known = np.isfinite(gt)
+    if not known.any():
+        raise ValueError(f"scene {scene.name}: the ground truth has no finite value")
+    if mask is not None and not (known & mask).any():
+        raise ValueError(
+            f"scene {scene.name}: {scene.mask_path}: the mask selects none of the "
+            f"{int(known.sum())} pixels with ground truth (--no-mask scores them all)"
+        )
     rows = []
     for variant in variants:
         try:
