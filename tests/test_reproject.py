@@ -598,6 +598,17 @@ def test_write_ply_ragged_list_names_the_parameter(
     assert list(tmp_path.iterdir()) == []
 
 
+def test_write_ply_big_endian_uint16_colours(tmp_path: Path) -> None:
+    # They were refused: "colors must have dtype uint8 or uint16, got >u2". By hand, the high
+    # bytes of 7 * 256 + 9, 0 and 65535 are 7, 0 and 255.
+    path = tmp_path / "be.ply"
+    colors = np.array([[7 * 256 + 9, 0, 65535]], ">u2")
+    assert stereodepth.write_ply(path, np.array([[1.0, 2.0, 3.0]], ">f8"), colors) == 1
+    _, vertex = read_ply(path)
+    assert [int(vertex[k][0]) for k in ("red", "green", "blue")] == [7, 0, 255]
+    assert [float(vertex[k][0]) for k in ("x", "y", "z")] == [1.0, 2.0, 3.0]
+
+
 def test_write_ply_takes_python_lists(tmp_path: Path) -> None:
     path = tmp_path / "l.ply"
     assert stereodepth.write_ply(path, [[0.5, -1.0, 2.0], [1.0, 2.0, 3.0]]) == 2
