@@ -775,12 +775,12 @@ def test_shared_scene_stereodepth(
         (["--repeat", "0"], "--repeat must be an integer >= 1, got 0"),
         (
             ["--threads", "-1"],
-            "--threads must be an integer in [0, 2147483647] (0: every core), got -1",
+            "--threads must be an integer >= 0 and <= 2147483647 (0: every core), got -1",
         ),
         # Beyond a C int it was the matcher's "threads must be ...", after reading the scene.
         (
             ["--threads", str(2**31)],
-            "--threads must be an integer in [0, 2147483647] (0: every core), got 2147483648",
+            "--threads must be an integer >= 0 and <= 2147483647 (0: every core), got 2147483648",
         ),
         (
             ["--num-disparities", "20"],

@@ -1035,7 +1035,7 @@ def run(args: argparse.Namespace) -> int:
     if not 0 <= args.threads <= check.MAX_NATIVE_INT:  # beyond: the matcher's own message,
         # naming threads rather than --threads, after the scene had been read
         raise ValueError(
-            f"--threads must be an integer in [0, {check.MAX_NATIVE_INT}] (0: every core), "
+            f"--threads must be an integer >= 0 and <= {check.MAX_NATIVE_INT} (0: every core), "
             f"got {args.threads}"
         )
     if args.num_disparities is not None and (
