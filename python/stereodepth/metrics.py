@@ -113,9 +113,9 @@ def _float_map(name: str, value: Any, what: str) -> np.ndarray:
             )
         elif name == "gt" and arr.dtype == np.uint8:
             hint = (
-                "; Middlebury's 2001-2006 PNGs store d * s (s = 8 for tsukuba and venus, 4 for "
-                "the later sets) with 0 unknown: d = raw.astype(np.float32) / s with "
-                "d[raw == 0] = np.nan"
+                "; Middlebury's 2001-2006 PNGs store d * s (s = 16 for tsukuba, 8 for venus, "
+                "4 for the 2003 sets, 3 for the third-size 2005/2006 ones) with 0 unknown: "
+                "d = raw.astype(np.float32) / s with d[raw == 0] = np.nan"
             )
         raise TypeError(
             f"{name} must be a floating-point array ({what}), got dtype {arr.dtype}{hint}"
