@@ -273,7 +273,7 @@ def _colours_u8(colors: Any, n_points_shape: tuple[int, ...]) -> np.ndarray:
     """Colours as (..., 3) uint8: grey is repeated, uint16 keeps its high byte."""
     # In the machine's byte order: a big-endian uint16 image (a 16-bit PNG decoded by hand,
     # FITS) was refused as "got >u2".
-    c = check.native_order(check.array("colors", colors))
+    c: np.ndarray = check.native_order(check.array("colors", colors))
     if c.dtype not in (np.uint8, np.uint16):
         raise TypeError(f"colors must have dtype uint8 or uint16, got {c.dtype}")
     if c.shape == n_points_shape:
