@@ -116,6 +116,16 @@ def test_markdown_table(capsys: pytest.CaptureFixture[str]) -> None:
             ["--baseline-mm", "100", "--focal-px", "1e300", "--table-disparities-px", "1e-30"],
             "--table-disparities-px must give a depth",
         ),
+        # A sub-pixel step that underflows or overflows the resolution named the disparity.
+        (
+            ["--baseline-mm", "100", "--focal-px", "1000", "--subpixel-px", "5e-324"],
+            "--subpixel-px must give a depth resolution that a double can hold (it overflows to "
+            "inf or rounds to 0; depth 6.25 m, B*f = 100.0 m*px), got 5e-324, which gives 0.0 m",
+        ),
+        (
+            ["--baseline-mm", "100", "--focal-px", "1000", "--subpixel-px", "1e308"],
+            "--subpixel-px must give a depth resolution that a double can hold",
+        ),
         # A warning on stderr before the error line ("RuntimeWarning: overflow encountered in
         # add"): 1e308 + 1e308 px is beyond a double; the depth, 100 / inf, rounds to 0.
         (

@@ -334,6 +334,11 @@ def test_results_beyond_a_double_raise_naming_the_parameter() -> None:
     sensor = StereoRig(baseline_mm=1, focal_mm=1e300, pixel_um=1e300)  # a pixel of 1e297 mm
     with pytest.raises(ValueError, match=r"^disparity_px must give a disparity on the sensor"):
         sensor.disparity_mm(1e300)
+    # A step that makes a resolution leave the range names the step, not the depth.
+    with pytest.raises(ValueError, match=r"^disparity_step_px must give .* got 1e\+308, "):
+        small.depth_resolution_m(100.0, 1e308)
+    with pytest.raises(ValueError, match=r"^disparity_step_px must give .* got 5e-324, "):
+        small.summary(16.0, disparity_step_px=5e-324, table_disparities_px=[1.0])
     # The true infinities stay inf: a point at infinity and its resolution.
     assert huge.depth_m(0.0) == math.inf
     assert huge.depth_resolution_m(math.inf) == math.inf

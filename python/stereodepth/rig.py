@@ -123,6 +123,16 @@ def _out_of_range(
     )
 
 
+def _step_out_of_range(step: float, result: float, z: float, bf: float) -> ValueError:
+    """The error for a depth resolution that a 1 px step keeps in range but ``step`` does not:
+    the step is to blame (``--subpixel-px`` on the command line)."""
+    return ValueError(
+        f"disparity_step_px must give a depth resolution that a double can hold (it overflows "
+        f"to inf or rounds to 0; depth {z!r} m, B*f = {bf!r} m*px), got {step!r}, which gives "
+        f"{result!r} m"
+    )
+
+
 def _fmt(v: float) -> str:
     if math.isinf(v):
         return "inf"
@@ -411,6 +421,7 @@ class StereoRig:
         dz = self._resolution_unchecked(z, step, exact=exact)
         bad = np.isfinite(z) & ~((dz > 0) & (dz < math.inf))
         if np.any(bad):
+            self._blame_step(z[bad] if z.ndim else z, dz[bad] if z.ndim else dz, step, exact)
             raise _out_of_range(
                 "depth_m",
                 z,
@@ -420,6 +431,16 @@ class StereoRig:
                 "m",
             )
         return _answer(dz, z)
+
+    def _blame_step(self, z: np.ndarray, dz: np.ndarray, step: float, exact: bool) -> None:
+        """Raises the disparity_step_px error when the first depth whose resolution left the
+        range keeps it with a 1 px step."""
+        if step == 1.0:
+            return
+        z0 = np.asarray(z).flat[0]
+        one = float(self._resolution_unchecked(np.asarray(z0), 1.0, exact=exact))
+        if 0.0 < one < math.inf:
+            raise _step_out_of_range(step, float(np.asarray(dz).flat[0]), float(z0), self._bf_m_px)
 
     def _resolution_unchecked(self, z: np.ndarray, step: float, *, exact: bool = False) -> Any:
         """depth_resolution_m of checked depths, inf or 0 where the double overflows (for the
@@ -516,6 +537,7 @@ class StereoRig:
         for res, s in ((res1, 1.0), (resn, step)):
             bad = np.isfinite(z) & ~((res > 0) & (res < math.inf))
             if np.any(bad):
+                self._blame_step(z[bad], res[bad], s, False)
                 raise _out_of_range(
                     name,
                     d,
@@ -594,6 +616,7 @@ class StereoRig:
                 ):
                     dz = float(self._resolution_unchecked(za, s, exact=exact))
                     if not 0.0 < dz < math.inf:  # named by what the caller gave: the disparity
+                        self._blame_step(za, np.asarray(dz), s, exact)
                         raise _out_of_range(
                             "disparity_px",
                             np.asarray(d),
