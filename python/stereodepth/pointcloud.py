@@ -207,6 +207,9 @@ def reproject(
         [X Y Z W]^T = Q [x y d 1]^T. The points come out in the units of its translation.
         Real (int or float; TypeError for bool, complex or object), finite and invertible
         (ValueError otherwise: a singular Q flattens the scene onto a plane or a line).
+        OpenCV's Q has ``Q[3, 2] = -1 / Tx`` with ``Tx < 0`` when the right camera is to the
+        right of the left one; a Q of the other sign (the cameras swapped) puts every point
+        of a positive disparity behind the camera, so every point is invalid (NaN).
     focal_px, baseline_m, cx_px, cy_px, doffs_px
         Instead of Q: the rectified rig (see :func:`q_matrix`); points in metres, the camera
         at the origin, x right, y down, z forward. ``cx_px`` and ``cy_px`` (the left
