@@ -94,6 +94,54 @@ def test_markdown_table(capsys: pytest.CaptureFixture[str]) -> None:
             [*ARM, "--subpixel-px", "-0.1"],
             "--subpixel-px must be the matcher's disparity step, a number > 0",
         ),
+        # Results a double cannot hold were inf (null with --json) with status 0.
+        (
+            ["--baseline-mm", "1e300", "--focal-px", "1e5", "--disparity-px", "1e-300"],
+            "--disparity-px must give a depth (B*f / (d + doffs), B*f = 1e+302 m*px) that a "
+            "double can hold (it overflows to inf or rounds to 0), got 1e-300, which gives inf m",
+        ),
+        (
+            ["--baseline-mm", "1e300", "--focal-px", "1e5", "--disparity-px", "1e-300", "--json"],
+            "--disparity-px must give a depth",
+        ),
+        (
+            ["--baseline-mm", "100", "--focal-px", "1000", "--disparity-px", "1e300"],
+            "--disparity-px must give a depth resolution (depth 1e-298 m",
+        ),
+        (
+            ["--baseline-mm", "100", "--focal-px", "1000", "--max-disparity-px", "1e-320"],
+            "--max-disparity-px must give a depth",
+        ),
+        (
+            ["--baseline-mm", "100", "--focal-px", "1e300", "--table-disparities-px", "1e-30"],
+            "--table-disparities-px must give a depth",
+        ),
+        # A sub-pixel step that underflows or overflows the resolution named the disparity.
+        (
+            ["--baseline-mm", "100", "--focal-px", "1000", "--subpixel-px", "5e-324"],
+            "--subpixel-px must give a depth resolution that a double can hold (it overflows to "
+            "inf or rounds to 0; depth 6.25 m, B*f = 100.0 m*px), got 5e-324, which gives 0.0 m",
+        ),
+        (
+            ["--baseline-mm", "100", "--focal-px", "1000", "--subpixel-px", "1e308"],
+            "--subpixel-px must give a depth resolution that a double can hold",
+        ),
+        # A warning on stderr before the error line ("RuntimeWarning: overflow encountered in
+        # add"): 1e308 + 1e308 px is beyond a double; the depth, 100 / inf, rounds to 0.
+        (
+            [
+                "--baseline-mm",
+                "100",
+                "--focal-px",
+                "1000",
+                "--doffs-px",
+                "1e308",
+                "--disparity-px",
+                "1e308",
+            ],
+            "--disparity-px must give a depth (B*f / (d + doffs), B*f = 100.0 m*px) that a "
+            "double can hold (it overflows to inf or rounds to 0), got 1e+308, which gives 0.0 m",
+        ),
     ],
 )
 def test_bad_input_is_one_line_and_status_2(args: list[str], message: str) -> None:
@@ -103,6 +151,30 @@ def test_bad_input_is_one_line_and_status_2(args: list[str], message: str) -> No
     assert len(lines) == 1 and lines[0].startswith("stereodepth calc: error: ")
     assert message in lines[0]
     assert r.stdout == ""
+
+
+def test_huge_but_representable_results_are_printed(capsys: pytest.CaptureFixture[str]) -> None:
+    # B*f = 1e302 m*px: the depth at 1 px is 1e302 m and its resolution Z**2 / (B*f) is 1e302
+    # m too (by hand), but Z * Z overflowed first, and --json printed null.
+    args = ["--baseline-mm", "1e300", "--focal-px", "1e5", "--disparity-px", "1", "--json"]
+    assert main(["calc", *args]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["depth_m"] == pytest.approx(1e302, rel=1e-12)
+    assert out["depth_resolution_m"] == pytest.approx(1e302, rel=1e-12)
+    assert out["depth_resolution_exact_m"] == pytest.approx(1e302 - 1e302 / 2, rel=1e-12)
+    assert out["table"][0]["depth_resolution_m"] == pytest.approx(1e302, rel=1e-12)
+
+
+def test_doffs_near_minus_the_largest_double(capsys: pytest.CaptureFixture[str]) -> None:
+    # Every default table disparity (1 to 256 px) is below -doffs = 1e308 px: the table's one
+    # row was math.ceil(1e308), a Python int numpy stored as an object array: "the table's
+    # disparity must be a real number or array, got ndarray with dtype object", exit 2.
+    # By hand: d = 1e308 px with doffs -1e308 is d + doffs = 0, a point at infinity.
+    args = ["--baseline-mm", "100", "--focal-px", "1000", "--doffs-px", "-1e308", "--json"]
+    assert main(["calc", *args]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["table"] == [{"disparity_px": 1e308, "depth_m": None, "depth_resolution_m": None}]
+    assert out["max_depth_m"] is None  # inf: 1 px is beyond infinity here
 
 
 def test_unparseable_number_is_status_2() -> None:

@@ -339,12 +339,26 @@ D = np.ones((2, 3), np.float32)
         (np.ones(5, np.float32), {}, ValueError, r"shape \(H, W\) or \(N, H, W\), got \(5,\)"),
         (np.ones((1, 1, 1, 1), np.float32), {}, ValueError, r"got \(1, 1, 1, 1\)"),
         ("text", {}, TypeError, "disparity must have dtype"),
+        # A ragged list got numpy's "setting an array element with a sequence".
+        (
+            [[1.0, 2.0], [3.0]],
+            {},
+            ValueError,
+            r"^disparity must be a rectangular array .* got list \[\[1.0, 2.0\], \[3.0\]\]$",
+        ),
         (D, {"focal_px": 0.0}, ValueError, "focal_px must be a finite number > 0, got 0.0"),
         (D, {"focal_px": -5}, ValueError, "focal_px .* got -5"),
         (D, {"focal_px": float("nan")}, ValueError, "focal_px .* got nan"),
         (D, {"focal_px": float("inf")}, ValueError, "focal_px .* got inf"),
         (D, {"focal_px": "700"}, TypeError, "focal_px must be a real number, got str"),
         (D, {"focal_px": True}, TypeError, "focal_px must be a real number, got bool"),
+        # Python's OverflowError "int too large to convert to float", naming nothing.
+        (
+            D,
+            {"focal_px": 10**400},
+            ValueError,
+            "^focal_px must be within the range of a double .*, got an integer of 401 digits$",
+        ),
         (D, {"baseline_m": 0}, ValueError, "baseline_m must be a finite number > 0, got 0"),
         (D, {"baseline_m": None}, TypeError, "baseline_m must be a real number, got NoneType"),
         (D, {"doffs_px": float("nan")}, ValueError, "doffs_px must be finite, got nan"),
@@ -385,6 +399,50 @@ def test_rejected_input(disparity, kwargs, exc, match) -> None:
         stereodepth.disparity_to_depth(disparity, **kw)
     with pytest.raises(exc, match=match):
         reference.disparity_to_depth(disparity, **kw)
+
+
+@pytest.mark.parametrize(
+    ("disparity", "kwargs", "match"),
+    [
+        # Every pixel was NaN, silently: B*f overflowed a double, or (float32 arithmetic)
+        # float32; scale or doffs rounded to 0 or inf in float32.
+        (
+            D,
+            {"focal_px": 1e300, "baseline_m": 1e300},
+            r"^focal_px \* baseline_m must be a finite double > 0, got focal_px=1e\+300 and "
+            r"baseline_m=1e\+300, whose product is inf$",
+        ),
+        (D, {"focal_px": 1e-200, "baseline_m": 1e-200}, r"whose product is 0.0$"),
+        (
+            D,
+            {"focal_px": 1e20, "baseline_m": 1e20},
+            r"^focal_px \* baseline_m must be within float32's normal range \[1.175e-38, "
+            r"3.403e\+38\] \(float32 depth from float32 disparity is computed in float32 "
+            r"arithmetic; pass float64 disparity for float64 arithmetic\), got 1e\+40$",
+        ),
+        (np.ones((2, 3), np.int16), {"scale": 1e-50}, r"^scale must be within float32's .* 1e-50$"),
+        (np.ones((2, 3), np.float16), {"doffs_px": 1e39}, r"^doffs_px must be within float32's"),
+    ],
+)
+def test_rig_beyond_the_arithmetic_is_rejected(disparity, kwargs, match) -> None:
+    kw = {**GOOD, **kwargs}
+    with pytest.raises(ValueError, match=match):
+        stereodepth.disparity_to_depth(disparity, **kw)
+    with pytest.raises(ValueError, match=match):
+        reference.disparity_to_depth(disparity, **kw)
+
+
+def test_float64_input_takes_what_float32_arithmetic_cannot() -> None:
+    # By hand: Z = f B / d = 1e20 * 1e20 / 1e10 = 1e30 m; and 1e40 / 1e30 = 1e10 m.
+    d = np.array([[1e10, 1e30]])
+    z = stereodepth.disparity_to_depth(d, focal_px=1e20, baseline_m=1e20)
+    np.testing.assert_allclose(z, [[1e30, 1e10]], rtol=1e-6)
+    # Millimetre output is computed in float64 too: f B = 7 m*px; 7 / 7 = 1 m = 1000 mm, and
+    # 7 / 7e-3 = 1000 m, beyond 65.535 m: 65535.
+    mm = stereodepth.disparity_to_depth(
+        np.array([[7.0, 7e-3]], np.float32), focal_px=7e20, baseline_m=1e-20, dtype=np.uint16
+    )
+    np.testing.assert_array_equal(mm, [[1000, 65535]])
 
 
 def test_rejected_read_only_out() -> None:

@@ -773,7 +773,15 @@ def test_shared_scene_stereodepth(
     ("argv", "message"),
     [
         (["--repeat", "0"], "--repeat must be an integer >= 1, got 0"),
-        (["--threads", "-1"], "--threads must be an integer >= 0 (0: every core), got -1"),
+        (
+            ["--threads", "-1"],
+            "--threads must be an integer >= 0 and <= 2147483647 (0: every core), got -1",
+        ),
+        # Beyond a C int it was the matcher's "threads must be ...", after reading the scene.
+        (
+            ["--threads", str(2**31)],
+            "--threads must be an integer >= 0 and <= 2147483647 (0: every core), got 2147483648",
+        ),
         (
             ["--num-disparities", "20"],
             "--num-disparities must be a positive multiple of 16, got 20",
@@ -958,6 +966,25 @@ def test_rejects_non_bool_mask(
     ) in err
 
 
+def test_rejects_negative_gt_naming_the_file(
+    scenes_dir: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    # A ground truth with -5 in it was scored silently.
+    monkeypatch.setattr(matching, "StereoMatcher", fake_matcher([]))
+    gt = np.full((64, 150), 4.0, dtype=np.float32)
+    gt[3, 7] = -5.0
+    np.save(scenes_dir / "rds-b" / "disp_gt.npy", gt)
+    status, out, err = run_eval(capsys, str(scenes_dir), "--scene", "rds-b")
+    assert status == 2 and out == ""
+    lines = err.strip().splitlines()
+    assert len(lines) == 1
+    assert (
+        "disp_gt.npy: ground truth must be >= 0 where it is finite (KITTI and Middlebury have no "
+        "negative disparity; mark unknown pixels with NaN or inf, and decode KITTI's 0 to NaN), "
+        "got -5.0 at row 3, column 7 (1 negative pixel)"
+    ) in lines[0]
+
+
 def test_rejects_gt_without_values(
     scenes_dir: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
 ) -> None:
@@ -966,6 +993,33 @@ def test_rejects_gt_without_values(
     status, _, err = run_eval(capsys, str(scenes_dir), "--scene", "rds-b")
     assert status == 2
     assert "scene rds-b: the ground truth has no finite value" in err
+
+
+@pytest.mark.parametrize("with_meta", [False, True])
+def test_rejects_a_scene_with_nothing_to_score(
+    scenes_dir: Path,
+    capsys: pytest.CaptureFixture[str],
+    monkeypatch: pytest.MonkeyPatch,
+    with_meta: bool,
+) -> None:
+    # An all-False mask, or an all-NaN ground truth beside a meta.json max_disp, gave a row
+    # of dashes and exit status 0.
+    monkeypatch.setattr(matching, "StereoMatcher", fake_matcher([]))
+    scene = scenes_dir / "rds-a"
+    if with_meta:
+        (scene / "meta.json").write_text('{"max_disp": 12}')
+        np.save(scene / "disp_gt.npy", np.full((64, 128), np.nan, dtype=np.float32))
+        want = "scene rds-a: the ground truth has no finite value"
+    else:
+        np.save(scene / "mask_nonocc.npy", np.zeros((64, 128), dtype=bool))
+        known = int(np.isfinite(np.load(scene / "disp_gt.npy")).sum())
+        want = f"mask_nonocc.npy: the mask selects none of the {known} pixels with ground truth"
+    status, out, err = run_eval(capsys, str(scenes_dir), "--scene", "rds-a")
+    assert status == 2 and out == ""
+    assert want in err and len(err.strip().splitlines()) == 1
+    if not with_meta:
+        status, _, _ = run_eval(capsys, str(scenes_dir), "--scene", "rds-a", "--no-mask")
+        assert status == 0
 
 
 def test_sgm_method_passes_its_options(

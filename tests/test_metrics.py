@@ -99,7 +99,7 @@ def test_random_against_loops(dtype: type, with_mask: bool, shape: tuple[int, in
     data=hnp.arrays(
         np.float32,
         st.tuples(st.integers(1, 6), st.integers(1, 6)),
-        elements=st.floats(-10, 80, width=32) | st.just(np.nan) | st.just(np.inf),
+        elements=st.floats(0, 80, width=32) | st.just(np.nan) | st.just(np.inf),
     ),
     noise=st.lists(st.floats(-6, 6, width=32) | st.just(np.nan), min_size=36, max_size=36),
 )
@@ -141,6 +141,59 @@ def test_nan_gt_is_not_evaluated() -> None:
     d = np.array([[100.0, 3.0, 100.0]], dtype=np.float32)
     m = evaluate(d, gt)
     assert (m.evaluated, m.estimated, m.bad_0_5, m.avgerr) == (1, 1, 0.0, 0.0)
+
+
+def test_negative_ground_truth_is_refused_naming_the_pixel() -> None:
+    # A GT of -5 was scored silently (an estimate of 0 counted as 5 px off).
+    gt = np.array([[1.0, 2.0, -5.0], [np.nan, -0.5, 3.0]], dtype=np.float32)
+    d = np.zeros((2, 3), dtype=np.float32)
+    with pytest.raises(
+        ValueError,
+        match=r"^gt must be >= 0 where it is finite \(KITTI and Middlebury .*\), got -5.0 at row "
+        r"0, column 2 \(2 negative pixels\); pass min_disparity < 0",
+    ):
+        evaluate(d, gt)
+    # Only the evaluated pixels count: masked out, the negative values are not scored.
+    mask = np.array([[True, True, False], [True, False, True]])
+    assert evaluate(d, gt, mask).evaluated == 3
+    # -inf is non-finite: unknown, as NaN and inf.
+    assert evaluate(d[:1, :2], np.array([[-np.inf, 2.0]], np.float32)).evaluated == 1
+
+
+def test_negative_ground_truth_with_a_negative_search_range() -> None:
+    # A matcher that searched from -8 px: negative true disparities are real. By hand: the
+    # estimates -4.5, 1.0, -9 (below -8: a hole) against -5, 1, -7: errors 0.5, 0; one hole.
+    gt = np.array([[-5.0, 1.0, -7.0]])
+    d = np.array([[-4.5, 1.0, -9.0]])
+    m = evaluate(d, gt, min_disparity=-8)
+    assert (m.evaluated, m.estimated) == (3, 2)
+    assert m.avgerr == pytest.approx(0.25)
+    assert m.bad_0_5 == pytest.approx(1 / 3)  # the hole; 0.5 is not more than 0.5
+    with pytest.raises(ValueError, match="gt must be >= 0"):
+        evaluate(d, gt, min_disparity=0)
+
+
+def test_huge_errors_do_not_overflow_where_the_result_fits() -> None:
+    # By hand: errors 1.7e308 and 0. avgerr = 8.5e307; rms = 1.7e308 / sqrt(2) (the square
+    # overflowed, with a RuntimeWarning, an error under -W error).
+    m = evaluate(np.array([[1.7e308, 3.0]]), np.array([[1.0, 3.0]]))
+    assert m.avgerr == pytest.approx(8.5e307, rel=1e-12)
+    assert m.rms == pytest.approx(1.7e308 / math.sqrt(2), rel=1e-12)
+    assert (m.bad_4, m.bad_4_est) == (0.5, 0.5)
+    # An error beyond a double (-1.7e308 against 1.7e308) is inf, as documented, no warning.
+    m = evaluate(np.array([[-1.7e308, 3.0]]), np.array([[1.7e308, 3.0]]))
+    assert (m.avgerr, m.rms, m.bad_0_5) == (math.inf, math.inf, 0.5)
+
+
+def test_min_disparity_beyond_float16_keeps_its_meaning() -> None:
+    # -70000 does not fit in float16 (numpy warned "overflow encountered in cast"): nothing
+    # finite is below it; +70000: everything is.
+    d = np.array([[1.0, -3.0, np.inf]], np.float16)
+    gt = np.array([[1.0, 2.0, 2.0]], np.float16)
+    low = evaluate(d, gt, min_disparity=-70000)
+    assert (low.evaluated, low.estimated, low.avgerr) == (3, 2, pytest.approx(2.5))
+    high = evaluate(d, gt, min_disparity=70000)
+    assert (high.evaluated, high.estimated, high.bad_0_5) == (3, 0, 1.0)
 
 
 def test_mask_selects_pixels() -> None:
@@ -212,8 +265,22 @@ def test_rejects_uint16_disparity_with_conversion_hint() -> None:
 
 
 def test_rejects_integer_gt() -> None:
-    with pytest.raises(TypeError, match=r"^gt must be a floating-point array .*got dtype uint8$"):
-        evaluate(np.zeros((2, 2), np.float32), np.zeros((2, 2), np.uint8))
+    with pytest.raises(TypeError, match=r"^gt must be a floating-point array .*got dtype int32$"):
+        evaluate(np.zeros((2, 2), np.float32), np.zeros((2, 2), np.int32))
+
+
+@pytest.mark.parametrize(
+    ("dtype", "hint"),
+    [
+        (np.uint16, r"; KITTI's PNG encoding must be converted first: .* / 256 with "),
+        (np.uint8, r"; Middlebury's 2001-2006 PNGs store d \* s .*d\[raw == 0\] = np.nan$"),
+    ],
+)
+def test_integer_gt_gets_the_datasets_decoding(dtype: type, hint: str) -> None:
+    # The datasets' integer ground truth marks unknown pixels with 0: it must be decoded
+    # (0 to NaN) before scoring; the message said only "got dtype uint16".
+    with pytest.raises(TypeError, match=rf"^gt must be a floating-point array .*{hint}"):
+        evaluate(np.zeros((2, 2), np.float32), np.zeros((2, 2), dtype))
 
 
 def test_rejects_bool_disparity() -> None:
@@ -251,6 +318,12 @@ def test_rejects_shape_mismatch() -> None:
 def test_rejects_non_bool_mask() -> None:
     with pytest.raises(TypeError, match=r"^mask must be a bool array, got dtype uint8$"):
         evaluate(np.zeros((2, 2)), np.zeros((2, 2)), np.ones((2, 2), np.uint8))
+
+
+def test_rejects_ragged_mask_naming_it() -> None:
+    # It got numpy's "setting an array element with a sequence".
+    with pytest.raises(ValueError, match=r"^mask must be a rectangular array .* got list "):
+        evaluate(np.zeros((2, 2)), np.zeros((2, 2)), [[True, False], [True]])
 
 
 def test_rejects_mask_shape() -> None:

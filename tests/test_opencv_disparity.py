@@ -185,6 +185,27 @@ def test_bad_min_disparity_is_rejected(call: Any, exc: type, message: str) -> No
         call()
 
 
+@pytest.mark.parametrize(
+    ("raw", "exc", "message"),
+    [
+        # A 0-d one failed inside: "'numpy.float32' object does not support item assignment".
+        (np.int16(16), ValueError, r"raw must have shape \(H, W\) or \(N, H, W\), got \(\)"),
+        (np.zeros(4, np.int16), ValueError, r"raw must have shape .* got \(4,\)"),
+        (np.zeros((1, 1, 2, 2), np.int16), ValueError, r"got \(1, 1, 2, 2\)"),
+        ([[16, 32], [48]], ValueError, r"raw must be a rectangular array .* got list"),
+    ],
+)
+def test_bad_raw_shape_is_rejected(raw: Any, exc: type, message: str) -> None:
+    with pytest.raises(exc, match=message):
+        stereodepth.from_opencv_disparity(raw)
+
+
+def test_stack_of_raw_maps_is_decoded_frame_by_frame() -> None:
+    raw = np.array([[[16, -16]], [[40, 0]]], np.int16)  # by hand: 1, hole; 2.5, 0
+    d = stereodepth.from_opencv_disparity(raw)
+    np.testing.assert_array_equal(d, np.array([[[1.0, np.nan]], [[2.5, 0.0]]], np.float32))
+
+
 def test_dask_wrappers_pass_min_disparity() -> None:
     da = pytest.importorskip("dask.array", reason="dask (the batch extra) is not installed")
     import stereodepth.dask as sdd

@@ -357,6 +357,39 @@ def test_ground_truth_point_cloud_of_a_real_scene(stereo_scenes: list[Any]) -> N
         ({"Q": np.eye(3)}, ValueError, r"Q must be a 4x4 matrix, got shape \(3, 3\)"),
         ({"Q": np.full((4, 4), np.nan)}, ValueError, "Q must be finite"),
         ({"Q": [["a"] * 4] * 4}, TypeError, "Q must be a 4x4 array of real numbers"),
+        # A complex Q lost its imaginary part with only a ComplexWarning; a bool one was 0/1.
+        (
+            {"Q": np.eye(4) * (1 + 1j)},
+            TypeError,
+            "Q must be a 4x4 array of real numbers, got dtype complex128",
+        ),
+        ({"Q": np.eye(4, dtype=bool)}, TypeError, "got dtype bool"),
+        ({"Q": np.array([[None] * 4] * 4)}, TypeError, "got dtype object"),
+        # A singular Q silently gave every point NaN (W = 0) or flattened the scene.
+        ({"Q": np.zeros((4, 4))}, ValueError, r"Q must be invertible \(rank 4\), got rank 0"),
+        (
+            {"Q": [[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 0, 1], [0, 0, 0, 1]]},
+            ValueError,
+            r"Q must be invertible \(rank 4\), got rank 3",
+        ),
+        # The rig's Q overflowed: "Q must be finite, got inf", naming no parameter given.
+        (
+            {**RIG, "focal_px": 1e300, "baseline_m": 1e300},
+            ValueError,
+            r"focal_px \* baseline_m must be a finite double > 0 \(an entry of Q\), got "
+            r"focal_px=1e\+300 and baseline_m=1e\+300, whose product is inf",
+        ),
+        (
+            {**RIG, "focal_px": 1e-200, "baseline_m": 1e-200},
+            ValueError,
+            r"focal_px \* baseline_m must be a finite double > 0 .* product is 0.0",
+        ),
+        (
+            {**RIG, "baseline_m": 1e300, "cx_px": 1e10},
+            ValueError,
+            r"cx_px \* baseline_m must be a finite double \(an entry of Q\), got "
+            r"cx_px=10000000000.0",
+        ),
         (
             {"Q": np.eye(4), "focal_px": 700.0},
             ValueError,
@@ -547,6 +580,39 @@ def test_write_ply_rejects(
     with pytest.raises(exc, match=message):
         stereodepth.write_ply(tmp_path / "x.ply", points, colors, comment=comment)
     assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize(
+    ("points", "colors", "name"),
+    [
+        ([[0.0, 0.0, 1.0], [1.0, 2.0]], None, "points"),
+        ([[0.0, 0.0, 1.0], [1.0, 2.0, 3.0]], [[1, 2, 3], [4, 5]], "colors"),
+    ],
+)
+def test_write_ply_ragged_list_names_the_parameter(
+    tmp_path: Path, points: Any, colors: Any, name: str
+) -> None:
+    # A ragged list got numpy's "setting an array element with a sequence", naming nothing.
+    with pytest.raises(ValueError, match=rf"^{name} must be a rectangular array .* got list \["):
+        stereodepth.write_ply(tmp_path / "x.ply", points, colors)
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_write_ply_big_endian_uint16_colours(tmp_path: Path) -> None:
+    # They were refused: "colors must have dtype uint8 or uint16, got >u2". By hand, the high
+    # bytes of 7 * 256 + 9, 0 and 65535 are 7, 0 and 255.
+    path = tmp_path / "be.ply"
+    colors = np.array([[7 * 256 + 9, 0, 65535]], ">u2")
+    assert stereodepth.write_ply(path, np.array([[1.0, 2.0, 3.0]], ">f8"), colors) == 1
+    _, vertex = read_ply(path)
+    assert [int(vertex[k][0]) for k in ("red", "green", "blue")] == [7, 0, 255]
+    assert [float(vertex[k][0]) for k in ("x", "y", "z")] == [1.0, 2.0, 3.0]
+
+
+def test_write_ply_takes_python_lists(tmp_path: Path) -> None:
+    path = tmp_path / "l.ply"
+    assert stereodepth.write_ply(path, [[0.5, -1.0, 2.0], [1.0, 2.0, 3.0]]) == 2
+    assert stereodepth.write_ply(path, [[0.5, -1.0, 2.0]], np.array([[1, 2, 3]], np.uint8)) == 1
 
 
 @pytest.mark.parametrize("comment", [5, b"bytes", ["a", "b"]])

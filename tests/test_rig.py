@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 import sys
+from typing import Any
 
 import numpy as np
 import pytest
@@ -175,8 +176,9 @@ def test_depth_disparity_round_trip(d: float, b: float, f: float, p: float) -> N
 
 
 @settings(max_examples=80, deadline=None)
-@given(st.lists(st.floats(0, 1e5), min_size=2, max_size=30))
+@given(st.lists(st.just(0.0) | st.floats(1e-300, 1e5), min_size=2, max_size=30))
 def test_depth_decreases_with_disparity(ds: list[float]) -> None:
+    # (A disparity below B*f / 1.8e308 px, 5e-324 say, overflows the depth: ValueError.)
     rig = StereoRig(**CAR)
     z = rig.depth_m(np.sort(np.array(ds)))
     assert np.all(np.diff(z[np.isfinite(z)]) <= 0)
@@ -231,6 +233,12 @@ def test_rejected_rig(kwargs, exc, match) -> None:
         (lambda r: r.table([]), ValueError, "disparities_px must be a non-empty 1-D sequence"),
         (lambda r: r.table([1, -1]), ValueError, "disparities_px must be finite and >= 0"),
         (lambda r: r.summary("x"), TypeError, "disparity_px must be a real number, got str"),
+        (
+            lambda r: r.summary(10**400),
+            ValueError,
+            "disparity_px must be within the range of a double",
+        ),
+        (lambda r: r.min_depth_m(2**1024), ValueError, "max_disparity_px must be within the"),
     ],
 )
 def test_rejected_questions(call, exc, match) -> None:
@@ -274,12 +282,84 @@ def test_extreme_numbers_answer_or_raise_value_error(b: float, f: float, p: floa
             StereoRig(b, f, p, width_px=1 << 24, height_px=1)
         return
     rig = StereoRig(b, f, p, width_px=1 << 24, height_px=1)
-    summary = rig.summary(d, disparity_step_px=0.25, max_disparity_px=256)
-    assert summary["focal_px"] > 0
-    for row in summary["table"]:
-        assert all(v is None or v >= 0 for v in row.values())
-    rig.table(disparity_step_px=0.5).to_text()
-    assert rig.required_baseline_mm(1e300, 1e-300) >= 0
+    # A result the model makes finite but a double cannot hold is a ValueError naming the
+    # parameter that leads there, never a silent inf or 0 (null in JSON).
+    overflow = "that a double can hold"
+    results: list[Any] = []
+    for call in (
+        lambda: rig.summary(d, disparity_step_px=0.25, max_disparity_px=256),
+        lambda: rig.table(disparity_step_px=0.5).to_text(),
+        lambda: rig.required_baseline_mm(1e300, 1e-300),
+    ):
+        try:
+            results.append(call())
+        except ValueError as exc:
+            results.append(exc)
+    summary, _, baseline = results
+    if isinstance(summary, ValueError):
+        assert overflow in str(summary)
+    else:
+        assert summary["focal_px"] > 0
+        for row in summary["table"]:
+            assert all(v is None or 0 < v < math.inf for v in row.values())
+        if d > 0:
+            assert summary["depth_m"] is not None and summary["depth_m"] > 0
+    assert not isinstance(results[1], ValueError) or overflow in str(results[1])
+    if isinstance(baseline, ValueError):
+        assert str(baseline).startswith("depth_m must give a baseline that a double can hold")
+    else:
+        assert 0 < baseline < math.inf
+
+
+def test_results_beyond_a_double_raise_naming_the_parameter() -> None:
+    # They were inf (a finite depth, null in JSON) or 0 (a positive depth resolution).
+    huge = StereoRig.from_pixels(1e300, 1e5)  # B*f = 1e302 m*px
+    with pytest.raises(ValueError, match=r"^disparity_px must give a depth .* got 1e-300, "):
+        huge.depth_m(1e-300)
+    with pytest.raises(ValueError, match=r"^disparity_px .* got 1e-300, which gives inf m"):
+        huge.depth_m(np.array([1.0, 1e-300]))
+    with pytest.raises(ValueError, match=r"^disparity_px .* got 1e-300"):
+        huge.summary(1e-300)
+    with pytest.raises(ValueError, match=r"^depth_m must give a disparity .* got 1e-300"):
+        huge.disparity_px(1e-300)
+    with pytest.raises(ValueError, match=r"^depth_m must give a depth resolution .* got 1e\+306"):
+        huge.depth_resolution_m(1e306)  # 1e306 * 1e306 / 1e302 = 1e310 m
+    with pytest.raises(ValueError, match=r"^max_disparity_px must give a depth .* got 1e-300"):
+        huge.min_depth_m(1e-300)
+    with pytest.raises(ValueError, match=r"^disparities_px must give a depth .* got 1e-300"):
+        huge.table([1.0, 1e-300])
+    small = StereoRig.from_pixels(100, 1000)  # B*f = 100 m*px
+    with pytest.raises(ValueError, match=r"^disparity_px .* got 1e\+300, which gives 0.0 m"):
+        small.summary(1e300)  # depth 1e-298 m, resolution 1e-596 m: 0
+    sensor = StereoRig(baseline_mm=1, focal_mm=1e300, pixel_um=1e300)  # a pixel of 1e297 mm
+    with pytest.raises(ValueError, match=r"^disparity_px must give a disparity on the sensor"):
+        sensor.disparity_mm(1e300)
+    # A step that makes a resolution leave the range names the step, not the depth.
+    with pytest.raises(ValueError, match=r"^disparity_step_px must give .* got 1e\+308, "):
+        small.depth_resolution_m(100.0, 1e308)
+    with pytest.raises(ValueError, match=r"^disparity_step_px must give .* got 5e-324, "):
+        small.summary(16.0, disparity_step_px=5e-324, table_disparities_px=[1.0])
+    # The true infinities stay inf: a point at infinity and its resolution.
+    assert huge.depth_m(0.0) == math.inf
+    assert huge.depth_resolution_m(math.inf) == math.inf
+    assert huge.summary(0.0)["depth_m"] is None
+
+
+def test_no_spurious_overflow_where_the_result_fits() -> None:
+    # By hand: B*f = 1e302 m*px; d = 1 px: Z = 1e302 m, dZ = Z**2 / (B*f) = 1e302 m and the
+    # exact Z(1) - Z(2) = 5e301 m. Z * Z overflowed first.
+    huge = StereoRig.from_pixels(1e300, 1e5)
+    assert huge.depth_resolution_m(1e302) == pytest.approx(1e302, rel=1e-12)
+    assert huge.depth_resolution_m(1e302, exact=True) == pytest.approx(5e301, rel=1e-12)
+    assert huge.table([1.0]).rows[0][-1] == pytest.approx(1e302, rel=1e-12)
+    # The exact difference cancelled to 0 at large disparities: at d = 1e17 px with B*f =
+    # 100 m*px it is B*f / (d (d + 1)) = 1e-32 m.
+    small = StereoRig.from_pixels(100, 1000)
+    z = small.depth_m(1e17)
+    assert small.depth_resolution_m(z, exact=True) == pytest.approx(1e-32, rel=1e-12)
+    # B = Z**2 dd / (dZ f) = 1e400 / (1e-10 * 1e300) m * 1000 = 1e113 mm; Z * Z overflowed.
+    rig = StereoRig.from_pixels(1e-5, 1e300)
+    assert rig.required_baseline_mm(1e200, 1e-10) == pytest.approx(1e113, rel=1e-9)
 
 
 def test_rigs_compare_by_value() -> None:

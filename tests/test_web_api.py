@@ -308,6 +308,35 @@ def test_rules_across_parameters(
     ]
 
 
+@pytest.mark.parametrize(
+    ("params", "loc", "start"),
+    [
+        pytest.param(
+            {"baseline_mm": 1e6, "focal_px": 1e7, "disparity_px": "5e-324"},
+            "disparity_px",
+            "disparity_px must give a depth (B*f / (d + doffs), B*f = 10000000000.0 m*px) that a "
+            "double can hold (it overflows to inf or rounds to 0), got 5e-324, which gives inf m",
+            id="depth",
+        ),
+        pytest.param(
+            {**ARM, "inverse_depth_m": 1e6, "inverse_depth_resolution_m": "5e-324"},
+            "inverse_depth_m",
+            "inverse_depth_m must give a baseline that a double can hold",
+            id="inverse",
+        ),
+    ],
+)
+def test_results_a_double_cannot_hold_answer_422(
+    client: TestClient, params: dict[str, Any], loc: str, start: str
+) -> None:
+    # They came back null (200), like a value the rig cannot give.
+    r = calc(client, **params)
+    assert r.status_code == 422, r.text
+    (err,) = r.json()["detail"]
+    assert err["loc"] == ["query", loc]
+    assert err["msg"].startswith(start)
+
+
 def test_every_bad_parameter_is_reported_at_once(client: TestClient) -> None:
     r = client.get("/api/calc?baseline_mm=x&focal_mm=-1&pixel_um=nan&width_px=0")
     assert r.status_code == 422

@@ -29,7 +29,13 @@ def real(name: str, value: Any) -> float:
     """A real scalar (int or float, not bool) as float; may be NaN or infinite."""
     if not _is_real(value):
         raise TypeError(f"{name} must be a real number, got {type(value).__name__} {value!r}")
-    return float(value)
+    try:
+        return float(value)
+    except OverflowError:  # an int beyond a double: was Python's "int too large to convert"
+        shown = str(value) if len(str(value)) <= 40 else f"an integer of {len(str(value))} digits"
+        raise ValueError(
+            f"{name} must be within the range of a double (about 1.8e308), got {shown}"
+        ) from None
 
 
 def finite(name: str, value: Any) -> float:
@@ -83,6 +89,24 @@ def threads(value: Any) -> int:
     if value is None:
         return 0
     return integer("threads", value, minimum=0, maximum=MAX_NATIVE_INT)
+
+
+def array(name: str, value: Any) -> np.ndarray:
+    """``value`` as a numpy array (a numpy array as it is); a ragged nested list (rows of
+    different lengths) or anything else numpy cannot turn into an array is a ValueError naming
+    ``name`` and showing the value, not numpy's own "setting an array element with a sequence"
+    or "inhomogeneous shape"."""
+    if isinstance(value, np.ndarray):
+        return value
+    try:
+        return np.asarray(value)
+    except (ValueError, TypeError) as exc:
+        shown = repr(value)
+        shown = shown if len(shown) <= 80 else shown[:77] + "..."
+        raise ValueError(
+            f"{name} must be a rectangular array (every row of the same length), got "
+            f"{type(value).__name__} {shown}"
+        ) from exc
 
 
 def real_array(name: str, value: Any) -> np.ndarray:

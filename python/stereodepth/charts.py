@@ -160,14 +160,14 @@ def chart_data(
     with np.errstate(over="ignore", under="ignore"):
         lo, hi = _disparity_range(rig, target, limit)
         d = np.geomspace(lo, hi, n)
-        z = rig.depth_m(d)
+        z, _ = rig._depth_unchecked(d)  # the curve's own points: out-of-range ones left out
         dx, zy = _positive(d, z)
 
         # Depth error against depth: ascending depth, only where the depth is finite and > 0.
         z_err = np.sort(z[np.isfinite(z) & (z > 0)])
         steps = (1.0,) if step == 1.0 else (1.0, step)
         err_series = tuple(
-            Series(_step_name(s), *_positive(z_err, rig.depth_resolution_m(z_err, s)))
+            Series(_step_name(s), *_positive(z_err, rig._resolution_unchecked(z_err, s)))
             for s in steps
         )
 
@@ -178,7 +178,7 @@ def chart_data(
             if math.isfinite(zt) and zt > 0:
                 depth_markers.append(Marker("target", target, zt))
                 for s in steps:
-                    e = float(rig.depth_resolution_m(zt, s))
+                    e = float(rig._resolution_unchecked(np.asarray(zt), s))
                     if math.isfinite(e) and e > 0:
                         error_markers.append(Marker(f"target, {s:g} px", zt, e))
 

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from typing import Any
 
 import numpy as np
@@ -49,6 +50,7 @@ class DepthOptions:
         max_depth_m: Any,
         invalid_value: Any,
         min_disparity: Any = None,
+        check_rig: bool = True,
     ) -> None:
         self.focal_px = check.positive("focal_px", focal_px)
         self.baseline_m = check.positive("baseline_m", baseline_m)
@@ -69,6 +71,8 @@ class DepthOptions:
         if out_dtype not in (np.dtype(np.float32), np.dtype(np.uint16)):
             raise TypeError(f"dtype must be numpy.float32 or numpy.uint16, got {out_dtype}")
         self.dtype = out_dtype
+        if check_rig:
+            self._check_ranges(kind)
         self.min_depth_m = (
             0.0 if min_depth_m is None else check.non_negative("min_depth_m", min_depth_m)
         )
@@ -94,6 +98,37 @@ class DepthOptions:
         # The raw threshold: raw < min_disparity / scale is a hole (exact for int16 x16).
         self.invalid_below: float | None = None if md is None else md / self.scale
 
+    def _check_ranges(self, kind: np.dtype) -> None:
+        """The rig's numbers must survive the arithmetic the kernel does: B*f a finite double
+        > 0 (beyond, every depth was NaN or 0, silently), and, for float32 depth from
+        non-float64 input (float32 arithmetic), B*f and scale in float32's normal range and
+        doffs within float32 (beyond, they rounded to inf or 0: every pixel NaN)."""
+        k = self.focal_px * self.baseline_m
+        if not 0.0 < k < math.inf:
+            raise ValueError(
+                f"focal_px * baseline_m must be a finite double > 0, got focal_px="
+                f"{self.focal_px!r} and baseline_m={self.baseline_m!r}, whose product is {k!r}"
+            )
+        if self.dtype != np.float32 or kind == np.float64:
+            return
+        f32 = np.finfo(np.float32)
+        lo, hi = float(f32.tiny), float(f32.max)
+        why = (
+            f"(float32 depth from {kind} disparity is computed in float32 arithmetic; pass "
+            "float64 disparity for float64 arithmetic)"
+        )
+        for name, value in (("focal_px * baseline_m", k), ("scale", self.scale)):
+            if not lo <= value <= hi:
+                raise ValueError(
+                    f"{name} must be within float32's normal range [{lo:.4g}, {hi:.4g}] {why}, "
+                    f"got {value!r}"
+                )
+        if abs(self.doffs_px) > hi:
+            raise ValueError(
+                f"doffs_px must be within float32's range (|doffs_px| <= {hi:.4g}) {why}, got "
+                f"{self.doffs_px!r}"
+            )
+
 
 def check_min_disparity(value: Any) -> int:
     """``min_disparity`` as an int in +-MAX_ABS_MIN_DISPARITY (TypeError, ValueError)."""
@@ -105,9 +140,7 @@ def check_min_disparity(value: Any) -> int:
 def as_disparity(disparity: Any, name: str = "disparity") -> np.ndarray:
     """Checks dtype and shape; never copies a numpy array in the machine's byte order (one in
     the other byte order is converted)."""
-    arr: np.ndarray = check.native_order(
-        disparity if isinstance(disparity, np.ndarray) else np.asarray(disparity)
-    )
+    arr: np.ndarray = check.native_order(check.array(name, disparity))
     if arr.dtype not in _DISPARITY_DTYPES:
         raise TypeError(
             f"{name} must have dtype float16, float32, float64, int16 (OpenCV, x16) or uint16 "
@@ -197,6 +230,9 @@ def disparity_to_depth(
     A pixel is invalid where its value is NaN or a hole, where ``d * scale + doffs_px <= 0``
     (zero disparity is infinitely far), or where its depth leaves the range. Float32 results
     are computed in float32 arithmetic (float64 for float64 input); uint16 in float64.
+    ValueError when ``focal_px * baseline_m`` is not a finite double > 0, and, in float32
+    arithmetic, when it or ``scale`` leaves float32's normal range or ``doffs_px`` float32's
+    range (every pixel would be NaN).
 
     A C-contiguous input is never copied; an input whose rows are not contiguous is copied
     once. The GIL is released while the kernel runs.
@@ -249,12 +285,15 @@ def from_opencv_disparity(raw: Any, *, min_disparity: int = 0) -> np.ndarray:
     :func:`stereodepth.to_opencv_disparity` with the same ``min_disparity``.
 
     Raises TypeError unless ``raw`` is an int16 array and ``min_disparity`` an integer, and
-    ValueError for a ``min_disparity`` outside [-2047, 2048], which no OpenCV matcher can have
+    ValueError for a ``raw`` whose shape is not (H, W) or (N, H, W) (as every disparity map
+    here), or a ``min_disparity`` outside [-2047, 2048], which no OpenCV matcher can have
     (its holes, ``(minDisparity - 1) * 16``, would not fit in int16; every pixel would be NaN).
     """
-    arr: np.ndarray = check.native_order(raw if isinstance(raw, np.ndarray) else np.asarray(raw))
+    arr: np.ndarray = check.native_order(check.array("raw", raw))
     if arr.dtype != np.int16:
         raise TypeError(f"raw must be OpenCV's int16 disparity (x16), got dtype {arr.dtype}")
+    if arr.ndim not in (2, 3):  # a 0-d one failed inside numpy ("does not support item ...")
+        raise ValueError(f"raw must have shape (H, W) or (N, H, W), got {arr.shape}")
     md = check_min_disparity(min_disparity)
     if not -2047 <= md <= 2048:  # as to_opencv_disparity: beyond, OpenCV's holes overflow int16
         raise ValueError(

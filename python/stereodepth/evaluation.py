@@ -85,7 +85,7 @@ from . import _validate as check
 from .cli import key_value_option, path_arg
 from .depth import from_opencv_disparity
 from .matching import MAX_NUM_DISPARITIES
-from .metrics import DisparityMetrics, evaluate
+from .metrics import DisparityMetrics, evaluate, negative_ground_truth
 
 __all__ = [
     "METHODS",
@@ -170,7 +170,9 @@ class Scene:
     def load(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray | None]:
         """(left, right, gt, mask): the images as read by :func:`stereodepth.io.read_image`,
         the float ground truth (NaN or inf where unknown) and the bool mask or None. Raises
-        ValueError naming the file when a part is malformed or the shapes disagree."""
+        ValueError naming the file when a part is malformed or the shapes disagree, or when
+        the ground truth has a negative finite value (:mod:`stereodepth.metrics`' rule: every
+        method searches from 0, and neither KITTI nor Middlebury has negative disparities)."""
         from .io import read_image, read_pfm
 
         left = read_image(self.left_path)
@@ -186,6 +188,9 @@ class Scene:
                 f"{self.gt_path}: ground truth must be a float array of the image's shape "
                 f"{left.shape[:2]}, got {gt.dtype} {gt.shape}"
             )
+        problem = negative_ground_truth(gt)  # the matchers here search from 0
+        if problem is not None:
+            raise ValueError(f"{self.gt_path}: ground truth {problem}")
         mask = None
         if self.mask_path is not None:
             if self.mask_path.suffix == ".png":
@@ -574,6 +579,15 @@ def _evaluate_scene(
             )
     if not use_mask:
         mask = None
+    # A scene with no pixel to score gave a row of dashes (NaN) and exit status 0.
+    known = np.isfinite(gt)
+    if not known.any():
+        raise ValueError(f"scene {scene.name}: the ground truth has no finite value")
+    if mask is not None and not (known & mask).any():
+        raise ValueError(
+            f"scene {scene.name}: {scene.mask_path}: the mask selects none of the "
+            f"{int(known.sum())} pixels with ground truth (--no-mask scores them all)"
+        )
     rows = []
     for variant in variants:
         try:
@@ -1018,8 +1032,12 @@ def run(args: argparse.Namespace) -> int:
     require("PIL.Image", "reading images")  # before any work: one line with the install hint
     if args.repeat < 1:
         raise ValueError(f"--repeat must be an integer >= 1, got {args.repeat}")
-    if args.threads < 0:
-        raise ValueError(f"--threads must be an integer >= 0 (0: every core), got {args.threads}")
+    if not 0 <= args.threads <= check.MAX_NATIVE_INT:  # beyond: the matcher's own message,
+        # naming threads rather than --threads, after the scene had been read
+        raise ValueError(
+            f"--threads must be an integer >= 0 and <= {check.MAX_NATIVE_INT} (0: every core), "
+            f"got {args.threads}"
+        )
     if args.num_disparities is not None and (
         args.num_disparities < 16 or args.num_disparities % 16
     ):

@@ -5,6 +5,14 @@ The convention is the one of the Middlebury stereo evaluation, also used by our 
 
 - The *evaluated* pixels are those whose ground truth is finite and, when a mask is given,
   where the mask is true (typically the non-occluded pixels).
+- Ground truth marks unknown pixels with NaN or inf (Middlebury's PFM files write inf).
+  The datasets' integer encodings use 0 for "unknown" (KITTI's uint16 PNG, Middlebury's
+  2001-2006 PNGs): decode those to NaN first, since a float 0 is a valid disparity (a point at
+  infinity). Neither dataset has negative disparities, and no convention uses a negative
+  value as a marker we could honour silently, so a negative evaluated ground truth is an error
+  (ValueError naming ``gt``, the value and its pixel) unless the matcher searched negative
+  disparities (``min_disparity < 0``: a rig whose principal points differ, where negative
+  true disparities are real).
 - An evaluated pixel has an *estimate* when its disparity is finite; NaN (or any non-finite
   value) is a hole. OpenCV's int16 output (disparity x 16) is read with the matcher's
   ``min_disparity``: raw values below ``min_disparity * 16`` are holes (OpenCV writes
@@ -15,11 +23,14 @@ The convention is the one of the Middlebury stereo evaluation, also used by our 
 - ``density`` is the fraction of evaluated pixels with an estimate; ``avgerr`` and ``rms`` are
   the mean and root-mean-square absolute error over those pixels.
 
-Fractions are in [0, 1] (multiply by 100 for percent). Errors are computed in float64.
+Fractions are in [0, 1] (multiply by 100 for percent). Errors are computed in float64; an
+error beyond a double's range (an estimate of -1e308 against 1e308) is ``inf``, and so are
+``avgerr`` and ``rms`` then.
 """
 
 from __future__ import annotations
 
+import math
 from dataclasses import asdict, dataclass
 from typing import Any
 
@@ -28,7 +39,7 @@ import numpy as np
 from . import _validate as check
 from .depth import check_min_disparity, from_opencv_disparity
 
-__all__ = ["BAD_THRESHOLDS_PX", "DisparityMetrics", "evaluate"]
+__all__ = ["BAD_THRESHOLDS_PX", "DisparityMetrics", "evaluate", "negative_ground_truth"]
 
 #: The error thresholds of the bad-pixel rates, in pixels.
 BAD_THRESHOLDS_PX: tuple[float, ...] = (0.5, 1.0, 2.0, 4.0)
@@ -95,10 +106,16 @@ def _float_map(name: str, value: Any, what: str) -> np.ndarray:
                 "min_disparity (its holes are the values below min_disparity * 16), or convert "
                 "with stereodepth.from_opencv_disparity(raw, min_disparity=...)"
             )
-        elif name == "disparity" and arr.dtype == np.uint16:
+        elif arr.dtype == np.uint16:
             hint = (
                 "; KITTI's PNG encoding must be converted first: "
                 "d = raw.astype(np.float32) / 256 with d[raw == 0] = np.nan"
+            )
+        elif name == "gt" and arr.dtype == np.uint8:
+            hint = (
+                "; Middlebury's 2001-2006 PNGs store d * s (s = 16 for tsukuba, 8 for venus, "
+                "4 for the 2003 sets, 3 for the third-size 2005/2006 ones) with 0 unknown: "
+                "d = raw.astype(np.float32) / s with d[raw == 0] = np.nan"
             )
         raise TypeError(
             f"{name} must be a floating-point array ({what}), got dtype {arr.dtype}{hint}"
@@ -106,6 +123,26 @@ def _float_map(name: str, value: Any, what: str) -> np.ndarray:
     if arr.ndim != 2:
         raise ValueError(f"{name} must have shape (H, W), got {arr.shape}")
     return arr
+
+
+def negative_ground_truth(gt: np.ndarray, where: np.ndarray | None = None) -> str | None:
+    """Why ``gt`` (a float disparity map) is not ground truth a harness should score, or
+    None: the first negative finite value (within ``where``, a bool array of its shape, when
+    given), its pixel and how many there are. See the module docstring for the rule."""
+    with np.errstate(invalid="ignore"):
+        negative = np.isfinite(gt) & (gt < 0)
+    if where is not None:
+        negative &= where
+    count = int(np.count_nonzero(negative))
+    if count == 0:
+        return None
+    row, col = (int(i) for i in np.argwhere(negative)[0])
+    return (
+        f"must be >= 0 where it is finite (KITTI and Middlebury have no negative disparity; "
+        f"mark unknown pixels with NaN or inf, and decode KITTI's 0 to NaN), got "
+        f"{float(gt[row, col])!r} at row {row}, column {col} ({count} negative pixel"
+        f"{'s' if count > 1 else ''})"
+    )
 
 
 def evaluate(
@@ -122,7 +159,8 @@ def evaluate(
         uint16 (x256) is rejected: convert it with ``/ 256`` and 0 to NaN.
     gt
         (H, W) floating-point ground-truth disparity; non-finite values (NaN, or inf as in
-        Middlebury's PFM files) mark unknown pixels, which are not evaluated.
+        Middlebury's PFM files) mark unknown pixels, which are not evaluated. Evaluated values
+        must be >= 0 unless ``min_disparity`` is negative (see the module docstring).
     mask
         Optional (H, W) bool array: only pixels where it is true are evaluated (for example
         the non-occluded pixels).
@@ -131,7 +169,8 @@ def evaluate(
         holes. int16 input needs it: it is OpenCV's ``minDisparity``, and raw values below
         ``min_disparity * 16`` are holes, as :func:`stereodepth.from_opencv_disparity` decodes
         them (the score must not guess the hole marker, so there is no default here). For
-        float input there is no lower limit unless it is given.
+        float input there is no lower limit unless it is given. A negative value also admits
+        negative ground truth.
 
     Returns
     -------
@@ -140,7 +179,8 @@ def evaluate(
 
     Raises TypeError for a disparity that is neither float nor int16, a non-float ground
     truth, a non-bool mask or a non-integer ``min_disparity``, and ValueError for shapes that
-    are not (H, W) or do not match.
+    are not (H, W) or do not match, or for a negative evaluated ground truth (without a
+    negative ``min_disparity``).
     """
     md = None if min_disparity is None else check_min_disparity(min_disparity)
     disparity, gt = (
@@ -150,25 +190,43 @@ def evaluate(
         disparity = from_opencv_disparity(disparity, min_disparity=md)
     d = _float_map("disparity", disparity, "pixels, NaN for holes")
     if md is not None:
-        with np.errstate(invalid="ignore"):
+        # A min_disparity beyond the dtype's range (-70000 against float16) rounds to -inf or
+        # inf in the comparison, which keeps its meaning; numpy warned "overflow in cast".
+        with np.errstate(invalid="ignore", over="ignore"):
             d = np.where(d < md, np.nan, d)
     g = _float_map("gt", gt, "pixels, NaN where unknown")
     if g.shape != d.shape:
         raise ValueError(f"gt must have the shape of disparity {d.shape}, got {g.shape}")
     evaluated = np.isfinite(g)
     if mask is not None:
-        m = mask if isinstance(mask, np.ndarray) else np.asarray(mask)
+        m = check.array("mask", mask)
         if m.dtype != np.bool_:
             raise TypeError(f"mask must be a bool array, got dtype {m.dtype}")
         if m.shape != d.shape:
             raise ValueError(f"mask must have the shape of disparity {d.shape}, got {m.shape}")
         evaluated &= m
+    if md is None or md >= 0:
+        problem = negative_ground_truth(g, evaluated)
+        if problem is not None:
+            raise ValueError(
+                f"gt {problem}; pass min_disparity < 0 if the matcher searched negative disparities"
+            )
 
     n_eval = int(np.count_nonzero(evaluated))
     est = d[evaluated].astype(np.float64)
     ok = np.isfinite(est)
-    err = np.abs(est[ok] - g[evaluated][ok].astype(np.float64))
+    with np.errstate(over="ignore"):  # an error beyond a double's range is inf
+        err = np.abs(est[ok] - g[evaluated][ok].astype(np.float64))
     n_est = int(err.size)
+    # The mean and RMS scaled by the largest error, so that neither the sum nor the squares
+    # overflow where the result fits (errors of 1e200 px squared to inf with a warning).
+    top = float(err.max()) if n_est else 0.0
+    if 0.0 < top < math.inf:
+        scaled = err / top
+        avgerr = top * float(scaled.mean())
+        rms = top * math.sqrt(float(np.mean(scaled * scaled)))
+    else:  # no estimate (NaN below), every error 0, or an infinite error (inf)
+        avgerr = rms = top
     nan = float("nan")
 
     def frac(count: int, total: int) -> float:
@@ -192,6 +250,6 @@ def evaluate(
         bad_1_est=bad["bad_1_est"],
         bad_2_est=bad["bad_2_est"],
         bad_4_est=bad["bad_4_est"],
-        avgerr=float(err.mean()) if n_est else nan,
-        rms=float(np.sqrt(np.mean(err * err))) if n_est else nan,
+        avgerr=avgerr if n_est else nan,
+        rms=rms if n_est else nan,
     )

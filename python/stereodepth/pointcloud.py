@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import errno
+import math
 import os
 from typing import Any
 
@@ -27,12 +28,24 @@ def q_matrix(
          [0, 0, 1,  doffs]]
 
     Then Z = f B / (d + doffs), X = (x - cx) B / (d + doffs), Y = (y - cy) B / (d + doffs), in
-    metres. ``doffs_px`` is cx_right - cx_left (Middlebury's ``doffs``; 0 for most rigs)."""
+    metres. ``doffs_px`` is cx_right - cx_left (Middlebury's ``doffs``; 0 for most rigs).
+
+    ValueError, naming the two parameters, when a product (``focal_px * baseline_m``,
+    ``cx_px * baseline_m``, ``cy_px * baseline_m``) overflows a double, or when
+    ``focal_px * baseline_m`` rounds to 0 (every Z would be 0)."""
     f = check.positive("focal_px", focal_px)
     b = check.positive("baseline_m", baseline_m)
     cx = check.finite("cx_px", cx_px)
     cy = check.finite("cy_px", cy_px)
     doffs = check.finite("doffs_px", doffs_px)
+    for name, value in (("focal_px", f), ("cx_px", cx), ("cy_px", cy)):
+        product = value * b
+        if not math.isfinite(product) or (name == "focal_px" and product == 0.0):
+            raise ValueError(
+                f"{name} * baseline_m must be a finite double{' > 0' if name == 'focal_px' else ''}"
+                f" (an entry of Q), got {name}={value!r} and baseline_m={b!r}, whose product is "
+                f"{product!r}"
+            )
     return np.array(
         [
             [b, 0.0, 0.0, -cx * b],
@@ -108,6 +121,7 @@ class ReprojectOptions:
             max_depth_m=max_depth_m,
             invalid_value=invalid_value,
             min_disparity=min_disparity,
+            check_rig=False,  # reproject computes in float64, with Q's numbers
         )
         self.scale = o.scale
         self.min_depth_m = o.min_depth_m
@@ -117,14 +131,24 @@ class ReprojectOptions:
 
 
 def _as_q(Q: Any) -> np.ndarray:
+    """Q as a float64 4x4 matrix: real (a complex one lost its imaginary part with only a
+    ComplexWarning; a bool one was read as 0 and 1), finite and invertible."""
     try:
-        q = np.array(Q, dtype=np.float64)
+        raw = np.asarray(Q)
     except (TypeError, ValueError) as exc:
         raise TypeError(f"Q must be a 4x4 array of real numbers, got {Q!r}") from exc
+    if raw.dtype.kind not in "iuf":
+        raise TypeError(f"Q must be a 4x4 array of real numbers, got dtype {raw.dtype}")
+    q = raw.astype(np.float64)
     if q.shape != (4, 4):
         raise ValueError(f"Q must be a 4x4 matrix, got shape {q.shape}")
     if not np.isfinite(q).all():
         raise ValueError(f"Q must be finite, got {q.tolist()}")
+    rank = int(np.linalg.matrix_rank(q))
+    if rank < 4:
+        # A singular Q maps every pixel onto a plane or a line (all zeros: W = 0, every point
+        # invalid): no reprojection matrix is (cv2.stereoRectify's has rank 4).
+        raise ValueError(f"Q must be invertible (rank 4), got rank {rank}: {q.tolist()}")
     return q
 
 
@@ -181,6 +205,11 @@ def reproject(
     Q
         OpenCV's 4x4 reprojection matrix (from ``cv2.stereoRectify``):
         [X Y Z W]^T = Q [x y d 1]^T. The points come out in the units of its translation.
+        Real (int or float; TypeError for bool, complex or object), finite and invertible
+        (ValueError otherwise: a singular Q flattens the scene onto a plane or a line).
+        OpenCV's Q has ``Q[3, 2] = -1 / Tx`` with ``Tx < 0`` when the right camera is to the
+        right of the left one; a Q of the other sign (the cameras swapped) puts every point
+        of a positive disparity behind the camera, so every point is invalid (NaN).
     focal_px, baseline_m, cx_px, cy_px, doffs_px
         Instead of Q: the rectified rig (see :func:`q_matrix`); points in metres, the camera
         at the origin, x right, y down, z forward. ``cx_px`` and ``cy_px`` (the left
@@ -245,7 +274,9 @@ _PLY_VERTEX_RGB = np.dtype(
 
 def _colours_u8(colors: Any, n_points_shape: tuple[int, ...]) -> np.ndarray:
     """Colours as (..., 3) uint8: grey is repeated, uint16 keeps its high byte."""
-    c = np.asarray(colors)
+    # In the machine's byte order: a big-endian uint16 image (a 16-bit PNG decoded by hand,
+    # FITS) was refused as "got >u2".
+    c: np.ndarray = check.native_order(check.array("colors", colors))
     if c.dtype not in (np.uint8, np.uint16):
         raise TypeError(f"colors must have dtype uint8 or uint16, got {c.dtype}")
     if c.shape == n_points_shape:
@@ -276,11 +307,11 @@ def write_ply(
 
     Vertex properties: float x, y, z, and uchar red, green, blue when coloured.
 
-    Raises ValueError for a finite coordinate beyond float32's range (about 3.4e38) or a
-    ``comment`` that is not ASCII, TypeError for a ``path`` that is not a str or os.PathLike
-    or a ``comment`` that is not a str, FileNotFoundError
-    (naming ``path``) when its folder does not exist, before any work, and OSError naming
-    ``path`` when it cannot be written; ``path`` is then left as it was."""
+    Raises ValueError for a finite coordinate beyond float32's range (about 3.4e38), a ragged
+    nested list as ``points`` or ``colors``, or a ``comment`` that is not ASCII, TypeError
+    for a ``path`` that is not a str or os.PathLike or a ``comment`` that is not a str,
+    FileNotFoundError (naming ``path``) when its folder does not exist, before any work, and
+    OSError naming ``path`` when it cannot be written; ``path`` is then left as it was."""
     from .io import atomic_write
 
     if not isinstance(path, (str, os.PathLike)):
@@ -299,7 +330,7 @@ def write_ply(
         raise TypeError(f"comment must be a str, got {type(comment).__name__} {comment!r}")
     if comment is not None and not comment.isascii():
         raise ValueError(f"comment must be ASCII text (PLY headers are ASCII), got {comment!r}")
-    pts = np.asarray(points)
+    pts = check.array("points", points)
     if pts.dtype.kind not in "iuf":
         raise TypeError(f"points must be a real array, got dtype {pts.dtype}")
     if pts.ndim < 2 or pts.shape[-1] != 3:

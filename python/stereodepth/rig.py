@@ -7,6 +7,13 @@ The model is the rectified pinhole pair: a point at depth Z appears in the two i
 disparity d (pixels) such that ``Z = B * f_px / (d + doffs)``, where B is the baseline,
 ``f_px = focal_mm / pixel_mm`` is the focal length in pixels and doffs the difference of the
 principal points (0 for most rigs). A disparity of 0 means a point at infinity: depth inf.
+
+Results that leave the range of a double: a result is ``inf`` only where the model's answer is
+infinite (``d + doffs == 0``: a point at infinity, and its depth resolution). Where the
+model's answer is finite but the double overflows (a disparity of 1e-300 px, a baseline of
+1e300 mm), or where a positive depth, depth resolution or baseline would round to 0, the
+method raises ValueError naming the parameter and the value that lead there, rather than
+answer inf or 0 (which JSON would show as null, like a value the rig cannot give).
 """
 
 from __future__ import annotations
@@ -102,6 +109,28 @@ def _image_size(name: str, value: int | None) -> int | None:
     if value is None:
         return None
     return check.integer(name, value, minimum=1, maximum=MAX_IMAGE_SIZE_PX)
+
+
+def _out_of_range(
+    name: str, values: np.ndarray, results: np.ndarray, bad: np.ndarray, what: str, unit: str
+) -> ValueError:
+    """The error for the first ``bad`` entry: ``name`` gave a result outside a double's range."""
+    first = values[bad].flat[0] if values.ndim else values
+    got = results[bad].flat[0] if results.ndim else results
+    return ValueError(
+        f"{name} must give a {what} that a double can hold (it overflows to inf or rounds "
+        f"to 0), got {float(first)!r}, which gives {float(got)!r} {unit}"
+    )
+
+
+def _step_out_of_range(step: float, result: float, z: float, bf: float) -> ValueError:
+    """The error for a depth resolution that a 1 px step keeps in range but ``step`` does not:
+    the step is to blame (``--subpixel-px`` on the command line)."""
+    return ValueError(
+        f"disparity_step_px must give a depth resolution that a double can hold (it overflows "
+        f"to inf or rounds to 0; depth {z!r} m, B*f = {bf!r} m*px), got {step!r}, which gives "
+        f"{result!r} m"
+    )
 
 
 def _fmt(v: float) -> str:
@@ -272,7 +301,8 @@ class StereoRig:
     # --- disparity and depth ---------------------------------------------------------------
     def _disparity(self, name: str, disparity_px: ArrayLike) -> np.ndarray:
         d = check.real_array(name, disparity_px)
-        den = d + self._doffs_px
+        with np.errstate(over="ignore"):  # 1e308 + 1e308: inf, > 0 (its depth is checked later)
+            den = d + self._doffs_px
         bad = ~np.isfinite(d) | (d < 0) | (den < 0)
         if np.any(bad):
             first = d[bad].flat[0] if d.ndim else d
@@ -293,21 +323,43 @@ class StereoRig:
         """Depth in metres of a disparity in pixels: B * f_px / (d + doffs).
 
         A disparity of 0 (with doffs 0) is a point at infinity: ``inf``. Negative, NaN or
-        infinite disparities raise ValueError."""
-        d = self._disparity("disparity_px", disparity_px)
-        with np.errstate(divide="ignore", over="ignore", under="ignore"):
-            z = self._bf_m_px / (d + self._doffs_px)
+        infinite disparities raise ValueError, and so does one whose depth leaves the range
+        of a double (inf or 0 for a finite, positive depth)."""
+        return self._depth_of("disparity_px", disparity_px)
+
+    def _depth_of(self, name: str, disparity_px: ArrayLike) -> Any:
+        """depth_m, naming the disparity ``name`` in its messages."""
+        d = self._disparity(name, disparity_px)
+        z, den = self._depth_unchecked(d)
+        bad = (den != 0) & ~((z > 0) & (z < math.inf))
+        if np.any(bad):
+            raise _out_of_range(
+                name, d, z, bad, f"depth (B*f / (d + doffs), B*f = {self._bf_m_px!r} m*px)", "m"
+            )
         return _answer(z, d)
+
+    def _depth_unchecked(self, d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(depth, d + doffs) of checked disparities, inf or 0 where the double overflows
+        (for the charts, which leave such points out)."""
+        with np.errstate(divide="ignore", over="ignore", under="ignore"):
+            den = d + self._doffs_px
+            return self._bf_m_px / den, den
 
     @overload
     def disparity_px(self, depth_m: float) -> float: ...
     @overload
     def disparity_px(self, depth_m: np.ndarray) -> np.ndarray: ...
     def disparity_px(self, depth_m: ArrayLike) -> Any:
-        """The disparity in pixels of a point at ``depth_m`` metres (> 0; inf gives -doffs)."""
+        """The disparity in pixels of a point at ``depth_m`` metres (> 0; inf gives -doffs).
+
+        ValueError for a depth so small that its disparity overflows a double."""
         z = self._depth("depth_m", depth_m)
         with np.errstate(over="ignore", under="ignore"):
-            return _answer(self._bf_m_px / z - self._doffs_px, z)
+            d = self._bf_m_px / z - self._doffs_px
+        bad = np.isfinite(z) & ~np.isfinite(d)
+        if np.any(bad):
+            raise _out_of_range("depth_m", z, d, bad, "disparity", "px")
+        return _answer(d, z)
 
     def _depth(self, name: str, depth_m: ArrayLike) -> np.ndarray:
         z = check.real_array(name, depth_m)
@@ -325,8 +377,16 @@ class StereoRig:
                 "focal_mm, pixel_um) rather than from_pixels"
             )
         d = self._disparity("disparity_px", disparity_px)
+        mm = self._disparity_mm_unchecked(d)
+        bad = ~np.isfinite(mm)
+        if np.any(bad):
+            raise _out_of_range("disparity_px", d, mm, bad, "disparity on the sensor", "mm")
+        return _answer(mm, d)
+
+    def _disparity_mm_unchecked(self, d: np.ndarray) -> np.ndarray:
+        assert self._pixel_um is not None
         with np.errstate(over="ignore", under="ignore"):
-            return _answer(d * (self._pixel_um / 1000.0), d)
+            return np.asarray(d * (self._pixel_um / 1000.0))
 
     @property
     def max_depth_m(self) -> float:
@@ -335,12 +395,12 @@ class StereoRig:
         at infinity."""
         if 1.0 + self._doffs_px <= 0.0:
             return math.inf
-        return float(self.depth_m(1.0))
+        return float(self._depth_of("the disparity of 1 px (max depth)", 1.0))
 
     def min_depth_m(self, max_disparity_px: float) -> float:
         """The nearest depth a matcher searching disparities up to ``max_disparity_px`` sees."""
         d = check.positive("max_disparity_px", max_disparity_px)
-        return float(self.depth_m(self._disparity("max_disparity_px", d)))
+        return float(self._depth_of("max_disparity_px", d))
 
     def depth_resolution_m(
         self, depth_m: ArrayLike, disparity_step_px: float = 1.0, *, exact: bool = False
@@ -351,31 +411,79 @@ class StereoRig:
         Z²·p·Δd/(B·f) with the focal length and pixel size in the same unit), which grows with
         the square of the depth. With ``exact=True``, the exact difference ``Z(d) - Z(d + dd)``
         between the depth at the target's disparity d and the depth one step nearer; it is a
-        little smaller than the estimate and the two agree as dd / d goes to 0."""
+        little smaller than the estimate and the two agree as dd / d goes to 0. A depth of
+        ``inf`` gives ``inf``; ValueError for a finite depth whose resolution overflows a
+        double or rounds to 0."""
         z = self._depth("depth_m", depth_m)
         step = check.positive("disparity_step_px", disparity_step_px)
         if not isinstance(exact, bool):
             raise TypeError(f"exact must be a bool, got {type(exact).__name__} {exact!r}")
-        with np.errstate(over="ignore", under="ignore", invalid="ignore"):
+        dz = self._resolution_unchecked(z, step, exact=exact)
+        bad = np.isfinite(z) & ~((dz > 0) & (dz < math.inf))
+        if np.any(bad):
+            self._blame_step(z[bad] if z.ndim else z, dz[bad] if z.ndim else dz, step, exact)
+            raise _out_of_range(
+                "depth_m",
+                z,
+                dz,
+                bad,
+                f"depth resolution (B*f = {self._bf_m_px!r} m*px, step {step!r} px)",
+                "m",
+            )
+        return _answer(dz, z)
+
+    def _blame_step(self, z: np.ndarray, dz: np.ndarray, step: float, exact: bool) -> None:
+        """Raises the disparity_step_px error when the first depth whose resolution left the
+        range keeps it with a 1 px step."""
+        if step == 1.0:
+            return
+        z0 = np.asarray(z).flat[0]
+        one = float(self._resolution_unchecked(np.asarray(z0), 1.0, exact=exact))
+        if 0.0 < one < math.inf:
+            raise _step_out_of_range(step, float(np.asarray(dz).flat[0]), float(z0), self._bf_m_px)
+
+    def _resolution_unchecked(self, z: np.ndarray, step: float, *, exact: bool = False) -> Any:
+        """depth_resolution_m of checked depths, inf or 0 where the double overflows (for the
+        charts). Written so that no intermediate overflows or cancels where the result does
+        not: Z * (Z / (B f)) * dd, and the exact Z(d) - Z(d + dd) = Z * dd / (d + doffs + dd)."""
+        with np.errstate(over="ignore", under="ignore", invalid="ignore", divide="ignore"):
             if exact:
                 den = self._bf_m_px / z  # d + doffs
-                dz = z - self._bf_m_px / (den + step)
-            else:
-                dz = z * z * step / self._bf_m_px
-        return _answer(dz, z)
+                return z * step / (den + step)
+            return z * (z / self._bf_m_px) * step
 
     def required_baseline_mm(
         self, depth_m: float, depth_resolution_m: float, disparity_step_px: float = 1.0
     ) -> float:
         """The baseline that gives a depth error of ``depth_resolution_m`` at ``depth_m``, with
         this rig's focal length and a matcher accurate to ``disparity_step_px``:
-        ``B = Z**2 * dd / (dZ * f_px)`` (first order, as :meth:`depth_resolution_m`)."""
+        ``B = Z**2 * dd / (dZ * f_px)`` (first order, as :meth:`depth_resolution_m`).
+
+        ValueError when that baseline leaves the range of a double (names ``depth_m``)."""
         z = check.positive("depth_m", depth_m)
         dz = check.positive("depth_resolution_m", depth_resolution_m)
         step = check.positive("disparity_step_px", disparity_step_px)
         with np.errstate(over="ignore", under="ignore"):
-            b = np.float64(z) * z * step / (dz * self._focal_px) * 1000.0
-        return float(b)
+            b = float(np.float64(z) * (z / dz) * (step / self._focal_px) * 1000.0)
+        if not 0.0 < b < math.inf:
+            # An intermediate may overflow or underflow where the answer does not: decide
+            # in logarithms.
+            log_b = (
+                2 * math.log(z)
+                + math.log(step)
+                - math.log(dz)
+                - math.log(self._focal_px)
+                + math.log(1000.0)
+            )
+            if not math.log(sys.float_info.min) <= log_b < math.log(sys.float_info.max):
+                raise ValueError(
+                    f"depth_m must give a baseline that a double can hold (it overflows to inf "
+                    f"or rounds to 0), got {z!r} with depth_resolution_m {dz!r} (focal length "
+                    f"{self._focal_px!r} px, step {step!r} px), which gives about "
+                    f"1e{log_b / math.log(10):+.0f} mm"
+                )
+            b = math.exp(log_b)
+        return b
 
     # --- field of view ---------------------------------------------------------------------
     @property
@@ -404,13 +512,15 @@ class StereoRig:
 
         Columns: ``disparity_px``, ``disparity_mm`` (when the pixel size is known),
         ``depth_m``, ``depth_resolution_m`` (for a 1 px step) and, for another
-        ``disparity_step_px``, ``depth_resolution_subpx_m``."""
+        ``disparity_step_px``, ``depth_resolution_subpx_m``. ValueError for a disparity whose
+        depth, depth resolution or disparity on the sensor leaves the range of a double."""
         if disparities_px is None:
             # Below the image width, and not below infinity (d + doffs >= 0).
             limit = self._width_px - 1 if self._width_px is not None else math.inf
             lowest = max(0.0, -self._doffs_px)
             ds = [float(d) for d in DEFAULT_TABLE_DISPARITIES_PX if lowest <= d <= limit]
-            ds = ds or [max(1.0, math.ceil(lowest))]
+            # (A float: math.ceil of 1e308 is an int numpy stores as an object array.)
+            ds = ds or [max(1.0, float(math.ceil(lowest)))]
         else:
             arr = check.real_array("disparities_px", disparities_px)
             if arr.ndim != 1 or arr.size == 0:
@@ -418,21 +528,37 @@ class StereoRig:
                     f"disparities_px must be a non-empty 1-D sequence, got shape {arr.shape}"
                 )
             ds = [float(v) for v in arr]
-        d = self._disparity("disparities_px", np.asarray(ds))
+        name = "the table's disparity" if disparities_px is None else "disparities_px"
+        d = self._disparity(name, np.asarray(ds))
         step = check.positive("disparity_step_px", disparity_step_px)
-        z = self.depth_m(d)
+        z = self._depth_of(name, d)
+        res1 = self._resolution_unchecked(z, 1.0)
+        resn = res1 if step == 1.0 else self._resolution_unchecked(z, step)
+        for res, s in ((res1, 1.0), (resn, step)):
+            bad = np.isfinite(z) & ~((res > 0) & (res < math.inf))
+            if np.any(bad):
+                self._blame_step(z[bad], res[bad], s, False)
+                raise _out_of_range(
+                    name,
+                    d,
+                    res,
+                    bad,
+                    f"depth resolution (B*f = {self._bf_m_px!r} m*px, step {s!r} px)",
+                    "m",
+                )
         columns: list[str] = ["disparity_px"]
         cols: list[np.ndarray] = [d]
-        with np.errstate(over="ignore", under="ignore", invalid="ignore"):
-            res1 = np.where(np.isfinite(z), z * z / self._bf_m_px, np.inf)
-            if self._pixel_um is not None:
-                columns.append("disparity_mm")
-                cols.append(d * (self._pixel_um / 1000.0))
-            columns += ["depth_m", "depth_resolution_m"]
-            cols += [z, res1]
-            if step != 1.0:
-                columns.append("depth_resolution_subpx_m")
-                cols.append(res1 * step)
+        if self._pixel_um is not None:
+            mm = self._disparity_mm_unchecked(d)
+            if not np.isfinite(mm).all():
+                raise _out_of_range(name, d, mm, ~np.isfinite(mm), "disparity on the sensor", "mm")
+            columns.append("disparity_mm")
+            cols.append(mm)
+        columns += ["depth_m", "depth_resolution_m"]
+        cols += [z, res1]
+        if step != 1.0:
+            columns.append("depth_resolution_subpx_m")
+            cols.append(resn)
         rows = tuple(tuple(float(c[i]) for c in cols) for i in range(len(ds)))
         return DepthTable(columns=tuple(columns), rows=rows)
 
@@ -451,6 +577,8 @@ class StereoRig:
         width, a disparity) are None. So are infinite values (the depth at disparity 0, and
         its depth resolution), since JSON has no infinity; with ``finite_only=False`` they
         stay ``inf`` (for display: the CLI's text output and table show ``inf``).
+        A result that the model makes finite but that leaves the range of a double raises
+        ValueError naming the parameter that leads there (see the module docstring).
 
         Keys: ``focal_px``, ``max_depth_m``, ``hfov_deg``, ``vfov_deg``, ``disparity_px``,
         ``depth_m``, ``disparity_mm``, ``depth_resolution_m`` (1 px step, first order),
@@ -480,9 +608,25 @@ class StereoRig:
             if self._pixel_um is not None:
                 out["disparity_mm"] = float(self.disparity_mm(d))
             if 0.0 < z < math.inf:
-                out["depth_resolution_m"] = float(self.depth_resolution_m(z))
-                out["depth_resolution_exact_m"] = float(self.depth_resolution_m(z, exact=True))
-                out["depth_resolution_subpx_m"] = float(self.depth_resolution_m(z, step))
+                za = np.asarray(z)
+                for key, s, exact in (
+                    ("depth_resolution_m", 1.0, False),
+                    ("depth_resolution_exact_m", 1.0, True),
+                    ("depth_resolution_subpx_m", step, False),
+                ):
+                    dz = float(self._resolution_unchecked(za, s, exact=exact))
+                    if not 0.0 < dz < math.inf:  # named by what the caller gave: the disparity
+                        self._blame_step(za, np.asarray(dz), s, exact)
+                        raise _out_of_range(
+                            "disparity_px",
+                            np.asarray(d),
+                            np.asarray(dz),
+                            np.asarray(True),
+                            f"depth resolution (depth {z!r} m, B*f = {self._bf_m_px!r} m*px, "
+                            f"step {s!r} px)",
+                            "m",
+                        )
+                    out[key] = dz
             elif z == math.inf:  # at infinity every disparity error is an infinite depth error
                 out["depth_resolution_m"] = math.inf
                 out["depth_resolution_exact_m"] = math.inf

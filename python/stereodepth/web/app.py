@@ -13,14 +13,15 @@ them), ``/openapi.json`` is the schema. Bad input answers 422 in FastAPI's error
 ``{"detail": [{"loc": ["query", name], "msg": ..., "type": ...}]}``, whose message names the
 parameter, states the rule and shows what was received; no input makes the server answer 500.
 The allowed ranges are the library's rules (e.g. > 0) with a generous upper bound; a value
-that still overflows (a pixel of 1e-300 µm) comes back null, as in ``summary()``.
+whose result still leaves the range of a double (a disparity of 5e-324 px, a pixel of 1e-300
+µm) answers 422 at that parameter, as the library raises ValueError for it; null means only
+"not available" or a true infinity (the depth at disparity 0).
 
 The page works offline: plotly.js is served from the installed ``plotly`` package.
 """
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 from importlib import resources
 from pathlib import Path
@@ -207,7 +208,7 @@ class Inverse(BaseModel):
     depth_resolution_m: float
     disparity_step_px: float
     focal_px: float
-    required_baseline_mm: float | None
+    required_baseline_mm: float
 
 
 class SeriesOut(BaseModel):
@@ -317,10 +318,6 @@ def _request_error(err: dict[str, Any]) -> dict[str, Any]:
 _LIBRARY_ERRORS = (ValueError, TypeError, ArithmeticError)
 
 
-def _finite_or_none(x: float) -> float | None:
-    return x if math.isfinite(x) else None
-
-
 def _rig(
     baseline_mm: float,
     focal_mm: float | None,
@@ -378,7 +375,7 @@ def calculate(
     inverse_depth_resolution_m: float | None = None,
 ) -> dict[str, Any] | list[dict[str, Any]]:
     """The answer of /api/calc as a dict, or the list of errors (for a 422)."""
-    # Extreme but allowed inputs may overflow to inf: the library reports those as None.
+    # Extreme but allowed inputs whose results overflow: the library raises ValueError.
     with np.errstate(over="ignore", under="ignore", divide="ignore", invalid="ignore"):
         try:
             rig = _rig(baseline_mm, focal_mm, pixel_um, focal_px, doffs_px, width_px, height_px)
@@ -423,7 +420,7 @@ def calculate(
                 "depth_resolution_m": inverse_depth_resolution_m,
                 "disparity_step_px": disparity_step_px,
                 "focal_px": rig.focal_px,
-                "required_baseline_mm": _finite_or_none(baseline),
+                "required_baseline_mm": baseline,
             }
     return {"summary": summary, "inverse": inverse, "charts": charts}
 
