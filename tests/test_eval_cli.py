@@ -836,6 +836,23 @@ def test_rejects_unknown_opencv_option(
     assert "--opencv-option nonsense_knob: no selected OpenCV matcher has setNonsenseKnob()" in err
 
 
+@pytest.mark.parametrize(
+    ("flag", "method"),
+    [("--option", "stereodepth"), ("--sgm-option", "sgm"), ("--opencv-option", "opencv-bm")],
+)
+def test_an_option_given_twice_is_a_usage_error(
+    scenes_dir: Path, capsys: pytest.CaptureFixture[str], flag: str, method: str
+) -> None:
+    """The last value was used without a word (as batch's --option had it)."""
+    status, out, err = run_eval(
+        capsys, str(scenes_dir), "--method", method, flag, "uniqueness_ratio=5",
+        flag, "uniqueness_ratio=10",
+    )  # fmt: skip
+    assert (status, out) == (2, "")
+    assert err.count("\n") == 1
+    assert f"{flag} uniqueness_ratio is given twice (5 and 10): give it once" in err
+
+
 def test_rejects_opencv_option_value(scenes_dir: Path, capsys: pytest.CaptureFixture[str]) -> None:
     pytest.importorskip("cv2")
     status, _, err = run_eval(
