@@ -265,7 +265,7 @@ def test_opencv_distortion_forms(tmp_path: Path) -> None:
     assert c.distortion_model == "plumb_bob"
 
 
-NOT_ROTATION = r"must be a rotation \(R R\^T = I and det R = \+1 within 1e-06\)"
+NOT_ROTATION = r"must be a rotation \(R R\^T = I and det R = \+1 within 1e-05\)"
 
 
 @pytest.mark.parametrize(
@@ -517,6 +517,34 @@ def test_ros_recovers_opencv_r_and_t(tmp_path: Path) -> None:
         c = read_stereo_calibration(lp, second_path=rp)
         np.testing.assert_allclose(c.R, r, atol=1e-12)
         np.testing.assert_allclose(c.T, t, atol=1e-12)
+
+
+def test_ros_rotations_printed_to_6_digits(tmp_path: Path) -> None:
+    """camera_info files saved by ROS's C++ camera_calibration_parsers (and many copied by
+    hand) print 6 significant digits: |R R^T - I| reaches about 3e-6 in each file and R =
+    R2^T R1 composes two of them. Most such pairs were refused ("R must be a rotation ...
+    1e-06", naming an R that is in neither file); they read as the nearest rotations."""
+    cv2 = pytest.importorskip("cv2", reason="opencv-python-headless is not installed")
+    from stereodepth import StereoRectifier
+
+    def six(a: np.ndarray) -> np.ndarray:
+        return np.array([float(f"{v:.6g}") for v in a.ravel()]).reshape(a.shape)
+
+    rng = np.random.default_rng(1)
+    for t in (np.array([-0.12, 0.002, 0.001]), np.array([0.002, -0.12, 0.001])):
+        for _ in range(8):
+            r = rot(*rng.normal(scale=0.03, size=3))
+            r1, r2, p1, p2, _, _, _ = cv2.stereoRectify(
+                K1, D1, K2, D2, (640, 480), r, t.reshape(3, 1)
+            )
+            lp, rp = ros_pair(tmp_path, {"r": six(r1), "p": six(p1)}, {"r": six(r2), "p": six(p2)})
+            c = read_stereo_calibration(lp, second_path=rp)
+            for m in (c.R, c.R1, c.R2):
+                assert np.abs(m @ m.T - np.eye(3)).max() < 1e-12
+            np.testing.assert_allclose(c.R, r, atol=1e-5)
+            np.testing.assert_allclose(c.T, t, atol=1e-6)
+            np.testing.assert_allclose(c.R1, r1, atol=2e-6)
+            StereoRectifier.from_calibration(c)  # the rectifier's own 1e-6 check passes
 
 
 P_LEFT = np.hstack([np.array([[690.0, 0, 300], [0, 690, 238], [0, 0, 1]]), np.zeros((3, 1))])

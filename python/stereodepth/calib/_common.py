@@ -79,8 +79,16 @@ _MODEL_ALIASES = {
 _NAMED_COUNTS = {"rational_polynomial": (8,), "radtan": (4,)}
 
 
-#: How close R R^T must be to I and det R to +1.
-ROTATION_TOLERANCE = 1e-6
+#: How close R R^T must be to I and det R to +1. Files print their rotations rounded: C++'s
+#: default 6 significant digits (ROS camera_calibration_parsers, hand-copied files) leave
+#: |R R^T - I| up to about 3e-6, and ROS's R = R2^T R1 composes two such roundings; 1e-5
+#: accepts them and still refuses a matrix off by 1e-5 in every entry.
+ROTATION_TOLERANCE = 1e-5
+
+
+#: Below this |R R^T - I| a rotation is kept bit for bit (the rounding of a double); above it
+#: (and within ROTATION_TOLERANCE) it is replaced by the nearest rotation.
+_EXACT_ROTATION = 1e-12
 
 
 #: The largest calibration file read, bytes: the files of every format here are a few kB; a
@@ -138,6 +146,9 @@ def _check_intrinsics(value: Any, where: str, key: str) -> np.ndarray:
 
 
 def _check_rotation(value: Any, where: str, key: str) -> np.ndarray:
+    """A rotation within :data:`ROTATION_TOLERANCE`, made exact: a matrix rounded in print is
+    replaced by the nearest rotation (U V^T of its SVD, as OpenCV's Rodrigues does), so that
+    what is built from it (R = R2^T R1, the rectifier's own 1e-6 check) is a rotation."""
     r = _check_array(value, where, key, (3, 3))
     err = float(np.abs(r @ r.T - np.eye(3)).max())
     det = float(np.linalg.det(r))
@@ -147,6 +158,9 @@ def _check_rotation(value: Any, where: str, key: str) -> np.ndarray:
             f"{key} must be a rotation (R R^T = I and det R = +1 within {ROTATION_TOLERANCE:g}), "
             f"got max |R R^T - I| = {err:.3g} and det R = {det:.9g}",
         )
+    if err > _EXACT_ROTATION or abs(det - 1.0) > _EXACT_ROTATION:
+        u, _, vt = np.linalg.svd(r)
+        r = u @ vt
     return r
 
 

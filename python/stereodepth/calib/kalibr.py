@@ -112,7 +112,7 @@ def read_kalibr_stereo_calibration(
         m = _check_array(field(n, "T_cn_cnm1"), where, key, (4, 4))
         if m[3].tolist() != [0.0, 0.0, 0.0, 1.0]:
             raise _fail(where, f"{key} must end with the row 0 0 0 1, got {m[3].tolist()}")
-        _check_rotation(m[:3, :3], where, f"{key}[:3, :3]")
+        m[:3, :3] = _check_rotation(m[:3, :3], where, f"{key}[:3, :3]")
         return m
 
     lo, hi = min(first, second), max(first, second)
