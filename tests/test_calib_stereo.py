@@ -694,6 +694,44 @@ def test_kalibr(tmp_path: Path) -> None:
     assert read_stereo_calibration(fish).distortion_model == "equidistant"
 
 
+def test_ros_and_kalibr_refuse_a_baseline_in_mm_read_as_metres(tmp_path: Path) -> None:
+    """A ROS or Kalibr calibration of a target measured in mm (``--square 108`` for 0.108 m)
+    says metres by convention but holds a 120 m baseline: it was read so without a word, every
+    depth 1000 times too large. As for OpenCV files, over 10 m needs translation_unit."""
+    kp = np.array([[690.0, 0.0, 300.0], [0.0, 690.0, 238.0], [0.0, 0.0, 1.0]])
+    p1 = np.hstack([kp, np.zeros((3, 1))])
+    p2 = np.hstack([kp, np.array([[-690.0 * 120.0], [0.0], [0.0]])])
+    lp, rp = ros_pair(tmp_path, {"p": p1}, {"p": p2})
+    with pytest.raises(
+        ValueError,
+        match=r"right\.yaml: projection_matrix gives a baseline of 120: read as metres "
+        r"\(ROS's convention; no translation unit given\) that is an unlikely 120 m.*'mm'",
+    ):
+        read_stereo_calibration(lp, second_path=rp)
+    c = read_stereo_calibration(lp, second_path=rp, translation_unit="mm")
+    assert c.baseline_m == pytest.approx(0.12, rel=1e-14)
+    c = read_stereo_calibration(lp, second_path=rp, translation_unit="m")
+    assert c.baseline_m == pytest.approx(120.0, rel=1e-14)
+    path = write(
+        tmp_path / "camchain.yaml",
+        kalibr_yaml([{}, {"T": transform(RA, TA * 1000)}, {"T": transform(RB, TB * 1000)}]),
+    )
+    with pytest.raises(
+        ValueError,
+        match=r"camchain\.yaml: cam2\.T_cn_cnm1 @ cam1\.T_cn_cnm1 gives a baseline of 200\.?\d*: "
+        r"read as metres \(Kalibr's convention",
+    ):
+        read_stereo_calibration(path, cameras=(2, 0))
+    with pytest.raises(ValueError, match=r"cam1\.T_cn_cnm1 gives a baseline of 110"):
+        read_stereo_calibration(path)
+    c = read_stereo_calibration(path, translation_unit="mm")
+    np.testing.assert_allclose(c.T, TA, rtol=1e-15)
+    # a long rig in metres is accepted when said so (and a 9 m one without a word)
+    np.testing.assert_array_equal(read_stereo_calibration(path, translation_unit="m").T, TA * 1000)
+    nine = write(tmp_path / "nine.yaml", kalibr_yaml([{}, {"T": transform(RA, [-9.0, 0, 0])}]))
+    assert read_stereo_calibration(nine).baseline_m == 9.0
+
+
 @pytest.mark.parametrize(
     ("cams", "message"),
     [

@@ -235,6 +235,23 @@ def _to_float(v: Any) -> float | None:
 MAX_IMPLICIT_BASELINE_M = 10.0
 
 
+def _check_implicit_baseline(
+    length: float, translation_unit: str | None, where: str, what: str, convention: str
+) -> None:
+    """ValueError when no ``translation_unit`` was given and ``length`` (the baseline read as
+    metres, from ``what``) exceeds :data:`MAX_IMPLICIT_BASELINE_M`: a file whose target was
+    measured in millimetres (ROS's ``--square 108`` for 0.108 m, a Kalibr target yaml in mm)
+    states metres by its ``convention`` but gives every depth 1000 times too large."""
+    if translation_unit is None and length > MAX_IMPLICIT_BASELINE_M:
+        raise _fail(
+            where,
+            f"{what} gives a baseline of {length:g}: read as metres ({convention}; no "
+            f"translation unit given) that is an unlikely {length:g} m, far more likely a "
+            "calibration target measured in millimetres; give the unit with "
+            "translation_unit, e.g. 'mm', or 'm' to accept metres",
+        )
+
+
 def _unit(translation_unit: str | None) -> float:
     """Metres per unit; None (no unit given) is metres."""
     if translation_unit is None:

@@ -61,8 +61,8 @@ def read_stereo_calibration(
     - KITTI (``P2: ...`` or ``P_rect_02: ...`` lines): :func:`read_kitti_stereo_calibration`.
 
     The keywords go to the readers that take them: ``translation_unit`` (OpenCV, ROS,
-    Kalibr; None for metres, with OpenCV's plausibility check; Middlebury and KITTI files
-    state their unit, so only None or "m" is accepted there),
+    Kalibr; None for metres, with a plausibility check: a baseline over 10 m is refused;
+    Middlebury and KITTI files state their unit, so only None or "m" is accepted there),
     ``image_size`` (all), ``distortion_model`` (OpenCV), ``cameras`` (Kalibr, default (0, 1);
     KITTI, default (2, 3)). Raises FileNotFoundError, ValueError naming the file for an
     unknown format, a file over 4 MiB (``MAX_FILE_BYTES``: calibration files are a few kB),

@@ -11,6 +11,7 @@ import numpy as np
 
 from ._common import (
     _check_distortion,
+    _check_implicit_baseline,
     _check_intrinsics,
     _check_model,
     _check_rotation,
@@ -74,14 +75,17 @@ def read_ros_stereo_calibration(
     so t = (-B, 0, 0)); a point X of the left camera is ``R1 X - t_1`` in the common
     rectified frame, so ``R = R2^T R1`` and ``T = R2^T (t_2 - t_1)``. The two projections
     must share fx' and fy' (a rectified pair). B is in metres by ROS's convention;
-    ``translation_unit`` says otherwise. R1, R2, P1, P2 are the files' rectification and
-    projection matrices.
+    ``translation_unit`` says otherwise; without it (None) a baseline over
+    ``MAX_IMPLICIT_BASELINE_M`` (10 m) is refused, as for OpenCV files: far more likely a
+    target measured in mm (every depth 1000 times too large); pass ``"m"`` to accept it.
+    R1, R2, P1, P2 are the files' rectification and projection matrices.
 
     Raises FileNotFoundError, ImportError without PyYAML, and ValueError naming the file
     and the key for a missing key, a wrong shape, a non-finite value, a rectification matrix
     that is not a rotation, a distortion count that does not fit the model, cameras with
     different distortion models, image sizes or rectified focal lengths, a right camera
-    with no offset or files given in the wrong order."""
+    with no offset or files given in the wrong order, or a baseline over 10 m read without
+    a translation unit."""
     scale = _unit(translation_unit)
     left = _ros_camera(_path(left_path, "left_path"), scale)
     right = _ros_camera(_path(right_path, "right_path"), scale)
@@ -114,6 +118,13 @@ def read_ros_stereo_calibration(
             f"projection_matrix Tx = {pr[0, 3]} > 0: this camera is left of the other "
             "(are the files swapped?)",
         )
+    _check_implicit_baseline(
+        float(np.linalg.norm(right["t"] - left["t"])),
+        translation_unit,
+        right["where"],
+        "projection_matrix",
+        "ROS's convention",
+    )
     r = right["R"].T @ left["R"]
     t = right["R"].T @ (right["t"] - left["t"])
     return StereoCalibration(
