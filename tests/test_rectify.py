@@ -746,6 +746,41 @@ def test_stereo_rectify_rejects(change: dict[str, Any], exc: type, match: str) -
             reference.stereo_rectify(**args)
 
 
+def test_stereo_rectify_takes_a_rotation_rounded_in_print(cv2: Any) -> None:
+    """An R printed to 6 significant digits (a calibration file, a README) is up to about
+    3e-6 from orthonormal: cv2.stereoRectify takes it (its Rodrigues conversion makes it the
+    nearest rotation), stereo_rectify refused some with a 1e-6 check; it now takes them within
+    1e-5, as the calibration readers do, and gives OpenCV's result."""
+    args = good_args()
+    rng = np.random.default_rng(0)
+    refused_before = 0
+    for _ in range(200):
+        r = rotation(rng.normal(scale=0.05, size=3))
+        r6 = np.array([float(f"{v:.6g}") for v in r.ravel()]).reshape(3, 3)
+        refused_before += float(np.abs(r6 @ r6.T - np.eye(3)).max()) > 1e-6
+        args["R"] = r6
+        ours = stereo_rectify(**args)
+        oracle = reference.stereo_rectify(**args)
+        theirs = cv2.stereoRectify(
+            args["K1"],
+            cv_dist(np.asarray(args["D1"])),
+            args["K2"],
+            cv_dist(np.asarray(args["D2"])),
+            args["image_size"],
+            r6,
+            np.asarray(args["T"], dtype=np.float64).reshape(3, 1),
+            alpha=-1,
+            flags=cv2.CALIB_ZERO_DISPARITY,
+        )
+        for a, b, o in zip(ours[:5], theirs[:5], oracle[:5], strict=True):
+            np.testing.assert_allclose(a, b, rtol=1e-9, atol=1e-9 * np.abs(b).max())
+            np.testing.assert_allclose(o, b, rtol=1e-9, atol=1e-9 * np.abs(b).max())
+    assert refused_before > 0
+    args["R"] = args["R"] + 1e-4
+    with pytest.raises(ValueError, match=r"R must be a rotation matrix \(orthonormal within 1e-05"):
+        stereo_rectify(**args)
+
+
 @pytest.mark.parametrize(
     ("kwargs", "exc", "match"),
     [

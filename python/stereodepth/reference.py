@@ -466,12 +466,14 @@ def _stereo_rectify(
     fov_scale: float,
 ) -> Any:
     from .rectify import (
+        _ROUNDED_ROTATION,
         Rectification,
         _alpha,
         _camera_matrix,
         _check_finite_rectification,
         _distortion,
         _model,
+        _nearest_rotation,
         _real_matrix,
         _rotation,
         _size,
@@ -481,7 +483,7 @@ def _stereo_rectify(
     k1, k2 = _camera_matrix("K1", K1), _camera_matrix("K2", K2)
     d1, d2 = _distortion("D1", D1, model), _distortion("D2", D2, model)
     w, h = _size("image_size", image_size)
-    rot = _rotation("R", R)
+    rot = _nearest_rotation(_rotation("R", R, _ROUNDED_ROTATION))
     t_in = _real_matrix("T", T, (3,))
     a = _alpha(alpha)
     nw, nh = (w, h) if new_image_size is None else _size("new_image_size", new_image_size)
