@@ -776,6 +776,31 @@ def test_stereo_rectify_takes_a_rotation_rounded_in_print(cv2: Any) -> None:
             np.testing.assert_allclose(a, b, rtol=1e-9, atol=1e-9 * np.abs(b).max())
             np.testing.assert_allclose(o, b, rtol=1e-9, atol=1e-9 * np.abs(b).max())
     assert refused_before > 0
+    # the maps take such an R1 as given, as cv2.initUndistortRectifyMap does
+    r1 = stereo_rectify(**good_args()).R1
+    r1_6 = np.array([float(f"{v:.6g}") for v in r1.ravel()]).reshape(3, 3)
+    for _ in range(20):
+        if float(np.abs(r1_6 @ r1_6.T - np.eye(3)).max()) > 1e-6:
+            break
+        r1_6 = np.array(
+            [float(f"{v:.6g}") for v in (r1_6 + rng.normal(scale=2e-6, size=(3, 3))).ravel()]
+        ).reshape(3, 3)
+    assert float(np.abs(r1_6 @ r1_6.T - np.eye(3)).max()) > 1e-6
+    p1 = stereo_rectify(**good_args()).P1
+    size = good_args()["image_size"]
+    mx, my = stereodepth.init_undistort_rectify_map(
+        good_args()["K1"], good_args()["D1"], r1_6, p1, size
+    )
+    ox, oy = reference.init_undistort_rectify_map(
+        good_args()["K1"], good_args()["D1"], r1_6, p1, size
+    )
+    cx, cy = cv2.initUndistortRectifyMap(
+        good_args()["K1"], cv_dist(np.asarray(good_args()["D1"])), r1_6, p1, size, cv2.CV_32FC1
+    )
+    np.testing.assert_array_equal(mx, ox)
+    np.testing.assert_array_equal(my, oy)
+    np.testing.assert_array_equal(mx, cx)  # bit for bit, as for exact rotations
+    np.testing.assert_array_equal(my, cy)
     args["R"] = args["R"] + 1e-4
     with pytest.raises(ValueError, match=r"R must be a rotation matrix \(orthonormal within 1e-05"):
         stereo_rectify(**args)

@@ -341,8 +341,10 @@ def init_undistort_rectify_map(
     (R1 or R2, or None for the identity), ``P`` the new (3, 3) camera matrix or the (3, 4)
     projection (P1 or P2). As ``cv2.initUndistortRectifyMap`` (``cv2.fisheye.`` for
     ``"equidistant"``) with ``CV_32FC1`` maps: float64 per pixel, rounded once to float32 (in
-    tests they equal OpenCV's bit for bit). Behind the camera (equidistant only) the maps
-    hold -1e6.
+    tests they equal OpenCV's bit for bit). ``R`` may be a rotation rounded in print
+    (orthonormal within 1e-5, as a camera_info's rectification_matrix printed to 6
+    significant digits): it is used as given, ``(P R)^-1`` inverted in full as OpenCV does.
+    Behind the camera (equidistant only) the maps hold -1e6.
 
     Returns ``(map_x, map_y)``, two (height, width) float32 arrays of raw column and row.
     Rows are split over ``threads`` (None or 0: every core); the maps do not depend on it.
@@ -351,7 +353,7 @@ def init_undistort_rectify_map(
     m = _model("model", model)
     k = _camera_matrix("K", K)
     d = _distortion("D", D, m)
-    rot = np.eye(3) if R is None else _rotation("R", R)
+    rot = np.eye(3) if R is None else _rotation("R", R, _ROUNDED_ROTATION)
     p = check.real_array("P", P)
     if p.shape == (3, 4):
         p = p[:, :3]

@@ -190,14 +190,22 @@ def init_undistort_rectify_map(
 ) -> tuple[np.ndarray, np.ndarray]:
     """Oracle of :func:`stereodepth.init_undistort_rectify_map`: the same float64 operations
     in the same order, rounded once to float32 (``threads`` is checked, then unused)."""
-    from .rectify import _camera_matrix, _distortion, _model, _real_matrix, _rotation, _size
+    from .rectify import (
+        _ROUNDED_ROTATION,
+        _camera_matrix,
+        _distortion,
+        _model,
+        _real_matrix,
+        _rotation,
+        _size,
+    )
 
     m = _model("model", model)
     k_mat = _camera_matrix("K", K)
     d = np.zeros(8)
     coeffs = _distortion("D", D, m)
     d[: coeffs.size] = coeffs
-    rot = np.eye(3) if R is None else _rotation("R", R)
+    rot = np.eye(3) if R is None else _rotation("R", R, _ROUNDED_ROTATION)
     p = check.real_array("P", P)
     p = _real_matrix("P", p[:, :3] if p.shape == (3, 4) else p, (3, 3))
     width, height = _size("size", size)
