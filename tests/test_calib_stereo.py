@@ -547,6 +547,78 @@ def test_ros_rotations_printed_to_6_digits(tmp_path: Path) -> None:
             StereoRectifier.from_calibration(c)  # the rectifier's own 1e-6 check passes
 
 
+def camera_info_message(
+    k: np.ndarray, d: np.ndarray, r: np.ndarray, p: np.ndarray, ros2: bool, **extra: str
+) -> str:
+    """A CameraInfo message as `rostopic echo -n1` (ROS 1: K, D, R, P as flow lists) or
+    `ros2 topic echo --once` (ROS 2: k, d, r, p as block lists) prints it, "---" included."""
+
+    def flat(name: str, a: np.ndarray) -> str:
+        values = [repr(float(v)) for v in a.ravel()]
+        if not ros2:
+            return f"{name.upper()}: [{', '.join(values)}]"
+        return f"{name}:\n" + "".join(f"- {v}\n" for v in values).rstrip("\n")
+
+    stamp = "  stamp:\n    sec: 0\n    nanosec: 0" if ros2 else "  seq: 3\n  stamp:\n    secs: 0"
+    lines = [
+        f"header:\n{stamp}\n  frame_id: left",
+        "height: 480",
+        "width: 640",
+        "distortion_model: plumb_bob" if ros2 else 'distortion_model: "plumb_bob"',
+        flat("d", d),
+        flat("k", k),
+        flat("r", r),
+        flat("p", p),
+        f"binning_x: {extra.get('binning_x', '0')}",
+        "binning_y: 0",
+        "roi:",
+        f"  x_offset: {extra.get('x_offset', '0')}",
+        "  y_offset: 0",
+        "  height: 0",
+        "  width: 0",
+        "  do_rectify: false",
+        "---",
+    ]
+    return "\n".join(lines) + "\n"
+
+
+@pytest.mark.parametrize("ros2", [False, True])
+def test_ros_camera_info_as_topic_echo_prints_it(tmp_path: Path, ros2: bool) -> None:
+    """The camera_info a robot publishes, saved with `rostopic echo -n1` or `ros2 topic echo
+    --once` (K, D, R, P or k, d, r, p as flat lists, width, height, a closing "---"): ROS 1's
+    went to the OpenCV reader (its "R" is an OpenCV key) and failed with "missing key K1 or
+    M1", ROS 2's was "not a calibration file this reader knows"."""
+    cv2 = pytest.importorskip("cv2", reason="opencv-python-headless is not installed")
+    t = np.array([-0.12, 0.001, 0.0005])
+    r1, r2, p1, p2, _, _, _ = cv2.stereoRectify(K1, D1, K2, D2, (640, 480), R, t.reshape(3, 1))
+    lp = write(tmp_path / "left.yaml", camera_info_message(K1, D1, r1, p1, ros2))
+    rp = write(tmp_path / "right.yaml", camera_info_message(K2, D2, r2, p2, ros2))
+    c = read_stereo_calibration(lp, second_path=rp)
+    np.testing.assert_allclose(c.R, R, atol=1e-12)
+    np.testing.assert_allclose(c.T, t, atol=1e-12)
+    np.testing.assert_array_equal(c.K1, K1)
+    np.testing.assert_array_equal(c.D2, D2)
+    np.testing.assert_array_equal(c.P2, p2)
+    assert c.image_size == (640, 480) and c.distortion_model == "plumb_bob"
+    assert c.to_rig().baseline_mm == pytest.approx(1000 * np.linalg.norm(t), rel=1e-12)
+    key = "p" if ros2 else "P"
+    bad = camera_info_message(K2, D2, r2, p2[:, :3], ros2)
+    with pytest.raises(ValueError, match=rf"right\.yaml: {key} must be 12 numbers .*got 9"):
+        read_stereo_calibration(lp, second_path=write(tmp_path / "right.yaml", bad))
+    bad = camera_info_message(K2, D2, r2, p2, ros2, binning_x="2")
+    with pytest.raises(ValueError, match=r"right\.yaml: binning_x is 2: binned camera_info"):
+        read_stereo_calibration(lp, second_path=write(tmp_path / "right.yaml", bad))
+    bad = camera_info_message(K2, D2, r2, p2, ros2, x_offset="8")
+    with pytest.raises(ValueError, match=r"right\.yaml: roi is .*a camera_info of a region"):
+        read_stereo_calibration(lp, second_path=write(tmp_path / "right.yaml", bad))
+    bad = camera_info_message(K2 * np.nan, D2, r2, p2, ros2)
+    k_key = "k" if ros2 else "K"
+    with pytest.raises(
+        ValueError, match=rf"right\.yaml: {k_key} must be a list of numbers, got \['nan'"
+    ):
+        read_stereo_calibration(lp, second_path=write(tmp_path / "right.yaml", bad))
+
+
 P_LEFT = np.hstack([np.array([[690.0, 0, 300], [0, 690, 238], [0, 0, 1]]), np.zeros((3, 1))])
 P_FX700 = np.hstack([np.array([[700.0, 0, 300], [0, 690, 238], [0, 0, 1]]), [[-82.8], [0], [0]]])
 

@@ -13,7 +13,7 @@ from .kalibr import read_kalibr_stereo_calibration
 from .kitti import read_kitti_calib, read_kitti_stereo_calibration
 from .middlebury import read_middlebury_calib, read_middlebury_stereo_calibration
 from .opencv import _OPENCV_NAMES, read_opencv_stereo_calibration
-from .ros import read_ros_stereo_calibration
+from .ros import _is_camera_info_message, read_ros_stereo_calibration
 from .stereo import Calibration, StereoCalibration
 
 __all__ = ["read_calibration", "read_stereo_calibration", "rectified_format"]
@@ -53,8 +53,9 @@ def read_stereo_calibration(
     - OpenCV FileStorage XML (``<opencv_storage>``), YAML or JSON (keys such as M1, K1, R, T):
       :func:`read_opencv_stereo_calibration`, ``second_path`` the second file when the
       calibration is split in two (intrinsics and extrinsics);
-    - ROS camera_info YAML (``camera_matrix``): :func:`read_ros_stereo_calibration`, the
-      left camera's file, ``second_path`` the right camera's (required);
+    - ROS camera_info YAML (``camera_matrix``, or a CameraInfo message as ``rostopic echo``
+      or ``ros2 topic echo`` prints it): :func:`read_ros_stereo_calibration`, the left
+      camera's file, ``second_path`` the right camera's (required);
     - Kalibr camchain YAML (``cam0`` with ``intrinsics``):
       :func:`read_kalibr_stereo_calibration`;
     - Middlebury ``calib.txt`` (``cam0=[...]``): :func:`read_middlebury_stereo_calibration`;
@@ -119,7 +120,7 @@ def read_stereo_calibration(
         if head.startswith("%YAML") or "!!opencv-" in text:
             raise  # an OpenCV file with a fault: say which
         raise _fail(str(p), f"{known}; as YAML: {str(exc)[len(str(p)) + 2 :]}") from exc
-    if "camera_matrix" in tree:
+    if "camera_matrix" in tree or _is_camera_info_message(tree):
         refuse("ROS camera_info", distortion_model=distortion_model, cameras=cameras)
         if second_path is None:
             raise _fail(
