@@ -86,9 +86,10 @@ _NAMED_COUNTS = {"rational_polynomial": (8,), "radtan": (4,)}
 ROTATION_TOLERANCE = 1e-5
 
 
-#: Below this |R R^T - I| a rotation is kept bit for bit (the rounding of a double); above it
-#: (and within ROTATION_TOLERANCE) it is replaced by the nearest rotation.
-_EXACT_ROTATION = 1e-12
+#: Within this |R R^T - I| (and |det R - 1|) a rotation is kept bit for bit: what the readers
+#: took before, float32 files' rotations included, and what the rectifier's own check takes;
+#: beyond it (and within ROTATION_TOLERANCE) it is replaced by the nearest rotation.
+_EXACT_ROTATION = 1e-6
 
 
 #: The largest calibration file read, bytes: the files of every format here are a few kB; a
@@ -146,9 +147,9 @@ def _check_intrinsics(value: Any, where: str, key: str) -> np.ndarray:
 
 
 def _check_rotation(value: Any, where: str, key: str) -> np.ndarray:
-    """A rotation within :data:`ROTATION_TOLERANCE`, made exact: a matrix rounded in print is
-    replaced by the nearest rotation (U V^T of its SVD, as OpenCV's Rodrigues does), so that
-    what is built from it (R = R2^T R1, the rectifier's own 1e-6 check) is a rotation."""
+    """A rotation within :data:`ROTATION_TOLERANCE`; one further than 1e-6 from orthonormal (a
+    matrix rounded in print) is replaced by the nearest rotation (U V^T of its SVD, as
+    OpenCV's Rodrigues does), so that the rectifier's own 1e-6 check takes it."""
     r = _check_array(value, where, key, (3, 3))
     err = float(np.abs(r @ r.T - np.eye(3)).max())
     det = float(np.linalg.det(r))
