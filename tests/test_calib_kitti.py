@@ -94,3 +94,36 @@ def test_the_right_camera_must_be_right_of_the_left(tmp_path: Path) -> None:
         calib.read_kitti_calib(write(tmp_path, kitti_2012()), (3, 2))
     with pytest.raises(ValueError, match=r"cams must be two different KITTI cameras, got \(2, 2\)"):
         calib.read_kitti_calib(write(tmp_path, kitti_2012()), (2, 2))
+
+
+def test_the_rectified_size_is_the_calibrations_image_size(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """calib_cam_to_cam.txt's S_rect_0i is the size of the rectified images: read_kitti_calib
+    left it out, so `stereodepth match` (and batch) matched images of another size, e.g.
+    downscaled ones, with depths off by the scale factor and no word; Middlebury's width
+    and height were checked so already."""
+    sizes = "S_rect_02: 1.242000e+03 3.750000e+02\nS_rect_03: 1.242000e+03 3.750000e+02\n"
+    path = write(tmp_path, kitti_2012() + sizes)
+    assert calib.read_kitti_calib(path).image_size == (1242, 375)
+    assert calib.read_calibration(path).image_size == (1242, 375)
+    assert calib.read_kitti_calib(write(tmp_path, kitti_2012())).image_size is None
+    path = write(tmp_path, kitti_2012() + "S_rect_02: 1242 -375\n")
+    with pytest.raises(ValueError, match=r"000000\.txt: S_rect_02 must be two whole numbers > 0"):
+        calib.read_kitti_calib(path)
+
+    pytest.importorskip("PIL", reason="reading images needs Pillow")
+    import numpy as np
+    from PIL import Image
+
+    from stereodepth.cli import main
+
+    path = write(tmp_path, kitti_2012() + sizes)
+    img = np.zeros((188, 621), np.uint8)
+    Image.fromarray(img).save(tmp_path / "l.png")
+    Image.fromarray(img).save(tmp_path / "r.png")
+    args = [str(tmp_path / n) for n in ("l.png", "r.png")] + ["--calib", str(path)]
+    assert main(["match", *args, "-o", str(tmp_path / "o-"), "--no-preview"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1
+    assert "must have the size of the calibration in --calib, 1242x375 px, got 621x188" in err

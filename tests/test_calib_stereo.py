@@ -265,7 +265,7 @@ def test_opencv_distortion_forms(tmp_path: Path) -> None:
     assert c.distortion_model == "plumb_bob"
 
 
-NOT_ROTATION = r"must be a rotation \(R R\^T = I and det R = \+1 within 1e-06\)"
+NOT_ROTATION = r"must be a rotation \(R R\^T = I and det R = \+1 within 1e-05\)"
 
 
 @pytest.mark.parametrize(
@@ -519,6 +519,106 @@ def test_ros_recovers_opencv_r_and_t(tmp_path: Path) -> None:
         np.testing.assert_allclose(c.T, t, atol=1e-12)
 
 
+def test_ros_rotations_printed_to_6_digits(tmp_path: Path) -> None:
+    """camera_info files saved by ROS's C++ camera_calibration_parsers (and many copied by
+    hand) print 6 significant digits: |R R^T - I| reaches about 3e-6 in each file and R =
+    R2^T R1 composes two of them. Most such pairs were refused ("R must be a rotation ...
+    1e-06", naming an R that is in neither file); they read as the nearest rotations."""
+    cv2 = pytest.importorskip("cv2", reason="opencv-python-headless is not installed")
+    from stereodepth import StereoRectifier
+
+    def six(a: np.ndarray) -> np.ndarray:
+        return np.array([float(f"{v:.6g}") for v in a.ravel()]).reshape(a.shape)
+
+    rng = np.random.default_rng(1)
+    for t in (np.array([-0.12, 0.002, 0.001]), np.array([0.002, -0.12, 0.001])):
+        for _ in range(8):
+            r = rot(*rng.normal(scale=0.03, size=3))
+            r1, r2, p1, p2, _, _, _ = cv2.stereoRectify(
+                K1, D1, K2, D2, (640, 480), r, t.reshape(3, 1)
+            )
+            lp, rp = ros_pair(tmp_path, {"r": six(r1), "p": six(p1)}, {"r": six(r2), "p": six(p2)})
+            c = read_stereo_calibration(lp, second_path=rp)
+            for m in (c.R1, c.R2):  # what the rectifier's 1e-6 check takes
+                assert np.abs(m @ m.T - np.eye(3)).max() <= 1e-6
+            np.testing.assert_allclose(c.R, r, atol=1e-5)
+            np.testing.assert_allclose(c.T, t, atol=1e-6)
+            np.testing.assert_allclose(c.R1, r1, atol=2e-6)
+            StereoRectifier.from_calibration(c)  # the rectifier's own 1e-6 check passes
+
+
+def camera_info_message(
+    k: np.ndarray, d: np.ndarray, r: np.ndarray, p: np.ndarray, ros2: bool, **extra: str
+) -> str:
+    """A CameraInfo message as `rostopic echo -n1` (ROS 1: K, D, R, P as flow lists) or
+    `ros2 topic echo --once` (ROS 2: k, d, r, p as block lists) prints it, "---" included."""
+
+    def flat(name: str, a: np.ndarray) -> str:
+        values = [repr(float(v)) for v in a.ravel()]
+        if not ros2:
+            return f"{name.upper()}: [{', '.join(values)}]"
+        return f"{name}:\n" + "".join(f"- {v}\n" for v in values).rstrip("\n")
+
+    stamp = "  stamp:\n    sec: 0\n    nanosec: 0" if ros2 else "  seq: 3\n  stamp:\n    secs: 0"
+    lines = [
+        f"header:\n{stamp}\n  frame_id: left",
+        "height: 480",
+        "width: 640",
+        "distortion_model: plumb_bob" if ros2 else 'distortion_model: "plumb_bob"',
+        flat("d", d),
+        flat("k", k),
+        flat("r", r),
+        flat("p", p),
+        f"binning_x: {extra.get('binning_x', '0')}",
+        "binning_y: 0",
+        "roi:",
+        f"  x_offset: {extra.get('x_offset', '0')}",
+        "  y_offset: 0",
+        "  height: 0",
+        "  width: 0",
+        "  do_rectify: false",
+        "---",
+    ]
+    return "\n".join(lines) + "\n"
+
+
+@pytest.mark.parametrize("ros2", [False, True])
+def test_ros_camera_info_as_topic_echo_prints_it(tmp_path: Path, ros2: bool) -> None:
+    """The camera_info a robot publishes, saved with `rostopic echo -n1` or `ros2 topic echo
+    --once` (K, D, R, P or k, d, r, p as flat lists, width, height, a closing "---"): ROS 1's
+    went to the OpenCV reader (its "R" is an OpenCV key) and failed with "missing key K1 or
+    M1", ROS 2's was "not a calibration file this reader knows"."""
+    cv2 = pytest.importorskip("cv2", reason="opencv-python-headless is not installed")
+    t = np.array([-0.12, 0.001, 0.0005])
+    r1, r2, p1, p2, _, _, _ = cv2.stereoRectify(K1, D1, K2, D2, (640, 480), R, t.reshape(3, 1))
+    lp = write(tmp_path / "left.yaml", camera_info_message(K1, D1, r1, p1, ros2))
+    rp = write(tmp_path / "right.yaml", camera_info_message(K2, D2, r2, p2, ros2))
+    c = read_stereo_calibration(lp, second_path=rp)
+    np.testing.assert_allclose(c.R, R, atol=1e-12)
+    np.testing.assert_allclose(c.T, t, atol=1e-12)
+    np.testing.assert_array_equal(c.K1, K1)
+    np.testing.assert_array_equal(c.D2, D2)
+    np.testing.assert_array_equal(c.P2, p2)
+    assert c.image_size == (640, 480) and c.distortion_model == "plumb_bob"
+    assert c.to_rig().baseline_mm == pytest.approx(1000 * np.linalg.norm(t), rel=1e-12)
+    key = "p" if ros2 else "P"
+    bad = camera_info_message(K2, D2, r2, p2[:, :3], ros2)
+    with pytest.raises(ValueError, match=rf"right\.yaml: {key} must be 12 numbers .*got 9"):
+        read_stereo_calibration(lp, second_path=write(tmp_path / "right.yaml", bad))
+    bad = camera_info_message(K2, D2, r2, p2, ros2, binning_x="2")
+    with pytest.raises(ValueError, match=r"right\.yaml: binning_x is 2: binned camera_info"):
+        read_stereo_calibration(lp, second_path=write(tmp_path / "right.yaml", bad))
+    bad = camera_info_message(K2, D2, r2, p2, ros2, x_offset="8")
+    with pytest.raises(ValueError, match=r"right\.yaml: roi is .*a camera_info of a region"):
+        read_stereo_calibration(lp, second_path=write(tmp_path / "right.yaml", bad))
+    bad = camera_info_message(K2 * np.nan, D2, r2, p2, ros2)
+    k_key = "k" if ros2 else "K"
+    with pytest.raises(
+        ValueError, match=rf"right\.yaml: {k_key} must be a list of numbers, got \['nan'"
+    ):
+        read_stereo_calibration(lp, second_path=write(tmp_path / "right.yaml", bad))
+
+
 P_LEFT = np.hstack([np.array([[690.0, 0, 300], [0, 690, 238], [0, 0, 1]]), np.zeros((3, 1))])
 P_FX700 = np.hstack([np.array([[700.0, 0, 300], [0, 690, 238], [0, 0, 1]]), [[-82.8], [0], [0]]])
 
@@ -664,6 +764,44 @@ def test_kalibr(tmp_path: Path) -> None:
         kalibr_yaml([{"model": "equidistant"}, {"T": transform(RA, TA), "model": "equidistant"}]),
     )
     assert read_stereo_calibration(fish).distortion_model == "equidistant"
+
+
+def test_ros_and_kalibr_refuse_a_baseline_in_mm_read_as_metres(tmp_path: Path) -> None:
+    """A ROS or Kalibr calibration of a target measured in mm (``--square 108`` for 0.108 m)
+    says metres by convention but holds a 120 m baseline: it was read so without a word, every
+    depth 1000 times too large. As for OpenCV files, over 10 m needs translation_unit."""
+    kp = np.array([[690.0, 0.0, 300.0], [0.0, 690.0, 238.0], [0.0, 0.0, 1.0]])
+    p1 = np.hstack([kp, np.zeros((3, 1))])
+    p2 = np.hstack([kp, np.array([[-690.0 * 120.0], [0.0], [0.0]])])
+    lp, rp = ros_pair(tmp_path, {"p": p1}, {"p": p2})
+    with pytest.raises(
+        ValueError,
+        match=r"right\.yaml: projection_matrix gives a baseline of 120: read as metres "
+        r"\(ROS's convention; no translation unit given\) that is an unlikely 120 m.*'mm'",
+    ):
+        read_stereo_calibration(lp, second_path=rp)
+    c = read_stereo_calibration(lp, second_path=rp, translation_unit="mm")
+    assert c.baseline_m == pytest.approx(0.12, rel=1e-14)
+    c = read_stereo_calibration(lp, second_path=rp, translation_unit="m")
+    assert c.baseline_m == pytest.approx(120.0, rel=1e-14)
+    path = write(
+        tmp_path / "camchain.yaml",
+        kalibr_yaml([{}, {"T": transform(RA, TA * 1000)}, {"T": transform(RB, TB * 1000)}]),
+    )
+    with pytest.raises(
+        ValueError,
+        match=r"camchain\.yaml: cam2\.T_cn_cnm1 @ cam1\.T_cn_cnm1 gives a baseline of 200\.?\d*: "
+        r"read as metres \(Kalibr's convention",
+    ):
+        read_stereo_calibration(path, cameras=(2, 0))
+    with pytest.raises(ValueError, match=r"cam1\.T_cn_cnm1 gives a baseline of 110"):
+        read_stereo_calibration(path)
+    c = read_stereo_calibration(path, translation_unit="mm")
+    np.testing.assert_allclose(c.T, TA, rtol=1e-15)
+    # a long rig in metres is accepted when said so (and a 9 m one without a word)
+    np.testing.assert_array_equal(read_stereo_calibration(path, translation_unit="m").T, TA * 1000)
+    nine = write(tmp_path / "nine.yaml", kalibr_yaml([{}, {"T": transform(RA, [-9.0, 0, 0])}]))
+    assert read_stereo_calibration(nine).baseline_m == 9.0
 
 
 @pytest.mark.parametrize(

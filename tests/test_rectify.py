@@ -746,6 +746,66 @@ def test_stereo_rectify_rejects(change: dict[str, Any], exc: type, match: str) -
             reference.stereo_rectify(**args)
 
 
+def test_stereo_rectify_takes_a_rotation_rounded_in_print(cv2: Any) -> None:
+    """An R printed to 6 significant digits (a calibration file, a README) is up to about
+    3e-6 from orthonormal: cv2.stereoRectify takes it (its Rodrigues conversion makes it the
+    nearest rotation), stereo_rectify refused some with a 1e-6 check; it now takes them within
+    1e-5, as the calibration readers do, and gives OpenCV's result."""
+    args = good_args()
+    rng = np.random.default_rng(0)
+    refused_before = 0
+    for _ in range(200):
+        r = rotation(rng.normal(scale=0.05, size=3))
+        r6 = np.array([float(f"{v:.6g}") for v in r.ravel()]).reshape(3, 3)
+        refused_before += float(np.abs(r6 @ r6.T - np.eye(3)).max()) > 1e-6
+        args["R"] = r6
+        ours = stereo_rectify(**args)
+        oracle = reference.stereo_rectify(**args)
+        theirs = cv2.stereoRectify(
+            args["K1"],
+            cv_dist(np.asarray(args["D1"])),
+            args["K2"],
+            cv_dist(np.asarray(args["D2"])),
+            args["image_size"],
+            r6,
+            np.asarray(args["T"], dtype=np.float64).reshape(3, 1),
+            alpha=-1,
+            flags=cv2.CALIB_ZERO_DISPARITY,
+        )
+        for a, b, o in zip(ours[:5], theirs[:5], oracle[:5], strict=True):
+            np.testing.assert_allclose(a, b, rtol=1e-9, atol=1e-9 * np.abs(b).max())
+            np.testing.assert_allclose(o, b, rtol=1e-9, atol=1e-9 * np.abs(b).max())
+    assert refused_before > 0
+    # the maps take such an R1 as given, as cv2.initUndistortRectifyMap does
+    r1 = stereo_rectify(**good_args()).R1
+    r1_6 = np.array([float(f"{v:.6g}") for v in r1.ravel()]).reshape(3, 3)
+    for _ in range(20):
+        if float(np.abs(r1_6 @ r1_6.T - np.eye(3)).max()) > 1e-6:
+            break
+        r1_6 = np.array(
+            [float(f"{v:.6g}") for v in (r1_6 + rng.normal(scale=2e-6, size=(3, 3))).ravel()]
+        ).reshape(3, 3)
+    assert float(np.abs(r1_6 @ r1_6.T - np.eye(3)).max()) > 1e-6
+    p1 = stereo_rectify(**good_args()).P1
+    size = good_args()["image_size"]
+    mx, my = stereodepth.init_undistort_rectify_map(
+        good_args()["K1"], good_args()["D1"], r1_6, p1, size
+    )
+    ox, oy = reference.init_undistort_rectify_map(
+        good_args()["K1"], good_args()["D1"], r1_6, p1, size
+    )
+    cx, cy = cv2.initUndistortRectifyMap(
+        good_args()["K1"], cv_dist(np.asarray(good_args()["D1"])), r1_6, p1, size, cv2.CV_32FC1
+    )
+    np.testing.assert_array_equal(mx, ox)
+    np.testing.assert_array_equal(my, oy)
+    np.testing.assert_array_equal(mx, cx)  # bit for bit, as for exact rotations
+    np.testing.assert_array_equal(my, cy)
+    args["R"] = args["R"] + 1e-4
+    with pytest.raises(ValueError, match=r"R must be a rotation matrix \(orthonormal within 1e-05"):
+        stereo_rectify(**args)
+
+
 @pytest.mark.parametrize(
     ("kwargs", "exc", "match"),
     [

@@ -76,8 +76,8 @@ def add_raw_flags(group: Any) -> None:
     group.add_argument(
         "--translation-unit",
         choices=tuple(TRANSLATION_UNITS),
-        help="unit of the translations in a raw --calib file (default: metres, and an OpenCV "
-        "file whose baseline would then exceed 10 m is refused as probably in mm)",
+        help="unit of the translations in a raw --calib file (default: metres, and a file "
+        "whose baseline would then exceed 10 m is refused as probably in mm)",
     )
     group.add_argument(
         "--distortion-model",

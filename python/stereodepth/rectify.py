@@ -155,14 +155,30 @@ def _size(name: str, value: Any) -> tuple[int, int]:
     return w, h
 
 
-def _rotation(name: str, value: Any) -> np.ndarray:
+#: How far from orthonormal R may be in :func:`stereo_rectify`: as the calibration readers'
+#: ``ROTATION_TOLERANCE``, what a rotation printed to 6 significant digits keeps.
+_ROUNDED_ROTATION = 1e-5
+
+
+def _rotation(name: str, value: Any, tolerance: float = 1e-6) -> np.ndarray:
     R = _real_matrix(name, value, (3, 3))
     err = float(np.abs(R @ R.T - np.eye(3)).max())
-    if err > 1e-6 or np.linalg.det(R) <= 0:
+    det = float(np.linalg.det(R))
+    if err > tolerance or det <= 0 or abs(det - 1.0) > tolerance:
         raise ValueError(
-            f"{name} must be a rotation matrix (orthonormal, determinant +1), got {R.tolist()}"
+            f"{name} must be a rotation matrix (orthonormal within {tolerance:g}, determinant "
+            f"+1), got {R.tolist()} (max |R R^T - I| = {err:.3g}, det = {det:.9g})"
         )
     return R
+
+
+def _nearest_rotation(R: np.ndarray) -> np.ndarray:
+    """R itself when orthonormal to 1e-12, else U V^T of its SVD: what cv2.stereoRectify makes
+    of a rounded R (its Rodrigues conversion)."""
+    if float(np.abs(R @ R.T - np.eye(3)).max()) <= 1e-12:
+        return R
+    u, _, vt = np.linalg.svd(R)
+    return np.ascontiguousarray(u @ vt)
 
 
 def _alpha(value: Any) -> float:
@@ -202,7 +218,9 @@ def stereo_rectify(
         ``(width, height)`` of the raw images in pixels.
     R, T
         (3, 3) rotation and (3,) translation from the first camera's frame to the second's
-        (``x2 = R @ x1 + T``), as ``cv2.stereoCalibrate``; T in metres. The rig is horizontal
+        (``x2 = R @ x1 + T``), as ``cv2.stereoCalibrate``; T in metres. An R rounded in print
+        (orthonormal within 1e-5, as 6 significant digits leave it) is replaced by the
+        nearest rotation, as ``cv2.stereoRectify`` does. The rig is horizontal
         when the rotated baseline's x component is the larger, else vertical; a T whose z
         component is the largest (one camera behind the other) is refused.
     alpha
@@ -246,7 +264,7 @@ def stereo_rectify(
     d1 = _distortion("D1", D1, model)
     d2 = _distortion("D2", D2, model)
     width, height = _size("image_size", image_size)
-    rot = _rotation("R", R)
+    rot = _nearest_rotation(_rotation("R", R, _ROUNDED_ROTATION))
     t = _real_matrix("T", T, (3,))
     if not np.any(t != 0):
         raise ValueError("T must not be zero: the cameras need a baseline, got [0, 0, 0]")
@@ -323,8 +341,10 @@ def init_undistort_rectify_map(
     (R1 or R2, or None for the identity), ``P`` the new (3, 3) camera matrix or the (3, 4)
     projection (P1 or P2). As ``cv2.initUndistortRectifyMap`` (``cv2.fisheye.`` for
     ``"equidistant"``) with ``CV_32FC1`` maps: float64 per pixel, rounded once to float32 (in
-    tests they equal OpenCV's bit for bit). Behind the camera (equidistant only) the maps
-    hold -1e6.
+    tests they equal OpenCV's bit for bit). ``R`` may be a rotation rounded in print
+    (orthonormal within 1e-5, as a camera_info's rectification_matrix printed to 6
+    significant digits): it is used as given, ``(P R)^-1`` inverted in full as OpenCV does.
+    Behind the camera (equidistant only) the maps hold -1e6.
 
     Returns ``(map_x, map_y)``, two (height, width) float32 arrays of raw column and row.
     Rows are split over ``threads`` (None or 0: every core); the maps do not depend on it.
@@ -333,7 +353,7 @@ def init_undistort_rectify_map(
     m = _model("model", model)
     k = _camera_matrix("K", K)
     d = _distortion("D", D, m)
-    rot = np.eye(3) if R is None else _rotation("R", R)
+    rot = np.eye(3) if R is None else _rotation("R", R, _ROUNDED_ROTATION)
     p = check.real_array("P", P)
     if p.shape == (3, 4):
         p = p[:, :3]

@@ -190,14 +190,22 @@ def init_undistort_rectify_map(
 ) -> tuple[np.ndarray, np.ndarray]:
     """Oracle of :func:`stereodepth.init_undistort_rectify_map`: the same float64 operations
     in the same order, rounded once to float32 (``threads`` is checked, then unused)."""
-    from .rectify import _camera_matrix, _distortion, _model, _real_matrix, _rotation, _size
+    from .rectify import (
+        _ROUNDED_ROTATION,
+        _camera_matrix,
+        _distortion,
+        _model,
+        _real_matrix,
+        _rotation,
+        _size,
+    )
 
     m = _model("model", model)
     k_mat = _camera_matrix("K", K)
     d = np.zeros(8)
     coeffs = _distortion("D", D, m)
     d[: coeffs.size] = coeffs
-    rot = np.eye(3) if R is None else _rotation("R", R)
+    rot = np.eye(3) if R is None else _rotation("R", R, _ROUNDED_ROTATION)
     p = check.real_array("P", P)
     p = _real_matrix("P", p[:, :3] if p.shape == (3, 4) else p, (3, 3))
     width, height = _size("size", size)
@@ -466,12 +474,14 @@ def _stereo_rectify(
     fov_scale: float,
 ) -> Any:
     from .rectify import (
+        _ROUNDED_ROTATION,
         Rectification,
         _alpha,
         _camera_matrix,
         _check_finite_rectification,
         _distortion,
         _model,
+        _nearest_rotation,
         _real_matrix,
         _rotation,
         _size,
@@ -481,7 +491,7 @@ def _stereo_rectify(
     k1, k2 = _camera_matrix("K1", K1), _camera_matrix("K2", K2)
     d1, d2 = _distortion("D1", D1, model), _distortion("D2", D2, model)
     w, h = _size("image_size", image_size)
-    rot = _rotation("R", R)
+    rot = _nearest_rotation(_rotation("R", R, _ROUNDED_ROTATION))
     t_in = _real_matrix("T", T, (3,))
     a = _alpha(alpha)
     nw, nh = (w, h) if new_image_size is None else _size("new_image_size", new_image_size)

@@ -79,8 +79,17 @@ _MODEL_ALIASES = {
 _NAMED_COUNTS = {"rational_polynomial": (8,), "radtan": (4,)}
 
 
-#: How close R R^T must be to I and det R to +1.
-ROTATION_TOLERANCE = 1e-6
+#: How close R R^T must be to I and det R to +1. Files print their rotations rounded: C++'s
+#: default 6 significant digits (ROS camera_calibration_parsers, hand-copied files) leave
+#: |R R^T - I| up to about 3e-6, and ROS's R = R2^T R1 composes two such roundings; 1e-5
+#: accepts them and still refuses a matrix off by 1e-5 in every entry.
+ROTATION_TOLERANCE = 1e-5
+
+
+#: Within this |R R^T - I| (and |det R - 1|) a rotation is kept bit for bit: what the readers
+#: took before, float32 files' rotations included, and what the rectifier's own check takes;
+#: beyond it (and within ROTATION_TOLERANCE) it is replaced by the nearest rotation.
+_EXACT_ROTATION = 1e-6
 
 
 #: The largest calibration file read, bytes: the files of every format here are a few kB; a
@@ -138,6 +147,9 @@ def _check_intrinsics(value: Any, where: str, key: str) -> np.ndarray:
 
 
 def _check_rotation(value: Any, where: str, key: str) -> np.ndarray:
+    """A rotation within :data:`ROTATION_TOLERANCE`; one further than 1e-6 from orthonormal (a
+    matrix rounded in print) is replaced by the nearest rotation (U V^T of its SVD, as
+    OpenCV's Rodrigues does), so that the rectifier's own 1e-6 check takes it."""
     r = _check_array(value, where, key, (3, 3))
     err = float(np.abs(r @ r.T - np.eye(3)).max())
     det = float(np.linalg.det(r))
@@ -147,6 +159,9 @@ def _check_rotation(value: Any, where: str, key: str) -> np.ndarray:
             f"{key} must be a rotation (R R^T = I and det R = +1 within {ROTATION_TOLERANCE:g}), "
             f"got max |R R^T - I| = {err:.3g} and det R = {det:.9g}",
         )
+    if err > _EXACT_ROTATION or abs(det - 1.0) > _EXACT_ROTATION:
+        u, _, vt = np.linalg.svd(r)
+        r = u @ vt
     return r
 
 
@@ -219,6 +234,23 @@ def _to_float(v: Any) -> float | None:
 #: baseline (and every depth) 1000 times too large, so such a file is refused and the unit
 #: must be given (``"m"`` accepts any length).
 MAX_IMPLICIT_BASELINE_M = 10.0
+
+
+def _check_implicit_baseline(
+    length: float, translation_unit: str | None, where: str, what: str, convention: str
+) -> None:
+    """ValueError when no ``translation_unit`` was given and ``length`` (the baseline read as
+    metres, from ``what``) exceeds :data:`MAX_IMPLICIT_BASELINE_M`: a file whose target was
+    measured in millimetres (ROS's ``--square 108`` for 0.108 m, a Kalibr target yaml in mm)
+    states metres by its ``convention`` but gives every depth 1000 times too large."""
+    if translation_unit is None and length > MAX_IMPLICIT_BASELINE_M:
+        raise _fail(
+            where,
+            f"{what} gives a baseline of {length:g}: read as metres ({convention}; no "
+            f"translation unit given) that is an unlikely {length:g} m, far more likely a "
+            "calibration target measured in millimetres; give the unit with "
+            "translation_unit, e.g. 'mm', or 'm' to accept metres",
+        )
 
 
 def _unit(translation_unit: str | None) -> float:

@@ -122,6 +122,9 @@ def _yaml_tree(p: Path, text: str) -> dict[str, Any]:
     # OpenCV writes "%YAML:1.0" (before 5.0; "%YAML 1.2" since): a YAML 1.1 parser wants
     # neither. Blank the line, keeping the line numbers of error messages.
     text = re.sub(r"\A%YAML[: ]?[ \t]*\d+\.\d+[ \t]*", "", text)
+    # `rostopic echo` and `ros2 topic echo` end each message with a "---" line: one message
+    # saved to a file is one document followed by an empty one.
+    text = re.sub(r"\n---[ \t]*\n?\s*\Z", "\n", text)
     try:
         tree = yaml.load(text, Loader=Loader)  # a SafeLoader: no arbitrary objects
     except yaml.YAMLError as exc:

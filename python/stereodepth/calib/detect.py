@@ -13,7 +13,7 @@ from .kalibr import read_kalibr_stereo_calibration
 from .kitti import read_kitti_calib, read_kitti_stereo_calibration
 from .middlebury import read_middlebury_calib, read_middlebury_stereo_calibration
 from .opencv import _OPENCV_NAMES, read_opencv_stereo_calibration
-from .ros import read_ros_stereo_calibration
+from .ros import _is_camera_info_message, read_ros_stereo_calibration
 from .stereo import Calibration, StereoCalibration
 
 __all__ = ["read_calibration", "read_stereo_calibration", "rectified_format"]
@@ -53,16 +53,17 @@ def read_stereo_calibration(
     - OpenCV FileStorage XML (``<opencv_storage>``), YAML or JSON (keys such as M1, K1, R, T):
       :func:`read_opencv_stereo_calibration`, ``second_path`` the second file when the
       calibration is split in two (intrinsics and extrinsics);
-    - ROS camera_info YAML (``camera_matrix``): :func:`read_ros_stereo_calibration`, the
-      left camera's file, ``second_path`` the right camera's (required);
+    - ROS camera_info YAML (``camera_matrix``, or a CameraInfo message as ``rostopic echo``
+      or ``ros2 topic echo`` prints it): :func:`read_ros_stereo_calibration`, the left
+      camera's file, ``second_path`` the right camera's (required);
     - Kalibr camchain YAML (``cam0`` with ``intrinsics``):
       :func:`read_kalibr_stereo_calibration`;
     - Middlebury ``calib.txt`` (``cam0=[...]``): :func:`read_middlebury_stereo_calibration`;
     - KITTI (``P2: ...`` or ``P_rect_02: ...`` lines): :func:`read_kitti_stereo_calibration`.
 
     The keywords go to the readers that take them: ``translation_unit`` (OpenCV, ROS,
-    Kalibr; None for metres, with OpenCV's plausibility check; Middlebury and KITTI files
-    state their unit, so only None or "m" is accepted there),
+    Kalibr; None for metres, with a plausibility check: a baseline over 10 m is refused;
+    Middlebury and KITTI files state their unit, so only None or "m" is accepted there),
     ``image_size`` (all), ``distortion_model`` (OpenCV), ``cameras`` (Kalibr, default (0, 1);
     KITTI, default (2, 3)). Raises FileNotFoundError, ValueError naming the file for an
     unknown format, a file over 4 MiB (``MAX_FILE_BYTES``: calibration files are a few kB),
@@ -119,7 +120,7 @@ def read_stereo_calibration(
         if head.startswith("%YAML") or "!!opencv-" in text:
             raise  # an OpenCV file with a fault: say which
         raise _fail(str(p), f"{known}; as YAML: {str(exc)[len(str(p)) + 2 :]}") from exc
-    if "camera_matrix" in tree:
+    if "camera_matrix" in tree or _is_camera_info_message(tree):
         refuse("ROS camera_info", distortion_model=distortion_model, cameras=cameras)
         if second_path is None:
             raise _fail(

@@ -12,6 +12,7 @@ from ._common import (
     _check_cameras,
     _check_distortion,
     _check_image_size,
+    _check_implicit_baseline,
     _check_intrinsics,
     _check_model,
     _check_rotation,
@@ -43,13 +44,16 @@ def read_kalibr_stereo_calibration(
     ``T_cn_cnm1``, the 4x4 transform from camera n-1 to camera n (metres).
 
     ``cameras`` picks the pair, left first (default ``cam0``, ``cam1``); transforms along
-    the chain are composed. ``translation_unit`` is "m" by Kalibr's convention.
+    the chain are composed. ``translation_unit`` is "m" by Kalibr's convention; without it
+    (None) a baseline over ``MAX_IMPLICIT_BASELINE_M`` (10 m) is refused, as for OpenCV
+    files: far more likely a target measured in mm; pass ``"m"`` to accept it.
 
     Raises FileNotFoundError, ImportError without PyYAML, and ValueError naming the file
     and the key (``cam1.T_cn_cnm1``) for a missing key, a wrong shape, a non-finite value, a
     transform whose rotation is not one or whose last row is not 0 0 0 1, an unsupported
     camera model, a distortion count that does not fit the model, and cameras with
-    different distortion models or resolutions; TypeError for ``cameras`` that are not
+    different distortion models or resolutions, or a baseline over 10 m read without a
+    translation unit; TypeError for ``cameras`` that are not
     integers."""
     scale = _unit(translation_unit)
     first, second = _check_cameras(cameras)
@@ -112,13 +116,20 @@ def read_kalibr_stereo_calibration(
         m = _check_array(field(n, "T_cn_cnm1"), where, key, (4, 4))
         if m[3].tolist() != [0.0, 0.0, 0.0, 1.0]:
             raise _fail(where, f"{key} must end with the row 0 0 0 1, got {m[3].tolist()}")
-        _check_rotation(m[:3, :3], where, f"{key}[:3, :3]")
+        m[:3, :3] = _check_rotation(m[:3, :3], where, f"{key}[:3, :3]")
         return m
 
     lo, hi = min(first, second), max(first, second)
     chain = np.eye(4)
     for n in range(lo + 1, hi + 1):
         chain = link(n) @ chain  # from cam{lo} to cam{n}
+    _check_implicit_baseline(
+        float(np.linalg.norm(chain[:3, 3])),
+        translation_unit,
+        where,
+        " @ ".join(f"cam{n}.T_cn_cnm1" for n in range(hi, lo, -1)),
+        "Kalibr's convention",
+    )
     if first > second:
         rot, tr = chain[:3, :3], chain[:3, 3]
         chain = np.eye(4)

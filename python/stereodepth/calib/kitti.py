@@ -105,7 +105,10 @@ def _rectified_pair(
 def read_kitti_calib(path: str | os.PathLike[str], cams: tuple[int, int] = (2, 3)) -> Calibration:
     """The rig of two rectified KITTI cameras (default 2 and 3, the colour pair): the left
     camera's focal length and principal point in pixels, the baseline in metres from the two
-    projection matrices, and doffs = cx_r - cx_l.
+    projection matrices, and doffs = cx_r - cx_l; ``image_size`` is the left camera's
+    ``S_rect_0i`` (calib_cam_to_cam.txt's rectified size; None in files without it, such as
+    KITTI 2012's), so that images of another size are refused rather than given depths off by
+    the scale factor.
 
     Raises FileNotFoundError, and ValueError naming the file, the line and what was wrong
     (see the module's documentation for the rules)."""
@@ -113,7 +116,8 @@ def read_kitti_calib(path: str | os.PathLike[str], cams: tuple[int, int] = (2, 3
     lc, rc = cams
     if lc == rc:
         raise ValueError(f"cams must be two different KITTI cameras, got {cams}")
-    pl, pr, baseline = _rectified_pair(p, _fields(p), lc, rc)
+    fields = _fields(p)
+    pl, pr, baseline = _rectified_pair(p, fields, lc, rc)
     return Calibration(
         focal_px=float(pl[0, 0]),
         baseline_m=baseline,
@@ -121,7 +125,18 @@ def read_kitti_calib(path: str | os.PathLike[str], cams: tuple[int, int] = (2, 3
         cx_px=float(pl[0, 2]),
         cy_px=float(pl[1, 2]),
         source=str(p),
+        image_size=_rectified_size(p, fields, lc),
     )
+
+
+def _rectified_size(
+    p: Path, fields: dict[str, tuple[int, str]], camera: int
+) -> tuple[int, int] | None:
+    """``S_rect_0{camera}`` (calib_cam_to_cam.txt's rectified image size), None if absent."""
+    key = f"S_rect_0{camera}"
+    if key not in fields:
+        return None
+    return _check_image_size(_numbers(p, fields, key, 2).tolist(), str(p), key)
 
 
 def read_kitti_stereo_calibration(
@@ -146,9 +161,6 @@ def read_kitti_stereo_calibration(
     p = _path(path)
     fields = _fields(p)
     pl, pr, baseline = _rectified_pair(p, fields, first, second)
-    size_key = f"S_rect_0{first}"
-    found = None
-    if size_key in fields:
-        found = _check_image_size(_numbers(p, fields, size_key, 2).tolist(), str(p), size_key)
-    size = _image_size_of(found, image_size, str(p), size_key)
+    found = _rectified_size(p, fields, first)
+    size = _image_size_of(found, image_size, str(p), f"S_rect_0{first}")
     return _rectified_calibration(pl[:, :3].copy(), pr[:, :3].copy(), baseline, size, str(p))

@@ -31,7 +31,9 @@ class StereoCalibration:
     A point X in the left camera's frame is ``R @ X + T`` in the right camera's frame (what
     ``cv2.stereoCalibrate`` returns). Every array is float64; the readers check the shapes,
     that every value is finite, that the rotations are rotations (``R R^T = I`` and
-    ``det R = +1`` within 1e-6) and that the distortion coefficients fit the model, and
+    ``det R = +1`` within 1e-5, what a rotation printed to 6 significant digits keeps; such
+    a rounded one is replaced by the nearest rotation) and that the distortion coefficients
+    fit the model, and
     raise ValueError naming the file and the key otherwise; building one directly runs the
     same checks and names the field.
 
