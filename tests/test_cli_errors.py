@@ -22,6 +22,20 @@ HAS_WEB = all(importlib.util.find_spec(m) is not None for m in ("fastapi", "uvic
 INTERNALS = ("__init__", "StereoMatcher", "BlockMatchOptions", "disparity_step_px", ".tmp")
 
 
+def one_line_usage_error(argv: list[str], capsys: pytest.CaptureFixture[str]) -> str:
+    """Runs ``main(argv)``; asserts exit status 2, nothing on stdout and one line on stderr,
+    and returns stderr."""
+    try:
+        status = main(argv)
+    except SystemExit as exc:  # argparse exits itself
+        status = exc.code  # type: ignore[assignment]
+    out, err = capsys.readouterr()
+    assert status == 2, err
+    assert out == ""
+    assert len(err.splitlines()) == 1, err
+    return err
+
+
 @pytest.fixture(scope="module")
 def scenes(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """A folder that eval reads as holding one scene (the files are never opened)."""
@@ -132,15 +146,8 @@ def test_error_is_one_line_status_2_no_traceback(
     argv: list[str], message: str, scenes: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     argv = [a.replace("{scenes}", str(scenes)) for a in argv]
-    try:
-        status = main(argv)
-    except SystemExit as exc:  # argparse exits itself
-        status = exc.code  # type: ignore[assignment]
-    out, err = capsys.readouterr()
-    assert status == 2, err
-    assert out == ""
+    err = one_line_usage_error(argv, capsys)
     lines = err.splitlines()
-    assert len(lines) == 1, err
     prefix = (
         "stereodepth: error: "
         if not argv or argv[0].startswith("-") or argv[0] == "bogus"
@@ -256,13 +263,7 @@ def usage_error_beside_a_pair(
     image.fromarray(np.roll(left, -2, axis=1)).save(tmp_path / "right.png")
     before = sorted(p.name for p in tmp_path.iterdir())
     monkeypatch.chdir(tmp_path)
-    try:
-        status = main(argv)
-    except SystemExit as exc:  # argparse exits itself
-        status = exc.code  # type: ignore[assignment]
-    out, err = capsys.readouterr()
-    assert status == 2, err
-    assert out == ""
+    err = one_line_usage_error(argv, capsys)
     assert err.splitlines() == [err.strip()], err
     assert sorted(p.name for p in tmp_path.iterdir()) == before
     return err

@@ -124,6 +124,28 @@ def key_value_option(text: str) -> tuple[str, Any]:
     return key, _scalar(raw)
 
 
+class KeyValueOnce(argparse.Action):
+    """argparse action of a repeatable ``--option KEY=VALUE`` (``type=key_value_option``):
+    appends the (key, value) pairs, and a KEY given twice is a usage error naming both values
+    (with ``action="append"`` the last one was used without a word)."""
+
+    def __call__(
+        self,
+        parser: argparse.ArgumentParser,
+        namespace: argparse.Namespace,
+        values: Any,
+        option_string: str | None = None,
+    ) -> None:
+        pairs = list(getattr(namespace, self.dest) or [])
+        key, value = values
+        for given, old in pairs:
+            if given == key:
+                parser.error(
+                    f"{option_string} {key} is given twice ({old!r} and {value!r}): give it once"
+                )
+        setattr(namespace, self.dest, [*pairs, (key, value)])
+
+
 def _scalar(raw: str) -> Any:
     """One value of ``--option``: bool, None, int, float or str."""
     low = raw.lower()

@@ -82,7 +82,7 @@ from typing import Any
 import numpy as np
 
 from . import _validate as check
-from .cli import key_value_option, path_arg
+from .cli import KeyValueOnce, key_value_option, path_arg
 from .depth import from_opencv_disparity
 from .matching import MAX_NUM_DISPARITIES
 from .metrics import DisparityMetrics, evaluate, negative_ground_truth
@@ -864,7 +864,7 @@ def register(subparsers: Any) -> None:
     )
     m.add_argument(
         "--option",
-        action="append",
+        action=KeyValueOnce,
         type=key_value_option,
         default=[],
         metavar="KEY=VALUE",
@@ -873,7 +873,7 @@ def register(subparsers: Any) -> None:
     )
     m.add_argument(
         "--sgm-option",
-        action="append",
+        action=KeyValueOnce,
         type=key_value_option,
         default=[],
         metavar="KEY=VALUE",
@@ -882,7 +882,7 @@ def register(subparsers: Any) -> None:
     )
     m.add_argument(
         "--opencv-option",
-        action="append",
+        action=KeyValueOnce,
         type=key_value_option,
         default=[],
         metavar="KEY=VALUE",
@@ -1025,19 +1025,6 @@ def _jsonable(value: Any) -> Any:
     return value
 
 
-def _options_once(flag: str, given: list[tuple[str, Any]]) -> dict[str, Any]:
-    """The ``KEY=VALUE`` pairs of a repeatable option flag as a dict; a KEY given twice is a
-    usage error naming both values (``dict`` kept the last one without a word)."""
-    out: dict[str, Any] = {}
-    for key, value in given:
-        if key in out:
-            raise _usage_error(
-                f"{flag} {key} is given twice ({out[key]!r} and {value!r}): give it once"
-            )
-        out[key] = value
-    return out
-
-
 def run(args: argparse.Namespace) -> int:
     """Runs ``stereodepth eval``; returns the exit status."""
     from ._extras import require
@@ -1058,13 +1045,13 @@ def run(args: argparse.Namespace) -> int:
             f"--num-disparities must be a positive multiple of 16, got {args.num_disparities}"
         )
     threads = args.threads or check.available_cores()
-    options = _options_once("--option", args.option)
-    sgm_options = _options_once("--sgm-option", args.sgm_option)
+    options = dict(args.option)
+    sgm_options = dict(args.sgm_option)
     for flag, given in (("--option", options), ("--sgm-option", sgm_options)):
         for key in given:
             if key in _RESERVED_OPTIONS:
                 raise _usage_error(f"{flag} {key}: {_RESERVED_OPTIONS[key]}")
-    opencv_options = _options_once("--opencv-option", args.opencv_option)
+    opencv_options = dict(args.opencv_option)
     variants = _variants(args.method or [("stereodepth", None)], args.block_size)
     scenes = find_scenes(args.dir, args.scene)
 

@@ -17,7 +17,7 @@ from .. import _validate as check
 from .._extras import require
 from .._methods import METHODS, check_method
 from ..calib import Calibration
-from ..cli import key_value_option, path_arg
+from ..cli import KeyValueOnce, key_value_option, path_arg
 from .calibration import (
     COMMAND_LINE,
     BatchRectifier,
@@ -138,7 +138,7 @@ def register(subparsers: Any) -> None:
     m.add_argument("--cost", choices=("census", "sad"), help="matching cost (bm only)")
     m.add_argument(
         "--option",
-        action="append",
+        action=KeyValueOnce,
         type=key_value_option,
         default=[],
         metavar="KEY=VALUE",
@@ -235,10 +235,6 @@ def _matcher_options(args: argparse.Namespace) -> dict[str, Any]:
             )
         if key not in known:
             raise not_an_option(f"--option {key}", key)
-        if key in opts:  # the last one was used without a word
-            raise UsageError(
-                f"--option {key} is given twice ({opts[key]!r} and {value!r}): give it once"
-            )
         opts[key] = value
         typed[key] = f"--option {key}"
     for key, flag in _FLAGS.items():
