@@ -70,6 +70,20 @@ ROWS: list[tuple[list[str], str]] = [
     (["--focal-px", "700"], "give both --focal-px and --baseline-mm"),
     (["--focal-px", "nan", "--baseline-mm", "100"], "--focal-px must be a finite number > 0"),
     (["--cx-px", "3"], "--cx-px goes with --focal-px and --baseline-mm"),
+    # a rig whose depths float32 cannot hold: refused in the flags' names before any pair
+    # (each pair failed after matching, with the library's message about float64 input)
+    (
+        ["--focal-px", "1e30", "--baseline-mm", "1e30"],
+        "--focal-px 1e+30 times --baseline-mm 1e+30 is 1e+57 px*m, outside the range",
+    ),
+    (
+        ["--focal-px", "1e-30", "--baseline-mm", "1e-20"],
+        "--focal-px 1e-30 times --baseline-mm 1e-20 is 1e-53 px*m, outside the range",
+    ),
+    (
+        ["--focal-px", "700", "--baseline-mm", "100", "--doffs-px", "1e40"],
+        "--doffs-px 1e+40 px is outside float32's range",
+    ),
     (["--calib", "{tmp}/nowhere.txt"], "--calib: calibration file not found"),
     (["--workers", "0"], "--workers must be an integer >= 1, got 0"),
     (["--threads", "-1"], "--threads must be an integer >= 0"),
@@ -264,3 +278,24 @@ def test_a_stem_too_long_for_its_file_names_is_refused_before_any_work(
     assert_one_line(status, err, "would be longer than a file name may be (255 bytes)")
     assert "give it a shorter stem in a CSV list" in err
     assert not out.exists()
+
+
+def test_a_calibration_file_whose_depths_float32_cannot_hold(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    # Given with --calib it stops the command before any pair, naming the file; found beside a
+    # pair it fails that pair alone, before matching, naming the file too. Both failed each
+    # pair after matching, with the library's message (focal_px * baseline_m, float64 input).
+    inp = scene(tmp_path)
+    calib = inp / "teddy" / "calib.txt"
+    calib.write_text(calib.read_text().replace("baseline=100", "baseline=1e40"))
+    status, err = run([str(inp), "-o", str(tmp_path / "out"), "--calib", str(calib)], capsys)
+    assert_one_line(
+        status, err, f"--calib {calib}: focal length 700 px times baseline 1e+37 m is 7e+39 px*m"
+    )
+    assert not (tmp_path / "out").exists()
+    status, err = run([str(inp), "-o", str(tmp_path / "out"), "--quiet"], capsys)
+    assert status == 1, err
+    record = (tmp_path / "out" / "teddy.record.json").read_text()
+    assert f"{calib}: focal length 700 px times baseline 1e+37 m is 7e+39 px*m" in record
+    assert not list((tmp_path / "out").glob("teddy.*.npy"))  # failed before matching

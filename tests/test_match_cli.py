@@ -306,6 +306,11 @@ def bad_cases(tmp: Path, left: Path, right: Path) -> list[tuple[list[Any], str]]
     (tmp / "bad_calib.txt").write_text("cam0=[1 0 0; 0 1 0]\nbaseline=100\n")
     wide_ndisp = write_middlebury_calib(tmp / "wide.txt", 96, 64)
     wide_ndisp.write_text(wide_ndisp.read_text().replace("ndisp=73", "ndisp=5000"))
+    absurd = tmp / "absurd.txt"  # 1e30 px times 1e20 mm
+    absurd.write_text(
+        "cam0=[1e30 0 48; 0 1e30 32; 0 0 1]\ncam1=[1e30 0 48; 0 1e30 32; 0 0 1]\n"
+        "doffs=0\nbaseline=1e20\nwidth=96\nheight=64\nndisp=16\n"
+    )
     return [
         ([tmp / "nope.png", right], "LEFT: image not found"),
         (
@@ -349,6 +354,21 @@ def bad_cases(tmp: Path, left: Path, right: Path) -> list[tuple[list[Any], str]]
         # the same file twice: every disparity 0, every depth unknown (batch's CSV refuses it)
         ([left, left], "LEFT and RIGHT are the same file"),
         ([left, tmp / ".." / tmp.name / left.name], "LEFT and RIGHT are the same file"),
+        # a rig whose depths float32 cannot hold: the message named focal_px * baseline_m and
+        # suggested float64 disparity, which a command-line user cannot give
+        (
+            [left, right, "--focal-px", "1e30", "--baseline-mm", "1e30"],
+            "--focal-px 1e+30 times --baseline-mm 1e+30 is 1e+57 px*m, outside the range "
+            "float32 depth maps can be computed from ([1.175e-38, 3.403e+38] px*m)",
+        ),
+        (
+            [left, right, "--focal-px", "700", "--baseline-mm", "100", "--doffs-px", "-1e39"],
+            "--doffs-px -1e+39 px is outside float32's range (|doffs| <= 3.403e+38)",
+        ),
+        (
+            [left, right, "--calib", absurd],
+            f"--calib {absurd}: focal length 1e+30 px times baseline 1e+17 m is 1e+47 px*m",
+        ),
         (  # a calib.txt's ndisp out of range was blamed on --min-disparity 0, never given
             [left, right, "--calib", wide_ndisp],
             f"--calib {wide_ndisp}: its ndisp=5000 is no search range for --method bm "

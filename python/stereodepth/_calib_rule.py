@@ -302,6 +302,39 @@ def rectified_rig(rectifier: Any) -> dict[str, float]:
     }
 
 
+def rig_range_problem(
+    focal_px: float, baseline_m: float, doffs_px: float, *, flags: bool = False
+) -> str | None:
+    """Why the commands' float32 depth maps cannot hold this rig's depths, or None: the rule of
+    :func:`stereodepth.disparity_to_depth` for float32 disparity (focal_px * baseline_m within
+    float32's normal range, ``|doffs_px|`` within float32's range), said in the rig's terms
+    (``flags``: in those of ``--focal-px``, ``--baseline-mm`` and ``--doffs-px``), so that a
+    command names what the user gave (the library's message names its parameters and suggests
+    float64 input, which a command-line user cannot give)."""
+    import numpy as np
+
+    f32 = np.finfo(np.float32)
+    lo, hi = float(f32.tiny), float(f32.max)
+    k = focal_px * baseline_m
+    if not lo <= k <= hi:
+        rig = (
+            f"--focal-px {focal_px:.6g} times --baseline-mm {baseline_m * 1000:.6g}"
+            if flags
+            else f"focal length {focal_px:.6g} px times baseline {baseline_m:.6g} m"
+        )
+        return (
+            f"{rig} is {k:.4g} px*m, outside the range float32 depth maps can be computed from "
+            f"([{lo:.4g}, {hi:.4g}] px*m): check the units"
+        )
+    if not abs(doffs_px) <= hi:
+        name = "--doffs-px" if flags else "doffs"
+        return (
+            f"{name} {doffs_px:.6g} px is outside float32's range (|doffs| <= {hi:.4g}): check "
+            "the units"
+        )
+    return None
+
+
 def write_png(path: Path, image: Any) -> None:
     """An 8-bit grey or RGB, or a 16-bit grey image as a PNG, atomically (the rectified
     images of ``--write-rectified``)."""

@@ -361,6 +361,13 @@ def run(args: argparse.Namespace) -> int:
     from .match_pair import default_num_disparities, match_pair, prepare_pair
 
     rig, ndisp, source, rectifier = _rig(args)
+    if rig is not None:
+        flags = source == "command line"
+        why = rule.rig_range_problem(
+            rig["focal_px"], rig["baseline_m"], rig["doffs_px"], flags=flags
+        )
+        if why is not None:
+            raise _Usage(why if flags else f"--calib {source}: {why}")
     if args.threads is not None and args.threads < 0:
         raise _Usage(f"--threads must be an integer >= 0, got {args.threads}")
     left_img = _read("LEFT", args.left)

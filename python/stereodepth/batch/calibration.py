@@ -68,7 +68,18 @@ def resolve_calibration(
     Raises UsageError when no pair has a calibration or a number of disparities, so a
     forgotten option is one clear error (naming where the calibration came from) rather than
     a failure per pair."""
+    from .._calib_rule import rig_range_problem
+
+    def out_of_range(calib: Calibration) -> str | None:
+        flags = calib.source == COMMAND_LINE
+        why = rig_range_problem(calib.focal_px, calib.baseline_m, calib.doffs_px, flags=flags)
+        if why is None or flags:
+            return why
+        return f"{calib.source}: {why}"
+
     shared = given if given is not None else calib_rig
+    if shared is not None and (why := out_of_range(shared)) is not None:
+        raise UsageError(why)
     # A KITTI --calib holds four cameras: each pair reads those of its folders (a job may
     # hold grey image_0/image_1 pairs and colour image_2/image_3 ones).
     by_cams: dict[tuple[int, int] | None, Calibration] = {}
@@ -79,6 +90,8 @@ def resolve_calibration(
             except (OSError, ValueError) as exc:
                 raise UsageError(f"--calib: {exc}") from exc
             by_cams[cams] = replace(read, source=f"--calib {calib_file}")
+            if (why := out_of_range(by_cams[cams])) is not None:
+                raise UsageError(why)
     out = []
     cache: dict[tuple[Path, tuple[int, int] | None], Calibration | str] = {}
     for p in pairs:
@@ -96,6 +109,7 @@ def resolve_calibration(
                 problem = problem or found
             else:
                 calib = found
+                problem = problem or out_of_range(found)
         if calib is None:
             problem = problem or (
                 "no calibration: give --focal-px and --baseline-mm, or --calib FILE, or put a "
