@@ -230,6 +230,27 @@ def test_the_whole_chain_is_lazy_and_checked_up_front() -> None:
             ValueError,
             r"left must have shape .* got \(2, 8, 8, 4\) uint8",
         ),
+        # One colour frame, as the numpy function reads it: (H, W, 4) RGBA and (H, W, 3)
+        # uint16 were matched as 8 grey frames 4 or 3 px wide, without a word.
+        (
+            lambda: sdd.block_match(
+                da.ones((8, 8, 4), dtype=np.uint8),
+                da.ones((8, 8, 4), dtype=np.uint8),
+                num_disparities=4,
+            ),
+            ValueError,
+            r"left must have shape .* got \(8, 8, 4\) uint8 \(a last axis of 3 or 4 is read as "
+            "colour channels",
+        ),
+        (
+            lambda: sdd.semi_global_match(
+                da.ones((8, 8, 3), dtype=np.uint16),
+                da.ones((8, 8, 3), dtype=np.uint16),
+                num_disparities=16,
+            ),
+            ValueError,
+            r"left must have shape .* got \(8, 8, 3\) uint16",
+        ),
         (
             lambda: sdd.block_match(
                 da.ones((8, 8), dtype=np.uint8), da.ones((8, 8), dtype=np.uint8)

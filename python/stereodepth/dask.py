@@ -99,7 +99,9 @@ def _depth_block(block: np.ndarray, *, options: dict[str, Any]) -> np.ndarray:
 def block_match(left: Any, right: Any, **params: Any) -> Any:
     """:func:`stereodepth.block_match` on dask arrays of image pairs: (H, W) or (N, H, W) grey,
     or (H, W, 3) / (N, H, W, 3) colour (R, G, B, or B, G, R with ``channel_order="bgr"``, as
-    frames read by OpenCV are). Returns the float32 disparity, (H, W) or (N, H, W), NaN
+    frames read by OpenCV are). A 3-D array whose last axis is 3 or 4 is one colour frame, as
+    the numpy function reads it (never a stack of frames 3 or 4 px wide), so (H, W, 4) and
+    (H, W, 3) uint16 raise ValueError. Returns the float32 disparity, (H, W) or (N, H, W), NaN
     where invalid. Chunks are first made to hold whole frames (``left`` and ``right`` are
     rechunked alike); ``params`` are those of the numpy function, checked now
     (``return_confidence`` is not accepted). Each frame is matched as the numpy function
@@ -154,13 +156,16 @@ def _match(method: str, name: str, left: Any, right: Any, params: dict[str, Any]
             "intensity_range applies to uint16 images (uint8 images are matched as they are), "
             f"got {params['intensity_range']!r} with uint8 images"
         )
-    # (N, H, W, 3) and (H, W, 3) uint8 are RGB; (N, H, W) and (H, W) grey.
-    rgb = la.ndim == 4 or (la.ndim == 3 and la.shape[-1] == 3 and la.dtype == np.uint8)
+    # (N, H, W, 3) and (H, W, 3) uint8 are RGB; (N, H, W) and (H, W) grey. A 3-D array whose
+    # last axis is 3 or 4 is one colour frame, as the numpy function reads it: an (H, W, 4)
+    # RGBA frame or an (H, W, 3) uint16 one was matched as H grey frames 4 or 3 px wide.
+    rgb = la.ndim == 4 or (la.ndim == 3 and la.shape[-1] in (3, 4))
     frame_axes = 3 if rgb else 2
     if la.ndim not in (2, 3, 4) or (rgb and (la.shape[-1] != 3 or la.dtype != np.uint8)):
         raise ValueError(
             "left must have shape (H, W) or (N, H, W) grey, or (H, W, 3) or (N, H, W, 3) uint8 "
-            f"RGB, got {la.shape} {la.dtype}"
+            f"RGB, got {la.shape} {la.dtype} (a last axis of 3 or 4 is read as colour "
+            "channels, as stereodepth.block_match reads it; drop an alpha channel first)"
         )
     la = _frames_per_chunk(la, frame_axes)
     ra = ra.rechunk(la.chunks)
