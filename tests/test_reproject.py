@@ -207,6 +207,24 @@ def test_non_contiguous_input_and_out() -> None:
     assert_same(out, reference.reproject(np.ascontiguousarray(view), **RIG))
 
 
+@pytest.mark.parametrize("in_dtype", IN_DTYPES)
+@pytest.mark.parametrize("layout", ["fortran", "broadcast", "reversed", "columns"])
+def test_any_layout_of_every_dtype(in_dtype: type, layout: str) -> None:
+    # float16 was converted to float32 keeping its layout: a Fortran-order or broadcast
+    # float16 map was refused with "disparity must have contiguous rows", which the user did
+    # not pass (the other dtypes were copied, as the docstring says).
+    d = random_disparity(np.random.default_rng(17), in_dtype, (6, 9))
+    view = {
+        "fortran": np.asfortranarray(d),
+        "broadcast": np.broadcast_to(d[:1], d.shape),
+        "reversed": d[::-1, ::-1],
+        "columns": d[:, ::2],
+    }[layout]
+    scale = 1 / 256 if in_dtype == np.uint16 else None
+    r = stereodepth.reproject(view, **RIG, scale=scale)
+    assert_same(r, reference.reproject(np.ascontiguousarray(view), **RIG, scale=scale))
+
+
 # --- the geometry -----------------------------------------------------------------------------
 def test_points_match_the_closed_forms() -> None:
     rows, cols = 9, 17

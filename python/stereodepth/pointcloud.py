@@ -246,7 +246,7 @@ def reproject(
     if arr.size == 0:
         return result
     if arr.dtype == np.float16:
-        arr = arr.astype(np.float32)  # exact
+        arr = arr.astype(np.float32, order="C")  # exact; C order, as the kernel needs
     elif (arr.shape[-1] > 1 and arr.strides[-1] != arr.itemsize) or any(
         stride % arr.itemsize for stride in arr.strides
     ):
