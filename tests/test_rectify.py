@@ -6,6 +6,7 @@ from __future__ import annotations
 import dataclasses
 import sys
 import threading
+import warnings
 import zlib
 from dataclasses import dataclass
 from typing import Any
@@ -520,6 +521,31 @@ def test_remap_writes_into_out_and_accepts_float64_maps() -> None:
     got = stereodepth.remap(img, mx.astype(np.float64), my.astype(np.float64), out=out)
     assert got is out
     np.testing.assert_array_equal(out, reference.remap(img, mx, my))
+
+
+@pytest.mark.parametrize("remap", [stereodepth.remap, reference.remap], ids=["native", "oracle"])
+def test_remap_float64_maps_beyond_float32(remap: Any) -> None:
+    # A float64 map may mark "no source" with a huge value (1e300, finfo.max): rounded to
+    # float32 it is +-inf, which the clamp puts outside the image (0), as the docstring says.
+    # The rounding printed numpy's "RuntimeWarning: overflow encountered in cast" (an error
+    # under -W error) before the image came out right.
+    rng = np.random.default_rng(12)
+    img = random_image(rng, (6, 7), np.uint8)
+    mx, my = random_maps(rng, (4, 5), (6, 7))
+    big_x, big_y = mx.astype(np.float64), my.astype(np.float64)
+    big_x[0, :3] = [1e300, -1e300, np.finfo(np.float64).max]
+    big_y[1, :2] = [1e300, -np.inf]
+    f32_max = float(np.finfo(np.float32).max)
+    small_x, small_y = (
+        np.where(np.abs(m) > f32_max, np.copysign(np.inf, m), m).astype(np.float32)
+        for m in (big_x, big_y)
+    )
+    expected = stereodepth.remap(img, small_x, small_y)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        got = remap(img, big_x, big_y)
+    np.testing.assert_array_equal(got, expected)
+    assert (got[0, :3] == 0).all() and (got[1, :2] == 0).all()
 
 
 # --- StereoRectifier -----------------------------------------------------------------------------
