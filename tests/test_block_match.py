@@ -892,12 +892,16 @@ def test_matcher_rejects_missing_and_unknown_parameters() -> None:
         sd.StereoMatcher(num_disparities=8, blocksize=9)
 
 
-@pytest.mark.parametrize("ratio", [6553399.0, 6553400.0, 1e7, 1e20, 1e300])
+MAX_DOUBLE = float(np.finfo(np.float64).max)
+
+
+@pytest.mark.parametrize("ratio", [6553399.0, 6553400.0, 1e7, 1e20, 1e300, 1e308, MAX_DOUBLE])
 @pytest.mark.parametrize("cost", ["census", "sad"])
 def test_huge_uniqueness_ratio_matches_the_oracle(ratio: float, cost: str) -> None:
     # A ratio of 1e20 hung the matcher's constructor: its table loop added 1.0 to a double
     # too large to change. From 6553400 on (a factor of 65535 x 100) no second-best cost
-    # passes a winner above 0; a winning cost of 0 still passes.
+    # passes a winner above 0; a winning cost of 0 still passes. From 1e308 on the oracle's
+    # best * factor overflows to inf (it printed numpy's overflow RuntimeWarning).
     rng = np.random.default_rng(11)
     left = rng.integers(0, 256, (24, 40), dtype=np.uint8)
     right = np.roll(left, -3, axis=1)
