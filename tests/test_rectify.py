@@ -732,7 +732,8 @@ def good_args() -> dict[str, Any]:
         ({"alpha": -0.5}, ValueError, "alpha must be -1"),
         ({"alpha": "0"}, TypeError, "alpha must be a real number"),
         ({"new_image_size": (10, -1)}, ValueError, "new_image_size"),
-        ({"zero_disparity": 1}, TypeError, "zero_disparity must be a bool"),
+        ({"zero_disparity": 1}, TypeError, "zero_disparity must be a bool, got int 1"),
+        ({"zero_disparity": "no"}, TypeError, "zero_disparity must be a bool, got str 'no'"),
         ({"distortion_model": "radtan"}, ValueError, "distortion_model must be one of"),
         ({"distortion_model": 5}, TypeError, "distortion_model must be a str"),
         ({"distortion_model": "equidistant"}, ValueError, "D1 must have 4 coefficients"),
@@ -767,9 +768,23 @@ def test_stereo_rectify_rejects(change: dict[str, Any], exc: type, match: str) -
     args.update(change)
     with pytest.raises(exc, match=match):
         stereo_rectify(**args)
-    if "non-finite" in match:  # the oracle said "cannot convert float NaN to integer"
+    if "non-finite" in match or "zero_disparity" in match:
+        # the oracle said "cannot convert float NaN to integer"; it took any zero_disparity
+        # for its truth value ("no" as True)
         with pytest.raises(exc, match=match):
             reference.stereo_rectify(**args)
+
+
+@pytest.mark.parametrize("flag", [np.True_, np.False_])
+def test_stereo_rectify_takes_a_numpy_bool_zero_disparity(flag: Any) -> None:
+    # numpy's bool (from a mask, a config array) was refused as "zero_disparity must be a
+    # bool, got bool"; it is the Python bool of its value, as the matchers' flags are.
+    args = good_args()
+    want = stereo_rectify(**args, zero_disparity=bool(flag))
+    for rectify in (stereo_rectify, reference.stereo_rectify):
+        got = rectify(**args, zero_disparity=flag)
+        for a, b in zip(got, want, strict=True):
+            np.testing.assert_allclose(np.asarray(a), np.asarray(b), rtol=1e-12, atol=1e-12)
 
 
 def test_stereo_rectify_takes_a_rotation_rounded_in_print(cv2: Any) -> None:

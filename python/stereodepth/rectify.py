@@ -181,6 +181,14 @@ def _nearest_rotation(R: np.ndarray) -> np.ndarray:
     return np.ascontiguousarray(u @ vt)
 
 
+def _zero_disparity(value: Any) -> bool:
+    """A bool or numpy bool (numpy's was refused as "must be a bool, got bool"); TypeError
+    naming ``zero_disparity`` and the value otherwise."""
+    if not isinstance(value, (bool, np.bool_)):
+        raise TypeError(f"zero_disparity must be a bool, got {type(value).__name__} {value!r}")
+    return bool(value)
+
+
 def _alpha(value: Any) -> float:
     a = check.finite("alpha", value)
     if a > 1 or (a < 0 and a != -1):
@@ -277,8 +285,7 @@ def stereo_rectify(
         )
     a = _alpha(alpha)
     new_w, new_h = (0, 0) if new_image_size is None else _size("new_image_size", new_image_size)
-    if not isinstance(zero_disparity, bool):
-        raise TypeError(f"zero_disparity must be a bool, got {type(zero_disparity).__name__}")
+    zd = _zero_disparity(zero_disparity)
     b = check.finite("balance", balance)
     if not 0 <= b <= 1:
         raise ValueError(f"balance must be in [0, 1], got {balance!r}")
@@ -290,7 +297,7 @@ def stereo_rectify(
                 f"got alpha={alpha!r}"
             )
         r = _core.fisheye_stereo_rectify(
-            k1, d1, k2, d2, width, height, rot, t, b, fov, new_w, new_h, zero_disparity
+            k1, d1, k2, d2, width, height, rot, t, b, fov, new_w, new_h, zd
         )
     else:
         if b != 0.0 or fov != 1.0:
@@ -298,9 +305,7 @@ def stereo_rectify(
                 "balance and fov_scale apply to equidistant rigs; use alpha, got "
                 f"balance={balance!r}, fov_scale={fov_scale!r}"
             )
-        r = _core.stereo_rectify(
-            k1, d1, k2, d2, model, width, height, rot, t, a, new_w, new_h, zero_disparity
-        )
+        r = _core.stereo_rectify(k1, d1, k2, d2, model, width, height, rot, t, a, new_w, new_h, zd)
     _check_finite_rectification(r, k1, k2, d1, d2, t)
     return Rectification(
         r["R1"], r["R2"], r["P1"], r["P2"], r["Q"], tuple(r["roi1"]), tuple(r["roi2"])

@@ -485,6 +485,7 @@ def _stereo_rectify(
         _real_matrix,
         _rotation,
         _size,
+        _zero_disparity,
     )
 
     model = _model("distortion_model", distortion_model)
@@ -495,6 +496,7 @@ def _stereo_rectify(
     t_in = _real_matrix("T", T, (3,))
     a = _alpha(alpha)
     nw, nh = (w, h) if new_image_size is None else _size("new_image_size", new_image_size)
+    zero_disparity = _zero_disparity(zero_disparity)
     r_r = _rotation_matrix(_rotation_vector(rot) * -0.5)
     t = r_r @ t_in
     if model == "equidistant":
