@@ -74,7 +74,18 @@ def kitti_cameras(left: str | os.PathLike[str], right: str | os.PathLike[str]) -
 def prepare_pair(left: np.ndarray, right: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """The pair as the matcher takes it, checked by the rule :func:`stereodepth.block_match`
     and ``stereodepth batch`` follow: the same size, both colour or both grey, the same bit
-    depth. Raises ValueError naming ``right`` (the one compared)."""
+    depth. Raises TypeError naming the image that is not a numpy array, ValueError naming the
+    one that is not (H, W) or (H, W, C), and ValueError naming ``right`` (the one compared)
+    when they differ."""
+    for name, image in (("left", left), ("right", right)):
+        # a list or a path was an AttributeError ('list' object has no attribute 'shape'), a
+        # 1-D array an IndexError from the size message
+        if not isinstance(image, np.ndarray):
+            raise TypeError(f"{name} must be a numpy.ndarray image, got {type(image).__name__}")
+        if image.ndim not in (2, 3):
+            raise ValueError(
+                f"{name} must be an image, (H, W) grey or (H, W, 3) colour, got shape {image.shape}"
+            )
     if left.shape[:2] != right.shape[:2]:
         raise ValueError(
             f"right must have the size of left, {left.shape[1]}x{left.shape[0]} px, got "

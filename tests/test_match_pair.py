@@ -1,0 +1,55 @@
+"""stereodepth.match_pair, the steps ``stereodepth match`` and the web page's depth view share,
+called from Python: the result is the matcher's and disparity_to_depth's, and bad input is a
+TypeError or ValueError naming the parameter and the value received."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+import pytest
+
+import stereodepth as sd
+from stereodepth.match_pair import match_pair, prepare_pair
+
+
+def pair() -> tuple[np.ndarray, np.ndarray]:
+    left = np.random.default_rng(3).integers(0, 256, (20, 40), dtype=np.uint8)
+    return left, np.roll(left, -2, axis=1)
+
+
+def test_the_result_is_the_matchers_and_the_depth_disparity_to_depths() -> None:
+    left, right = pair()
+    result = match_pair(left, right, num_disparities=8, focal_px=700.0, baseline_m=0.1)
+    disparity, confidence = sd.block_match(left, right, num_disparities=8, return_confidence=True)
+    np.testing.assert_array_equal(result.disparity, disparity)
+    assert result.confidence is not None
+    np.testing.assert_array_equal(result.confidence, confidence)
+    assert result.depth is not None
+    np.testing.assert_array_equal(
+        result.depth, sd.disparity_to_depth(disparity, focal_px=700.0, baseline_m=0.1)
+    )
+
+
+@pytest.mark.parametrize(
+    ("left", "right", "exc", "message"),
+    [
+        # were AttributeError ('list' object has no attribute 'shape') and IndexError (tuple
+        # index out of range, from the size message)
+        ([[1, 2]], [[1, 2]], TypeError, "left must be a numpy.ndarray image, got list"),
+        (np.zeros((4, 5), np.uint8), "b.png", TypeError, "right must be a numpy.ndarray"),
+        (
+            np.zeros(5, np.uint8),
+            np.zeros(6, np.uint8),
+            ValueError,
+            r"left must be .*got shape \(5,\)",
+        ),
+        (np.zeros((4, 5), np.uint8), np.array(3, np.uint8), ValueError, r"right .*got shape \(\)"),
+    ],
+)
+def test_prepare_pair_names_the_image_that_is_not_one(
+    left: Any, right: Any, exc: type, message: str
+) -> None:
+    for call in (prepare_pair, match_pair):
+        with pytest.raises(exc, match=message):
+            call(left, right)
