@@ -53,3 +53,18 @@ def test_prepare_pair_names_the_image_that_is_not_one(
     for call in (prepare_pair, match_pair):
         with pytest.raises(exc, match=message):
             call(left, right)
+
+
+@pytest.mark.parametrize(
+    ("rig", "message"),
+    [
+        ({"focal_px": 700.0}, "focal_px and baseline_m go together: baseline_m missing"),
+        ({"baseline_m": 0.1}, "focal_px and baseline_m go together: focal_px missing"),
+        ({"doffs_px": 3.0}, "doffs_px applies with focal_px and baseline_m"),
+    ],
+)
+def test_half_a_rig_is_refused(rig: dict[str, Any], message: str) -> None:
+    # focal_px without baseline_m (or the other way round) gave no depth without a word.
+    left, right = pair()
+    with pytest.raises(ValueError, match=message):
+        match_pair(left, right, num_disparities=8, **rig)

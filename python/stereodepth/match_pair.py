@@ -180,10 +180,25 @@ def match_pair(
     (``stereodepth.semi_global_match``, where the library has it). ``num_disparities``
     defaults to :func:`default_num_disparities` of the width; ``block_size`` and ``cost`` to
     the block matcher's defaults. Depth is ``disparity_to_depth(disparity, focal_px=...,
-    baseline_m=..., doffs_px=...)``, float32 metres. Raises ValueError or TypeError naming
-    the parameter."""
+    baseline_m=..., doffs_px=...)``, float32 metres, given both ``focal_px`` and
+    ``baseline_m`` (one without the other, or a non-zero ``doffs_px`` without them, is a
+    ValueError: there would be no depth). Raises ValueError or TypeError naming the
+    parameter."""
     import stereodepth
 
+    if (focal_px is None) != (baseline_m is None):
+        # one without the other gave no depth without a word
+        given, got = ("focal_px", focal_px) if baseline_m is None else ("baseline_m", baseline_m)
+        missing = "baseline_m" if baseline_m is None else "focal_px"
+        raise ValueError(
+            f"focal_px and baseline_m go together: {missing} missing (got {given}={got!r}); "
+            "give both for depth, or neither for the disparity alone"
+        )
+    if focal_px is None and doffs_px != 0:
+        raise ValueError(
+            f"doffs_px applies with focal_px and baseline_m (the depth), got doffs_px="
+            f"{doffs_px!r} without them"
+        )
     if method not in METHODS:
         raise ValueError(f"method must be one of {', '.join(METHODS)}, got {method!r}")
     left, right = prepare_pair(left, right)
