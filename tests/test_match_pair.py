@@ -68,3 +68,11 @@ def test_half_a_rig_is_refused(rig: dict[str, Any], message: str) -> None:
     left, right = pair()
     with pytest.raises(ValueError, match=message):
         match_pair(left, right, num_disparities=8, **rig)
+
+
+def test_method_of_another_type_is_a_type_error() -> None:
+    left, right = pair()
+    with pytest.raises(TypeError, match=r"method must be one of 'bm', 'sgm', got list \['bm'\]"):
+        match_pair(left, right, method=["bm"])  # type: ignore[arg-type]
+    with pytest.raises(ValueError, match="method must be one of 'bm', 'sgm', got 'BM'"):
+        match_pair(left, right, method="BM")

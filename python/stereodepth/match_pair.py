@@ -20,7 +20,7 @@ from typing import Any
 
 import numpy as np
 
-from ._methods import METHODS
+from ._methods import METHODS, check_method
 
 __all__ = [
     "METHODS",
@@ -199,8 +199,7 @@ def match_pair(
             f"doffs_px applies with focal_px and baseline_m (the depth), got doffs_px="
             f"{doffs_px!r} without them"
         )
-    if method not in METHODS:
-        raise ValueError(f"method must be one of {', '.join(METHODS)}, got {method!r}")
+    check_method(method)  # TypeError for a list or None (was ValueError), ValueError else
     left, right = prepare_pair(left, right)
     nd = default_num_disparities(left.shape[1]) if num_disparities is None else num_disparities
     params: dict[str, Any] = {"num_disparities": nd, "min_disparity": min_disparity}
