@@ -587,6 +587,20 @@ def test_one_shot_keeps_the_threads_matcher_and_still_checks_every_call(
     assert _methods._thread_state.matcher is None
 
 
+@pytest.mark.parametrize("match", [sd.block_match, sd.semi_global_match])
+@pytest.mark.parametrize("refused", [(True, 4095), (1.0, 4095), [1, np.float64(4095)]])
+def test_one_shot_checks_the_items_of_intensity_range_every_call(match: Any, refused: Any) -> None:
+    # The kept matcher was found by comparing the values with == and only their outer type:
+    # after (1, 4095), an intensity_range of (True, 4095) or (1.0, 4095), which the checks
+    # refuse, equalled the kept key and was matched with, or refused, by the thread's history.
+    left, right = (a.astype(np.uint16) * 16 for a in shifted_pair((12, 30), 2, seed=42))
+    valid = type(refused)([1, 4095])  # of the same outer type: tuple or list
+    kept = match(left, right, num_disparities=8, intensity_range=valid)
+    assert np.isfinite(kept).any()
+    with pytest.raises(TypeError, match="intensity_range must be None or two integers"):
+        match(left, right, num_disparities=8, intensity_range=refused)
+
+
 def test_matcher_params_and_repr() -> None:
     m = sd.StereoMatcher(num_disparities=32, block_size=7, lr_max_diff=None)
     p = m.params
