@@ -1005,6 +1005,24 @@ def test_native_layer_rejects_bad_parameters_too() -> None:
             TypeError,
             "min_disparity must be an integer",
         ),
+        # numpy's "setting an array element with a sequence", naming nothing
+        ([[1.5], [2.0, 3.0]], {}, ValueError, r"disparity must be a rectangular array .* list"),
+        # maps of any other shape came out in that shape (from_opencv_disparity refuses them)
+        (
+            np.float32(3.2),
+            {},
+            ValueError,
+            r"disparity must have shape \(H, W\) or \(N, H, W\), got \(\)$",
+        ),
+        (np.zeros(3), {}, ValueError, r"disparity must have shape .*, got \(3,\)$"),
+        (np.zeros((1, 1, 2, 2)), {}, ValueError, r"got \(1, 1, 2, 2\)$"),
+        # numpy's "RuntimeWarning: overflow encountered in multiply" came first (x 16)
+        (
+            np.array([[1.7e308]]),
+            {},
+            ValueError,
+            r"below 2048 px to fit .* format, got 1\.7e\+308 \(inf px in sixteenths\)$",
+        ),
     ],
 )
 def test_to_opencv_disparity_rejects(
