@@ -225,6 +225,17 @@ def test_any_layout_of_every_dtype(in_dtype: type, layout: str) -> None:
     assert_same(r, reference.reproject(np.ascontiguousarray(view), **RIG, scale=scale))
 
 
+@pytest.mark.parametrize("max_depth_m", [None, 1e300])
+def test_a_point_at_infinite_depth_is_invalid(max_depth_m: float | None) -> None:
+    # "A point is invalid where ... a coordinate is not finite": with a max_depth_m beyond
+    # float32's range, Z = inf (a disparity whose depth overflows float32) was kept (X = Y = 0
+    # here: the pixel is on the principal point).
+    d = np.array([[1.0, 1e-300, 2.0]], np.float64)
+    for project in (stereodepth.reproject, reference.reproject):
+        p = project(d, focal_px=1e5, baseline_m=1e3, cx_px=1.0, cy_px=0.0, max_depth_m=max_depth_m)
+        assert np.isnan(p[0, 1]).all() and np.isfinite(p[0, [0, 2]]).all()
+
+
 # --- the geometry -----------------------------------------------------------------------------
 def test_points_match_the_closed_forms() -> None:
     rows, cols = 9, 17

@@ -85,6 +85,17 @@ class DepthOptions:
                     f"max_depth_m must be >= min_depth_m ({self.min_depth_m!r}), "
                     f"got {max_depth_m!r}"
                 )
+            if self.dtype == np.float32:
+                # Compared in float32, a max beyond its range was inf, and a depth that
+                # overflowed float32 (inf) passed as inside the range: it is above any max.
+                self.max_depth_m = min(self.max_depth_m, FLOAT32_MAX)
+        if self.min_depth_m > FLOAT32_MAX and (max_depth_m is None or self.dtype == np.float32):
+            # Every depth would be invalid; the kernel named the max_depth_m not given.
+            which = "float32 depth" if self.dtype == np.float32 else "depth (default max_depth_m)"
+            raise ValueError(
+                f"min_depth_m must be at most the largest float32, {FLOAT32_MAX!r} m (no {which} "
+                f"lies beyond it: every pixel would be invalid), got {min_depth_m!r}"
+            )
         # Which raw values mean "no disparity". OpenCV's int16 output marks holes with
         # (min_disparity - 1) * 16: every raw value below min_disparity * 16 is a hole, and
         # the rest are disparities, negative ones included. KITTI's uint16 uses 0.
@@ -209,7 +220,9 @@ def disparity_to_depth(
         half to even, 0 where invalid and 65535 for anything farther (the depth-camera / ROS
         format).
     min_depth_m, max_depth_m
-        Depths outside this range are invalid. By default only non-finite depths are.
+        Depths outside this range are invalid. By default only non-finite depths are; an
+        infinite float32 depth (a disparity so near 0 that the depth overflows float32) is
+        invalid whatever ``max_depth_m``.
     invalid_value
         A raw value that marks holes, replacing the per-dtype default above (for int16, the
         ``min_disparity`` rule then applies only when ``min_disparity`` is given too).
@@ -232,7 +245,9 @@ def disparity_to_depth(
     are computed in float32 arithmetic (float64 for float64 input); uint16 in float64.
     ValueError when ``focal_px * baseline_m`` is not a finite double > 0, and, in float32
     arithmetic, when it or ``scale`` leaves float32's normal range or ``doffs_px`` float32's
-    range (every pixel would be NaN).
+    range (every pixel would be NaN); ValueError too when ``min_depth_m`` exceeds the
+    largest float32 (3.4e38 m) for float32 depth or without ``max_depth_m`` (every pixel
+    would be invalid).
 
     A C-contiguous input is never copied; an input whose rows are not contiguous is copied
     once. The GIL is released while the kernel runs.
