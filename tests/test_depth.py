@@ -366,6 +366,8 @@ D = np.ones((2, 3), np.float32)
         (np.ones((2, 3), np.uint16), {}, ValueError, "scale is required for uint16"),
         (D, {"dtype": np.float64}, TypeError, "dtype must be numpy.float32 or numpy.uint16"),
         (D, {"dtype": "nonsense"}, TypeError, "dtype must be numpy.float32 or numpy.uint16"),
+        # numpy reads None as float64: the message said "got float64"
+        (D, {"dtype": None}, TypeError, "^dtype must be numpy.float32 or numpy.uint16, got None$"),
         (D, {"min_depth_m": -1.0}, ValueError, "min_depth_m must be a finite number >= 0"),
         (D, {"max_depth_m": 0.0}, ValueError, "max_depth_m must be a finite number > 0"),
         (

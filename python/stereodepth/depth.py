@@ -64,6 +64,8 @@ class DepthOptions:
                 )
             scale = 1.0 / 16.0 if kind == np.int16 else 1.0
         self.scale = check.positive("scale", scale)
+        if dtype is None:  # numpy reads None as float64: the message said "got float64"
+            raise TypeError("dtype must be numpy.float32 or numpy.uint16, got None")
         try:
             out_dtype = np.dtype(dtype)
         except TypeError as exc:
