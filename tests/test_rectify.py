@@ -877,6 +877,29 @@ def test_remap_rejects(kwargs: dict[str, Any], exc: type, match: str) -> None:
         stereodepth.remap(**args)
 
 
+@pytest.mark.parametrize(
+    "maps", [stereodepth.init_undistort_rectify_map, reference.init_undistort_rectify_map]
+)
+@pytest.mark.parametrize(
+    ("P", "match"),
+    [
+        # the kernel said "P @ R must be invertible" without the values
+        (
+            np.zeros((3, 4)),
+            r"^P @ R must be invertible \(its determinant is 0\.0; .*\), got P = "
+            r"\[\[0\.0, 0\.0, 0\.0\], .* and R = \[\[1\.0, 0\.0, 0\.0\], ",
+        ),
+        (np.diag([1e300, 1e300, 1.0]), r"^P @ R must be invertible \(its determinant is inf;"),
+        # "must have shape (3, 3)", though a (3, 4) projection is taken too
+        (np.eye(4), r"^P must have shape \(3, 3\) or \(3, 4\), got \(4, 4\)$"),
+    ],
+)
+def test_maps_name_the_new_camera_they_cannot_use(maps: Any, P: np.ndarray, match: str) -> None:
+    rig = RIGS[0]
+    with pytest.raises(ValueError, match=match):
+        maps(rig.K1, rig.D1, None, P, (4, 4))
+
+
 def test_maps_and_rectifier_reject() -> None:
     rig = RIGS[0]
     with pytest.raises(ValueError, match=r"P must have shape \(3, 3\)"):

@@ -359,16 +359,45 @@ def init_undistort_rectify_map(
     k = _camera_matrix("K", K)
     d = _distortion("D", D, m)
     rot = np.eye(3) if R is None else _rotation("R", R, _ROUNDED_ROTATION)
-    p = check.real_array("P", P)
-    if p.shape == (3, 4):
-        p = p[:, :3]
-    p = _real_matrix("P", p, (3, 3))
+    p = _new_camera(P, rot)
     width, height = _size("size", size)
     nthreads = check.threads(threads)
     map_x = np.empty((height, width), np.float32)
     map_y = np.empty((height, width), np.float32)
     _core.init_undistort_rectify_map(k, d, m, rot, p, map_x, map_y, nthreads)
     return map_x, map_y
+
+
+def _new_camera(P: Any, rot: np.ndarray) -> np.ndarray:
+    """``P`` of :func:`init_undistort_rectify_map` as its finite (3, 3) camera matrix (the
+    first three columns of a (3, 4) projection), with ``P @ R`` invertible, checked in the
+    kernel's arithmetic (rectify.cpp, mul and inverse3), so that the refusal names the values
+    (the kernel's said "P @ R must be invertible" alone). Shared with the numpy oracle."""
+    p = check.real_array("P", P)
+    if p.shape == (3, 4):
+        p = p[:, :3]
+    elif p.shape != (3, 3):
+        raise ValueError(f"P must have shape (3, 3) or (3, 4), got {p.shape}")
+    p = _real_matrix("P", p, (3, 3))
+    a = [
+        [
+            float(p[i, 0]) * float(rot[0, j])
+            + float(p[i, 1]) * float(rot[1, j])
+            + float(p[i, 2]) * float(rot[2, j])
+            for j in range(3)
+        ]
+        for i in range(3)
+    ]
+    c00 = a[1][1] * a[2][2] - a[1][2] * a[2][1]
+    c01 = a[1][0] * a[2][2] - a[1][2] * a[2][0]
+    c02 = a[1][0] * a[2][1] - a[1][1] * a[2][0]
+    det = a[0][0] * c00 - a[0][1] * c01 + a[0][2] * c02
+    if not (math.isfinite(det) and det != 0):
+        raise ValueError(
+            f"P @ R must be invertible (its determinant is {det!r}; P's first three columns "
+            f"are the new camera matrix), got P = {p.tolist()} and R = {rot.tolist()}"
+        )
+    return p
 
 
 # --- the reusable rectifier ----------------------------------------------------------------------

@@ -195,7 +195,7 @@ def init_undistort_rectify_map(
         _camera_matrix,
         _distortion,
         _model,
-        _real_matrix,
+        _new_camera,
         _rotation,
         _size,
     )
@@ -206,8 +206,7 @@ def init_undistort_rectify_map(
     coeffs = _distortion("D", D, m)
     d[: coeffs.size] = coeffs
     rot = np.eye(3) if R is None else _rotation("R", R, _ROUNDED_ROTATION)
-    p = check.real_array("P", P)
-    p = _real_matrix("P", p[:, :3] if p.shape == (3, 4) else p, (3, 3))
+    p = _new_camera(P, rot)
     width, height = _size("size", size)
     check.threads(threads)
     a = [[float(_sum3(p[i], rot[:, j])) for j in range(3)] for i in range(3)]
