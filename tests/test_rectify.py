@@ -900,6 +900,26 @@ def test_maps_name_the_new_camera_they_cannot_use(maps: Any, P: np.ndarray, matc
         maps(rig.K1, rig.D1, None, P, (4, 4))
 
 
+@pytest.mark.parametrize(
+    ("K", "D", "model"),
+    [
+        (np.diag([1e300, 1e300, 1.0]), np.zeros(5), "plumb_bob"),
+        (np.array([[700.0, 0, 320], [0, 700, 240], [0, 0, 1]]), [0, 0, 0, 0, 1e38], "plumb_bob"),
+        (np.array([[700.0, 0, 320], [0, 700, 240], [0, 0, 1]]), [1e38, 0, 0, 0], "equidistant"),
+    ],
+)
+def test_maps_beyond_float32_are_infinite_in_the_oracle_too(K: Any, D: Any, model: str) -> None:
+    # The kernel rounds such positions to +-inf (remap puts them outside the image); the
+    # oracle's rounding printed numpy's "overflow encountered in cast" (an error under
+    # -W error), so the two could not be compared.
+    P = np.array([[650.0, 0, 310, 0], [0, 650, 250, 0], [0, 0, 1, 0]])
+    native = stereodepth.init_undistort_rectify_map(K, D, None, P, (8, 6), model)
+    oracle = reference.init_undistort_rectify_map(K, D, None, P, (8, 6), model)
+    for a, b in zip(native, oracle, strict=True):
+        np.testing.assert_array_equal(a, b, strict=True)
+    assert np.isinf(native[0]).any()
+
+
 def test_maps_and_rectifier_reject() -> None:
     rig = RIGS[0]
     with pytest.raises(ValueError, match=r"P must have shape \(3, 3\)"):

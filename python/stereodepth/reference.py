@@ -249,7 +249,8 @@ def init_undistort_rectify_map(
             yd = y * kr + d[2] * (r2 + 2 * y2) + d[3] * xy2
             u = fx * xd + u0
             v = fy * yd + v0
-    return u.astype(np.float32), v.astype(np.float32)
+        # rounded once to float32, as the kernel: beyond its range, +-inf without a warning
+        return u.astype(np.float32), v.astype(np.float32)
 
 
 def _sum3(a: np.ndarray, b: np.ndarray) -> float:
