@@ -839,6 +839,9 @@ L8 = np.zeros((6, 9), np.uint8)
             r" got list",
         ),
         (L8, "right.png", TypeError, "right must be a numpy.ndarray .* got str"),
+        # block_match's clean-up then took the list's shape and raised numpy's "setting an
+        # array element with a sequence ... inhomogeneous shape" instead
+        ([[1, 2], [3]], L8, TypeError, r"left must be a numpy.ndarray .* got list$"),
         (
             L8.astype(np.float32),
             L8,

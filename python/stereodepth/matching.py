@@ -692,7 +692,8 @@ def block_match(
     try:
         return matcher.compute(left, right)
     finally:
-        shape = np.shape(left)
+        # not np.shape: of a ragged list it raised numpy's error over the TypeError above
+        shape: tuple[int, ...] = left.shape if isinstance(left, np.ndarray) else ()
         if len(shape) >= 2 and shape[0] * shape[1] > KEEP_MATCHER_MAX_PIXELS:
             release_thread_matcher()  # do not hold a huge pair's buffers
 
