@@ -920,6 +920,44 @@ def test_maps_beyond_float32_are_infinite_in_the_oracle_too(K: Any, D: Any, mode
     assert np.isinf(native[0]).any()
 
 
+def _stored(change: dict[str, Any]) -> dict[str, Any]:
+    """A calibration's stored transforms (those stereo_rectify computes), with ``change``:
+    None drops a P, an int zeroes that row of the P named."""
+    rig = RIGS[0]
+    r = stereo_rectify(rig.K1, rig.D1, rig.K2, rig.D2, rig.size, rig.R, rig.T)
+    kw: dict[str, Any] = {"R1": r.R1, "R2": r.R2, "P1": r.P1.copy(), "P2": r.P2.copy()}
+    for key, value in change.items():
+        if key in ("P1", "P2") and isinstance(value, int):
+            kw[key][value] = 0.0
+        else:
+            kw[key] = value
+    return kw
+
+
+@pytest.mark.parametrize("rectified", [False, True])
+@pytest.mark.parametrize(
+    ("change", "match"),
+    [
+        # An uncalibrated camera's camera_info has P all zeros: P2's gave ZeroDivisionError
+        # ("float division by zero") from Q, P1's a rectifier of garbage maps.
+        ({"P2": np.zeros((3, 4))}, r"^calib\.P2 must be a projection .*fx = P\[0, 0\] > 0"),
+        ({"P1": np.zeros((3, 4))}, r"^calib\.P1 must be a projection .*got \[\[0\.0, 0\.0"),
+        ({"P2": 1}, r"^calib\.P2 must be a projection .*fy = P\[1, 1\] > 0"),
+        # a stored Q of zeros came back as rectifier.Q (reproject refused it later, as "Q")
+        ({"Q": np.zeros((4, 4))}, r"^calib\.Q must be invertible \(rank 4\), got rank 0"),
+    ],
+)
+def test_rectifier_refuses_a_stored_projection_that_is_none(
+    change: dict[str, Any], match: str, rectified: bool
+) -> None:
+    rig = RIGS[0]
+    kw = _stored(change)
+    if rectified:  # an already rectified pair keeps P1, P2 and Q only
+        kw = {k: v for k, v in kw.items() if k in ("P1", "P2", "Q")}
+    with pytest.raises(ValueError, match=match):
+        StereoRectifier.from_calibration(calib_of(rig, rectified=rectified, **kw))
+
+
 def test_maps_and_rectifier_reject() -> None:
     rig = RIGS[0]
     with pytest.raises(ValueError, match=r"P must have shape \(3, 3\)"):

@@ -42,6 +42,7 @@ import numpy as np
 from . import _core
 from . import _validate as check
 from ._remap import _as_image, _precision, _prepare_out, remap
+from .pointcloud import _as_q
 from .rig import StereoRig
 
 __all__ = [
@@ -93,6 +94,20 @@ def _real_matrix(name: str, value: Any, shape: tuple[int, ...]) -> np.ndarray:
     if not np.all(np.isfinite(arr)):
         raise ValueError(f"{name} must be finite, got {arr.tolist()}")
     return np.ascontiguousarray(arr, dtype=np.float64)
+
+
+def _projection(name: str, value: Any) -> np.ndarray:
+    """A calibration's stored (3, 4) projection of a rectified camera: finite, with fx and fy
+    > 0 (an uncalibrated camera's camera_info has P all zeros: P2's gave ZeroDivisionError
+    from Q, P1's a rectifier of garbage maps)."""
+    P = _real_matrix(name, value, (3, 4))
+    if not (P[0, 0] > 0 and P[1, 1] > 0):
+        raise ValueError(
+            f"{name} must be a projection of a rectified camera, [[fx, 0, cx, fx Tx], "
+            f"[0, fy, cy, fy Ty], [0, 0, 1, 0]] with fx = P[0, 0] > 0 and fy = P[1, 1] > 0, "
+            f"got {P.tolist()}"
+        )
+    return P
 
 
 def _camera_matrix(name: str, value: Any) -> np.ndarray:
@@ -582,10 +597,10 @@ class StereoRectifier:
         if not asked and all(m is not None for m in stored):
             R1 = _rotation("calib.R1", stored[0])
             R2 = _rotation("calib.R2", stored[1])
-            P1 = _real_matrix("calib.P1", stored[2], (3, 4))
-            P2 = _real_matrix("calib.P2", stored[3], (3, 4))
+            P1 = _projection("calib.P1", stored[2])
+            P2 = _projection("calib.P2", stored[3])
             Q = getattr(calib, "Q", None)
-            Qm = _q_from_projections(P1, P2) if Q is None else _real_matrix("calib.Q", Q, (4, 4))
+            Qm = _q_from_projections(P1, P2) if Q is None else _as_q(Q, "calib.Q")
             full = (0, 0, *size)
             rect = Rectification(R1, R2, P1, P2, Qm, full, full)
         else:
@@ -623,21 +638,13 @@ class StereoRectifier:
         t = _real_matrix("calib.T", calib.T, (3,))
         K1, K2 = self._cameras[0][0], self._cameras[1][0]
         P1, P2, Q = (getattr(calib, f, None) for f in ("P1", "P2", "Q"))
-        self._P1 = (
-            np.hstack([K1, np.zeros((3, 1))])
-            if P1 is None
-            else _real_matrix("calib.P1", P1, (3, 4))
-        )
+        self._P1 = np.hstack([K1, np.zeros((3, 1))]) if P1 is None else _projection("calib.P1", P1)
         self._P2 = (
             np.hstack([K2, (K2[0, 0] * t[0]) * np.eye(3)[:, :1]])
             if P2 is None
-            else _real_matrix("calib.P2", P2, (3, 4))
+            else _projection("calib.P2", P2)
         )
-        self._Q = (
-            _q_from_projections(self._P1, self._P2)
-            if Q is None
-            else _real_matrix("calib.Q", Q, (4, 4))
-        )
+        self._Q = _q_from_projections(self._P1, self._P2) if Q is None else _as_q(Q, "calib.Q")
 
     @classmethod
     def from_file(
