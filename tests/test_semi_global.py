@@ -882,3 +882,33 @@ def test_huge_uniqueness_ratio_matches_the_oracle(ratio: float) -> None:
     want = ref.semi_global_match(left, right, **kw)
     np.testing.assert_array_equal(got, want, strict=True)
     assert np.isfinite(got).any() and np.isnan(got).any()
+
+
+@pytest.mark.parametrize(
+    ("disparity", "exc", "match"),
+    [
+        # were "too many values to unpack (expected 2)", "not enough values to unpack",
+        # "'list' object has no attribute 'shape'" and "assignment destination is read-only"
+        (
+            np.zeros((2, 3, 4), np.float32),
+            ValueError,
+            r"^disparity must be 2-D \(H, W\).*got shape \(2, 3, 4\)$",
+        ),
+        (np.zeros(4, np.float32), ValueError, r"^disparity must be 2-D .*got shape \(4,\)$"),
+        ([[1.0, float("nan")]], TypeError, "^disparity must be a numpy.ndarray .*got list$"),
+        (
+            np.zeros((2, 2), np.int16),
+            TypeError,
+            "^disparity must be a float array .*got dtype int16$",
+        ),
+        ("read-only", ValueError, r"^disparity must be writeable \(it is filled in place\)$"),
+    ],
+)
+def test_fill_background_names_what_it_cannot_fill(disparity: Any, exc: type, match: str) -> None:
+    from stereodepth.semi_global import fill_background
+
+    if isinstance(disparity, str):
+        disparity = np.array([[1.0, np.nan]], np.float32)
+        disparity.flags.writeable = False
+    with pytest.raises(exc, match=match):
+        fill_background(disparity)

@@ -265,7 +265,21 @@ def fill_background(disparity: np.ndarray) -> np.ndarray:
     """Fills the NaN pixels of a float disparity map in place along each row with the smaller
     of the nearest valid values to the left and to the right (the one that exists at the row's
     ends; rows without a valid pixel stay NaN); returns the map. Step 8 of
-    :mod:`stereodepth.semi_global`."""
+    :mod:`stereodepth.semi_global`. Valid means finite: an infinite value is filled as a NaN
+    is. ``disparity`` is a writeable (H, W) float16, float32 or float64 numpy array (TypeError
+    for another type or dtype, ValueError for another shape or a read-only one)."""
+    if not isinstance(disparity, np.ndarray):
+        raise TypeError(
+            f"disparity must be a numpy.ndarray (filled in place), got {type(disparity).__name__}"
+        )
+    if disparity.dtype.kind != "f":
+        raise TypeError(
+            f"disparity must be a float array (NaN for holes), got dtype {disparity.dtype}"
+        )
+    if disparity.ndim != 2:
+        raise ValueError(f"disparity must be 2-D (H, W), got shape {disparity.shape}")
+    if not disparity.flags.writeable:
+        raise ValueError("disparity must be writeable (it is filled in place)")
     h, w = disparity.shape
     valid = np.isfinite(disparity)
     cols = np.broadcast_to(np.arange(w), (h, w))
