@@ -274,6 +274,10 @@ def stereo_rectify(
         ``cv2.fisheye.stereoRectify``'s) results to about 1e-12 relative (OpenCV 5.0),
         computed natively in Eigen; the ROIs within 1 pixel of OpenCV's (their edges are
         rounded, and an edge that falls on a pixel boundary to 1e-13 may round either way).
+        This holds where the lens model is invertible over the image: where OpenCV's 5-step
+        undistortion of the image border does not converge (strong distortion, a wide field
+        of view, the rational model's k4..k6), the ``alpha > 0`` scaling depends on points
+        that are off by pixels in both, and may differ from OpenCV's by pixels in P1, P2.
 
     Raises
     ------
