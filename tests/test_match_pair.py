@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 import stereodepth as sd
-from stereodepth.match_pair import match_pair, prepare_pair
+from stereodepth.match_pair import default_num_disparities, match_pair, prepare_pair
 
 
 def pair() -> tuple[np.ndarray, np.ndarray]:
@@ -76,3 +76,27 @@ def test_method_of_another_type_is_a_type_error() -> None:
         match_pair(left, right, method=["bm"])  # type: ignore[arg-type]
     with pytest.raises(ValueError, match="method must be one of 'bm', 'sgm', got 'BM'"):
         match_pair(left, right, method="BM")
+
+
+@pytest.mark.parametrize(
+    ("width", "exc", "match"),
+    [
+        # were 16 for -5 and 0, OverflowError ("cannot convert float infinity to integer")
+        # for inf and "unsupported operand type(s) for /: 'str' and 'int'" for "640"
+        (-5, ValueError, "^width_px must be an integer >= 1, got -5$"),
+        (0, ValueError, "^width_px must be an integer >= 1, got 0$"),
+        (float("inf"), TypeError, "^width_px must be an integer, got float inf$"),
+        ("640", TypeError, "^width_px must be an integer, got str '640'$"),
+    ],
+)
+def test_default_num_disparities_needs_a_width(width: Any, exc: type, match: str) -> None:
+    with pytest.raises(exc, match=match):
+        default_num_disparities(width)
+    assert default_num_disparities(np.int64(640)) == 80
+    assert [default_num_disparities(w) for w in (1, 128, 129, 2048, 10**6)] == [
+        16,
+        16,
+        32,
+        256,
+        256,
+    ]

@@ -43,8 +43,13 @@ def sgm_available() -> bool:
 
 def default_num_disparities(width_px: int) -> int:
     """A search range for an image ``width_px`` wide when nothing better is known: an eighth of
-    the width rounded up to a multiple of 16, from 16 to 256 px (for a 640 px image, 80)."""
-    return int(min(256, max(16, math.ceil(width_px / 8 / 16) * 16)))
+    the width rounded up to a multiple of 16, from 16 to 256 px (for a 640 px image, 80).
+    Raises TypeError or ValueError unless ``width_px`` is an integer >= 1 (a float width was
+    Python's TypeError or OverflowError, naming nothing, or a range for a width of -5)."""
+    from . import _validate as check
+
+    width = check.integer("width_px", width_px, minimum=1)
+    return int(min(256, max(16, math.ceil(width / 8 / 16) * 16)))
 
 
 def read_calibration_file(path: str | os.PathLike[str], cams: tuple[int, int] | None = None) -> Any:
