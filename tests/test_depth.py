@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import os
 import threading
+from typing import Any
 
 import numpy as np
 import pytest
@@ -545,3 +546,25 @@ def test_a_min_depth_beyond_float32_without_a_max_names_min_depth(
     for convert in (stereodepth.disparity_to_depth, reference.disparity_to_depth):
         with pytest.raises(ValueError, match=match):
             convert(D.astype(in_dtype), **kw)
+
+
+@pytest.mark.parametrize(
+    "call",
+    [
+        lambda d: stereodepth.disparity_to_depth(d, **GOOD),
+        lambda d: reference.disparity_to_depth(d, **GOOD),
+        lambda d: stereodepth.reproject(d, **GOOD),
+        lambda d: reference.reproject(d, **GOOD),
+        lambda d: stereodepth.to_opencv_disparity(d),
+        lambda d: stereodepth.from_opencv_disparity(d.astype(np.int16)),
+    ],
+    ids=["depth", "depth-oracle", "reproject", "reproject-oracle", "to-opencv", "from-opencv"],
+)
+def test_a_masked_disparity_is_refused(call: Any) -> None:
+    # The mask was dropped: the pixels the user masked (a low confidence, a far range) got a
+    # depth or a point from the data beneath, silently.
+    d = np.ma.masked_greater(np.array([[1.0, 2.0], [200.0, 4.0]], np.float32), 100)
+    with pytest.raises(
+        TypeError, match=r"(disparity|raw) must not be a masked array .*\.filled\(numpy\.nan\)"
+    ):
+        call(d)

@@ -153,7 +153,7 @@ def check_min_disparity(value: Any) -> int:
 def as_disparity(disparity: Any, name: str = "disparity") -> np.ndarray:
     """Checks dtype and shape; never copies a numpy array in the machine's byte order (one in
     the other byte order is converted)."""
-    arr: np.ndarray = check.native_order(check.array(name, disparity))
+    arr: np.ndarray = check.native_order(check.disparity_array(name, disparity))
     if arr.dtype not in _DISPARITY_DTYPES:
         raise TypeError(
             f"{name} must have dtype float16, float32, float64, int16 (OpenCV, x16) or uint16 "
@@ -211,7 +211,8 @@ def disparity_to_depth(
         (H, W) or (N, H, W) array of float16, float32, float64, int16 or uint16, in either
         byte order. int16 is read as OpenCV's fixed point (``scale`` defaults to 1/16; raw
         values below ``min_disparity * 16`` are holes); uint16 needs ``scale`` (1/256 for
-        KITTI) and 0 is a hole.
+        KITTI) and 0 is a hole. Not a masked array (``numpy.ma``: TypeError, its mask would
+        be ignored): NaN marks a hole.
     focal_px, baseline_m, doffs_px
         The rig: focal length in pixels, baseline in metres, and the difference of the two
         cameras' principal points in pixels (Middlebury's ``doffs``; 0 for most rigs).
@@ -301,12 +302,13 @@ def from_opencv_disparity(raw: Any, *, min_disparity: int = 0) -> np.ndarray:
     negative ``minDisparity`` produces). The inverse of
     :func:`stereodepth.to_opencv_disparity` with the same ``min_disparity``.
 
-    Raises TypeError unless ``raw`` is an int16 array and ``min_disparity`` an integer, and
+    Raises TypeError unless ``raw`` is an int16 array (not a masked one) and ``min_disparity``
+    an integer, and
     ValueError for a ``raw`` whose shape is not (H, W) or (N, H, W) (as every disparity map
     here), or a ``min_disparity`` outside [-2047, 2048], which no OpenCV matcher can have
     (its holes, ``(minDisparity - 1) * 16``, would not fit in int16; every pixel would be NaN).
     """
-    arr: np.ndarray = check.native_order(check.array("raw", raw))
+    arr: np.ndarray = check.native_order(check.disparity_array("raw", raw))
     if arr.dtype != np.int16:
         raise TypeError(f"raw must be OpenCV's int16 disparity (x16), got dtype {arr.dtype}")
     if arr.ndim not in (2, 3):  # a 0-d one failed inside numpy ("does not support item ...")

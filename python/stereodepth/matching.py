@@ -707,9 +707,9 @@ def to_opencv_disparity(disparity: Any, *, min_disparity: int = 0) -> np.ndarray
     (which OpenCV's readers, and :func:`stereodepth.from_opencv_disparity`, would take for a
     hole); when the invalid value itself does not fit in int16; or for a ``disparity`` whose
     shape is not (H, W) or (N, H, W), as every disparity map here (TypeError for one that is
-    not of floats).
+    not of floats, or is a masked array, whose mask would be ignored).
     """
-    arr = check.array("disparity", disparity)
+    arr = check.disparity_array("disparity", disparity)
     if arr.dtype.kind != "f":
         raise TypeError(f"disparity must be a float array (NaN for holes), got dtype {arr.dtype}")
     if arr.ndim not in (2, 3):  # from_opencv_disparity takes these only
