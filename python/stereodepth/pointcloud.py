@@ -217,7 +217,9 @@ def reproject(
         camera's principal point) default to the image centre, ``(W - 1) / 2`` and
         ``(H - 1) / 2``; ``doffs_px`` to 0.
     min_depth_m, max_depth_m
-        Points whose Z leaves this range are invalid.
+        Points whose Z leaves this range are invalid (a Z that overflows float32 whatever
+        ``max_depth_m``); ValueError for a ``min_depth_m`` beyond the largest float32,
+        3.4e38 (every point would be invalid).
     out
         A preallocated C-contiguous float32 array of shape ``disparity.shape + (3,)``.
     threads
