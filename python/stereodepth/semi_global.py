@@ -315,7 +315,8 @@ def memory_estimate(
     and grey images) and a few rows per thread. The figure is for an RGB pair with
     ``median=True`` (grey pairs need a little less); the speckle filter's runs, which depend
     on the disparities, are not counted (12 bytes per run of linked pixels in a row). The
-    disparities are counted rounded up to a multiple of 16 (:func:`run_disparities`).
+    disparities are counted rounded up to a multiple of 16 (:func:`run_disparities`). The
+    figure is capped at 1.8e19 bytes (shapes of that size hold more pixels than any memory).
 
     Raises TypeError or ValueError for a ``shape`` that is not two integers >= 1 and for the
     parameters :func:`semi_global_match` refuses, naming the parameter; ValueError for an
