@@ -236,6 +236,17 @@ def test_a_point_at_infinite_depth_is_invalid(max_depth_m: float | None) -> None
         assert np.isnan(p[0, 1]).all() and np.isfinite(p[0, [0, 2]]).all()
 
 
+@pytest.mark.parametrize("in_dtype", [np.float16, np.float32, np.int16, np.uint16])
+@pytest.mark.parametrize("invalid_value", [1e39, -1e300])
+def test_an_invalid_value_beyond_float32(in_dtype: type, invalid_value: float) -> None:
+    # Compared in float32 it is +-inf; the oracle's cast printed numpy's "overflow encountered
+    # in cast" (an error under -W error), so the two could not be compared.
+    d = random_disparity(np.random.default_rng(23), in_dtype, (5, 7))
+    scale = 1 / 256 if in_dtype == np.uint16 else None
+    kw: dict[str, Any] = {**RIG, "scale": scale, "invalid_value": invalid_value}
+    assert_same(stereodepth.reproject(d, **kw), reference.reproject(d, **kw))
+
+
 # --- the geometry -----------------------------------------------------------------------------
 def test_points_match_the_closed_forms() -> None:
     rows, cols = 9, 17

@@ -170,7 +170,8 @@ def reproject(
         if arr.dtype == np.float64:
             ok &= raw != o.invalid_value
         else:
-            ok &= arr.astype(np.float32) != np.float32(o.invalid_value)
+            with np.errstate(over="ignore"):  # beyond float32: +-inf, as the kernel's cast
+                ok &= arr.astype(np.float32) != np.float32(o.invalid_value)
     if o.invalid_below is not None:
         ok &= raw >= o.invalid_below
     for i, c in enumerate(xyz):
