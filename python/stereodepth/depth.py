@@ -302,11 +302,11 @@ def from_opencv_disparity(raw: Any, *, min_disparity: int = 0) -> np.ndarray:
     negative ``minDisparity`` produces). The inverse of
     :func:`stereodepth.to_opencv_disparity` with the same ``min_disparity``.
 
-    Raises TypeError unless ``raw`` is an int16 array (not a masked one) and ``min_disparity``
-    an integer, and
-    ValueError for a ``raw`` whose shape is not (H, W) or (N, H, W) (as every disparity map
-    here), or a ``min_disparity`` outside [-2047, 2048], which no OpenCV matcher can have
-    (its holes, ``(minDisparity - 1) * 16``, would not fit in int16; every pixel would be NaN).
+    Raises TypeError unless ``raw`` is an int16 array (not a masked one) and
+    ``min_disparity`` an integer, and ValueError for a ``raw`` whose shape is not (H, W) or
+    (N, H, W) (as every disparity map here), or a ``min_disparity`` outside [-2047, 2048],
+    which no OpenCV matcher can have (its holes, ``(minDisparity - 1) * 16``, would not fit
+    in int16; every pixel would be NaN).
     """
     arr: np.ndarray = check.native_order(check.disparity_array("raw", raw))
     if arr.dtype != np.int16:
