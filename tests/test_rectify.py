@@ -938,8 +938,9 @@ def _stored(change: dict[str, Any]) -> dict[str, Any]:
 @pytest.mark.parametrize(
     ("change", "match"),
     [
-        # An uncalibrated camera's camera_info has P all zeros: P2's gave ZeroDivisionError
-        # ("float division by zero") from Q, P1's a rectifier of garbage maps.
+        # A P of zeros (an uncalibrated camera's camera_info) in a calibration object other
+        # than StereoCalibration, which checks it: P2's gave ZeroDivisionError ("float
+        # division by zero") from Q, P1's a rectifier of garbage maps.
         ({"P2": np.zeros((3, 4))}, r"^calib\.P2 must be a projection .*fx = P\[0, 0\] > 0"),
         ({"P1": np.zeros((3, 4))}, r"^calib\.P1 must be a projection .*got \[\[0\.0, 0\.0"),
         ({"P2": 1}, r"^calib\.P2 must be a projection .*fy = P\[1, 1\] > 0"),

@@ -98,8 +98,9 @@ def _real_matrix(name: str, value: Any, shape: tuple[int, ...]) -> np.ndarray:
 
 def _projection(name: str, value: Any) -> np.ndarray:
     """A calibration's stored (3, 4) projection of a rectified camera: finite, with fx and fy
-    > 0 (an uncalibrated camera's camera_info has P all zeros: P2's gave ZeroDivisionError
-    from Q, P1's a rectifier of garbage maps)."""
+    > 0. StereoCalibration checks this itself; another object with its fields, which
+    from_calibration takes, could hold a P of zeros (an uncalibrated camera's camera_info):
+    P2's gave ZeroDivisionError from Q, P1's a rectifier of garbage maps."""
     P = _real_matrix(name, value, (3, 4))
     if not (P[0, 0] > 0 and P[1, 1] > 0):
         raise ValueError(
