@@ -787,6 +787,26 @@ def test_stereo_rectify_takes_a_numpy_bool_zero_disparity(flag: Any) -> None:
             np.testing.assert_allclose(np.asarray(a), np.asarray(b), rtol=1e-12, atol=1e-12)
 
 
+@pytest.mark.parametrize("alpha", [0.0, 1.0])
+def test_stereo_rectify_names_a_principal_point_on_the_border(alpha: float) -> None:
+    # K = diag(f, f, 1) (cx, cy forgotten) puts the principal point on the corner pixel: the
+    # alpha scaling divides 0 by 0, as cv2.stereoRectify does (its P1 is NaN). The message
+    # blamed the focal lengths, distortion and T, which are fine, and not the principal point.
+    args = {
+        "K1": np.diag([500.0, 500.0, 1.0]), "D1": None, "K2": np.diag([500.0, 500.0, 1.0]),
+        "D2": None, "image_size": (640, 480), "R": np.eye(3), "T": [-0.1, 0.0, 0.0],
+    }  # fmt: skip
+    match = (
+        r"non-finite rectification .*; alpha=.* from the principal point \(cx, cy\), which "
+        r"must lie inside the 640 x 480 image: K1's \(0\.0, 0\.0\) and K2's \(0\.0, 0\.0\) "
+        r"does not \(a K written without cx, cy\?\)$"
+    )
+    for rectify in (stereo_rectify, reference.stereo_rectify):
+        with pytest.raises(ValueError, match=match):
+            rectify(**args, alpha=alpha)
+    stereo_rectify(**args)  # alpha=-1 (OpenCV's default scaling) has no such division
+
+
 def test_stereo_rectify_takes_a_rotation_rounded_in_print(cv2: Any) -> None:
     """An R printed to 6 significant digits (a calibration file, a README) is up to about
     3e-6 from orthonormal: cv2.stereoRectify takes it (its Rodrigues conversion makes it the

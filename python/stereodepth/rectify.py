@@ -326,25 +326,48 @@ def stereo_rectify(
                 f"balance={balance!r}, fov_scale={fov_scale!r}"
             )
         r = _core.stereo_rectify(k1, d1, k2, d2, model, width, height, rot, t, a, new_w, new_h, zd)
-    _check_finite_rectification(r, k1, k2, d1, d2, t)
+    _check_finite_rectification(r, k1, k2, d1, d2, t, (width, height), a)
     return Rectification(
         r["R1"], r["R2"], r["P1"], r["P2"], r["Q"], tuple(r["roi1"]), tuple(r["roi2"])
     )
 
 
 def _check_finite_rectification(
-    r: Any, k1: np.ndarray, k2: np.ndarray, d1: np.ndarray, d2: np.ndarray, t: np.ndarray
+    r: Any,
+    k1: np.ndarray,
+    k2: np.ndarray,
+    d1: np.ndarray,
+    d2: np.ndarray,
+    t: np.ndarray,
+    size: tuple[int, int] | None = None,
+    alpha: float = -1.0,
 ) -> None:
     """ValueError naming the inputs when R1, R2, P1, P2 or Q (``r[name]``) is not finite:
     focal lengths near 0 or 1e300, or distortion of 1e10, overflow Bouguet's method (said
-    here, not later as "P must be finite" from the maps). Shared with the numpy oracle."""
+    here, not later as "P must be finite" from the maps). With ``alpha >= 0`` and the raw
+    image ``size``, a principal point on or beyond the image's border pixels (a K written
+    without cx, cy: the 0 / 0 of the alpha scaling) is named. Shared with the numpy oracle."""
     for key in ("R1", "R2", "P1", "P2", "Q"):
         if not np.all(np.isfinite(r[key])):
+            hint = ""
+            if size is not None and alpha >= 0:
+                w, h = size
+                outside = [
+                    f"{name}'s ({float(k[0, 2])!r}, {float(k[1, 2])!r})"
+                    for name, k in (("K1", k1), ("K2", k2))
+                    if not (0 < k[0, 2] < w - 1 and 0 < k[1, 2] < h - 1)
+                ]
+                if outside:
+                    hint = (
+                        f"; alpha={alpha!r} scales to the image's edges from the principal "
+                        f"point (cx, cy), which must lie inside the {w} x {h} image: "
+                        f"{' and '.join(outside)} does not (a K written without cx, cy?)"
+                    )
             raise ValueError(
                 f"the calibration gives a non-finite rectification ({key} = "
                 f"{np.asarray(r[key]).tolist()}): K1, K2, D1, D2, R and T must describe a real "
                 f"camera pair, got fx = {float(k1[0, 0])!r}, {float(k2[0, 0])!r}, "
-                f"D1 = {d1.tolist()}, D2 = {d2.tolist()}, T = {t.tolist()}"
+                f"D1 = {d1.tolist()}, D2 = {d2.tolist()}, T = {t.tolist()}{hint}"
             )
 
 

@@ -601,7 +601,7 @@ def _stereo_rectify(
     q_mat = np.array([[1, 0, 0, -c1n[0]], [0, 1, 0, -c1n[1]], [0, 0, 0, fc],
                       [0, 0, -1 / t_idx, (c1n[idx] - c2n[idx]) / t_idx]])  # fmt: skip
     found = {"R1": r1, "R2": r2, "P1": p1, "P2": p2, "Q": q_mat}
-    _check_finite_rectification(found, k1, k2, d1, d2, t_in)
+    _check_finite_rectification(found, k1, k2, d1, d2, t_in, (w, h), a)
 
     def roi(r: tuple[float, ...], c0: np.ndarray, c: np.ndarray) -> tuple[int, int, int, int]:
         x, y = int(np.ceil((r[0] - c0[0]) * s + c[0])), int(np.ceil((r[1] - c0[1]) * s + c[1]))
