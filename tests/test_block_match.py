@@ -587,6 +587,20 @@ def test_one_shot_keeps_the_threads_matcher_and_still_checks_every_call(
     assert _methods._thread_state.matcher is None
 
 
+@pytest.mark.parametrize("match", [sd.block_match, sd.semi_global_match])
+@pytest.mark.parametrize("refused", [(True, 4095), (1.0, 4095), [1, np.float64(4095)]])
+def test_one_shot_checks_the_items_of_intensity_range_every_call(match: Any, refused: Any) -> None:
+    # The kept matcher was found by comparing the values with == and only their outer type:
+    # after (1, 4095), an intensity_range of (True, 4095) or (1.0, 4095), which the checks
+    # refuse, equalled the kept key and was matched with, or refused, by the thread's history.
+    left, right = (a.astype(np.uint16) * 16 for a in shifted_pair((12, 30), 2, seed=42))
+    valid = type(refused)([1, 4095])  # of the same outer type: tuple or list
+    kept = match(left, right, num_disparities=8, intensity_range=valid)
+    assert np.isfinite(kept).any()
+    with pytest.raises(TypeError, match="intensity_range must be None or two integers"):
+        match(left, right, num_disparities=8, intensity_range=refused)
+
+
 def test_matcher_params_and_repr() -> None:
     m = sd.StereoMatcher(num_disparities=32, block_size=7, lr_max_diff=None)
     p = m.params
@@ -825,6 +839,9 @@ L8 = np.zeros((6, 9), np.uint8)
             r" got list",
         ),
         (L8, "right.png", TypeError, "right must be a numpy.ndarray .* got str"),
+        # block_match's clean-up then took the list's shape and raised numpy's "setting an
+        # array element with a sequence ... inhomogeneous shape" instead
+        ([[1, 2], [3]], L8, TypeError, r"left must be a numpy.ndarray .* got list$"),
         (
             L8.astype(np.float32),
             L8,
@@ -892,12 +909,16 @@ def test_matcher_rejects_missing_and_unknown_parameters() -> None:
         sd.StereoMatcher(num_disparities=8, blocksize=9)
 
 
-@pytest.mark.parametrize("ratio", [6553399.0, 6553400.0, 1e7, 1e20, 1e300])
+MAX_DOUBLE = float(np.finfo(np.float64).max)
+
+
+@pytest.mark.parametrize("ratio", [6553399.0, 6553400.0, 1e7, 1e20, 1e300, 1e308, MAX_DOUBLE])
 @pytest.mark.parametrize("cost", ["census", "sad"])
 def test_huge_uniqueness_ratio_matches_the_oracle(ratio: float, cost: str) -> None:
     # A ratio of 1e20 hung the matcher's constructor: its table loop added 1.0 to a double
     # too large to change. From 6553400 on (a factor of 65535 x 100) no second-best cost
-    # passes a winner above 0; a winning cost of 0 still passes.
+    # passes a winner above 0; a winning cost of 0 still passes. From 1e308 on the oracle's
+    # best * factor overflows to inf (it printed numpy's overflow RuntimeWarning).
     rng = np.random.default_rng(11)
     left = rng.integers(0, 256, (24, 40), dtype=np.uint8)
     right = np.roll(left, -3, axis=1)
@@ -986,6 +1007,24 @@ def test_native_layer_rejects_bad_parameters_too() -> None:
             {"min_disparity": 1.5},
             TypeError,
             "min_disparity must be an integer",
+        ),
+        # numpy's "setting an array element with a sequence", naming nothing
+        ([[1.5], [2.0, 3.0]], {}, ValueError, r"disparity must be a rectangular array .* list"),
+        # maps of any other shape came out in that shape (from_opencv_disparity refuses them)
+        (
+            np.float32(3.2),
+            {},
+            ValueError,
+            r"disparity must have shape \(H, W\) or \(N, H, W\), got \(\)$",
+        ),
+        (np.zeros(3), {}, ValueError, r"disparity must have shape .*, got \(3,\)$"),
+        (np.zeros((1, 1, 2, 2)), {}, ValueError, r"got \(1, 1, 2, 2\)$"),
+        # numpy's "RuntimeWarning: overflow encountered in multiply" came first (x 16)
+        (
+            np.array([[1.7e308]]),
+            {},
+            ValueError,
+            r"below 2048 px to fit .* format, got 1\.7e\+308 \(inf px in sixteenths\)$",
         ),
     ],
 )

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import os
 import threading
+from typing import Any
 
 import numpy as np
 import pytest
@@ -366,6 +367,8 @@ D = np.ones((2, 3), np.float32)
         (np.ones((2, 3), np.uint16), {}, ValueError, "scale is required for uint16"),
         (D, {"dtype": np.float64}, TypeError, "dtype must be numpy.float32 or numpy.uint16"),
         (D, {"dtype": "nonsense"}, TypeError, "dtype must be numpy.float32 or numpy.uint16"),
+        # numpy reads None as float64: the message said "got float64"
+        (D, {"dtype": None}, TypeError, "^dtype must be numpy.float32 or numpy.uint16, got None$"),
         (D, {"min_depth_m": -1.0}, ValueError, "min_depth_m must be a finite number >= 0"),
         (D, {"max_depth_m": 0.0}, ValueError, "max_depth_m must be a finite number > 0"),
         (
@@ -517,3 +520,51 @@ def test_arrays_that_went_through_pickle_are_accepted() -> None:
         raw = pickle.loads(pickle.dumps(d.astype(dtype)))
         got = stereodepth.disparity_to_depth(raw, scale=1.0, dtype=np.uint16, out=out, **GOOD)
         assert_same(got, reference.disparity_to_depth(raw, scale=1.0, dtype=np.uint16, **GOOD))
+
+
+@pytest.mark.parametrize("in_dtype", [np.float16, np.float32, np.float64])
+@pytest.mark.parametrize("max_depth_m", [3.5e38, 1e300, float(np.finfo(np.float64).max)])
+def test_an_infinite_depth_is_beyond_any_max_depth(in_dtype: type, max_depth_m: float) -> None:
+    # A max_depth_m beyond float32's range (a user's "no limit") rounded to inf in the float32
+    # comparison, so a depth that overflowed float32 (a disparity near 0) came out inf, as a
+    # valid depth inside the range; it is above every max_depth_m, and NaN.
+    d = np.array([[1.0, 0.0, 2.0, np.finfo(in_dtype).smallest_subnormal]], in_dtype)
+    for convert in (stereodepth.disparity_to_depth, reference.disparity_to_depth):
+        z = convert(d, focal_px=1e18, baseline_m=1e18, max_depth_m=max_depth_m)
+        np.testing.assert_array_equal(z, np.array([[1e36, np.nan, 5e35, np.nan]], np.float32))
+
+
+@pytest.mark.parametrize("dtype", [np.float32, np.uint16])
+@pytest.mark.parametrize("in_dtype", [np.float32, np.float64])
+def test_a_min_depth_beyond_float32_without_a_max_names_min_depth(
+    dtype: type, in_dtype: type
+) -> None:
+    # The native check said "max_depth_m must be >= min_depth_m, got 3.40282e+38", of a
+    # max_depth_m never given (the oracle gave every pixel invalid); every depth is below it.
+    kw = {**GOOD, "min_depth_m": 1e300, "dtype": dtype}
+    match = r"^min_depth_m must be at most .*3\.40282.*e\+38.* got 1e\+300"
+    for convert in (stereodepth.disparity_to_depth, reference.disparity_to_depth):
+        with pytest.raises(ValueError, match=match):
+            convert(D.astype(in_dtype), **kw)
+
+
+@pytest.mark.parametrize(
+    "call",
+    [
+        lambda d: stereodepth.disparity_to_depth(d, **GOOD),
+        lambda d: reference.disparity_to_depth(d, **GOOD),
+        lambda d: stereodepth.reproject(d, **GOOD),
+        lambda d: reference.reproject(d, **GOOD),
+        lambda d: stereodepth.to_opencv_disparity(d),
+        lambda d: stereodepth.from_opencv_disparity(d.astype(np.int16)),
+    ],
+    ids=["depth", "depth-oracle", "reproject", "reproject-oracle", "to-opencv", "from-opencv"],
+)
+def test_a_masked_disparity_is_refused(call: Any) -> None:
+    # The mask was dropped: the pixels the user masked (a low confidence, a far range) got a
+    # depth or a point from the data beneath, silently.
+    d = np.ma.masked_greater(np.array([[1.0, 2.0], [200.0, 4.0]], np.float32), 100)
+    with pytest.raises(
+        TypeError, match=r"(disparity|raw) must not be a masked array .*\.filled\(numpy\.nan\)"
+    ):
+        call(d)

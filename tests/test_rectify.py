@@ -6,6 +6,7 @@ from __future__ import annotations
 import dataclasses
 import sys
 import threading
+import warnings
 import zlib
 from dataclasses import dataclass
 from typing import Any
@@ -522,6 +523,31 @@ def test_remap_writes_into_out_and_accepts_float64_maps() -> None:
     np.testing.assert_array_equal(out, reference.remap(img, mx, my))
 
 
+@pytest.mark.parametrize("remap", [stereodepth.remap, reference.remap], ids=["native", "oracle"])
+def test_remap_float64_maps_beyond_float32(remap: Any) -> None:
+    # A float64 map may mark "no source" with a huge value (1e300, finfo.max): rounded to
+    # float32 it is +-inf, which the clamp puts outside the image (0), as the docstring says.
+    # The rounding printed numpy's "RuntimeWarning: overflow encountered in cast" (an error
+    # under -W error) before the image came out right.
+    rng = np.random.default_rng(12)
+    img = random_image(rng, (6, 7), np.uint8)
+    mx, my = random_maps(rng, (4, 5), (6, 7))
+    big_x, big_y = mx.astype(np.float64), my.astype(np.float64)
+    big_x[0, :3] = [1e300, -1e300, np.finfo(np.float64).max]
+    big_y[1, :2] = [1e300, -np.inf]
+    f32_max = float(np.finfo(np.float32).max)
+    small_x, small_y = (
+        np.where(np.abs(m) > f32_max, np.copysign(np.inf, m), m).astype(np.float32)
+        for m in (big_x, big_y)
+    )
+    expected = stereodepth.remap(img, small_x, small_y)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        got = remap(img, big_x, big_y)
+    np.testing.assert_array_equal(got, expected)
+    assert (got[0, :3] == 0).all() and (got[1, :2] == 0).all()
+
+
 # --- StereoRectifier -----------------------------------------------------------------------------
 @dataclass(frozen=True)
 class Calib:
@@ -706,7 +732,8 @@ def good_args() -> dict[str, Any]:
         ({"alpha": -0.5}, ValueError, "alpha must be -1"),
         ({"alpha": "0"}, TypeError, "alpha must be a real number"),
         ({"new_image_size": (10, -1)}, ValueError, "new_image_size"),
-        ({"zero_disparity": 1}, TypeError, "zero_disparity must be a bool"),
+        ({"zero_disparity": 1}, TypeError, "zero_disparity must be a bool, got int 1"),
+        ({"zero_disparity": "no"}, TypeError, "zero_disparity must be a bool, got str 'no'"),
         ({"distortion_model": "radtan"}, ValueError, "distortion_model must be one of"),
         ({"distortion_model": 5}, TypeError, "distortion_model must be a str"),
         ({"distortion_model": "equidistant"}, ValueError, "D1 must have 4 coefficients"),
@@ -741,9 +768,43 @@ def test_stereo_rectify_rejects(change: dict[str, Any], exc: type, match: str) -
     args.update(change)
     with pytest.raises(exc, match=match):
         stereo_rectify(**args)
-    if "non-finite" in match:  # the oracle said "cannot convert float NaN to integer"
+    if "non-finite" in match or "zero_disparity" in match:
+        # the oracle said "cannot convert float NaN to integer"; it took any zero_disparity
+        # for its truth value ("no" as True)
         with pytest.raises(exc, match=match):
             reference.stereo_rectify(**args)
+
+
+@pytest.mark.parametrize("flag", [np.True_, np.False_])
+def test_stereo_rectify_takes_a_numpy_bool_zero_disparity(flag: Any) -> None:
+    # numpy's bool (from a mask, a config array) was refused as "zero_disparity must be a
+    # bool, got bool"; it is the Python bool of its value, as the matchers' flags are.
+    args = good_args()
+    want = stereo_rectify(**args, zero_disparity=bool(flag))
+    for rectify in (stereo_rectify, reference.stereo_rectify):
+        got = rectify(**args, zero_disparity=flag)
+        for a, b in zip(got, want, strict=True):
+            np.testing.assert_allclose(np.asarray(a), np.asarray(b), rtol=1e-12, atol=1e-12)
+
+
+@pytest.mark.parametrize("alpha", [0.0, 1.0])
+def test_stereo_rectify_names_a_principal_point_on_the_border(alpha: float) -> None:
+    # K = diag(f, f, 1) (cx, cy forgotten) puts the principal point on the corner pixel: the
+    # alpha scaling divides 0 by 0, as cv2.stereoRectify does (its P1 is NaN). The message
+    # blamed the focal lengths, distortion and T, which are fine, and not the principal point.
+    args = {
+        "K1": np.diag([500.0, 500.0, 1.0]), "D1": None, "K2": np.diag([500.0, 500.0, 1.0]),
+        "D2": None, "image_size": (640, 480), "R": np.eye(3), "T": [-0.1, 0.0, 0.0],
+    }  # fmt: skip
+    match = (
+        r"non-finite rectification .*; alpha=.* from the principal point \(cx, cy\), which "
+        r"must lie inside the 640 x 480 image: K1's \(0\.0, 0\.0\) and K2's \(0\.0, 0\.0\) "
+        r"does not \(a K written without cx, cy\?\)$"
+    )
+    for rectify in (stereo_rectify, reference.stereo_rectify):
+        with pytest.raises(ValueError, match=match):
+            rectify(**args, alpha=alpha)
+    stereo_rectify(**args)  # alpha=-1 (OpenCV's default scaling) has no such division
 
 
 def test_stereo_rectify_takes_a_rotation_rounded_in_print(cv2: Any) -> None:
@@ -834,6 +895,88 @@ def test_remap_rejects(kwargs: dict[str, Any], exc: type, match: str) -> None:
         args["out"] = args["image"].reshape(-1)[:4].reshape(2, 2)
     with pytest.raises(exc, match=match):
         stereodepth.remap(**args)
+
+
+@pytest.mark.parametrize(
+    "maps", [stereodepth.init_undistort_rectify_map, reference.init_undistort_rectify_map]
+)
+@pytest.mark.parametrize(
+    ("P", "match"),
+    [
+        # the kernel said "P @ R must be invertible" without the values
+        (
+            np.zeros((3, 4)),
+            r"^P @ R must be invertible \(its determinant is 0\.0; .*\), got P = "
+            r"\[\[0\.0, 0\.0, 0\.0\], .* and R = \[\[1\.0, 0\.0, 0\.0\], ",
+        ),
+        (np.diag([1e300, 1e300, 1.0]), r"^P @ R must be invertible \(its determinant is inf;"),
+        # "must have shape (3, 3)", though a (3, 4) projection is taken too
+        (np.eye(4), r"^P must have shape \(3, 3\) or \(3, 4\), got \(4, 4\)$"),
+    ],
+)
+def test_maps_name_the_new_camera_they_cannot_use(maps: Any, P: np.ndarray, match: str) -> None:
+    rig = RIGS[0]
+    with pytest.raises(ValueError, match=match):
+        maps(rig.K1, rig.D1, None, P, (4, 4))
+
+
+@pytest.mark.parametrize(
+    ("K", "D", "model"),
+    [
+        (np.diag([1e300, 1e300, 1.0]), np.zeros(5), "plumb_bob"),
+        (np.array([[700.0, 0, 320], [0, 700, 240], [0, 0, 1]]), [0, 0, 0, 0, 1e38], "plumb_bob"),
+        (np.array([[700.0, 0, 320], [0, 700, 240], [0, 0, 1]]), [1e38, 0, 0, 0], "equidistant"),
+    ],
+)
+def test_maps_beyond_float32_are_infinite_in_the_oracle_too(K: Any, D: Any, model: str) -> None:
+    # The kernel rounds such positions to +-inf (remap puts them outside the image); the
+    # oracle's rounding printed numpy's "overflow encountered in cast" (an error under
+    # -W error), so the two could not be compared.
+    P = np.array([[650.0, 0, 310, 0], [0, 650, 250, 0], [0, 0, 1, 0]])
+    native = stereodepth.init_undistort_rectify_map(K, D, None, P, (8, 6), model)
+    oracle = reference.init_undistort_rectify_map(K, D, None, P, (8, 6), model)
+    for a, b in zip(native, oracle, strict=True):
+        np.testing.assert_array_equal(a, b, strict=True)
+    assert np.isinf(native[0]).any()
+
+
+def _stored(change: dict[str, Any]) -> dict[str, Any]:
+    """A calibration's stored transforms (those stereo_rectify computes), with ``change``:
+    None drops a P, an int zeroes that row of the P named."""
+    rig = RIGS[0]
+    r = stereo_rectify(rig.K1, rig.D1, rig.K2, rig.D2, rig.size, rig.R, rig.T)
+    kw: dict[str, Any] = {"R1": r.R1, "R2": r.R2, "P1": r.P1.copy(), "P2": r.P2.copy()}
+    for key, value in change.items():
+        if key in ("P1", "P2") and isinstance(value, int):
+            kw[key][value] = 0.0
+        else:
+            kw[key] = value
+    return kw
+
+
+@pytest.mark.parametrize("rectified", [False, True])
+@pytest.mark.parametrize(
+    ("change", "match"),
+    [
+        # A P of zeros (an uncalibrated camera's camera_info) in a calibration object other
+        # than StereoCalibration, which checks it: P2's gave ZeroDivisionError ("float
+        # division by zero") from Q, P1's a rectifier of garbage maps.
+        ({"P2": np.zeros((3, 4))}, r"^calib\.P2 must be a projection .*fx = P\[0, 0\] > 0"),
+        ({"P1": np.zeros((3, 4))}, r"^calib\.P1 must be a projection .*got \[\[0\.0, 0\.0"),
+        ({"P2": 1}, r"^calib\.P2 must be a projection .*fy = P\[1, 1\] > 0"),
+        # a stored Q of zeros came back as rectifier.Q (reproject refused it later, as "Q")
+        ({"Q": np.zeros((4, 4))}, r"^calib\.Q must be invertible \(rank 4\), got rank 0"),
+    ],
+)
+def test_rectifier_refuses_a_stored_projection_that_is_none(
+    change: dict[str, Any], match: str, rectified: bool
+) -> None:
+    rig = RIGS[0]
+    kw = _stored(change)
+    if rectified:  # an already rectified pair keeps P1, P2 and Q only
+        kw = {k: v for k, v in kw.items() if k in ("P1", "P2", "Q")}
+    with pytest.raises(ValueError, match=match):
+        StereoRectifier.from_calibration(calib_of(rig, rectified=rectified, **kw))
 
 
 def test_maps_and_rectifier_reject() -> None:

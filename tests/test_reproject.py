@@ -207,6 +207,46 @@ def test_non_contiguous_input_and_out() -> None:
     assert_same(out, reference.reproject(np.ascontiguousarray(view), **RIG))
 
 
+@pytest.mark.parametrize("in_dtype", IN_DTYPES)
+@pytest.mark.parametrize("layout", ["fortran", "broadcast", "reversed", "columns"])
+def test_any_layout_of_every_dtype(in_dtype: type, layout: str) -> None:
+    # float16 was converted to float32 keeping its layout: a Fortran-order or broadcast
+    # float16 map was refused with "disparity must have contiguous rows", which the user did
+    # not pass (the other dtypes were copied, as the docstring says).
+    d = random_disparity(np.random.default_rng(17), in_dtype, (6, 9))
+    view = {
+        "fortran": np.asfortranarray(d),
+        "broadcast": np.broadcast_to(d[:1], d.shape),
+        "reversed": d[::-1, ::-1],
+        "columns": d[:, ::2],
+    }[layout]
+    scale = 1 / 256 if in_dtype == np.uint16 else None
+    r = stereodepth.reproject(view, **RIG, scale=scale)
+    assert_same(r, reference.reproject(np.ascontiguousarray(view), **RIG, scale=scale))
+
+
+@pytest.mark.parametrize("max_depth_m", [None, 1e300])
+def test_a_point_at_infinite_depth_is_invalid(max_depth_m: float | None) -> None:
+    # "A point is invalid where ... a coordinate is not finite": with a max_depth_m beyond
+    # float32's range, Z = inf (a disparity whose depth overflows float32) was kept (X = Y = 0
+    # here: the pixel is on the principal point).
+    d = np.array([[1.0, 1e-300, 2.0]], np.float64)
+    for project in (stereodepth.reproject, reference.reproject):
+        p = project(d, focal_px=1e5, baseline_m=1e3, cx_px=1.0, cy_px=0.0, max_depth_m=max_depth_m)
+        assert np.isnan(p[0, 1]).all() and np.isfinite(p[0, [0, 2]]).all()
+
+
+@pytest.mark.parametrize("in_dtype", [np.float16, np.float32, np.int16, np.uint16])
+@pytest.mark.parametrize("invalid_value", [1e39, -1e300])
+def test_an_invalid_value_beyond_float32(in_dtype: type, invalid_value: float) -> None:
+    # Compared in float32 it is +-inf; the oracle's cast printed numpy's "overflow encountered
+    # in cast" (an error under -W error), so the two could not be compared.
+    d = random_disparity(np.random.default_rng(23), in_dtype, (5, 7))
+    scale = 1 / 256 if in_dtype == np.uint16 else None
+    kw: dict[str, Any] = {**RIG, "scale": scale, "invalid_value": invalid_value}
+    assert_same(stereodepth.reproject(d, **kw), reference.reproject(d, **kw))
+
+
 # --- the geometry -----------------------------------------------------------------------------
 def test_points_match_the_closed_forms() -> None:
     rows, cols = 9, 17

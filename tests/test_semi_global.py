@@ -866,3 +866,49 @@ def test_channel_order_and_intensity_range_as_the_block_matcher() -> None:
     )
     with pytest.raises(ValueError, match="channel_order must be 'rgb' or 'bgr', got 'rbg'"):
         sd.SemiGlobalMatcher(num_disparities=16, channel_order="rbg")
+
+
+@pytest.mark.parametrize("ratio", [1e300, 1e308, float(np.finfo(np.float64).max)])
+def test_huge_uniqueness_ratio_matches_the_oracle(ratio: float) -> None:
+    # best * (100 + ratio) overflows to inf from 1e308 on: the oracle printed numpy's
+    # "overflow encountered in multiply" (an error under -W error). No second-best sum passes
+    # a winner above 0; a winning sum of 0 still passes.
+    rng = np.random.default_rng(12)
+    left = rng.integers(0, 256, (24, 40), dtype=np.uint8)
+    right = np.roll(left, -3, axis=1)
+    right[:8, ::7] = 0
+    kw: dict[str, Any] = {"num_disparities": 8, "uniqueness_ratio": ratio, "paths": 4}
+    got = sd.semi_global_match(left, right, **kw)
+    want = ref.semi_global_match(left, right, **kw)
+    np.testing.assert_array_equal(got, want, strict=True)
+    assert np.isfinite(got).any() and np.isnan(got).any()
+
+
+@pytest.mark.parametrize(
+    ("disparity", "exc", "match"),
+    [
+        # were "too many values to unpack (expected 2)", "not enough values to unpack",
+        # "'list' object has no attribute 'shape'" and "assignment destination is read-only"
+        (
+            np.zeros((2, 3, 4), np.float32),
+            ValueError,
+            r"^disparity must be 2-D \(H, W\).*got shape \(2, 3, 4\)$",
+        ),
+        (np.zeros(4, np.float32), ValueError, r"^disparity must be 2-D .*got shape \(4,\)$"),
+        ([[1.0, float("nan")]], TypeError, "^disparity must be a numpy.ndarray .*got list$"),
+        (
+            np.zeros((2, 2), np.int16),
+            TypeError,
+            "^disparity must be a float array .*got dtype int16$",
+        ),
+        ("read-only", ValueError, r"^disparity must be writeable \(it is filled in place\)$"),
+    ],
+)
+def test_fill_background_names_what_it_cannot_fill(disparity: Any, exc: type, match: str) -> None:
+    from stereodepth.semi_global import fill_background
+
+    if isinstance(disparity, str):
+        disparity = np.array([[1.0, np.nan]], np.float32)
+        disparity.flags.writeable = False
+    with pytest.raises(exc, match=match):
+        fill_background(disparity)

@@ -91,9 +91,11 @@ def thread_matcher(method: str, **params: Any) -> Any:
     # must not answer for another that its checks would refuse. They come before the values,
     # so that a comparison stops at a type that differs before it compares (say) a cached
     # tuple with an array. The key is built on every one-shot call, so it is kept cheap.
+    # The items of a tuple or list (intensity_range) are typed too: after (1, 4095), an
+    # intensity_range of (True, 4095) or (1.0, 4095) compared equal and skipped the checks.
     names = tuple(sorted(params))
     values = tuple([params[k] for k in names])
-    key = (method, names, tuple(map(type, values)), values)
+    key = (method, names, tuple(map(_types, values)), values)
     cached = getattr(_thread_state, "matcher", None)
     if cached is None or cached[0] != key:
         check_method(method)
@@ -101,6 +103,14 @@ def thread_matcher(method: str, **params: Any) -> Any:
         cached = (key, matcher_class(method)(**params))
         _thread_state.matcher = cached
     return cached[1]
+
+
+def _types(value: Any) -> Any:
+    """The type of ``value``, with those of its items for a tuple or list (one level: the
+    parameters hold no deeper containers)."""
+    if isinstance(value, (tuple, list)):
+        return (type(value), tuple(map(type, value)))
+    return type(value)
 
 
 def release_thread_matcher() -> None:

@@ -225,9 +225,10 @@ def block_match(
     second = np.where(far, agg_in, sentinel).min(axis=2)
     has_second = second < sentinel
     if o.uniqueness_factor > 0:
-        ok &= ~has_second | (
-            second.astype(np.float64) * 100.0 > best.astype(np.float64) * o.uniqueness_factor
-        )
+        # best * factor may overflow to inf (a ratio near 1e308): no second cost passes then
+        with np.errstate(over="ignore"):
+            bound = best.astype(np.float64) * o.uniqueness_factor
+        ok &= ~has_second | (second.astype(np.float64) * 100.0 > bound)
 
     if o.lr_max_diff is not None:
         # The right image's winner at xr: the least agg[xr + d, k] over d with xr + d in the

@@ -52,8 +52,11 @@ def _as_maps(map_x: Any, map_y: Any) -> tuple[np.ndarray, np.ndarray]:
             raise ValueError(f"{name} must be 2-D, got shape {m.shape}")
     if mx.shape != my.shape:
         raise ValueError(f"map_x and map_y must have the same shape, got {mx.shape} and {my.shape}")
-    mx = np.ascontiguousarray(mx, dtype=np.float32)
-    my = np.ascontiguousarray(my, dtype=np.float32)
+    # A float64 position beyond float32 (1e300 marking "no source") rounds to +-inf, which
+    # the clamp puts outside the image, as the docstring says: no overflow warning for it.
+    with np.errstate(over="ignore"):
+        mx = np.ascontiguousarray(mx, dtype=np.float32)
+        my = np.ascontiguousarray(my, dtype=np.float32)
     return mx, my
 
 
@@ -95,7 +98,8 @@ def remap(
 
     ``image``: (H, W) uint8 or uint16, or (H, W, 3) uint8 (channels interleaved, any order).
     ``map_x``, ``map_y``: (h, w) float32 raw column and row positions (float64 is rounded to
-    float32 first). Returns (h, w[, 3]) of the image's dtype (into ``out`` when given).
+    float32 first; beyond float32's range, to +-inf). Returns (h, w[, 3]) of the image's
+    dtype (into ``out`` when given).
 
     Exactly specified arithmetic. Each position is clamped to [-2, W + 1] x [-2, H + 1] (NaN
     to -2; no result changes) and ``p`` is the image, 0 outside it (``cv2.BORDER_CONSTANT``

@@ -109,6 +109,19 @@ def array(name: str, value: Any) -> np.ndarray:
         ) from exc
 
 
+def disparity_array(name: str, value: Any) -> np.ndarray:
+    """:func:`array` for a disparity map: a masked array (``numpy.ma``) is a TypeError naming
+    ``name``, since the kernels read its data and would give the masked pixels a depth or a
+    point, silently; NaN marks a hole (``d.filled(np.nan)``)."""
+    if isinstance(value, np.ma.MaskedArray):
+        raise TypeError(
+            f"{name} must not be a masked array (its mask would be ignored: the masked pixels "
+            f"would get values); mark the holes with NaN, {name}.filled(numpy.nan), got "
+            f"MaskedArray with dtype {value.dtype}"
+        )
+    return array(name, value)
+
+
 def real_array(name: str, value: Any) -> np.ndarray:
     """A scalar or array of real numbers as a float64 array (NaN and inf allowed)."""
     if isinstance(value, (bool, np.bool_)):

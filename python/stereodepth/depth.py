@@ -64,6 +64,8 @@ class DepthOptions:
                 )
             scale = 1.0 / 16.0 if kind == np.int16 else 1.0
         self.scale = check.positive("scale", scale)
+        if dtype is None:  # numpy reads None as float64: the message said "got float64"
+            raise TypeError("dtype must be numpy.float32 or numpy.uint16, got None")
         try:
             out_dtype = np.dtype(dtype)
         except TypeError as exc:
@@ -85,6 +87,17 @@ class DepthOptions:
                     f"max_depth_m must be >= min_depth_m ({self.min_depth_m!r}), "
                     f"got {max_depth_m!r}"
                 )
+            if self.dtype == np.float32:
+                # Compared in float32, a max beyond its range was inf, and a depth that
+                # overflowed float32 (inf) passed as inside the range: it is above any max.
+                self.max_depth_m = min(self.max_depth_m, FLOAT32_MAX)
+        if self.min_depth_m > FLOAT32_MAX and (max_depth_m is None or self.dtype == np.float32):
+            # Every depth would be invalid; the kernel named the max_depth_m not given.
+            which = "float32 depth" if self.dtype == np.float32 else "depth (default max_depth_m)"
+            raise ValueError(
+                f"min_depth_m must be at most the largest float32, {FLOAT32_MAX!r} m (no {which} "
+                f"lies beyond it: every pixel would be invalid), got {min_depth_m!r}"
+            )
         # Which raw values mean "no disparity". OpenCV's int16 output marks holes with
         # (min_disparity - 1) * 16: every raw value below min_disparity * 16 is a hole, and
         # the rest are disparities, negative ones included. KITTI's uint16 uses 0.
@@ -140,7 +153,7 @@ def check_min_disparity(value: Any) -> int:
 def as_disparity(disparity: Any, name: str = "disparity") -> np.ndarray:
     """Checks dtype and shape; never copies a numpy array in the machine's byte order (one in
     the other byte order is converted)."""
-    arr: np.ndarray = check.native_order(check.array(name, disparity))
+    arr: np.ndarray = check.native_order(check.disparity_array(name, disparity))
     if arr.dtype not in _DISPARITY_DTYPES:
         raise TypeError(
             f"{name} must have dtype float16, float32, float64, int16 (OpenCV, x16) or uint16 "
@@ -198,7 +211,8 @@ def disparity_to_depth(
         (H, W) or (N, H, W) array of float16, float32, float64, int16 or uint16, in either
         byte order. int16 is read as OpenCV's fixed point (``scale`` defaults to 1/16; raw
         values below ``min_disparity * 16`` are holes); uint16 needs ``scale`` (1/256 for
-        KITTI) and 0 is a hole.
+        KITTI) and 0 is a hole. Not a masked array (``numpy.ma``: TypeError, its mask would
+        be ignored): NaN marks a hole.
     focal_px, baseline_m, doffs_px
         The rig: focal length in pixels, baseline in metres, and the difference of the two
         cameras' principal points in pixels (Middlebury's ``doffs``; 0 for most rigs).
@@ -209,7 +223,9 @@ def disparity_to_depth(
         half to even, 0 where invalid and 65535 for anything farther (the depth-camera / ROS
         format).
     min_depth_m, max_depth_m
-        Depths outside this range are invalid. By default only non-finite depths are.
+        Depths outside this range are invalid. By default only non-finite depths are; an
+        infinite float32 depth (a disparity so near 0 that the depth overflows float32) is
+        invalid whatever ``max_depth_m``.
     invalid_value
         A raw value that marks holes, replacing the per-dtype default above (for int16, the
         ``min_disparity`` rule then applies only when ``min_disparity`` is given too).
@@ -232,7 +248,9 @@ def disparity_to_depth(
     are computed in float32 arithmetic (float64 for float64 input); uint16 in float64.
     ValueError when ``focal_px * baseline_m`` is not a finite double > 0, and, in float32
     arithmetic, when it or ``scale`` leaves float32's normal range or ``doffs_px`` float32's
-    range (every pixel would be NaN).
+    range (every pixel would be NaN); ValueError too when ``min_depth_m`` exceeds the
+    largest float32 (3.4e38 m) for float32 depth or without ``max_depth_m`` (every pixel
+    would be invalid).
 
     A C-contiguous input is never copied; an input whose rows are not contiguous is copied
     once. The GIL is released while the kernel runs.
@@ -284,12 +302,13 @@ def from_opencv_disparity(raw: Any, *, min_disparity: int = 0) -> np.ndarray:
     negative ``minDisparity`` produces). The inverse of
     :func:`stereodepth.to_opencv_disparity` with the same ``min_disparity``.
 
-    Raises TypeError unless ``raw`` is an int16 array and ``min_disparity`` an integer, and
-    ValueError for a ``raw`` whose shape is not (H, W) or (N, H, W) (as every disparity map
-    here), or a ``min_disparity`` outside [-2047, 2048], which no OpenCV matcher can have
-    (its holes, ``(minDisparity - 1) * 16``, would not fit in int16; every pixel would be NaN).
+    Raises TypeError unless ``raw`` is an int16 array (not a masked one) and
+    ``min_disparity`` an integer, and ValueError for a ``raw`` whose shape is not (H, W) or
+    (N, H, W) (as every disparity map here), or a ``min_disparity`` outside [-2047, 2048],
+    which no OpenCV matcher can have (its holes, ``(minDisparity - 1) * 16``, would not fit
+    in int16; every pixel would be NaN).
     """
-    arr: np.ndarray = check.native_order(check.array("raw", raw))
+    arr: np.ndarray = check.native_order(check.disparity_array("raw", raw))
     if arr.dtype != np.int16:
         raise TypeError(f"raw must be OpenCV's int16 disparity (x16), got dtype {arr.dtype}")
     if arr.ndim not in (2, 3):  # a 0-d one failed inside numpy ("does not support item ...")

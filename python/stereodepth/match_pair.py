@@ -20,7 +20,7 @@ from typing import Any
 
 import numpy as np
 
-from ._methods import METHODS
+from ._methods import METHODS, check_method
 
 __all__ = [
     "METHODS",
@@ -43,8 +43,13 @@ def sgm_available() -> bool:
 
 def default_num_disparities(width_px: int) -> int:
     """A search range for an image ``width_px`` wide when nothing better is known: an eighth of
-    the width rounded up to a multiple of 16, from 16 to 256 px (for a 640 px image, 80)."""
-    return int(min(256, max(16, math.ceil(width_px / 8 / 16) * 16)))
+    the width rounded up to a multiple of 16, from 16 to 256 px (for a 640 px image, 80).
+    Raises TypeError or ValueError unless ``width_px`` is an integer >= 1 (a float width was
+    Python's TypeError or OverflowError, naming nothing, or a range for a width of -5)."""
+    from . import _validate as check
+
+    width = check.integer("width_px", width_px, minimum=1)
+    return int(min(256, max(16, math.ceil(width / 8 / 16) * 16)))
 
 
 def read_calibration_file(path: str | os.PathLike[str], cams: tuple[int, int] | None = None) -> Any:
@@ -74,7 +79,18 @@ def kitti_cameras(left: str | os.PathLike[str], right: str | os.PathLike[str]) -
 def prepare_pair(left: np.ndarray, right: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """The pair as the matcher takes it, checked by the rule :func:`stereodepth.block_match`
     and ``stereodepth batch`` follow: the same size, both colour or both grey, the same bit
-    depth. Raises ValueError naming ``right`` (the one compared)."""
+    depth. Raises TypeError naming the image that is not a numpy array, ValueError naming the
+    one that is not (H, W) or (H, W, C), and ValueError naming ``right`` (the one compared)
+    when they differ."""
+    for name, image in (("left", left), ("right", right)):
+        # a list or a path was an AttributeError ('list' object has no attribute 'shape'), a
+        # 1-D array an IndexError from the size message
+        if not isinstance(image, np.ndarray):
+            raise TypeError(f"{name} must be a numpy.ndarray image, got {type(image).__name__}")
+        if image.ndim not in (2, 3):
+            raise ValueError(
+                f"{name} must be an image, (H, W) grey or (H, W, 3) colour, got shape {image.shape}"
+            )
     if left.shape[:2] != right.shape[:2]:
         raise ValueError(
             f"right must have the size of left, {left.shape[1]}x{left.shape[0]} px, got "
@@ -169,12 +185,26 @@ def match_pair(
     (``stereodepth.semi_global_match``, where the library has it). ``num_disparities``
     defaults to :func:`default_num_disparities` of the width; ``block_size`` and ``cost`` to
     the block matcher's defaults. Depth is ``disparity_to_depth(disparity, focal_px=...,
-    baseline_m=..., doffs_px=...)``, float32 metres. Raises ValueError or TypeError naming
-    the parameter."""
+    baseline_m=..., doffs_px=...)``, float32 metres, given both ``focal_px`` and
+    ``baseline_m`` (one without the other, or a non-zero ``doffs_px`` without them, is a
+    ValueError: there would be no depth). Raises ValueError or TypeError naming the
+    parameter."""
     import stereodepth
 
-    if method not in METHODS:
-        raise ValueError(f"method must be one of {', '.join(METHODS)}, got {method!r}")
+    if (focal_px is None) != (baseline_m is None):
+        # one without the other gave no depth without a word
+        given, got = ("focal_px", focal_px) if baseline_m is None else ("baseline_m", baseline_m)
+        missing = "baseline_m" if baseline_m is None else "focal_px"
+        raise ValueError(
+            f"focal_px and baseline_m go together: {missing} missing (got {given}={got!r}); "
+            "give both for depth, or neither for the disparity alone"
+        )
+    if focal_px is None and doffs_px != 0:
+        raise ValueError(
+            f"doffs_px applies with focal_px and baseline_m (the depth), got doffs_px="
+            f"{doffs_px!r} without them"
+        )
+    check_method(method)  # TypeError for a list or None (was ValueError), ValueError else
     left, right = prepare_pair(left, right)
     nd = default_num_disparities(left.shape[1]) if num_disparities is None else num_disparities
     params: dict[str, Any] = {"num_disparities": nd, "min_disparity": min_disparity}

@@ -692,7 +692,8 @@ def block_match(
     try:
         return matcher.compute(left, right)
     finally:
-        shape = np.shape(left)
+        # not np.shape: of a ragged list it raised numpy's error over the TypeError above
+        shape: tuple[int, ...] = left.shape if isinstance(left, np.ndarray) else ()
         if len(shape) >= 2 and shape[0] * shape[1] > KEEP_MATCHER_MAX_PIXELS:
             release_thread_matcher()  # do not hold a huge pair's buffers
 
@@ -704,11 +705,15 @@ def to_opencv_disparity(disparity: Any, *, min_disparity: int = 0) -> np.ndarray
     holes (NaN) set to OpenCV's invalid value ``(min_disparity - 1) * 16``. Raises ValueError
     when a finite disparity does not fit: at 2048 px or more, or below ``min_disparity``
     (which OpenCV's readers, and :func:`stereodepth.from_opencv_disparity`, would take for a
-    hole); or when the invalid value itself does not fit in int16.
+    hole); when the invalid value itself does not fit in int16; or for a ``disparity`` whose
+    shape is not (H, W) or (N, H, W), as every disparity map here (TypeError for one that is
+    not of floats, or is a masked array, whose mask would be ignored).
     """
-    arr = np.asarray(disparity)
+    arr = check.disparity_array("disparity", disparity)
     if arr.dtype.kind != "f":
         raise TypeError(f"disparity must be a float array (NaN for holes), got dtype {arr.dtype}")
+    if arr.ndim not in (2, 3):  # from_opencv_disparity takes these only
+        raise ValueError(f"disparity must have shape (H, W) or (N, H, W), got {arr.shape}")
     md = check.integer("min_disparity", min_disparity)
     invalid = (md - 1) * 16
     info = np.iinfo(np.int16)
@@ -720,7 +725,8 @@ def to_opencv_disparity(disparity: Any, *, min_disparity: int = 0) -> np.ndarray
     if np.isinf(arr).any():
         raise ValueError("disparity must be finite or NaN (holes), got an infinite value")
     finite = np.isfinite(arr)
-    scaled = np.where(finite, arr.astype(np.float64) * 16.0, 0.0)
+    with np.errstate(over="ignore"):  # beyond 1.1e307 px: inf, refused below
+        scaled = np.where(finite, arr.astype(np.float64) * 16.0, 0.0)
     fixed = np.trunc(scaled + np.copysign(0.5, scaled))
     if finite.any():
         # The messages show the value given ("below 2048 px, got 2048.0" was said of

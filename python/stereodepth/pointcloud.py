@@ -130,25 +130,26 @@ class ReprojectOptions:
         self.invalid_below = o.invalid_below
 
 
-def _as_q(Q: Any) -> np.ndarray:
+def _as_q(Q: Any, name: str = "Q") -> np.ndarray:
     """Q as a float64 4x4 matrix: real (a complex one lost its imaginary part with only a
-    ComplexWarning; a bool one was read as 0 and 1), finite and invertible."""
+    ComplexWarning; a bool one was read as 0 and 1), finite and invertible. The messages
+    name ``name`` (``calib.Q`` for a calibration's)."""
     try:
         raw = np.asarray(Q)
     except (TypeError, ValueError) as exc:
-        raise TypeError(f"Q must be a 4x4 array of real numbers, got {Q!r}") from exc
+        raise TypeError(f"{name} must be a 4x4 array of real numbers, got {Q!r}") from exc
     if raw.dtype.kind not in "iuf":
-        raise TypeError(f"Q must be a 4x4 array of real numbers, got dtype {raw.dtype}")
+        raise TypeError(f"{name} must be a 4x4 array of real numbers, got dtype {raw.dtype}")
     q = raw.astype(np.float64)
     if q.shape != (4, 4):
-        raise ValueError(f"Q must be a 4x4 matrix, got shape {q.shape}")
+        raise ValueError(f"{name} must be a 4x4 matrix, got shape {q.shape}")
     if not np.isfinite(q).all():
-        raise ValueError(f"Q must be finite, got {q.tolist()}")
+        raise ValueError(f"{name} must be finite, got {q.tolist()}")
     rank = int(np.linalg.matrix_rank(q))
     if rank < 4:
         # A singular Q maps every pixel onto a plane or a line (all zeros: W = 0, every point
         # invalid): no reprojection matrix is (cv2.stereoRectify's has rank 4).
-        raise ValueError(f"Q must be invertible (rank 4), got rank {rank}: {q.tolist()}")
+        raise ValueError(f"{name} must be invertible (rank 4), got rank {rank}: {q.tolist()}")
     return q
 
 
@@ -216,7 +217,9 @@ def reproject(
         camera's principal point) default to the image centre, ``(W - 1) / 2`` and
         ``(H - 1) / 2``; ``doffs_px`` to 0.
     min_depth_m, max_depth_m
-        Points whose Z leaves this range are invalid.
+        Points whose Z leaves this range are invalid (a Z that overflows float32 whatever
+        ``max_depth_m``); ValueError for a ``min_depth_m`` beyond the largest float32,
+        3.4e38 (every point would be invalid).
     out
         A preallocated C-contiguous float32 array of shape ``disparity.shape + (3,)``.
     threads
@@ -246,7 +249,7 @@ def reproject(
     if arr.size == 0:
         return result
     if arr.dtype == np.float16:
-        arr = arr.astype(np.float32)  # exact
+        arr = arr.astype(np.float32, order="C")  # exact; C order, as the kernel needs
     elif (arr.shape[-1] > 1 and arr.strides[-1] != arr.itemsize) or any(
         stride % arr.itemsize for stride in arr.strides
     ):

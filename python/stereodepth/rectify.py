@@ -42,6 +42,7 @@ import numpy as np
 from . import _core
 from . import _validate as check
 from ._remap import _as_image, _precision, _prepare_out, remap
+from .pointcloud import _as_q
 from .rig import StereoRig
 
 __all__ = [
@@ -93,6 +94,21 @@ def _real_matrix(name: str, value: Any, shape: tuple[int, ...]) -> np.ndarray:
     if not np.all(np.isfinite(arr)):
         raise ValueError(f"{name} must be finite, got {arr.tolist()}")
     return np.ascontiguousarray(arr, dtype=np.float64)
+
+
+def _projection(name: str, value: Any) -> np.ndarray:
+    """A calibration's stored (3, 4) projection of a rectified camera: finite, with fx and fy
+    > 0. StereoCalibration checks this itself; another object with its fields, which
+    from_calibration takes, could hold a P of zeros (an uncalibrated camera's camera_info):
+    P2's gave ZeroDivisionError from Q, P1's a rectifier of garbage maps."""
+    P = _real_matrix(name, value, (3, 4))
+    if not (P[0, 0] > 0 and P[1, 1] > 0):
+        raise ValueError(
+            f"{name} must be a projection of a rectified camera, [[fx, 0, cx, fx Tx], "
+            f"[0, fy, cy, fy Ty], [0, 0, 1, 0]] with fx = P[0, 0] > 0 and fy = P[1, 1] > 0, "
+            f"got {P.tolist()}"
+        )
+    return P
 
 
 def _camera_matrix(name: str, value: Any) -> np.ndarray:
@@ -181,6 +197,14 @@ def _nearest_rotation(R: np.ndarray) -> np.ndarray:
     return np.ascontiguousarray(u @ vt)
 
 
+def _zero_disparity(value: Any) -> bool:
+    """A bool or numpy bool (numpy's was refused as "must be a bool, got bool"); TypeError
+    naming ``zero_disparity`` and the value otherwise."""
+    if not isinstance(value, (bool, np.bool_)):
+        raise TypeError(f"zero_disparity must be a bool, got {type(value).__name__} {value!r}")
+    return bool(value)
+
+
 def _alpha(value: Any) -> float:
     a = check.finite("alpha", value)
     if a > 1 or (a < 0 and a != -1):
@@ -251,6 +275,10 @@ def stereo_rectify(
         ``cv2.fisheye.stereoRectify``'s) results to about 1e-12 relative (OpenCV 5.0),
         computed natively in Eigen; the ROIs within 1 pixel of OpenCV's (their edges are
         rounded, and an edge that falls on a pixel boundary to 1e-13 may round either way).
+        This holds where the lens model is invertible over the image: where OpenCV's 5-step
+        undistortion of the image border does not converge (strong distortion, a wide field
+        of view, the rational model's k4..k6), the ``alpha > 0`` scaling depends on points
+        that are off by pixels in both, and may differ from OpenCV's by pixels in P1, P2.
 
     Raises
     ------
@@ -277,8 +305,7 @@ def stereo_rectify(
         )
     a = _alpha(alpha)
     new_w, new_h = (0, 0) if new_image_size is None else _size("new_image_size", new_image_size)
-    if not isinstance(zero_disparity, bool):
-        raise TypeError(f"zero_disparity must be a bool, got {type(zero_disparity).__name__}")
+    zd = _zero_disparity(zero_disparity)
     b = check.finite("balance", balance)
     if not 0 <= b <= 1:
         raise ValueError(f"balance must be in [0, 1], got {balance!r}")
@@ -290,7 +317,7 @@ def stereo_rectify(
                 f"got alpha={alpha!r}"
             )
         r = _core.fisheye_stereo_rectify(
-            k1, d1, k2, d2, width, height, rot, t, b, fov, new_w, new_h, zero_disparity
+            k1, d1, k2, d2, width, height, rot, t, b, fov, new_w, new_h, zd
         )
     else:
         if b != 0.0 or fov != 1.0:
@@ -298,28 +325,49 @@ def stereo_rectify(
                 "balance and fov_scale apply to equidistant rigs; use alpha, got "
                 f"balance={balance!r}, fov_scale={fov_scale!r}"
             )
-        r = _core.stereo_rectify(
-            k1, d1, k2, d2, model, width, height, rot, t, a, new_w, new_h, zero_disparity
-        )
-    _check_finite_rectification(r, k1, k2, d1, d2, t)
+        r = _core.stereo_rectify(k1, d1, k2, d2, model, width, height, rot, t, a, new_w, new_h, zd)
+    _check_finite_rectification(r, k1, k2, d1, d2, t, (width, height), a)
     return Rectification(
         r["R1"], r["R2"], r["P1"], r["P2"], r["Q"], tuple(r["roi1"]), tuple(r["roi2"])
     )
 
 
 def _check_finite_rectification(
-    r: Any, k1: np.ndarray, k2: np.ndarray, d1: np.ndarray, d2: np.ndarray, t: np.ndarray
+    r: Any,
+    k1: np.ndarray,
+    k2: np.ndarray,
+    d1: np.ndarray,
+    d2: np.ndarray,
+    t: np.ndarray,
+    size: tuple[int, int] | None = None,
+    alpha: float = -1.0,
 ) -> None:
     """ValueError naming the inputs when R1, R2, P1, P2 or Q (``r[name]``) is not finite:
     focal lengths near 0 or 1e300, or distortion of 1e10, overflow Bouguet's method (said
-    here, not later as "P must be finite" from the maps). Shared with the numpy oracle."""
+    here, not later as "P must be finite" from the maps). With ``alpha >= 0`` and the raw
+    image ``size``, a principal point on or beyond the image's border pixels (a K written
+    without cx, cy: the 0 / 0 of the alpha scaling) is named. Shared with the numpy oracle."""
     for key in ("R1", "R2", "P1", "P2", "Q"):
         if not np.all(np.isfinite(r[key])):
+            hint = ""
+            if size is not None and alpha >= 0:
+                w, h = size
+                outside = [
+                    f"{name}'s ({float(k[0, 2])!r}, {float(k[1, 2])!r})"
+                    for name, k in (("K1", k1), ("K2", k2))
+                    if not (0 < k[0, 2] < w - 1 and 0 < k[1, 2] < h - 1)
+                ]
+                if outside:
+                    hint = (
+                        f"; alpha={alpha!r} scales to the image's edges from the principal "
+                        f"point (cx, cy), which must lie inside the {w} x {h} image: "
+                        f"{' and '.join(outside)} does not (a K written without cx, cy?)"
+                    )
             raise ValueError(
                 f"the calibration gives a non-finite rectification ({key} = "
                 f"{np.asarray(r[key]).tolist()}): K1, K2, D1, D2, R and T must describe a real "
                 f"camera pair, got fx = {float(k1[0, 0])!r}, {float(k2[0, 0])!r}, "
-                f"D1 = {d1.tolist()}, D2 = {d2.tolist()}, T = {t.tolist()}"
+                f"D1 = {d1.tolist()}, D2 = {d2.tolist()}, T = {t.tolist()}{hint}"
             )
 
 
@@ -354,16 +402,45 @@ def init_undistort_rectify_map(
     k = _camera_matrix("K", K)
     d = _distortion("D", D, m)
     rot = np.eye(3) if R is None else _rotation("R", R, _ROUNDED_ROTATION)
-    p = check.real_array("P", P)
-    if p.shape == (3, 4):
-        p = p[:, :3]
-    p = _real_matrix("P", p, (3, 3))
+    p = _new_camera(P, rot)
     width, height = _size("size", size)
     nthreads = check.threads(threads)
     map_x = np.empty((height, width), np.float32)
     map_y = np.empty((height, width), np.float32)
     _core.init_undistort_rectify_map(k, d, m, rot, p, map_x, map_y, nthreads)
     return map_x, map_y
+
+
+def _new_camera(P: Any, rot: np.ndarray) -> np.ndarray:
+    """``P`` of :func:`init_undistort_rectify_map` as its finite (3, 3) camera matrix (the
+    first three columns of a (3, 4) projection), with ``P @ R`` invertible, checked in the
+    kernel's arithmetic (rectify.cpp, mul and inverse3), so that the refusal names the values
+    (the kernel's said "P @ R must be invertible" alone). Shared with the numpy oracle."""
+    p = check.real_array("P", P)
+    if p.shape == (3, 4):
+        p = p[:, :3]
+    elif p.shape != (3, 3):
+        raise ValueError(f"P must have shape (3, 3) or (3, 4), got {p.shape}")
+    p = _real_matrix("P", p, (3, 3))
+    a = [
+        [
+            float(p[i, 0]) * float(rot[0, j])
+            + float(p[i, 1]) * float(rot[1, j])
+            + float(p[i, 2]) * float(rot[2, j])
+            for j in range(3)
+        ]
+        for i in range(3)
+    ]
+    c00 = a[1][1] * a[2][2] - a[1][2] * a[2][1]
+    c01 = a[1][0] * a[2][2] - a[1][2] * a[2][0]
+    c02 = a[1][0] * a[2][1] - a[1][1] * a[2][0]
+    det = a[0][0] * c00 - a[0][1] * c01 + a[0][2] * c02
+    if not (math.isfinite(det) and det != 0):
+        raise ValueError(
+            f"P @ R must be invertible (its determinant is {det!r}; P's first three columns "
+            f"are the new camera matrix), got P = {p.tolist()} and R = {rot.tolist()}"
+        )
+    return p
 
 
 # --- the reusable rectifier ----------------------------------------------------------------------
@@ -548,10 +625,10 @@ class StereoRectifier:
         if not asked and all(m is not None for m in stored):
             R1 = _rotation("calib.R1", stored[0])
             R2 = _rotation("calib.R2", stored[1])
-            P1 = _real_matrix("calib.P1", stored[2], (3, 4))
-            P2 = _real_matrix("calib.P2", stored[3], (3, 4))
+            P1 = _projection("calib.P1", stored[2])
+            P2 = _projection("calib.P2", stored[3])
             Q = getattr(calib, "Q", None)
-            Qm = _q_from_projections(P1, P2) if Q is None else _real_matrix("calib.Q", Q, (4, 4))
+            Qm = _q_from_projections(P1, P2) if Q is None else _as_q(Q, "calib.Q")
             full = (0, 0, *size)
             rect = Rectification(R1, R2, P1, P2, Qm, full, full)
         else:
@@ -589,21 +666,13 @@ class StereoRectifier:
         t = _real_matrix("calib.T", calib.T, (3,))
         K1, K2 = self._cameras[0][0], self._cameras[1][0]
         P1, P2, Q = (getattr(calib, f, None) for f in ("P1", "P2", "Q"))
-        self._P1 = (
-            np.hstack([K1, np.zeros((3, 1))])
-            if P1 is None
-            else _real_matrix("calib.P1", P1, (3, 4))
-        )
+        self._P1 = np.hstack([K1, np.zeros((3, 1))]) if P1 is None else _projection("calib.P1", P1)
         self._P2 = (
             np.hstack([K2, (K2[0, 0] * t[0]) * np.eye(3)[:, :1]])
             if P2 is None
-            else _real_matrix("calib.P2", P2, (3, 4))
+            else _projection("calib.P2", P2)
         )
-        self._Q = (
-            _q_from_projections(self._P1, self._P2)
-            if Q is None
-            else _real_matrix("calib.Q", Q, (4, 4))
-        )
+        self._Q = _q_from_projections(self._P1, self._P2) if Q is None else _as_q(Q, "calib.Q")
 
     @classmethod
     def from_file(

@@ -170,7 +170,8 @@ def reproject(
         if arr.dtype == np.float64:
             ok &= raw != o.invalid_value
         else:
-            ok &= arr.astype(np.float32) != np.float32(o.invalid_value)
+            with np.errstate(over="ignore"):  # beyond float32: +-inf, as the kernel's cast
+                ok &= arr.astype(np.float32) != np.float32(o.invalid_value)
     if o.invalid_below is not None:
         ok &= raw >= o.invalid_below
     for i, c in enumerate(xyz):
@@ -195,7 +196,7 @@ def init_undistort_rectify_map(
         _camera_matrix,
         _distortion,
         _model,
-        _real_matrix,
+        _new_camera,
         _rotation,
         _size,
     )
@@ -206,8 +207,7 @@ def init_undistort_rectify_map(
     coeffs = _distortion("D", D, m)
     d[: coeffs.size] = coeffs
     rot = np.eye(3) if R is None else _rotation("R", R, _ROUNDED_ROTATION)
-    p = check.real_array("P", P)
-    p = _real_matrix("P", p[:, :3] if p.shape == (3, 4) else p, (3, 3))
+    p = _new_camera(P, rot)
     width, height = _size("size", size)
     check.threads(threads)
     a = [[float(_sum3(p[i], rot[:, j])) for j in range(3)] for i in range(3)]
@@ -250,7 +250,8 @@ def init_undistort_rectify_map(
             yd = y * kr + d[2] * (r2 + 2 * y2) + d[3] * xy2
             u = fx * xd + u0
             v = fy * yd + v0
-    return u.astype(np.float32), v.astype(np.float32)
+        # rounded once to float32, as the kernel: beyond its range, +-inf without a warning
+        return u.astype(np.float32), v.astype(np.float32)
 
 
 def _sum3(a: np.ndarray, b: np.ndarray) -> float:
@@ -485,6 +486,7 @@ def _stereo_rectify(
         _real_matrix,
         _rotation,
         _size,
+        _zero_disparity,
     )
 
     model = _model("distortion_model", distortion_model)
@@ -495,6 +497,7 @@ def _stereo_rectify(
     t_in = _real_matrix("T", T, (3,))
     a = _alpha(alpha)
     nw, nh = (w, h) if new_image_size is None else _size("new_image_size", new_image_size)
+    zero_disparity = _zero_disparity(zero_disparity)
     r_r = _rotation_matrix(_rotation_vector(rot) * -0.5)
     t = r_r @ t_in
     if model == "equidistant":
@@ -598,7 +601,7 @@ def _stereo_rectify(
     q_mat = np.array([[1, 0, 0, -c1n[0]], [0, 1, 0, -c1n[1]], [0, 0, 0, fc],
                       [0, 0, -1 / t_idx, (c1n[idx] - c2n[idx]) / t_idx]])  # fmt: skip
     found = {"R1": r1, "R2": r2, "P1": p1, "P2": p2, "Q": q_mat}
-    _check_finite_rectification(found, k1, k2, d1, d2, t_in)
+    _check_finite_rectification(found, k1, k2, d1, d2, t_in, (w, h), a)
 
     def roi(r: tuple[float, ...], c0: np.ndarray, c: np.ndarray) -> tuple[int, int, int, int]:
         x, y = int(np.ceil((r[0] - c0[0]) * s + c[0])), int(np.ceil((r[1] - c0[1]) * s + c[1]))

@@ -265,7 +265,21 @@ def fill_background(disparity: np.ndarray) -> np.ndarray:
     """Fills the NaN pixels of a float disparity map in place along each row with the smaller
     of the nearest valid values to the left and to the right (the one that exists at the row's
     ends; rows without a valid pixel stay NaN); returns the map. Step 8 of
-    :mod:`stereodepth.semi_global`."""
+    :mod:`stereodepth.semi_global`. Valid means finite: an infinite value is filled as a NaN
+    is. ``disparity`` is a writeable (H, W) float16, float32 or float64 numpy array (TypeError
+    for another type or dtype, ValueError for another shape or a read-only one)."""
+    if not isinstance(disparity, np.ndarray):
+        raise TypeError(
+            f"disparity must be a numpy.ndarray (filled in place), got {type(disparity).__name__}"
+        )
+    if disparity.dtype.kind != "f":
+        raise TypeError(
+            f"disparity must be a float array (NaN for holes), got dtype {disparity.dtype}"
+        )
+    if disparity.ndim != 2:
+        raise ValueError(f"disparity must be 2-D (H, W), got shape {disparity.shape}")
+    if not disparity.flags.writeable:
+        raise ValueError("disparity must be writeable (it is filled in place)")
     h, w = disparity.shape
     valid = np.isfinite(disparity)
     cols = np.broadcast_to(np.arange(w), (h, w))
@@ -301,7 +315,8 @@ def memory_estimate(
     and grey images) and a few rows per thread. The figure is for an RGB pair with
     ``median=True`` (grey pairs need a little less); the speckle filter's runs, which depend
     on the disparities, are not counted (12 bytes per run of linked pixels in a row). The
-    disparities are counted rounded up to a multiple of 16 (:func:`run_disparities`).
+    disparities are counted rounded up to a multiple of 16 (:func:`run_disparities`). The
+    figure is capped at 1.8e19 bytes (shapes of that size hold more pixels than any memory).
 
     Raises TypeError or ValueError for a ``shape`` that is not two integers >= 1 and for the
     parameters :func:`semi_global_match` refuses, naming the parameter; ValueError for an
