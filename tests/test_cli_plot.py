@@ -69,3 +69,17 @@ def test_bad_plot_path_is_one_line_and_status_2(
     assert err.startswith(f"stereodepth calc: error: {message}")
     assert err.count("\n") == 1
     assert [p.name for p in tmp_path.iterdir()] == ([name] if name == "folder.png" else [])
+
+
+def test_target_disparity_0_of_a_rig_with_doffs(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    # Middlebury's Adirondack (doffs 53.271 px): disparity 0 is a finite depth, B*f / doffs =
+    # 3.434 m, but the depth-vs-disparity chart's axis is logarithmic: --plot failed with
+    # "stereodepth calc: error: math domain error", exit 2, writing no charts.
+    rig = ["--baseline-mm", "176.252", "--focal-px", "1038.018", "--doffs-px", "53.271"]
+    out = tmp_path / "charts.svg"
+    assert main(["calc", *rig, "--disparity-px", "0", "--plot", str(out)]) == 0
+    assert out.read_bytes().lstrip().startswith(b"<?xml")
+    text = capsys.readouterr().out
+    assert "3.43438 m" in text and f"charts written to {out}" in text
