@@ -181,6 +181,30 @@ def test_console_command_prints_one_line(argv: list[str]) -> None:
     assert len(r.stderr.splitlines()) == 1 and "Traceback" not in r.stderr
 
 
+@pytest.mark.parametrize(
+    "argv", [["calc", "--baseline-mm", "150", "--focal-px", "700"], ["--help"], ["match", "--help"]]
+)
+def test_a_mistyped_isa_variable_is_one_line(argv: list[str]) -> None:
+    # STEREODEPTH_ISA=avx3 (no such ISA): building the parser asks the core for the cores this
+    # process may use (the --threads help of eval), and the core refuses the variable; every
+    # command, --help included, ended in a 16-line traceback, exit status 1.
+    import os
+
+    r = subprocess.run(
+        [sys.executable, "-m", "stereodepth", *argv],
+        capture_output=True,
+        text=True,
+        timeout=60,
+        check=False,
+        env={**os.environ, "STEREODEPTH_ISA": "avx3"},
+    )
+    assert r.returncode == 2
+    assert r.stdout == ""
+    assert r.stderr.startswith("stereodepth: error: the environment variable STEREODEPTH_ISA ")
+    assert r.stderr.rstrip().endswith("got 'avx3'")
+    assert len(r.stderr.splitlines()) == 1
+
+
 def test_disparity_zero_is_inf_in_text_and_table_and_null_in_json(
     capsys: pytest.CaptureFixture[str],
 ) -> None:

@@ -69,3 +69,36 @@ def test_bad_plot_path_is_one_line_and_status_2(
     assert err.startswith(f"stereodepth calc: error: {message}")
     assert err.count("\n") == 1
     assert [p.name for p in tmp_path.iterdir()] == ([name] if name == "folder.png" else [])
+
+
+def test_target_disparity_0_of_a_rig_with_doffs(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    # Middlebury's Adirondack (doffs 53.271 px): disparity 0 is a finite depth, B*f / doffs =
+    # 3.434 m, but the depth-vs-disparity chart's axis is logarithmic: --plot failed with
+    # "stereodepth calc: error: math domain error", exit 2, writing no charts.
+    rig = ["--baseline-mm", "176.252", "--focal-px", "1038.018", "--doffs-px", "53.271"]
+    out = tmp_path / "charts.svg"
+    assert main(["calc", *rig, "--disparity-px", "0", "--plot", str(out)]) == 0
+    assert out.read_bytes().lstrip().startswith(b"<?xml")
+    text = capsys.readouterr().out
+    assert "3.43438 m" in text and f"charts written to {out}" in text
+
+
+def test_negative_disparity_of_a_rig_with_doffs(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    # Middlebury's Adirondack (doffs 53.271 px): a point 10 m away has disparity
+    # 176.252e-3 * 1038.018 / 10 - 53.271 = -34.97 px. calc refused it ("--disparity-px must
+    # be finite and >= 0"); now it answers 10 m, and the charts are drawn (the depth-vs-
+    # disparity chart's log axis cannot show the negative target, as it cannot show 0).
+    rig = ["--baseline-mm", "176.252", "--focal-px", "1038.018", "--doffs-px", "53.271"]
+    d = 0.176252 * 1038.018 / 10 - 53.271
+    out = tmp_path / "charts.svg"
+    assert main(["calc", *rig, "--disparity-px", repr(d), "--plot", str(out)]) == 0
+    assert out.read_bytes().lstrip().startswith(b"<?xml")
+    assert "charts written to" in capsys.readouterr().out
+    assert main(["calc", *rig, "--disparity-px", repr(d), "--json"]) == 0
+    summary = json.loads(capsys.readouterr().out)
+    assert summary["disparity_px"] == d
+    assert summary["depth_m"] == pytest.approx(10.0, rel=1e-12)

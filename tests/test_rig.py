@@ -264,6 +264,34 @@ def test_negative_doffs_moves_infinity(doffs: float) -> None:
     assert summary["depth_m"] == pytest.approx(70.0 / (400 + doffs))
 
 
+def test_positive_doffs_puts_far_points_at_negative_disparities() -> None:
+    # Middlebury's Adirondack (doffs 53.271 px): infinity is at d = -53.271 px, and every
+    # point beyond B*f / doffs = 3.43 m has a negative disparity. disparity_px() gives such
+    # disparities and the map kernels (depth_map, disparity_to_depth) take them; depth_m
+    # refused them ("must be finite and >= 0"), so depth_m(disparity_px(z)) failed.
+    rig = StereoRig.from_pixels(176.252, 1038.018, doffs_px=53.271)
+    bf = 0.176252 * 1038.018
+    for z in (5.0, 100.0, 1e4):
+        d = rig.disparity_px(z)
+        assert d < 0
+        assert rig.depth_m(d) == pytest.approx(z, rel=1e-12)
+    d = np.array([[-53.0, -20.0, -1.0, 0.0, 10.0]], dtype=np.float32)
+    np.testing.assert_allclose(rig.depth_m(d), rig.depth_map(d), rtol=1e-6)
+    assert rig.depth_m(-20.0) == pytest.approx(bf / 33.271, rel=1e-12)
+    assert rig.depth_m(-53.271) == math.inf  # the point at infinity
+    assert rig.table([-20.0]).to_records()[0]["depth_m"] == rig.depth_m(-20.0)
+    with pytest.raises(
+        ValueError,
+        match=r"disparity_px must be finite and >= -53.271 \(with doffs_px 53.271, a disparity "
+        r"of -53.271 px is a point at infinity and one below it lies behind the cameras\), "
+        r"got -54.0",
+    ):
+        rig.depth_m(-54.0)
+    # Without doffs the rule and its message are as before.
+    with pytest.raises(ValueError, match=r"^disparity_px must be finite and >= 0, got -1.0$"):
+        StereoRig.from_pixels(176.252, 1038.018).depth_m(-1.0)
+
+
 _EXTREME = st.sampled_from([1e-300, 1e-150, 1e-12, 1e-3, 1.0, 1e3, 1e12, 1e150, 1e300])
 
 

@@ -103,3 +103,15 @@ def test_unknown_attribute_is_an_attribute_error() -> None:
     with pytest.raises(AttributeError, match="module 'stereodepth' has no attribute 'nope'"):
         _ = stereodepth.nope  # type: ignore[attr-defined]
     assert not hasattr(stereodepth, "_private_thing")
+
+
+def test_package_docstring_names_every_submodule() -> None:
+    # help(stereodepth) is where a reader looks for what the package holds: sample (the
+    # synthetic pair), semi_global, rectify and colormap were missing from its list.
+    doc = stereodepth.__doc__ or ""
+    missing = [
+        name
+        for name in SUBMODULES
+        if f"``{name}``" not in doc and f"``stereodepth.{name}``" not in doc
+    ]
+    assert missing == []

@@ -13,8 +13,9 @@
 Every public submodule is an attribute of the package, imported on first use (PEP 562), so
 ``import stereodepth`` stays light and optional extras load only when their module is used:
 ``stereodepth.reference``, ``io``, ``metrics``, ``dask`` (the ``batch`` extra), ``calib``,
-``matching``, ``rig``, ``depth``, ``pointcloud``, ``evaluation``, ``batch``, ``plotting``
-(``plot``), ``charts``, ``web`` (``web``) and ``cli``.
+``matching``, ``semi_global``, ``rig``, ``depth``, ``pointcloud``, ``rectify``, ``colormap``,
+``sample`` (a synthetic pair with its true disparity: ``sample.sample_pair()``),
+``evaluation``, ``batch``, ``plotting`` (``plot``), ``charts``, ``web`` (``web``) and ``cli``.
 """
 
 from __future__ import annotations

@@ -151,7 +151,7 @@ def chart_data(
     target: float | None = None
     if disparity_px is not None:
         target = check.real("disparity_px", disparity_px)
-        rig.depth_m(target)  # the rig's rule for a disparity: finite and >= max(0, -doffs)
+        rig.depth_m(target)  # the rig's rule for a disparity: finite and >= -doffs
     limit = (
         None if max_disparity_px is None else check.positive("max_disparity_px", max_disparity_px)
     )

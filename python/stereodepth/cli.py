@@ -381,7 +381,13 @@ def _subparser(parser: argparse.ArgumentParser, command: str) -> argparse.Argume
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    parser = build_parser()
+    try:
+        parser = build_parser()
+    except ValueError as exc:
+        # The option help asks the core for the cores this process may use, and the core
+        # refuses a mistyped STEREODEPTH_ISA (avx3): one line, before any command runs.
+        print(f"stereodepth: error: {one_line(exc)}", file=sys.stderr)
+        return 2
     args, extras = parser.parse_known_args(argv)
     if extras:  # name the subcommand whose options these are not
         _subparser(parser, args.command).error(f"unrecognized arguments: {' '.join(extras)}")

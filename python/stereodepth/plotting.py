@@ -50,6 +50,10 @@ def _draw(ax: Axes, chart: Chart) -> None:
         ax.plot(s.x, s.y, color=_SERIES_COLOURS[i % len(_SERIES_COLOURS)], lw=2, label=s.name)
     xs = [x for s in chart.series for x in s.x]
     for i, m in enumerate(chart.markers):
+        if (chart.x_log and not m.x > 0) or (chart.y_log and not m.y > 0):
+            # A log axis has no place for it: the target disparity 0 of a rig with doffs > 0,
+            # whose depth is finite (chart_data keeps it: its other chart shows that depth).
+            continue
         edge = _SERIES_COLOURS[i % len(_SERIES_COLOURS)] if len(chart.markers) > 1 else "white"
         if i == 0:
             ax.axvline(m.x, color=_TARGET_COLOUR, lw=0.8, ls=":", zorder=1)

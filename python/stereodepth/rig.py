@@ -6,7 +6,9 @@ metres, ``_deg`` degrees. Every method takes a scalar or a numpy array and answe
 The model is the rectified pinhole pair: a point at depth Z appears in the two images with a
 disparity d (pixels) such that ``Z = B * f_px / (d + doffs)``, where B is the baseline,
 ``f_px = focal_mm / pixel_mm`` is the focal length in pixels and doffs the difference of the
-principal points (0 for most rigs). A disparity of 0 means a point at infinity: depth inf.
+principal points (0 for most rigs). A disparity of -doffs (0 for most rigs) means a point at
+infinity: depth inf; with doffs > 0 the points beyond B * f_px / doffs have negative
+disparities.
 
 Results that leave the range of a double: a result is ``inf`` only where the model's answer is
 infinite (``d + doffs == 0``: a point at infinity, and its depth resolution). Where the
@@ -303,14 +305,22 @@ class StereoRig:
         d = check.real_array(name, disparity_px)
         with np.errstate(over="ignore"):  # 1e308 + 1e308: inf, > 0 (its depth is checked later)
             den = d + self._doffs_px
-        bad = ~np.isfinite(d) | (d < 0) | (den < 0)
+        # d + doffs >= 0: -doffs is the disparity of a point at infinity, so with doffs > 0
+        # (Middlebury's cx1 > cx0) the points beyond B*f / doffs have negative disparities,
+        # as disparity_px() gives them and the map kernels take them.
+        bad = ~np.isfinite(d) | (den < 0)
         if np.any(bad):
             first = d[bad].flat[0] if d.ndim else d
-            rule = f"finite and >= {max(0.0, -self._doffs_px):g}"
+            rule = f"finite and >= {-self._doffs_px + 0.0:g}"
             if self._doffs_px < 0:
                 rule += (
                     f" (with doffs_px {self._doffs_px:g}, a disparity below "
                     f"{-self._doffs_px:g} px puts the point behind the cameras)"
+                )
+            elif self._doffs_px > 0:
+                rule += (
+                    f" (with doffs_px {self._doffs_px:g}, a disparity of {-self._doffs_px:g} px "
+                    "is a point at infinity and one below it lies behind the cameras)"
                 )
             raise ValueError(f"{name} must be {rule}, got {float(first)!r}")
         return d
@@ -322,9 +332,10 @@ class StereoRig:
     def depth_m(self, disparity_px: ArrayLike) -> Any:
         """Depth in metres of a disparity in pixels: B * f_px / (d + doffs).
 
-        A disparity of 0 (with doffs 0) is a point at infinity: ``inf``. Negative, NaN or
-        infinite disparities raise ValueError, and so does one whose depth leaves the range
-        of a double (inf or 0 for a finite, positive depth)."""
+        A disparity of -doffs (0 for most rigs) is a point at infinity: ``inf``; with doffs > 0
+        the points beyond B * f_px / doffs have negative disparities. A disparity below -doffs
+        (behind the cameras), NaN or infinite raises ValueError, and so does one whose depth
+        leaves the range of a double (inf or 0 for a finite, positive depth)."""
         return self._depth_of("disparity_px", disparity_px)
 
     def _depth_of(self, name: str, disparity_px: ArrayLike) -> Any:
