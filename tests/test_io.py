@@ -911,3 +911,21 @@ def test_empty_path_is_refused_not_the_current_folder(
         assert list(tmp_path.iterdir()) == [], name
     with pytest.raises(ValueError, match=r"^directory must not be empty, got ''$"):
         io.remove_temp_files("")
+
+
+def test_write_pfm_refuses_values_beyond_float32(tmp_path: Path) -> None:
+    """A finite float64 value beyond float32's range became an infinity in the file (only
+    numpy's RuntimeWarning 'overflow encountered in cast'), which Middlebury's tools read as
+    'unknown': refused, naming the value and its pixel, writing nothing. The largest float32
+    and NaN / infinities are written as they are."""
+    a = np.ones((2, 3))
+    a[1, 2] = -1e39
+    with pytest.raises(
+        ValueError, match=r"array must fit in float32 .* got -1e\+39 at row 1, column 2"
+    ):
+        io.write_pfm(tmp_path / "x.pfm", a)
+    assert names(tmp_path) == []
+    top = float(np.finfo(np.float32).max)
+    b = np.array([[top, -top, np.nan], [np.inf, -np.inf, 1e-50]])
+    io.write_pfm(tmp_path / "y.pfm", b)
+    np.testing.assert_array_equal(io.read_pfm(tmp_path / "y.pfm"), b.astype(np.float32))

@@ -338,13 +338,24 @@ def write_pfm(path: str | os.PathLike[str], array: np.ndarray, *, scale: float =
     read infinity as "unknown"; stereodepth writes NaN).
 
     Raises TypeError for a non-float ``array`` or a ``scale`` that is not a real number (a
-    str, a bool) and ValueError for another shape or a ``scale`` that is not finite and > 0,
-    writing nothing."""
+    str, a bool) and ValueError for another shape, a finite value beyond float32's range
+    (about 3.4e38: PFM stores float32, and it would become an infinity, which Middlebury
+    reads as "unknown") or a ``scale`` that is not finite and > 0, writing nothing."""
     a = np.asarray(array)
     if a.dtype.kind != "f":
         raise TypeError(f"array must have a float dtype, got {a.dtype}")
     if not (a.ndim == 2 or (a.ndim == 3 and a.shape[2] == 3)) or 0 in a.shape:
         raise ValueError(f"array must have shape (H, W) or (H, W, 3), got {a.shape}")
+    if a.dtype.itemsize > 4:
+        beyond = np.isfinite(a) & (np.abs(a) > np.finfo(np.float32).max)
+        if beyond.any():
+            where = tuple(int(i) for i in np.argwhere(beyond)[0])
+            raise ValueError(
+                "array must fit in float32 (PFM stores float32; beyond, a value becomes an "
+                f"infinity, read as unknown), got {float(a[where])!r} at row {where[0]}, "
+                f"column {where[1]} ({int(beyond.sum())} such value"
+                f"{'s' if beyond.sum() > 1 else ''})"
+            )
     # A str or bool scale reached numpy (a TypeError naming no parameter) or was written as 1.
     scale = check.positive("scale", scale)
     kind = "Pf" if a.ndim == 2 else "PF"
