@@ -269,6 +269,41 @@ def test_atomic_writers_keep_the_permissions_of_a_file_they_replace(tmp_path: Pa
         assert target.read_bytes() != b"old"
 
 
+@pytest.mark.skipif(os.name != "posix", reason="symbolic links")
+def test_atomic_writers_write_through_a_link(tmp_path: Path) -> None:
+    """A path that is a symbolic link (out/d.npy -> a shared disk's file) was replaced by a
+    new file: the link was gone and the file it named kept the old data, where open(),
+    numpy.save and cv2.imwrite write into that file. Now the file the link names gets the
+    new data (its permissions kept, no temporary file left) and the link stays."""
+    disparity = np.arange(20, dtype=np.float32).reshape(4, 5)
+    writers = {
+        "d.npy": (lambda p: io.write_npy(p, disparity), lambda p: np.load(p)),
+        "d.pfm": (lambda p: io.write_pfm(p, disparity), io.read_pfm),
+        "d.png": (lambda p: io.write_png16(p, disparity.astype(np.uint16)), io.read_image),
+        "d.ply": (lambda p: write_ply(p, np.ones((3, 3))), lambda p: p.read_bytes()[:3]),
+    }
+    shared, out = tmp_path / "shared", tmp_path / "out"
+    shared.mkdir()
+    out.mkdir()
+    for name, (write, read) in writers.items():
+        target = shared / name
+        target.write_bytes(b"old")
+        target.chmod(0o640)
+        link = out / name
+        link.symlink_to(Path("..") / "shared" / name)
+        write(link)
+        assert link.is_symlink(), name
+        assert target.read_bytes() != b"old", name
+        np.testing.assert_array_equal(read(link), read(target))
+        assert target.stat().st_mode & 0o777 == 0o640, name
+    assert names(shared) == sorted(writers) and names(out) == sorted(writers)
+    # A link to nothing yet: the file it names is made.
+    (out / "new.npy").symlink_to(shared / "new.npy")
+    io.write_npy(out / "new.npy", disparity)
+    assert (out / "new.npy").is_symlink()
+    np.testing.assert_array_equal(np.load(shared / "new.npy"), disparity)
+
+
 def test_atomic_writers_take_names_up_to_the_file_systems_limit(tmp_path: Path) -> None:
     # The temporary name adds 31 bytes to the target's: a name of 225 to 255 bytes (legal,
     # say a batch stem from deep folders) failed with "File name too long" naming the

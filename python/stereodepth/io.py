@@ -218,13 +218,19 @@ def atomic_write(path: str | os.PathLike[str], *, text: bool = False) -> Iterato
     POSIX); when it raises, including KeyboardInterrupt, the temporary file is removed and
     ``path`` is untouched. A process killed outright can leave a
     temporary file behind, never a partial ``path``: :func:`remove_temp_files` sweeps them.
+    A ``path`` that is a symbolic link is written through, as ``open``, ``numpy.save`` and
+    ``cv2.imwrite`` write: the file it points to is replaced (its temporary file beside it)
+    and the link kept, so that what the link names is the new file.
     Raises IsADirectoryError naming ``path`` when it is a folder, before writing anything,
     and the OSError of a folder that takes no new file (missing, read-only) naming ``path``.
     """
     p = _as_path(path)
     if p.is_dir():  # else the rename's error names the temporary file, not the user's path
         raise IsADirectoryError(errno.EISDIR, "cannot write a file over a folder", str(p))
-    tmp = _temp_path(p)
+    # A link is written through: replacing the link itself by the new file left the file
+    # it named (on a shared disk, say) with the old data, and the link gone.
+    target = Path(os.path.realpath(p)) if p.is_symlink() else p
+    tmp = _temp_path(target)
     # O_EXCL: never follow or clobber anything; mode 0o666 so the umask applies as usual.
     try:
         fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_BINARY", 0), 0o666)
@@ -240,14 +246,14 @@ def atomic_write(path: str | os.PathLike[str], *, text: bool = False) -> Iterato
             # A file replaced keeps its permissions (a new one gets 0o666 less the umask).
             if hasattr(os, "fchmod"):  # POSIX
                 with contextlib.suppress(FileNotFoundError):
-                    os.fchmod(f.fileno(), os.stat(p).st_mode & 0o7777)
+                    os.fchmod(f.fileno(), os.stat(target).st_mode & 0o7777)
             os.fsync(f.fileno())
-        os.replace(tmp, p)
+        os.replace(tmp, target)
     except BaseException:
         with contextlib.suppress(OSError):
             tmp.unlink()
         raise
-    _fsync_dir(p.parent)
+    _fsync_dir(target.parent)
 
 
 _TEMP_RE = re.compile(r"^\..+\." + TEMP_MARKER + r"-[0-9a-f]{12}\.tmp$")
