@@ -232,6 +232,41 @@ def test_middlebury_layout(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -
     assert row["metrics"]["evaluated"] == int((np.isfinite(gt) & (mask_png == 255)).sum())
 
 
+def test_middlebury_calib_of_another_size_is_refused(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A calib.txt for another resolution (MiddEval3's quarter-size one beside full-size
+    images) gave its ndisp, in that resolution's pixels, as the search range: the scene was
+    scored with most disparities out of reach, exit status 0. `match` and the web page refuse
+    such a calib.txt; eval now does, naming it and both sizes."""
+    left, right, gt = random_dot_pair(40, 100, [7, 13], rgb=False, seed=5)
+    folder = tmp_path / "Pair"
+    folder.mkdir()
+    write_png(folder / "im0.png", left)
+    write_png(folder / "im1.png", right)
+    write_pfm(folder / "disp0GT.pfm", np.where(np.isnan(gt), np.inf, gt).astype(np.float32))
+    calib = (
+        "cam0=[1000 0 50; 0 1000 20; 0 0 1]\ncam1=[1000 0 50; 0 1000 20; 0 0 1]\n"
+        "doffs=0\nbaseline=100\nwidth={w}\nheight={h}\nndisp={n}\n"
+    )
+    (folder / "calib.txt").write_text(calib.format(w=25, h=10, n=10))
+    status, out, err = run_eval(capsys, str(tmp_path))
+    assert status == 2 and out == ""
+    assert err.count("\n") == 1, err
+    assert (
+        f"{folder / 'calib.txt'}: it is for 25x10 px images, im0.png is 100x40 px: use the "
+        "calib.txt of these images"
+    ) in err
+    # The calib.txt of these images, and one without a size, are used as before.
+    for text in (
+        calib.format(w=100, h=40, n=40),
+        calib.format(w=100, h=40, n=40).replace("width=100\nheight=40\n", ""),
+    ):
+        (folder / "calib.txt").write_text(text)
+        report = run_json(capsys, str(tmp_path), "--repeat", "1")
+        assert report["results"][0]["num_disparities"] == 48
+
+
 @pytest.mark.parametrize(
     ("mask", "kind"),
     [

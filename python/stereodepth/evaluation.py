@@ -9,7 +9,7 @@ Scenes
       (``max_disp``);
     - Middlebury 2014 / MiddEval3: ``im0.png``, ``im1.png``, ``disp0GT.pfm`` or ``disp0.pfm``
       (inf where unknown), optional ``mask0nocc.png`` (255 = non-occluded) and ``calib.txt``
-      (``ndisp``).
+      (``ndisp``; its ``width`` and ``height``, where given, must be the images' size).
 
 Disparity range
     Every method searches the same range, from 0 to ``num_disparities - 1`` with
@@ -157,6 +157,9 @@ class Scene:
 
     ``max_disparity_px`` is the largest ground-truth disparity as declared by the scene's
     ``meta.json`` (``max_disp``) or ``calib.txt`` (``ndisp - 1``); None when neither gives it.
+    ``calib_size`` is (width, height) of the images a Middlebury ``calib.txt`` describes
+    (its ``width`` and ``height``), None without one; :meth:`load` checks the images' size
+    against it.
     """
 
     name: str
@@ -166,6 +169,7 @@ class Scene:
     gt_path: Path
     mask_path: Path | None
     max_disparity_px: float | None
+    calib_size: tuple[int, int] | None = None
 
     def load(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray | None]:
         """(left, right, gt, mask): the images as read by :func:`stereodepth.io.read_image`,
@@ -181,6 +185,15 @@ class Scene:
             raise ValueError(
                 f"scene {self.name}: left and right images must have the same shape, "
                 f"got {left.shape} and {right.shape}"
+            )
+        size = (left.shape[1], left.shape[0])
+        if self.calib_size is not None and self.calib_size != size:
+            # Its ndisp (the search range) is in that resolution's pixels: a quarter-size
+            # calib.txt beside full-size images searched a quarter of the disparities.
+            raise ValueError(
+                f"{self.path / 'calib.txt'}: it is for {self.calib_size[0]}x"
+                f"{self.calib_size[1]} px images, {self.left_path.name} is {size[0]}x{size[1]}"
+                " px: use the calib.txt of these images"
             )
         gt = read_pfm(self.gt_path) if self.gt_path.suffix == ".pfm" else _load_npy(self.gt_path)
         if gt.dtype.kind != "f" or gt.shape != left.shape[:2]:
@@ -266,11 +279,14 @@ def _scene_at(path: Path) -> Scene | None:
     gts = [path / n for n in ("disp0GT.pfm", "disp0.pfm") if (path / n).is_file()]
     if (path / "im0.png").is_file() and gts:
         max_disp = None
+        calib_size = None
         if (path / "calib.txt").is_file():
             from .calib import read_middlebury_calib
 
-            ndisp = read_middlebury_calib(path / "calib.txt").ndisp
-            max_disp = None if ndisp is None else float(ndisp - 1)
+            calib = read_middlebury_calib(path / "calib.txt")
+            max_disp = None if calib.ndisp is None else float(calib.ndisp - 1)
+            if calib.width_px and calib.height_px:
+                calib_size = (calib.width_px, calib.height_px)
         mask = path / "mask0nocc.png"
         return Scene(
             name=path.name,
@@ -280,6 +296,7 @@ def _scene_at(path: Path) -> Scene | None:
             gt_path=gts[0],
             mask_path=mask if mask.is_file() else None,
             max_disparity_px=max_disp,
+            calib_size=calib_size,
         )
     return None
 
