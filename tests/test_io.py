@@ -459,6 +459,55 @@ def test_disparity_png16_is_kitti_format(tmp_path: Path) -> None:
     assert not (tmp_path / "e.png").exists()
 
 
+def test_read_disparity_png16_is_kitti_devkit_decoding(tmp_path: Path) -> None:
+    """KITTI's devkit reads d = png / 256 with 0 as no value. The writer's docstring said to
+    read its files back with read_image(path) / 256, which gives every hole disparity 0 (a
+    valid disparity, a point at infinity: evaluate scored them as estimates, depth as
+    infinitely far). read_disparity_png16 decodes as the devkit, checked against an
+    independent decoding (OpenCV's where installed, else Pillow's)."""
+    raw = np.array([[0, 1, 256, 65535], [2688, 0, 65533, 640]], np.uint16)
+    Image.fromarray(raw).save(tmp_path / "k.png")
+    try:
+        import cv2
+
+        decoded = cv2.imread(str(tmp_path / "k.png"), cv2.IMREAD_UNCHANGED)
+    except ImportError:
+        decoded = np.asarray(Image.open(tmp_path / "k.png"))
+    assert decoded.dtype == np.uint16
+    want = np.where(decoded > 0, decoded.astype(np.float64) / 256.0, np.nan)
+    got = io.read_disparity_png16(tmp_path / "k.png")
+    assert got.dtype == np.float32 and got.shape == (2, 4)
+    np.testing.assert_array_equal(got.astype(np.float64), want)
+    # The writer's files read back to the disparity rounded to 1/256 px, holes NaN.
+    d = np.array([[np.nan, 1.0, 10.5, -2.0], [0.0, 255.99, 3.3, np.inf]], np.float32)
+    io.write_disparity_png16(tmp_path / "d.png", d)
+    back = io.read_disparity_png16(tmp_path / "d.png")
+    hole = ~(np.isfinite(d) & (d > 0))
+    assert (np.isnan(back) == hole).all()
+    np.testing.assert_array_equal(back[~hole], np.rint(d[~hole] * 256.0) / 256.0)
+
+
+@pytest.mark.parametrize(
+    ("image", "kind"),
+    [
+        (np.full((3, 4), 7, np.uint8), r"an 8-bit grey image of shape \(3, 4\)"),
+        (np.full((3, 4, 3), 7, np.uint8), r"a colour image of shape \(3, 4, 3\)"),
+    ],
+)
+def test_read_disparity_png16_refuses_8_bit_and_colour(
+    tmp_path: Path, image: np.ndarray, kind: str
+) -> None:
+    # An 8-bit PNG (a preview, or a map saved by a tool that cut it to 8 bits) is not KITTI's
+    # d * 256: 7 would read as 0.027 px.
+    Image.fromarray(image).save(tmp_path / "p.png")
+    with pytest.raises(
+        ValueError, match=r"p\.png: a KITTI disparity PNG is a 16-bit grey image .*" + kind
+    ):
+        io.read_disparity_png16(tmp_path / "p.png")
+    with pytest.raises(FileNotFoundError):
+        io.read_disparity_png16(tmp_path / "missing.png")
+
+
 # --- PFM --------------------------------------------------------------------------------------
 @pytest.mark.parametrize("shape", [(1, 1), (3, 5), (4, 7, 3), (1, 1023)])
 def test_pfm_round_trip(tmp_path: Path, shape: tuple[int, ...]) -> None:

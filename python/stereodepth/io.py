@@ -24,6 +24,7 @@ from ._validate import native_order
 __all__ = [
     "TEMP_MARKER",
     "atomic_write",
+    "read_disparity_png16",
     "read_image",
     "read_pfm",
     "read_pnm",
@@ -321,7 +322,9 @@ def write_png16(
 def write_disparity_png16(path: str | os.PathLike[str], disparity: np.ndarray) -> None:
     """A float disparity map in KITTI's format, atomically: uint16 PNG of round(d * 256), 0
     where the disparity is NaN, infinite, <= 0 or too small to encode (< 1/512 px): the format
-    has no negative values and 0 means "no value". Read back with ``read_image(path) / 256``.
+    has no negative values and 0 means "no value". Read back with
+    :func:`read_disparity_png16` (not ``read_image(path) / 256``, which reads the holes as
+    disparity 0, a point at infinity).
 
     Raises ValueError, writing nothing, for a finite disparity above the format's largest,
     65535 / 256 = 255.996 px (it was once capped there: a wrong value, not a hole); write PFM
@@ -335,6 +338,32 @@ def write_disparity_png16(path: str | os.PathLike[str], disparity: np.ndarray) -
             "(KITTI's d * 256 holds at most 255.996 px): write PFM or .npy instead"
         )
     write_png16(path, v.astype(np.uint16))
+
+
+def read_disparity_png16(path: str | os.PathLike[str]) -> np.ndarray:
+    """A disparity map in KITTI's format as (H, W) float32 pixels, NaN where there is none.
+
+    The format (the KITTI stereo devkit's ``disp_read``, also what
+    :func:`write_disparity_png16` writes): a 16-bit greyscale PNG of d * 256, 0 for "no
+    value". Each value v > 0 gives v / 256 (exact in float32); 0 gives NaN. Read as
+    ``read_image(path) / 256``, the holes would be disparity 0: a valid disparity (a point at
+    infinity) to :func:`stereodepth.metrics.evaluate` and every depth conversion.
+
+    Raises FileNotFoundError for a missing file, IsADirectoryError for a folder and ValueError
+    naming the file for one that is not a 16-bit grey image (an 8-bit PNG, a colour image: a
+    preview or a visualisation, not the data; the devkit reads those as wrong values) or
+    cannot be decoded."""
+    p = _as_path(path)
+    raw = read_image(p)
+    if raw.dtype != np.uint16 or raw.ndim != 2:
+        kind = "a colour" if raw.ndim == 3 else f"an {raw.dtype.itemsize * 8}-bit grey"
+        raise ValueError(
+            f"{p}: a KITTI disparity PNG is a 16-bit grey image (d * 256, 0 for no value), got "
+            f"{kind} image of shape {raw.shape}"
+        )
+    out: np.ndarray = raw.astype(np.float32) / np.float32(256.0)
+    out[raw == 0] = np.nan
+    return out
 
 
 def write_pfm(path: str | os.PathLike[str], array: np.ndarray, *, scale: float = 1.0) -> None:
