@@ -158,6 +158,13 @@ def test_bad_values(values: Any, kind: type[Exception], message: str) -> None:
         ({"vmax": True}, TypeError, "vmax must be a real number or None, got bool True"),
         ({"vmin": float("nan")}, ValueError, "vmin must be finite, got nan"),
         ({"vmax": float("inf")}, ValueError, "vmax must be finite, got inf"),
+        # An int beyond a double was Python's OverflowError 'int too large to convert to float'.
+        (
+            {"vmin": 10**400},
+            ValueError,
+            "vmin must be within the range of a double (about 1.8e308), got an integer of 401",
+        ),
+        ({"vmax": -(10**309)}, ValueError, "vmax must be within the range of a double"),
         ({"vmin": 3, "vmax": 3}, ValueError, "vmin must be < vmax, got vmin=3.0 and vmax=3.0"),
         ({"vmin": 4, "vmax": 1}, ValueError, "vmin must be < vmax"),
         ({"cmap": "no-such-map"}, ValueError, "cmap must be a matplotlib colour map name"),

@@ -22,6 +22,8 @@ from typing import Any
 
 import numpy as np
 
+from . import _validate as check
+
 __all__ = [
     "LUT_SIZE",
     "colorize",
@@ -99,10 +101,8 @@ def _limit(name: str, value: Any) -> float | None:
         raise TypeError(
             f"{name} must be a real number or None, got {type(value).__name__} {value!r}"
         )
-    v = float(value)
-    if not math.isfinite(v):
-        raise ValueError(f"{name} must be finite, got {value!r}")
-    return v
+    # An int beyond a double (10**400) raised Python's OverflowError, naming no parameter.
+    return check.finite(name, value)
 
 
 def _colour(value: Any) -> tuple[int, int, int]:
