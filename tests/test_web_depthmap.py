@@ -580,6 +580,49 @@ def test_not_json_and_not_an_object(client: TestClient) -> None:
         assert r.json()["detail"][0]["msg"] == "the request must be JSON nested less deeply"
 
 
+def test_a_key_given_twice_in_the_json_is_refused_at_it(client: TestClient, pair: Any) -> None:
+    """JSON keeps the last of two equal keys without a word: {"num_disparities": 16,
+    "num_disparities": 64} searched 64, a rig with two baselines used the second. Each
+    answers 422 at that field with both values, as a query parameter given twice does."""
+    left, right = encode(pair.left), encode(pair.right)
+    rig = f'{{"baseline_mm": {SAMPLE_BASELINE_MM}, "focal_px": {SAMPLE_FOCAL_PX}}}'
+    cases = [
+        (
+            f'{{"left": "{left}", "right": "{right}", "rig": {rig}, "num_disparities": 16, '
+            '"num_disparities": 64}',
+            ["body", "num_disparities"],
+            "num_disparities is given twice (16, 64): give it once",
+        ),
+        (
+            f'{{"left": "{left}", "right": "{right}", "rig": {{"baseline_mm": 100, '
+            f'"focal_px": {SAMPLE_FOCAL_PX}, "baseline_mm": 120}}}}',
+            ["body", "rig", "baseline_mm"],
+            "baseline_mm is given twice (100, 120): give it once",
+        ),
+    ]
+    for text, loc, msg in cases:
+        r = client.post(
+            "/api/depthmap", content=text.encode(), headers={"content-type": "application/json"}
+        )
+        assert r.status_code == 422, r.text
+        assert r.json()["detail"] == [{"loc": loc, "msg": msg, "type": "repeated"}]
+    r = client.post(
+        "/api/calib",
+        content=b'{"calib": "doffs=0", "calib": "baseline=1"}',
+        headers={"content-type": "application/json"},
+    )
+    assert r.status_code == 422
+    assert r.json()["detail"][0]["loc"] == ["body", "calib"]
+    assert "calib is given twice ('doffs=0', 'baseline=1')" in r.json()["detail"][0]["msg"]
+    # The same request with each key once is answered.
+    r = client.post(
+        "/api/depthmap",
+        content=cases[0][0].replace(', "num_disparities": 64', "").encode(),
+        headers={"content-type": "application/json"},
+    )
+    assert r.status_code == 200 and r.json()["params"]["num_disparities"] == 16
+
+
 def test_limits_in_bytes_and_pixels(pair: Any) -> None:
     left, right = encode(pair.left), encode(pair.right)
     size = len(base64.b64decode(left))

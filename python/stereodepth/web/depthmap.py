@@ -21,7 +21,8 @@
 
 Numbers may come as JSON numbers or as numeric strings (what the page's form fields hold);
 an integer field also takes a float with an integral value (``16.0``). A field not named
-here, in the request or in ``rig`` (a misspelt ``doffs``), answers 422 at that field.
+here, in the request or in ``rig`` (a misspelt ``doffs``), answers 422 at that field, and so
+does a key given twice in one object (JSON would keep the last one).
 
 The answer has the summary (size, density, time, ranges), the images as PNG data URLs (the
 left image, the colourised disparity and depth), the colour bars (limits and the colour table),
@@ -387,14 +388,44 @@ def _int_field(body: dict[str, Any], name: str, lo: int, hi: int) -> int | None:
     return v
 
 
-def _parse_request(data: bytes, limits: DepthMapLimits) -> Job:
+class _RepeatedKey(ValueError):
+    def __init__(self, key: str, values: list[Any]) -> None:
+        super().__init__(key)
+        self.key, self.values = key, values
+
+
+def _no_repeated_keys(pairs: list[tuple[str, Any]]) -> dict[str, Any]:
+    """json's object_pairs_hook: an object, refusing a key given twice (json keeps the last
+    one without a word, so {"num_disparities": 16, "num_disparities": 64} searched 64)."""
+    out: dict[str, Any] = {}
+    for key, value in pairs:
+        if key in out:
+            raise _RepeatedKey(key, [out[key], value])
+        out[key] = value
+    return out
+
+
+def _load_json(data: bytes) -> Any:
+    """The request's JSON; BadInput for text that is not JSON, nested too deeply, or with an
+    object key given twice (at that key, where it is a field of the request or of rig)."""
     try:
-        body = json.loads(data)
+        return json.loads(data, object_pairs_hook=_no_repeated_keys)
+    except _RepeatedKey as exc:
+        shown = ", ".join(repr(v)[:40] for v in exc.values)
+        key = str(exc.key)[:40]
+        raise BadInput(
+            ["body", "rig", key] if key in _RIG_NAMES else ["body", key],
+            f"{key} is given twice ({shown}): give it once",
+            "repeated",
+        ) from None
     except (ValueError, UnicodeDecodeError):
         raise BadInput(["body"], "the request must be JSON") from None
     except RecursionError:  # arrays or objects nested thousands deep
         raise BadInput(["body"], "the request must be JSON nested less deeply") from None
-    return parse_job(body, limits)
+
+
+def _parse_request(data: bytes, limits: DepthMapLimits) -> Job:
+    return parse_job(_load_json(data), limits)
 
 
 def parse_job(body: Any, limits: DepthMapLimits) -> Job:
@@ -964,13 +995,9 @@ def add_calib_route(router: APIRouter) -> None:
                 [BadInput(["body", "calib"], "calib: the file is too large")], 413
             )
         try:
-            body = json.loads(data)
-        except (ValueError, UnicodeDecodeError):
-            return _error_response([BadInput(["body"], "the request must be JSON")])
-        except RecursionError:  # arrays or objects nested thousands deep
-            return _error_response(
-                [BadInput(["body"], "the request must be JSON nested less deeply")]
-            )
+            body = _load_json(data)
+        except BadInput as e:
+            return _error_response([e])
         if not isinstance(body, dict):
             return _error_response([BadInput(["body"], "the request must be a JSON object")])
         try:
