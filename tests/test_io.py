@@ -304,6 +304,34 @@ def test_atomic_writers_write_through_a_link(tmp_path: Path) -> None:
     np.testing.assert_array_equal(np.load(shared / "new.npy"), disparity)
 
 
+@pytest.mark.skipif(not hasattr(os, "mkfifo"), reason="named pipes")
+def test_atomic_writers_write_into_a_pipe_not_over_it(tmp_path: Path) -> None:
+    """A path that is a device or a pipe was replaced by a regular file (the temporary file
+    renamed over it): a FIFO's reader never got the data, and as root write_pfm("/dev/null",
+    ...) made /dev/null a regular file. Such a path is written to as open() writes it."""
+    import stat
+    import threading
+
+    fifo = tmp_path / "pipe"
+    os.mkfifo(fifo)
+    disparity = np.arange(12, dtype=np.float32).reshape(3, 4)
+    got: list[bytes] = []
+
+    def read() -> None:
+        with open(fifo, "rb") as f:  # blocks until a writer opens the pipe
+            got.append(f.read())
+
+    reader = threading.Thread(target=read, daemon=True)
+    reader.start()
+    io.write_pfm(fifo, disparity)
+    assert stat.S_ISFIFO(os.stat(fifo).st_mode)  # still the pipe, not a file
+    reader.join(timeout=30)
+    assert not reader.is_alive()
+    io.write_pfm(tmp_path / "ref.pfm", disparity)
+    assert got == [(tmp_path / "ref.pfm").read_bytes()]
+    assert names(tmp_path) == ["pipe", "ref.pfm"]  # no temporary file left
+
+
 def test_atomic_writers_take_names_up_to_the_file_systems_limit(tmp_path: Path) -> None:
     # The temporary name adds 31 bytes to the target's: a name of 225 to 255 bytes (legal,
     # say a batch stem from deep folders) failed with "File name too long" naming the

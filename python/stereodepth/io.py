@@ -12,6 +12,7 @@ import errno
 import os
 import re
 import secrets
+import stat
 from collections.abc import Iterator
 from pathlib import Path
 from typing import IO, Any
@@ -221,13 +222,26 @@ def atomic_write(path: str | os.PathLike[str], *, text: bool = False) -> Iterato
     temporary file behind, never a partial ``path``: :func:`remove_temp_files` sweeps them.
     A ``path`` that is a symbolic link is written through, as ``open``, ``numpy.save`` and
     ``cv2.imwrite`` write: the file it points to is replaced (its temporary file beside it)
-    and the link kept, so that what the link names is the new file.
+    and the link kept, so that what the link names is the new file. A ``path`` that is a
+    device, a pipe or a socket (``/dev/null``, ``/dev/stdout``, a FIFO) is written to as
+    ``open`` writes it, never replaced by a file.
     Raises IsADirectoryError naming ``path`` when it is a folder, before writing anything,
     and the OSError of a folder that takes no new file (missing, read-only) naming ``path``.
     """
     p = _as_path(path)
     if p.is_dir():  # else the rename's error names the temporary file, not the user's path
         raise IsADirectoryError(errno.EISDIR, "cannot write a file over a folder", str(p))
+    if _is_stream(p):
+        # Renaming over a device or a pipe replaced it by a regular file (with the right to:
+        # as root, write_pfm("/dev/null", ...) made /dev/null a file); a stream has no
+        # half-written state to avoid, so it is written as open() writes it.
+        try:
+            stream: IO[Any] = open(p, "w", encoding="utf-8") if text else open(p, "wb")  # noqa: SIM115
+        except OSError as exc:  # a socket, or a device that takes no writes
+            raise type(exc)(exc.errno, f"cannot write {p.name}: {exc.strerror}", str(p)) from None
+        with stream:
+            yield stream
+        return
     # A link is written through: replacing the link itself by the new file left the file
     # it named (on a shared disk, say) with the old data, and the link gone.
     target = Path(os.path.realpath(p)) if p.is_symlink() else p
@@ -255,6 +269,15 @@ def atomic_write(path: str | os.PathLike[str], *, text: bool = False) -> Iterato
             tmp.unlink()
         raise
     _fsync_dir(target.parent)
+
+
+def _is_stream(p: Path) -> bool:
+    """Whether ``p`` (its link's target) exists and is a device, a pipe or a socket."""
+    try:
+        mode = os.stat(p).st_mode
+    except (OSError, ValueError):
+        return False
+    return not (stat.S_ISREG(mode) or stat.S_ISDIR(mode))
 
 
 _TEMP_RE = re.compile(r"^\..+\." + TEMP_MARKER + r"-[0-9a-f]{12}\.tmp$")
