@@ -623,6 +623,24 @@ def test_a_key_given_twice_in_the_json_is_refused_at_it(client: TestClient, pair
     assert r.status_code == 200 and r.json()["params"]["num_disparities"] == 16
 
 
+def test_a_body_not_sent_as_json_is_refused(client: TestClient) -> None:
+    """The routes read their body themselves, so FastAPI's refusal of a JSON body sent as
+    another type (its CSRF guard) did not apply: a text/plain or form POST, which any web
+    site may make a browser send to 127.0.0.1 without a CORS preflight, was matched. 415."""
+    body = b'{"sample": true, "rig": {"baseline_mm": 100, "focal_px": 500}}'
+    for url in ("/api/depthmap", "/api/calib"):
+        for kind in ("text/plain", "application/x-www-form-urlencoded", "multipart/form-data"):
+            r = client.post(url, content=body, headers={"content-type": kind})
+            assert r.status_code == 415, (url, kind, r.text)
+            (item,) = r.json()["detail"]
+            assert item["loc"] == ["header", "content-type"] and repr(kind) in item["msg"]
+    r = client.post("/api/depthmap", content=body)  # no content-type at all
+    assert r.status_code == 415
+    for kind in ("application/json", "application/json; charset=utf-8", "Application/JSON"):
+        r = client.post("/api/depthmap", content=body, headers={"content-type": kind})
+        assert r.status_code == 200, (kind, r.text)
+
+
 def test_limits_in_bytes_and_pixels(pair: Any) -> None:
     left, right = encode(pair.left), encode(pair.right)
     size = len(base64.b64decode(left))

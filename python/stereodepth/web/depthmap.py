@@ -39,7 +39,9 @@ are decoded in memory and results kept in memory (the last few, under a random i
 are written to a temporary folder of the server's choosing. Matching runs in worker threads
 (at most two at once) so the server keeps answering. Every bad input answers 422 with
 ``{"detail": [{"loc": ["body", field], "msg": ..., "type": ...}]}`` at its field, a body
-too large 413, a missing extra (Pillow, matplotlib) 503 with the install hint; none 500.
+too large 413, a body not sent as ``application/json`` 415 (a form or text/plain POST is one
+any web site can make a browser send to this server), a missing extra (Pillow, matplotlib)
+503 with the install hint; none 500.
 """
 
 from __future__ import annotations
@@ -811,6 +813,29 @@ class _Results:
             return self._items.get(key)
 
 
+def _not_json(request: Request) -> Response | None:
+    """415 for a body that does not say it is JSON, else None. A form or text/plain POST is
+    a request any web site may make a browser send without asking (no CORS preflight), so
+    another site could have the local server match images; FastAPI refuses such bodies for
+    its JSON parameters for this reason (CSRF), and these routes read the body themselves."""
+    media = request.headers.get("content-type", "").split(";", 1)[0].strip().lower()
+    if media == "application/json" or (
+        media.startswith("application/") and media.endswith("+json")
+    ):
+        return None
+    return _error_response(
+        [
+            BadInput(
+                ["header", "content-type"],
+                f"the request must be JSON sent as application/json, got content-type "
+                f"{media[:60]!r}",
+                "unsupported_media_type",
+            )
+        ],
+        415,
+    )
+
+
 async def _read_body(request: Request, limit: int) -> bytes | None:
     """The body, or None when it is larger than ``limit`` (read no further than that)."""
     declared = request.headers.get("content-length")
@@ -860,6 +885,8 @@ def make_router(limits: DepthMapLimits) -> APIRouter:
         responses={422: {"description": "Bad input, at its field"}, 413: {}},
     )
     async def depthmap(request: Request) -> Response:
+        if (refused := _not_json(request)) is not None:
+            return refused
         data = await _read_body(request, limits.max_body_bytes)
         if data is None:
             return _error_response(
@@ -989,6 +1016,8 @@ def add_calib_route(router: APIRouter) -> None:
 
     @router.post("/api/calib", summary="A Middlebury calib.txt to the rig's numbers")
     async def calib(request: Request) -> Response:
+        if (refused := _not_json(request)) is not None:
+            return refused
         data = await _read_body(request, 200_000)
         if data is None:
             return _error_response(
