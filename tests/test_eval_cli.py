@@ -526,6 +526,7 @@ def test_text_table_matches_json(scenes_dir: Path, capsys: pytest.CaptureFixture
             ("bad-2 %", "bad_2"),
             ("density %", "density"),
             ("bad-2(est) %", "bad_2_est"),
+            ("D1 %", "d1"),
         ):
             want = 100 * row["metrics"][key]
             assert float(t[header.index(title)]) == pytest.approx(want, abs=0.0051)

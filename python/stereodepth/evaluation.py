@@ -57,11 +57,13 @@ Timing
 Scores
     :func:`stereodepth.metrics.evaluate` over the non-occluded pixels with ground truth where the
     scene has a mask (``region`` nonocc), else over all pixels with ground truth (``all``);
-    ``--no-mask`` always uses all. Percentages in the tables, fractions in ``--json``. The
-    ``mean`` rows average each score over the scenes (every scene weighs the same) and the
-    times; their ``ns/(px*d)`` is the total time over the total work. The ``--json`` object
-    also records the options given (``options``, ``sgm_options``, ``opencv_options``: each a
-    dict of the ``KEY=VALUE`` pairs after conversion, empty when none was given).
+    ``--no-mask`` always uses all. ``D1`` is KITTI's outlier rate (off by more than 3 px and
+    5 %; holes count), ``d1`` and ``d1_est`` in ``--json``. Percentages in the tables,
+    fractions in ``--json``. The ``mean`` rows average each score over the scenes (every
+    scene weighs the same) and the times; their ``ns/(px*d)`` is the total time over the total
+    work. The ``--json`` object also records the options given (``options``,
+    ``sgm_options``, ``opencv_options``: each a dict of the ``KEY=VALUE`` pairs after
+    conversion, empty when none was given).
 """
 
 from __future__ import annotations
@@ -135,6 +137,8 @@ _BEST_BY = (
     "bad_1_est",
     "bad_2_est",
     "bad_4_est",
+    "d1",
+    "d1_est",
     "avgerr",
     "rms",
 )
@@ -646,6 +650,7 @@ _METRIC_COLUMNS: tuple[tuple[str, str, float], ...] = (
     ("bad-2 %", "bad_2", 100.0),
     ("bad-4 %", "bad_4", 100.0),
     ("bad-2(est) %", "bad_2_est", 100.0),
+    ("D1 %", "d1", 100.0),
     ("avgerr px", "avgerr", 1.0),
     ("rms px", "rms", 1.0),
 )
