@@ -978,6 +978,29 @@ def test_a_search_range_beyond_the_matchers_names_its_source(
     ) in err
 
 
+def test_a_declared_range_the_ground_truth_leaves_is_refused(
+    scenes_dir: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A meta.json max_disp (or calib.txt ndisp) smaller than the ground truth's disparities
+    (one of another resolution) made every method search a range the truth leaves: the
+    scene was scored badly for every method, exit status 0. Refused naming the scene, the
+    largest true disparity, the range and its source; --num-disparities still decides."""
+    gt = np.load(scenes_dir / "rds-b" / "disp_gt.npy")
+    top = float(np.nanmax(gt))
+    assert top > 15
+    (scenes_dir / "rds-b" / "meta.json").write_text('{"max_disp": 3}')
+    status, out, err = run_eval(capsys, str(scenes_dir), "--scene", "rds-b")
+    assert status == 2 and out == ""
+    assert err.count("\n") == 1, err
+    assert (
+        f"scene rds-b: the ground truth reaches {top:g} px ({int((gt > 15).sum())} pixels "
+        "beyond the search range 0 .. 15 that meta.json's max_disp=3 gives): correct it, or "
+        "give --num-disparities"
+    ) in err
+    report = run_json(capsys, str(scenes_dir), "--scene", "rds-b", "--num-disparities", "16")
+    assert report["results"][0]["num_disparities"] == 16
+
+
 def test_rejects_unreadable_meta(scenes_dir: Path, capsys: pytest.CaptureFixture[str]) -> None:
     (scenes_dir / "rds-a" / "meta.json").write_text("{not json")
     status, _, err = run_eval(capsys, str(scenes_dir))

@@ -16,7 +16,9 @@ Disparity range
     ``num_disparities = 16 * ceil((D + 1) / 16)`` (OpenCV needs a multiple of 16), where D, the
     largest ground-truth disparity, is ``max_disp`` from ``meta.json``, else ``ndisp - 1`` from
     ``calib.txt``, else the ceiling of the largest finite ground-truth value.
-    ``--num-disparities`` overrides it for every scene.
+    ``--num-disparities`` overrides it for every scene. A declared D (meta.json's or
+    calib.txt's) whose range the ground truth leaves (a value of another resolution) is an
+    error naming the scene.
 
 Methods
     ``stereodepth`` (or ``bm``, as ``match`` and ``batch`` call it):
@@ -591,6 +593,17 @@ def _evaluate_scene(
         else:  # Middlebury: max_disp is ndisp - 1
             source = f"calib.txt's ndisp={max_disp + 1:g}"
         num_disparities = num_disparities_for(max_disp)
+        with np.errstate(invalid="ignore"):
+            beyond = np.isfinite(gt) & (gt > num_disparities - 1)
+        if beyond.any():
+            # A max_disp or ndisp of another resolution (half-size beside full-size images)
+            # searched a range the true disparities leave: every method scored badly, exit 0.
+            raise ValueError(
+                f"scene {scene.name}: the ground truth reaches {float(gt[beyond].max()):g} px "
+                f"({int(beyond.sum())} pixels beyond the search range 0 .. "
+                f"{num_disparities - 1} that {source} gives): correct it, or give "
+                "--num-disparities"
+            )
         ours = any(v.method in ("stereodepth", "sgm") for v in variants)
         if ours and num_disparities > MAX_NUM_DISPARITIES:  # the matcher's error named no source
             raise ValueError(
