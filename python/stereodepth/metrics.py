@@ -132,7 +132,8 @@ def _float_map(name: str, value: Any, what: str) -> np.ndarray:
         elif arr.dtype == np.uint16:
             hint = (
                 "; KITTI's PNG encoding must be converted first: "
-                "d = raw.astype(np.float32) / 256 with d[raw == 0] = np.nan"
+                "d = raw.astype(np.float32) / 256 with d[raw == 0] = np.nan "
+                "(stereodepth.io.read_disparity_png16 reads such a file so)"
             )
         elif name == "gt" and arr.dtype == np.uint8:
             hint = (
