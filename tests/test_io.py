@@ -515,6 +515,25 @@ def test_read_disparity_png16_is_kitti_devkit_decoding(tmp_path: Path) -> None:
     np.testing.assert_array_equal(back[~hole], np.rint(d[~hole] * 256.0) / 256.0)
 
 
+def test_read_disparity_png16_ignores_an_exif_orientation(tmp_path: Path) -> None:
+    """A disparity map is data, read as stored by KITTI's devkit and cv2.IMREAD_UNCHANGED;
+    read_image turns a photo by its EXIF tag, and a disparity PNG carrying one (written by a
+    tool that copied the photo's metadata) came back turned, off its image's pixels."""
+    raw = np.arange(1, 13, dtype=np.uint16).reshape(3, 4) * 256
+    exif = Image.Exif()
+    exif[0x0112] = 6  # turned 90 degrees for display
+    Image.fromarray(raw).save(tmp_path / "d.png", exif=exif)
+    assert io.read_image(tmp_path / "d.png").shape == (4, 3)  # a photo is turned
+    got = io.read_disparity_png16(tmp_path / "d.png")
+    np.testing.assert_array_equal(got, raw.astype(np.float32) / 256)
+    try:
+        import cv2
+    except ImportError:
+        return
+    theirs = cv2.imread(str(tmp_path / "d.png"), cv2.IMREAD_UNCHANGED)
+    np.testing.assert_array_equal(got * 256, theirs.astype(np.float32))
+
+
 @pytest.mark.parametrize(
     ("image", "kind"),
     [

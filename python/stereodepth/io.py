@@ -116,7 +116,13 @@ def read_image(path: str | os.PathLike[str]) -> np.ndarray:
     ``DecompressionBombError``, twice ``Image.MAX_IMAGE_PIXELS``), holds floating-point
     samples (a float TIFF or a PFM: :func:`read_pfm` reads those) or is 16-bit colour or
     16-bit with alpha (Pillow would keep only the high byte of each sample)."""
-    p = _as_path(path)
+    return _read_image(_as_path(path), turn=True)
+
+
+def _read_image(p: Path, *, turn: bool) -> np.ndarray:
+    """:func:`read_image`, applying the EXIF orientation only with ``turn`` (a data map, such
+    as a disparity PNG, is read as stored, as ``cv2.IMREAD_UNCHANGED`` and KITTI's devkit
+    read it)."""
     require_file(p, "image")
     with p.open("rb") as f:
         magic = f.read(2)
@@ -136,7 +142,8 @@ def read_image(path: str | os.PathLike[str]) -> np.ndarray:
                     "of those"
                 )
             im.load()
-            im = upright(im)
+            if turn:
+                im = upright(im)
             mode = im.mode
             if mode in ("I;16", "I;16B", "I;16L"):
                 return np.asarray(im, dtype=np.uint16)
@@ -368,7 +375,9 @@ def read_disparity_png16(path: str | os.PathLike[str]) -> np.ndarray:
 
     The format (the KITTI stereo devkit's ``disp_read``, also what
     :func:`write_disparity_png16` writes): a 16-bit greyscale PNG of d * 256, 0 for "no
-    value". Each value v > 0 gives v / 256 (exact in float32); 0 gives NaN. Read as
+    value", read as stored (an EXIF orientation tag is not applied, as the devkit and
+    ``cv2.IMREAD_UNCHANGED`` do not). Each value v > 0 gives v / 256 (exact in float32); 0
+    gives NaN. Read as
     ``read_image(path) / 256``, the holes would be disparity 0: a valid disparity (a point at
     infinity) to :func:`stereodepth.metrics.evaluate` and every depth conversion.
 
@@ -377,7 +386,7 @@ def read_disparity_png16(path: str | os.PathLike[str]) -> np.ndarray:
     preview or a visualisation, not the data; the devkit reads those as wrong values) or
     cannot be decoded."""
     p = _as_path(path)
-    raw = read_image(p)
+    raw = _read_image(p, turn=False)  # a data map: as stored, whatever its EXIF tag says
     if raw.dtype != np.uint16 or raw.ndim != 2:
         kind = "a colour" if raw.ndim == 3 else f"an {raw.dtype.itemsize * 8}-bit grey"
         raise ValueError(
