@@ -469,6 +469,11 @@ def bad_cases(pair: Any) -> list[tuple[dict[str, Any], list[Any], str]]:
             ["body", "calib"],
             "calib: the calib.txt is for 192\u00d7144 px images, the pair is 96\u00d772 px",
         ),
+        (  # beside the sample pair (320x240) it was ignored without a word
+            {"sample": True, "calib_size": [707, 481]},
+            ["body", "calib"],
+            "calib: the calib.txt is for 707\u00d7481 px images, the pair is 320\u00d7240 px",
+        ),
         (
             {"sample": True, "calib_size": [96, "72"]},
             ["body", "calib_size"],

@@ -555,16 +555,18 @@ def parse_job(body: Any, limits: DepthMapLimits) -> Job:
                 left, right = images["left"], images["right"]
             except ValueError as exc:
                 errors.append(BadInput(["body", "right"], str(exc)))
-            h, w = images["left"].shape[:2]
-            if calib_size is not None and calib_size != (w, h):
-                errors.append(
-                    BadInput(
-                        ["body", "calib"],
-                        f"calib: the calib.txt is for {calib_size[0]}\u00d7{calib_size[1]} px "
-                        f"images, the pair is {w}\u00d7{h} px (a calibration of another "
-                        "resolution would scale every depth): use the calib.txt of these images",
-                    )
+    # The sample pair too: a calib_size beside sample: true was ignored without a word.
+    if calib_size is not None and left is not None:
+        h, w = left.shape[:2]
+        if calib_size != (w, h):
+            errors.append(
+                BadInput(
+                    ["body", "calib"],
+                    f"calib: the calib.txt is for {calib_size[0]}\u00d7{calib_size[1]} px "
+                    f"images, the pair is {w}\u00d7{h} px (a calibration of another "
+                    "resolution would scale every depth): use the calib.txt of these images",
                 )
+            )
     if errors:
         raise ExceptionGroupLike(errors)
     assert left is not None and right is not None
