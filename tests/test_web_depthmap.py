@@ -540,6 +540,23 @@ def test_without_matplotlib_a_clear_answer_not_500(
     )
 
 
+def test_limits_give_each_methods_defaults(client: TestClient) -> None:
+    """The page's form held block matching's block size (9) and cost for every method, so
+    choosing semi-global matching sent both and was refused ('cost is an option of method
+    bm'); the limits now give each method's own defaults, those of the library's matchers."""
+    import inspect
+
+    from stereodepth import block_match, semi_global_match
+
+    defaults = client.get("/api/depthmap/limits").json()["defaults"]
+    bm = inspect.signature(block_match).parameters
+    assert defaults["bm"] == {"block_size": bm["block_size"].default, "cost": bm["cost"].default}
+    if sgm_available():
+        sgm = inspect.signature(semi_global_match).parameters
+        assert "cost" not in sgm
+        assert defaults["sgm"] == {"block_size": sgm["block_size"].default, "cost": None}
+
+
 def test_sgm_with_a_stand_in_matcher(
     client: TestClient, pair: Any, monkeypatch: pytest.MonkeyPatch
 ) -> None:

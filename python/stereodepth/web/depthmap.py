@@ -865,13 +865,24 @@ def make_router(limits: DepthMapLimits) -> APIRouter:
     @router.get("/api/depthmap/limits", summary="The upload limits and the sample pair's rig")
     def depthmap_limits() -> dict[str, Any]:
         from ..match_pair import sgm_available
+        from ..matching import DEFAULT_BLOCK_SIZE
         from ..sample import SAMPLE_BASELINE_MM, SAMPLE_FOCAL_PX
 
+        # Each method's own defaults, for the page's form: block matching's block size and
+        # cost are not semi-global matching's (which takes no cost).
+        defaults: dict[str, dict[str, Any]] = {
+            "bm": {"block_size": DEFAULT_BLOCK_SIZE, "cost": "census"}
+        }
+        if sgm_available():
+            from ..semi_global import DEFAULT_BLOCK_SIZE as SGM_BLOCK_SIZE
+
+            defaults["sgm"] = {"block_size": SGM_BLOCK_SIZE, "cost": None}
         return {
             "max_upload_bytes": limits.max_upload_bytes,
             "max_pixels": limits.max_pixels,
             "formats": list(_FORMATS),
-            "methods": ["bm", "sgm"] if sgm_available() else ["bm"],
+            "methods": list(defaults),
+            "defaults": defaults,
             "sample": {
                 "width_px": 320,
                 "height_px": 240,
