@@ -557,6 +557,27 @@ def test_limits_give_each_methods_defaults(client: TestClient) -> None:
         assert defaults["sgm"] == {"block_size": sgm["block_size"].default, "cost": None}
 
 
+def test_sgm_block_size_1(client: TestClient, pair: Any) -> None:
+    """semi_global_match takes block_size 1 (a pixel-wise cost) or 3, but the request's
+    block_size had to be from 3 on (block matching's smallest): 1 was refused, so the page
+    could not run semi-global matching pixel-wise. Now 1 reaches the matcher; block matching
+    still refuses it, naming block_size."""
+    if not sgm_available():
+        pytest.skip("this build has no semi-global matcher")
+    from stereodepth import semi_global_match
+
+    r = post(client, sample=True, method="sgm", block_size=1, num_disparities=48)
+    assert r.status_code == 200, r.text
+    s = sample_pair()
+    want = semi_global_match(s.left, s.right, num_disparities=48, block_size=1)
+    assert same(f32(r.json()["arrays"]["disparity"], want.shape), want)
+    assert r.json()["params"]["block_size"] == 1
+    r = post(client, sample=True, method="bm", block_size=1)
+    assert r.status_code == 422
+    (item,) = r.json()["detail"]
+    assert item["loc"] == ["body", "block_size"] and "got 1" in item["msg"], item
+
+
 def test_sgm_with_a_stand_in_matcher(
     client: TestClient, pair: Any, monkeypatch: pytest.MonkeyPatch
 ) -> None:

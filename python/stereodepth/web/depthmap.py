@@ -461,7 +461,8 @@ def parse_job(body: Any, limits: DepthMapLimits) -> Job:
     nums: dict[str, int | None] = {}
     for name, lo, hi in (
         ("num_disparities", 1, MAX_NUM_DISPARITIES),
-        ("block_size", 3, max(MAX_BLOCK_SIZE.values())),
+        # 1 for semi-global matching's pixel-wise cost; each matcher checks its own sizes.
+        ("block_size", 1, max(MAX_BLOCK_SIZE.values())),
     ):
         try:
             nums[name] = _int_field(body, name, lo, hi)
