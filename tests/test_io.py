@@ -269,6 +269,39 @@ def test_atomic_writers_keep_the_permissions_of_a_file_they_replace(tmp_path: Pa
         assert target.read_bytes() != b"old"
 
 
+@pytest.mark.skipif(os.name != "posix", reason="POSIX permissions")
+def test_atomic_writers_do_not_replace_a_read_only_file(tmp_path: Path) -> None:
+    """open() refuses to overwrite a file without write permission, but renaming over it
+    needs only the folder's: a result or an input the user had made read-only (chmod a-w)
+    was replaced by every writer without a word. Refused naming the path, the file kept."""
+    import importlib.util
+
+    from stereodepth import save_colorized
+
+    disparity = np.ones((4, 5), np.float32)
+    writers = {
+        "d.npy": lambda p: io.write_npy(p, disparity),
+        "d.pfm": lambda p: io.write_pfm(p, disparity),
+        "d.png": lambda p: io.write_png16(p, np.ones((4, 5), np.uint16)),
+        "k.png": lambda p: io.write_disparity_png16(p, disparity),
+        "d.ply": lambda p: write_ply(p, np.ones((3, 3))),
+    }
+    if importlib.util.find_spec("matplotlib") is not None:  # the plot extra
+        writers["c.png"] = lambda p: save_colorized(p, disparity)
+    for name, write in writers.items():
+        target = tmp_path / name
+        target.write_bytes(b"keep me")
+        target.chmod(0o444)
+        with pytest.raises(PermissionError, match="the file is read-only") as info:
+            write(target)
+        assert info.value.filename == str(target), name
+        assert target.read_bytes() == b"keep me", name
+        target.chmod(0o644)  # writable again: replaced as before
+        write(target)
+        assert target.read_bytes() != b"keep me", name
+    assert names(tmp_path) == sorted(writers)  # no temporary file left
+
+
 @pytest.mark.skipif(os.name != "posix", reason="symbolic links")
 def test_atomic_writers_write_through_a_link(tmp_path: Path) -> None:
     """A path that is a symbolic link (out/d.npy -> a shared disk's file) was replaced by a

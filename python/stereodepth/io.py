@@ -231,7 +231,8 @@ def atomic_write(path: str | os.PathLike[str], *, text: bool = False) -> Iterato
     ``cv2.imwrite`` write: the file it points to is replaced (its temporary file beside it)
     and the link kept, so that what the link names is the new file. A ``path`` that is a
     device, a pipe or a socket (``/dev/null``, ``/dev/stdout``, a FIFO) is written to as
-    ``open`` writes it, never replaced by a file.
+    ``open`` writes it, never replaced by a file. A file without write permission is not
+    replaced: PermissionError naming ``path``, as ``open`` refuses it.
     Raises IsADirectoryError naming ``path`` when it is a folder, before writing anything,
     and the OSError of a folder that takes no new file (missing, read-only) naming ``path``.
     """
@@ -252,6 +253,7 @@ def atomic_write(path: str | os.PathLike[str], *, text: bool = False) -> Iterato
     # A link is written through: replacing the link itself by the new file left the file
     # it named (on a shared disk, say) with the old data, and the link gone.
     target = Path(os.path.realpath(p)) if p.is_symlink() else p
+    _refuse_read_only(target, p)
     tmp = _temp_path(target)
     # O_EXCL: never follow or clobber anything; mode 0o666 so the umask applies as usual.
     try:
@@ -276,6 +278,26 @@ def atomic_write(path: str | os.PathLike[str], *, text: bool = False) -> Iterato
             tmp.unlink()
         raise
     _fsync_dir(target.parent)
+
+
+def _refuse_read_only(target: Path, p: Path) -> None:
+    """PermissionError naming ``p`` when ``target`` is a file without write permission.
+
+    open() refuses to overwrite such a file, but renaming over it needs only the folder's
+    permission, so a file the user had made read-only (chmod a-w: an input, a result to
+    keep) was replaced without a word. A file with no write bit at all is refused even where
+    the process could write it (root), as ``rm`` asks before removing one."""
+    try:
+        mode = os.stat(target).st_mode
+    except OSError:
+        return
+    if stat.S_ISREG(mode) and (not (mode & 0o222) or not os.access(target, os.W_OK)):
+        raise PermissionError(
+            errno.EACCES,
+            f"cannot write {p.name}: the file is read-only (no write permission); make it "
+            "writable or choose another path",
+            str(p),
+        )
 
 
 def _is_stream(p: Path) -> bool:
