@@ -399,9 +399,9 @@ def read_disparity_png16(path: str | os.PathLike[str]) -> np.ndarray:
     :func:`write_disparity_png16` writes): a 16-bit greyscale PNG of d * 256, 0 for "no
     value", read as stored (an EXIF orientation tag is not applied, as the devkit and
     ``cv2.IMREAD_UNCHANGED`` do not). Each value v > 0 gives v / 256 (exact in float32); 0
-    gives NaN. Read as
-    ``read_image(path) / 256``, the holes would be disparity 0: a valid disparity (a point at
-    infinity) to :func:`stereodepth.metrics.evaluate` and every depth conversion.
+    gives NaN. Read as ``read_image(path) / 256``, the holes would be disparity 0: a valid
+    disparity (a point at infinity) to :func:`stereodepth.metrics.evaluate` and every depth
+    conversion.
 
     Raises FileNotFoundError for a missing file, IsADirectoryError for a folder and ValueError
     naming the file for one that is not a 16-bit grey image (an 8-bit PNG, a colour image: a
