@@ -557,6 +557,28 @@ def test_limits_give_each_methods_defaults(client: TestClient) -> None:
         assert defaults["sgm"] == {"block_size": sgm["block_size"].default, "cost": None}
 
 
+@pytest.mark.parametrize("baseline_mm", [1.0, 1e-6])
+def test_the_cloud_of_a_small_rig_keeps_its_shape(client: TestClient, baseline_mm: float) -> None:
+    """The cloud's coordinates were rounded to 0.1 mm whatever the scene's size: with a 1 mm
+    baseline (a stereo microscope) the sample's points stood on a coarse grid, with 1 nm all
+    at 0. They keep 5 significant digits of the largest coordinate; a metre-sized scene
+    keeps 0.1 mm (the test above)."""
+    r = post(client, sample=True, rig={"baseline_mm": baseline_mm, "focal_px": SAMPLE_FOCAL_PX})
+    assert r.status_code == 200, r.text
+    body = r.json()
+    cloud = body["points"]
+    h, w = body["height"], body["width"]
+    disparity = f32(body["arrays"]["disparity"], (h, w))
+    points = reproject(disparity, focal_px=SAMPLE_FOCAL_PX, baseline_m=baseline_mm / 1000)
+    sub = points[:: cloud["step"], :: cloud["step"]]
+    want = sub[np.isfinite(sub).all(axis=-1)].astype(np.float64)
+    got = np.array([cloud["x"], cloud["y"], cloud["z"]]).T
+    assert got.shape == want.shape
+    extent = np.abs(want).max()
+    np.testing.assert_allclose(got, want, rtol=0, atol=extent * 5e-5)
+    assert len(np.unique(got[:, 2])) > 10  # the depths are not one value
+
+
 def test_sgm_block_size_1(client: TestClient, pair: Any) -> None:
     """semi_global_match takes block_size 1 (a pixel-wise cost) or 3, but the request's
     block_size had to be from 3 on (block matching's smallest): 1 was refused, so the page

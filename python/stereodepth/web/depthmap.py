@@ -660,12 +660,17 @@ def _cloud(points: np.ndarray, colours: np.ndarray) -> dict[str, Any]:
         c = np.repeat(c[..., None], 3, axis=-1)
     p = sub[ok].astype(np.float64)
     cols = c[ok]
+    # 0.1 mm for a scene of a metre or more; finer for a smaller one, to 5 significant digits
+    # of its largest coordinate (a rig of 1 mm baseline, a microscope's, had every point on a
+    # 0.1 mm grid, and a smaller one all points at 0).
+    extent = float(np.abs(p).max()) if p.size else 0.0
+    decimals = 4 if not 0 < extent < 1 else 4 - math.floor(math.log10(extent))
     return {
         "step": step,
         "count": int(ok.sum()),
-        "x": np.round(p[:, 0], 4).tolist(),
-        "y": np.round(p[:, 1], 4).tolist(),
-        "z": np.round(p[:, 2], 4).tolist(),
+        "x": np.round(p[:, 0], decimals).tolist(),
+        "y": np.round(p[:, 1], decimals).tolist(),
+        "z": np.round(p[:, 2], decimals).tolist(),
         # The points' colours: base64 of uint8 R, G, B per point, in order.
         "rgb": base64.b64encode(np.ascontiguousarray(cols, dtype=np.uint8).tobytes()).decode(),
     }
