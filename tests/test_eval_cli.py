@@ -199,6 +199,20 @@ def test_num_disparities_for_against_definition() -> None:
     ]
 
 
+def test_num_disparities_for_takes_numpy_numbers() -> None:
+    """The largest value of a float32 ground truth is a numpy.float32, which was refused as
+    'must be a finite number >= 0, got np.float32(5.0)' (so was numpy's int64), while True
+    was taken as 1 and 10**400 raised Python's OverflowError naming nothing."""
+    assert num_disparities_for(np.float32(5.0)) == 16
+    assert num_disparities_for(np.float32(15.5)) == 32
+    assert num_disparities_for(np.int64(16)) == 32
+    assert num_disparities_for(np.float64(63.0)) == 64
+    with pytest.raises(TypeError, match="max_disparity_px must be a real number, got bool True"):
+        num_disparities_for(True)
+    with pytest.raises(ValueError, match="max_disparity_px must be within the range of a double"):
+        num_disparities_for(10**400)
+
+
 @pytest.mark.parametrize("bad", [-1, math.nan, math.inf])
 def test_num_disparities_for_rejects(bad: float) -> None:
     with pytest.raises(ValueError, match=r"^max_disparity_px must be a finite number >= 0"):

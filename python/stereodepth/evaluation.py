@@ -337,14 +337,13 @@ def find_scenes(root: str | os.PathLike[str], patterns: Sequence[str] = ()) -> l
 
 def num_disparities_for(max_disparity_px: float) -> int:
     """``16 * ceil((D + 1) / 16)`` for D = ``ceil(max_disparity_px)``: the smallest multiple of
-    16 whose search range ``0 .. num_disparities - 1`` reaches the largest disparity."""
-    if not (
-        isinstance(max_disparity_px, (int, float))
-        and math.isfinite(max_disparity_px)
-        and max_disparity_px >= 0
-    ):
-        raise ValueError(f"max_disparity_px must be a finite number >= 0, got {max_disparity_px!r}")
-    return 16 * math.ceil((math.ceil(max_disparity_px) + 1) / 16)
+    16 whose search range ``0 .. num_disparities - 1`` reaches the largest disparity.
+
+    Takes any real number, numpy's included (the largest value of a float32 ground truth is
+    a numpy.float32); raises TypeError for another type (a bool, a str) and ValueError for a
+    negative or non-finite value."""
+    d = check.non_negative("max_disparity_px", max_disparity_px)
+    return 16 * math.ceil((math.ceil(d) + 1) / 16)
 
 
 # --------------------------------------------------------------------------------------------
