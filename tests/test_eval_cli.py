@@ -199,6 +199,21 @@ def test_num_disparities_for_against_definition() -> None:
     ]
 
 
+def test_find_scenes_checks_its_arguments(scenes_dir: Path) -> None:
+    """find_scenes(root, "rds-a") took the str as its characters, and the patterns 'r', 'd',
+    's', '-', 'a' matched nothing, while "rds-*" matched every scene through its '*';
+    find_scenes("") searched the current folder. Each is refused naming the parameter."""
+    assert [s.name for s in find_scenes(scenes_dir, ["rds-a"])] == ["rds-a"]
+    with pytest.raises(TypeError, match=r"patterns must be a sequence .* such as \['rds-\*'\]"):
+        find_scenes(scenes_dir, "rds-*")
+    with pytest.raises(TypeError, match="patterns must be a sequence of shell patterns"):
+        find_scenes(scenes_dir, [3])  # type: ignore[list-item]
+    with pytest.raises(ValueError, match="root must not be empty"):
+        find_scenes("")
+    with pytest.raises(TypeError, match=r"root must be a str or os\.PathLike, got int 5"):
+        find_scenes(5)  # type: ignore[arg-type]
+
+
 def test_num_disparities_for_takes_numpy_numbers() -> None:
     """The largest value of a float32 ground truth is a numpy.float32, which was refused as
     'must be a finite number >= 0, got np.float32(5.0)' (so was numpy's int64), while True

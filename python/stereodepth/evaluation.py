@@ -310,8 +310,19 @@ def _scene_at(path: Path) -> Scene | None:
 def find_scenes(root: str | os.PathLike[str], patterns: Sequence[str] = ()) -> list[Scene]:
     """The scenes in ``root`` (its sub-folders in name order, or ``root`` itself when it is a
     scene), keeping those whose folder name matches one of the shell ``patterns`` if any are
-    given. Raises ValueError when ``root`` is not a folder or nothing matches."""
-    base = Path(root)
+    given. Raises ValueError when ``root`` is not a folder (or is empty: not the current
+    folder) or nothing matches, and TypeError for a ``root`` that is not a str or
+    os.PathLike or ``patterns`` that are not a sequence of str (a str alone was taken as its
+    characters, and a ``*`` among them matched every scene)."""
+    from .io import _as_path
+
+    base = _as_path(root, "root")
+    if isinstance(patterns, (str, bytes)) or not all(isinstance(p, str) for p in patterns):
+        hint = f", such as [{patterns!r}]" if isinstance(patterns, str) else ""
+        raise TypeError(
+            f"patterns must be a sequence of shell patterns (str){hint}, got "
+            f"{type(patterns).__name__} {patterns!r}"
+        )
     if not base.is_dir():
         raise ValueError(f"DIR must be a folder of scenes, got {str(base)!r} (not a folder)")
     itself = _scene_at(base)
