@@ -540,6 +540,20 @@ def test_without_matplotlib_a_clear_answer_not_500(
     )
 
 
+def test_limits_take_numpy_integers_and_name_bad_ones() -> None:
+    # A numpy integer limit (from a config array) was refused as 'max_upload_bytes must be
+    # an integer >= 1, got np.int64(5)'; a float 2.5 was a ValueError, not a TypeError.
+    limits = depthmap.DepthMapLimits(max_upload_bytes=np.int64(5), max_pixels=np.int32(7))
+    assert (limits.max_upload_bytes, limits.max_pixels) == (5, 7)
+    assert type(limits.max_upload_bytes) is int
+    with pytest.raises(TypeError, match=r"max_pixels must be an integer, got float 2\.5"):
+        depthmap.DepthMapLimits(max_pixels=2.5)  # type: ignore[arg-type]
+    with pytest.raises(TypeError, match="max_pixels must be an integer, got bool True"):
+        depthmap.DepthMapLimits(max_pixels=True)
+    with pytest.raises(ValueError, match="max_upload_bytes must be an integer >= 1, got 0"):
+        create_app(max_upload_bytes=0)
+
+
 def test_limits_give_each_methods_defaults(client: TestClient) -> None:
     """The page's form held block matching's block size (9) and cost for every method, so
     choosing semi-global matching sent both and was refused ('cost is an option of method

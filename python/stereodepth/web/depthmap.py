@@ -90,10 +90,12 @@ class DepthMapLimits:
     max_pixels: int = DEFAULT_MAX_PIXELS
 
     def __post_init__(self) -> None:
+        from .. import _validate as check
+
         for name in ("max_upload_bytes", "max_pixels"):
-            v = getattr(self, name)
-            if isinstance(v, bool) or not isinstance(v, int) or v < 1:
-                raise ValueError(f"{name} must be an integer >= 1, got {v!r}")
+            # numpy integers too (a limit from a config array was refused as 'must be an
+            # integer >= 1, got np.int64(5)'); TypeError for a float or bool, as elsewhere.
+            object.__setattr__(self, name, check.integer(name, getattr(self, name), minimum=1))
 
     @property
     def max_body_bytes(self) -> int:
