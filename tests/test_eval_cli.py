@@ -199,6 +199,48 @@ def test_num_disparities_for_against_definition() -> None:
     ]
 
 
+@pytest.mark.parametrize("fault", ["empty mask", "range", "16-bit for opencv"])
+def test_a_faulty_last_scene_is_reported_before_any_matching(
+    scenes_dir: Path,
+    capsys: pytest.CaptureFixture[str],
+    monkeypatch: pytest.MonkeyPatch,
+    fault: str,
+) -> None:
+    """A scene that cannot be scored (a mask selecting nothing, a declared range its ground
+    truth leaves, 16-bit images for an OpenCV method) was found only when its turn came:
+    every scene before it had been matched and timed, and their results were lost with the
+    error. Every scene is checked first; nothing is matched."""
+    import stereodepth.evaluation as evaluation
+
+    calls: list[str] = []
+    real = evaluation._timed
+
+    def counted(*args: Any, **kwargs: Any) -> Any:
+        calls.append("matched")
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(evaluation, "_timed", counted)
+    last = scenes_dir / "rds-b"  # after rds-a in name order
+    methods = ["stereodepth"]
+    if fault == "empty mask":
+        np.save(last / "mask_nonocc.npy", np.zeros((64, 150), dtype=bool))
+        want = "scene rds-b: " + str(last / "mask_nonocc.npy") + ": the mask selects none"
+    elif fault == "range":
+        (last / "meta.json").write_text('{"max_disp": 3}')
+        want = "scene rds-b: the ground truth reaches"
+    else:
+        pytest.importorskip("cv2")
+        for name in ("left.png", "right.png"):
+            image = np.asarray(stereodepth.io.read_image(last / name), np.uint16) * 257
+            stereodepth.io.write_png16(last / name, image)
+        methods = ["opencv-bm"]
+        want = "scene rds-b: opencv-bm needs 8-bit images, got uint16"
+    status, out, err = run_eval(capsys, str(scenes_dir), "--repeat", "1", "--method", *methods)
+    assert status == 2 and out == ""
+    assert want in err and err.count("\n") == 1, err
+    assert calls == []
+
+
 def test_find_scenes_checks_its_arguments(scenes_dir: Path) -> None:
     """find_scenes(root, "rds-a") took the str as its characters, and the patterns 'r', 'd',
     's', '-', 'a' matched nothing, while "rds-*" matched every scene through its '*';

@@ -48,6 +48,12 @@ Methods
     runs a method with each block size and adds a ``best=`` row per scene: the block size with
     the lowest ``--best-by`` metric (bad-2 by default).
 
+Checks
+    Every scene is read and checked before any is matched (its files, a mask selecting no
+    pixel with ground truth, a declared range its ground truth leaves, 8-bit images for the
+    OpenCV methods), so that a fault in the last scene ends the run before the work on the
+    others, not after it.
+
 Timing
     Each method is run once to warm up, then ``--repeat`` times (default 3); the time is the
     median. It covers the whole conversion from the images as read to a float disparity map
@@ -578,17 +584,17 @@ def _with_best(rows: list[EvalResult], best_by: str) -> list[EvalResult]:
     return out
 
 
-def _evaluate_scene(
+def _scene_inputs(
     scene: Scene,
     variants: Sequence[Variant],
-    factories: dict[str, Callable[[Variant, int], Matcher]],
     *,
-    repeat: int,
     num_disparities: int | None,
     use_mask: bool,
-    best_by: str,
-    progress: Callable[[str], None] | None,
-) -> list[EvalResult]:
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray | None, int]:
+    """The scene's images, ground truth, mask (None with ``use_mask`` false) and search range,
+    checked: ValueError naming the scene for anything that would fail or score nothing. Run
+    over every scene before any is matched, so a fault in the last scene is reported before
+    the work on the others, not after it (their results were lost with it)."""
     left, right, gt, mask = scene.load()
     if num_disparities is None:
         max_disp = scene.max_disparity_px
@@ -632,6 +638,26 @@ def _evaluate_scene(
             f"scene {scene.name}: {scene.mask_path}: the mask selects none of the "
             f"{int(known.sum())} pixels with ground truth (--no-mask scores them all)"
         )
+    opencv = sorted({v.method for v in variants} & set(_OPENCV_METHODS))
+    if opencv and left.dtype != np.uint8:  # they failed here only after the scenes before
+        raise ValueError(f"scene {scene.name}: {opencv[0]} needs 8-bit images, got {left.dtype}")
+    return left, right, gt, mask, num_disparities
+
+
+def _evaluate_scene(
+    scene: Scene,
+    variants: Sequence[Variant],
+    factories: dict[str, Callable[[Variant, int], Matcher]],
+    *,
+    repeat: int,
+    num_disparities: int | None,
+    use_mask: bool,
+    best_by: str,
+    progress: Callable[[str], None] | None,
+) -> list[EvalResult]:
+    left, right, gt, mask, num_disparities = _scene_inputs(
+        scene, variants, num_disparities=num_disparities, use_mask=use_mask
+    )
     rows = []
     for variant in variants:
         try:
@@ -1164,6 +1190,14 @@ def run(args: argparse.Namespace) -> int:
 
         def progress(text: str) -> None:
             print(text, file=sys.stderr, flush=True)
+
+    # Every scene checked before any is matched: a fault in the last one (a mask selecting
+    # nothing, a range its ground truth leaves) ended the run after the others' work, and
+    # their results were lost with it.
+    for scene in scenes:
+        _scene_inputs(
+            scene, variants, num_disparities=args.num_disparities, use_mask=not args.no_mask
+        )
 
     rows: list[EvalResult] = []
     saved_threads = cv2.getNumThreads() if cv2 is not None else None
