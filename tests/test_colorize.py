@@ -128,6 +128,29 @@ def test_save_colorized_writes_the_map_and_a_colour_bar(tmp_path: Path) -> None:
     assert [p.name for p in tmp_path.iterdir()] == ["d.png"]  # no temporary file left
 
 
+@pytest.mark.parametrize(
+    "ends",
+    [(-1.7e308, 1.7e308), (1.7976931348623157e308, 1.7976931348623157e308), (-1e305, 0.0)],
+)
+def test_save_colorized_values_near_a_doubles_limits(
+    tmp_path: Path, ends: tuple[float, float]
+) -> None:
+    """colorize maps values near float64's limits (its halved arithmetic), but the colour bar
+    under them failed: matplotlib's 'overflow encountered in scalar subtract', then 'Axis
+    limits cannot be NaN or Inf', naming nothing. The bar is drawn in units of a power of ten
+    that its label names; the map above it is colorize's, pixel for pixel."""
+    from PIL import Image
+
+    half = np.linspace(1.0, 0.0, 15 * 200)  # ends[1] - ends[0] may overflow
+    values = np.concatenate([ends[0] * half, ends[1] * half[::-1]]).reshape(30, 200)
+    out = save_colorized(tmp_path / "d.png", values, quantity="depth", unit="m")
+    with Image.open(out) as im:
+        a = np.asarray(im)
+    assert a.shape == (30 + COLORBAR_HEIGHT_PX, 200, 3)
+    assert a[:30].tolist() == colorize(values).tolist()
+    assert a[30:].min() < 128
+
+
 # --- rejected input: one test per kind ---------------------------------------------------------
 @pytest.mark.parametrize(
     ("values", "kind", "message"),
@@ -158,6 +181,13 @@ def test_bad_values(values: Any, kind: type[Exception], message: str) -> None:
         ({"vmax": True}, TypeError, "vmax must be a real number or None, got bool True"),
         ({"vmin": float("nan")}, ValueError, "vmin must be finite, got nan"),
         ({"vmax": float("inf")}, ValueError, "vmax must be finite, got inf"),
+        # An int beyond a double was Python's OverflowError 'int too large to convert to float'.
+        (
+            {"vmin": 10**400},
+            ValueError,
+            "vmin must be within the range of a double (about 1.8e308), got an integer of 401",
+        ),
+        ({"vmax": -(10**309)}, ValueError, "vmax must be within the range of a double"),
         ({"vmin": 3, "vmax": 3}, ValueError, "vmin must be < vmax, got vmin=3.0 and vmax=3.0"),
         ({"vmin": 4, "vmax": 1}, ValueError, "vmin must be < vmax"),
         ({"cmap": "no-such-map"}, ValueError, "cmap must be a matplotlib colour map name"),

@@ -199,6 +199,77 @@ def test_num_disparities_for_against_definition() -> None:
     ]
 
 
+@pytest.mark.parametrize("fault", ["empty mask", "range", "16-bit for opencv"])
+def test_a_faulty_last_scene_is_reported_before_any_matching(
+    scenes_dir: Path,
+    capsys: pytest.CaptureFixture[str],
+    monkeypatch: pytest.MonkeyPatch,
+    fault: str,
+) -> None:
+    """A scene that cannot be scored (a mask selecting nothing, a declared range its ground
+    truth leaves, 16-bit images for an OpenCV method) was found only when its turn came:
+    every scene before it had been matched and timed, and their results were lost with the
+    error. Every scene is checked first; nothing is matched."""
+    import stereodepth.evaluation as evaluation
+
+    calls: list[str] = []
+    real = evaluation._timed
+
+    def counted(*args: Any, **kwargs: Any) -> Any:
+        calls.append("matched")
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(evaluation, "_timed", counted)
+    last = scenes_dir / "rds-b"  # after rds-a in name order
+    methods = ["stereodepth"]
+    if fault == "empty mask":
+        np.save(last / "mask_nonocc.npy", np.zeros((64, 150), dtype=bool))
+        want = "scene rds-b: " + str(last / "mask_nonocc.npy") + ": the mask selects none"
+    elif fault == "range":
+        (last / "meta.json").write_text('{"max_disp": 3}')
+        want = "scene rds-b: the ground truth reaches"
+    else:
+        pytest.importorskip("cv2")
+        for name in ("left.png", "right.png"):
+            image = np.asarray(stereodepth.io.read_image(last / name), np.uint16) * 257
+            stereodepth.io.write_png16(last / name, image)
+        methods = ["opencv-bm"]
+        want = "scene rds-b: opencv-bm needs 8-bit images, got uint16"
+    status, out, err = run_eval(capsys, str(scenes_dir), "--repeat", "1", "--method", *methods)
+    assert status == 2 and out == ""
+    assert want in err and err.count("\n") == 1, err
+    assert calls == []
+
+
+def test_find_scenes_checks_its_arguments(scenes_dir: Path) -> None:
+    """find_scenes(root, "rds-a") took the str as its characters, and the patterns 'r', 'd',
+    's', '-', 'a' matched nothing, while "rds-*" matched every scene through its '*';
+    find_scenes("") searched the current folder. Each is refused naming the parameter."""
+    assert [s.name for s in find_scenes(scenes_dir, ["rds-a"])] == ["rds-a"]
+    with pytest.raises(TypeError, match=r"patterns must be a sequence .* such as \['rds-\*'\]"):
+        find_scenes(scenes_dir, "rds-*")
+    with pytest.raises(TypeError, match="patterns must be a sequence of shell patterns"):
+        find_scenes(scenes_dir, [3])  # type: ignore[list-item]
+    with pytest.raises(ValueError, match="root must not be empty"):
+        find_scenes("")
+    with pytest.raises(TypeError, match=r"root must be a str or os\.PathLike, got int 5"):
+        find_scenes(5)  # type: ignore[arg-type]
+
+
+def test_num_disparities_for_takes_numpy_numbers() -> None:
+    """The largest value of a float32 ground truth is a numpy.float32, which was refused as
+    'must be a finite number >= 0, got np.float32(5.0)' (so was numpy's int64), while True
+    was taken as 1 and 10**400 raised Python's OverflowError naming nothing."""
+    assert num_disparities_for(np.float32(5.0)) == 16
+    assert num_disparities_for(np.float32(15.5)) == 32
+    assert num_disparities_for(np.int64(16)) == 32
+    assert num_disparities_for(np.float64(63.0)) == 64
+    with pytest.raises(TypeError, match="max_disparity_px must be a real number, got bool True"):
+        num_disparities_for(True)
+    with pytest.raises(ValueError, match="max_disparity_px must be within the range of a double"):
+        num_disparities_for(10**400)
+
+
 @pytest.mark.parametrize("bad", [-1, math.nan, math.inf])
 def test_num_disparities_for_rejects(bad: float) -> None:
     with pytest.raises(ValueError, match=r"^max_disparity_px must be a finite number >= 0"):
@@ -230,6 +301,41 @@ def test_middlebury_layout(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -
     want = evaluate(opencv_disparity(cv2, "bm", left, right, 48, 9), gt, mask_png == 255)
     assert_same_metrics(row["metrics"], want.as_dict())
     assert row["metrics"]["evaluated"] == int((np.isfinite(gt) & (mask_png == 255)).sum())
+
+
+def test_middlebury_calib_of_another_size_is_refused(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A calib.txt for another resolution (MiddEval3's quarter-size one beside full-size
+    images) gave its ndisp, in that resolution's pixels, as the search range: the scene was
+    scored with most disparities out of reach, exit status 0. `match` and the web page refuse
+    such a calib.txt; eval now does, naming it and both sizes."""
+    left, right, gt = random_dot_pair(40, 100, [7, 13], rgb=False, seed=5)
+    folder = tmp_path / "Pair"
+    folder.mkdir()
+    write_png(folder / "im0.png", left)
+    write_png(folder / "im1.png", right)
+    write_pfm(folder / "disp0GT.pfm", np.where(np.isnan(gt), np.inf, gt).astype(np.float32))
+    calib = (
+        "cam0=[1000 0 50; 0 1000 20; 0 0 1]\ncam1=[1000 0 50; 0 1000 20; 0 0 1]\n"
+        "doffs=0\nbaseline=100\nwidth={w}\nheight={h}\nndisp={n}\n"
+    )
+    (folder / "calib.txt").write_text(calib.format(w=25, h=10, n=10))
+    status, out, err = run_eval(capsys, str(tmp_path))
+    assert status == 2 and out == ""
+    assert err.count("\n") == 1, err
+    assert (
+        f"{folder / 'calib.txt'}: it is for 25x10 px images, im0.png is 100x40 px: use the "
+        "calib.txt of these images"
+    ) in err
+    # The calib.txt of these images, and one without a size, are used as before.
+    for text in (
+        calib.format(w=100, h=40, n=40),
+        calib.format(w=100, h=40, n=40).replace("width=100\nheight=40\n", ""),
+    ):
+        (folder / "calib.txt").write_text(text)
+        report = run_json(capsys, str(tmp_path), "--repeat", "1")
+        assert report["results"][0]["num_disparities"] == 48
 
 
 @pytest.mark.parametrize(
@@ -491,6 +597,7 @@ def test_text_table_matches_json(scenes_dir: Path, capsys: pytest.CaptureFixture
             ("bad-2 %", "bad_2"),
             ("density %", "density"),
             ("bad-2(est) %", "bad_2_est"),
+            ("D1 %", "d1"),
         ):
             want = 100 * row["metrics"][key]
             assert float(t[header.index(title)]) == pytest.approx(want, abs=0.0051)
@@ -940,6 +1047,29 @@ def test_a_search_range_beyond_the_matchers_names_its_source(
         "scene rds-a: meta.json's max_disp=5000 needs 5008 disparities, more than the "
         "matchers search (4096): give --num-disparities"
     ) in err
+
+
+def test_a_declared_range_the_ground_truth_leaves_is_refused(
+    scenes_dir: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A meta.json max_disp (or calib.txt ndisp) smaller than the ground truth's disparities
+    (one of another resolution) made every method search a range the truth leaves: the
+    scene was scored badly for every method, exit status 0. Refused naming the scene, the
+    largest true disparity, the range and its source; --num-disparities still decides."""
+    gt = np.load(scenes_dir / "rds-b" / "disp_gt.npy")
+    top = float(np.nanmax(gt))
+    assert top > 15
+    (scenes_dir / "rds-b" / "meta.json").write_text('{"max_disp": 3}')
+    status, out, err = run_eval(capsys, str(scenes_dir), "--scene", "rds-b")
+    assert status == 2 and out == ""
+    assert err.count("\n") == 1, err
+    assert (
+        f"scene rds-b: the ground truth reaches {top:g} px ({int((gt > 15).sum())} pixels "
+        "beyond the search range 0 .. 15 that meta.json's max_disp=3 gives): correct it, or "
+        "give --num-disparities"
+    ) in err
+    report = run_json(capsys, str(scenes_dir), "--scene", "rds-b", "--num-disparities", "16")
+    assert report["results"][0]["num_disparities"] == 16
 
 
 def test_rejects_unreadable_meta(scenes_dir: Path, capsys: pytest.CaptureFixture[str]) -> None:

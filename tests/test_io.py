@@ -269,6 +269,102 @@ def test_atomic_writers_keep_the_permissions_of_a_file_they_replace(tmp_path: Pa
         assert target.read_bytes() != b"old"
 
 
+@pytest.mark.skipif(os.name != "posix", reason="POSIX permissions")
+def test_atomic_writers_do_not_replace_a_read_only_file(tmp_path: Path) -> None:
+    """open() refuses to overwrite a file without write permission, but renaming over it
+    needs only the folder's: a result or an input the user had made read-only (chmod a-w)
+    was replaced by every writer without a word. Refused naming the path, the file kept."""
+    import importlib.util
+
+    from stereodepth import save_colorized
+
+    disparity = np.ones((4, 5), np.float32)
+    writers = {
+        "d.npy": lambda p: io.write_npy(p, disparity),
+        "d.pfm": lambda p: io.write_pfm(p, disparity),
+        "d.png": lambda p: io.write_png16(p, np.ones((4, 5), np.uint16)),
+        "k.png": lambda p: io.write_disparity_png16(p, disparity),
+        "d.ply": lambda p: write_ply(p, np.ones((3, 3))),
+    }
+    if importlib.util.find_spec("matplotlib") is not None:  # the plot extra
+        writers["c.png"] = lambda p: save_colorized(p, disparity)
+    for name, write in writers.items():
+        target = tmp_path / name
+        target.write_bytes(b"keep me")
+        target.chmod(0o444)
+        with pytest.raises(PermissionError, match="the file is read-only") as info:
+            write(target)
+        assert info.value.filename == str(target), name
+        assert target.read_bytes() == b"keep me", name
+        target.chmod(0o644)  # writable again: replaced as before
+        write(target)
+        assert target.read_bytes() != b"keep me", name
+    assert names(tmp_path) == sorted(writers)  # no temporary file left
+
+
+@pytest.mark.skipif(os.name != "posix", reason="symbolic links")
+def test_atomic_writers_write_through_a_link(tmp_path: Path) -> None:
+    """A path that is a symbolic link (out/d.npy -> a shared disk's file) was replaced by a
+    new file: the link was gone and the file it named kept the old data, where open(),
+    numpy.save and cv2.imwrite write into that file. Now the file the link names gets the
+    new data (its permissions kept, no temporary file left) and the link stays."""
+    disparity = np.arange(20, dtype=np.float32).reshape(4, 5)
+    writers = {
+        "d.npy": (lambda p: io.write_npy(p, disparity), lambda p: np.load(p)),
+        "d.pfm": (lambda p: io.write_pfm(p, disparity), io.read_pfm),
+        "d.png": (lambda p: io.write_png16(p, disparity.astype(np.uint16)), io.read_image),
+        "d.ply": (lambda p: write_ply(p, np.ones((3, 3))), lambda p: p.read_bytes()[:3]),
+    }
+    shared, out = tmp_path / "shared", tmp_path / "out"
+    shared.mkdir()
+    out.mkdir()
+    for name, (write, read) in writers.items():
+        target = shared / name
+        target.write_bytes(b"old")
+        target.chmod(0o640)
+        link = out / name
+        link.symlink_to(Path("..") / "shared" / name)
+        write(link)
+        assert link.is_symlink(), name
+        assert target.read_bytes() != b"old", name
+        np.testing.assert_array_equal(read(link), read(target))
+        assert target.stat().st_mode & 0o777 == 0o640, name
+    assert names(shared) == sorted(writers) and names(out) == sorted(writers)
+    # A link to nothing yet: the file it names is made.
+    (out / "new.npy").symlink_to(shared / "new.npy")
+    io.write_npy(out / "new.npy", disparity)
+    assert (out / "new.npy").is_symlink()
+    np.testing.assert_array_equal(np.load(shared / "new.npy"), disparity)
+
+
+@pytest.mark.skipif(not hasattr(os, "mkfifo"), reason="named pipes")
+def test_atomic_writers_write_into_a_pipe_not_over_it(tmp_path: Path) -> None:
+    """A path that is a device or a pipe was replaced by a regular file (the temporary file
+    renamed over it): a FIFO's reader never got the data, and as root write_pfm("/dev/null",
+    ...) made /dev/null a regular file. Such a path is written to as open() writes it."""
+    import stat
+    import threading
+
+    fifo = tmp_path / "pipe"
+    os.mkfifo(fifo)
+    disparity = np.arange(12, dtype=np.float32).reshape(3, 4)
+    got: list[bytes] = []
+
+    def read() -> None:
+        with open(fifo, "rb") as f:  # blocks until a writer opens the pipe
+            got.append(f.read())
+
+    reader = threading.Thread(target=read, daemon=True)
+    reader.start()
+    io.write_pfm(fifo, disparity)
+    assert stat.S_ISFIFO(os.stat(fifo).st_mode)  # still the pipe, not a file
+    reader.join(timeout=30)
+    assert not reader.is_alive()
+    io.write_pfm(tmp_path / "ref.pfm", disparity)
+    assert got == [(tmp_path / "ref.pfm").read_bytes()]
+    assert names(tmp_path) == ["pipe", "ref.pfm"]  # no temporary file left
+
+
 def test_atomic_writers_take_names_up_to_the_file_systems_limit(tmp_path: Path) -> None:
     # The temporary name adds 31 bytes to the target's: a name of 225 to 255 bytes (legal,
     # say a batch stem from deep folders) failed with "File name too long" naming the
@@ -422,6 +518,74 @@ def test_disparity_png16_is_kitti_format(tmp_path: Path) -> None:
     with pytest.raises(ValueError, match=r"disparity up to 300 px does not fit a 16-bit"):
         io.write_disparity_png16(tmp_path / "e.png", d)
     assert not (tmp_path / "e.png").exists()
+
+
+def test_read_disparity_png16_is_kitti_devkit_decoding(tmp_path: Path) -> None:
+    """KITTI's devkit reads d = png / 256 with 0 as no value. The writer's docstring said to
+    read its files back with read_image(path) / 256, which gives every hole disparity 0 (a
+    valid disparity, a point at infinity: evaluate scored them as estimates, depth as
+    infinitely far). read_disparity_png16 decodes as the devkit, checked against an
+    independent decoding (OpenCV's where installed, else Pillow's)."""
+    raw = np.array([[0, 1, 256, 65535], [2688, 0, 65533, 640]], np.uint16)
+    Image.fromarray(raw).save(tmp_path / "k.png")
+    try:
+        import cv2
+
+        decoded = cv2.imread(str(tmp_path / "k.png"), cv2.IMREAD_UNCHANGED)
+    except ImportError:
+        decoded = np.asarray(Image.open(tmp_path / "k.png"))
+    assert decoded.dtype == np.uint16
+    want = np.where(decoded > 0, decoded.astype(np.float64) / 256.0, np.nan)
+    got = io.read_disparity_png16(tmp_path / "k.png")
+    assert got.dtype == np.float32 and got.shape == (2, 4)
+    np.testing.assert_array_equal(got.astype(np.float64), want)
+    # The writer's files read back to the disparity rounded to 1/256 px, holes NaN.
+    d = np.array([[np.nan, 1.0, 10.5, -2.0], [0.0, 255.99, 3.3, np.inf]], np.float32)
+    io.write_disparity_png16(tmp_path / "d.png", d)
+    back = io.read_disparity_png16(tmp_path / "d.png")
+    hole = ~(np.isfinite(d) & (d > 0))
+    assert (np.isnan(back) == hole).all()
+    np.testing.assert_array_equal(back[~hole], np.rint(d[~hole] * 256.0) / 256.0)
+
+
+def test_read_disparity_png16_ignores_an_exif_orientation(tmp_path: Path) -> None:
+    """A disparity map is data, read as stored by KITTI's devkit and cv2.IMREAD_UNCHANGED;
+    read_image turns a photo by its EXIF tag, and a disparity PNG carrying one (written by a
+    tool that copied the photo's metadata) came back turned, off its image's pixels."""
+    raw = np.arange(1, 13, dtype=np.uint16).reshape(3, 4) * 256
+    exif = Image.Exif()
+    exif[0x0112] = 6  # turned 90 degrees for display
+    Image.fromarray(raw).save(tmp_path / "d.png", exif=exif)
+    assert io.read_image(tmp_path / "d.png").shape == (4, 3)  # a photo is turned
+    got = io.read_disparity_png16(tmp_path / "d.png")
+    np.testing.assert_array_equal(got, raw.astype(np.float32) / 256)
+    try:
+        import cv2
+    except ImportError:
+        return
+    theirs = cv2.imread(str(tmp_path / "d.png"), cv2.IMREAD_UNCHANGED)
+    np.testing.assert_array_equal(got * 256, theirs.astype(np.float32))
+
+
+@pytest.mark.parametrize(
+    ("image", "kind"),
+    [
+        (np.full((3, 4), 7, np.uint8), r"an 8-bit grey image of shape \(3, 4\)"),
+        (np.full((3, 4, 3), 7, np.uint8), r"a colour image of shape \(3, 4, 3\)"),
+    ],
+)
+def test_read_disparity_png16_refuses_8_bit_and_colour(
+    tmp_path: Path, image: np.ndarray, kind: str
+) -> None:
+    # An 8-bit PNG (a preview, or a map saved by a tool that cut it to 8 bits) is not KITTI's
+    # d * 256: 7 would read as 0.027 px.
+    Image.fromarray(image).save(tmp_path / "p.png")
+    with pytest.raises(
+        ValueError, match=r"p\.png: a KITTI disparity PNG is a 16-bit grey image .*" + kind
+    ):
+        io.read_disparity_png16(tmp_path / "p.png")
+    with pytest.raises(FileNotFoundError):
+        io.read_disparity_png16(tmp_path / "missing.png")
 
 
 # --- PFM --------------------------------------------------------------------------------------
@@ -911,3 +1075,21 @@ def test_empty_path_is_refused_not_the_current_folder(
         assert list(tmp_path.iterdir()) == [], name
     with pytest.raises(ValueError, match=r"^directory must not be empty, got ''$"):
         io.remove_temp_files("")
+
+
+def test_write_pfm_refuses_values_beyond_float32(tmp_path: Path) -> None:
+    """A finite float64 value beyond float32's range became an infinity in the file (only
+    numpy's RuntimeWarning 'overflow encountered in cast'), which Middlebury's tools read as
+    'unknown': refused, naming the value and its pixel, writing nothing. The largest float32
+    and NaN / infinities are written as they are."""
+    a = np.ones((2, 3))
+    a[1, 2] = -1e39
+    with pytest.raises(
+        ValueError, match=r"array must fit in float32 .* got -1e\+39 at row 1, column 2"
+    ):
+        io.write_pfm(tmp_path / "x.pfm", a)
+    assert names(tmp_path) == []
+    top = float(np.finfo(np.float32).max)
+    b = np.array([[top, -top, np.nan], [np.inf, -np.inf, 1e-50]])
+    io.write_pfm(tmp_path / "y.pfm", b)
+    np.testing.assert_array_equal(io.read_pfm(tmp_path / "y.pfm"), b.astype(np.float32))

@@ -20,6 +20,7 @@ def loop_metrics(d: np.ndarray, g: np.ndarray, mask: np.ndarray | None) -> dict[
     """The convention of shared/data/stereo/README.md, one pixel at a time in plain Python."""
     evaluated = 0
     errors: list[float] = []
+    truths: list[float] = []
     for y in range(g.shape[0]):
         for x in range(g.shape[1]):
             gt = float(g[y, x])
@@ -29,6 +30,7 @@ def loop_metrics(d: np.ndarray, g: np.ndarray, mask: np.ndarray | None) -> dict[
             est = float(d[y, x])
             if math.isfinite(est):
                 errors.append(abs(est - gt))
+                truths.append(gt)
     holes = evaluated - len(errors)
     out: dict[str, float] = {"evaluated": evaluated, "estimated": len(errors)}
     nan = float("nan")
@@ -37,6 +39,12 @@ def loop_metrics(d: np.ndarray, g: np.ndarray, mask: np.ndarray | None) -> dict[
         wrong = sum(1 for e in errors if e > t)
         out[key] = (wrong + holes) / evaluated if evaluated else nan
         out[key + "_est"] = wrong / len(errors) if errors else nan
+    # KITTI's D1 (devkit: d_err > 3 and d_err / |d_gt| > 0.05), holes counted as outliers.
+    outliers = sum(
+        1 for e, gt in zip(errors, truths, strict=True) if e > 3 and (gt == 0 or e / abs(gt) > 0.05)
+    )
+    out["d1"] = (outliers + holes) / evaluated if evaluated else nan
+    out["d1_est"] = outliers / len(errors) if errors else nan
     out["avgerr"] = sum(errors) / len(errors) if errors else nan
     out["rms"] = math.sqrt(sum(e * e for e in errors) / len(errors)) if errors else nan
     return out
@@ -214,6 +222,23 @@ def test_nothing_to_evaluate_gives_nan() -> None:
     m2 = evaluate(np.zeros((2, 3)), np.zeros((2, 3)), np.zeros((2, 3), dtype=bool))
     assert m2.evaluated == 0
     assert math.isnan(m2.bad_2)
+
+
+def test_kitti_d1_needs_both_3_px_and_5_percent() -> None:
+    """KITTI's D1: an outlier is off by more than 3 px AND by more than 5 % of the true
+    disparity. Hand-made cases on each side of both thresholds; holes count as outliers in
+    d1 (as in bad-t) and are left out of d1_est."""
+    nan = np.nan
+    gt = np.array([[100.0, 50.0, 10.0, 0.0, 80.0, 60.0, 20.0, 30.0]])
+    d = np.array([[104.0, 54.0, 12.9, 3.5, 84.0, 63.0, 23.5, nan]])
+    # errors:      4 (4 %)  4 (8 %) 2.9   3.5/0  4 (5 %)  3 (5 %) 3.5 (17.5 %)  hole
+    # outlier:     no       yes     no    yes    no       no      yes
+    m = evaluate(d, gt)
+    assert (m.evaluated, m.estimated) == (8, 7)
+    assert m.d1_est == 3 / 7
+    assert m.d1 == 4 / 8
+    want = loop_metrics(d, gt, None)
+    assert (want["d1"], want["d1_est"]) == (m.d1, m.d1_est)
 
 
 def test_result_is_frozen_and_as_dict_is_ordered() -> None:

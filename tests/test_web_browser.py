@@ -591,6 +591,35 @@ def test_depth_view_sample_pair(page: Page) -> None:
 
 
 @pytest.mark.browser
+def test_depth_view_semi_global_with_the_forms_defaults(page: Page) -> None:
+    """Choosing "semi-global" on the page and computing failed whatever else was set: the
+    page sent its block-matching fields too (cost census, block size 9), which semi-global
+    matching does not take ("cost is an option of method 'bm'"). Now it sends them for
+    block matching only, and the result is semi_global_match's."""
+    from stereodepth.match_pair import sgm_available
+
+    if not sgm_available():
+        pytest.skip("this build has no semi-global matcher")
+    import numpy as np
+
+    from stereodepth import semi_global_match
+    from stereodepth.sample import sample_pair
+
+    p = page.page
+    p.click("#tab-depth")
+    p.wait_for_function("() => document.getElementById('limit-text').textContent.includes('MB')")
+    p.select_option("#method", "sgm")
+    assert p.input_value("#block_size") == "3" and p.is_disabled("#cost")
+    p.click("#use-sample")
+    page.expect(p.locator("#depth-status")).to_contain_text("Done: 320\u00d7240 px", timeout=60_000)
+    s = sample_pair()
+    want = semi_global_match(s.left, s.right, num_disparities=48)
+    got = p.evaluate("() => Array.from(window.stereodepthDepth.result().disparity)")
+    assert len(got) == want.size
+    assert np.array_equal(np.asarray(got, np.float32).reshape(want.shape), want, equal_nan=True)
+
+
+@pytest.mark.browser
 def test_depth_view_reads_the_corner_pixels(page: Page) -> None:
     # The maps' frames had rounded corners that clipped the image: the corner pixels were
     # neither drawn nor under the cursor (the readout kept the last pixel read).

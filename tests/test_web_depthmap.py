@@ -469,6 +469,11 @@ def bad_cases(pair: Any) -> list[tuple[dict[str, Any], list[Any], str]]:
             ["body", "calib"],
             "calib: the calib.txt is for 192\u00d7144 px images, the pair is 96\u00d772 px",
         ),
+        (  # beside the sample pair (320x240) it was ignored without a word
+            {"sample": True, "calib_size": [707, 481]},
+            ["body", "calib"],
+            "calib: the calib.txt is for 707\u00d7481 px images, the pair is 320\u00d7240 px",
+        ),
         (
             {"sample": True, "calib_size": [96, "72"]},
             ["body", "calib_size"],
@@ -535,6 +540,80 @@ def test_without_matplotlib_a_clear_answer_not_500(
     )
 
 
+def test_limits_take_numpy_integers_and_name_bad_ones() -> None:
+    # A numpy integer limit (from a config array) was refused as 'max_upload_bytes must be
+    # an integer >= 1, got np.int64(5)'; a float 2.5 was a ValueError, not a TypeError.
+    limits = depthmap.DepthMapLimits(max_upload_bytes=np.int64(5), max_pixels=np.int32(7))
+    assert (limits.max_upload_bytes, limits.max_pixels) == (5, 7)
+    assert type(limits.max_upload_bytes) is int
+    with pytest.raises(TypeError, match=r"max_pixels must be an integer, got float 2\.5"):
+        depthmap.DepthMapLimits(max_pixels=2.5)  # type: ignore[arg-type]
+    with pytest.raises(TypeError, match="max_pixels must be an integer, got bool True"):
+        depthmap.DepthMapLimits(max_pixels=True)
+    with pytest.raises(ValueError, match="max_upload_bytes must be an integer >= 1, got 0"):
+        create_app(max_upload_bytes=0)
+
+
+def test_limits_give_each_methods_defaults(client: TestClient) -> None:
+    """The page's form held block matching's block size (9) and cost for every method, so
+    choosing semi-global matching sent both and was refused ('cost is an option of method
+    bm'); the limits now give each method's own defaults, those of the library's matchers."""
+    import inspect
+
+    from stereodepth import block_match, semi_global_match
+
+    defaults = client.get("/api/depthmap/limits").json()["defaults"]
+    bm = inspect.signature(block_match).parameters
+    assert defaults["bm"] == {"block_size": bm["block_size"].default, "cost": bm["cost"].default}
+    if sgm_available():
+        sgm = inspect.signature(semi_global_match).parameters
+        assert "cost" not in sgm
+        assert defaults["sgm"] == {"block_size": sgm["block_size"].default, "cost": None}
+
+
+@pytest.mark.parametrize("baseline_mm", [1.0, 1e-6])
+def test_the_cloud_of_a_small_rig_keeps_its_shape(client: TestClient, baseline_mm: float) -> None:
+    """The cloud's coordinates were rounded to 0.1 mm whatever the scene's size: with a 1 mm
+    baseline (a stereo microscope) the sample's points stood on a coarse grid, with 1 nm all
+    at 0. They keep 5 significant digits of the largest coordinate; a metre-sized scene
+    keeps 0.1 mm (the test above)."""
+    r = post(client, sample=True, rig={"baseline_mm": baseline_mm, "focal_px": SAMPLE_FOCAL_PX})
+    assert r.status_code == 200, r.text
+    body = r.json()
+    cloud = body["points"]
+    h, w = body["height"], body["width"]
+    disparity = f32(body["arrays"]["disparity"], (h, w))
+    points = reproject(disparity, focal_px=SAMPLE_FOCAL_PX, baseline_m=baseline_mm / 1000)
+    sub = points[:: cloud["step"], :: cloud["step"]]
+    want = sub[np.isfinite(sub).all(axis=-1)].astype(np.float64)
+    got = np.array([cloud["x"], cloud["y"], cloud["z"]]).T
+    assert got.shape == want.shape
+    extent = np.abs(want).max()
+    np.testing.assert_allclose(got, want, rtol=0, atol=extent * 5e-5)
+    assert len(np.unique(got[:, 2])) > 10  # the depths are not one value
+
+
+def test_sgm_block_size_1(client: TestClient, pair: Any) -> None:
+    """semi_global_match takes block_size 1 (a pixel-wise cost) or 3, but the request's
+    block_size had to be from 3 on (block matching's smallest): 1 was refused, so the page
+    could not run semi-global matching pixel-wise. Now 1 reaches the matcher; block matching
+    still refuses it, naming block_size."""
+    if not sgm_available():
+        pytest.skip("this build has no semi-global matcher")
+    from stereodepth import semi_global_match
+
+    r = post(client, sample=True, method="sgm", block_size=1, num_disparities=48)
+    assert r.status_code == 200, r.text
+    s = sample_pair()
+    want = semi_global_match(s.left, s.right, num_disparities=48, block_size=1)
+    assert same(f32(r.json()["arrays"]["disparity"], want.shape), want)
+    assert r.json()["params"]["block_size"] == 1
+    r = post(client, sample=True, method="bm", block_size=1)
+    assert r.status_code == 422
+    (item,) = r.json()["detail"]
+    assert item["loc"] == ["body", "block_size"] and "got 1" in item["msg"], item
+
+
 def test_sgm_with_a_stand_in_matcher(
     client: TestClient, pair: Any, monkeypatch: pytest.MonkeyPatch
 ) -> None:
@@ -578,6 +657,67 @@ def test_not_json_and_not_an_object(client: TestClient) -> None:
         r = client.post(url, content=deep, headers={"content-type": "application/json"})
         assert r.status_code == 422, (url, r.text)
         assert r.json()["detail"][0]["msg"] == "the request must be JSON nested less deeply"
+
+
+def test_a_key_given_twice_in_the_json_is_refused_at_it(client: TestClient, pair: Any) -> None:
+    """JSON keeps the last of two equal keys without a word: {"num_disparities": 16,
+    "num_disparities": 64} searched 64, a rig with two baselines used the second. Each
+    answers 422 at that field with both values, as a query parameter given twice does."""
+    left, right = encode(pair.left), encode(pair.right)
+    rig = f'{{"baseline_mm": {SAMPLE_BASELINE_MM}, "focal_px": {SAMPLE_FOCAL_PX}}}'
+    cases = [
+        (
+            f'{{"left": "{left}", "right": "{right}", "rig": {rig}, "num_disparities": 16, '
+            '"num_disparities": 64}',
+            ["body", "num_disparities"],
+            "num_disparities is given twice (16, 64): give it once",
+        ),
+        (
+            f'{{"left": "{left}", "right": "{right}", "rig": {{"baseline_mm": 100, '
+            f'"focal_px": {SAMPLE_FOCAL_PX}, "baseline_mm": 120}}}}',
+            ["body", "rig", "baseline_mm"],
+            "baseline_mm is given twice (100, 120): give it once",
+        ),
+    ]
+    for text, loc, msg in cases:
+        r = client.post(
+            "/api/depthmap", content=text.encode(), headers={"content-type": "application/json"}
+        )
+        assert r.status_code == 422, r.text
+        assert r.json()["detail"] == [{"loc": loc, "msg": msg, "type": "repeated"}]
+    r = client.post(
+        "/api/calib",
+        content=b'{"calib": "doffs=0", "calib": "baseline=1"}',
+        headers={"content-type": "application/json"},
+    )
+    assert r.status_code == 422
+    assert r.json()["detail"][0]["loc"] == ["body", "calib"]
+    assert "calib is given twice ('doffs=0', 'baseline=1')" in r.json()["detail"][0]["msg"]
+    # The same request with each key once is answered.
+    r = client.post(
+        "/api/depthmap",
+        content=cases[0][0].replace(', "num_disparities": 64', "").encode(),
+        headers={"content-type": "application/json"},
+    )
+    assert r.status_code == 200 and r.json()["params"]["num_disparities"] == 16
+
+
+def test_a_body_not_sent_as_json_is_refused(client: TestClient) -> None:
+    """The routes read their body themselves, so FastAPI's refusal of a JSON body sent as
+    another type (its CSRF guard) did not apply: a text/plain or form POST, which any web
+    site may make a browser send to 127.0.0.1 without a CORS preflight, was matched. 415."""
+    body = b'{"sample": true, "rig": {"baseline_mm": 100, "focal_px": 500}}'
+    for url in ("/api/depthmap", "/api/calib"):
+        for kind in ("text/plain", "application/x-www-form-urlencoded", "multipart/form-data"):
+            r = client.post(url, content=body, headers={"content-type": kind})
+            assert r.status_code == 415, (url, kind, r.text)
+            (item,) = r.json()["detail"]
+            assert item["loc"] == ["header", "content-type"] and repr(kind) in item["msg"]
+    r = client.post("/api/depthmap", content=body)  # no content-type at all
+    assert r.status_code == 415
+    for kind in ("application/json", "application/json; charset=utf-8", "Application/JSON"):
+        r = client.post("/api/depthmap", content=body, headers={"content-type": kind})
+        assert r.status_code == 200, (kind, r.text)
 
 
 def test_limits_in_bytes_and_pixels(pair: Any) -> None:

@@ -22,6 +22,8 @@ from typing import Any
 
 import numpy as np
 
+from . import _validate as check
+
 __all__ = [
     "LUT_SIZE",
     "colorize",
@@ -99,10 +101,8 @@ def _limit(name: str, value: Any) -> float | None:
         raise TypeError(
             f"{name} must be a real number or None, got {type(value).__name__} {value!r}"
         )
-    v = float(value)
-    if not math.isfinite(v):
-        raise ValueError(f"{name} must be finite, got {value!r}")
-    return v
+    # An int beyond a double (10**400) raised Python's OverflowError, naming no parameter.
+    return check.finite(name, value)
 
 
 def _colour(value: Any) -> tuple[int, int, int]:
@@ -218,6 +218,8 @@ def colorize(
 # --- a figure: the colourised map with a colour bar ---------------------------------------------
 #: Height in pixels of the colour bar strip under the map in :func:`colorbar_strip`.
 COLORBAR_HEIGHT_PX = 64
+#: Limits larger in magnitude are drawn on the colour bar in units of a power of ten.
+_LARGEST_DRAWN = 1e300
 
 
 def colorbar_strip(
@@ -247,6 +249,14 @@ def colorbar_strip(
     lut = colormap_lut(cmap).astype(np.float64) / 255.0
     from matplotlib.cm import ScalarMappable
 
+    top = max(abs(vmin), abs(vmax))
+    if top > _LARGEST_DRAWN:
+        # matplotlib's bar computes vmax - vmin, which overflows beyond a double's range
+        # (values near 1e308: its warning, then "Axis limits cannot be NaN or Inf"): the bar
+        # is drawn in units of a power of ten, which the label names.
+        exponent = math.floor(math.log10(top))
+        vmin, vmax = vmin / 10.0**exponent, vmax / 10.0**exponent
+        label = f"{label}, \u00d7 1e{exponent}"
     hi = vmax if vmax > vmin else vmin + 1e-9 * max(1.0, abs(vmin))
     mappable = ScalarMappable(norm=Normalize(vmin=vmin, vmax=hi), cmap=ListedColormap(lut))
     bar = fig.colorbar(mappable, cax=ax, orientation="horizontal")

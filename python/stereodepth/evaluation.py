@@ -9,14 +9,16 @@ Scenes
       (``max_disp``);
     - Middlebury 2014 / MiddEval3: ``im0.png``, ``im1.png``, ``disp0GT.pfm`` or ``disp0.pfm``
       (inf where unknown), optional ``mask0nocc.png`` (255 = non-occluded) and ``calib.txt``
-      (``ndisp``).
+      (``ndisp``; its ``width`` and ``height``, where given, must be the images' size).
 
 Disparity range
     Every method searches the same range, from 0 to ``num_disparities - 1`` with
     ``num_disparities = 16 * ceil((D + 1) / 16)`` (OpenCV needs a multiple of 16), where D, the
     largest ground-truth disparity, is ``max_disp`` from ``meta.json``, else ``ndisp - 1`` from
     ``calib.txt``, else the ceiling of the largest finite ground-truth value.
-    ``--num-disparities`` overrides it for every scene.
+    ``--num-disparities`` overrides it for every scene. A declared D (meta.json's or
+    calib.txt's) whose range the ground truth leaves (a value of another resolution) is an
+    error naming the scene.
 
 Methods
     ``stereodepth`` (or ``bm``, as ``match`` and ``batch`` call it):
@@ -46,6 +48,12 @@ Methods
     runs a method with each block size and adds a ``best=`` row per scene: the block size with
     the lowest ``--best-by`` metric (bad-2 by default).
 
+Checks
+    Every scene is read and checked before any is matched (its files, a mask selecting no
+    pixel with ground truth, a declared range its ground truth leaves, 8-bit images for the
+    OpenCV methods), so that a fault in the last scene ends the run before the work on the
+    others, not after it.
+
 Timing
     Each method is run once to warm up, then ``--repeat`` times (default 3); the time is the
     median. It covers the whole conversion from the images as read to a float disparity map
@@ -57,11 +65,13 @@ Timing
 Scores
     :func:`stereodepth.metrics.evaluate` over the non-occluded pixels with ground truth where the
     scene has a mask (``region`` nonocc), else over all pixels with ground truth (``all``);
-    ``--no-mask`` always uses all. Percentages in the tables, fractions in ``--json``. The
-    ``mean`` rows average each score over the scenes (every scene weighs the same) and the
-    times; their ``ns/(px*d)`` is the total time over the total work. The ``--json`` object
-    also records the options given (``options``, ``sgm_options``, ``opencv_options``: each a
-    dict of the ``KEY=VALUE`` pairs after conversion, empty when none was given).
+    ``--no-mask`` always uses all. ``D1`` is KITTI's outlier rate (off by more than 3 px and
+    5 %; holes count), ``d1`` and ``d1_est`` in ``--json``. Percentages in the tables,
+    fractions in ``--json``. The ``mean`` rows average each score over the scenes (every
+    scene weighs the same) and the times; their ``ns/(px*d)`` is the total time over the total
+    work. The ``--json`` object also records the options given (``options``,
+    ``sgm_options``, ``opencv_options``: each a dict of the ``KEY=VALUE`` pairs after
+    conversion, empty when none was given).
 """
 
 from __future__ import annotations
@@ -135,6 +145,8 @@ _BEST_BY = (
     "bad_1_est",
     "bad_2_est",
     "bad_4_est",
+    "d1",
+    "d1_est",
     "avgerr",
     "rms",
 )
@@ -157,6 +169,9 @@ class Scene:
 
     ``max_disparity_px`` is the largest ground-truth disparity as declared by the scene's
     ``meta.json`` (``max_disp``) or ``calib.txt`` (``ndisp - 1``); None when neither gives it.
+    ``calib_size`` is (width, height) of the images a Middlebury ``calib.txt`` describes
+    (its ``width`` and ``height``), None without one; :meth:`load` checks the images' size
+    against it.
     """
 
     name: str
@@ -166,6 +181,7 @@ class Scene:
     gt_path: Path
     mask_path: Path | None
     max_disparity_px: float | None
+    calib_size: tuple[int, int] | None = None
 
     def load(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray | None]:
         """(left, right, gt, mask): the images as read by :func:`stereodepth.io.read_image`,
@@ -181,6 +197,15 @@ class Scene:
             raise ValueError(
                 f"scene {self.name}: left and right images must have the same shape, "
                 f"got {left.shape} and {right.shape}"
+            )
+        size = (left.shape[1], left.shape[0])
+        if self.calib_size is not None and self.calib_size != size:
+            # Its ndisp (the search range) is in that resolution's pixels: a quarter-size
+            # calib.txt beside full-size images searched a quarter of the disparities.
+            raise ValueError(
+                f"{self.path / 'calib.txt'}: it is for {self.calib_size[0]}x"
+                f"{self.calib_size[1]} px images, {self.left_path.name} is {size[0]}x{size[1]}"
+                " px: use the calib.txt of these images"
             )
         gt = read_pfm(self.gt_path) if self.gt_path.suffix == ".pfm" else _load_npy(self.gt_path)
         if gt.dtype.kind != "f" or gt.shape != left.shape[:2]:
@@ -266,11 +291,14 @@ def _scene_at(path: Path) -> Scene | None:
     gts = [path / n for n in ("disp0GT.pfm", "disp0.pfm") if (path / n).is_file()]
     if (path / "im0.png").is_file() and gts:
         max_disp = None
+        calib_size = None
         if (path / "calib.txt").is_file():
             from .calib import read_middlebury_calib
 
-            ndisp = read_middlebury_calib(path / "calib.txt").ndisp
-            max_disp = None if ndisp is None else float(ndisp - 1)
+            calib = read_middlebury_calib(path / "calib.txt")
+            max_disp = None if calib.ndisp is None else float(calib.ndisp - 1)
+            if calib.width_px and calib.height_px:
+                calib_size = (calib.width_px, calib.height_px)
         mask = path / "mask0nocc.png"
         return Scene(
             name=path.name,
@@ -280,6 +308,7 @@ def _scene_at(path: Path) -> Scene | None:
             gt_path=gts[0],
             mask_path=mask if mask.is_file() else None,
             max_disparity_px=max_disp,
+            calib_size=calib_size,
         )
     return None
 
@@ -287,8 +316,19 @@ def _scene_at(path: Path) -> Scene | None:
 def find_scenes(root: str | os.PathLike[str], patterns: Sequence[str] = ()) -> list[Scene]:
     """The scenes in ``root`` (its sub-folders in name order, or ``root`` itself when it is a
     scene), keeping those whose folder name matches one of the shell ``patterns`` if any are
-    given. Raises ValueError when ``root`` is not a folder or nothing matches."""
-    base = Path(root)
+    given. Raises ValueError when ``root`` is not a folder (or is empty: not the current
+    folder) or nothing matches, and TypeError for a ``root`` that is not a str or
+    os.PathLike or ``patterns`` that are not a sequence of str (a str alone was taken as its
+    characters, and a ``*`` among them matched every scene)."""
+    from .io import _as_path
+
+    base = _as_path(root, "root")
+    if isinstance(patterns, (str, bytes)) or not all(isinstance(p, str) for p in patterns):
+        hint = f", such as [{patterns!r}]" if isinstance(patterns, str) else ""
+        raise TypeError(
+            f"patterns must be a sequence of shell patterns (str){hint}, got "
+            f"{type(patterns).__name__} {patterns!r}"
+        )
     if not base.is_dir():
         raise ValueError(f"DIR must be a folder of scenes, got {str(base)!r} (not a folder)")
     itself = _scene_at(base)
@@ -314,14 +354,13 @@ def find_scenes(root: str | os.PathLike[str], patterns: Sequence[str] = ()) -> l
 
 def num_disparities_for(max_disparity_px: float) -> int:
     """``16 * ceil((D + 1) / 16)`` for D = ``ceil(max_disparity_px)``: the smallest multiple of
-    16 whose search range ``0 .. num_disparities - 1`` reaches the largest disparity."""
-    if not (
-        isinstance(max_disparity_px, (int, float))
-        and math.isfinite(max_disparity_px)
-        and max_disparity_px >= 0
-    ):
-        raise ValueError(f"max_disparity_px must be a finite number >= 0, got {max_disparity_px!r}")
-    return 16 * math.ceil((math.ceil(max_disparity_px) + 1) / 16)
+    16 whose search range ``0 .. num_disparities - 1`` reaches the largest disparity.
+
+    Takes any real number, numpy's included (the largest value of a float32 ground truth is
+    a numpy.float32); raises TypeError for another type (a bool, a str) and ValueError for a
+    negative or non-finite value."""
+    d = check.non_negative("max_disparity_px", max_disparity_px)
+    return 16 * math.ceil((math.ceil(d) + 1) / 16)
 
 
 # --------------------------------------------------------------------------------------------
@@ -545,17 +584,17 @@ def _with_best(rows: list[EvalResult], best_by: str) -> list[EvalResult]:
     return out
 
 
-def _evaluate_scene(
+def _scene_inputs(
     scene: Scene,
     variants: Sequence[Variant],
-    factories: dict[str, Callable[[Variant, int], Matcher]],
     *,
-    repeat: int,
     num_disparities: int | None,
     use_mask: bool,
-    best_by: str,
-    progress: Callable[[str], None] | None,
-) -> list[EvalResult]:
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray | None, int]:
+    """The scene's images, ground truth, mask (None with ``use_mask`` false) and search range,
+    checked: ValueError naming the scene for anything that would fail or score nothing. Run
+    over every scene before any is matched, so a fault in the last scene is reported before
+    the work on the others, not after it (their results were lost with it)."""
     left, right, gt, mask = scene.load()
     if num_disparities is None:
         max_disp = scene.max_disparity_px
@@ -570,6 +609,17 @@ def _evaluate_scene(
         else:  # Middlebury: max_disp is ndisp - 1
             source = f"calib.txt's ndisp={max_disp + 1:g}"
         num_disparities = num_disparities_for(max_disp)
+        with np.errstate(invalid="ignore"):
+            beyond = np.isfinite(gt) & (gt > num_disparities - 1)
+        if beyond.any():
+            # A max_disp or ndisp of another resolution (half-size beside full-size images)
+            # searched a range the true disparities leave: every method scored badly, exit 0.
+            raise ValueError(
+                f"scene {scene.name}: the ground truth reaches {float(gt[beyond].max()):g} px "
+                f"({int(beyond.sum())} pixels beyond the search range 0 .. "
+                f"{num_disparities - 1} that {source} gives): correct it, or give "
+                "--num-disparities"
+            )
         ours = any(v.method in ("stereodepth", "sgm") for v in variants)
         if ours and num_disparities > MAX_NUM_DISPARITIES:  # the matcher's error named no source
             raise ValueError(
@@ -588,6 +638,26 @@ def _evaluate_scene(
             f"scene {scene.name}: {scene.mask_path}: the mask selects none of the "
             f"{int(known.sum())} pixels with ground truth (--no-mask scores them all)"
         )
+    opencv = sorted({v.method for v in variants} & set(_OPENCV_METHODS))
+    if opencv and left.dtype != np.uint8:  # they failed here only after the scenes before
+        raise ValueError(f"scene {scene.name}: {opencv[0]} needs 8-bit images, got {left.dtype}")
+    return left, right, gt, mask, num_disparities
+
+
+def _evaluate_scene(
+    scene: Scene,
+    variants: Sequence[Variant],
+    factories: dict[str, Callable[[Variant, int], Matcher]],
+    *,
+    repeat: int,
+    num_disparities: int | None,
+    use_mask: bool,
+    best_by: str,
+    progress: Callable[[str], None] | None,
+) -> list[EvalResult]:
+    left, right, gt, mask, num_disparities = _scene_inputs(
+        scene, variants, num_disparities=num_disparities, use_mask=use_mask
+    )
     rows = []
     for variant in variants:
         try:
@@ -629,6 +699,7 @@ _METRIC_COLUMNS: tuple[tuple[str, str, float], ...] = (
     ("bad-2 %", "bad_2", 100.0),
     ("bad-4 %", "bad_4", 100.0),
     ("bad-2(est) %", "bad_2_est", 100.0),
+    ("D1 %", "d1", 100.0),
     ("avgerr px", "avgerr", 1.0),
     ("rms px", "rms", 1.0),
 )
@@ -1119,6 +1190,14 @@ def run(args: argparse.Namespace) -> int:
 
         def progress(text: str) -> None:
             print(text, file=sys.stderr, flush=True)
+
+    # Every scene checked before any is matched: a fault in the last one (a mask selecting
+    # nothing, a range its ground truth leaves) ended the run after the others' work, and
+    # their results were lost with it.
+    for scene in scenes:
+        _scene_inputs(
+            scene, variants, num_disparities=args.num_disparities, use_mask=not args.no_mask
+        )
 
     rows: list[EvalResult] = []
     saved_threads = cv2.getNumThreads() if cv2 is not None else None

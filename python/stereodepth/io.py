@@ -12,6 +12,7 @@ import errno
 import os
 import re
 import secrets
+import stat
 from collections.abc import Iterator
 from pathlib import Path
 from typing import IO, Any
@@ -24,6 +25,7 @@ from ._validate import native_order
 __all__ = [
     "TEMP_MARKER",
     "atomic_write",
+    "read_disparity_png16",
     "read_image",
     "read_pfm",
     "read_pnm",
@@ -114,7 +116,13 @@ def read_image(path: str | os.PathLike[str]) -> np.ndarray:
     ``DecompressionBombError``, twice ``Image.MAX_IMAGE_PIXELS``), holds floating-point
     samples (a float TIFF or a PFM: :func:`read_pfm` reads those) or is 16-bit colour or
     16-bit with alpha (Pillow would keep only the high byte of each sample)."""
-    p = _as_path(path)
+    return _read_image(_as_path(path), turn=True)
+
+
+def _read_image(p: Path, *, turn: bool) -> np.ndarray:
+    """:func:`read_image`, applying the EXIF orientation only with ``turn`` (a data map, such
+    as a disparity PNG, is read as stored, as ``cv2.IMREAD_UNCHANGED`` and KITTI's devkit
+    read it)."""
     require_file(p, "image")
     with p.open("rb") as f:
         magic = f.read(2)
@@ -134,7 +142,8 @@ def read_image(path: str | os.PathLike[str]) -> np.ndarray:
                     "of those"
                 )
             im.load()
-            im = upright(im)
+            if turn:
+                im = upright(im)
             mode = im.mode
             if mode in ("I;16", "I;16B", "I;16L"):
                 return np.asarray(im, dtype=np.uint16)
@@ -218,13 +227,34 @@ def atomic_write(path: str | os.PathLike[str], *, text: bool = False) -> Iterato
     POSIX); when it raises, including KeyboardInterrupt, the temporary file is removed and
     ``path`` is untouched. A process killed outright can leave a
     temporary file behind, never a partial ``path``: :func:`remove_temp_files` sweeps them.
+    A ``path`` that is a symbolic link is written through, as ``open``, ``numpy.save`` and
+    ``cv2.imwrite`` write: the file it points to is replaced (its temporary file beside it)
+    and the link kept, so that what the link names is the new file. A ``path`` that is a
+    device, a pipe or a socket (``/dev/null``, ``/dev/stdout``, a FIFO) is written to as
+    ``open`` writes it, never replaced by a file. A file without write permission is not
+    replaced: PermissionError naming ``path``, as ``open`` refuses it.
     Raises IsADirectoryError naming ``path`` when it is a folder, before writing anything,
     and the OSError of a folder that takes no new file (missing, read-only) naming ``path``.
     """
     p = _as_path(path)
     if p.is_dir():  # else the rename's error names the temporary file, not the user's path
         raise IsADirectoryError(errno.EISDIR, "cannot write a file over a folder", str(p))
-    tmp = _temp_path(p)
+    if _is_stream(p):
+        # Renaming over a device or a pipe replaced it by a regular file (with the right to:
+        # as root, write_pfm("/dev/null", ...) made /dev/null a file); a stream has no
+        # half-written state to avoid, so it is written as open() writes it.
+        try:
+            stream: IO[Any] = open(p, "w", encoding="utf-8") if text else open(p, "wb")  # noqa: SIM115
+        except OSError as exc:  # a socket, or a device that takes no writes
+            raise type(exc)(exc.errno, f"cannot write {p.name}: {exc.strerror}", str(p)) from None
+        with stream:
+            yield stream
+        return
+    # A link is written through: replacing the link itself by the new file left the file
+    # it named (on a shared disk, say) with the old data, and the link gone.
+    target = Path(os.path.realpath(p)) if p.is_symlink() else p
+    _refuse_read_only(target, p)
+    tmp = _temp_path(target)
     # O_EXCL: never follow or clobber anything; mode 0o666 so the umask applies as usual.
     try:
         fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_BINARY", 0), 0o666)
@@ -240,14 +270,43 @@ def atomic_write(path: str | os.PathLike[str], *, text: bool = False) -> Iterato
             # A file replaced keeps its permissions (a new one gets 0o666 less the umask).
             if hasattr(os, "fchmod"):  # POSIX
                 with contextlib.suppress(FileNotFoundError):
-                    os.fchmod(f.fileno(), os.stat(p).st_mode & 0o7777)
+                    os.fchmod(f.fileno(), os.stat(target).st_mode & 0o7777)
             os.fsync(f.fileno())
-        os.replace(tmp, p)
+        os.replace(tmp, target)
     except BaseException:
         with contextlib.suppress(OSError):
             tmp.unlink()
         raise
-    _fsync_dir(p.parent)
+    _fsync_dir(target.parent)
+
+
+def _refuse_read_only(target: Path, p: Path) -> None:
+    """PermissionError naming ``p`` when ``target`` is a file without write permission.
+
+    open() refuses to overwrite such a file, but renaming over it needs only the folder's
+    permission, so a file the user had made read-only (chmod a-w: an input, a result to
+    keep) was replaced without a word. A file with no write bit at all is refused even where
+    the process could write it (root), as ``rm`` asks before removing one."""
+    try:
+        mode = os.stat(target).st_mode
+    except OSError:
+        return
+    if stat.S_ISREG(mode) and (not (mode & 0o222) or not os.access(target, os.W_OK)):
+        raise PermissionError(
+            errno.EACCES,
+            f"cannot write {p.name}: the file is read-only (no write permission); make it "
+            "writable or choose another path",
+            str(p),
+        )
+
+
+def _is_stream(p: Path) -> bool:
+    """Whether ``p`` (its link's target) exists and is a device, a pipe or a socket."""
+    try:
+        mode = os.stat(p).st_mode
+    except (OSError, ValueError):
+        return False
+    return not (stat.S_ISREG(mode) or stat.S_ISDIR(mode))
 
 
 _TEMP_RE = re.compile(r"^\..+\." + TEMP_MARKER + r"-[0-9a-f]{12}\.tmp$")
@@ -315,7 +374,9 @@ def write_png16(
 def write_disparity_png16(path: str | os.PathLike[str], disparity: np.ndarray) -> None:
     """A float disparity map in KITTI's format, atomically: uint16 PNG of round(d * 256), 0
     where the disparity is NaN, infinite, <= 0 or too small to encode (< 1/512 px): the format
-    has no negative values and 0 means "no value". Read back with ``read_image(path) / 256``.
+    has no negative values and 0 means "no value". Read back with
+    :func:`read_disparity_png16` (not ``read_image(path) / 256``, which reads the holes as
+    disparity 0, a point at infinity).
 
     Raises ValueError, writing nothing, for a finite disparity above the format's largest,
     65535 / 256 = 255.996 px (it was once capped there: a wrong value, not a hole); write PFM
@@ -331,6 +392,34 @@ def write_disparity_png16(path: str | os.PathLike[str], disparity: np.ndarray) -
     write_png16(path, v.astype(np.uint16))
 
 
+def read_disparity_png16(path: str | os.PathLike[str]) -> np.ndarray:
+    """A disparity map in KITTI's format as (H, W) float32 pixels, NaN where there is none.
+
+    The format (the KITTI stereo devkit's ``disp_read``, also what
+    :func:`write_disparity_png16` writes): a 16-bit greyscale PNG of d * 256, 0 for "no
+    value", read as stored (an EXIF orientation tag is not applied, as the devkit and
+    ``cv2.IMREAD_UNCHANGED`` do not). Each value v > 0 gives v / 256 (exact in float32); 0
+    gives NaN. Read as ``read_image(path) / 256``, the holes would be disparity 0: a valid
+    disparity (a point at infinity) to :func:`stereodepth.metrics.evaluate` and every depth
+    conversion.
+
+    Raises FileNotFoundError for a missing file, IsADirectoryError for a folder and ValueError
+    naming the file for one that is not a 16-bit grey image (an 8-bit PNG, a colour image: a
+    preview or a visualisation, not the data; the devkit reads those as wrong values) or
+    cannot be decoded."""
+    p = _as_path(path)
+    raw = _read_image(p, turn=False)  # a data map: as stored, whatever its EXIF tag says
+    if raw.dtype != np.uint16 or raw.ndim != 2:
+        kind = "a colour" if raw.ndim == 3 else f"an {raw.dtype.itemsize * 8}-bit grey"
+        raise ValueError(
+            f"{p}: a KITTI disparity PNG is a 16-bit grey image (d * 256, 0 for no value), got "
+            f"{kind} image of shape {raw.shape}"
+        )
+    out: np.ndarray = raw.astype(np.float32) / np.float32(256.0)
+    out[raw == 0] = np.nan
+    return out
+
+
 def write_pfm(path: str | os.PathLike[str], array: np.ndarray, *, scale: float = 1.0) -> None:
     """A (H, W) or (H, W, 3) float array as PFM (float32, little-endian), atomically.
 
@@ -338,13 +427,24 @@ def write_pfm(path: str | os.PathLike[str], array: np.ndarray, *, scale: float =
     read infinity as "unknown"; stereodepth writes NaN).
 
     Raises TypeError for a non-float ``array`` or a ``scale`` that is not a real number (a
-    str, a bool) and ValueError for another shape or a ``scale`` that is not finite and > 0,
-    writing nothing."""
+    str, a bool) and ValueError for another shape, a finite value beyond float32's range
+    (about 3.4e38: PFM stores float32, and it would become an infinity, which Middlebury
+    reads as "unknown") or a ``scale`` that is not finite and > 0, writing nothing."""
     a = np.asarray(array)
     if a.dtype.kind != "f":
         raise TypeError(f"array must have a float dtype, got {a.dtype}")
     if not (a.ndim == 2 or (a.ndim == 3 and a.shape[2] == 3)) or 0 in a.shape:
         raise ValueError(f"array must have shape (H, W) or (H, W, 3), got {a.shape}")
+    if a.dtype.itemsize > 4:
+        beyond = np.isfinite(a) & (np.abs(a) > np.finfo(np.float32).max)
+        if beyond.any():
+            where = tuple(int(i) for i in np.argwhere(beyond)[0])
+            raise ValueError(
+                "array must fit in float32 (PFM stores float32; beyond, a value becomes an "
+                f"infinity, read as unknown), got {float(a[where])!r} at row {where[0]}, "
+                f"column {where[1]} ({int(beyond.sum())} such value"
+                f"{'s' if beyond.sum() > 1 else ''})"
+            )
     # A str or bool scale reached numpy (a TypeError naming no parameter) or was written as 1.
     scale = check.positive("scale", scale)
     kind = "Pf" if a.ndim == 2 else "PF"

@@ -20,6 +20,12 @@ The convention is the one of the Middlebury stereo evaluation, also used by our 
 - ``bad_t`` is the fraction of evaluated pixels whose estimate is missing or off by more than
   ``t`` pixels: holes count as bad. ``bad_t_est`` is the same fraction among the evaluated
   pixels that have an estimate (holes left out).
+- ``d1`` is KITTI's outlier rate (Geiger, Lenz and Urtasun, CVPR 2012; the stereo 2015
+  devkit's D1): the fraction of evaluated pixels whose estimate is missing or off by more
+  than 3 px *and* by more than 5 % of the true disparity (``|d - g| > 3`` and
+  ``|d - g| / |g| > 0.05``). Holes count as outliers here, as in ``bad_t`` (KITTI's devkit
+  fills them by background interpolation first, so its D1 of a map with holes differs);
+  ``d1_est`` is the same fraction among the pixels that have an estimate.
 - ``density`` is the fraction of evaluated pixels with an estimate; ``avgerr`` and ``rms`` are
   the mean and root-mean-square absolute error over those pixels.
 
@@ -39,10 +45,20 @@ import numpy as np
 from . import _validate as check
 from .depth import check_min_disparity, from_opencv_disparity
 
-__all__ = ["BAD_THRESHOLDS_PX", "DisparityMetrics", "evaluate", "negative_ground_truth"]
+__all__ = [
+    "BAD_THRESHOLDS_PX",
+    "D1_THRESHOLD_PX",
+    "D1_THRESHOLD_RELATIVE",
+    "DisparityMetrics",
+    "evaluate",
+    "negative_ground_truth",
+]
 
 #: The error thresholds of the bad-pixel rates, in pixels.
 BAD_THRESHOLDS_PX: tuple[float, ...] = (0.5, 1.0, 2.0, 4.0)
+#: KITTI's D1 outlier rule: off by more than 3 px and by more than 5 % of the true disparity.
+D1_THRESHOLD_PX = 3.0
+D1_THRESHOLD_RELATIVE = 0.05
 
 
 @dataclass(frozen=True)
@@ -61,6 +77,11 @@ class DisparityMetrics:
         Fraction of evaluated pixels that are holes or off by more than 0.5, 1, 2 or 4 px.
     bad_0_5_est, bad_1_est, bad_2_est, bad_4_est
         Fraction of estimated pixels off by more than 0.5, 1, 2 or 4 px.
+    d1
+        KITTI's D1: fraction of evaluated pixels that are holes or off by more than 3 px and
+        more than 5 % of the true disparity.
+    d1_est
+        The same fraction among the estimated pixels (holes left out).
     avgerr
         Mean absolute error in pixels over the estimated pixels.
     rms
@@ -81,6 +102,8 @@ class DisparityMetrics:
     bad_1_est: float
     bad_2_est: float
     bad_4_est: float
+    d1: float
+    d1_est: float
     avgerr: float
     rms: float
 
@@ -109,7 +132,8 @@ def _float_map(name: str, value: Any, what: str) -> np.ndarray:
         elif arr.dtype == np.uint16:
             hint = (
                 "; KITTI's PNG encoding must be converted first: "
-                "d = raw.astype(np.float32) / 256 with d[raw == 0] = np.nan"
+                "d = raw.astype(np.float32) / 256 with d[raw == 0] = np.nan "
+                "(stereodepth.io.read_disparity_png16 reads such a file so)"
             )
         elif name == "gt" and arr.dtype == np.uint8:
             hint = (
@@ -215,8 +239,17 @@ def evaluate(
     n_eval = int(np.count_nonzero(evaluated))
     est = d[evaluated].astype(np.float64)
     ok = np.isfinite(est)
+    truth = g[evaluated][ok].astype(np.float64)
     with np.errstate(over="ignore"):  # an error beyond a double's range is inf
-        err = np.abs(est[ok] - g[evaluated][ok].astype(np.float64))
+        err = np.abs(est[ok] - truth)
+    # KITTI's devkit: d_err > tau_1 and d_err / |d_gt| > tau_2 (a true disparity of 0 with
+    # any error is relative error inf; 0 / 0 is no outlier, as 0 is not > 3 anyway).
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        outliers = int(
+            np.count_nonzero(
+                (err > D1_THRESHOLD_PX) & (err / np.abs(truth) > D1_THRESHOLD_RELATIVE)
+            )
+        )
     n_est = int(err.size)
     # The mean and RMS scaled by the largest error, so that neither the sum nor the squares
     # overflow where the result fits (errors of 1e200 px squared to inf with a warning).
@@ -250,6 +283,8 @@ def evaluate(
         bad_1_est=bad["bad_1_est"],
         bad_2_est=bad["bad_2_est"],
         bad_4_est=bad["bad_4_est"],
+        d1=frac(outliers + n_eval - n_est, n_eval),
+        d1_est=frac(outliers, n_est),
         avgerr=avgerr if n_est else nan,
         rms=rms if n_est else nan,
     )

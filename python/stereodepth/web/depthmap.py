@@ -21,7 +21,8 @@
 
 Numbers may come as JSON numbers or as numeric strings (what the page's form fields hold);
 an integer field also takes a float with an integral value (``16.0``). A field not named
-here, in the request or in ``rig`` (a misspelt ``doffs``), answers 422 at that field.
+here, in the request or in ``rig`` (a misspelt ``doffs``), answers 422 at that field, and so
+does a key given twice in one object (JSON would keep the last one).
 
 The answer has the summary (size, density, time, ranges), the images as PNG data URLs (the
 left image, the colourised disparity and depth), the colour bars (limits and the colour table),
@@ -38,7 +39,9 @@ are decoded in memory and results kept in memory (the last few, under a random i
 are written to a temporary folder of the server's choosing. Matching runs in worker threads
 (at most two at once) so the server keeps answering. Every bad input answers 422 with
 ``{"detail": [{"loc": ["body", field], "msg": ..., "type": ...}]}`` at its field, a body
-too large 413, a missing extra (Pillow, matplotlib) 503 with the install hint; none 500.
+too large 413, a body not sent as ``application/json`` 415 (a form or text/plain POST is one
+any web site can make a browser send to this server), a missing extra (Pillow, matplotlib)
+503 with the install hint; none 500.
 """
 
 from __future__ import annotations
@@ -87,10 +90,12 @@ class DepthMapLimits:
     max_pixels: int = DEFAULT_MAX_PIXELS
 
     def __post_init__(self) -> None:
+        from .. import _validate as check
+
         for name in ("max_upload_bytes", "max_pixels"):
-            v = getattr(self, name)
-            if isinstance(v, bool) or not isinstance(v, int) or v < 1:
-                raise ValueError(f"{name} must be an integer >= 1, got {v!r}")
+            # numpy integers too (a limit from a config array was refused as 'must be an
+            # integer >= 1, got np.int64(5)'); TypeError for a float or bool, as elsewhere.
+            object.__setattr__(self, name, check.integer(name, getattr(self, name), minimum=1))
 
     @property
     def max_body_bytes(self) -> int:
@@ -387,14 +392,44 @@ def _int_field(body: dict[str, Any], name: str, lo: int, hi: int) -> int | None:
     return v
 
 
-def _parse_request(data: bytes, limits: DepthMapLimits) -> Job:
+class _RepeatedKey(ValueError):
+    def __init__(self, key: str, values: list[Any]) -> None:
+        super().__init__(key)
+        self.key, self.values = key, values
+
+
+def _no_repeated_keys(pairs: list[tuple[str, Any]]) -> dict[str, Any]:
+    """json's object_pairs_hook: an object, refusing a key given twice (json keeps the last
+    one without a word, so {"num_disparities": 16, "num_disparities": 64} searched 64)."""
+    out: dict[str, Any] = {}
+    for key, value in pairs:
+        if key in out:
+            raise _RepeatedKey(key, [out[key], value])
+        out[key] = value
+    return out
+
+
+def _load_json(data: bytes) -> Any:
+    """The request's JSON; BadInput for text that is not JSON, nested too deeply, or with an
+    object key given twice (at that key, where it is a field of the request or of rig)."""
     try:
-        body = json.loads(data)
+        return json.loads(data, object_pairs_hook=_no_repeated_keys)
+    except _RepeatedKey as exc:
+        shown = ", ".join(repr(v)[:40] for v in exc.values)
+        key = str(exc.key)[:40]
+        raise BadInput(
+            ["body", "rig", key] if key in _RIG_NAMES else ["body", key],
+            f"{key} is given twice ({shown}): give it once",
+            "repeated",
+        ) from None
     except (ValueError, UnicodeDecodeError):
         raise BadInput(["body"], "the request must be JSON") from None
     except RecursionError:  # arrays or objects nested thousands deep
         raise BadInput(["body"], "the request must be JSON nested less deeply") from None
-    return parse_job(body, limits)
+
+
+def _parse_request(data: bytes, limits: DepthMapLimits) -> Job:
+    return parse_job(_load_json(data), limits)
 
 
 def parse_job(body: Any, limits: DepthMapLimits) -> Job:
@@ -428,7 +463,8 @@ def parse_job(body: Any, limits: DepthMapLimits) -> Job:
     nums: dict[str, int | None] = {}
     for name, lo, hi in (
         ("num_disparities", 1, MAX_NUM_DISPARITIES),
-        ("block_size", 3, max(MAX_BLOCK_SIZE.values())),
+        # 1 for semi-global matching's pixel-wise cost; each matcher checks its own sizes.
+        ("block_size", 1, max(MAX_BLOCK_SIZE.values())),
     ):
         try:
             nums[name] = _int_field(body, name, lo, hi)
@@ -522,16 +558,18 @@ def parse_job(body: Any, limits: DepthMapLimits) -> Job:
                 left, right = images["left"], images["right"]
             except ValueError as exc:
                 errors.append(BadInput(["body", "right"], str(exc)))
-            h, w = images["left"].shape[:2]
-            if calib_size is not None and calib_size != (w, h):
-                errors.append(
-                    BadInput(
-                        ["body", "calib"],
-                        f"calib: the calib.txt is for {calib_size[0]}\u00d7{calib_size[1]} px "
-                        f"images, the pair is {w}\u00d7{h} px (a calibration of another "
-                        "resolution would scale every depth): use the calib.txt of these images",
-                    )
+    # The sample pair too: a calib_size beside sample: true was ignored without a word.
+    if calib_size is not None and left is not None:
+        h, w = left.shape[:2]
+        if calib_size != (w, h):
+            errors.append(
+                BadInput(
+                    ["body", "calib"],
+                    f"calib: the calib.txt is for {calib_size[0]}\u00d7{calib_size[1]} px "
+                    f"images, the pair is {w}\u00d7{h} px (a calibration of another "
+                    "resolution would scale every depth): use the calib.txt of these images",
                 )
+            )
     if errors:
         raise ExceptionGroupLike(errors)
     assert left is not None and right is not None
@@ -624,12 +662,17 @@ def _cloud(points: np.ndarray, colours: np.ndarray) -> dict[str, Any]:
         c = np.repeat(c[..., None], 3, axis=-1)
     p = sub[ok].astype(np.float64)
     cols = c[ok]
+    # 0.1 mm for a scene of a metre or more; finer for a smaller one, to 5 significant digits
+    # of its largest coordinate (a rig of 1 mm baseline, a microscope's, had every point on a
+    # 0.1 mm grid, and a smaller one all points at 0).
+    extent = float(np.abs(p).max()) if p.size else 0.0
+    decimals = 4 if not 0 < extent < 1 else 4 - math.floor(math.log10(extent))
     return {
         "step": step,
         "count": int(ok.sum()),
-        "x": np.round(p[:, 0], 4).tolist(),
-        "y": np.round(p[:, 1], 4).tolist(),
-        "z": np.round(p[:, 2], 4).tolist(),
+        "x": np.round(p[:, 0], decimals).tolist(),
+        "y": np.round(p[:, 1], decimals).tolist(),
+        "z": np.round(p[:, 2], decimals).tolist(),
         # The points' colours: base64 of uint8 R, G, B per point, in order.
         "rgb": base64.b64encode(np.ascontiguousarray(cols, dtype=np.uint8).tobytes()).decode(),
     }
@@ -780,6 +823,29 @@ class _Results:
             return self._items.get(key)
 
 
+def _not_json(request: Request) -> Response | None:
+    """415 for a body that does not say it is JSON, else None. A form or text/plain POST is
+    a request any web site may make a browser send without asking (no CORS preflight), so
+    another site could have the local server match images; FastAPI refuses such bodies for
+    its JSON parameters for this reason (CSRF), and these routes read the body themselves."""
+    media = request.headers.get("content-type", "").split(";", 1)[0].strip().lower()
+    if media == "application/json" or (
+        media.startswith("application/") and media.endswith("+json")
+    ):
+        return None
+    return _error_response(
+        [
+            BadInput(
+                ["header", "content-type"],
+                f"the request must be JSON sent as application/json, got content-type "
+                f"{media[:60]!r}",
+                "unsupported_media_type",
+            )
+        ],
+        415,
+    )
+
+
 async def _read_body(request: Request, limit: int) -> bytes | None:
     """The body, or None when it is larger than ``limit`` (read no further than that)."""
     declared = request.headers.get("content-length")
@@ -807,13 +873,24 @@ def make_router(limits: DepthMapLimits) -> APIRouter:
     @router.get("/api/depthmap/limits", summary="The upload limits and the sample pair's rig")
     def depthmap_limits() -> dict[str, Any]:
         from ..match_pair import sgm_available
+        from ..matching import DEFAULT_BLOCK_SIZE
         from ..sample import SAMPLE_BASELINE_MM, SAMPLE_FOCAL_PX
 
+        # Each method's own defaults, for the page's form: block matching's block size and
+        # cost are not semi-global matching's (which takes no cost).
+        defaults: dict[str, dict[str, Any]] = {
+            "bm": {"block_size": DEFAULT_BLOCK_SIZE, "cost": "census"}
+        }
+        if sgm_available():
+            from ..semi_global import DEFAULT_BLOCK_SIZE as SGM_BLOCK_SIZE
+
+            defaults["sgm"] = {"block_size": SGM_BLOCK_SIZE, "cost": None}
         return {
             "max_upload_bytes": limits.max_upload_bytes,
             "max_pixels": limits.max_pixels,
             "formats": list(_FORMATS),
-            "methods": ["bm", "sgm"] if sgm_available() else ["bm"],
+            "methods": list(defaults),
+            "defaults": defaults,
             "sample": {
                 "width_px": 320,
                 "height_px": 240,
@@ -829,6 +906,8 @@ def make_router(limits: DepthMapLimits) -> APIRouter:
         responses={422: {"description": "Bad input, at its field"}, 413: {}},
     )
     async def depthmap(request: Request) -> Response:
+        if (refused := _not_json(request)) is not None:
+            return refused
         data = await _read_body(request, limits.max_body_bytes)
         if data is None:
             return _error_response(
@@ -958,19 +1037,17 @@ def add_calib_route(router: APIRouter) -> None:
 
     @router.post("/api/calib", summary="A Middlebury calib.txt to the rig's numbers")
     async def calib(request: Request) -> Response:
+        if (refused := _not_json(request)) is not None:
+            return refused
         data = await _read_body(request, 200_000)
         if data is None:
             return _error_response(
                 [BadInput(["body", "calib"], "calib: the file is too large")], 413
             )
         try:
-            body = json.loads(data)
-        except (ValueError, UnicodeDecodeError):
-            return _error_response([BadInput(["body"], "the request must be JSON")])
-        except RecursionError:  # arrays or objects nested thousands deep
-            return _error_response(
-                [BadInput(["body"], "the request must be JSON nested less deeply")]
-            )
+            body = _load_json(data)
+        except BadInput as e:
+            return _error_response([e])
         if not isinstance(body, dict):
             return _error_response([BadInput(["body"], "the request must be a JSON object")])
         try:

@@ -144,12 +144,14 @@
   async function run(sample) {
     if (busy) return;
     clearFieldErrors();
+    const method = $("method").value;
     const request = {
       rig: window.stereodepth.rigValues(),
-      method: $("method").value,
+      method,
       num_disparities: $("num_disparities").value.trim() || null,
       block_size: $("block_size").value.trim() || null,
-      cost: $("cost").value,
+      // Block matching's cost only: semi-global matching takes none (and refuses one).
+      cost: method === "bm" ? $("cost").value : null,
       disparity_step_px: $("disparity_step_px").value.trim() || null,
     };
     if (centre && !sample) Object.assign(request, centre);
@@ -430,11 +432,27 @@
     if (result) placeMarks("pin", pins);
   }
 
+  // The method's own defaults in the form: semi-global matching has another block size than
+  // block matching's 9 and no cost. A block size the user typed is kept.
+  let shownMethod = "bm";
+  function methodChanged() {
+    const method = $("method").value;
+    const defaults = limits && limits.defaults;
+    if (defaults && defaults[method] && defaults[shownMethod]) {
+      const box = $("block_size");
+      const before = String(defaults[shownMethod].block_size);
+      if (box.value.trim() === "" || box.value.trim() === before) box.value = String(defaults[method].block_size);
+    }
+    $("cost").disabled = method !== "bm";
+    shownMethod = method;
+  }
+
   // --- start -------------------------------------------------------------------------------
   async function loadLimits() {
     try {
       limits = await (await fetch("/api/depthmap/limits")).json();
       $("limit-text").textContent = `${g(limits.max_upload_bytes / 1e6, 3)} MB and ${g(limits.max_pixels / 1e6, 3)} megapixels`;
+      methodChanged();  // a method the browser restored in the form gets its defaults
       if (!limits.methods.includes("sgm")) {
         const opt = $("method").querySelector('option[value="sgm"]');
         opt.disabled = true;
@@ -452,6 +470,7 @@
     $("run-depth").addEventListener("click", () => run(false));
     $("use-sample").addEventListener("click", useSample);
     $("calib-file").addEventListener("change", loadCalib);
+    $("method").addEventListener("change", methodChanged);
     for (const n of ["left", "right"]) $(`${n}-file`).addEventListener("change", () => checkSize(n));
     for (const id of ["img-left", "img-disparity", "img-depth"]) {
       const img = $(id);
