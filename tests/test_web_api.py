@@ -224,8 +224,8 @@ def _bad_cases() -> list[Any]:
     cases = []
     for name in CHECKED:
         for kind, text in BAD.items():
-            if kind == "zero" and name == "disparity_px":
-                continue
+            if kind in ("zero", "negative") and name == "disparity_px":
+                continue  # the rig's rule (d >= -doffs), tested below with the library's
             cases.append(pytest.param(name, text, id=f"{name}-{kind}"))
     return cases
 
@@ -253,7 +253,7 @@ def test_bad_value_answers_422_naming_the_parameter(
 def test_rule_matches_the_schema_range() -> None:
     assert FIELDS["baseline_mm"].rule == "a number > 0 and <= 1000000"
     assert FIELDS["width_px"].rule == "an integer >= 1 and <= 1000000"
-    assert FIELDS["disparity_px"].rule == "a number >= 0 and <= 1000000"
+    assert FIELDS["disparity_px"].rule == "a number <= 1000000"  # d >= -doffs: the rig's rule
 
 
 @pytest.mark.parametrize(
@@ -290,6 +290,20 @@ def test_rule_matches_the_schema_range() -> None:
             "puts the point behind the cameras), got 0.2",
             id="library-rule-doffs",
         ),
+        pytest.param(  # no doffs: a negative disparity is behind the cameras
+            {**ARM, "disparity_px": -3},
+            "disparity_px",
+            "disparity_px must be finite and >= 0, got -3.0",
+            id="negative-disparity",
+        ),
+        pytest.param(  # below -doffs: behind the cameras
+            {"baseline_mm": 176.252, "focal_px": 1038.018, "doffs_px": 53.271, "disparity_px": -54},
+            "disparity_px",
+            "disparity_px must be finite and >= -53.271 (with doffs_px 53.271, a disparity of "
+            "-53.271 px is a point at infinity and one below it lies behind the cameras), got "
+            "-54.0",
+            id="library-rule-positive-doffs",
+        ),
         pytest.param(
             {**ARM, "width_px": "1280.5"},
             "width_px",
@@ -306,6 +320,19 @@ def test_rules_across_parameters(
     assert {"loc": ["query", loc], "msg": msg} in [
         {"loc": e["loc"], "msg": e["msg"]} for e in r.json()["detail"]
     ]
+
+
+def test_negative_disparity_within_doffs_answers_as_the_library(client: TestClient) -> None:
+    # Adirondack's rig (doffs 53.271 px): a point 10 m away has disparity -34.97 px, which
+    # StereoRig.depth_m and `stereodepth calc` take; the page refused every d < 0.
+    rig = StereoRig.from_pixels(baseline_mm=176.252, focal_px=1038.018, doffs_px=53.271)
+    d = float(rig.disparity_px(10.0))
+    assert d < 0
+    r = calc(client, baseline_mm=176.252, focal_px=1038.018, doffs_px=53.271, disparity_px=d)
+    assert r.status_code == 200, r.text
+    s = r.json()["summary"]
+    assert s["depth_m"] == float(rig.depth_m(d))
+    assert s["depth_m"] == pytest.approx(10.0, rel=1e-12)
 
 
 @pytest.mark.parametrize(

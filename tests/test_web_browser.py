@@ -380,7 +380,8 @@ BAD = [
     ("focal_mm", "0", "Focal length f must be a number > 0 and <= 10000, got 0"),
     ("pixel_um", "NaN", "Pixel size p must be a number > 0 and <= 1000, got NaN"),
     ("width_px", "1e300", "Image width W must be an integer >= 1 and <= 1000000, got 1e300"),
-    ("disparity_px", "-1", "Disparity d must be a number >= 0 and <= 1000000, got -1"),
+    # d >= -doffs is the rig's rule (the library's message): without doffs, d >= 0
+    ("disparity_px", "-1", "Disparity d must be finite and >= 0, got -1.0"),
     (
         "disparity_step_px",
         "1e999",

@@ -141,10 +141,14 @@ _F = [
         exclusive_minimum=False,
     ),
     Field(
+        # No lower bound here: the rig's rule, d + doffs >= 0 (-doffs is a point at infinity;
+        # with doffs > 0 the points beyond B*f / doffs have negative disparities), depends on
+        # doffs_px, and the library checks it (422 at disparity_px with its message), as
+        # `stereodepth calc` and StereoRig.depth_m take it.
         "disparity_px",
         "px",
-        "disparity d of the target (0: infinitely far)",
-        exclusive_minimum=False,
+        "disparity d of the target (-doffs, 0 for most rigs: infinitely far)",
+        minimum=None,
     ),
     Field(
         "disparity_step_px",
