@@ -636,6 +636,39 @@ def test_rectifier_uses_the_files_transforms_unless_asked() -> None:
     assert recomputed.P1[0, 0] != r.P1[0, 0]
 
 
+def test_rectifier_recomputes_for_zero_disparity_and_fov_scale() -> None:
+    # A calibration holding R1, R2, P1, P2 (an OpenCV file from stereoRectify with
+    # CALIB_ZERO_DISPARITY, a ROS camera_info pair) kept them when asked for zero_disparity=False
+    # or a fov_scale: the option was dropped without a word (P2's cx stayed P1's, the fisheye
+    # focal length unscaled, a plumb_bob fov_scale taken). Either option now recomputes.
+    rig = RIGS[0]
+    args = (rig.K1, rig.D1, rig.K2, rig.D2, rig.size, rig.R, rig.T)
+    r = stereo_rectify(*args)
+    calib = calib_of(rig, R1=r.R1, R2=r.R2, P1=r.P1, P2=r.P2, Q=r.Q)
+    free = StereoRectifier.from_calibration(calib, zero_disparity=False)
+    want = stereo_rectify(*args, zero_disparity=False)
+    for got, expected in zip((free.R1, free.R2, free.P1, free.P2, free.Q), want[:5], strict=True):
+        np.testing.assert_array_equal(got, expected)
+    assert free.P2[0, 2] != free.P1[0, 2]
+    with pytest.raises(ValueError, match="balance and fov_scale apply to equidistant"):
+        StereoRectifier.from_calibration(calib, fov_scale=1.5)
+    fish = dataclasses.replace(
+        rig,
+        D1=np.array([0.01, -0.002, 0.001, 0.0]),
+        D2=np.array([0.012, -0.001, 0.0, 0.0005]),
+        model="equidistant",
+    )
+    fargs = (fish.K1, fish.D1, fish.K2, fish.D2, fish.size, fish.R, fish.T)
+    fr = stereo_rectify(*fargs, distortion_model="equidistant")
+    fcalib = calib_of(fish, R1=fr.R1, R2=fr.R2, P1=fr.P1, P2=fr.P2, Q=fr.Q)
+    scaled = StereoRectifier.from_calibration(fcalib, fov_scale=1.5)
+    fwant = stereo_rectify(*fargs, distortion_model="equidistant", fov_scale=1.5)
+    np.testing.assert_array_equal(scaled.P1, fwant.P1)
+    assert scaled.P1[0, 0] < fr.P1[0, 0]
+    # None of them given: the stored transforms, as before.
+    np.testing.assert_array_equal(StereoRectifier.from_calibration(calib).P2, r.P2)
+
+
 @pytest.mark.parametrize("rig_index", [1, 3])  # horizontal, vertical
 def test_rectifier_baseline_is_relative_to_p1(rig_index: int) -> None:
     # Projections that place both rectified cameras in a third camera's frame (as KITTI's

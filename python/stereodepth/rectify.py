@@ -571,18 +571,20 @@ class StereoRectifier:
         *,
         alpha: float | None = None,
         new_image_size: tuple[int, int] | None = None,
-        zero_disparity: bool = True,
+        zero_disparity: bool | None = None,
         balance: float | None = None,
-        fov_scale: float = 1.0,
+        fov_scale: float | None = None,
         threads: int | None = None,
     ) -> StereoRectifier:
         """A rectifier for a :class:`stereodepth.calib.StereoCalibration`.
 
         When the calibration holds rectifying transforms (R1, R2, P1, P2, as OpenCV's stereo
-        YAML or ROS camera_info files do) and none of ``alpha``, ``balance`` and
-        ``new_image_size`` is given, those are used as they are; otherwise they are computed
-        with :func:`stereo_rectify` (``alpha`` None means -1, ``balance`` None means 0; the
-        latter and ``fov_scale`` for equidistant calibrations only). A calibration of images
+        YAML or ROS camera_info files do) and none of ``alpha``, ``balance``,
+        ``new_image_size``, ``zero_disparity`` and ``fov_scale`` is given, those are used as
+        they are; otherwise they are computed with :func:`stereo_rectify` (``alpha`` None
+        means -1, ``balance`` None means 0, ``zero_disparity`` None means True, ``fov_scale``
+        None means 1; ``balance`` and ``fov_scale`` for equidistant calibrations only). A
+        calibration of images
         that are already rectified (``calib.rectified``: Middlebury, KITTI) gives a rectifier
         whose :meth:`rectify` returns its inputs unchanged. Raises TypeError or ValueError naming
         the field at fault.
@@ -621,7 +623,11 @@ class StereoRectifier:
             self._from_rectified(calib)
             return self
         stored = [getattr(calib, f, None) for f in ("R1", "R2", "P1", "P2")]
-        asked = alpha is not None or balance is not None or new_image_size is not None
+        # Any rectification option given asks for a rectification computed with it: the
+        # stored one was kept for zero_disparity=False and fov_scale=2 without a word.
+        asked = any(
+            v is not None for v in (alpha, balance, new_image_size, zero_disparity, fov_scale)
+        )
         if not asked and all(m is not None for m in stored):
             R1 = _rotation("calib.R1", stored[0])
             R2 = _rotation("calib.R2", stored[1])
@@ -642,10 +648,10 @@ class StereoRectifier:
                 calib.T,
                 alpha=-1.0 if alpha is None else alpha,
                 new_image_size=new_image_size,
-                zero_disparity=zero_disparity,
+                zero_disparity=True if zero_disparity is None else zero_disparity,
                 distortion_model=model,
                 balance=0.0 if balance is None else balance,
-                fov_scale=fov_scale,
+                fov_scale=1.0 if fov_scale is None else fov_scale,
             )
         self._setup(
             K1=K1,
@@ -682,9 +688,9 @@ class StereoRectifier:
         second_path: str | os.PathLike[str] | None = None,
         alpha: float | None = None,
         new_image_size: tuple[int, int] | None = None,
-        zero_disparity: bool = True,
+        zero_disparity: bool | None = None,
         balance: float | None = None,
-        fov_scale: float = 1.0,
+        fov_scale: float | None = None,
         threads: int | None = None,
         **read_options: Any,
     ) -> StereoRectifier:
