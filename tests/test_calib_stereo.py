@@ -1081,6 +1081,32 @@ def test_to_rig_rejects() -> None:
         StereoCalibration(**fields(P1=p1, P2=p2)).to_rig()
 
 
+def test_to_rig_of_kitti_projections_in_a_ros_pair(tmp_path: Path) -> None:
+    # KITTI's P_rect_02 and P_rect_03 (raw calib_cam_to_cam.txt of 2011_09_26) in a ROS
+    # camera_info pair, as converters to rosbag write them: both cameras in camera 0's
+    # frame, so P[1, 3] differs by the sub-millimetre y offsets. to_rig refused it as "a
+    # vertical pair" while StereoRectifier.rig took it as the horizontal pair it is.
+    from stereodepth.rectify import StereoRectifier
+
+    p2 = np.array([[721.5377, 0, 609.5593, 44.85728], [0, 721.5377, 172.854, 0.2163791],
+                   [0, 0, 1, 0.002745884]])  # fmt: skip
+    p3 = np.array([[721.5377, 0, 609.5593, -339.5242], [0, 721.5377, 172.854, 2.199936],
+                   [0, 0, 1, 0.002729905]])  # fmt: skip
+    none = np.zeros(5)
+    left = write(tmp_path / "l.yaml", ros_yaml(p2[:, :3], none, "plumb_bob", np.eye(3), p2,
+                                               (1242, 375)))  # fmt: skip
+    right = write(tmp_path / "r.yaml", ros_yaml(p3[:, :3], none, "plumb_bob", np.eye(3), p3,
+                                                (1242, 375), "right"))  # fmt: skip
+    calib = read_stereo_calibration(left, second_path=right)
+    rig = calib.to_rig()
+    baseline_mm = (44.85728 + 339.5242) / 721.5377 * 1000  # the devkit's B
+    assert rig.baseline_mm == pytest.approx(baseline_mm, rel=1e-12)
+    assert (rig.focal_px, rig.doffs_px, rig.width_px, rig.height_px) == (721.5377, 0, 1242, 375)
+    rect = StereoRectifier.from_calibration(calib)
+    assert not rect.vertical
+    assert rect.rig.baseline_mm == pytest.approx(rig.baseline_mm, rel=1e-12)
+
+
 def test_unknown_formats_and_keywords(tmp_path: Path) -> None:
     for text in ("name: nothing\n", "a = b\n", "<?xml version='1.0'?>\n<opencv_storage/>\n"):
         path = write(tmp_path / "x.cfg", text)

@@ -141,12 +141,18 @@ class StereoCalibration:
                 raise _fail(where, f"a rectified horizontal pair has T = (-B, 0, 0), got {t}")
             focal, baseline, doffs = k1[0, 0], -t[0], k2[0, 2] - k1[0, 2]
         elif self.P1 is not None and self.P2 is not None:
+            from ..rectify import _baseline_axis
+
             p1, p2 = self.P1, self.P2
-            if p2[1, 3] != p1[1, 3]:
+            # The rectifier's rule (StereoRectifier.vertical): projections that place both
+            # cameras in a third camera's frame (KITTI's P_rect_02, P_rect_03 in a ROS
+            # camera_info pair) differ in P[1, 3] too, by the sub-millimetre y offsets, and
+            # were refused here as a vertical pair while the rectifier took them.
+            if _baseline_axis(p1, p2) == 1:
                 raise _fail(
                     where,
-                    "P2 is of a vertical pair (P2[1, 3] != P1[1, 3]): the matchers need a "
-                    "horizontal one",
+                    "P2 is of a vertical pair (P2[1, 3] != P1[1, 3] and P2[0, 3] == "
+                    "P1[0, 3]): the matchers need a horizontal one",
                 )
             focal = p1[0, 0]
             baseline = -(p2[0, 3] - p1[0, 3]) / p2[0, 0]
