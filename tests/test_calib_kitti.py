@@ -6,7 +6,9 @@ that are not a rectified pair raise ValueError naming the file (and line) and wh
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any
 
+import numpy as np
 import pytest
 
 from stereodepth import batch, calib
@@ -94,6 +96,24 @@ def test_the_right_camera_must_be_right_of_the_left(tmp_path: Path) -> None:
         calib.read_kitti_calib(write(tmp_path, kitti_2012()), (3, 2))
     with pytest.raises(ValueError, match=r"cams must be two different KITTI cameras, got \(2, 2\)"):
         calib.read_kitti_calib(write(tmp_path, kitti_2012()), (2, 2))
+
+
+@pytest.mark.parametrize(
+    ("cams", "exc", "message"),
+    [
+        ((2,), ValueError, r"cams must be two camera numbers, got \(2,\)"),
+        ((2.0, 3), TypeError, r"cams must be two whole numbers >= 0, got \(2\.0, 3\) \(a float\)"),
+        ((-1, 3), ValueError, r"cams must be two whole numbers >= 0, got \(-1, 3\)"),
+        (("2", "3"), TypeError, r"cams must be two whole numbers >= 0, got \('2', '3'\) \(a str\)"),
+    ],
+)
+def test_cams_are_checked(tmp_path: Path, cams: Any, exc: type, message: str) -> None:
+    # cams (2,) was Python's "not enough values to unpack (expected 2, got 1)", naming
+    # nothing; (2.0, 3) and (-1, 3) were looked up as keys P2.0 and P-1 ("missing P2.0 (or
+    # P_rect_02.0)"). They are checked as read_kitti_stereo_calibration's cameras are.
+    with pytest.raises(exc, match=message):
+        calib.read_kitti_calib(write(tmp_path, kitti_2012()), cams)
+    assert calib.read_kitti_calib(write(tmp_path, kitti_2012()), (np.int64(2), 3)).focal_px > 0
 
 
 def test_the_rectified_size_is_the_calibrations_image_size(

@@ -291,7 +291,9 @@ def _image_size_of(
     return size
 
 
-def _check_cameras(cameras: Any, name: str = "cameras") -> tuple[int, int]:
+def _check_cameras(cameras: Any, name: str = "cameras", kind: str = "") -> tuple[int, int]:
+    """Two different camera numbers (integers >= 0, numpy's too): ValueError / TypeError
+    naming ``name`` and the value; ``kind`` qualifies them in the message ("KITTI ")."""
     try:
         a, b = cameras
     except (TypeError, ValueError):
@@ -306,5 +308,5 @@ def _check_cameras(cameras: Any, name: str = "cameras") -> tuple[int, int]:
             raise ValueError(f"{name} must be two whole numbers >= 0, got {cameras!r}")
     a, b = int(a), int(b)
     if a == b:
-        raise ValueError(f"{name} must be two different cameras, got {cameras!r}")
+        raise ValueError(f"{name} must be two different {kind}cameras, got {cameras!r}")
     return a, b

@@ -111,11 +111,12 @@ def read_kitti_calib(path: str | os.PathLike[str], cams: tuple[int, int] = (2, 3
     the scale factor.
 
     Raises FileNotFoundError, and ValueError naming the file, the line and what was wrong
-    (see the module's documentation for the rules)."""
+    (see the module's documentation for the rules); ``cams`` must be two different integers
+    >= 0 (TypeError or ValueError naming ``cams`` otherwise)."""
     p = _path(path)
-    lc, rc = cams
-    if lc == rc:
-        raise ValueError(f"cams must be two different KITTI cameras, got {cams}")
+    # Checked as read_kitti_stereo_calibration's cameras: (2,) was Python's "not enough
+    # values to unpack", (2.0, 3) and (-1, 3) looked for keys P2.0 and P-1 in the file.
+    lc, rc = _check_cameras(cams, "cams", "KITTI ")
     fields = _fields(p)
     pl, pr, baseline = _rectified_pair(p, fields, lc, rc)
     return Calibration(
