@@ -1081,6 +1081,33 @@ def test_to_rig_rejects() -> None:
         StereoCalibration(**fields(P1=p1, P2=p2)).to_rig()
 
 
+def test_to_rig_takes_what_the_rectified_readers_take(tmp_path: Path) -> None:
+    # read_middlebury_calib and read_kitti_calib take a cam1 / P3 whose fx, fy or cy differ
+    # from the left camera's within 1e-6 relative (the last printed digit); read_calibration
+    # and StereoRectifier gave such a file a rig, and to_rig refused it ("a rectified pair
+    # has the same fx, fy and cy in K1 and K2", without the values).
+    mb = write(tmp_path / "calib.txt",
+               "cam0=[1758.23 0 953.34; 0 1758.23 552.29; 0 0 1]\n"
+               "cam1=[1758.23 0 953.34; 0 1758.23 552.2901; 0 0 1]\n"
+               "doffs=0\nbaseline=111.53\nwidth=1920\nheight=1080\nndisp=290\n")  # fmt: skip
+    rig = read_stereo_calibration(mb).to_rig()
+    flat = sc.read_calibration(mb)
+    assert (rig.focal_px, rig.baseline_mm, rig.doffs_px) == (1758.23, 111.53, 0.0)
+    assert (flat.focal_px, flat.baseline_m * 1000, flat.doffs_px) == (1758.23, 111.53, 0.0)
+    p2 = "718.856 0 607.1928 45.38225 0 718.856 185.2157 -0.1130887 0 0 1 0.003779761"
+    p3 = "718.8561 0 607.1928 -337.2877 0 718.8561 185.2157 2.369057 0 0 1 0.004915215"
+    kitti = write(tmp_path / "calib_kitti.txt", f"P2: {p2}\nP3: {p3}\n")
+    rig = read_stereo_calibration(kitti, image_size=(1241, 376)).to_rig()
+    assert rig.baseline_mm == pytest.approx(sc.read_calibration(kitti).baseline_m * 1000)
+    off = write(tmp_path / "off.txt", f"P2: {p2}\nP3: {p3.replace('718.8561', '718.9')}\n")
+    with pytest.raises(ValueError, match="their focal length fx differ"):
+        read_stereo_calibration(off, image_size=(1241, 376))
+    direct = StereoCalibration(**fields(D1=[], D2=[], distortion_model="none", R=np.eye(3),
+                                        rectified=True, T=[-0.1, 0, 0]))  # fmt: skip
+    with pytest.raises(ValueError, match=r"same fx, fy and cy in K1 and K2, got fx 700\.0 and 710"):
+        direct.to_rig()
+
+
 def test_to_rig_of_kitti_projections_in_a_ros_pair(tmp_path: Path) -> None:
     # KITTI's P_rect_02 and P_rect_03 (raw calib_cam_to_cam.txt of 2011_09_26) in a ROS
     # camera_info pair, as converters to rosbag write them: both cameras in camera 0's

@@ -125,18 +125,29 @@ class StereoCalibration:
         principal point offset doffs and image size), for computing depth from disparity.
 
         For a rectified source (``rectified=True``): focal length K1's fx, baseline -T[0],
-        doffs K2's cx - K1's cx. For a source that holds the rectified projections P1, P2 (as
-        OpenCV and ROS stereo calibrations do): focal length P1's fx, baseline
-        -(P2[0, 3] - P1[0, 3]) / P2's fx, doffs P2's cx - P1's cx. Raises ValueError for any
-        other calibration (rectify it first: the rectified pair's rig comes with the
-        rectification), for a vertical pair and when the right camera is not to the right."""
+        doffs K2's cx - K1's cx (K1's and K2's fx, fy and cy must agree within 1e-6
+        relative, as the readers require). For a source that holds the rectified
+        projections P1, P2 (as OpenCV and ROS stereo calibrations do): focal length P1's fx,
+        baseline -(P2[0, 3] - P1[0, 3]) / P2's fx, doffs P2's cx - P1's cx. Raises
+        ValueError for any other calibration (rectify it first: the rectified pair's rig
+        comes with the rectification), for a vertical pair and when the right camera is not
+        to the right."""
         from ..rig import StereoRig
 
         where = self.source or "StereoCalibration"
         if self.rectified:
             k1, k2, t = self.K1, self.K2, self.T
-            if k1[0, 0] != k2[0, 0] or k1[1, 1] != k2[1, 1] or k1[1, 2] != k2[1, 2]:
-                raise _fail(where, "a rectified pair has the same fx, fy and cy in K1 and K2")
+            # Within the readers' tolerance (read_kitti_calib's and read_middlebury_calib's
+            # 1e-6 relative): files whose values differ in the last printed digit were read,
+            # rectified and given a rig by read_calibration, and refused here.
+            for name, i, j in (("fx", 0, 0), ("fy", 1, 1), ("cy", 1, 2)):
+                a, b = float(k1[i, j]), float(k2[i, j])
+                if abs(a - b) > 1e-6 * max(abs(a), abs(b)) + 1e-9:
+                    raise _fail(
+                        where,
+                        f"a rectified pair has the same fx, fy and cy in K1 and K2, got {name} "
+                        f"{a!r} and {b!r}",
+                    )
             if abs(t[1]) > 1e-9 * abs(t[0]) or abs(t[2]) > 1e-9 * abs(t[0]):
                 raise _fail(where, f"a rectified horizontal pair has T = (-B, 0, 0), got {t}")
             focal, baseline, doffs = k1[0, 0], -t[0], k2[0, 2] - k1[0, 2]
