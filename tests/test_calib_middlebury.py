@@ -145,6 +145,9 @@ def replace(key: str, value: str | None) -> str:
             r"doffs must be cam1's cx - cam0's cx \(1310\.12 - 1180\.5 = 129\.625 px\), "
             "got '50'",
         ),
+        # One without the other was dropped: a 1920 px file matched 640 px images unchecked.
+        (replace("height", None), r"width and height go together, got width='2900' and no height"),
+        (replace("width", None), r"width and height go together, got height='1950' and no width"),
         (replace("width", "0"), r"width must be a whole number > 0, got '0'"),
         (replace("height", "1950.5"), r"height must be a whole number > 0, got '1950\.5'"),
         (replace("ndisp", "-280"), r"ndisp must be a whole number > 0, got '-280'"),

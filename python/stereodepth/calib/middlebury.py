@@ -89,7 +89,8 @@ def read_middlebury_calib(path: str | os.PathLike[str]) -> MiddleburyCalib:
     positive focal lengths, no skew and a last row 0 0 1, a cam1 whose fx, fy or cy differ
     from cam0's (not a rectified pair), a baseline that is not a finite number
     > 0, a non-finite doffs or one that differs from cam1's cx - cam0's cx by more than
-    ``DOFFS_TOLERANCE_PX``, a width, height or ndisp that is not a whole number > 0."""
+    ``DOFFS_TOLERANCE_PX``, a width, height or ndisp that is not a whole number > 0, a width
+    without a height or the other way round."""
     p = _path(path)
     text = _read_text(p, "Middlebury calib.txt")
     fields: dict[str, str] = {}
@@ -126,6 +127,14 @@ def read_middlebury_calib(path: str | os.PathLike[str]) -> MiddleburyCalib:
             raise ValueError(f"{p}: {key} must be a whole number > 0, got {_shown(v)}")
         return int(v)
 
+    if ("width" in fields) != ("height" in fields):
+        # One without the other (a misspelt "heigth") was dropped without a word: the file's
+        # stated size went unchecked, and images of another resolution were given its focal
+        # length and doffs. The OpenCV reader's rule for image_width and image_height.
+        given, missing = ("width", "height") if "width" in fields else ("height", "width")
+        raise ValueError(
+            f"{p}: width and height go together, got {given}={fields[given]!r} and no {missing}"
+        )
     cam0 = _matrix(fields["cam0"], "cam0", p)
     baseline = number("baseline")
     if not baseline > 0:
