@@ -96,6 +96,40 @@ def assert_rel(a: np.ndarray, b: np.ndarray, rtol: float = 1e-9) -> None:
 
 
 # --- stereo_rectify ------------------------------------------------------------------------------
+@pytest.mark.parametrize("count", [12, 14])
+def test_opencv_thin_prism_and_tilted_forms_with_zero_terms(cv2: Any, count: int) -> None:
+    # cv2.stereoCalibrate with CALIB_RATIONAL_MODEL returns D1, D2 of shape (1, 14), zeros
+    # after the 8th (OpenCV 5.0, checked); OpenCV takes them everywhere, and so do the
+    # calibration readers, but stereo_rectify, init_undistort_rectify_map and
+    # StereoRectifier refused them ("must have 4 or 5 or 8 coefficients").
+    rig = RIGS[2]  # the rational model's 8
+    d1, d2 = np.zeros(count), np.zeros(count)
+    d1[:8], d2[:8] = rig.D1, rig.D2
+    got = stereo_rectify(rig.K1, d1, rig.K2, d2, rig.size, rig.R, rig.T, alpha=0.0)
+    want = cv2.stereoRectify(rig.K1, d1, rig.K2, d2, rig.size, rig.R, rig.T.reshape(3, 1),
+                             flags=cv2.CALIB_ZERO_DISPARITY, alpha=0.0)  # fmt: skip
+    for a, b in zip(got[:5], want[:5], strict=True):
+        assert_rel(a, b)
+    same = stereo_rectify(rig.K1, rig.D1, rig.K2, rig.D2, rig.size, rig.R, rig.T, alpha=0.0)
+    for a, b in zip(got[:5], same[:5], strict=True):
+        np.testing.assert_array_equal(a, b)
+    mx, my = stereodepth.init_undistort_rectify_map(rig.K1, d1, got.R1, got.P1, rig.size)
+    cx, cy = cv2.initUndistortRectifyMap(rig.K1, d1, got.R1, got.P1, rig.size, cv2.CV_32FC1)
+    np.testing.assert_array_equal(mx, cx)
+    np.testing.assert_array_equal(my, cy)
+    rect = StereoRectifier(K1=rig.K1, D1=d1, K2=rig.K2, D2=d2, R=rig.R, T=rig.T,
+                           image_size=rig.size, alpha=0.0)  # fmt: skip
+    np.testing.assert_array_equal(rect.maps("left")[0], mx)
+    d1[count - 1] = 1e-3  # a tilt or thin prism term: a model the rectifier does not have
+    with pytest.raises(
+        ValueError, match=f"D1 has thin prism or tilt terms .coefficients 9 to {count}"
+    ):
+        stereo_rectify(rig.K1, d1, rig.K2, d2, rig.size, rig.R, rig.T)
+    d1[count - 1] = np.nan
+    with pytest.raises(ValueError, match="D1 must be finite"):
+        stereo_rectify(rig.K1, d1, rig.K2, d2, rig.size, rig.R, rig.T)
+
+
 @pytest.mark.parametrize("zero_disparity", [True, False], ids=["zero-disp", "free-cx"])
 @pytest.mark.parametrize("alpha", ALPHAS)
 @pytest.mark.parametrize("rig", RIGS, ids=lambda r: r.name)

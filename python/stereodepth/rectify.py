@@ -21,7 +21,8 @@ in metres. Distortion models:
 - ``"none"``: the pinhole model;
 - ``"plumb_bob"`` (ROS's name; Kalibr's ``radtan``): Brown-Conrady, coefficients in OpenCV's
   order ``k1 k2 p1 p2 [k3 [k4 k5 k6]]`` (4, 5 or 8 of them; the 8-coefficient form is
-  OpenCV's rational model);
+  OpenCV's rational model; OpenCV's 12 and 14 coefficient forms are taken when their thin
+  prism and tilt terms are 0);
 - ``"equidistant"`` (OpenCV's ``fisheye``): Kannala-Brandt, ``k1 k2 k3 k4``.
 
 Sources: J.-Y. Bouguet, Camera Calibration Toolbox for Matlab (``rect.m``); OpenCV's
@@ -143,6 +144,18 @@ def _distortion(name: str, value: Any, model: str) -> np.ndarray:
             arr = arr.reshape(-1)
         if arr.ndim != 1:
             raise ValueError(f"{name} must be 1-D, got shape {arr.shape}")
+    if model == "plumb_bob" and arr.size in (12, 14):
+        # OpenCV's thin prism (12) and tilted (14) forms: cv2.stereoCalibrate with
+        # CALIB_RATIONAL_MODEL returns (1, 14), zeros after the 8th. Taken when those terms
+        # are 0, as the calibration readers take them (refused before).
+        if not np.all(np.isfinite(arr)):
+            raise ValueError(f"{name} must be finite, got {arr.tolist()}")
+        if np.any(arr[8:] != 0):
+            raise ValueError(
+                f"{name} has thin prism or tilt terms (coefficients 9 to {arr.size}), which "
+                f"the plumb_bob model does not take, got {arr.tolist()}"
+            )
+        arr = arr[:8]
     if model == "none" and arr.size and np.any(arr != 0):
         raise ValueError(f"{name} must be empty or zero for distortion_model 'none', got {arr}")
     if model == "none":
