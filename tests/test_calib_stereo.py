@@ -1081,6 +1081,25 @@ def test_to_rig_rejects() -> None:
         StereoCalibration(**fields(P1=p1, P2=p2)).to_rig()
 
 
+def test_direct_construction_from_stereo_calibrate_rational_output() -> None:
+    # cv2.stereoCalibrate with CALIB_RATIONAL_MODEL returns D1, D2 of shape (1, 14), zeros
+    # after the 8th (OpenCV 5.0); the OpenCV file reader took such a file, but a
+    # StereoCalibration built from the same results refused them ("D1 has 14 coefficients;
+    # the plumb_bob model takes 4 or 5 or 8").
+    d8 = np.array([0.1, -0.2, 0.001, 0.002, 0.03, 0.01, -0.02, 0.004])
+    for count in (12, 14):
+        d = np.zeros((1, count))
+        d[0, :8] = d8
+        c = StereoCalibration(**fields(D1=d, D2=d))
+        np.testing.assert_array_equal(c.D1, d8)
+        np.testing.assert_array_equal(c.D2, d8)
+        d[0, 9] = 1e-3
+        with pytest.raises(
+            ValueError, match=f"D1 has thin prism or tilt terms .coefficients 9 to {count}"
+        ):
+            StereoCalibration(**fields(D1=d, D2=d))
+
+
 def test_to_rig_takes_what_the_rectified_readers_take(tmp_path: Path) -> None:
     # read_middlebury_calib and read_kitti_calib take a cam1 / P3 whose fx, fy or cy differ
     # from the left camera's within 1e-6 relative (the last printed digit); read_calibration

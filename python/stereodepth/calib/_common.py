@@ -172,10 +172,22 @@ def _check_distortion(
     where it fixes the count (ROS's rational_polynomial 8, Kalibr's radtan 4). An empty list
     for the pinhole models is no distortion, five zeros (OpenCV's empty distCoeffs, ROS's
     empty D in image_geometry; the rectifier takes it so too); a fisheye model's zeros are
-    not "no distortion", so it keeps its count."""
+    not "no distortion", so it keeps its count. OpenCV's 12 and 14 coefficient forms are the
+    first 8 when the rest are 0 (plumb_bob, no ``named``)."""
     d = _check_array(value, where, key, (-1,))
     if d.size == 0 and model == "plumb_bob":
         return np.zeros(5)
+    if model == "plumb_bob" and named is None and d.size in (12, 14):
+        # OpenCV's thin prism and tilted forms: cv2.stereoCalibrate with CALIB_RATIONAL_MODEL
+        # returns (1, 14), zeros after the 8th, which a StereoCalibration built from its
+        # results refused while the OpenCV file reader took it.
+        if np.any(d[8:]):
+            raise _fail(
+                where,
+                f"{key} has thin prism or tilt terms (coefficients 9 to {d.size}), which the "
+                "plumb_bob model does not take",
+            )
+        d = d[:8]
     name = named.strip().lower() if named is not None else model
     counts = _NAMED_COUNTS.get(name, DISTORTION_COUNTS[model])
     if d.size not in counts:

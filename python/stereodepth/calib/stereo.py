@@ -41,8 +41,10 @@ class StereoCalibration:
         K1, K2: (3, 3) intrinsics of the left and right camera, pixels.
         D1, D2: (n,) distortion coefficients: none for ``"none"``; k1 k2 p1 p2 [k3 [k4 k5
             k6]] (4, 5 or 8) for ``"plumb_bob"`` (Brown-Conrady, ROS's plumb_bob and
-            rational_polynomial, Kalibr's radtan, OpenCV's default model); k1 k2 k3 k4 for
-            ``"equidistant"`` (Kannala-Brandt, OpenCV's fisheye module, Kalibr's
+            rational_polynomial, Kalibr's radtan, OpenCV's default model; OpenCV's 12 and
+            14 coefficient forms, as cv2.stereoCalibrate returns them with
+            CALIB_RATIONAL_MODEL, are kept as their first 8 when the rest are 0); k1 k2 k3 k4
+            for ``"equidistant"`` (Kannala-Brandt, OpenCV's fisheye module, Kalibr's
             equidistant).
         distortion_model: ``"none"``, ``"plumb_bob"`` or ``"equidistant"``, both cameras.
         R: (3, 3) rotation from the left camera to the right.
