@@ -98,12 +98,15 @@ class BatchOptions:
         return self.out_dir / f"{stem}{RECORD_SUFFIX}"
 
     def owned_names(self, stem: str) -> set[str]:
-        """The names of every file a pair may write into OUTDIR, in any format, with or
-        without ``--ply``, ``--preview`` or ``--write-rectified``: the only files batch ever
-        removes (when they are stale)."""
-        names = {
-            f"{stem}.{kind}.{ext}" for kind in ("disparity", "depth") for ext in FORMATS.values()
-        }
-        previews = {f"{stem}.{kind}.preview.png" for kind in ("disparity", "depth")}
-        rectified = {f"{stem}.{side}-rectified.png" for side in ("left", "right")}
-        return names | previews | rectified | {f"{stem}.ply", f"{stem}{RECORD_SUFFIX}"}
+        """The names of every file a pair may write into OUTDIR (:func:`owned_names`)."""
+        return owned_names(stem)
+
+
+def owned_names(stem: str) -> set[str]:
+    """The names of every file the pair ``stem`` may write into OUTDIR, in any format, with
+    or without ``--ply``, ``--preview`` or ``--write-rectified``: the only files batch ever
+    removes (when they are stale)."""
+    names = {f"{stem}.{kind}.{ext}" for kind in ("disparity", "depth") for ext in FORMATS.values()}
+    previews = {f"{stem}.{kind}.preview.png" for kind in ("disparity", "depth")}
+    rectified = {f"{stem}.{side}-rectified.png" for side in ("left", "right")}
+    return names | previews | rectified | {f"{stem}.ply", f"{stem}{RECORD_SUFFIX}"}
