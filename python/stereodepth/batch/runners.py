@@ -248,7 +248,8 @@ def run_batch(
         # found no images there (every pair failed) or wrote the outputs elsewhere.
         pairs, options = _absolute(pairs, options)
     out_dir = options.out_dir
-    created = not out_dir.exists()
+    # OUTDIR and its missing parents, deepest first: -o new/run/out made all three.
+    created = [d for d in (out_dir, *out_dir.parents) if not d.exists()]
     try:
         out_dir.mkdir(parents=True, exist_ok=True)
     except OSError as exc:  # what the command's checks cannot foresee (/proc, /sys, full disk)
@@ -256,9 +257,13 @@ def run_batch(
     try:
         return _run_locked(pairs, options, scheduler, workers, threads, progress, on_result, notes)
     except UsageError:
-        if created:  # e.g. the scheduler did not answer: leave no empty OUTDIR behind
-            with contextlib.suppress(OSError):
-                out_dir.rmdir()
+        # e.g. the scheduler did not answer: leave no empty OUTDIR behind, nor the folders
+        # made for it (rmdir removes only an empty folder)
+        for folder in created:
+            try:
+                folder.rmdir()
+            except OSError:
+                break
         raise
 
 
