@@ -781,6 +781,77 @@ def test_relative_paths_reach_a_scheduler_whose_workers_work_elsewhere(tmp_path:
         )
 
 
+def test_the_same_job_with_input_spelled_otherwise_resumes(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A pair's record named its images by the path as given, so the same job run again with
+    INPUT absolute instead of relative (or from another folder) redid every pair."""
+    middlebury_folder(tmp_path / "in", 2)
+    monkeypatch.chdir(tmp_path)
+    assert run_cli("batch", "in", "-o", "out", "--quiet") == 0
+    stamps = {p.name: p.stat().st_mtime_ns for p in (tmp_path / "out").glob("*.npy")}
+    assert run_cli("batch", tmp_path / "in", "-o", tmp_path / "out", "--quiet") == 0
+    assert report_of(tmp_path / "out")["counts"]["skipped"] == 2
+    monkeypatch.chdir(tmp_path / "in")
+    assert run_cli("batch", ".", "-o", "../out", "--quiet") == 0
+    assert report_of(tmp_path / "out")["counts"]["skipped"] == 2
+    assert {p.name: p.stat().st_mtime_ns for p in (tmp_path / "out").glob("*.npy")} == stamps
+    # an image changed is still redone
+    (tmp_path / "in" / "scene01" / "im1.png").write_bytes(
+        (tmp_path / "in" / "scene00" / "im1.png").read_bytes()
+    )
+    assert run_cli("batch", "scene01", "-o", "../out", "--quiet") == 0
+    assert [p["status"] for p in report_of(tmp_path / "out")["pairs"]] == ["ok"]
+
+
+@pytest.mark.cluster
+def test_a_job_of_a_scheduler_resumes_here(tmp_path: Path) -> None:
+    """A --scheduler job (its paths made absolute for the workers) resumed in this process
+    after the cluster went away, with the same relative INPUT: every pair was redone."""
+    distributed = pytest.importorskip("distributed")
+    middlebury_folder(tmp_path / "in", 2)
+    argv = ["batch", "in", "-o", "out", "--quiet"]
+    with distributed.LocalCluster(
+        n_workers=1,
+        processes=False,
+        protocol="tcp",
+        threads_per_worker=1,
+        host="127.0.0.1",
+        dashboard_address="127.0.0.1:0",
+    ) as cluster:
+        code = [*argv, "--scheduler", cluster.scheduler_address]
+        proc = subprocess.run(
+            [
+                sys.executable,
+                "-c",
+                f"import sys; from stereodepth import cli; sys.exit(cli.main({code!r}))",
+            ],
+            cwd=tmp_path,
+            capture_output=True,
+            text=True,
+            timeout=120,
+            env={**os.environ, "PYTHONPATH": os.pathsep.join(sys.path)},
+        )
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    assert report_of(tmp_path / "out")["counts"]["ok"] == 2
+    proc = subprocess.run(
+        [
+            sys.executable,
+            "-c",
+            f"import sys; from stereodepth import cli; sys.exit(cli.main({argv!r}))",
+        ],
+        cwd=tmp_path,
+        capture_output=True,
+        text=True,
+        timeout=120,
+        env={**os.environ, "PYTHONPATH": os.pathsep.join(sys.path)},
+    )
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    assert report_of(tmp_path / "out")["counts"] == {
+        "ok": 0, "skipped": 2, "failed": 0, "cancelled": 0,
+    }  # fmt: skip
+
+
 @pytest.mark.cluster
 def test_workers_option_starts_a_local_cluster(tmp_path: Path) -> None:
     pytest.importorskip("distributed")

@@ -92,9 +92,11 @@ Output, per pair with stem S, in OUTDIR
     Every file is written to a temporary file and renamed, so a killed job leaves no
     half-written output. Running the same command again skips the pairs whose record matches
     (same inputs, options and calibration, outputs present) and redoes the rest; ``--force``
-    redoes all. A pair that is redone loses the files of its earlier run that this run does
-    not write again (another ``--format``, a ``.ply`` no longer asked for, everything when it
-    now fails); its record lists them under ``removed``. One job at a time may write to
+    redoes all. An input is the file itself (its real path, size and time), however INPUT is
+    spelled: a job resumes from another folder, or here after its Dask cluster went away. A
+    pair that is redone loses the files of its earlier run that this run does not write again
+    (another ``--format``, a ``.ply`` no longer asked for, everything when it now fails); its
+    record lists them under ``removed``. One job at a time may write to
     OUTDIR: a lock file, ``.stereodepth-batch.lock``, guards it and is removed when the job
     ends.
 
