@@ -617,3 +617,47 @@ def test_a_folder_reached_twice_through_a_link_is_searched_once(tmp_path: Path) 
         "d/loop": f"the same folder as {inp} (a link): not searched again",
         "z_again": f"the same folder as {inp / 'teddy'} (a link): not searched again",
     }
+
+
+def test_outputs_in_the_kitti_left_folder_are_not_pairs_on_the_next_run(
+    tmp_path: Path, stereo_data_dir: Path
+) -> None:
+    """Outputs beside the left images of a KITTI set (-o training/image_2): the depth and
+    disparity PNGs of --format png16 and the previews were taken for left images on the next
+    run, which pair 000070_10 writes, so the same command was refused ('which is the input
+    ...: choose another OUTDIR'). The shared KITTI scene, its outputs checked."""
+    scene = stereo_data_dir / "kitti2012-000070"
+    root = tmp_path / "training"
+    for side, name in (("image_0", "left.png"), ("image_1", "right.png")):
+        (root / side).mkdir(parents=True)
+        (root / side / "000070_10.png").write_bytes((scene / name).read_bytes())
+    meta = json.loads((scene / "meta.json").read_text())
+    out = root / "image_0"
+    argv = [
+        "batch", str(root), "-o", str(out), "--format", "png16", "--preview",
+        "--focal-px", str(meta["focal_px"]), "--baseline-mm", str(meta["baseline_mm"]),
+        "--num-disparities", "160", "--threads", "1", "--quiet",
+    ]  # fmt: skip
+    assert cli.main(argv) == 0
+    first = {p.name: p.read_bytes() for p in out.iterdir() if p.name != "report.json"}
+    assert cli.main(argv) == 0
+    report = json.loads((out / "report.json").read_text())
+    assert [(p["stem"], p["status"]) for p in report["pairs"]] == [("000070_10", "skipped")]
+    assert (
+        f"skipped {out / '000070_10.depth.png'}: an output of pair '000070_10' in OUTDIR, "
+        "not a pair" in report["notes"]
+    )
+    assert {p.name: p.read_bytes() for p in out.iterdir() if p.name != "report.json"} == first
+    left = stereodepth.io.read_image(out / "000070_10.png")
+    right = stereodepth.io.read_image(root / "image_1" / "000070_10.png")
+    disparity = stereodepth.block_match(left, right, num_disparities=160, threads=1)
+    depth = stereodepth.disparity_to_depth(
+        disparity,
+        focal_px=meta["focal_px"],
+        baseline_m=meta["baseline_mm"] / 1000,
+        dtype=np.uint16,
+    )
+    np.testing.assert_array_equal(stereodepth.io.read_image(out / "000070_10.depth.png"), depth)
+    written = stereodepth.io.read_disparity_png16(out / "000070_10.disparity.png")
+    np.testing.assert_array_equal(np.isnan(written), ~(disparity > 0) | np.isnan(disparity))
+    assert np.nanmax(np.abs(written - disparity)) <= 1 / 512

@@ -28,8 +28,9 @@ Input
     the rest of the left image's name. Folders that hold images but give no pair, right
     sub-folders' images with no left image of their name, and folders deeper than the search,
     are listed with the reason (on stderr and in the report), never dropped silently. With
-    OUTDIR = INPUT, the images of a pair's outputs (``S.left-rectified.png``...) are not pairs,
-    even those of a job killed before the pair's record listed them (they are listed too).
+    OUTDIR = INPUT or a folder of left images (KITTI's ``image_2``), the images of a pair's
+    outputs (``S.left-rectified.png``, ``S.depth.png``...) are not pairs, even those of a job
+    killed before the pair's record listed them (they are listed too).
 
     A CSV file lists ``left,right[,stem]`` per line, UTF-8, LF or CR LF line ends; cells are
     stripped of spaces (a quoted cell may follow spaces: ``a.png, "b 1.png"``); an optional

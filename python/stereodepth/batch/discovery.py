@@ -394,12 +394,14 @@ def _without_outputs(
     """The pairs found, without those whose left image is an output of another pair found, in
     OUTDIR (``out_dirs``), and those left out, with the reason.
 
-    OUTDIR is searched when it is INPUT itself (outputs beside the inputs). A pair's record,
-    written last, lists its outputs, and the images it lists are never taken for pairs; but a
-    job killed mid-pair (SIGKILL, the OOM killer, a power cut) leaves the images it wrote
-    without a record: ``p0.left-rectified.png`` and ``p0.right-rectified.png`` were then found
-    as a new pair, and since pair ``p0`` writes them, the next run was refused ('which is the
-    input ...: choose another OUTDIR'), so the job could not be resumed."""
+    OUTDIR is searched when it is INPUT itself or a folder of left images (outputs beside the
+    inputs). A scene folder's images that a pair's record lists are not taken for pairs, but
+    a job killed mid-pair (SIGKILL, the OOM killer, a power cut) leaves the images it wrote
+    without a record, and left/right folders (KITTI's image_2) have no such check: then
+    ``p0.left-rectified.png`` and ``p0.right-rectified.png``, or ``000000_10.depth.png`` of
+    ``--format png16`` in ``image_2``, were found as new pairs, and since pair ``p0`` or
+    ``000000_10`` writes them, the next run was refused ('which is the input ...: choose
+    another OUTDIR'), so the job could not be resumed."""
     from .job import owned_names
 
     if not out_dirs:
@@ -421,8 +423,7 @@ def _without_outputs(
         left_out.append(
             (
                 p.left,
-                f"an output of pair {stem!r} in OUTDIR, not a pair (a job stopped before "
-                "writing that pair's record, which lists it)",
+                f"an output of pair {stem!r} in OUTDIR, not a pair",
             )
         )
     return kept, left_out
