@@ -478,6 +478,43 @@ def test_channel_order_is_passed_to_the_matcher(
     assert record_of(out, "a")["settings"]["matcher"]["channel_order"] == "bgr"
 
 
+def test_channel_order_bgr_colours_the_point_cloud_in_rgb(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A pair stored with its channels swapped (B, G, R), matched with --channel-order bgr:
+    the PLY's red, green, blue were the file's channels as stored, so the cloud's blue sky
+    came out red; write_ply takes RGB (the README: colors=frame[..., ::-1] for a BGR frame)."""
+    d = scene(tmp_path / "in" / "a", rgb=True)
+    out = tmp_path / "out"
+    argv = [tmp_path / "in", "-o", out, "--channel-order", "bgr", "--ply", "--quiet"]
+    assert run(capsys, *argv)[0] == 0
+    left = np.asarray(Image.open(d / "im0.png"))
+    right = np.asarray(Image.open(d / "im1.png"))
+    disparity = stereodepth.block_match(left, right, num_disparities=16, channel_order="bgr")
+    points = stereodepth.reproject(disparity, focal_px=700, baseline_m=0.1, cx_px=24, cy_px=16)
+    keep = np.isfinite(points).all(axis=-1)
+    assert keep.sum() > 0
+    _, vertex = _read_ply(out / "a.ply")
+    np.testing.assert_array_equal(
+        np.stack([vertex["x"], vertex["y"], vertex["z"]], -1), points[keep]
+    )
+    colours = np.stack([vertex["red"], vertex["green"], vertex["blue"]], -1)
+    np.testing.assert_array_equal(colours, left[..., ::-1][keep])
+
+
+def _read_ply(path: Path) -> tuple[list[str], np.ndarray]:
+    """A minimal reader of the binary little-endian PLY files write_ply makes."""
+    data = path.read_bytes()
+    end = data.index(b"end_header\n") + len(b"end_header\n")
+    header = data[:end].decode("ascii").splitlines()
+    n = int(next(h for h in header if h.startswith("element vertex")).split()[-1])
+    types = {"float": "<f4", "uchar": "u1"}
+    fields = [(h.split()[2], types[h.split()[1]]) for h in header if h.startswith("property")]
+    vertex = np.frombuffer(data[end:], dtype=np.dtype(fields))
+    assert vertex.size == n
+    return header, vertex
+
+
 # --- the lock file ------------------------------------------------------------------------------
 def test_the_lock_file_is_removed_when_the_job_ends(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]

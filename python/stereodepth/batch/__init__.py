@@ -40,7 +40,8 @@ Input
 
 Images
     Images are read by Pillow: colour images come as RGB (``--channel-order bgr`` for files
-    whose channels were stored swapped), grey ones as 8 or 16 bit. Left and right must both
+    whose channels were stored swapped: the matcher reads them so, and the point cloud is
+    coloured in RGB), grey ones as 8 or 16 bit. Left and right must both
     be colour or both grey, of the same size and bit depth, as :func:`stereodepth.block_match`
     requires: a mixed pair fails with a message saying which is which.
 
