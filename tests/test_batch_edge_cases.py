@@ -698,3 +698,32 @@ def test_outputs_in_the_kitti_left_folder_are_not_pairs_on_the_next_run(
     written = stereodepth.io.read_disparity_png16(out / "000070_10.disparity.png")
     np.testing.assert_array_equal(np.isnan(written), ~(disparity > 0) | np.isnan(disparity))
     assert np.nanmax(np.abs(written - disparity)) <= 1 / 512
+
+
+def test_batch_options_are_checked_when_made(tmp_path: Path) -> None:
+    """The Python API: a str OUTDIR was an AttributeError from run_batch ('str' object has no
+    attribute 'parents'); an unknown format failed every pair with "KeyError: 'tif'" and an
+    unknown method every pair too, each leaving a failed record in OUTDIR."""
+    scene(tmp_path / "in" / "a")
+    pairs = batch.resolve_calibration(batch.find_pairs(tmp_path / "in"))
+    report = batch.run_batch(pairs, batch.BatchOptions(out_dir=str(tmp_path / "out")), threads=1)
+    assert report.counts["ok"] == 1
+    np.testing.assert_array_equal(
+        np.load(tmp_path / "out" / "a.disparity.npy"),
+        stereodepth.block_match(
+            np.asarray(Image.open(tmp_path / "in" / "a" / "im0.png")),
+            np.asarray(Image.open(tmp_path / "in" / "a" / "im1.png")),
+            num_disparities=16,
+        ),
+    )
+    with pytest.raises(
+        TypeError, match=r"out_dir must be a path \(str or os.PathLike\), got int 3"
+    ):
+        batch.BatchOptions(out_dir=3)  # type: ignore[arg-type]
+    with pytest.raises(ValueError, match=r"format must be one of 'npy', 'png16', 'pfm', got 'tif'"):
+        batch.BatchOptions(out_dir=tmp_path / "x", format="tif")
+    with pytest.raises(ValueError, match=r"method must be one of 'bm', 'sgm', got 'xx'"):
+        batch.BatchOptions(out_dir=tmp_path / "x", method="xx")
+    with pytest.raises(TypeError, match=r"method must be one of 'bm', 'sgm', got NoneType None"):
+        batch.BatchOptions(out_dir=tmp_path / "x", method=None)  # type: ignore[arg-type]
+    assert not (tmp_path / "x").exists()
