@@ -804,6 +804,36 @@ def test_the_same_job_with_input_spelled_otherwise_resumes(
     assert [p["status"] for p in report_of(tmp_path / "out")["pairs"]] == ["ok"]
 
 
+def test_a_second_job_whose_stems_repeat_the_first_does_not_replace_its_results(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Two jobs into one OUTDIR whose pairs share stems (KITTI 2012's and 2015's training
+    frames are both 000000_10...): the second replaced the first's results without a word
+    (exit 0, '2 done'). Refused before any pair, one line naming both images; --force
+    replaces them."""
+    middlebury_folder(tmp_path / "first", 2)
+    middlebury_folder(tmp_path / "second", 2, first_seed=7)
+    out = tmp_path / "out"
+    assert run_cli("batch", tmp_path / "first", "-o", out, "--quiet") == 0
+    before = outputs_bytes(out)
+    capsys.readouterr()
+    assert run_cli("batch", tmp_path / "second", "-o", out, "--quiet") == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and err.startswith("stereodepth batch: error: OUTDIR "), err
+    left = (tmp_path / "first" / "scene00" / "im0.png").resolve()
+    assert f"holds the outputs of pair 'scene00' made from other images ({left}, " in err
+    assert "give --force to replace them" in err
+    assert outputs_bytes(out) == before
+    assert report_of(out)["counts"]["ok"] == 2  # the first job's report, untouched
+    # the first job's own run again is no collision, and --force replaces
+    assert run_cli("batch", tmp_path / "first", "-o", out, "--quiet") == 0
+    assert run_cli("batch", tmp_path / "second", "-o", out, "--quiet", "--force") == 0
+    for name in ("scene00", "scene01"):
+        disparity, depth = expected_maps(tmp_path / "second" / name)
+        np.testing.assert_array_equal(np.load(out / f"{name}.disparity.npy"), disparity)
+        np.testing.assert_array_equal(np.load(out / f"{name}.depth.npy"), depth)
+
+
 @pytest.mark.cluster
 def test_a_job_of_a_scheduler_resumes_here(tmp_path: Path) -> None:
     """A --scheduler job (its paths made absolute for the workers) resumed in this process

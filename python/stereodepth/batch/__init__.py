@@ -96,11 +96,12 @@ Output, per pair with stem S, in OUTDIR
     (same inputs, options and calibration, outputs present) and redoes the rest; ``--force``
     redoes all. An input is the file itself (its real path, size and time), however INPUT is
     spelled: a job resumes from another folder, or here after its Dask cluster went away. A
-    pair that is redone loses the files of its earlier run that this run does not write again
-    (another ``--format``, a ``.ply`` no longer asked for, everything when it now fails); its
-    record lists them under ``removed``. One job at a time may write to
-    OUTDIR: a lock file, ``.stereodepth-batch.lock``, guards it and is removed when the job
-    ends.
+    job whose pair would replace a pair's outputs made from other images (a second job into
+    the same OUTDIR, its stems the first's) is refused before any pair; ``--force`` replaces
+    them. A pair that is redone loses the files of its earlier run that this run does not
+    write again (another ``--format``, a ``.ply`` no longer asked for, everything when it now
+    fails); its record lists them under ``removed``. One job at a time may write to OUTDIR: a
+    lock file, ``.stereodepth-batch.lock``, guards it and is removed when the job ends.
 
 Running
     By default the pairs run in this process, three at a time on a thread pool, each using every

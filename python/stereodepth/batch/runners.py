@@ -318,6 +318,8 @@ def _run_locked(
 
         try:
             removed += len(remove_temp_files(out_dir))
+            if not options.force:
+                _refuse_replacing_other_images(pairs, options)
             todo: list[tuple[int, Pair]] = []
             for i, p in enumerate(pairs):
                 earlier = None if options.force else completed_record(p, options)
@@ -375,6 +377,33 @@ def _run_locked(
         rectification=None if options.rectification is None else options.rectification.as_dict(),
         force=options.force,
     )
+
+
+def _refuse_replacing_other_images(pairs: Sequence[Pair], options: BatchOptions) -> None:
+    """UsageError, before any pair runs, when OUTDIR holds a pair's complete outputs made from
+    other images: a second job into the same OUTDIR whose stems repeat the first's (KITTI
+    2012's and 2015's training/image_2/000000_10.png are both pair 000000_10) replaced the
+    first job's results without a word. ``--force`` replaces them.
+
+    Records name their images by real path (:func:`~.records.file_stamp`); one naming them by
+    a relative path (written before that) cannot be compared and is taken as the same pair."""
+    from .job import read_record
+
+    for p in pairs:
+        record = read_record(options.record_path(p.stem))
+        if record is None or record.get("status") != "ok":
+            continue  # a failed pair's record: its outputs were removed, nothing to lose
+        try:
+            before = [record["inputs"][side]["path"] for side in ("left", "right")]
+        except (KeyError, TypeError):
+            continue
+        now = [os.path.realpath(p.left), os.path.realpath(p.right)]
+        if all(isinstance(b, str) and os.path.isabs(b) for b in before) and before != now:
+            raise UsageError(
+                f"OUTDIR {options.out_dir} holds the outputs of pair {p.stem!r} made from other "
+                f"images ({before[0]}, {before[1]}; this job's are {p.left}, {p.right}): "
+                "choose another OUTDIR (-o), or give --force to replace them"
+            )
 
 
 def _record_stamp(pair: Pair, options: BatchOptions) -> tuple[int, int, int] | None:
