@@ -946,6 +946,49 @@ def test_ctrl_c_during_a_dask_job_sets_a_flag_and_a_second_one_raises() -> None:
 
 
 @pytest.mark.cluster
+def test_ctrl_c_while_the_local_cluster_starts_stops_the_job(tmp_path: Path) -> None:
+    """SIGINT is ignored while the worker processes start (so that they inherit it ignored),
+    and a Ctrl-C in those seconds was lost: the job ran every pair and ended with status 0.
+    Now it stops before any pair, status 130, every pair cancelled. The workers' start is
+    slowed down through dask's worker preload hook."""
+    pytest.importorskip("distributed")
+    inp, out = tmp_path / "in", tmp_path / "out"
+    middlebury_folder(inp, 3)
+    marker = tmp_path / "worker-starting"
+    preload = tmp_path / "slow_start.py"
+    preload.write_text(
+        f"import pathlib, time\npathlib.Path({str(marker)!r}).touch()\ntime.sleep(3)\n"
+    )
+    env = {**os.environ, "DASK_DISTRIBUTED__WORKER__PRELOAD": json.dumps([str(preload)])}
+    argv = [sys.executable, "-m", "stereodepth.cli", "batch", str(inp), "-o", str(out)]
+    with subprocess.Popen(
+        [*argv, "--workers", "1"],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        env=env,
+        start_new_session=True,
+    ) as proc:
+        try:
+            wait_for(marker.exists, timeout=120)
+        finally:
+            os.killpg(proc.pid, signal.SIGINT)
+            _, stderr = proc.communicate(timeout=120)
+    assert proc.returncode == 130, stderr
+    assert "Traceback" not in stderr, stderr
+    report = report_of(out)
+    assert report["interrupted"]
+    assert report["counts"] == {"ok": 0, "skipped": 0, "failed": 0, "cancelled": 3}
+    assert sorted(p.name for p in out.iterdir()) == ["report.json"]
+    # and the same command then does the job
+    assert run_cli("batch", inp, "-o", out, "--quiet") == 0
+    for name in ("scene00", "scene01", "scene02"):
+        np.testing.assert_array_equal(
+            np.load(out / f"{name}.depth.npy"), expected_maps(inp / name)[1], strict=True
+        )
+
+
+@pytest.mark.cluster
 def test_ctrl_c_in_a_terminal_with_local_workers(tmp_path: Path) -> None:
     """Ctrl-C reaches the whole process group: the job stops with status 130 and a report,
     the worker processes (which ignore SIGINT) print no tracebacks, no temporary file is

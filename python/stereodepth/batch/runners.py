@@ -137,6 +137,8 @@ def _run_dask(
     already arrived are kept, and KeyboardInterrupt is raised here, outside Dask's calls."""
     import queue
 
+    if stop.is_set():  # Ctrl-C while the cluster started: no pair is sent
+        raise KeyboardInterrupt
     run_id = uuid.uuid4().hex[:8]
     futures = {}
     for i, p in todo:
@@ -432,6 +434,39 @@ def _sigint_handled_by(handler: Any) -> Iterator[None]:
 
 
 @contextlib.contextmanager
+def _ctrl_c_witness() -> Iterator[Callable[[], bool]]:
+    """A small process of this process group that a Ctrl-C ends, for a block during which
+    this process ignores SIGINT (while a local cluster starts: a Ctrl-C then was lost, and the
+    job ran every pair and ended with status 0). Yields a function that says, after the
+    block, whether the witness ended on its own, that is whether SIGINT reached the group.
+    In the main thread of a POSIX process only (elsewhere SIGINT is not ignored: the function
+    says False)."""
+    import subprocess
+
+    if (
+        os.name != "posix"
+        or threading.current_thread() is not threading.main_thread()
+        or not sys.executable  # an embedded interpreter: no witness
+    ):
+        yield lambda: False
+        return
+    witness = subprocess.Popen(
+        [sys.executable, "-S", "-E", "-c", "import time\nwhile True: time.sleep(60)"],
+        stdin=subprocess.DEVNULL,
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,  # a Ctrl-C during its start is a KeyboardInterrupt there
+    )
+    ended: list[bool] = []
+    try:
+        yield lambda: bool(ended and ended[0])
+    finally:
+        ended.append(witness.poll() is not None)
+        if not ended[0]:
+            witness.kill()
+        witness.wait()
+
+
+@contextlib.contextmanager
 def _sigint_as_flag() -> Iterator[threading.Event]:
     """For the block's duration, Ctrl-C (SIGINT) sets the returned event instead of raising
     KeyboardInterrupt wherever the main thread happens to be.
@@ -482,8 +517,9 @@ def _dask_client(
     # would still try port 8787 and warn (or fail) when that is taken.
     # Ctrl-C in a terminal reaches every process of the group: the worker processes start with
     # SIGINT ignored (their children inherit it), so that this process alone stops the job
-    # and shuts the cluster down, rather than each worker dying with a traceback.
-    with _sigint_handled_by(signal.SIG_IGN):
+    # and shuts the cluster down, rather than each worker dying with a traceback. This
+    # process ignores it too meanwhile; the witness hears a Ctrl-C of those seconds for it.
+    with _ctrl_c_witness() as witness, _sigint_handled_by(signal.SIG_IGN):
         cluster = LocalCluster(  # type: ignore[no-untyped-call]
             n_workers=workers,
             threads_per_worker=1,
@@ -492,5 +528,7 @@ def _dask_client(
             dashboard_address="127.0.0.1:0",
             silence_logs=logging.ERROR,
         )
+    if witness():  # the handler in place now (_sigint_as_flag's: the job stops) gets it
+        signal.raise_signal(signal.SIGINT)
     with cluster, Client(cluster) as client:  # type: ignore[no-untyped-call]
         yield client, f"local dask cluster of {workers} worker processes", task_threads
