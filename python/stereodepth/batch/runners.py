@@ -399,13 +399,22 @@ def _refuse_replacing_other_images(pairs: Sequence[Pair], options: BatchOptions)
             before = [record["inputs"][side]["path"] for side in ("left", "right")]
         except (KeyError, TypeError):
             continue
-        now = [os.path.realpath(p.left), os.path.realpath(p.right)]
-        if all(isinstance(b, str) and os.path.isabs(b) for b in before) and before != now:
+        if not all(isinstance(b, str) and os.path.isabs(b) for b in before):
+            continue
+        if not all(_same_file(b, now) for b, now in zip(before, (p.left, p.right), strict=True)):
             raise UsageError(
                 f"OUTDIR {options.out_dir} holds the outputs of pair {p.stem!r} made from other "
                 f"images ({before[0]}, {before[1]}; this job's are {p.left}, {p.right}): "
                 "choose another OUTDIR (-o), or give --force to replace them"
             )
+
+
+def _same_file(recorded: str, path: Path) -> bool:
+    """Whether a record's absolute path names the file at ``path`` (a link to it too)."""
+    try:
+        return os.path.samefile(recorded, path)
+    except OSError:  # either is gone
+        return recorded == os.path.realpath(path)
 
 
 def _record_stamp(pair: Pair, options: BatchOptions) -> tuple[int, int, int] | None:
