@@ -781,6 +781,107 @@ def test_relative_paths_reach_a_scheduler_whose_workers_work_elsewhere(tmp_path:
         )
 
 
+def test_the_same_job_with_input_spelled_otherwise_resumes(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A pair's record named its images by the path as given, so the same job run again with
+    INPUT absolute instead of relative (or from another folder) redid every pair."""
+    middlebury_folder(tmp_path / "in", 2)
+    monkeypatch.chdir(tmp_path)
+    assert run_cli("batch", "in", "-o", "out", "--quiet") == 0
+    stamps = {p.name: p.stat().st_mtime_ns for p in (tmp_path / "out").glob("*.npy")}
+    assert run_cli("batch", tmp_path / "in", "-o", tmp_path / "out", "--quiet") == 0
+    assert report_of(tmp_path / "out")["counts"]["skipped"] == 2
+    monkeypatch.chdir(tmp_path / "in")
+    assert run_cli("batch", ".", "-o", "../out", "--quiet") == 0
+    assert report_of(tmp_path / "out")["counts"]["skipped"] == 2
+    assert {p.name: p.stat().st_mtime_ns for p in (tmp_path / "out").glob("*.npy")} == stamps
+    # an image changed is still redone
+    (tmp_path / "in" / "scene01" / "im1.png").write_bytes(
+        (tmp_path / "in" / "scene00" / "im1.png").read_bytes()
+    )
+    assert run_cli("batch", "scene01", "-o", "../out", "--quiet") == 0
+    assert [p["status"] for p in report_of(tmp_path / "out")["pairs"]] == ["ok"]
+
+
+def test_a_second_job_whose_stems_repeat_the_first_does_not_replace_its_results(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Two jobs into one OUTDIR whose pairs share stems (KITTI 2012's and 2015's training
+    frames are both 000000_10...): the second replaced the first's results without a word
+    (exit 0, '2 done'). Refused before any pair, one line naming both images; --force
+    replaces them."""
+    middlebury_folder(tmp_path / "first", 2)
+    middlebury_folder(tmp_path / "second", 2, first_seed=7)
+    out = tmp_path / "out"
+    assert run_cli("batch", tmp_path / "first", "-o", out, "--quiet") == 0
+    before = outputs_bytes(out)
+    capsys.readouterr()
+    assert run_cli("batch", tmp_path / "second", "-o", out, "--quiet") == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and err.startswith("stereodepth batch: error: OUTDIR "), err
+    left = (tmp_path / "first" / "scene00" / "im0.png").resolve()
+    assert f"holds the outputs of pair 'scene00' made from other images ({left}, " in err
+    assert "give --force to replace them" in err
+    assert outputs_bytes(out) == before
+    assert report_of(out)["counts"]["ok"] == 2  # the first job's report, untouched
+    # the first job's own run again is no collision, and --force replaces
+    assert run_cli("batch", tmp_path / "first", "-o", out, "--quiet") == 0
+    assert run_cli("batch", tmp_path / "second", "-o", out, "--quiet", "--force") == 0
+    for name in ("scene00", "scene01"):
+        disparity, depth = expected_maps(tmp_path / "second" / name)
+        np.testing.assert_array_equal(np.load(out / f"{name}.disparity.npy"), disparity)
+        np.testing.assert_array_equal(np.load(out / f"{name}.depth.npy"), depth)
+
+
+@pytest.mark.cluster
+def test_a_job_of_a_scheduler_resumes_here(tmp_path: Path) -> None:
+    """A --scheduler job (its paths made absolute for the workers) resumed in this process
+    after the cluster went away, with the same relative INPUT: every pair was redone."""
+    distributed = pytest.importorskip("distributed")
+    middlebury_folder(tmp_path / "in", 2)
+    argv = ["batch", "in", "-o", "out", "--quiet"]
+    with distributed.LocalCluster(
+        n_workers=1,
+        processes=False,
+        protocol="tcp",
+        threads_per_worker=1,
+        host="127.0.0.1",
+        dashboard_address="127.0.0.1:0",
+    ) as cluster:
+        code = [*argv, "--scheduler", cluster.scheduler_address]
+        proc = subprocess.run(
+            [
+                sys.executable,
+                "-c",
+                f"import sys; from stereodepth import cli; sys.exit(cli.main({code!r}))",
+            ],
+            cwd=tmp_path,
+            capture_output=True,
+            text=True,
+            timeout=120,
+            env={**os.environ, "PYTHONPATH": os.pathsep.join(sys.path)},
+        )
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    assert report_of(tmp_path / "out")["counts"]["ok"] == 2
+    proc = subprocess.run(
+        [
+            sys.executable,
+            "-c",
+            f"import sys; from stereodepth import cli; sys.exit(cli.main({argv!r}))",
+        ],
+        cwd=tmp_path,
+        capture_output=True,
+        text=True,
+        timeout=120,
+        env={**os.environ, "PYTHONPATH": os.pathsep.join(sys.path)},
+    )
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    assert report_of(tmp_path / "out")["counts"] == {
+        "ok": 0, "skipped": 2, "failed": 0, "cancelled": 0,
+    }  # fmt: skip
+
+
 @pytest.mark.cluster
 def test_workers_option_starts_a_local_cluster(tmp_path: Path) -> None:
     pytest.importorskip("distributed")
@@ -842,6 +943,49 @@ def test_ctrl_c_during_a_dask_job_sets_a_flag_and_a_second_one_raises() -> None:
             assert not stop.is_set() and seen == [signal.SIGINT]
     finally:
         signal.signal(signal.SIGINT, previous)
+
+
+@pytest.mark.cluster
+def test_ctrl_c_while_the_local_cluster_starts_stops_the_job(tmp_path: Path) -> None:
+    """SIGINT is ignored while the worker processes start (so that they inherit it ignored),
+    and a Ctrl-C in those seconds was lost: the job ran every pair and ended with status 0.
+    Now it stops before any pair, status 130, every pair cancelled. The workers' start is
+    slowed down through dask's worker preload hook."""
+    pytest.importorskip("distributed")
+    inp, out = tmp_path / "in", tmp_path / "out"
+    middlebury_folder(inp, 3)
+    marker = tmp_path / "worker-starting"
+    preload = tmp_path / "slow_start.py"
+    preload.write_text(
+        f"import pathlib, time\npathlib.Path({str(marker)!r}).touch()\ntime.sleep(3)\n"
+    )
+    env = {**os.environ, "DASK_DISTRIBUTED__WORKER__PRELOAD": json.dumps([str(preload)])}
+    argv = [sys.executable, "-m", "stereodepth.cli", "batch", str(inp), "-o", str(out)]
+    with subprocess.Popen(
+        [*argv, "--workers", "1"],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        env=env,
+        start_new_session=True,
+    ) as proc:
+        try:
+            wait_for(marker.exists, timeout=120)
+        finally:
+            os.killpg(proc.pid, signal.SIGINT)
+            _, stderr = proc.communicate(timeout=120)
+    assert proc.returncode == 130, stderr
+    assert "Traceback" not in stderr, stderr
+    report = report_of(out)
+    assert report["interrupted"]
+    assert report["counts"] == {"ok": 0, "skipped": 0, "failed": 0, "cancelled": 3}
+    assert sorted(p.name for p in out.iterdir()) == ["report.json"]
+    # and the same command then does the job
+    assert run_cli("batch", inp, "-o", out, "--quiet") == 0
+    for name in ("scene00", "scene01", "scene02"):
+        np.testing.assert_array_equal(
+            np.load(out / f"{name}.depth.npy"), expected_maps(inp / name)[1], strict=True
+        )
 
 
 @pytest.mark.cluster

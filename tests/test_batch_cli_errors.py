@@ -165,6 +165,28 @@ def test_input_and_output_errors(tmp_path: Path, capsys: pytest.CaptureFixture[s
     assert not (tmp_path / "out").exists()
 
 
+def test_an_unreachable_scheduler_leaves_none_of_the_folders_made_for_outdir(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """``-o runs/2026/out`` made runs/ and runs/2026/ too; only out/ was removed again, so the
+    job that did nothing left two empty folders. A folder that was there before (empty too)
+    stays."""
+    distributed = pytest.importorskip("distributed")
+
+    def refuse(address: str, **kwargs: object) -> None:
+        raise OSError(f"Timed out trying to connect to {address} after 10 s")
+
+    monkeypatch.setattr(distributed, "Client", refuse)
+    inp = scene(tmp_path)
+    (tmp_path / "existing").mkdir()
+    out = tmp_path / "existing" / "runs" / "2026" / "out"
+    argv = [str(inp), "-o", str(out), "--quiet", "--scheduler", "tcp://127.0.0.1:9"]
+    status, err = run(argv, capsys)
+    assert_one_line(status, err, "cannot reach the Dask scheduler")
+    assert (tmp_path / "existing").is_dir()
+    assert list((tmp_path / "existing").iterdir()) == []
+
+
 def test_an_outdir_the_system_refuses_to_make_is_a_usage_error(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:

@@ -478,6 +478,43 @@ def test_channel_order_is_passed_to_the_matcher(
     assert record_of(out, "a")["settings"]["matcher"]["channel_order"] == "bgr"
 
 
+def test_channel_order_bgr_colours_the_point_cloud_in_rgb(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A pair stored with its channels swapped (B, G, R), matched with --channel-order bgr:
+    the PLY's red, green, blue were the file's channels as stored, so the cloud's blue sky
+    came out red; write_ply takes RGB (the README: colors=frame[..., ::-1] for a BGR frame)."""
+    d = scene(tmp_path / "in" / "a", rgb=True)
+    out = tmp_path / "out"
+    argv = [tmp_path / "in", "-o", out, "--channel-order", "bgr", "--ply", "--quiet"]
+    assert run(capsys, *argv)[0] == 0
+    left = np.asarray(Image.open(d / "im0.png"))
+    right = np.asarray(Image.open(d / "im1.png"))
+    disparity = stereodepth.block_match(left, right, num_disparities=16, channel_order="bgr")
+    points = stereodepth.reproject(disparity, focal_px=700, baseline_m=0.1, cx_px=24, cy_px=16)
+    keep = np.isfinite(points).all(axis=-1)
+    assert keep.sum() > 0
+    _, vertex = _read_ply(out / "a.ply")
+    np.testing.assert_array_equal(
+        np.stack([vertex["x"], vertex["y"], vertex["z"]], -1), points[keep]
+    )
+    colours = np.stack([vertex["red"], vertex["green"], vertex["blue"]], -1)
+    np.testing.assert_array_equal(colours, left[..., ::-1][keep])
+
+
+def _read_ply(path: Path) -> tuple[list[str], np.ndarray]:
+    """A minimal reader of the binary little-endian PLY files write_ply makes."""
+    data = path.read_bytes()
+    end = data.index(b"end_header\n") + len(b"end_header\n")
+    header = data[:end].decode("ascii").splitlines()
+    n = int(next(h for h in header if h.startswith("element vertex")).split()[-1])
+    types = {"float": "<f4", "uchar": "u1"}
+    fields = [(h.split()[2], types[h.split()[1]]) for h in header if h.startswith("property")]
+    vertex = np.frombuffer(data[end:], dtype=np.dtype(fields))
+    assert vertex.size == n
+    return header, vertex
+
+
 # --- the lock file ------------------------------------------------------------------------------
 def test_the_lock_file_is_removed_when_the_job_ends(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
@@ -617,3 +654,76 @@ def test_a_folder_reached_twice_through_a_link_is_searched_once(tmp_path: Path) 
         "d/loop": f"the same folder as {inp} (a link): not searched again",
         "z_again": f"the same folder as {inp / 'teddy'} (a link): not searched again",
     }
+
+
+def test_outputs_in_the_kitti_left_folder_are_not_pairs_on_the_next_run(
+    tmp_path: Path, stereo_data_dir: Path
+) -> None:
+    """Outputs beside the left images of a KITTI set (-o training/image_2): the depth and
+    disparity PNGs of --format png16 and the previews were taken for left images on the next
+    run, which pair 000070_10 writes, so the same command was refused ('which is the input
+    ...: choose another OUTDIR'). The shared KITTI scene, its outputs checked."""
+    scene = stereo_data_dir / "kitti2012-000070"
+    root = tmp_path / "training"
+    for side, name in (("image_0", "left.png"), ("image_1", "right.png")):
+        (root / side).mkdir(parents=True)
+        (root / side / "000070_10.png").write_bytes((scene / name).read_bytes())
+    meta = json.loads((scene / "meta.json").read_text())
+    out = root / "image_0"
+    argv = [
+        "batch", str(root), "-o", str(out), "--format", "png16", "--preview",
+        "--focal-px", str(meta["focal_px"]), "--baseline-mm", str(meta["baseline_mm"]),
+        "--num-disparities", "160", "--threads", "1", "--quiet",
+    ]  # fmt: skip
+    assert cli.main(argv) == 0
+    first = {p.name: p.read_bytes() for p in out.iterdir() if p.name != "report.json"}
+    assert cli.main(argv) == 0
+    report = json.loads((out / "report.json").read_text())
+    assert [(p["stem"], p["status"]) for p in report["pairs"]] == [("000070_10", "skipped")]
+    assert (
+        f"skipped {out / '000070_10.depth.png'}: an output of pair '000070_10' in OUTDIR, "
+        "not a pair" in report["notes"]
+    )
+    assert {p.name: p.read_bytes() for p in out.iterdir() if p.name != "report.json"} == first
+    left = stereodepth.io.read_image(out / "000070_10.png")
+    right = stereodepth.io.read_image(root / "image_1" / "000070_10.png")
+    disparity = stereodepth.block_match(left, right, num_disparities=160, threads=1)
+    depth = stereodepth.disparity_to_depth(
+        disparity,
+        focal_px=meta["focal_px"],
+        baseline_m=meta["baseline_mm"] / 1000,
+        dtype=np.uint16,
+    )
+    np.testing.assert_array_equal(stereodepth.io.read_image(out / "000070_10.depth.png"), depth)
+    written = stereodepth.io.read_disparity_png16(out / "000070_10.disparity.png")
+    np.testing.assert_array_equal(np.isnan(written), ~(disparity > 0) | np.isnan(disparity))
+    assert np.nanmax(np.abs(written - disparity)) <= 1 / 512
+
+
+def test_batch_options_are_checked_when_made(tmp_path: Path) -> None:
+    """The Python API: a str OUTDIR was an AttributeError from run_batch ('str' object has no
+    attribute 'parents'); an unknown format failed every pair with "KeyError: 'tif'" and an
+    unknown method every pair too, each leaving a failed record in OUTDIR."""
+    scene(tmp_path / "in" / "a")
+    pairs = batch.resolve_calibration(batch.find_pairs(tmp_path / "in"))
+    report = batch.run_batch(pairs, batch.BatchOptions(out_dir=str(tmp_path / "out")), threads=1)
+    assert report.counts["ok"] == 1
+    np.testing.assert_array_equal(
+        np.load(tmp_path / "out" / "a.disparity.npy"),
+        stereodepth.block_match(
+            np.asarray(Image.open(tmp_path / "in" / "a" / "im0.png")),
+            np.asarray(Image.open(tmp_path / "in" / "a" / "im1.png")),
+            num_disparities=16,
+        ),
+    )
+    with pytest.raises(
+        TypeError, match=r"out_dir must be a path \(str or os.PathLike\), got int 3"
+    ):
+        batch.BatchOptions(out_dir=3)  # type: ignore[arg-type]
+    with pytest.raises(ValueError, match=r"format must be one of 'npy', 'png16', 'pfm', got 'tif'"):
+        batch.BatchOptions(out_dir=tmp_path / "x", format="tif")
+    with pytest.raises(ValueError, match=r"method must be one of 'bm', 'sgm', got 'xx'"):
+        batch.BatchOptions(out_dir=tmp_path / "x", method="xx")
+    with pytest.raises(TypeError, match=r"method must be one of 'bm', 'sgm', got NoneType None"):
+        batch.BatchOptions(out_dir=tmp_path / "x", method=None)  # type: ignore[arg-type]
+    assert not (tmp_path / "x").exists()

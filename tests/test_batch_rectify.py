@@ -506,3 +506,58 @@ def test_no_output_is_an_input(tmp_path: Path, capsys: pytest.CaptureFixture[str
     assert sorted(p.name for p in inp.iterdir()) == [
         "list.csv", "p.left-rectified.png", "p.right-rectified.png", "p0",
     ]  # fmt: skip
+
+
+HANG_ON_DEPTH = """
+import time
+from stereodepth import io
+_write_npy = io.write_npy
+def _hang(path, array):
+    if str(path).endswith("p0.depth.npy"):
+        print("writing the depth", flush=True)
+        time.sleep(120)
+    return _write_npy(path, array)
+io.write_npy = _hang
+"""
+
+
+def test_a_job_killed_mid_pair_with_outdir_inside_input_resumes(tmp_path: Path) -> None:
+    """OUTDIR = INPUT and --write-rectified, the job killed (SIGKILL) after the rectified pair
+    was written and before the pair's record, which lists it: ``p0.left-rectified.png`` was
+    then found as a new pair, which pair ``p0`` writes, so every later run was refused
+    ('which is the input ...: choose another OUTDIR') and the job could not be resumed."""
+    import signal
+
+    inp, calib = raw_folder(tmp_path, n=1)
+    scene = inp / "p0"
+    yaml = mr.write_opencv_yaml(tmp_path / "stereo.yml", calib, stored=False)
+    argv = [
+        "batch", str(scene), "-o", str(scene), "--calib", str(yaml), "--translation-unit", "mm",
+        "--num-disparities", str(NDISP), "--write-rectified", "--quiet",
+    ]  # fmt: skip
+    with tb.cli_process(argv, HANG_ON_DEPTH) as proc:
+        try:
+            assert proc.stdout is not None
+            assert proc.stdout.readline().strip() == "writing the depth"
+        finally:
+            proc.send_signal(signal.SIGKILL)
+            proc.communicate(timeout=60)
+    assert (scene / "p0.left-rectified.png").is_file()
+    assert not (scene / "p0.record.json").exists()
+    assert run_cli(*argv) == 0
+    report = json.loads((scene / "report.json").read_text())
+    assert [(p["stem"], p["status"]) for p in report["pairs"]] == [("p0", "ok")]
+    note = (
+        f"skipped {scene / 'p0.left-rectified.png'}: an output of pair 'p0' in OUTDIR, not a pair"
+    )
+    assert note in report["notes"]
+    rect = StereoRectifier.from_calibration(read_stereo_calibration(yaml, translation_unit="mm"))
+    disparity, depth, rect_l, rect_r = expected(scene / "left.png", scene / "right.png", rect)
+    np.testing.assert_array_equal(np.load(scene / "p0.disparity.npy"), disparity, strict=True)
+    np.testing.assert_array_equal(np.load(scene / "p0.depth.npy"), depth, strict=True)
+    np.testing.assert_array_equal(io.read_image(scene / "p0.left-rectified.png"), rect_l)
+    np.testing.assert_array_equal(io.read_image(scene / "p0.right-rectified.png"), rect_r)
+    assert sorted(p.name for p in scene.iterdir()) == [
+        "left.png", "p0.depth.npy", "p0.disparity.npy", "p0.left-rectified.png",
+        "p0.record.json", "p0.right-rectified.png", "report.json", "right.png",
+    ]  # fmt: skip

@@ -347,7 +347,7 @@ def bad_cases(tmp: Path, left: Path, right: Path) -> list[tuple[list[Any], str]]
             "num_disparities must be an integer in [1, 4096]",
         ),
         ([left, right, "--block-size", "4"], "block_size must be an odd integer"),
-        ([left, right, "--cmap", "nope"], "cmap must be a matplotlib colour map name"),
+        ([left, right, "--cmap", "nope"], "--cmap nope: cmap must be a matplotlib colour map"),
         ([left, right, "--ply"], "--ply needs a rig"),
         ([left, right, "-o", tmp / "missing" / "p-"], "the folder of the prefix"),
         ([left, right, "--threads", "-1"], "--threads must be an integer >= 0, got -1"),

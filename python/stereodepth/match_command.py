@@ -412,7 +412,10 @@ def run(args: argparse.Namespace) -> int:
     if want_preview:
         from .colormap import colormap_lut
 
-        colormap_lut(args.cmap)  # a bad name or a missing extra fails before any work
+        try:  # a bad name or a missing extra (ImportError, exit 1) fails before any work
+            colormap_lut(args.cmap)
+        except ValueError as exc:  # named the library's cmap, not the flag
+            raise _Usage(f"--cmap {args.cmap}: {exc}") from None
     names = {"disparity": "disparity" + DISPARITY_FORMATS[args.disparity_format]}
     if rig is not None:
         names["depth"] = "depth" + DEPTH_FORMATS[args.depth_format]

@@ -27,7 +27,10 @@ Input
     A pair's stem (its output names) is its folder's path below INPUT joined by ``_``, with
     the rest of the left image's name. Folders that hold images but give no pair, right
     sub-folders' images with no left image of their name, and folders deeper than the search,
-    are listed with the reason (on stderr and in the report), never dropped silently.
+    are listed with the reason (on stderr and in the report), never dropped silently. With
+    OUTDIR = INPUT or a folder of left images (KITTI's ``image_2``), the images of a pair's
+    outputs (``S.left-rectified.png``, ``S.depth.png``...) are not pairs, even those of a job
+    killed before the pair's record listed them (they are listed too).
 
     A CSV file lists ``left,right[,stem]`` per line, UTF-8, LF or CR LF line ends; cells are
     stripped of spaces (a quoted cell may follow spaces: ``a.png, "b 1.png"``); an optional
@@ -37,7 +40,8 @@ Input
 
 Images
     Images are read by Pillow: colour images come as RGB (``--channel-order bgr`` for files
-    whose channels were stored swapped), grey ones as 8 or 16 bit. Left and right must both
+    whose channels were stored swapped: the matcher reads them so, and the point cloud is
+    coloured in RGB), grey ones as 8 or 16 bit. Left and right must both
     be colour or both grey, of the same size and bit depth, as :func:`stereodepth.block_match`
     requires: a mixed pair fails with a message saying which is which.
 
@@ -90,11 +94,14 @@ Output, per pair with stem S, in OUTDIR
     Every file is written to a temporary file and renamed, so a killed job leaves no
     half-written output. Running the same command again skips the pairs whose record matches
     (same inputs, options and calibration, outputs present) and redoes the rest; ``--force``
-    redoes all. A pair that is redone loses the files of its earlier run that this run does
-    not write again (another ``--format``, a ``.ply`` no longer asked for, everything when it
-    now fails); its record lists them under ``removed``. One job at a time may write to
-    OUTDIR: a lock file, ``.stereodepth-batch.lock``, guards it and is removed when the job
-    ends.
+    redoes all. An input is the file itself (its real path, size and time), however INPUT is
+    spelled: a job resumes from another folder, or here after its Dask cluster went away. A
+    job whose pair would replace a pair's outputs made from other images (a second job into
+    the same OUTDIR, its stems the first's) is refused before any pair; ``--force`` replaces
+    them. A pair that is redone loses the files of its earlier run that this run does not
+    write again (another ``--format``, a ``.ply`` no longer asked for, everything when it now
+    fails); its record lists them under ``removed``. One job at a time may write to OUTDIR: a
+    lock file, ``.stereodepth-batch.lock``, guards it and is removed when the job ends.
 
 Running
     By default the pairs run in this process, three at a time on a thread pool, each using every

@@ -112,7 +112,10 @@ def register(subparsers: Any) -> None:
         help="the JSON report (default OUTDIR/report.json); its folder must exist",
     )
     o.add_argument(
-        "--force", action="store_true", help="recompute pairs whose outputs are already complete"
+        "--force",
+        action="store_true",
+        help="recompute pairs whose outputs are already complete, and replace outputs of the "
+        "same names made from other images (refused without it)",
     )
     o.add_argument("--quiet", action="store_true", help="no progress bar and no summary")
     m = p.add_argument_group(

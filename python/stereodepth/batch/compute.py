@@ -164,6 +164,10 @@ def process_pair(pair: Pair, options: BatchOptions, threads: int | None = None) 
             stem = pair.stem.encode("ascii", "backslashreplace").decode("ascii")
             from ..colormap import to_uint8  # 16-bit: coloured as matched, not by the high byte
 
+            if colours.ndim == 3 and options.matcher.get("channel_order") == "bgr":
+                # --channel-order bgr: the file's channels are B, G, R (the matcher is told
+                # so); a PLY's are red, green, blue (its sky was written red)
+                colours = colours[..., ::-1]
             n = write_ply(
                 paths["ply"],
                 points,

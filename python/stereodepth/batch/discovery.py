@@ -388,6 +388,47 @@ def _csv_pairs(path: Path, names: Sequence[tuple[str, str]]) -> list[Pair]:
     return pairs
 
 
+def _without_outputs(
+    pairs: list[Pair], out_dirs: Sequence[Path]
+) -> tuple[list[Pair], list[tuple[Path, str]]]:
+    """The pairs found, without those whose left image is an output of another pair found, in
+    OUTDIR (``out_dirs``), and those left out, with the reason.
+
+    OUTDIR is searched when it is INPUT itself or a folder of left images (outputs beside the
+    inputs). A scene folder's images that a pair's record lists are not taken for pairs, but
+    a job killed mid-pair (SIGKILL, the OOM killer, a power cut) leaves the images it wrote
+    without a record, and left/right folders (KITTI's image_2) have no such check: then
+    ``p0.left-rectified.png`` and ``p0.right-rectified.png``, or ``000000_10.depth.png`` of
+    ``--format png16`` in ``image_2``, were found as new pairs, and since pair ``p0`` or
+    ``000000_10`` writes them, the next run was refused ('which is the input ...: choose
+    another OUTDIR'), so the job could not be resumed."""
+    from .job import owned_names
+
+    if not out_dirs:
+        return pairs, []
+    owner: dict[Path, str] = {}
+    for d in out_dirs:
+        folder = d.resolve()
+        for p in pairs:
+            for name in owned_names(p.stem):
+                owner.setdefault(folder / name, p.stem)
+    kept: list[Pair] = []
+    left_out: list[tuple[Path, str]] = []
+    for p in pairs:
+        # where the image's name is (a link there is written through by that pair too)
+        stem = owner.get(p.left.parent.resolve() / p.left.name)
+        if stem is None or stem == p.stem:
+            kept.append(p)
+            continue
+        left_out.append(
+            (
+                p.left,
+                f"an output of pair {stem!r} in OUTDIR, not a pair",
+            )
+        )
+    return kept, left_out
+
+
 def discover(
     input_path: str | os.PathLike[str],
     *,
@@ -419,6 +460,8 @@ def discover(
         pairs = _csv_pairs(root, names)
     else:
         pairs, skipped = _search(root, names, [Path(p) for p in exclude])
+        pairs, unrecorded = _without_outputs(pairs, [Path(p) for p in exclude])
+        skipped.extend(unrecorded)
         for p in pairs:
             # A link (image_3/x.png linked to image_2/x.png, --pair-names naming a link to
             # the left image) matched the image with itself: every disparity 0, "ok". The

@@ -78,6 +78,29 @@ class BatchOptions:
     rectification: BatchRectifier | None = None
     write_rectified: bool = False
 
+    def __post_init__(self) -> None:
+        """The fields every pair is named and written by, checked once: a str OUTDIR was an
+        AttributeError ('str' object has no attribute 'parents'), and an unknown format or
+        method failed every pair (``KeyError: 'tif'``), writing a failed record for each."""
+        import os
+
+        from .._methods import check_method
+
+        if isinstance(self.out_dir, str) or (
+            isinstance(self.out_dir, os.PathLike) and not isinstance(self.out_dir, Path)
+        ):
+            object.__setattr__(self, "out_dir", Path(self.out_dir))
+        if not isinstance(self.out_dir, Path):
+            raise TypeError(
+                f"out_dir must be a path (str or os.PathLike), got "
+                f"{type(self.out_dir).__name__} {self.out_dir!r}"
+            )
+        if not isinstance(self.format, str) or self.format not in FORMATS:
+            raise ValueError(
+                f"format must be one of {', '.join(map(repr, FORMATS))}, got {self.format!r}"
+            )
+        check_method(self.method, "method")
+
     def output_paths(self, stem: str) -> dict[str, Path]:
         ext = FORMATS[self.format]
         out = {
@@ -98,12 +121,15 @@ class BatchOptions:
         return self.out_dir / f"{stem}{RECORD_SUFFIX}"
 
     def owned_names(self, stem: str) -> set[str]:
-        """The names of every file a pair may write into OUTDIR, in any format, with or
-        without ``--ply``, ``--preview`` or ``--write-rectified``: the only files batch ever
-        removes (when they are stale)."""
-        names = {
-            f"{stem}.{kind}.{ext}" for kind in ("disparity", "depth") for ext in FORMATS.values()
-        }
-        previews = {f"{stem}.{kind}.preview.png" for kind in ("disparity", "depth")}
-        rectified = {f"{stem}.{side}-rectified.png" for side in ("left", "right")}
-        return names | previews | rectified | {f"{stem}.ply", f"{stem}{RECORD_SUFFIX}"}
+        """The names of every file a pair may write into OUTDIR (:func:`owned_names`)."""
+        return owned_names(stem)
+
+
+def owned_names(stem: str) -> set[str]:
+    """The names of every file the pair ``stem`` may write into OUTDIR, in any format, with
+    or without ``--ply``, ``--preview`` or ``--write-rectified``: the only files batch ever
+    removes (when they are stale)."""
+    names = {f"{stem}.{kind}.{ext}" for kind in ("disparity", "depth") for ext in FORMATS.values()}
+    previews = {f"{stem}.{kind}.preview.png" for kind in ("disparity", "depth")}
+    rectified = {f"{stem}.{side}-rectified.png" for side in ("left", "right")}
+    return names | previews | rectified | {f"{stem}.ply", f"{stem}{RECORD_SUFFIX}"}

@@ -4,6 +4,7 @@ report."""
 from __future__ import annotations
 
 import math
+import os
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -14,8 +15,13 @@ from .job import STATUSES, BatchOptions, Pair, read_record
 
 
 def file_stamp(p: Path) -> dict[str, Any]:
+    """An input image's identity for resuming: the file it is (links followed, as an absolute
+    path), its size and time. The path as given depended on the folder the job ran from and
+    on the runner (a ``--scheduler`` job's are absolute), so the same job run again with
+    INPUT spelled otherwise, or resumed here after its Dask cluster went away, redid every
+    pair."""
     st = p.stat()
-    return {"path": str(p), "bytes": st.st_size, "mtime_ns": st.st_mtime_ns}
+    return {"path": os.path.realpath(p), "bytes": st.st_size, "mtime_ns": st.st_mtime_ns}
 
 
 def settings_of(pair: Pair, options: BatchOptions) -> dict[str, Any]:

@@ -137,6 +137,8 @@ def _run_dask(
     already arrived are kept, and KeyboardInterrupt is raised here, outside Dask's calls."""
     import queue
 
+    if stop.is_set():  # Ctrl-C while the cluster started: no pair is sent
+        raise KeyboardInterrupt
     run_id = uuid.uuid4().hex[:8]
     futures = {}
     for i, p in todo:
@@ -248,7 +250,8 @@ def run_batch(
         # found no images there (every pair failed) or wrote the outputs elsewhere.
         pairs, options = _absolute(pairs, options)
     out_dir = options.out_dir
-    created = not out_dir.exists()
+    # OUTDIR and its missing parents, deepest first: -o new/run/out made all three.
+    created = [d for d in (out_dir, *out_dir.parents) if not d.exists()]
     try:
         out_dir.mkdir(parents=True, exist_ok=True)
     except OSError as exc:  # what the command's checks cannot foresee (/proc, /sys, full disk)
@@ -256,9 +259,13 @@ def run_batch(
     try:
         return _run_locked(pairs, options, scheduler, workers, threads, progress, on_result, notes)
     except UsageError:
-        if created:  # e.g. the scheduler did not answer: leave no empty OUTDIR behind
-            with contextlib.suppress(OSError):
-                out_dir.rmdir()
+        # e.g. the scheduler did not answer: leave no empty OUTDIR behind, nor the folders
+        # made for it (rmdir removes only an empty folder)
+        for folder in created:
+            try:
+                folder.rmdir()
+            except OSError:
+                break
         raise
 
 
@@ -313,6 +320,8 @@ def _run_locked(
 
         try:
             removed += len(remove_temp_files(out_dir))
+            if not options.force:
+                _refuse_replacing_other_images(pairs, options)
             todo: list[tuple[int, Pair]] = []
             for i, p in enumerate(pairs):
                 earlier = None if options.force else completed_record(p, options)
@@ -372,6 +381,42 @@ def _run_locked(
     )
 
 
+def _refuse_replacing_other_images(pairs: Sequence[Pair], options: BatchOptions) -> None:
+    """UsageError, before any pair runs, when OUTDIR holds a pair's complete outputs made from
+    other images: a second job into the same OUTDIR whose stems repeat the first's (KITTI
+    2012's and 2015's training/image_2/000000_10.png are both pair 000000_10) replaced the
+    first job's results without a word. ``--force`` replaces them.
+
+    Records name their images by real path (:func:`~.records.file_stamp`); one naming them by
+    a relative path (written before that) cannot be compared and is taken as the same pair."""
+    from .job import read_record
+
+    for p in pairs:
+        record = read_record(options.record_path(p.stem))
+        if record is None or record.get("status") != "ok":
+            continue  # a failed pair's record: its outputs were removed, nothing to lose
+        try:
+            before = [record["inputs"][side]["path"] for side in ("left", "right")]
+        except (KeyError, TypeError):
+            continue
+        if not all(isinstance(b, str) and os.path.isabs(b) for b in before):
+            continue
+        if not all(_same_file(b, now) for b, now in zip(before, (p.left, p.right), strict=True)):
+            raise UsageError(
+                f"OUTDIR {options.out_dir} holds the outputs of pair {p.stem!r} made from other "
+                f"images ({before[0]}, {before[1]}; this job's are {p.left}, {p.right}): "
+                "choose another OUTDIR (-o), or give --force to replace them"
+            )
+
+
+def _same_file(recorded: str, path: Path) -> bool:
+    """Whether a record's absolute path names the file at ``path`` (a link to it too)."""
+    try:
+        return os.path.samefile(recorded, path)
+    except OSError:  # either is gone
+        return recorded == os.path.realpath(path)
+
+
 def _record_stamp(pair: Pair, options: BatchOptions) -> tuple[int, int, int] | None:
     """(inode, size, mtime_ns) of a pair's record, None when it is missing: a record
     rewritten (atomically: a new file) has another stamp."""
@@ -395,6 +440,39 @@ def _sigint_handled_by(handler: Any) -> Iterator[None]:
         yield
     finally:
         signal.signal(signal.SIGINT, previous)
+
+
+@contextlib.contextmanager
+def _ctrl_c_witness() -> Iterator[Callable[[], bool]]:
+    """A small process of this process group that a Ctrl-C ends, for a block during which
+    this process ignores SIGINT (while a local cluster starts: a Ctrl-C then was lost, and the
+    job ran every pair and ended with status 0). Yields a function that says, after the
+    block, whether the witness ended on its own, that is whether SIGINT reached the group.
+    In the main thread of a POSIX process only (elsewhere SIGINT is not ignored: the function
+    says False)."""
+    import subprocess
+
+    if (
+        os.name != "posix"
+        or threading.current_thread() is not threading.main_thread()
+        or not sys.executable  # an embedded interpreter: no witness
+    ):
+        yield lambda: False
+        return
+    witness = subprocess.Popen(
+        [sys.executable, "-S", "-E", "-c", "import time\nwhile True: time.sleep(60)"],
+        stdin=subprocess.DEVNULL,
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,  # a Ctrl-C during its start is a KeyboardInterrupt there
+    )
+    ended: list[bool] = []
+    try:
+        yield lambda: bool(ended and ended[0])
+    finally:
+        ended.append(witness.poll() is not None)
+        if not ended[0]:
+            witness.kill()
+        witness.wait()
 
 
 @contextlib.contextmanager
@@ -448,8 +526,9 @@ def _dask_client(
     # would still try port 8787 and warn (or fail) when that is taken.
     # Ctrl-C in a terminal reaches every process of the group: the worker processes start with
     # SIGINT ignored (their children inherit it), so that this process alone stops the job
-    # and shuts the cluster down, rather than each worker dying with a traceback.
-    with _sigint_handled_by(signal.SIG_IGN):
+    # and shuts the cluster down, rather than each worker dying with a traceback. This
+    # process ignores it too meanwhile; the witness hears a Ctrl-C of those seconds for it.
+    with _ctrl_c_witness() as witness, _sigint_handled_by(signal.SIG_IGN):
         cluster = LocalCluster(  # type: ignore[no-untyped-call]
             n_workers=workers,
             threads_per_worker=1,
@@ -458,5 +537,7 @@ def _dask_client(
             dashboard_address="127.0.0.1:0",
             silence_logs=logging.ERROR,
         )
+    if witness():  # the handler in place now (_sigint_as_flag's: the job stops) gets it
+        signal.raise_signal(signal.SIGINT)
     with cluster, Client(cluster) as client:  # type: ignore[no-untyped-call]
         yield client, f"local dask cluster of {workers} worker processes", task_threads
