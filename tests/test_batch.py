@@ -440,6 +440,23 @@ def cli_process(argv: list[str], prelude: str) -> subprocess.Popen[str]:
     )
 
 
+def run_cli_in(argv: list[str], cwd: Path) -> subprocess.CompletedProcess[str]:
+    """``stereodepth`` run with ``argv`` in a process of its own from ``cwd`` (relative paths
+    as a user in that folder types them), its output captured."""
+    return subprocess.run(
+        [
+            sys.executable,
+            "-c",
+            f"import sys; from stereodepth import cli; sys.exit(cli.main({argv!r}))",
+        ],
+        cwd=cwd,
+        capture_output=True,
+        text=True,
+        timeout=120,
+        env={**os.environ, "PYTHONPATH": os.pathsep.join(sys.path)},
+    )
+
+
 def wait_for(predicate: Any, timeout: float = 60.0) -> None:
     deadline = time.monotonic() + timeout
     while not predicate():
@@ -758,18 +775,7 @@ def test_relative_paths_reach_a_scheduler_whose_workers_work_elsewhere(tmp_path:
         dashboard_address="127.0.0.1:0",
     ) as cluster:
         argv = ["batch", "in", "-o", "out", "--quiet", "--scheduler", cluster.scheduler_address]
-        proc = subprocess.run(
-            [
-                sys.executable,
-                "-c",
-                f"import sys; from stereodepth import cli; sys.exit(cli.main({argv!r}))",
-            ],
-            cwd=tmp_path,
-            capture_output=True,
-            text=True,
-            timeout=120,
-            env={**os.environ, "PYTHONPATH": os.pathsep.join(sys.path)},
-        )
+        proc = run_cli_in(argv, tmp_path)
     assert proc.returncode == 0, proc.stdout + proc.stderr
     report = report_of(tmp_path / "out")
     assert report["counts"]["ok"] == 2
@@ -850,32 +856,10 @@ def test_a_job_of_a_scheduler_resumes_here(tmp_path: Path) -> None:
         dashboard_address="127.0.0.1:0",
     ) as cluster:
         code = [*argv, "--scheduler", cluster.scheduler_address]
-        proc = subprocess.run(
-            [
-                sys.executable,
-                "-c",
-                f"import sys; from stereodepth import cli; sys.exit(cli.main({code!r}))",
-            ],
-            cwd=tmp_path,
-            capture_output=True,
-            text=True,
-            timeout=120,
-            env={**os.environ, "PYTHONPATH": os.pathsep.join(sys.path)},
-        )
+        proc = run_cli_in(code, tmp_path)
     assert proc.returncode == 0, proc.stdout + proc.stderr
     assert report_of(tmp_path / "out")["counts"]["ok"] == 2
-    proc = subprocess.run(
-        [
-            sys.executable,
-            "-c",
-            f"import sys; from stereodepth import cli; sys.exit(cli.main({argv!r}))",
-        ],
-        cwd=tmp_path,
-        capture_output=True,
-        text=True,
-        timeout=120,
-        env={**os.environ, "PYTHONPATH": os.pathsep.join(sys.path)},
-    )
+    proc = run_cli_in(argv, tmp_path)
     assert proc.returncode == 0, proc.stdout + proc.stderr
     assert report_of(tmp_path / "out")["counts"] == {
         "ok": 0, "skipped": 2, "failed": 0, "cancelled": 0,

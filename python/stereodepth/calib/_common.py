@@ -165,6 +165,22 @@ def _check_rotation(value: Any, where: str, key: str) -> np.ndarray:
     return r
 
 
+def _opencv_rational(d: np.ndarray, where: str, key: str) -> np.ndarray:
+    """OpenCV's 12 and 14 coefficient forms (thin prism, tilt) of a plumb_bob distortion as
+    its first 8 when the rest are 0 (as cv2.stereoCalibrate returns them with
+    CALIB_RATIONAL_MODEL); ValueError naming ``key`` when they are not; any other count
+    unchanged."""
+    if d.size not in (12, 14):
+        return d
+    if np.any(d[8:]):
+        raise _fail(
+            where,
+            f"{key} has thin prism or tilt terms (coefficients 9 to {d.size}), which the "
+            "plumb_bob model does not take",
+        )
+    return d[:8]
+
+
 def _check_distortion(
     value: Any, model: str, where: str, key: str, named: str | None = None
 ) -> np.ndarray:
@@ -177,17 +193,11 @@ def _check_distortion(
     d = _check_array(value, where, key, (-1,))
     if d.size == 0 and model == "plumb_bob":
         return np.zeros(5)
-    if model == "plumb_bob" and named is None and d.size in (12, 14):
-        # OpenCV's thin prism and tilted forms: cv2.stereoCalibrate with CALIB_RATIONAL_MODEL
-        # returns (1, 14), zeros after the 8th, which a StereoCalibration built from its
-        # results refused while the OpenCV file reader took it.
-        if np.any(d[8:]):
-            raise _fail(
-                where,
-                f"{key} has thin prism or tilt terms (coefficients 9 to {d.size}), which the "
-                "plumb_bob model does not take",
-            )
-        d = d[:8]
+    if model == "plumb_bob" and named is None:
+        # cv2.stereoCalibrate with CALIB_RATIONAL_MODEL returns (1, 14), which a
+        # StereoCalibration built from its results refused while the OpenCV file reader
+        # took it.
+        d = _opencv_rational(d, where, key)
     name = named.strip().lower() if named is not None else model
     counts = _NAMED_COUNTS.get(name, DISTORTION_COUNTS[model])
     if d.size not in counts:

@@ -17,6 +17,7 @@ from ._common import (
     _check_rotation,
     _fail,
     _image_size_of,
+    _opencv_rational,
     _path,
     _shown,
     _unit,
@@ -134,14 +135,8 @@ def read_opencv_stereo_calibration(
     for field in ("D1", "D2"):
         key, value, where = get(field)  # type: ignore[misc]
         d = _check_array(value, where, key, (-1,))
-        if model == "plumb_bob" and d.size in (12, 14):
-            if np.any(d[8:]):
-                raise _fail(
-                    where,
-                    f"{key} has thin prism or tilt terms (coefficients 9 to {d.size}), "
-                    "which the plumb_bob model does not take",
-                )
-            d = d[:8]
+        if model == "plumb_bob":
+            d = _opencv_rational(d, where, key)
         if d.size == 4 and not told:
             raise _fail(
                 where,
