@@ -3,6 +3,7 @@ resuming, Ctrl-C and kill -9, and the same job on a real Dask LocalCluster."""
 
 from __future__ import annotations
 
+import contextlib
 import io as io_module
 import json
 import os
@@ -11,6 +12,7 @@ import subprocess
 import sys
 import threading
 import time
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -696,6 +698,23 @@ def local_cluster() -> Any:
         yield cluster
 
 
+@contextlib.contextmanager
+def in_process_cluster() -> Iterator[Any]:
+    """A one-worker Dask cluster in this process, on loopback TCP: its worker works in this
+    process's folder, and a job sent to it by address from another process sees the paths
+    that process sends."""
+    distributed = pytest.importorskip("distributed")
+    with distributed.LocalCluster(
+        n_workers=1,
+        processes=False,
+        protocol="tcp",
+        threads_per_worker=1,
+        host="127.0.0.1",
+        dashboard_address="127.0.0.1:0",
+    ) as cluster:
+        yield cluster
+
+
 @pytest.mark.cluster
 def test_cluster_results_equal_embedded_bit_for_bit(tmp_path: Path, local_cluster: Any) -> None:
     inp = tmp_path / "in"
@@ -763,17 +782,9 @@ def test_relative_paths_reach_a_scheduler_whose_workers_work_elsewhere(tmp_path:
     # INPUT and OUTDIR given relative to the command's folder were sent to the cluster as
     # they were: a worker in another folder found no images (every pair failed) or would
     # have written the outputs into its own folder.
-    distributed = pytest.importorskip("distributed")
     middlebury_folder(tmp_path / "in", 2)
     assert Path.cwd() != tmp_path  # the workers below run in this process, in its folder
-    with distributed.LocalCluster(
-        n_workers=1,
-        processes=False,
-        protocol="tcp",
-        threads_per_worker=1,
-        host="127.0.0.1",
-        dashboard_address="127.0.0.1:0",
-    ) as cluster:
+    with in_process_cluster() as cluster:
         argv = ["batch", "in", "-o", "out", "--quiet", "--scheduler", cluster.scheduler_address]
         proc = run_cli_in(argv, tmp_path)
     assert proc.returncode == 0, proc.stdout + proc.stderr
@@ -844,17 +855,9 @@ def test_a_second_job_whose_stems_repeat_the_first_does_not_replace_its_results(
 def test_a_job_of_a_scheduler_resumes_here(tmp_path: Path) -> None:
     """A --scheduler job (its paths made absolute for the workers) resumed in this process
     after the cluster went away, with the same relative INPUT: every pair was redone."""
-    distributed = pytest.importorskip("distributed")
     middlebury_folder(tmp_path / "in", 2)
     argv = ["batch", "in", "-o", "out", "--quiet"]
-    with distributed.LocalCluster(
-        n_workers=1,
-        processes=False,
-        protocol="tcp",
-        threads_per_worker=1,
-        host="127.0.0.1",
-        dashboard_address="127.0.0.1:0",
-    ) as cluster:
+    with in_process_cluster() as cluster:
         code = [*argv, "--scheduler", cluster.scheduler_address]
         proc = run_cli_in(code, tmp_path)
     assert proc.returncode == 0, proc.stdout + proc.stderr

@@ -12,6 +12,7 @@ from typing import Any
 
 import numpy as np
 import pytest
+from ply_files import read_ply
 
 import stereodepth
 from stereodepth import batch, cli
@@ -494,25 +495,12 @@ def test_channel_order_bgr_colours_the_point_cloud_in_rgb(
     points = stereodepth.reproject(disparity, focal_px=700, baseline_m=0.1, cx_px=24, cy_px=16)
     keep = np.isfinite(points).all(axis=-1)
     assert keep.sum() > 0
-    _, vertex = _read_ply(out / "a.ply")
+    _, vertex = read_ply(out / "a.ply")
     np.testing.assert_array_equal(
         np.stack([vertex["x"], vertex["y"], vertex["z"]], -1), points[keep]
     )
     colours = np.stack([vertex["red"], vertex["green"], vertex["blue"]], -1)
     np.testing.assert_array_equal(colours, left[..., ::-1][keep])
-
-
-def _read_ply(path: Path) -> tuple[list[str], np.ndarray]:
-    """A minimal reader of the binary little-endian PLY files write_ply makes."""
-    data = path.read_bytes()
-    end = data.index(b"end_header\n") + len(b"end_header\n")
-    header = data[:end].decode("ascii").splitlines()
-    n = int(next(h for h in header if h.startswith("element vertex")).split()[-1])
-    types = {"float": "<f4", "uchar": "u1"}
-    fields = [(h.split()[2], types[h.split()[1]]) for h in header if h.startswith("property")]
-    vertex = np.frombuffer(data[end:], dtype=np.dtype(fields))
-    assert vertex.size == n
-    return header, vertex
 
 
 # --- the lock file ------------------------------------------------------------------------------

@@ -7,6 +7,7 @@ library's parameter names, a class's __init__, a temporary file).
 from __future__ import annotations
 
 import importlib.util
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -159,6 +160,23 @@ def test_error_is_one_line_status_2_no_traceback(
     assert not any(word in lines[0] for word in INTERNALS), lines[0]
 
 
+def console_usage_error(argv: list[str], **env: str) -> subprocess.CompletedProcess[str]:
+    """``python -m stereodepth`` run with ``argv`` (and ``env`` added to the environment);
+    asserts exit status 2, nothing on stdout and one line on stderr, and returns the run."""
+    r = subprocess.run(
+        [sys.executable, "-m", "stereodepth", *argv],
+        capture_output=True,
+        text=True,
+        timeout=60,
+        check=False,
+        env={**os.environ, **env},
+    )
+    assert r.returncode == 2, r.stderr
+    assert r.stdout == ""
+    assert len(r.stderr.splitlines()) == 1, r.stderr
+    return r
+
+
 @pytest.mark.parametrize(
     "argv",
     [
@@ -169,16 +187,8 @@ def test_error_is_one_line_status_2_no_traceback(
 )
 def test_console_command_prints_one_line(argv: list[str]) -> None:
     """The same through a real process: nothing but the one line reaches the terminal."""
-    r = subprocess.run(
-        [sys.executable, "-m", "stereodepth", *argv],
-        capture_output=True,
-        text=True,
-        timeout=60,
-        check=False,
-    )
-    assert r.returncode == 2
-    assert r.stdout == ""
-    assert len(r.stderr.splitlines()) == 1 and "Traceback" not in r.stderr
+    r = console_usage_error(argv)
+    assert "Traceback" not in r.stderr
 
 
 @pytest.mark.parametrize(
@@ -188,21 +198,9 @@ def test_a_mistyped_isa_variable_is_one_line(argv: list[str]) -> None:
     # STEREODEPTH_ISA=avx3 (no such ISA): building the parser asks the core for the cores this
     # process may use (the --threads help of eval), and the core refuses the variable; every
     # command, --help included, ended in a 16-line traceback, exit status 1.
-    import os
-
-    r = subprocess.run(
-        [sys.executable, "-m", "stereodepth", *argv],
-        capture_output=True,
-        text=True,
-        timeout=60,
-        check=False,
-        env={**os.environ, "STEREODEPTH_ISA": "avx3"},
-    )
-    assert r.returncode == 2
-    assert r.stdout == ""
+    r = console_usage_error(argv, STEREODEPTH_ISA="avx3")
     assert r.stderr.startswith("stereodepth: error: the environment variable STEREODEPTH_ISA ")
     assert r.stderr.rstrip().endswith("got 'avx3'")
-    assert len(r.stderr.splitlines()) == 1
 
 
 def test_disparity_zero_is_inf_in_text_and_table_and_null_in_json(

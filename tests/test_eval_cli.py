@@ -276,15 +276,21 @@ def test_num_disparities_for_rejects(bad: float) -> None:
         num_disparities_for(bad)
 
 
-def test_middlebury_layout(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    cv2 = pytest.importorskip("cv2")
-    left, right, gt = random_dot_pair(40, 100, [7, 13], rgb=True, seed=5)
-    folder = tmp_path / "Pair-perfect"
+def middlebury_pair(folder: Path, *, rgb: bool) -> tuple[Path, np.ndarray, np.ndarray, np.ndarray]:
+    """A 100x40 random-dot scene in Middlebury's layout in ``folder``: im0.png, im1.png and
+    disp0GT.pfm (inf where the ground truth is unknown, PFM's convention); returns the folder,
+    the images and the ground truth (NaN unknown)."""
+    left, right, gt = random_dot_pair(40, 100, [7, 13], rgb=rgb, seed=5)
     folder.mkdir()
     write_png(folder / "im0.png", left)
     write_png(folder / "im1.png", right)
-    pfm_gt = np.where(np.isnan(gt), np.inf, gt).astype(np.float32)  # PFM: inf = unknown
-    write_pfm(folder / "disp0GT.pfm", pfm_gt)
+    write_pfm(folder / "disp0GT.pfm", np.where(np.isnan(gt), np.inf, gt).astype(np.float32))
+    return folder, left, right, gt
+
+
+def test_middlebury_layout(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    cv2 = pytest.importorskip("cv2")
+    folder, left, right, gt = middlebury_pair(tmp_path / "Pair-perfect", rgb=True)
     mask_png = np.full(gt.shape, 255, dtype=np.uint8)
     mask_png[:5] = 128  # occluded in MiddEval3's masks
     write_png(folder / "mask0nocc.png", mask_png)
@@ -310,12 +316,7 @@ def test_middlebury_calib_of_another_size_is_refused(
     images) gave its ndisp, in that resolution's pixels, as the search range: the scene was
     scored with most disparities out of reach, exit status 0. `match` and the web page refuse
     such a calib.txt; eval now does, naming it and both sizes."""
-    left, right, gt = random_dot_pair(40, 100, [7, 13], rgb=False, seed=5)
-    folder = tmp_path / "Pair"
-    folder.mkdir()
-    write_png(folder / "im0.png", left)
-    write_png(folder / "im1.png", right)
-    write_pfm(folder / "disp0GT.pfm", np.where(np.isnan(gt), np.inf, gt).astype(np.float32))
+    folder = middlebury_pair(tmp_path / "Pair", rgb=False)[0]
     calib = (
         "cam0=[1000 0 50; 0 1000 20; 0 0 1]\ncam1=[1000 0 50; 0 1000 20; 0 0 1]\n"
         "doffs=0\nbaseline=100\nwidth={w}\nheight={h}\nndisp={n}\n"
@@ -349,12 +350,7 @@ def test_middlebury_calib_of_another_size_is_refused(
 def test_middlebury_mask_must_be_8_bit_grey(
     tmp_path: Path, capsys: pytest.CaptureFixture[str], mask: np.ndarray, kind: str
 ) -> None:
-    left, right, gt = random_dot_pair(40, 100, [7, 13], rgb=False, seed=5)
-    folder = tmp_path / "Pair"
-    folder.mkdir()
-    write_png(folder / "im0.png", left)
-    write_png(folder / "im1.png", right)
-    write_pfm(folder / "disp0GT.pfm", np.where(np.isnan(gt), np.inf, gt).astype(np.float32))
+    folder = middlebury_pair(tmp_path / "Pair", rgb=False)[0]
     write_png(folder / "mask0nocc.png", mask)
     status, _, err = run_eval(capsys, str(tmp_path))
     assert status == 2

@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from ply_files import read_ply
 
 import stereodepth
 from stereodepth import _core, reference
@@ -530,20 +531,6 @@ def test_kernel_rejects_what_the_wrapper_never_sends() -> None:
 
 
 # --- PLY --------------------------------------------------------------------------------------
-def read_ply(path: Path) -> tuple[list[str], np.ndarray]:
-    """A minimal reader of the binary little-endian PLY files write_ply makes."""
-    data = path.read_bytes()
-    end = data.index(b"end_header\n") + len(b"end_header\n")
-    header = data[:end].decode("ascii").splitlines()
-    assert header[:2] == ["ply", "format binary_little_endian 1.0"]
-    n = int(next(h for h in header if h.startswith("element vertex")).split()[-1])
-    types = {"float": "<f4", "uchar": "u1"}
-    fields = [(h.split()[2], types[h.split()[1]]) for h in header if h.startswith("property")]
-    vertex = np.frombuffer(data[end:], dtype=np.dtype(fields))
-    assert vertex.size == n
-    return header, vertex
-
-
 def test_write_ply_keeps_the_finite_points_with_their_colours(tmp_path: Path) -> None:
     rng = np.random.default_rng(10)
     d = random_disparity(rng, np.float32, (12, 17))
