@@ -642,14 +642,18 @@ inline void fill_range(uint8_t* __restrict o, ptrdiff_t k0, ptrdiff_t k1, int nd
       if (j0 >= j1) continue;
       uint8_t* p = o + r * kT;
       if constexpr (kT == 16) {
-        // in: j0 <= lane < j1 (signed bytes: lanes, j0 and j1 are at most 32).
-        const W in = _mm_andnot_si128(_mm_cmpgt_epi8(set1(static_cast<int>(j0)), lanes),
-                                      _mm_cmpgt_epi8(set1(static_cast<int>(j1)), lanes));
+        // in: lane > j0 - 1 and j1 > lane (signed bytes: lanes, j0 and j1 are at most 32).
+        // Two compares and an AND: GCC 12.2 with the AVX-512 flags compiled the earlier
+        // andnot(j0 > lane, j1 > lane) so that this function filled the lanes below j0
+        // instead (wrong costs in the left border band; seen on the first AVX-512 machine
+        // the tests ran on, fine with the AVX2 flags and under the sanitizers).
+        const W in = _mm_and_si128(_mm_cmpgt_epi8(lanes, set1(static_cast<int>(j0 - 1))),
+                                   _mm_cmpgt_epi8(set1(static_cast<int>(j1)), lanes));
         const W cur = _mm_loadu_si128(reinterpret_cast<const W*>(p));
         _mm_storeu_si128(reinterpret_cast<W*>(p), _mm_blendv_epi8(cur, fill, in));
       } else {
-        const W in = _mm256_andnot_si256(_mm256_cmpgt_epi8(set1(static_cast<int>(j0)), lanes),
-                                         _mm256_cmpgt_epi8(set1(static_cast<int>(j1)), lanes));
+        const W in = _mm256_and_si256(_mm256_cmpgt_epi8(lanes, set1(static_cast<int>(j0 - 1))),
+                                      _mm256_cmpgt_epi8(set1(static_cast<int>(j1)), lanes));
         const W cur = _mm256_loadu_si256(reinterpret_cast<const W*>(p));
         _mm256_storeu_si256(reinterpret_cast<W*>(p), _mm256_blendv_epi8(cur, fill, in));
       }
