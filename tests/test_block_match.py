@@ -409,9 +409,9 @@ def test_each_isa_on_odd_shapes(isa: str) -> None:
                 np.testing.assert_array_equal(a, b)
 
 
-# Disparity ranges that reach every fixed-size first pass of the SIMD builds (AVX2: 16 lanes a
-# vector, up to 256 disparities; AVX-512: 32 lanes, up to 256), with and without padding lanes,
-# and two beyond them (the generic pass).
+# Disparity ranges that reach every fixed-size first pass of the SIMD builds (16 lanes a
+# vector, up to 256 disparities, in the AVX2 and AVX-512 builds alike), with and without
+# padding lanes, and two beyond them (the generic pass).
 FIXED_PASS_RANGES = [16 * k - (k % 4) * 3 for k in range(1, 17)] + [9, 264]
 FIXED_PASS_CONFIGS: list[dict[str, Any]] = [
     {},

@@ -10,17 +10,14 @@
 // costs update the right image's running winners (the other diagonal); (3) a second pass over
 // the records applies the checks (left-right among them) and the sub-pixel step.
 //
-// The AVX-512 build keeps a pixel's costs in registers (dp <= 256: one template per vector
-// count), does step (1) for column x + r on the way (so the column sums are read back from
-// L1), rotates each pixel's costs into aligned right-winner blocks held in registers, and
-// does step (3) sixteen pixels at a time. The AVX2 build does the same with 16-lane vectors
-// (also dp <= 256), except that it works in groups of 16 pixels (block costs to `recent`,
-// then the right winners and the winners from there), matches the border band in the same
-// pass (border_band otherwise), reads the census costs of the row leaving the block from a
-// ring of the last rows' costs (BandScratch::ring), and does step (3) eight pixels at a
-// time. Every path computes the same
-// integers, and the floating-point steps use the same IEEE operations in the same order as
-// the numpy oracle.
+// The SIMD builds (AVX2, and AVX-512 with the same 16-lane code) keep a pixel's costs in
+// registers (dp <= 256: one template per vector count), do step (1) for column x + r on the
+// way (so the column sums are read back from L1), work in groups of 16 pixels (block costs to
+// `recent`, then the right winners and the winners from there), match the border band in the
+// same pass (border_band otherwise), read the census costs of the row leaving the block from a
+// ring of the last rows' costs (BandScratch::ring), and do step (3) eight pixels at a time.
+// Every path computes the same integers, and the floating-point steps use the same IEEE
+// operations in the same order as the numpy oracle.
 #include "block_match_kernels.hpp"
 
 #include <algorithm>
@@ -44,18 +41,18 @@
 #error "STEREODEPTH_ISA_NS must name the instruction set this file is compiled for"
 #endif
 
-#if defined(__AVX512BW__) && defined(__AVX512VPOPCNTDQ__) && defined(__AVX512VL__)
-#define STEREODEPTH_BM_AVX512 1
-#elif defined(__AVX2__)
+// The AVX-512 build runs the AVX2 matcher: 16-lane vectors, with the AVX-512 encodings and
+// registers the compiler picks. On the first AVX-512 machine measured (AMD EPYC, Zen 4) the
+// earlier 32-lane form took 2.6-3x the time of the AVX2 one (bench/README.md, "Issue 12,
+// eighth round").
+#if defined(__AVX2__)
 #define STEREODEPTH_BM_AVX2 1
 #endif
 
 namespace stereodepth::detail::STEREODEPTH_ISA_NS {
 namespace {
 
-#if defined(STEREODEPTH_BM_AVX512)
-constexpr int kLanes = 32;  // 16-bit costs per zmm register
-#elif defined(STEREODEPTH_BM_AVX2)
+#if defined(STEREODEPTH_BM_AVX2)
 constexpr int kLanes = 16;  // per ymm register
 #else
 constexpr int kLanes = 8;
@@ -102,63 +99,6 @@ uint32_t census_at(const T* const* rows, ptrdiff_t x, ptrdiff_t cols) {
   return code;
 }
 
-#if defined(STEREODEPTH_BM_AVX512)
-// The census codes of N = 64 (8-bit) or 32 (16-bit) interior pixels from x: each neighbour's
-// comparison mask adds its bit into one of two byte planes (bits 8-15, 0-7), which are then
-// widened and merged into 32-bit codes.
-template <typename T>
-inline void census_block(const T* const* rows, ptrdiff_t x, uint32_t* out) {
-  constexpr int kN = sizeof(T) == 1 ? 64 : 32;
-  using Mask = std::conditional_t<kN == 64, __mmask64, __mmask32>;
-  auto load = [](const T* p) {
-    if constexpr (kN == 64) {
-      return _mm512_loadu_si512(p);
-    } else {
-      return _mm512_loadu_si512(p);
-    }
-  };
-  auto less = [](__m512i a, __m512i b) -> Mask {
-    if constexpr (kN == 64) {
-      return _mm512_cmplt_epu8_mask(a, b);
-    } else {
-      return _mm512_cmplt_epu16_mask(a, b);
-    }
-  };
-  const __m512i c = load(rows[2] + x);
-  __m512i plane[2] = {_mm512_setzero_si512(), _mm512_setzero_si512()};
-  int bit = 15;
-  for (int dy = 0; dy < 5; ++dy) {
-    for (int dx = -2; dx <= 2; ++dx) {
-      if (!on_ring(dy, dx)) continue;
-      const Mask m = less(load(rows[dy] + x + dx), c);
-      const int p = 1 - bit / 8;  // plane 0: bits 8-15
-      const __m512i b = _mm512_set1_epi8(static_cast<char>(1 << (bit % 8)));
-      if constexpr (kN == 64) {
-        plane[p] = _mm512_mask_add_epi8(plane[p], m, plane[p], b);
-      } else {
-        // 32 pixels: the planes' low 32 bytes.
-        plane[p] = _mm512_mask_add_epi8(plane[p], static_cast<__mmask64>(m), plane[p], b);
-      }
-      --bit;
-    }
-  }
-  // Group G of 16 pixels (the index must be a compile-time constant for vextracti32x4).
-  auto emit = [&](auto group) {
-    constexpr int kG = decltype(group)::value;
-    auto bytes = [&](int p) {
-      return _mm512_cvtepu8_epi32(_mm512_extracti32x4_epi32(plane[p], kG));
-    };
-    const __m512i code = _mm512_or_si512(_mm512_slli_epi32(bytes(0), 8), bytes(1));
-    _mm512_storeu_si512(out + x + 16 * kG, code);
-  };
-  emit(std::integral_constant<int, 0>{});
-  emit(std::integral_constant<int, 1>{});
-  if constexpr (kN == 64) {
-    emit(std::integral_constant<int, 2>{});
-    emit(std::integral_constant<int, 3>{});
-  }
-}
-#endif
 
 #if defined(STEREODEPTH_BM_AVX2)
 // The census codes of the 32 interior 8-bit pixels from x: each neighbour's comparison sets
@@ -233,18 +173,6 @@ void census_row(const T* const* rows, uint32_t* out, ptrdiff_t cols) {
         census_block_avx2(rows, cols - 2 - kBlock, out);
         x = cols - 2;
       }
-    }
-  }
-#endif
-#if defined(STEREODEPTH_BM_AVX512)
-  constexpr ptrdiff_t kBlock = sizeof(T) == 1 ? 64 : 32;
-  if (cols - 4 >= kBlock) {
-    for (; x + kBlock <= cols - 2; x += kBlock) census_block(rows, x, out);
-    // The tail: one more block ending at the last interior column (overlapping the previous
-    // one; the overlapped codes are computed twice, identically).
-    if (x < cols - 2) {
-      census_block(rows, cols - 2 - kBlock, out);
-      x = cols - 2;
     }
   }
 #endif
@@ -341,20 +269,6 @@ inline __m256i sad_cost16(__m256i l, const uint8_t* r) {
 }
 #endif
 
-#if defined(STEREODEPTH_BM_AVX512)
-inline __m512i census_cost32(__m512i l, const uint32_t* r) {
-  const __m512i p0 = _mm512_popcnt_epi32(_mm512_xor_si512(l, _mm512_loadu_si512(r)));
-  const __m512i p1 = _mm512_popcnt_epi32(_mm512_xor_si512(l, _mm512_loadu_si512(r + 16)));
-  return _mm512_inserti64x4(_mm512_castsi256_si512(_mm512_cvtepi32_epi16(p0)),
-                            _mm512_cvtepi32_epi16(p1), 1);
-}
-
-inline __m512i sad_cost32(__m512i l, const uint8_t* r) {
-  const __m512i rv =
-      _mm512_cvtepu8_epi16(_mm256_loadu_si256(reinterpret_cast<const __m256i*>(r)));
-  return _mm512_abs_epi16(_mm512_sub_epi16(l, rv));
-}
-#endif
 
 // colsum[x][q] += cost(left[x], rpad[x + q]) for every lane (the padding lanes too: their sums
 // are never read as costs). AVX2 census: when costs is not null, the costs also go there (the
@@ -393,19 +307,7 @@ void add_cost_row(const typename Cost::Feature* left, const typename Cost::Featu
     uint16_t* s = colsum + x * dp;
     const auto l = left[x];
     const auto* r = rpad + x;
-#if defined(STEREODEPTH_BM_AVX512)
-    const __m512i lv = kCensus ? _mm512_set1_epi32(static_cast<int>(l))
-                               : _mm512_set1_epi16(static_cast<short>(l));
-    for (int q = 0; q < dp; q += 32) {
-      __m512i c;
-      if constexpr (kCensus) {
-        c = census_cost32(lv, r + q);
-      } else {
-        c = sad_cost32(lv, r + q);
-      }
-      _mm512_storeu_si512(s + q, _mm512_add_epi16(_mm512_loadu_si512(s + q), c));
-    }
-#elif defined(STEREODEPTH_BM_AVX2)
+#if defined(STEREODEPTH_BM_AVX2)
     const __m256i lv = kCensus ? _mm256_set1_epi32(static_cast<int>(l))
                                : _mm256_set1_epi16(static_cast<short>(l));
     auto cost = [&](int q) {
@@ -448,31 +350,7 @@ void update_cost_rows(const typename Cost::Feature* left_in, const typename Cost
     const auto lo = left_out[x];
     const auto* ri = rpad_in + x;
     const auto* ro = rpad_out + x;
-#if defined(STEREODEPTH_BM_AVX512)
-    if constexpr (kCensus) {
-      // The difference in 32-bit lanes, narrowed once.
-      const __m512i liv = _mm512_set1_epi32(static_cast<int>(li));
-      const __m512i lov = _mm512_set1_epi32(static_cast<int>(lo));
-      for (int q = 0; q < dp; q += 32) {
-        const __m512i d0 = _mm512_sub_epi32(
-            _mm512_popcnt_epi32(_mm512_xor_si512(liv, _mm512_loadu_si512(ri + q))),
-            _mm512_popcnt_epi32(_mm512_xor_si512(lov, _mm512_loadu_si512(ro + q))));
-        const __m512i d1 = _mm512_sub_epi32(
-            _mm512_popcnt_epi32(_mm512_xor_si512(liv, _mm512_loadu_si512(ri + q + 16))),
-            _mm512_popcnt_epi32(_mm512_xor_si512(lov, _mm512_loadu_si512(ro + q + 16))));
-        const __m512i c = _mm512_inserti64x4(_mm512_castsi256_si512(_mm512_cvtepi32_epi16(d0)),
-                                             _mm512_cvtepi32_epi16(d1), 1);
-        _mm512_storeu_si512(s + q, _mm512_add_epi16(_mm512_loadu_si512(s + q), c));
-      }
-    } else {
-      const __m512i liv = _mm512_set1_epi16(static_cast<short>(li));
-      const __m512i lov = _mm512_set1_epi16(static_cast<short>(lo));
-      for (int q = 0; q < dp; q += 32) {
-        const __m512i c = _mm512_sub_epi16(sad_cost32(liv, ri + q), sad_cost32(lov, ro + q));
-        _mm512_storeu_si512(s + q, _mm512_add_epi16(_mm512_loadu_si512(s + q), c));
-      }
-    }
-#elif defined(STEREODEPTH_BM_AVX2)
+#if defined(STEREODEPTH_BM_AVX2)
     const __m256i liv = kCensus ? _mm256_set1_epi32(static_cast<int>(li))
                                 : _mm256_set1_epi16(static_cast<short>(li));
     const __m256i lov = kCensus ? _mm256_set1_epi32(static_cast<int>(lo))
@@ -513,7 +391,7 @@ struct RowCtx {
   // Fixed-size SIMD first pass without confidence: `second` holds, instead of the
   // second-best cost, how many lanes cost less than the uniqueness threshold
   // unique_min[best]; the second pass subtracts the winner and its two neighbours (see
-  // decide_avx512).
+  // decide_avx2).
   bool count_low;
   bool first_pass_only;  // diagnostics: skip the second pass (see MatchArgs)
   double texture_sum_min, uniqueness_factor, lr_max_diff;
@@ -557,72 +435,7 @@ struct Winner {
   int q;          // its lane: the highest lane among equal costs (the lowest disparity)
 };
 
-#if defined(STEREODEPTH_BM_AVX512)
-
-inline __m512i lane_iota() {
-  return _mm512_set_epi16(31, 30, 29, 28, 27, 26, 25, 24, 23, 22, 21, 20, 19, 18, 17, 16, 15, 14,
-                          13, 12, 11, 10, 9, 8, 7, 6, 5, 4, 3, 2, 1, 0);
-}
-
-// Padding lanes (q < qpad < 32) all lie in the first vector.
-inline __mmask32 pad_mask(int qpad) {
-  return qpad > 0 ? static_cast<__mmask32>((1u << qpad) - 1u) : static_cast<__mmask32>(0);
-}
-
-inline uint32_t hmin_epu16(__m512i v) {
-  const __m256i a = _mm256_min_epu16(_mm512_castsi512_si256(v), _mm512_extracti64x4_epi64(v, 1));
-  const __m128i b = _mm_min_epu16(_mm256_castsi256_si128(a), _mm256_extracti128_si256(a, 1));
-  return static_cast<uint32_t>(_mm_cvtsi128_si32(_mm_minpos_epu16(b))) & 0xFFFFu;
-}
-
-// Lanes qb - 1 .. qb + 1 of the vector holding lanes q0 .. q0 + 31.
-inline __mmask32 near_mask(__m512i iota, int q0, int qb) {
-  const __m512i rel = _mm512_sub_epi16(iota, _mm512_set1_epi16(static_cast<short>(qb - 1 - q0)));
-  return _mm512_cmple_epu16_mask(rel, _mm512_set1_epi16(2));
-}
-
-// The generic pass's helpers (dp > 32 * kMaxChunks).
-inline Winner find_winner(const uint16_t* acc, int qpad, int dp) {
-  const __m512i ones = _mm512_set1_epi16(-1);
-  __m512i mn = _mm512_mask_mov_epi16(_mm512_loadu_si512(acc), pad_mask(qpad), ones);
-  for (int q = 32; q < dp; q += 32) mn = _mm512_min_epu16(mn, _mm512_loadu_si512(acc + q));
-  const uint32_t best = hmin_epu16(mn);
-  const __m512i bv = _mm512_set1_epi16(static_cast<short>(best));
-  int qb = -1;
-  for (int q = 0; q < dp; q += 32) {
-    __mmask32 m = _mm512_cmpeq_epi16_mask(_mm512_loadu_si512(acc + q), bv);
-    if (q == 0) m &= static_cast<__mmask32>(~pad_mask(qpad));
-    if (m) qb = q + 31 - __builtin_clz(static_cast<unsigned>(m));
-  }
-  return {best, qb};
-}
-
-inline uint32_t second_cost(const uint16_t* acc, int qpad, int dp, int qb) {
-  const __m512i ones = _mm512_set1_epi16(-1);
-  const __m512i iota = lane_iota();
-  __m512i mn = ones;
-  for (int q = 0; q < dp; q += 32) {
-    __mmask32 ex = near_mask(iota, q, qb);
-    if (q == 0) ex |= pad_mask(qpad);
-    mn = _mm512_min_epu16(mn, _mm512_mask_mov_epi16(_mm512_loadu_si512(acc + q), ex, ones));
-  }
-  return hmin_epu16(mn);
-}
-
-inline void right_update(const uint16_t* acc, uint16_t* rmin, uint16_t* rarg, ptrdiff_t x,
-                         int qpad, int dp) {
-  const __m512i xv = _mm512_set1_epi16(static_cast<short>(x));
-  for (int q = 0; q < dp; q += 32) {
-    __m512i a = _mm512_loadu_si512(acc + q);
-    if (q == 0) a = _mm512_mask_mov_epi16(a, pad_mask(qpad), _mm512_set1_epi16(-1));
-    const __m512i rm = _mm512_loadu_si512(rmin + x + q);
-    const __mmask32 lt = _mm512_cmplt_epu16_mask(a, rm);
-    _mm512_mask_storeu_epi16(rmin + x + q, lt, a);
-    _mm512_mask_storeu_epi16(rarg + x + q, lt, xv);
-  }
-}
-
-#elif defined(STEREODEPTH_BM_AVX2)
+#if defined(STEREODEPTH_BM_AVX2)
 
 inline __m256i lane_iota16() {
   return _mm256_setr_epi16(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15);
@@ -773,267 +586,9 @@ void winners_generic(const RowCtx& c) {
   }
 }
 
-#if defined(STEREODEPTH_BM_AVX512)
-
-constexpr int kMaxChunks = 8;
-constexpr bool kFixedPassDoesBorder = false;  // border_band after the second pass
-
-// rotation_table()[s] lane j = (j - s) mod 32: the index of a rotation by s lanes.
-const __m512i* rotation_table() {
-  struct Table {
-    alignas(64) uint16_t lanes[32][32];
-    Table() {
-      for (int s = 0; s < 32; ++s) {
-        for (int j = 0; j < 32; ++j) lanes[s][j] = static_cast<uint16_t>((j - s) & 31);
-      }
-    }
-  };
-  static const Table table;
-  return reinterpret_cast<const __m512i*>(table.lanes);
-}
-
-// quads[i] = the 128-bit blocks rpad[i..i+3], rpad[i+8..i+11], rpad[i+16..i+19],
-// rpad[i+24..i+27]: the codes that _mm512_packs_epi32 needs in its first operand to produce
-// lanes i..i+31 in order (quads[i + 4] gives the second operand).
-// With invert, each code is stored as ~code << 16 (the leaving row's form, see update_col).
-void quads_of(const uint32_t* rpad, __m512i* quads, ptrdiff_t n, bool invert) {
-  const __m512i ones = _mm512_set1_epi32(-1);
-  for (ptrdiff_t i = 0; i < n; ++i) {
-    __m512i v = _mm512_shuffle_i32x4(_mm512_loadu_si512(rpad + i),
-                                     _mm512_loadu_si512(rpad + i + 16), 0x88);
-    if (invert) v = _mm512_slli_epi32(_mm512_xor_si512(v, ones), 16);
-    _mm512_store_si512(quads + i, v);
-  }
-}
-
-// First pass with the NC vectors of costs in registers. The right winners stay in registers
-// too, for the NC + 1 aligned blocks of 32 right columns that the current group of 32 left
-// columns reaches: each pixel's costs are rotated by x mod 32 lanes into place.
-template <int NC, typename Cost>
-void winners_avx512(const RowCtx& c) {
-  using F = typename Cost::Feature;
-  // Everything the loop reads from c, in locals: the compiler then need not reload it after
-  // each store (and dp is a constant).
-  constexpr int kDp = 32 * NC;
-  constexpr int dp = kDp;
-  const ptrdiff_t cols = c.cols, xlo = c.xlo, xhi = c.xhi;
-  const int r = c.radius;
-  const uint32_t* const texcol = c.texcol;
-  const uint32_t* const unique_min = c.unique_min;
-  WinnerRecord* const records = c.rec;
-  uint16_t* const rarg = c.rarg;
-  const bool lr_on = c.lr_on, count_low = c.count_low, need_second = c.need_second;
-  const __m512i ones = _mm512_set1_epi16(-1);
-  const __m512i padv = _mm512_maskz_mov_epi16(pad_mask(c.qpad), ones);
-  const __m512i iota = lane_iota();
-  uint16_t* S = const_cast<uint16_t*>(c.colsum);
-
-  // The fused column-sum update: column j gains the entering row's costs and loses the
-  // leaving row's, just before the running sum reads it (so it is read back from L1).
-  const F* in_l = static_cast<const F*>(c.in_left);
-  const F* in_r = static_cast<const F*>(c.in_rpad);
-  const F* out_l = static_cast<const F*>(c.out_left);
-  const F* out_r = static_cast<const F*>(c.out_rpad);
-  const __m512i* in_q = static_cast<const __m512i*>(c.in_quad);
-  const __m512i* out_q = static_cast<const __m512i*>(c.out_quad);
-  const bool half_pad = c.qpad >= 16;  // the first vector's lower half is all padding
-  auto update_col = [&](ptrdiff_t j) {
-    uint16_t* s = S + j * dp;
-    if constexpr (sizeof(F) == 4) {
-      // quads[j + q] holds the codes of lanes q + {0-3, 8-11, 16-19, 24-27}, quads[j + q + 4]
-      // those of q + {4-7, 12-15, 20-23, 28-31}: vpackssdw interleaves their 128-bit blocks
-      // back into lane order. Codes have 16 bits: the entering row's XOR sits in the low half
-      // of a 32-bit lane, the complement of the leaving row's in the high half (its quads are
-      // stored as ~code << 16), so one popcount gives c_in + 16 - c_out.
-      const __m512i liv = _mm512_set1_epi32(static_cast<int>(in_l[j]));
-      const __m512i lov = _mm512_set1_epi32(static_cast<int>(out_l[j] << 16));
-      const __m512i* qi = in_q + j;
-      const __m512i* qo = out_q + j;
-      // (a ^ b) | c: vpternlogd with the truth table 0xBE.
-      auto diff16 = [&](const __m512i* in, const __m512i* out) {
-        return _mm512_popcnt_epi32(_mm512_ternarylogic_epi32(
-            _mm512_loadu_si512(in), liv, _mm512_xor_si512(_mm512_loadu_si512(out), lov), 0xBE));
-      };
-      const __m512i bias = _mm512_set1_epi16(16);
-      int i = 0;
-      if (half_pad) {
-        // Lanes 0-15 are padding: only lanes 16-31 of the first vector, which packs from the
-        // upper halves of the two quad vectors.
-        const __m256i li = _mm512_castsi512_si256(liv), lo = _mm512_castsi512_si256(lov);
-        auto upper = [](const __m512i* p) {
-          return _mm256_loadu_si256(reinterpret_cast<const __m256i*>(p) + 1);
-        };
-        auto diff8 = [&](const __m512i* in, const __m512i* out) {
-          return _mm256_popcnt_epi32(_mm256_ternarylogic_epi32(
-              upper(in), li, _mm256_xor_si256(upper(out), lo), 0xBE));
-        };
-        const __m256i d = _mm256_sub_epi16(_mm256_packs_epi32(diff8(qi, qo), diff8(qi + 4, qo + 4)),
-                                           _mm512_castsi512_si256(bias));
-        auto* sh = reinterpret_cast<__m256i*>(s) + 1;
-        _mm256_store_si256(sh, _mm256_add_epi16(_mm256_load_si256(sh), d));
-        i = 1;
-      }
-      for (; i < NC; ++i) {
-        const int q = 32 * i;
-        const __m512i d = _mm512_sub_epi16(
-            _mm512_packs_epi32(diff16(qi + q, qo + q), diff16(qi + q + 4, qo + q + 4)), bias);
-        _mm512_store_si512(s + q, _mm512_add_epi16(_mm512_load_si512(s + q), d));
-      }
-    } else {
-      const __m512i liv = _mm512_set1_epi16(static_cast<short>(in_l[j]));
-      const __m512i lov = _mm512_set1_epi16(static_cast<short>(out_l[j]));
-      for (int i = 0; i < NC; ++i) {
-        const int q = 32 * i;
-        const __m512i d = _mm512_sub_epi16(sad_cost32(liv, in_r + j + q),
-                                           sad_cost32(lov, out_r + j + q));
-        _mm512_store_si512(s + q, _mm512_add_epi16(_mm512_load_si512(s + q), d));
-      }
-    }
-  };
-  const bool fused = in_l != nullptr;
-  if (fused) {
-    for (ptrdiff_t j = 0; j <= r && j < cols; ++j) update_col(j);
-  }
-
-  __m512i A[NC];
-  for (int i = 0; i < NC; ++i) A[i] = _mm512_setzero_si512();
-  uint32_t tsum = 0;
-  for (ptrdiff_t dx = -r; dx <= r; ++dx) {
-    const ptrdiff_t xx = clamp_index(dx, 0, cols - 1);
-    for (int i = 0; i < NC; ++i) {
-      A[i] = _mm512_add_epi16(A[i], _mm512_loadu_si512(S + xx * dp + 32 * i));
-    }
-    if (texcol) tsum += texcol[xx];
-  }
-  A[0] = _mm512_or_si512(A[0], padv);  // padding lanes: 0xFFFF, never a winner
-
-  __m512i B[NC + 1], K[NC + 1];  // right winners: least cost, left column
-  for (int i = 0; i <= NC; ++i) {
-    B[i] = ones;
-    K[i] = _mm512_setzero_si512();
-  }
-  // The winner's neighbours serve the sub-pixel step and the counted uniqueness check.
-  const bool around = c.subpixel != SubpixelFit::kNone || count_low;
-  const __m512i one = _mm512_set1_epi16(1);
-  __m512i xv = _mm512_setzero_si512();  // x in every lane
-  const __m512i* rotations = rotation_table();
-
-  for (ptrdiff_t x = 0; x < cols; ++x) {
-    if (x > 0) {
-      if (fused && x + r < cols) update_col(x + r);
-      const ptrdiff_t xp = clamp_index(x + r, 0, cols - 1);
-      const ptrdiff_t xm = clamp_index(x - r - 1, 0, cols - 1);
-      const uint16_t* plus = S + xp * dp;
-      const uint16_t* minus = S + xm * dp;
-      for (int i = 0; i < NC; ++i) {
-        A[i] = _mm512_sub_epi16(_mm512_add_epi16(A[i], _mm512_loadu_si512(plus + 32 * i)),
-                                _mm512_loadu_si512(minus + 32 * i));
-      }
-      A[0] = _mm512_or_si512(A[0], padv);
-      if (texcol) tsum += texcol[xp] - texcol[xm];
-    }
-    if (lr_on) {
-      const int s = static_cast<int>(x & 31);
-      if (s == 0 && x > 0) {
-        _mm512_store_si512(rarg + (x - 32), K[0]);
-        for (int i = 0; i < NC; ++i) {
-          B[i] = B[i + 1];
-          K[i] = K[i + 1];
-        }
-        B[NC] = ones;
-        K[NC] = _mm512_setzero_si512();
-      }
-      const __m512i idx = _mm512_load_si512(rotations + s);  // lane j <- (j - s) mod 32
-      const __mmask32 from_prev = static_cast<__mmask32>((std::uint64_t{1} << s) - 1u);
-      __m512i prev = ones;
-      for (int i = 0; i <= NC; ++i) {
-        const __m512i cur = i < NC ? _mm512_permutexvar_epi16(idx, A[i]) : ones;
-        const __m512i v = _mm512_mask_blend_epi16(from_prev, cur, prev);
-        const __mmask32 lt = _mm512_cmplt_epu16_mask(v, B[i]);
-        B[i] = _mm512_mask_mov_epi16(B[i], lt, v);
-        K[i] = _mm512_mask_mov_epi16(K[i], lt, xv);
-        prev = cur;
-      }
-      xv = _mm512_add_epi16(xv, one);
-    }
-    if (x < xlo || x > xhi) {
-      record_none(c, x);
-      continue;
-    }
-    __m512i mn = A[0];
-    for (int i = 1; i < NC; ++i) mn = _mm512_min_epu16(mn, A[i]);
-    const uint32_t best = hmin_epu16(mn);
-    const __m512i bv = _mm512_set1_epi16(static_cast<short>(best));
-    // The winner: the highest lane holding the least cost (the lowest disparity on a tie).
-    // Branch-free: which vector holds the winner changes from pixel to pixel, and a
-    // mispredicted branch costs more than this whole selection.
-    int qb = 0;
-    for (int i = 0; i < NC; i += 2) {
-      std::uint64_t w = _mm512_cmpeq_epi16_mask(A[i], bv);
-      if (i + 1 < NC) {
-        w |= static_cast<std::uint64_t>(_mm512_cmpeq_epi16_mask(A[i + 1], bv)) << 32;
-      }
-      const int top = 32 * i + 63 - __builtin_clzll(w | 1u);
-      const int found = -static_cast<int>(w != 0);  // all ones when this pair holds the least
-      qb ^= (qb ^ top) & found;
-    }
-    uint32_t second = kNone;
-    if (count_low) {
-      // The lanes below the uniqueness threshold (the winner among them); this does not wait
-      // for the winner's lane. The threshold is stored twice per 32-bit word, so a dword
-      // broadcast from memory fills the 16-bit lanes.
-      const __m512i thr = _mm512_set1_epi32(static_cast<int>(unique_min[best]));
-      second = 0;
-      for (int i = 0; i < NC; ++i) {
-        second += static_cast<uint32_t>(__builtin_popcount(_mm512_cmplt_epu16_mask(A[i], thr)));
-      }
-    } else if (need_second) {
-      // The exact second-best cost, for the confidence.
-      __m512i m2 = ones;
-      for (int i = 0; i < NC; ++i) {
-        m2 = _mm512_min_epu16(m2, _mm512_mask_mov_epi16(A[i], near_mask(iota, 32 * i, qb), ones));
-      }
-      second = hmin_epu16(m2);
-    }
-    WinnerRecord* rec = records + x;
-    rec->best = static_cast<uint16_t>(best);
-    rec->second = static_cast<uint16_t>(second);
-    rec->kbest = kDp - 1 - qb;
-    rec->tsum = tsum;
-    rec->around = 0;
-    if (around) {
-      // c0 | c2 << 16: lanes qb + 1 and qb - 1 (disparity index kb - 1 and kb + 1), 0 beyond
-      // the lanes. Two-source permutes pick them out of each pair of vectors. (Written out
-      // here: a lambda taking A by reference would keep A in memory.)
-      const __m512i want = _mm512_set1_epi32(static_cast<int>(
-          (static_cast<uint32_t>(qb + 1) & 0xFFFFu) | (static_cast<uint32_t>(qb - 1) << 16)));
-      __m512i got = _mm512_setzero_si512();
-      for (int i = 0; i < NC; i += 2) {
-        const __m512i rel =
-            _mm512_sub_epi16(want, _mm512_set1_epi16(static_cast<short>(32 * i)));
-        __m512i t;
-        if (i + 1 < NC) {
-          t = _mm512_permutex2var_epi16(A[i], rel, A[i + 1]);
-        } else {
-          t = _mm512_permutexvar_epi16(rel, A[i]);
-        }
-        const __mmask32 in = _mm512_cmplt_epu16_mask(
-            rel, _mm512_set1_epi16(static_cast<short>(i + 1 < NC ? 64 : 32)));
-        got = _mm512_mask_mov_epi16(got, in & 3u, t);
-      }
-      rec->around = static_cast<uint32_t>(_mm_cvtsi128_si32(_mm512_castsi512_si128(got)));
-    }
-  }
-  if (lr_on) {
-    const ptrdiff_t base = (cols - 1) & ~ptrdiff_t{31};
-    for (int i = 0; i <= NC; ++i) _mm512_store_si512(rarg + base + 32 * i, K[i]);
-  }
-}
-
-#elif defined(STEREODEPTH_BM_AVX2)
+#if defined(STEREODEPTH_BM_AVX2)
 
 constexpr int kMaxChunks = 16;  // dp <= 256
-constexpr bool kFixedPassDoesBorder = true;  // the border band in group_winners
 
 // The n census codes of a row (16 bits each) split into nibbles for the lookup in
 // update_col: out[i] = code & 0x0F0F and out[stride + i] = (code >> 4) & 0x0F0F, one load per
@@ -1115,14 +670,15 @@ void right_group_keyed(const uint16_t* recent, uint16_t* rmin, uint16_t* rarg, p
   }
 }
 
-// First pass with the NC vectors of 16 costs in registers (the AVX2 form of winners_avx512):
+// First pass with the NC vectors of 16 costs in registers:
 // the column-sum update fused in, a branch-free winner, and the right winners updated per
 // group of 16 pixels (right_group) from the costs stored in `recent`, which also gives the
 // winner's neighbours.
 template <int NC, typename Cost, bool kRing, bool kBytes>
 void winners_avx2(const RowCtx& c) {
   using F = typename Cost::Feature;
-  // Everything the loop reads from c, in locals (see winners_avx512).
+  // Everything the loop reads from c, in locals: the compiler then need not reload it after
+  // each store (and dp is a constant).
   constexpr int dp = 16 * NC;
   constexpr ptrdiff_t kRow = dp + 32;  // a row of `recent`: 16 lanes of 0xFFFF either side
   const ptrdiff_t cols = c.cols, xlo = c.xlo, xhi = c.xhi;
@@ -1138,7 +694,9 @@ void winners_avx2(const RowCtx& c) {
   const __m256i padv = pad_vector(c.qpad);
   uint16_t* S = const_cast<uint16_t*>(c.colsum);
 
-  // The fused column-sum update (see winners_avx512). Census: the codes have 16 bits, so one
+  // The fused column-sum update: column j gains the entering row's costs and loses the
+  // leaving row's just before the running sum reads it (so it is read back from L1). Census:
+  // the codes have 16 bits, so one
   // 16-bit lane holds a whole code. The right rows come split into nibbles (nibbles_of), so
   // XOR with the left code's nibbles gives the vpshufb indices directly; the byte counts of
   // the entering row minus those of the leaving row (-8 .. 8), summed in pairs by
@@ -1493,7 +1051,9 @@ void winners_avx2(const RowCtx& c) {
         best = bests[x - x0];
         const __m256i bv = _mm256_set1_epi16(static_cast<short>(bests[x - x0]));
         // The winner: the highest lane holding the least cost (the lowest disparity on a
-        // tie), branch-free (see winners_avx512), four vectors (64 lanes) at a time: the
+        // tie), branch-free (which vector holds the winner changes from pixel to pixel, and a
+        // mispredicted branch costs more than this whole selection), four vectors (64 lanes)
+        // at a time: the
         // comparison masks of two vectors packed to bytes (vpacksswb interleaves their
         // 128-bit halves, vpermq puts them back in order) give one bit per lane.
         for (int g = 0; g < NC; g += 4) {
@@ -1513,7 +1073,8 @@ void winners_avx2(const RowCtx& c) {
       }
       uint32_t second = kNone;
       if (count_low_) {
-        // How many lanes cost less than the uniqueness threshold (see winners_avx512): the
+        // How many lanes cost less than the uniqueness threshold (this does not wait for the
+        // winner's lane): the
         // lanes >= it are those with min(a, thr) == thr; two vectors' masks packed to bytes
         // give one bit per lane.
         const __m256i thr = _mm256_set1_epi32(static_cast<int>(unique_min[best]));
@@ -1694,7 +1255,7 @@ void winners_avx2(const RowCtx& c) {
 
 #endif
 
-#if defined(STEREODEPTH_BM_AVX512) || defined(STEREODEPTH_BM_AVX2)
+#if defined(STEREODEPTH_BM_AVX2)
 
 // The first pass for dp = kLanes * NC when NC <= kMaxChunks; false otherwise.
 template <int NC, typename Cost>
@@ -1704,9 +1265,6 @@ bool winners_fixed(const RowCtx& c) {
     return false;
   } else {
     if (c.dp == kLanes * NC) {
-#if defined(STEREODEPTH_BM_AVX512)
-      winners_avx512<NC, Cost>(c);
-#else
       if constexpr (sizeof(typename Cost::Feature) == 4) {
         if (c.byte_cols) {
           winners_avx2<NC, Cost, true, true>(c);
@@ -1718,7 +1276,6 @@ bool winners_fixed(const RowCtx& c) {
       } else {
         winners_avx2<NC, Cost, false, false>(c);
       }
-#endif
       return true;
     }
     return winners_fixed<NC + 1, Cost>(c);
@@ -1727,117 +1284,9 @@ bool winners_fixed(const RowCtx& c) {
 
 #endif
 
-#if defined(STEREODEPTH_BM_AVX512)
-
-// Second pass, 16 pixels at a time; the same IEEE operations as decide_generic.
-void decide_avx512(const RowCtx& c) {
-  const ptrdiff_t cols = c.cols;
-  const int dp = c.dp;
-  const bool sub = c.subpixel != SubpixelFit::kNone;
-  const bool parabola = c.subpixel == SubpixelFit::kParabola;
-  const __m512i none = _mm512_set1_epi32(static_cast<int>(kNone));
-  const __m512i iota = _mm512_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15);
-  const __m512 nan = _mm512_set1_ps(std::numeric_limits<float>::quiet_NaN());
-  const __m512i zero = _mm512_setzero_si512();
-  // An integer disparity difference d passes the left-right check when d <= lr_max_diff,
-  // that is d <= floor(lr_max_diff).
-  const int lr_int = c.lr_max_diff >= 65536.0 ? 65536 : static_cast<int>(std::floor(c.lr_max_diff));
-  auto to_pd_lo = [](__m512i v) { return _mm512_cvtepu32_pd(_mm512_castsi512_si256(v)); };
-  auto to_pd_hi = [](__m512i v) { return _mm512_cvtepu32_pd(_mm512_extracti64x4_epi64(v, 1)); };
-  for (ptrdiff_t x = 0; x < cols; x += 16) {
-    const __mmask16 lanes =
-        cols - x >= 16 ? static_cast<__mmask16>(0xFFFF)
-                       : static_cast<__mmask16>((1u << (cols - x)) - 1u);
-    // 16 records = four vectors of four; pick each field out with two-source permutes.
-    const __m512i* rv = reinterpret_cast<const __m512i*>(c.rec + x);
-    const __m512i r0 = _mm512_loadu_si512(rv), r1 = _mm512_loadu_si512(rv + 1);
-    const __m512i r2 = _mm512_loadu_si512(rv + 2), r3 = _mm512_loadu_si512(rv + 3);
-    auto field = [&](int f) {
-      const __m512i idx = _mm512_add_epi32(_mm512_slli_epi32(iota, 2), _mm512_set1_epi32(f));
-      const __m512i lo = _mm512_permutex2var_epi32(r0, idx, r1);  // lanes 0-7
-      const __m512i hi = _mm512_permutex2var_epi32(r2, idx, r3);  // lanes 0-7
-      return _mm512_inserti64x4(lo, _mm512_castsi512_si256(hi), 1);
-    };
-    const __m512i f0 = field(0);  // best | second << 16
-    const __m512i b = _mm512_and_si512(f0, _mm512_set1_epi32(0xFFFF));
-    const __m512i s2 = _mm512_srli_epi32(f0, 16);
-    const __m512i kb = field(1);
-    __mmask16 ok = lanes & _mm512_cmpneq_epi32_mask(b, none);
-    if (c.texcol) {
-      const __m512i t = field(2);
-      const __m512d tmin = _mm512_set1_pd(c.texture_sum_min);
-      const __mmask8 lo = _mm512_cmp_pd_mask(to_pd_lo(t), tmin, _CMP_NLT_UQ);
-      const __mmask8 hi = _mm512_cmp_pd_mask(to_pd_hi(t), tmin, _CMP_NLT_UQ);
-      ok &= static_cast<__mmask16>(lo | (static_cast<unsigned>(hi) << 8));
-    }
-    const __mmask16 has2 = _mm512_cmpneq_epi32_mask(s2, none);
-    if (c.count_low) {
-      // Unique when the lanes below the threshold are only the winner and those of its two
-      // neighbours (disparity index kb - 1 and kb + 1, where they exist) below it.
-      const __m512i thr = _mm512_and_si512(
-          _mm512_mask_i32gather_epi32(zero, ok, b, c.unique_min, 4), _mm512_set1_epi32(0xFFFF));
-      const __m512i nb = field(3);
-      const __mmask16 low0 = _mm512_cmpge_epi32_mask(kb, _mm512_set1_epi32(1)) &
-                             _mm512_cmplt_epi32_mask(_mm512_and_si512(nb, _mm512_set1_epi32(0xFFFF)), thr);
-      const __mmask16 low2 = _mm512_cmple_epi32_mask(kb, _mm512_set1_epi32(c.nd - 2)) &
-                             _mm512_cmplt_epi32_mask(_mm512_srli_epi32(nb, 16), thr);
-      const __m512i near = _mm512_add_epi32(
-          _mm512_set1_epi32(1), _mm512_add_epi32(_mm512_maskz_set1_epi32(low0, 1),
-                                                 _mm512_maskz_set1_epi32(low2, 1)));
-      ok &= _mm512_cmpeq_epi32_mask(s2, near);
-    } else if (c.uniqueness_factor > 0) {
-      const __m512d hundred = _mm512_set1_pd(100.0);
-      const __m512d f = _mm512_set1_pd(c.uniqueness_factor);
-      const __mmask8 lo = _mm512_cmp_pd_mask(_mm512_mul_pd(to_pd_lo(s2), hundred),
-                                             _mm512_mul_pd(to_pd_lo(b), f), _CMP_GT_OQ);
-      const __mmask8 hi = _mm512_cmp_pd_mask(_mm512_mul_pd(to_pd_hi(s2), hundred),
-                                             _mm512_mul_pd(to_pd_hi(b), f), _CMP_GT_OQ);
-      ok &= static_cast<__mmask16>(~has2 | lo | (static_cast<unsigned>(hi) << 8));
-    }
-    if (c.lr_on) {
-      // i = x + dp - 1 - kb; the right winner's index is (rarg[i] - i + dp - 1) mod 2^16.
-      const __m512i xs = _mm512_add_epi32(_mm512_set1_epi32(static_cast<int>(x)), iota);
-      const __m512i i = _mm512_sub_epi32(_mm512_add_epi32(xs, _mm512_set1_epi32(dp - 1)), kb);
-      const __m512i g = _mm512_mask_i32gather_epi32(zero, ok, i, c.rarg, 2);
-      const __m512i kr = _mm512_and_si512(
-          _mm512_add_epi32(_mm512_sub_epi32(g, i), _mm512_set1_epi32(dp - 1)),
-          _mm512_set1_epi32(0xFFFF));
-      const __m512i diff = _mm512_abs_epi32(_mm512_sub_epi32(kb, kr));
-      ok &= _mm512_cmple_epi32_mask(diff, _mm512_set1_epi32(lr_int));
-    }
-    __m512 d = _mm512_cvtepi32_ps(_mm512_add_epi32(kb, _mm512_set1_epi32(c.min_d)));
-    if (sub) {
-      const __mmask16 interior = ok & _mm512_cmpge_epi32_mask(kb, _mm512_set1_epi32(1)) &
-                                 _mm512_cmple_epi32_mask(kb, _mm512_set1_epi32(c.nd - 2));
-      const __m512i nb = field(3);
-      const __m512i c0 = _mm512_and_si512(nb, _mm512_set1_epi32(0xFFFF));
-      const __m512i c2 = _mm512_srli_epi32(nb, 16);
-      const __m512 num = _mm512_cvtepi32_ps(_mm512_sub_epi32(c0, c2));
-      __m512i den_i;
-      if (parabola) {
-        den_i = _mm512_sub_epi32(_mm512_add_epi32(c0, c2), _mm512_add_epi32(b, b));
-      } else {
-        den_i = _mm512_max_epi32(_mm512_sub_epi32(c0, b), _mm512_sub_epi32(c2, b));
-      }
-      const __m512 den = _mm512_cvtepi32_ps(_mm512_add_epi32(den_i, den_i));
-      const __mmask16 use = interior & _mm512_cmp_ps_mask(den, _mm512_setzero_ps(), _CMP_GT_OQ);
-      d = _mm512_mask_add_ps(d, use, d, _mm512_maskz_div_ps(use, num, den));
-    }
-    _mm512_mask_storeu_ps(c.drow + x, lanes, _mm512_mask_blend_ps(ok, nan, d));
-    if (c.crow) {
-      const __mmask16 pos = has2 & _mm512_cmpgt_epi32_mask(s2, zero);
-      const __m512 ratio = _mm512_maskz_div_ps(pos, _mm512_cvtepi32_ps(_mm512_sub_epi32(s2, b)),
-                                               _mm512_cvtepi32_ps(s2));
-      const __m512 conf = _mm512_mask_blend_ps(has2, _mm512_set1_ps(1.0f), ratio);
-      _mm512_mask_storeu_ps(c.crow + x, lanes, _mm512_maskz_mov_ps(ok, conf));
-    }
-  }
-}
-
-#endif
 
 // Second pass, one pixel at a time: the checks, the sub-pixel step and the outputs. (The
-// SIMD builds use decide_avx512 and decide_avx2, which give the same results.)
+// SIMD builds use decide_avx2, which gives the same results.)
 [[maybe_unused]] void decide_generic(const RowCtx& c) {
   const float nan = std::numeric_limits<float>::quiet_NaN();
   for (ptrdiff_t x = 0; x < c.cols; ++x) {
@@ -1939,7 +1388,8 @@ void decide_avx2(const RowCtx& c) {
                                      _mm256_cmp_ps(den, _mm256_setzero_ps(), _CMP_GT_OQ));
     return _mm256_blendv_ps(d, _mm256_add_ps(d, _mm256_div_ps(num, den)), use);
   };
-  // See decide_avx512.
+  // An integer disparity difference d passes the left-right check when d <= lr_max_diff,
+  // that is d <= floor(lr_max_diff).
   const int lr_int = c.lr_max_diff >= 65536.0 ? 65536 : static_cast<int>(std::floor(c.lr_max_diff));
   // The transpose below leaves the pixels in the order 0, 2, 4, 6, 1, 3, 5, 7.
   const __m256i unshuffle = _mm256_setr_epi32(0, 4, 1, 5, 2, 6, 3, 7);
@@ -2026,7 +1476,8 @@ void decide_avx2(const RowCtx& c) {
     const __m256i c0 = _mm256_and_si256(nb, low16);
     const __m256i c2 = _mm256_srli_epi32(nb, 16);
     if (c.count_low) {
-      // See decide_avx512.
+      // Unique when the lanes below the threshold are only the winner and those of its two
+      // neighbours (disparity index kb - 1 and kb + 1, where they exist) below it.
       const __m256i thr = _mm256_and_si256(
           _mm256_mask_i32gather_epi32(zero, reinterpret_cast<const int*>(c.unique_min), b, ok, 4),
           low16);
@@ -2187,7 +1638,7 @@ void border_band(const RowCtx& c) {
 
 // Whether this build's first pass updates the column sums itself for this dp.
 inline bool fuses_update(int dp) {
-#if defined(STEREODEPTH_BM_AVX512) || defined(STEREODEPTH_BM_AVX2)
+#if defined(STEREODEPTH_BM_AVX2)
   return dp <= kLanes * kMaxChunks;
 #else
   (void)dp;
@@ -2197,22 +1648,16 @@ inline bool fuses_update(int dp) {
 
 template <typename Cost>
 void row_pass(const RowCtx& c) {
-#if defined(STEREODEPTH_BM_AVX512) || defined(STEREODEPTH_BM_AVX2)
-#if defined(STEREODEPTH_BM_AVX512)
-  auto decide = decide_avx512;
-#else
-  auto decide = decide_avx2;
-#endif
+#if defined(STEREODEPTH_BM_AVX2)
   if (c.dp <= kLanes * kMaxChunks) {
     RowCtx counted = c;
     counted.count_low = c.unique_min != nullptr && c.crow == nullptr;
     winners_fixed<1, Cost>(counted);
-    if (!c.first_pass_only) decide(counted);
-    // The AVX2 fixed pass matches the border band itself (see winners_avx2).
-    if (c.clip_border && !kFixedPassDoesBorder) border_band(c);
+    // The fixed pass matches the border band itself (group_winners): no border_band here.
+    if (!c.first_pass_only) decide_avx2(counted);
   } else {
     winners_generic(c);
-    if (!c.first_pass_only) decide(c);
+    if (!c.first_pass_only) decide_avx2(c);
     if (c.clip_border) border_band(c);
   }
 #else
@@ -2325,16 +1770,7 @@ void match_band_impl(const MatchArgs& a, const BandScratch& s, ptrdiff_t y0, ptr
           c.in_rpad = rpad_in;
           c.out_left = lrow(yout);
           c.out_rpad = rpad_out;
-#if defined(STEREODEPTH_BM_AVX512)
-          if constexpr (sizeof(F) == 4) {
-            // Every lane q < dp of every column x < cols reads quads below cols + dp - 28.
-            const ptrdiff_t nq = cols + dp - 28;
-            quads_of(rpad_in, static_cast<__m512i*>(s.quad_in), nq, false);
-            quads_of(rpad_out, static_cast<__m512i*>(s.quad_out), nq, true);
-            c.in_quad = s.quad_in;
-            c.out_quad = s.quad_out;
-          }
-#elif defined(STEREODEPTH_BM_AVX2)
+#if defined(STEREODEPTH_BM_AVX2)
           if constexpr (sizeof(F) == 4) {
             // With the ring the leaving row's costs are read back: only the entering row is
             // matched.
@@ -2381,34 +1817,7 @@ void speckle_links(const float* d, const float* u, ptrdiff_t cols, float rf, std
   std::memset(left, 0, sizeof(std::uint64_t) * static_cast<size_t>(words));
   std::memset(up, 0, sizeof(std::uint64_t) * static_cast<size_t>(words));
   ptrdiff_t i = 0;
-#if defined(STEREODEPTH_BM_AVX512)
-  // 16 columns at a time; column 0 has no left neighbour (done below).
-  auto* v16 = reinterpret_cast<uint16_t*>(valid);
-  auto* l16 = reinterpret_cast<uint16_t*>(left);
-  auto* u16 = reinterpret_cast<uint16_t*>(up);
-  const __m512 r = _mm512_set1_ps(rf);
-  const __m512 sign = _mm512_set1_ps(-0.0f);
-  if (cols > 16) {
-    for (; i + 16 <= cols; i += 16) {
-      const __m512 di = _mm512_loadu_ps(d + i);
-      v16[i / 16] = _mm512_cmp_ps_mask(di, di, _CMP_ORD_Q);
-      if (i > 0) {
-        const __m512 dl = _mm512_loadu_ps(d + i - 1);
-        l16[i / 16] = _mm512_cmp_ps_mask(_mm512_andnot_ps(sign, _mm512_sub_ps(di, dl)), r,
-                                         _CMP_LE_OQ);
-      }
-      if (u) {
-        const __m512 du = _mm512_loadu_ps(u + i);
-        u16[i / 16] = _mm512_cmp_ps_mask(_mm512_andnot_ps(sign, _mm512_sub_ps(di, du)), r,
-                                         _CMP_LE_OQ);
-      }
-    }
-    // The first 16 columns' left links (column 0 has none).
-    for (ptrdiff_t j = 1; j < 16; ++j) {
-      if (std::fabs(d[j] - d[j - 1]) <= rf) left[0] |= std::uint64_t{1} << j;
-    }
-  }
-#elif defined(STEREODEPTH_BM_AVX2)
+#if defined(STEREODEPTH_BM_AVX2)
   // 32 columns at a time, four movemasks of 8 per 32-bit half word (|a - b| is a - b with
   // the sign bit cleared, as fabs; a NaN compares false); column 0 has no left neighbour.
   auto* v32 = reinterpret_cast<uint32_t*>(valid);
