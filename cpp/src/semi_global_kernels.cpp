@@ -646,7 +646,7 @@ inline void fill_range(uint8_t* __restrict o, ptrdiff_t k0, ptrdiff_t k1, int nd
         // Two compares and an AND: GCC 12.2 with the AVX-512 flags compiled the earlier
         // andnot(j0 > lane, j1 > lane) so that this function filled the lanes below j0
         // instead (wrong costs in the left border band; seen on the first AVX-512 machine
-        // the tests ran on, fine with the AVX2 flags and under the sanitizers).
+        // the tests ran on, fine with the AVX2 flags, under the sanitizers and with clang).
         const W in = _mm_and_si128(_mm_cmpgt_epi8(lanes, set1(static_cast<int>(j0 - 1))),
                                    _mm_cmpgt_epi8(set1(static_cast<int>(j1)), lanes));
         const W cur = _mm_loadu_si128(reinterpret_cast<const W*>(p));
