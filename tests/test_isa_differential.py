@@ -92,19 +92,6 @@ BLOCK_MATCH_CASES: list[tuple[tuple[int, int], str, int, dict[str, Any]]] = [
 ]  # fmt: skip
 
 
-@pytest.mark.parametrize("isa", SIMD_ISAS)
-@pytest.mark.parametrize("case", range(len(BLOCK_MATCH_CASES)))
-def test_block_matcher_options_mix_matches_baseline(isa: str, case: int) -> None:
-    shape, kind, shift, kw = BLOCK_MATCH_CASES[case]
-    left, right = mixed_pair(shape, shift, seed=100 + case, kind=kind)
-    scalar = sd.StereoMatcher(isa="baseline", threads=1, **kw).compute(left, right)
-    simd = sd.StereoMatcher(isa=isa, threads=3, **kw).compute(left, right)
-    assert_same_bits(scalar, simd)
-    if shape[0] * shape[1] > 100:  # not a vacuous comparison
-        d = scalar[0] if isinstance(scalar, tuple) else scalar
-        assert np.isfinite(d).any()
-
-
 def sgm_limit(paths: int, block_size: int) -> int:
     return min(65535 // paths, 16383) - 16 * block_size**2
 
@@ -138,15 +125,25 @@ SEMI_GLOBAL_CASES: list[tuple[tuple[int, int], str, int, dict[str, Any]]] = [
 ]  # fmt: skip
 
 
+# (matcher class, index of the case in its list): both matchers' cases.
+MATCHER_CASES = [(sd.StereoMatcher, i) for i in range(len(BLOCK_MATCH_CASES))] + [
+    (sd.SemiGlobalMatcher, i) for i in range(len(SEMI_GLOBAL_CASES))
+]
+
+
 @pytest.mark.parametrize("isa", SIMD_ISAS)
-@pytest.mark.parametrize("case", range(len(SEMI_GLOBAL_CASES)))
-def test_semi_global_matcher_options_mix_matches_baseline(isa: str, case: int) -> None:
-    shape, kind, shift, kw = SEMI_GLOBAL_CASES[case]
-    left, right = mixed_pair(shape, shift, seed=200 + case, kind=kind)
-    scalar = sd.SemiGlobalMatcher(isa="baseline", threads=1, **kw).compute(left, right)
-    simd = sd.SemiGlobalMatcher(isa=isa, threads=3, **kw).compute(left, right)
+@pytest.mark.parametrize(
+    ("matcher", "case"), MATCHER_CASES, ids=[f"{m.__name__}-{i}" for m, i in MATCHER_CASES]
+)
+def test_options_mix_matches_baseline(isa: str, matcher: Any, case: int) -> None:
+    cases = BLOCK_MATCH_CASES if matcher is sd.StereoMatcher else SEMI_GLOBAL_CASES
+    shape, kind, shift, kw = cases[case]
+    seed = (100 if matcher is sd.StereoMatcher else 200) + case
+    left, right = mixed_pair(shape, shift, seed=seed, kind=kind)
+    scalar = matcher(isa="baseline", threads=1, **kw).compute(left, right)
+    simd = matcher(isa=isa, threads=3, **kw).compute(left, right)
     assert_same_bits(scalar, simd)
-    if shape[0] * shape[1] > 100:
+    if shape[0] * shape[1] > 100:  # not a vacuous comparison
         d = scalar[0] if isinstance(scalar, tuple) else scalar
         assert np.isfinite(d).any()
 
