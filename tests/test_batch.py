@@ -932,6 +932,28 @@ def test_ctrl_c_during_a_dask_job_sets_a_flag_and_a_second_one_raises() -> None:
         signal.signal(signal.SIGINT, previous)
 
 
+def ctrl_c_batch(inp: Path, out: Path, preload: Path, workers: str, ready: Any) -> tuple[int, str]:
+    """``stereodepth batch INP -o OUT --workers N`` in a process group of its own, with
+    ``preload`` run by dask in each worker; once ``ready()`` holds, SIGINT to the whole group
+    (a terminal's Ctrl-C). Returns the exit status and stderr."""
+    env = {**os.environ, "DASK_DISTRIBUTED__WORKER__PRELOAD": json.dumps([str(preload)])}
+    argv = [sys.executable, "-m", "stereodepth.cli", "batch", str(inp), "-o", str(out)]
+    with subprocess.Popen(
+        [*argv, "--workers", workers],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        env=env,
+        start_new_session=True,
+    ) as proc:
+        try:
+            wait_for(ready, timeout=120)
+        finally:
+            os.killpg(proc.pid, signal.SIGINT)
+            _, stderr = proc.communicate(timeout=120)
+    return proc.returncode, stderr
+
+
 @pytest.mark.cluster
 def test_ctrl_c_while_the_local_cluster_starts_stops_the_job(tmp_path: Path) -> None:
     """SIGINT is ignored while the worker processes start (so that they inherit it ignored),
@@ -946,22 +968,8 @@ def test_ctrl_c_while_the_local_cluster_starts_stops_the_job(tmp_path: Path) -> 
     preload.write_text(
         f"import pathlib, time\npathlib.Path({str(marker)!r}).touch()\ntime.sleep(3)\n"
     )
-    env = {**os.environ, "DASK_DISTRIBUTED__WORKER__PRELOAD": json.dumps([str(preload)])}
-    argv = [sys.executable, "-m", "stereodepth.cli", "batch", str(inp), "-o", str(out)]
-    with subprocess.Popen(
-        [*argv, "--workers", "1"],
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-        text=True,
-        env=env,
-        start_new_session=True,
-    ) as proc:
-        try:
-            wait_for(marker.exists, timeout=120)
-        finally:
-            os.killpg(proc.pid, signal.SIGINT)
-            _, stderr = proc.communicate(timeout=120)
-    assert proc.returncode == 130, stderr
+    status, stderr = ctrl_c_batch(inp, out, preload, "1", ready=marker.exists)
+    assert status == 130, stderr
     assert "Traceback" not in stderr, stderr
     report = report_of(out)
     assert report["interrupted"]
@@ -985,32 +993,10 @@ def test_ctrl_c_in_a_terminal_with_local_workers(tmp_path: Path) -> None:
     middlebury_folder(inp, 12)
     preload = tmp_path / "slow_worker.py"
     preload.write_text(SLOW_MATCHER.format(delay=0.5))
-    env = {**os.environ, "DASK_DISTRIBUTED__WORKER__PRELOAD": json.dumps([str(preload)])}
-    argv = [
-        sys.executable,
-        "-m",
-        "stereodepth.cli",
-        "batch",
-        str(inp),
-        "-o",
-        str(out),
-        "--workers",
-        "2",
-    ]
-    with subprocess.Popen(
-        argv,
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-        text=True,
-        env=env,
-        start_new_session=True,
-    ) as proc:
-        try:
-            wait_for(lambda: out.is_dir() and any(out.glob("scene*.json")), timeout=120)
-        finally:
-            os.killpg(proc.pid, signal.SIGINT)
-            _, stderr = proc.communicate(timeout=120)
-    assert proc.returncode == 130, stderr
+    status, stderr = ctrl_c_batch(
+        inp, out, preload, "2", ready=lambda: out.is_dir() and any(out.glob("scene*.json"))
+    )
+    assert status == 130, stderr
     assert "Traceback" not in stderr, stderr
     assert "interrupted" in stderr
     report = report_of(out)

@@ -43,8 +43,8 @@
 
 // The AVX-512 build runs the AVX2 matcher: 16-lane vectors, with the AVX-512 encodings and
 // registers the compiler picks. On the first AVX-512 machine measured (AMD EPYC, Zen 4) the
-// earlier 32-lane form took 2.6-3x the time of the AVX2 one (bench/README.md, "Issue 12,
-// eighth round").
+// earlier 32-lane form took 2.6-3x the time of the AVX2 one (bench/README.md, "On an AVX-512
+// machine (the eleventh round)").
 #if defined(__AVX2__)
 #define STEREODEPTH_BM_AVX2 1
 #endif
@@ -696,11 +696,10 @@ void winners_avx2(const RowCtx& c) {
 
   // The fused column-sum update: column j gains the entering row's costs and loses the
   // leaving row's just before the running sum reads it (so it is read back from L1). Census:
-  // the codes have 16 bits, so one
-  // 16-bit lane holds a whole code. The right rows come split into nibbles (nibbles_of), so
-  // XOR with the left code's nibbles gives the vpshufb indices directly; the byte counts of
-  // the entering row minus those of the leaving row (-8 .. 8), summed in pairs by
-  // vpmaddubsw, give c_in - c_out.
+  // the codes have 16 bits, so one 16-bit lane holds a whole code. The right rows come split
+  // into nibbles (nibbles_of), so XOR with the left code's nibbles gives the vpshufb indices
+  // directly; the byte counts of the entering row minus those of the leaving row (-8 .. 8),
+  // summed in pairs by vpmaddubsw, give c_in - c_out.
   const F* in_l = static_cast<const F*>(c.in_left);
   const F* in_r = static_cast<const F*>(c.in_rpad);
   const F* out_l = static_cast<const F*>(c.out_left);
@@ -1053,9 +1052,9 @@ void winners_avx2(const RowCtx& c) {
         // The winner: the highest lane holding the least cost (the lowest disparity on a
         // tie), branch-free (which vector holds the winner changes from pixel to pixel, and a
         // mispredicted branch costs more than this whole selection), four vectors (64 lanes)
-        // at a time: the
-        // comparison masks of two vectors packed to bytes (vpacksswb interleaves their
-        // 128-bit halves, vpermq puts them back in order) give one bit per lane.
+        // at a time: the comparison masks of two vectors packed to bytes (vpacksswb
+        // interleaves their 128-bit halves, vpermq puts them back in order) give one bit per
+        // lane.
         for (int g = 0; g < NC; g += 4) {
           auto eq = [&](int k) {
             return k < NC ? _mm256_cmpeq_epi16(V[k], bv) : _mm256_setzero_si256();
@@ -1074,9 +1073,8 @@ void winners_avx2(const RowCtx& c) {
       uint32_t second = kNone;
       if (count_low_) {
         // How many lanes cost less than the uniqueness threshold (this does not wait for the
-        // winner's lane): the
-        // lanes >= it are those with min(a, thr) == thr; two vectors' masks packed to bytes
-        // give one bit per lane.
+        // winner's lane): the lanes >= it are those with min(a, thr) == thr; two vectors'
+        // masks packed to bytes give one bit per lane.
         const __m256i thr = _mm256_set1_epi32(static_cast<int>(unique_min[best]));
         auto at_least = [&](int k) {
           return _mm256_cmpeq_epi16(_mm256_min_epu16(V[k], thr), thr);
@@ -1252,10 +1250,6 @@ void winners_avx2(const RowCtx& c) {
     }
   }
 }
-
-#endif
-
-#if defined(STEREODEPTH_BM_AVX2)
 
 // The first pass for dp = kLanes * NC when NC <= kMaxChunks; false otherwise.
 template <int NC, typename Cost>

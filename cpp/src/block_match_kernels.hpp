@@ -67,8 +67,8 @@ struct BandScratch {
   void* rpad_in;           // cols + dp + kRowPad features: the padded right row entering
   void* rpad_out;          // the same for the leaving row
   // Census, the padded rows regrouped for the SIMD builds (see the kernels), cols + dp +
-  // kRowPad elements of regrouped_bytes(lanes) each: AVX-512, for in-order packing; AVX2, the
-  // codes' nibbles as two rows of uint16, then those of the left row as two more.
+  // kRowPad elements of regrouped_bytes(lanes) each: the codes' nibbles as two rows of
+  // uint16, then those of the left row as two more.
   void* quad_in;
   void* quad_out;
   std::uint16_t* rmin;     // cols + dp + kRowPad: least cost per right column
@@ -76,22 +76,22 @@ struct BandScratch {
   std::uint32_t* texcol;   // cols: block-column sums of the texture
   // The row's winner records (see WinnerRecord), cols + 16 of them.
   void* records;
-  // AVX2: the block costs of the last 16 pixels, recent_size(lanes, dp) of them.
+  // SIMD builds: the block costs of the last 16 pixels, recent_size(lanes, dp) of them.
   std::uint16_t* recent;
-  // AVX2 census, fixed first pass: the pixel costs of the last cost_ring_rows(radius) image
-  // rows (row y in slot y mod that), so that a row leaving the block is read back rather than
-  // matched again. One byte per cost (a census cost is at most 16): column x of a slot at
-  // x * cost_ring_column_bytes(dp), its lanes as the pairs of vectors that vpackuswb makes
-  // (see winners_avx2); cost_ring_size(...) bytes, null when that is 0.
+  // SIMD builds, census, fixed first pass: the pixel costs of the last
+  // cost_ring_rows(radius) image rows (row y in slot y mod that), so that a row leaving the
+  // block is read back rather than matched again. One byte per cost (a census cost is at
+  // most 16): column x of a slot at x * cost_ring_column_bytes(dp), its lanes as the pairs of
+  // vectors that vpackuswb makes (see winners_avx2); cost_ring_size(...) bytes, null when
+  // that is 0.
   std::uint8_t* ring;
 };
 
-// Bytes per element of the regrouped census rows of a build with this many lanes.
-inline constexpr std::size_t regrouped_bytes(int lanes) {
-  return lanes == 32 ? 64 : lanes == 16 ? 8 : 0;
-}
+// Bytes per element of the regrouped census rows of a build with this many lanes (the SIMD
+// builds' 16; the baseline build has none).
+inline constexpr std::size_t regrouped_bytes(int lanes) { return lanes == 16 ? 8 : 0; }
 
-// Elements of BandScratch::recent: 16 rows of dp + 32 (AVX2 builds only).
+// Elements of BandScratch::recent: 16 rows of dp + 32 (SIMD builds only).
 inline constexpr std::size_t recent_size(int lanes, int dp) {
   return lanes == 16 ? 16 * (static_cast<std::size_t>(dp) + 32) : 0;
 }
@@ -106,9 +106,9 @@ inline constexpr std::size_t kCostRingBudget = std::size_t{24} << 20;
 // Bytes of one column's costs in a ring slot: dp rounded up to 32 (whole pairs of vectors).
 inline constexpr std::ptrdiff_t cost_ring_column_bytes(int dp) { return (dp + 31) / 32 * 32; }
 
-// Bytes of BandScratch::ring: a build with 16 lanes (AVX2), census features (4 bytes) and
-// dp <= 256 (its fixed first pass) keeps cost_ring_rows(radius) rows of cols columns, when
-// they fit kCostRingBudget; 0 otherwise.
+// Bytes of BandScratch::ring: a build with 16 lanes (AVX2, AVX-512), census features (4
+// bytes) and dp <= 256 (its fixed first pass) keeps cost_ring_rows(radius) rows of cols
+// columns, when they fit kCostRingBudget; 0 otherwise.
 inline constexpr std::size_t cost_ring_size(int lanes, std::size_t feat_size, int radius,
                                             std::ptrdiff_t cols, int dp) {
   const std::size_t n = static_cast<std::size_t>(cost_ring_rows(radius)) *

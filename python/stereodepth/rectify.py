@@ -135,6 +135,24 @@ def _model(name: str, value: Any) -> str:
     return value
 
 
+# The refusal of an OpenCV 12 or 14 coefficient distortion with thin prism or tilt terms
+# (_rational_as_8), after the parameter's name.
+_RATIONAL_TERMS = (
+    "has thin prism or tilt terms (coefficients 9 to {size}), which the plumb_bob model does "
+    "not take"
+)
+
+
+def _rational_as_8(d: np.ndarray) -> np.ndarray | None:
+    """OpenCV's 12 and 14 coefficient forms of its rational model (thin prism, tilt; as
+    cv2.stereoCalibrate returns them with CALIB_RATIONAL_MODEL: (1, 14), zeros after the
+    8th) as their first 8 when the added terms are 0, None when they are not; any other count
+    unchanged. The one rule of the rectifier and of the calibration readers."""
+    if d.size not in (12, 14):
+        return d
+    return None if np.any(d[8:] != 0) else d[:8]
+
+
 def _distortion(name: str, value: Any, model: str) -> np.ndarray:
     if value is None:
         arr = np.zeros(0)
@@ -145,17 +163,14 @@ def _distortion(name: str, value: Any, model: str) -> np.ndarray:
         if arr.ndim != 1:
             raise ValueError(f"{name} must be 1-D, got shape {arr.shape}")
     if model == "plumb_bob" and arr.size in (12, 14):
-        # OpenCV's thin prism (12) and tilted (14) forms: cv2.stereoCalibrate with
-        # CALIB_RATIONAL_MODEL returns (1, 14), zeros after the 8th. Taken when those terms
-        # are 0, as the calibration readers take them (refused before).
+        # Taken when the thin prism and tilt terms are 0, as the calibration readers take
+        # them (refused before).
         if not np.all(np.isfinite(arr)):
             raise ValueError(f"{name} must be finite, got {arr.tolist()}")
-        if np.any(arr[8:] != 0):
-            raise ValueError(
-                f"{name} has thin prism or tilt terms (coefficients 9 to {arr.size}), which "
-                f"the plumb_bob model does not take, got {arr.tolist()}"
-            )
-        arr = arr[:8]
+        eight = _rational_as_8(arr)
+        if eight is None:
+            raise ValueError(f"{name} {_RATIONAL_TERMS.format(size=arr.size)}, got {arr.tolist()}")
+        arr = eight
     if model == "none" and arr.size and np.any(arr != 0):
         raise ValueError(f"{name} must be empty or zero for distortion_model 'none', got {arr}")
     if model == "none":

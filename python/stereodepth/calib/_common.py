@@ -167,18 +167,21 @@ def _check_rotation(value: Any, where: str, key: str) -> np.ndarray:
 
 def _opencv_rational(d: np.ndarray, where: str, key: str) -> np.ndarray:
     """OpenCV's 12 and 14 coefficient forms (thin prism, tilt) of a plumb_bob distortion as
-    its first 8 when the rest are 0 (as cv2.stereoCalibrate returns them with
-    CALIB_RATIONAL_MODEL); ValueError naming ``key`` when they are not; any other count
-    unchanged."""
-    if d.size not in (12, 14):
-        return d
-    if np.any(d[8:]):
-        raise _fail(
-            where,
-            f"{key} has thin prism or tilt terms (coefficients 9 to {d.size}), which the "
-            "plumb_bob model does not take",
-        )
-    return d[:8]
+    its first 8 when the rest are 0, the rectifier's rule (rectify._rational_as_8);
+    ValueError naming ``key`` when they are not; any other count unchanged."""
+    from ..rectify import _RATIONAL_TERMS, _rational_as_8
+
+    eight = _rational_as_8(d)
+    if eight is None:
+        raise _fail(where, f"{key} {_RATIONAL_TERMS.format(size=d.size)}")
+    return eight
+
+
+def _differ(a: float, b: float) -> bool:
+    """Whether two values of a rectified pair that must be equal (the cameras' fx, fy, cy)
+    differ by more than a calibration file's last printed digit: 1e-6 relative (1e-9 for
+    zeros). The readers' and StereoCalibration.to_rig's one tolerance."""
+    return abs(a - b) > 1e-6 * max(abs(a), abs(b)) + 1e-9
 
 
 def _check_distortion(

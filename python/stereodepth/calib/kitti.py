@@ -19,7 +19,14 @@ from pathlib import Path
 
 import numpy as np
 
-from ._common import _check_cameras, _check_image_size, _image_size_of, _path, _read_text
+from ._common import (
+    _check_cameras,
+    _check_image_size,
+    _differ,
+    _image_size_of,
+    _path,
+    _read_text,
+)
 from .stereo import Calibration, StereoCalibration, _rectified_calibration
 
 __all__ = ["read_kitti_calib", "read_kitti_stereo_calibration"]
@@ -84,7 +91,7 @@ def _rectified_pair(
         ("focal length fy", pl[1, 1], pr[1, 1]),
         ("principal point row cy", pl[1, 2], pr[1, 2]),
     ):
-        if abs(a - b) > 1e-6 * max(abs(a), abs(b)) + 1e-9:
+        if _differ(a, b):
             raise ValueError(
                 f"{p}: {kl} and {kr} are not a rectified pair: their {name} differ ({a} and {b})"
             )

@@ -14,6 +14,7 @@ from ._common import (
     _INTEGER_RE,
     _LINE_RE,
     _NUMBER_RE,
+    _differ,
     _image_size_of,
     _path,
     _read_text,
@@ -148,7 +149,7 @@ def read_middlebury_calib(path: str | os.PathLike[str]) -> MiddleburyCalib:
         # and its pair matched and converted to depth as if it were rectified.
         for name, i, j in (("focal length fx", 0, 0), ("focal length fy", 1, 1), ("cy", 1, 2)):
             a, b = float(cam0[i, j]), float(cam1[i, j])
-            if abs(a - b) > 1e-6 * max(abs(a), abs(b)) + 1e-9:
+            if _differ(a, b):
                 raise ValueError(
                     f"{p}: cam0 and cam1 are not a rectified pair: their {name} differ "
                     f"({a:g} and {b:g})"

@@ -15,6 +15,7 @@ from ._common import (
     _check_intrinsics,
     _check_model,
     _check_rotation,
+    _differ,
     _fail,
 )
 
@@ -139,12 +140,12 @@ class StereoCalibration:
         where = self.source or "StereoCalibration"
         if self.rectified:
             k1, k2, t = self.K1, self.K2, self.T
-            # Within the readers' tolerance (read_kitti_calib's and read_middlebury_calib's
-            # 1e-6 relative): files whose values differ in the last printed digit were read,
+            # Within the readers' tolerance (_differ: 1e-6 relative): files whose values
+            # differ in the last printed digit were read,
             # rectified and given a rig by read_calibration, and refused here.
             for name, i, j in (("fx", 0, 0), ("fy", 1, 1), ("cy", 1, 2)):
                 a, b = float(k1[i, j]), float(k2[i, j])
-                if abs(a - b) > 1e-6 * max(abs(a), abs(b)) + 1e-9:
+                if _differ(a, b):
                     raise _fail(
                         where,
                         f"a rectified pair has the same fx, fy and cy in K1 and K2, got {name} "
