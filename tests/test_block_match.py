@@ -1033,3 +1033,25 @@ def test_to_opencv_disparity_rejects(
 ) -> None:
     with pytest.raises(exc, match=match):
         sd.to_opencv_disparity(value, **kwargs)
+
+
+@pytest.mark.parametrize("isa", SUPPORTED_ISAS)
+@pytest.mark.parametrize("ratio", [0, 15, 60, 400])
+def test_each_isa_near_the_largest_block_costs(isa: str, ratio: float) -> None:
+    # A right image that is the left one inverted: nearly every census bit differs, so the
+    # block costs of a 15 x 15 block come close to their largest value (15 * 15 * 16), and
+    # the uniqueness thresholds of large ratios pass the 16-bit range that the SIMD passes
+    # compare in (capped there, as in the scalar pass).
+    rng = np.random.default_rng(21)
+    left = rng.integers(0, 256, (40, 150), dtype=np.uint8)
+    right = np.roll(255 - left, -6, axis=1)
+    right[:, 70:] = np.roll(left, -6, axis=1)[:, 70:]  # and a part that matches
+    kw = {"num_disparities": 48, "block_size": 15, "uniqueness_ratio": ratio}
+    for cfg in ({}, {"return_confidence": True}):
+        scalar = sd.StereoMatcher(isa="baseline", **kw, **cfg).compute(left, right)
+        simd = sd.StereoMatcher(isa=isa, **kw, **cfg).compute(left, right)
+        if isinstance(scalar, tuple):
+            for a, b in zip(scalar, simd, strict=True):
+                np.testing.assert_array_equal(a, b)
+        else:
+            np.testing.assert_array_equal(scalar, simd)

@@ -223,7 +223,9 @@ BlockMatcher::BlockMatcher(const BlockMatchParams& params, int threads, Isa isa)
     // 0xFFFF, above every block cost.
     uniqueness_factor_ = 100.0 + params_.uniqueness_ratio;
     const int max_cost = params_.block_size * params_.block_size * pixel_cost_max(params_.cost);
-    unique_min_.resize(static_cast<std::size_t>(max_cost) + 1);
+    // Then the same thresholds as the AVX2 first pass compares them with costs << 4.
+    const auto n = static_cast<std::size_t>(max_cost) + 1;
+    unique_min_.resize(2 * n);
     for (int b = 0; b <= max_cost; ++b) {
       const double bound = static_cast<double>(b) * uniqueness_factor_;
       double s = 65535.0;  // the cap: no second-best cost passes (s * 100 > bound needs more)
@@ -236,6 +238,8 @@ BlockMatcher::BlockMatcher(const BlockMatchParams& params, int threads, Isa isa)
       }
       const auto t = static_cast<std::uint32_t>(std::min(s, 65535.0));
       unique_min_[static_cast<std::size_t>(b)] = t | (t << 16);  // twice: see the kernels
+      const std::uint32_t t4 = std::min<std::uint32_t>(t << 4, 0xFFFFu);
+      unique_min_[n + static_cast<std::size_t>(b)] = t4 | (t4 << 16);
     }
   }
 }
@@ -386,6 +390,8 @@ void BlockMatcher::compute(const StereoImage& left, const StereoImage& right,
   common.subpixel = p.subpixel;
   common.uniqueness_factor = uniqueness_factor_;
   common.unique_min = unique_min_.empty() ? nullptr : unique_min_.data();
+  common.unique_min_shifted =
+      unique_min_.empty() ? nullptr : unique_min_.data() + unique_min_.size() / 2;
   common.texture_sum_min = p.texture_threshold * static_cast<double>(p.block_size * p.block_size);
   common.lr_max_diff = p.lr_max_diff;
   common.clip_border = p.clip_border;
@@ -652,6 +658,7 @@ std::vector<std::pair<std::string, double>> BlockMatcher::stage_times(
   a.subpixel = p.subpixel;
   a.uniqueness_factor = uniqueness_factor_;
   a.unique_min = unique_min_.empty() ? nullptr : unique_min_.data();
+  a.unique_min_shifted = unique_min_.empty() ? nullptr : unique_min_.data() + unique_min_.size() / 2;
   a.texture_sum_min = p.texture_threshold * static_cast<double>(p.block_size * p.block_size);
   a.lr_max_diff = p.lr_max_diff;
   a.clip_border = p.clip_border;

@@ -403,6 +403,9 @@ struct RowCtx {
   uint16_t* recent;   // AVX2: the block costs of the last 16 pixels (see winners_avx2)
   WinnerRecord* rec;  // the row's winner records
   const uint32_t* unique_min;  // null when off
+  // unique_min's thresholds t as min(t << 4, 0xFFFF), in both halves (see winners_avx2,
+  // kShifted); null when off.
+  const uint32_t* unique_min_shifted;
   // The column-sum update of this row, when the first pass does it on the way (fused): the
   // left feature rows and padded right rows entering and leaving the block; null otherwise.
   const void* in_left;
@@ -635,8 +638,9 @@ void right_group(const uint16_t* recent, uint16_t* rmin, uint16_t* rarg, ptrdiff
 // keeps the least cost and, among equal costs, the first pixel (the lowest disparity), as the
 // strict < does. The 0xFFFF of `recent` either side of the lanes gives keys of at least
 // 0xFFF0, above every real one; a column that only such keys reach gets cost 4095, which the
-// first real cost replaces (its columns are never read before one arrives).
-template <int NC>
+// first real cost replaces (its columns are never read before one arrives). kShifted: `recent`
+// holds cost << 4 already (see winners_avx2), its 0xFFFF lanes the same.
+template <int NC, bool kShifted>
 void right_group_keyed(const uint16_t* recent, uint16_t* rmin, uint16_t* rarg, ptrdiff_t x0,
                        int n) {
   constexpr ptrdiff_t kRow = 16 * NC + 32;
@@ -650,7 +654,7 @@ void right_group_keyed(const uint16_t* recent, uint16_t* rmin, uint16_t* rarg, p
     const uint16_t* p = recent + t * kRow + 16 - t;  // block k: lanes 16k - t ..
     for (int k = 0; k <= NC; ++k) {
       const __m256i v = _mm256_loadu_si256(reinterpret_cast<const __m256i*>(p + 16 * k));
-      keys[k] = _mm256_min_epu16(keys[k], _mm256_or_si256(_mm256_slli_epi16(v, 4), tv));
+      keys[k] = _mm256_min_epu16(keys[k], _mm256_or_si256(kShifted ? v : _mm256_slli_epi16(v, 4), tv));
     }
     tv = _mm256_add_epi16(tv, _mm256_set1_epi16(1));
   }
@@ -784,8 +788,8 @@ void winners_avx2(const RowCtx& c) {
   };
   // The same with byte column sums (kBytes, see RowCtx::byte_cols): entering minus leaving
   // costs as bytes (-16 .. 16, exact modulo 256 as the sums stay below 256), added to the
-  // sums in the ring's layout, then widened for the block sums. Half the bytes of 16-bit
-  // sums to load and store per column.
+  // sums in the ring's layout; returns the column's new sums (bytes, that layout). Half the
+  // bytes of 16-bit sums to load and store per column.
   auto census_update_bytes = [&](const CensusLeft& l, ptrdiff_t j, int i) {
     const __m256i lut = nibble_popcounts();
     auto count = [&](const uint16_t* p) {
@@ -805,10 +809,7 @@ void winners_avx2(const RowCtx& c) {
     auto* s = reinterpret_cast<__m256i*>(reinterpret_cast<uint8_t*>(S) + at);
     const __m256i v = _mm256_add_epi8(_mm256_load_si256(s), _mm256_sub_epi8(c8, out));
     _mm256_store_si256(s, v);
-    Pair p;
-    p.v[0] = _mm256_unpacklo_epi8(v, _mm256_setzero_si256());
-    p.v[1] = _mm256_unpackhi_epi8(v, _mm256_setzero_si256());
-    return p;
+    return v;
   };
   auto update_col = [&](ptrdiff_t j) {
     auto* s = reinterpret_cast<__m256i*>(S + j * dp);
@@ -867,7 +868,47 @@ void winners_avx2(const RowCtx& c) {
     for (int i = 0; i < NC; ++i) A[i] = _mm256_add_epi16(A[i], column(xx, i));
     if (texcol) tsum += texcol[xx];
   }
+  // kBytes: the running block sums are kept as cost << 4 (below 2^16: every block cost is
+  // below 4095 there, see RowCtx::byte_cols), the form group_winners and right_group_keyed
+  // make their keys from, so `recent` holds them so too.
+  constexpr bool kShifted = kBytes;
+  if constexpr (kShifted) {
+    for (int i = 0; i < NC; ++i) A[i] = _mm256_slli_epi16(A[i], 4);
+  }
   A[0] = _mm256_or_si256(A[0], padv);  // padding lanes: 0xFFFF, never a winner
+  // kShifted: A[i] (and A[i + 1]) += (sums of column xp - those of column xm) << 4, from the
+  // byte sums of the two columns (vector pair i in the ring's layout): vpmaddubsw of their
+  // interleaved bytes with 16, -16 (exact: |16 * (a - b)| <= 16 * 255 fits the int16 lanes).
+  const __m256i diff16 = _mm256_set1_epi16(static_cast<short>(0xF010));
+  auto column_bytes = [&](ptrdiff_t j, int i) {
+    return _mm256_load_si256(reinterpret_cast<const __m256i*>(
+        reinterpret_cast<const uint8_t*>(S) + j * kRingColumn + 16 * i));
+  };
+  // A block cost in `recent` as the records hold it (0xFFFF, no cost, stays kNone).
+  auto cost_of = [](uint32_t v) -> uint32_t {
+    if constexpr (kShifted) {
+      return v >= 0xFFF0u ? kNone : v >> 4;
+    } else {
+      return v;
+    }
+  };
+  // The costs of `recent` shifted as the keys need (cost << 4).
+  auto shifted = [](__m256i v) {
+    if constexpr (kShifted) {
+      return v;
+    } else {
+      return _mm256_slli_epi16(v, 4);
+    }
+  };
+  // The least cost passing the uniqueness check, per winning cost, in `recent`'s form.
+  const uint32_t* const unique_thr = kShifted ? c.unique_min_shifted : unique_min;
+  auto add_diff = [&](int i, __m256i vp, __m256i vm) {
+    A[i] = _mm256_add_epi16(A[i], _mm256_maddubs_epi16(_mm256_unpacklo_epi8(vp, vm), diff16));
+    if (i + 1 < NC) {
+      A[i + 1] =
+          _mm256_add_epi16(A[i + 1], _mm256_maddubs_epi16(_mm256_unpackhi_epi8(vp, vm), diff16));
+    }
+  };
 
   // The winner's neighbours serve the sub-pixel step and the counted uniqueness check.
   const bool around = c.subpixel != SubpixelFit::kNone || count_low;
@@ -927,7 +968,7 @@ void winners_avx2(const RowCtx& c) {
   auto group_winners = [&](ptrdiff_t x0, ptrdiff_t x1, auto fast, auto inner) {
     constexpr bool kFast = decltype(fast)::value;
     constexpr bool kInner = decltype(inner)::value;
-    const bool keyed_ = kFast || keyed;
+    const bool keyed_ = kFast || kShifted || keyed;
     const bool count_low_ = kFast || count_low;
     const bool around_ = kFast || around;
     // Without keys, in two loops: the least costs first (a short chain), then the rest, which
@@ -971,7 +1012,7 @@ void winners_avx2(const RowCtx& c) {
           return _mm256_load_si256(reinterpret_cast<const __m256i*>(rows_[p]) + i);
         };
         for (int p = 0; p < kP; ++p) {
-          auto key_of = [&](int i) { return _mm256_or_si256(_mm256_slli_epi16(lv(p, i), 4), key_low[i]); };
+          auto key_of = [&](int i) { return _mm256_or_si256(shifted(lv(p, i)), key_low[i]); };
           __m256i kmin[2] = {key_of(0), NC > 1 ? key_of(1) : ones};
           for (int i = 2; i < NC; ++i) kmin[i & 1] = _mm256_min_epu16(kmin[i & 1], key_of(i));
           k[p] = _mm256_min_epu16(kmin[0], kmin[1]);
@@ -990,7 +1031,7 @@ void winners_avx2(const RowCtx& c) {
           qb[p] = static_cast<int>(16 * (15 - (key[p] & 15u)) + (31 - __builtin_clz(eq[p])) / 2);
         }
         for (int p = 0; p < kP; ++p) {
-          const __m256i thr = _mm256_set1_epi32(static_cast<int>(unique_min[best[p]]));
+          const __m256i thr = _mm256_set1_epi32(static_cast<int>(unique_thr[best[p]]));
           auto at_least = [&](int i) {
             return _mm256_cmpeq_epi16(_mm256_min_epu16(lv(p, i), thr), thr);
           };
@@ -1008,8 +1049,7 @@ void winners_avx2(const RowCtx& c) {
           rec->second = static_cast<uint16_t>(static_cast<uint32_t>(16 * (NC + (NC & 1))) - high[p]);
           rec->kbest = dp - 1 - qb[p];
           rec->tsum = tsums[x - x0];
-          rec->around = static_cast<uint32_t>(rows_[p][qb[p] + 1]) |
-                        (static_cast<uint32_t>(rows_[p][qb[p] - 1]) << 16);
+          rec->around = cost_of(rows_[p][qb[p] + 1]) | (cost_of(rows_[p][qb[p] - 1]) << 16);
         }
       }
     }
@@ -1034,7 +1074,7 @@ void winners_avx2(const RowCtx& c) {
         // real one), so that the least key per lane is the least cost and, among equal costs,
         // the last vector (the highest lane); across the 16 lanes, the least key's highest
         // lane. (One loop with the rest: its chain is short enough to overlap pixels.)
-        auto key_of = [&](int i) { return _mm256_or_si256(_mm256_slli_epi16(V[i], 4), key_low[i]); };
+        auto key_of = [&](int i) { return _mm256_or_si256(shifted(V[i]), key_low[i]); };
         __m256i kmin[2] = {key_of(0), NC > 1 ? key_of(1) : ones};
         for (int i = 2; i < NC; ++i) kmin[i & 1] = _mm256_min_epu16(kmin[i & 1], key_of(i));
         const __m256i k = _mm256_min_epu16(kmin[0], kmin[1]);
@@ -1075,7 +1115,7 @@ void winners_avx2(const RowCtx& c) {
         // How many lanes cost less than the uniqueness threshold (this does not wait for the
         // winner's lane): the lanes >= it are those with min(a, thr) == thr; two vectors'
         // masks packed to bytes give one bit per lane.
-        const __m256i thr = _mm256_set1_epi32(static_cast<int>(unique_min[best]));
+        const __m256i thr = _mm256_set1_epi32(static_cast<int>(unique_thr[best]));
         auto at_least = [&](int k) {
           return _mm256_cmpeq_epi16(_mm256_min_epu16(V[k], thr), thr);
         };
@@ -1096,7 +1136,7 @@ void winners_avx2(const RowCtx& c) {
           const __m256i ex = _mm256_cmpeq_epi16(_mm256_min_epu16(rel, two), rel);
           m2 = _mm256_min_epu16(m2, _mm256_or_si256(V[i], ex));
         }
-        second = hmin_epu16(m2);
+        second = cost_of(hmin_epu16(m2));
       }
       WinnerRecord* rec = records + x;
       rec->best = static_cast<uint16_t>(best);
@@ -1114,11 +1154,11 @@ void winners_avx2(const RowCtx& c) {
       uint32_t around_costs = 0;
       if (around_) {
         if (border) {
-          const uint32_t c0 = qb + 1 <= qhi ? row[qb + 1] : kNone;
-          const uint32_t c2 = qb - 1 >= qlo ? row[qb - 1] : kNone;
+          const uint32_t c0 = qb + 1 <= qhi ? cost_of(row[qb + 1]) : kNone;
+          const uint32_t c2 = qb - 1 >= qlo ? cost_of(row[qb - 1]) : kNone;
           around_costs = c0 | (c2 << 16);
         } else {
-          around_costs = static_cast<uint32_t>(row[qb + 1]) | (static_cast<uint32_t>(row[qb - 1]) << 16);
+          around_costs = cost_of(row[qb + 1]) | (cost_of(row[qb - 1]) << 16);
         }
       }
       rec->around = around_costs;
@@ -1147,11 +1187,7 @@ void winners_avx2(const RowCtx& c) {
           const ptrdiff_t xp = x + r, xm = x - r - 1;
           const CensusLeft l = census_left(xp);
           for (int i = ib; i < ie; i += 2) {
-            const Pair p = census_update_bytes(l, xp, i);
-            A[i] = _mm256_sub_epi16(_mm256_add_epi16(A[i], p.v[0]), column(xm, i));
-            if (i + 1 < NC) {
-              A[i + 1] = _mm256_sub_epi16(_mm256_add_epi16(A[i + 1], p.v[1]), column(xm, i + 1));
-            }
+            add_diff(i, census_update_bytes(l, xp, i), column_bytes(xm, i));
           }
           if constexpr (ib == 0) A[0] = _mm256_or_si256(A[0], padv);
           for (int i = ib; i < ie; ++i) _mm256_store_si256(reinterpret_cast<__m256i*>(rowp) + i, A[i]);
@@ -1170,15 +1206,14 @@ void winners_avx2(const RowCtx& c) {
         if constexpr (sizeof(F) == 4) {
           const CensusLeft l = census_left(xp);
           for (int i = 0; i < NC; i += 2) {
-            Pair p;
             if constexpr (kBytes) {
-              p = census_update_bytes(l, xp, i);
+              add_diff(i, census_update_bytes(l, xp, i), column_bytes(xm, i));
             } else {
-              p = census_update(l, xp, i);
-            }
-            A[i] = _mm256_sub_epi16(_mm256_add_epi16(A[i], p.v[0]), column(xm, i));
-            if (i + 1 < NC) {
-              A[i + 1] = _mm256_sub_epi16(_mm256_add_epi16(A[i + 1], p.v[1]), column(xm, i + 1));
+              const Pair p = census_update(l, xp, i);
+              A[i] = _mm256_sub_epi16(_mm256_add_epi16(A[i], p.v[0]), column(xm, i));
+              if (i + 1 < NC) {
+                A[i + 1] = _mm256_sub_epi16(_mm256_add_epi16(A[i + 1], p.v[1]), column(xm, i + 1));
+              }
             }
           }
         } else {
@@ -1201,18 +1236,19 @@ void winners_avx2(const RowCtx& c) {
             if (fused && x + r < cols) {
               const CensusLeft l = census_left(x + r);
               for (int i = 0; i < NC; i += 2) {
-                Pair p;
                 if constexpr (kBytes) {
-                  p = census_update_bytes(l, x + r, i);
+                  add_diff(i, census_update_bytes(l, x + r, i), column_bytes(xm, i));
                 } else {
-                  p = census_update(l, x + r, i);
-                }
-                A[i] = _mm256_sub_epi16(_mm256_add_epi16(A[i], p.v[0]), column(xm, i));
-                if (i + 1 < NC) {
-                  A[i + 1] =
-                      _mm256_sub_epi16(_mm256_add_epi16(A[i + 1], p.v[1]), column(xm, i + 1));
+                  const Pair p = census_update(l, x + r, i);
+                  A[i] = _mm256_sub_epi16(_mm256_add_epi16(A[i], p.v[0]), column(xm, i));
+                  if (i + 1 < NC) {
+                    A[i + 1] =
+                        _mm256_sub_epi16(_mm256_add_epi16(A[i + 1], p.v[1]), column(xm, i + 1));
+                  }
                 }
               }
+            } else if constexpr (kBytes) {
+              for (int i = 0; i < NC; i += 2) add_diff(i, column_bytes(xp, i), column_bytes(xm, i));
             } else {
               for (int i = 0; i < NC; ++i) {
                 A[i] = _mm256_sub_epi16(_mm256_add_epi16(A[i], column(xp, i)), column(xm, i));
@@ -1233,8 +1269,8 @@ void winners_avx2(const RowCtx& c) {
     }
     const int n = static_cast<int>(x1 - x0);
     if (lr_on) {
-      if (keyed) {
-        right_group_keyed<NC>(recent, rmin, rarg, x0, n);
+      if (kShifted || keyed) {
+        right_group_keyed<NC, kShifted>(recent, rmin, rarg, x0, n);
       } else {
         right_group<NC>(recent, rmin, rarg, x0, n);
       }
@@ -1722,6 +1758,7 @@ void match_band_impl(const MatchArgs& a, const BandScratch& s, ptrdiff_t y0, ptr
   c.recent = s.recent;
   c.rec = static_cast<WinnerRecord*>(s.records);
   c.unique_min = a.unique_min;
+  c.unique_min_shifted = a.unique_min_shifted;
   c.first_pass_only = a.first_pass_only;
 
   const bool fused = fuses_update(dp);
