@@ -658,7 +658,8 @@ std::vector<std::pair<std::string, double>> BlockMatcher::stage_times(
   a.subpixel = p.subpixel;
   a.uniqueness_factor = uniqueness_factor_;
   a.unique_min = unique_min_.empty() ? nullptr : unique_min_.data();
-  a.unique_min_shifted = unique_min_.empty() ? nullptr : unique_min_.data() + unique_min_.size() / 2;
+  a.unique_min_shifted =
+      unique_min_.empty() ? nullptr : unique_min_.data() + unique_min_.size() / 2;
   a.texture_sum_min = p.texture_threshold * static_cast<double>(p.block_size * p.block_size);
   a.lr_max_diff = p.lr_max_diff;
   a.clip_border = p.clip_border;

@@ -15,7 +15,9 @@
 // way (so the column sums are read back from L1), work in groups of 16 pixels (block costs to
 // `recent`, then the right winners and the winners from there), match the border band in the
 // same pass (border_band otherwise), read the census costs of the row leaving the block from a
-// ring of the last rows' costs (BandScratch::ring), and do step (3) eight pixels at a time.
+// ring of the last rows' costs (BandScratch::ring), and do step (3) eight pixels at a time. In
+// the defaults' case (census, byte column sums) the block costs are kept as cost << 4, the
+// form of the winner searches' keys (see winners_avx2, kShifted).
 // Every path computes the same integers, and the floating-point steps use the same IEEE
 // operations in the same order as the numpy oracle.
 #include "block_match_kernels.hpp"
@@ -654,7 +656,8 @@ void right_group_keyed(const uint16_t* recent, uint16_t* rmin, uint16_t* rarg, p
     const uint16_t* p = recent + t * kRow + 16 - t;  // block k: lanes 16k - t ..
     for (int k = 0; k <= NC; ++k) {
       const __m256i v = _mm256_loadu_si256(reinterpret_cast<const __m256i*>(p + 16 * k));
-      keys[k] = _mm256_min_epu16(keys[k], _mm256_or_si256(kShifted ? v : _mm256_slli_epi16(v, 4), tv));
+      const __m256i shifted = kShifted ? v : _mm256_slli_epi16(v, 4);
+      keys[k] = _mm256_min_epu16(keys[k], _mm256_or_si256(shifted, tv));
     }
     tv = _mm256_add_epi16(tv, _mm256_set1_epi16(1));
   }

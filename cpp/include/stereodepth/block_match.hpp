@@ -99,7 +99,8 @@ class BlockMatcher {
   int threads_;
   Isa isa_;
   double uniqueness_factor_ = 0.0;        // 100 + ratio, or 0 when the check is off
-  // The same check as a table (see the kernels): the thresholds, then the same << 4.
+  // The same check as a table (see the kernels): the thresholds, then min(t << 4, 0xFFFF)
+  // for each (the form the AVX2 first pass compares in).
   std::vector<std::uint32_t> unique_min_;
   std::unique_ptr<Workspace> workspace_;
   std::mutex mutex_;
