@@ -424,6 +424,10 @@ struct RowCtx {
   // column sums are bytes, laid out as the ring's slots (see winners_avx2), for every row of
   // the band.
   bool byte_cols;
+  // The records' `around` holds the neighbours' costs as cost << 4 (0xFFFF for none): the
+  // fixed first pass with byte column sums (winners_avx2, kShifted) leaves them so and
+  // decide_avx2 shifts them back, eight pixels at a time.
+  bool around_shifted;
   float* drow;
   float* crow;  // null when no confidence is wanted
 };
@@ -887,7 +891,8 @@ void winners_avx2(const RowCtx& c) {
     return _mm256_load_si256(reinterpret_cast<const __m256i*>(
         reinterpret_cast<const uint8_t*>(S) + j * kRingColumn + 16 * i));
   };
-  // A block cost in `recent` as the records hold it (0xFFFF, no cost, stays kNone).
+  // A block cost in `recent` as the records' `second` holds it (0xFFFF, no cost, stays kNone;
+  // `around` keeps the form of `recent`, see RowCtx::around_shifted).
   auto cost_of = [](uint32_t v) -> uint32_t {
     if constexpr (kShifted) {
       return v >= 0xFFF0u ? kNone : v >> 4;
@@ -1052,7 +1057,8 @@ void winners_avx2(const RowCtx& c) {
           rec->second = static_cast<uint16_t>(static_cast<uint32_t>(16 * (NC + (NC & 1))) - high[p]);
           rec->kbest = dp - 1 - qb[p];
           rec->tsum = tsums[x - x0];
-          rec->around = cost_of(rows_[p][qb[p] + 1]) | (cost_of(rows_[p][qb[p] - 1]) << 16);
+          rec->around = static_cast<uint32_t>(rows_[p][qb[p] + 1]) |
+                        (static_cast<uint32_t>(rows_[p][qb[p] - 1]) << 16);
         }
       }
     }
@@ -1157,11 +1163,11 @@ void winners_avx2(const RowCtx& c) {
       uint32_t around_costs = 0;
       if (around_) {
         if (border) {
-          const uint32_t c0 = qb + 1 <= qhi ? cost_of(row[qb + 1]) : kNone;
-          const uint32_t c2 = qb - 1 >= qlo ? cost_of(row[qb - 1]) : kNone;
+          const uint32_t c0 = qb + 1 <= qhi ? row[qb + 1] : kNone;
+          const uint32_t c2 = qb - 1 >= qlo ? row[qb - 1] : kNone;
           around_costs = c0 | (c2 << 16);
         } else {
-          around_costs = cost_of(row[qb + 1]) | (cost_of(row[qb - 1]) << 16);
+          around_costs = static_cast<uint32_t>(row[qb + 1]) | (static_cast<uint32_t>(row[qb - 1]) << 16);
         }
       }
       rec->around = around_costs;
@@ -1424,6 +1430,16 @@ void decide_avx2(const RowCtx& c) {
   // An integer disparity difference d passes the left-right check when d <= lr_max_diff,
   // that is d <= floor(lr_max_diff).
   const int lr_int = c.lr_max_diff >= 65536.0 ? 65536 : static_cast<int>(std::floor(c.lr_max_diff));
+  // The winners' neighbours' costs, c0 | c2 << 16, from the records' `around` (kNone stays
+  // kNone): as they are, or from cost << 4 when the first pass kept that form
+  // (RowCtx::around_shifted).
+  const bool around_shifted = c.around_shifted;
+  const __m256i none_from = _mm256_set1_epi16(static_cast<short>(0xFFF0));
+  auto neighbours = [&](__m256i v) {
+    if (!around_shifted) return v;
+    const __m256i none16 = _mm256_cmpeq_epi16(_mm256_max_epu16(v, none_from), v);
+    return _mm256_or_si256(_mm256_srli_epi16(v, 4), none16);
+  };
   // The transpose below leaves the pixels in the order 0, 2, 4, 6, 1, 3, 5, 7.
   const __m256i unshuffle = _mm256_setr_epi32(0, 4, 1, 5, 2, 6, 3, 7);
   ptrdiff_t xstart = 0;
@@ -1446,7 +1462,7 @@ void decide_avx2(const RowCtx& c) {
         const __m256i t2 = _mm256_unpacklo_epi32(r2, r3), t3 = _mm256_unpackhi_epi32(r2, r3);
         f0[u] = _mm256_permutevar8x32_epi32(_mm256_unpacklo_epi64(t0, t2), unshuffle);
         kb[u] = _mm256_permutevar8x32_epi32(_mm256_unpackhi_epi64(t0, t2), unshuffle);
-        nb[u] = _mm256_permutevar8x32_epi32(_mm256_unpackhi_epi64(t1, t3), unshuffle);
+        nb[u] = neighbours(_mm256_permutevar8x32_epi32(_mm256_unpackhi_epi64(t1, t3), unshuffle));
         ok[u] = _mm256_xor_si256(_mm256_cmpeq_epi32(_mm256_and_si256(f0[u], low16), none), all);
       }
       for (int u = 0; u < kU; ++u) {
@@ -1505,7 +1521,7 @@ void decide_avx2(const RowCtx& c) {
       ok = _mm256_and_si256(ok, masks_of(_mm256_cmp_pd(low_pd(t), tmin, _CMP_NLT_UQ),
                                          _mm256_cmp_pd(high_pd(t), tmin, _CMP_NLT_UQ)));
     }
-    const __m256i nb = order(_mm256_unpackhi_epi64(t1, t3));  // c0 | c2 << 16
+    const __m256i nb = neighbours(order(_mm256_unpackhi_epi64(t1, t3)));  // c0 | c2 << 16
     const __m256i c0 = _mm256_and_si256(nb, low16);
     const __m256i c2 = _mm256_srli_epi32(nb, 16);
     if (c.count_low) {
@@ -1685,6 +1701,7 @@ void row_pass(const RowCtx& c) {
   if (c.dp <= kLanes * kMaxChunks) {
     RowCtx counted = c;
     counted.count_low = c.unique_min != nullptr && c.crow == nullptr;
+    counted.around_shifted = sizeof(typename Cost::Feature) == 4 && c.byte_cols;  // kShifted
     winners_fixed<1, Cost>(counted);
     // The fixed pass matches the border band itself (group_winners): no border_band here.
     if (!c.first_pass_only) decide_avx2(counted);
