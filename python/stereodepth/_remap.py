@@ -23,6 +23,7 @@ __all__ = ["remap"]
 def _array_arg(name: str, value: Any) -> np.ndarray:
     if not isinstance(value, np.ndarray):
         raise TypeError(f"{name} must be a numpy.ndarray, got {type(value).__name__}")
+    check.not_masked(name, value)
     return value
 
 

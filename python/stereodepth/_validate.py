@@ -91,11 +91,25 @@ def threads(value: Any) -> int:
     return integer("threads", value, minimum=0, maximum=MAX_NATIVE_INT)
 
 
+def not_masked(name: str, value: Any) -> None:
+    """A masked array (``numpy.ma``) is a TypeError naming ``name``: nothing in this package
+    reads a mask (the kernels read the data), so its masked elements would be used as values,
+    silently. The caller says what they stand for with ``value.filled(...)``."""
+    if isinstance(value, np.ma.MaskedArray):
+        raise TypeError(
+            f"{name} must not be a masked array (its mask would be ignored: the masked elements "
+            f"would be used as values); pass {name}.filled(...) with the value they stand for "
+            f"(NaN marks a hole in a disparity or depth map), got MaskedArray with dtype "
+            f"{value.dtype}"
+        )
+
+
 def array(name: str, value: Any) -> np.ndarray:
     """``value`` as a numpy array (a numpy array as it is); a ragged nested list (rows of
     different lengths) or anything else numpy cannot turn into an array is a ValueError naming
     ``name`` and showing the value, not numpy's own "setting an array element with a sequence"
-    or "inhomogeneous shape"."""
+    or "inhomogeneous shape". A masked array is a TypeError (:func:`not_masked`)."""
+    not_masked(name, value)
     if isinstance(value, np.ndarray):
         return value
     try:
@@ -126,6 +140,7 @@ def real_array(name: str, value: Any) -> np.ndarray:
     """A scalar or array of real numbers as a float64 array (NaN and inf allowed)."""
     if isinstance(value, (bool, np.bool_)):
         raise TypeError(f"{name} must be a real number or array, got bool {value!r}")
+    not_masked(name, value)
     try:
         arr = np.asarray(value)
     except Exception as exc:  # ragged lists and the like

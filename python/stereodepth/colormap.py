@@ -80,6 +80,7 @@ def _values(values: Any) -> np.ndarray:
         isinstance(values, np.ndarray) and values.dtype == np.bool_
     ):
         raise TypeError("values must be a 2-D array of real numbers, got bool")
+    check.not_masked("values", values)
     try:
         arr = np.asarray(values)
     except (TypeError, ValueError) as exc:  # ragged lists and the like
@@ -294,6 +295,7 @@ def to_uint8(image: Any) -> np.ndarray:
     or narrow-band image shows what was matched instead of its high byte (0..15 for 12-bit
     data: black); a constant uint16 image keeps its high byte. Raises TypeError for another
     dtype."""
+    check.not_masked("image", image)
     a = np.asarray(image)
     if a.dtype == np.uint8:
         return a

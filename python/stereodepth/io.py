@@ -331,6 +331,7 @@ def remove_temp_files(directory: str | os.PathLike[str]) -> list[Path]:
 # --- writers ----------------------------------------------------------------------------------
 def write_npy(path: str | os.PathLike[str], array: np.ndarray) -> None:
     """``numpy.save`` to exactly ``path`` (no ``.npy`` appended), atomically."""
+    check.not_masked("array", array)
     with atomic_write(path) as f:
         np.save(f, np.asarray(array), allow_pickle=False)
 
@@ -338,6 +339,7 @@ def write_npy(path: str | os.PathLike[str], array: np.ndarray) -> None:
 def _check_2d(name: str, array: Any, dtypes: tuple[type, ...]) -> np.ndarray:
     if not isinstance(array, np.ndarray):
         raise TypeError(f"{name} must be a numpy.ndarray, got {type(array).__name__}")
+    check.not_masked(name, array)
     # A big-endian map is a map all the same: in the machine's byte order.
     a: np.ndarray = native_order(array)
     if a.dtype not in dtypes:
@@ -430,6 +432,7 @@ def write_pfm(path: str | os.PathLike[str], array: np.ndarray, *, scale: float =
     str, a bool) and ValueError for another shape, a finite value beyond float32's range
     (about 3.4e38: PFM stores float32, and it would become an infinity, which Middlebury
     reads as "unknown") or a ``scale`` that is not finite and > 0, writing nothing."""
+    check.not_masked("array", array)
     a = np.asarray(array)
     if a.dtype.kind != "f":
         raise TypeError(f"array must have a float dtype, got {a.dtype}")

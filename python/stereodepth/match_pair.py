@@ -82,11 +82,14 @@ def prepare_pair(left: np.ndarray, right: np.ndarray) -> tuple[np.ndarray, np.nd
     depth. Raises TypeError naming the image that is not a numpy array, ValueError naming the
     one that is not (H, W) or (H, W, C), and ValueError naming ``right`` (the one compared)
     when they differ."""
+    from . import _validate as check
+
     for name, image in (("left", left), ("right", right)):
         # a list or a path was an AttributeError ('list' object has no attribute 'shape'), a
         # 1-D array an IndexError from the size message
         if not isinstance(image, np.ndarray):
             raise TypeError(f"{name} must be a numpy.ndarray image, got {type(image).__name__}")
+        check.not_masked(name, image)
         if image.ndim not in (2, 3):
             raise ValueError(
                 f"{name} must be an image, (H, W) grey or (H, W, 3) colour, got shape {image.shape}"

@@ -373,6 +373,7 @@ def as_image(image: Any, name: str) -> np.ndarray:
         raise TypeError(
             f"{name} must be a numpy.ndarray ({_IMAGE_RULE}), got {type(image).__name__}"
         )
+    check.not_masked(name, image)
     image = check.native_order(image)
     if image.dtype not in (np.uint8, np.uint16):
         raise TypeError(f"{name} must be {_IMAGE_RULE}, got dtype {image.dtype}")

@@ -207,6 +207,8 @@ def evaluate(
     negative ``min_disparity``).
     """
     md = None if min_disparity is None else check_min_disparity(min_disparity)
+    check.not_masked("disparity", disparity)
+    check.not_masked("gt", gt)
     disparity, gt = (
         check.native_order(a) if isinstance(a, np.ndarray) else a for a in (disparity, gt)
     )

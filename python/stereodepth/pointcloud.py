@@ -160,6 +160,7 @@ def prepare_points_out(out: Any, disparity: np.ndarray) -> np.ndarray:
         return np.empty(shape, dtype=np.float32)
     if not isinstance(out, np.ndarray):
         raise TypeError(f"out must be a numpy.ndarray, got {type(out).__name__}")
+    check.not_masked("out", out)
     if out.dtype != np.float32:
         raise TypeError(f"out must have dtype float32, got {out.dtype}")
     if out.shape != shape:

@@ -272,6 +272,7 @@ def fill_background(disparity: np.ndarray) -> np.ndarray:
         raise TypeError(
             f"disparity must be a numpy.ndarray (filled in place), got {type(disparity).__name__}"
         )
+    check.not_masked("disparity", disparity)
     if disparity.dtype.kind != "f":
         raise TypeError(
             f"disparity must be a float array (NaN for holes), got dtype {disparity.dtype}"
