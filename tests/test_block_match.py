@@ -1055,3 +1055,18 @@ def test_each_isa_near_the_largest_block_costs(isa: str, ratio: float) -> None:
                 np.testing.assert_array_equal(a, b)
         else:
             np.testing.assert_array_equal(scalar, simd)
+
+
+@pytest.mark.parametrize("kind", ["bm", "sgm"])
+def test_a_matchers_parameters_cannot_be_assigned(kind: str) -> None:
+    # m.num_disparities = 128 made a new attribute that the matcher never read: it went on
+    # searching 64 disparities, silently.
+    cls = sd.StereoMatcher if kind == "bm" else sd.SemiGlobalMatcher
+    m = cls(num_disparities=64)
+    with pytest.raises(AttributeError, match=r"fixed when it is made.*'num_disparities': 128"):
+        m.num_disparities = 128  # type: ignore[misc]
+    assert m.params["num_disparities"] == 64
+    # The recipe the message gives makes the matcher wanted.
+    wider = cls(**{**m.params, "num_disparities": 128})
+    assert wider.params == {**m.params, "num_disparities": 128}
+    assert m.isa == wider.isa == sd.build_info()["isa"]

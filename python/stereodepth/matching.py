@@ -464,7 +464,27 @@ def as_pair(
     return left_arr, right_arr
 
 
-class StereoMatcher:
+class FixedParameters:
+    """A matcher's parameters are fixed when it is made: assigning one (``m.num_disparities
+    = 128``, the habit of OpenCV's setters) is an AttributeError saying so, where it made a new
+    attribute that the matcher never read. Make a new matcher instead (``m.params`` gives the
+    current parameters)."""
+
+    __slots__ = ()
+
+    def __setattr__(self, name: str, value: Any) -> None:
+        if name.startswith("_"):
+            object.__setattr__(self, name, value)
+            return
+        kind = type(self).__name__
+        raise AttributeError(
+            f"{kind}'s parameters are fixed when it is made: make a new one, "
+            f"{kind}(**{{**matcher.params, {name!r}: {value!r}}}), instead of assigning "
+            f"{name} = {value!r}"
+        )
+
+
+class StereoMatcher(FixedParameters):
     """The block matcher as an object for per-frame use.
 
     The parameters are those of :func:`block_match` (``return_confidence``,
@@ -476,7 +496,11 @@ class StereoMatcher:
     ``isa`` picks the instruction set of the kernel: ``"auto"`` (the best this CPU runs, capped
     by the environment variable STEREODEPTH_ISA), ``"baseline"``, ``"avx2"`` or ``"avx512"``.
     Every choice gives the same output; it exists for testing and benchmarking.
+
+    The parameters are fixed: assigning one is an AttributeError (make a new matcher).
     """
+
+    __slots__ = ("_native", "_options")
 
     def __init__(
         self,
@@ -538,6 +562,11 @@ class StereoMatcher:
     def params(self) -> dict[str, Any]:
         """The resolved parameters."""
         return self._options.as_dict()
+
+    @property
+    def isa(self) -> str:
+        """The instruction set the kernel runs."""
+        return str(self._native.isa)
 
     def __repr__(self) -> str:
         args = ", ".join(f"{k}={v!r}" for k, v in self.params.items())

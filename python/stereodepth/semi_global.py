@@ -87,7 +87,7 @@ import numpy as np
 
 from . import _core
 from . import _validate as check
-from .matching import MatcherOptions, check_flag, run_native
+from .matching import FixedParameters, MatcherOptions, check_flag, run_native
 
 __all__ = [
     "SemiGlobalMatcher",
@@ -341,7 +341,7 @@ def memory_estimate(
     )
 
 
-class SemiGlobalMatcher:
+class SemiGlobalMatcher(FixedParameters):
     """Semi-global matching as an object for per-frame use, the sibling of
     :class:`stereodepth.StereoMatcher`.
 
@@ -351,7 +351,11 @@ class SemiGlobalMatcher:
 
     ``isa`` picks the instruction set of the kernel: ``"auto"``, ``"baseline"``, ``"avx2"`` or
     ``"avx512"``; every choice gives the same output.
+
+    The parameters are fixed: assigning one is an AttributeError (make a new matcher).
     """
+
+    __slots__ = ("_native", "_options")
 
     def __init__(
         self,
