@@ -139,8 +139,15 @@ def test_markdown_table(capsys: pytest.CaptureFixture[str]) -> None:
                 "--disparity-px",
                 "1e308",
             ],
-            "--disparity-px must give a depth (B*f / (d + doffs), B*f = 100.0 m*px) that a "
-            "double can hold (it overflows to inf or rounds to 0), got 1e+308, which gives 0.0 m",
+            "--disparity-px (with --doffs-px 1e+308) must give a depth (B*f / (d + doffs), "
+            "B*f = 100.0 m*px) that a double can hold (it overflows to inf or rounds to 0), got "
+            "1e+308, which gives 0.0 m",
+        ),
+        # doffs alone: the default table's depth resolutions round to 0, and the message named
+        # only "the table's disparity".
+        (
+            ["--baseline-mm", "100", "--focal-px", "700", "--doffs-px", "1e308"],
+            "the table's disparity (with --doffs-px 1e+308) must give a depth resolution",
         ),
     ],
 )

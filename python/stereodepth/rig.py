@@ -338,6 +338,11 @@ class StereoRig:
         leaves the range of a double (inf or 0 for a finite, positive depth)."""
         return self._depth_of("disparity_px", disparity_px)
 
+    def _blamed(self, name: str) -> str:
+        """A disparity's name for a result out of a double's range: with doffs, which shares
+        the blame (``--doffs-px 1e308`` gave a depth of 0 that named only the disparity)."""
+        return f"{name} (with doffs_px {self._doffs_px!r})" if self._doffs_px else name
+
     def _depth_of(self, name: str, disparity_px: ArrayLike) -> Any:
         """depth_m, naming the disparity ``name`` in its messages."""
         d = self._disparity(name, disparity_px)
@@ -345,7 +350,12 @@ class StereoRig:
         bad = (den != 0) & ~((z > 0) & (z < math.inf))
         if np.any(bad):
             raise _out_of_range(
-                name, d, z, bad, f"depth (B*f / (d + doffs), B*f = {self._bf_m_px!r} m*px)", "m"
+                self._blamed(name),
+                d,
+                z,
+                bad,
+                f"depth (B*f / (d + doffs), B*f = {self._bf_m_px!r} m*px)",
+                "m",
             )
         return _answer(z, d)
 
@@ -550,7 +560,7 @@ class StereoRig:
             if np.any(bad):
                 self._blame_step(z[bad], res[bad], s, False)
                 raise _out_of_range(
-                    name,
+                    self._blamed(name),
                     d,
                     res,
                     bad,
@@ -629,7 +639,7 @@ class StereoRig:
                     if not 0.0 < dz < math.inf:  # named by what the caller gave: the disparity
                         self._blame_step(za, np.asarray(dz), s, exact)
                         raise _out_of_range(
-                            "disparity_px",
+                            self._blamed("disparity_px"),
                             np.asarray(d),
                             np.asarray(dz),
                             np.asarray(True),
