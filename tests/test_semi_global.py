@@ -597,7 +597,7 @@ def test_memory_estimate_and_refusal() -> None:
     left, right = shifted_pair((100, 200), 3, seed=31)
     with pytest.raises(
         ValueError,
-        match=r"semi-global matching of a 100x200 pair with num_disparities=512 and paths=4 "
+        match=r"semi-global matching of a 200x100 px pair with num_disparities=512 and paths=4 "
         r"needs about \d+ MiB, above max_memory_mb=5; lower num_disparities, use paths=3 ",
     ):
         sd.semi_global_match(left, right, num_disparities=512, paths=4, max_memory_mb=5)

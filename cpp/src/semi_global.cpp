@@ -477,8 +477,8 @@ void SemiGlobalMatcher::compute(const StereoImage& left, const StereoImage& righ
   if (need_mb > p.max_memory_mb) {
     std::ostringstream msg;
     msg.precision(need_mb < 10.0 ? 2 : 0);  // no "needs about 0 MiB" for a tiny limit
-    msg << std::fixed << "semi-global matching of a " << rows << "x" << cols
-        << " pair with num_disparities=" << nd_win << " and paths=" << p.paths << " needs about "
+    msg << std::fixed << "semi-global matching of a " << cols << "x" << rows  // width x height
+        << " px pair with num_disparities=" << nd_win << " and paths=" << p.paths << " needs about "
         << need_mb << " MiB, above max_memory_mb=";
     msg.unsetf(std::ios::floatfield);
     msg.precision(6);
