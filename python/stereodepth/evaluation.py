@@ -497,6 +497,15 @@ def _check_block_size(variant: Variant) -> None:
         raise ValueError(f"block size of opencv-bm must be an odd integer in 5..255, got {bs}")
     if variant.method.startswith("opencv-sgbm") and not (bs % 2 == 1 and bs >= 1):
         raise ValueError(f"block size of {variant.method} must be an odd integer >= 1, got {bs}")
+    if variant.method == "stereodepth":
+        from .matching import MAX_BLOCK_SIZE
+
+        # The largest over the costs (census); a smaller limit of cost=sad is the matcher's.
+        top = max(MAX_BLOCK_SIZE.values())
+        if not (bs % 2 == 1 and 3 <= bs <= top):
+            raise ValueError(
+                f"block size of stereodepth must be an odd integer in 3..{top}, got {bs}"
+            )
     if variant.method == "sgm" and bs not in (1, 3):
         raise ValueError(f"block size of sgm must be 1 or 3, got {bs}")
 
