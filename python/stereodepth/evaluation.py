@@ -244,8 +244,19 @@ def _load_npy(path: Path) -> np.ndarray:
     an empty, truncated or foreign file name no file (an empty one raised EOFError, a
     traceback)."""
     try:
+        with open(path, "rb") as f:
+            head = f.read(6)
+        # numpy takes any other file for a pickle, and says it "contains pickled data".
+        if head and head != b"\x93NUMPY" and not head.startswith(b"PK"):
+            raise ValueError(
+                f"{path}: not a readable .npy array (no NumPy header: it starts {head!r})"
+            )
         arr = np.load(path, allow_pickle=False)
-    except (ValueError, EOFError, OSError) as exc:
+    except (EOFError, OSError) as exc:
+        raise ValueError(f"{path}: not a readable .npy array ({exc})") from None
+    except ValueError as exc:
+        if str(exc).startswith(f"{path}: "):
+            raise
         raise ValueError(f"{path}: not a readable .npy array ({exc})") from None
     if not isinstance(arr, np.ndarray):  # an .npz archive under a .npy name
         arr.close()
