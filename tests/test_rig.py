@@ -11,7 +11,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from stereodepth import StereoRig
+from stereodepth import DepthTable, StereoRig
 
 ARM = {"baseline_mm": 150, "focal_mm": 6, "pixel_um": 2.8, "width_px": 1280}
 CAR = {"baseline_mm": 250, "focal_mm": 12, "pixel_um": 4.2, "width_px": 2048}
@@ -404,3 +404,30 @@ def test_rigs_compare_by_value() -> None:
     assert a != StereoRig(baseline_mm=121, focal_mm=4, pixel_um=2, width_px=640, height_px=480)
     assert a != StereoRig.from_pixels(baseline_mm=120, focal_px=2000, width_px=640, height_px=480)
     assert a != "a rig" and a != (120, 4, 2)
+
+
+@pytest.mark.parametrize(
+    ("columns", "rows", "error", "message"),
+    [
+        (("a",), ((1.0, 2.0),), ValueError, r"rows\[0\] must be a tuple of 1 numbers"),
+        (("a", "b"), 5, TypeError, r"rows must be a tuple of rows .*got int 5"),
+        (("a", "b"), ((1.0, "x"),), TypeError, r"rows\[0\]\[1\] must be a real number"),
+        ("ab", (), TypeError, r"columns must be a tuple of str, got str 'ab'"),
+        ((1, 2), (), TypeError, r"columns must be a tuple of str, got \(1, 2\)"),
+    ],
+)
+def test_depth_table_checks_its_cells(
+    columns: Any, rows: Any, error: type[Exception], message: str
+) -> None:
+    # A row longer than the columns lost its last cells from the text, silently; rows=5 was
+    # "'int' object is not iterable", naming nothing.
+    with pytest.raises(error, match=message):
+        DepthTable(columns=columns, rows=rows)
+
+
+def test_depth_table_keeps_tuples_of_floats() -> None:
+    t = DepthTable(columns=["d", "z"], rows=[[1, 2.5], (np.float32(3), 4)])
+    assert t.columns == ("d", "z")
+    assert t.rows == ((1.0, 2.5), (3.0, 4.0))
+    assert all(type(v) is float for r in t.rows for v in r)
+    assert list(t) == [{"d": 1.0, "z": 2.5}, {"d": 3.0, "z": 4.0}]

@@ -66,10 +66,37 @@ def _answer(x: Any, like: Any) -> Any:
 
 @dataclass(frozen=True)
 class DepthTable:
-    """Rows of disparity, depth and depth resolution. Iterate for dicts, or render as text."""
+    """Rows of disparity, depth and depth resolution. Iterate for dicts, or render as text.
+
+    ``columns`` is a sequence of str, ``rows`` a sequence of rows of real numbers, each as long
+    as ``columns`` (kept as tuples of floats); TypeError or ValueError naming the one that is
+    not (a row of the wrong length lost cells from the text, silently)."""
 
     columns: tuple[str, ...]
     rows: tuple[tuple[float, ...], ...]
+
+    def __post_init__(self) -> None:
+        cols = self.columns
+        if isinstance(cols, str) or not isinstance(cols, (tuple, list)):
+            raise TypeError(f"columns must be a tuple of str, got {type(cols).__name__} {cols!r}")
+        if not all(isinstance(c, str) for c in cols):
+            raise TypeError(f"columns must be a tuple of str, got {cols!r}")
+        rows = self.rows
+        if isinstance(rows, (str, bytes)) or not isinstance(rows, (tuple, list)):
+            raise TypeError(
+                f"rows must be a tuple of rows (tuples of numbers), got {type(rows).__name__} "
+                f"{rows!r}"
+            )
+        out = []
+        for i, row in enumerate(rows):
+            if not isinstance(row, (tuple, list)) or len(row) != len(cols):
+                raise ValueError(
+                    f"rows[{i}] must be a tuple of {len(cols)} numbers (one per column), got "
+                    f"{row!r}"
+                )
+            out.append(tuple(check.real(f"rows[{i}][{j}]", v) for j, v in enumerate(row)))
+        object.__setattr__(self, "columns", tuple(cols))
+        object.__setattr__(self, "rows", tuple(out))
 
     def to_records(self) -> list[dict[str, float]]:
         return [dict(zip(self.columns, r, strict=False)) for r in self.rows]
