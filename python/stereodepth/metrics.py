@@ -202,7 +202,8 @@ def evaluate(
         Density, bad-pixel rates with and without holes, mean and RMS error.
 
     Raises TypeError for a disparity that is neither float nor int16, a non-float ground
-    truth, a non-bool mask or a non-integer ``min_disparity``, and ValueError for shapes that
+    truth, a non-bool mask, a masked array (``numpy.ma``: its mask would be ignored; give NaN
+    or ``mask``) or a non-integer ``min_disparity``, and ValueError for shapes that
     are not (H, W) or do not match, or for a negative evaluated ground truth (without a
     negative ``min_disparity``).
     """
