@@ -1296,6 +1296,13 @@ void winners_avx2(const RowCtx& c) {
   }
 }
 
+// Whether the fixed first pass takes its byte-column-sum form (winners_avx2 with kBytes),
+// which leaves the records' `around` as cost << 4 (RowCtx::around_shifted).
+template <typename Cost>
+bool byte_sum_pass(const RowCtx& c) {
+  return sizeof(typename Cost::Feature) == 4 && c.byte_cols;
+}
+
 // The first pass for dp = kLanes * NC when NC <= kMaxChunks; false otherwise.
 template <int NC, typename Cost>
 bool winners_fixed(const RowCtx& c) {
@@ -1305,7 +1312,7 @@ bool winners_fixed(const RowCtx& c) {
   } else {
     if (c.dp == kLanes * NC) {
       if constexpr (sizeof(typename Cost::Feature) == 4) {
-        if (c.byte_cols) {
+        if (byte_sum_pass<Cost>(c)) {
           winners_avx2<NC, Cost, true, true>(c);
         } else if (c.ring_in != nullptr) {
           winners_avx2<NC, Cost, true, false>(c);
@@ -1701,7 +1708,7 @@ void row_pass(const RowCtx& c) {
   if (c.dp <= kLanes * kMaxChunks) {
     RowCtx counted = c;
     counted.count_low = c.unique_min != nullptr && c.crow == nullptr;
-    counted.around_shifted = sizeof(typename Cost::Feature) == 4 && c.byte_cols;  // kShifted
+    counted.around_shifted = byte_sum_pass<Cost>(c);
     winners_fixed<1, Cost>(counted);
     // The fixed pass matches the border band itself (group_winners): no border_band here.
     if (!c.first_pass_only) decide_avx2(counted);

@@ -94,7 +94,7 @@ import numpy as np
 from . import _validate as check
 from .cli import KeyValueOnce, key_value_option, path_arg
 from .depth import from_opencv_disparity
-from .matching import MAX_NUM_DISPARITIES
+from .matching import MAX_BLOCK_SIZE, MAX_NUM_DISPARITIES
 from .metrics import DisparityMetrics, evaluate, negative_ground_truth
 
 __all__ = [
@@ -246,17 +246,14 @@ def _load_npy(path: Path) -> np.ndarray:
     try:
         with open(path, "rb") as f:
             head = f.read(6)
-        # numpy takes any other file for a pickle, and says it "contains pickled data".
-        if head and head != b"\x93NUMPY" and not head.startswith(b"PK"):
-            raise ValueError(
-                f"{path}: not a readable .npy array (no NumPy header: it starts {head!r})"
-            )
-        arr = np.load(path, allow_pickle=False)
-    except (EOFError, OSError) as exc:
+    except OSError as exc:
         raise ValueError(f"{path}: not a readable .npy array ({exc})") from None
-    except ValueError as exc:
-        if str(exc).startswith(f"{path}: "):
-            raise
+    # numpy takes any other file for a pickle, and says it "contains pickled data".
+    if head and head != b"\x93NUMPY" and not head.startswith(b"PK"):
+        raise ValueError(f"{path}: not a readable .npy array (no NumPy header: it starts {head!r})")
+    try:
+        arr = np.load(path, allow_pickle=False)
+    except (ValueError, EOFError, OSError) as exc:
         raise ValueError(f"{path}: not a readable .npy array ({exc})") from None
     if not isinstance(arr, np.ndarray):  # an .npz archive under a .npy name
         arr.close()
@@ -509,8 +506,6 @@ def _check_block_size(variant: Variant) -> None:
     if variant.method.startswith("opencv-sgbm") and not (bs % 2 == 1 and bs >= 1):
         raise ValueError(f"block size of {variant.method} must be an odd integer >= 1, got {bs}")
     if variant.method == "stereodepth":
-        from .matching import MAX_BLOCK_SIZE
-
         # The largest over the costs (census); a smaller limit of cost=sad is the matcher's.
         top = max(MAX_BLOCK_SIZE.values())
         if not (bs % 2 == 1 and 3 <= bs <= top):

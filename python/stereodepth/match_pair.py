@@ -20,6 +20,7 @@ from typing import Any
 
 import numpy as np
 
+from . import _validate as check
 from ._methods import METHODS, check_method
 
 __all__ = [
@@ -46,8 +47,6 @@ def default_num_disparities(width_px: int) -> int:
     the width rounded up to a multiple of 16, from 16 to 256 px (for a 640 px image, 80).
     Raises TypeError or ValueError unless ``width_px`` is an integer >= 1 (a float width was
     Python's TypeError or OverflowError, naming nothing, or a range for a width of -5)."""
-    from . import _validate as check
-
     width = check.integer("width_px", width_px, minimum=1)
     return int(min(256, max(16, math.ceil(width / 8 / 16) * 16)))
 
@@ -82,8 +81,6 @@ def prepare_pair(left: np.ndarray, right: np.ndarray) -> tuple[np.ndarray, np.nd
     depth. Raises TypeError naming the image that is not a numpy array, ValueError naming the
     one that is not (H, W) or (H, W, C), and ValueError naming ``right`` (the one compared)
     when they differ."""
-    from . import _validate as check
-
     for name, image in (("left", left), ("right", right)):
         # a list or a path was an AttributeError ('list' object has no attribute 'shape'), a
         # 1-D array an IndexError from the size message
