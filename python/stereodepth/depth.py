@@ -56,6 +56,7 @@ class DepthOptions:
         self.baseline_m = check.positive("baseline_m", baseline_m)
         self.doffs_px = check.finite("doffs_px", doffs_px)
         kind = disparity.dtype
+        opencv_format = scale is None and kind == np.int16  # x16 fixed point
         if scale is None:
             if kind == np.uint16:
                 raise ValueError(
@@ -110,6 +111,24 @@ class DepthOptions:
             self.invalid_value = check.real("invalid_value", invalid_value)
         # The raw threshold: raw < min_disparity / scale is a hole (exact for int16 x16).
         self.invalid_below: float | None = None if md is None else md / self.scale
+        if md is None:
+            pass
+        elif opencv_format:
+            if not -2047 <= md <= 2048:
+                # As from_opencv_disparity: beyond, OpenCV's holes overflow int16 (and at
+                # 3000, every pixel was a hole, silently).
+                raise ValueError(
+                    f"min_disparity must be in [-2047, 2048] for OpenCV's int16 x16 disparity "
+                    f"(its invalid value (min_disparity - 1) * 16 must fit in int16), got {md}"
+                )
+        elif kind in (np.int16, np.uint16) and self.invalid_below is not None:
+            top = int(np.iinfo(kind).max)
+            if self.invalid_below > top:
+                raise ValueError(
+                    f"min_disparity / scale must be at most {top}, {kind}'s largest value (every "
+                    f"raw value below it is a hole: every pixel would be one), got min_disparity "
+                    f"{md} with scale {self.scale!r}"
+                )
 
     def _check_ranges(self, kind: np.dtype) -> None:
         """The rig's numbers must survive the arithmetic the kernel does: B*f a finite double
@@ -236,7 +255,10 @@ def disparity_to_depth(
         the matcher's ``minDisparity``; it defaults to 0, OpenCV's default. With a principal
         point offset (``doffs_px > 0``) negative disparities are valid: pass the negative
         ``min_disparity`` the matcher used. Other dtypes have no lower limit unless it is
-        given. Raises TypeError unless it is an integer.
+        given. Raises TypeError unless it is an integer, and ValueError for int16 in OpenCV's
+        format (no ``scale``) outside [-2047, 2048], as :func:`from_opencv_disparity`, or for
+        other integer input when ``min_disparity / scale`` exceeds the dtype's largest value
+        (every pixel would be a hole).
     out
         A preallocated C-contiguous array of ``dtype`` and the input's shape to write into.
         It may be the input itself when the item sizes match (float32 in place).

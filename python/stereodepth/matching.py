@@ -755,9 +755,12 @@ def to_opencv_disparity(disparity: Any, *, min_disparity: int = 0) -> np.ndarray
     if np.isinf(arr).any():
         raise ValueError("disparity must be finite or NaN (holes), got an infinite value")
     finite = np.isfinite(arr)
-    with np.errstate(over="ignore"):  # beyond 1.1e307 px: inf, refused below
+    with np.errstate(over="ignore", invalid="ignore"):  # beyond 1.1e307 px: inf, refused below
         scaled = np.where(finite, arr.astype(np.float64) * 16.0, 0.0)
-    fixed = np.trunc(scaled + np.copysign(0.5, scaled))
+        # Half away from zero, exactly: trunc(x + 0.5) rounded x + 0.5 first, so that
+        # 0.49999999999999994 became 1. (inf - inf is NaN: inf stays inf.)
+        whole = np.trunc(scaled)
+        fixed = whole + np.copysign(np.abs(scaled - whole) >= 0.5, scaled)
     if finite.any():
         # The messages show the value given ("below 2048 px, got 2048.0" was said of
         # 2047.97, which rounds to 2048 px in sixteenths) and its rounding.

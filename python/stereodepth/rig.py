@@ -329,6 +329,19 @@ class StereoRig:
 
     # --- disparity and depth ---------------------------------------------------------------
     def _disparity(self, name: str, disparity_px: ArrayLike) -> np.ndarray:
+        raw_dtype = getattr(disparity_px, "dtype", None)
+        if raw_dtype is not None and np.dtype(raw_dtype) in (
+            np.dtype(np.int16),
+            np.dtype(np.uint16),
+        ):
+            # The map functions read int16 as OpenCV's x16 fixed point and uint16 as KITTI's
+            # x256: read here as pixels, the same array gave depths 16 or 256 times apart.
+            raise TypeError(
+                f"{name} must be in pixels, got an array of {np.dtype(raw_dtype)}, the dtype of "
+                "OpenCV's disparity x 16 (int16) or KITTI's x 256 (uint16): convert it with "
+                "stereodepth.from_opencv_disparity or read_disparity_png16, or pass it to "
+                "depth_map, which reads both formats"
+            )
         d = check.real_array(name, disparity_px)
         with np.errstate(over="ignore"):  # 1e308 + 1e308: inf, > 0 (its depth is checked later)
             den = d + self._doffs_px
@@ -362,7 +375,9 @@ class StereoRig:
         A disparity of -doffs (0 for most rigs) is a point at infinity: ``inf``; with doffs > 0
         the points beyond B * f_px / doffs have negative disparities. A disparity below -doffs
         (behind the cameras), NaN or infinite raises ValueError, and so does one whose depth
-        leaves the range of a double (inf or 0 for a finite, positive depth)."""
+        leaves the range of a double (inf or 0 for a finite, positive depth). An int16 or
+        uint16 array raises TypeError: those are OpenCV's and KITTI's fixed-point maps, which
+        :meth:`depth_map` reads."""
         return self._depth_of("disparity_px", disparity_px)
 
     def _blamed(self, name: str) -> str:
@@ -697,11 +712,39 @@ class StereoRig:
         return {k: (v if k == "table" else shown(v)) for k, v in out.items()}
 
     # --- maps ------------------------------------------------------------------------------
+    def _check_map_size(self, name: str, disparity: Any) -> None:
+        """A (H, W) or (N, H, W) map must match the rig's image size where it has one."""
+        if self._width_px is None and self._height_px is None:
+            return
+        shape = np.shape(disparity)
+        if len(shape) not in (2, 3):
+            return  # disparity_to_depth names the shape
+        h, w = shape[-2:]
+        if (self._width_px is not None and w != self._width_px) or (
+            self._height_px is not None and h != self._height_px
+        ):
+            want = f"{self._width_px if self._width_px is not None else 'any'} x " + (
+                f"{self._height_px if self._height_px is not None else 'any'} px"
+            )
+            raise ValueError(
+                f"{name} must have the rig's image size, {want} (its focal length in pixels and "
+                f"doffs belong to that resolution), got {w} x {h} px: match at the calibrated "
+                "size, or make a rig for this one"
+            )
+
     def depth_map(self, disparity: Any, **options: Any) -> np.ndarray:
         """Converts a disparity map with this rig's numbers; see
         :func:`stereodepth.disparity_to_depth` for ``options`` (scale, dtype, limits, out,
-        threads)."""
+        threads).
+
+        When the rig has an image size (``width_px``, ``height_px``: a calibration file gives
+        one), the map must have it: raises ValueError otherwise, since the focal length in
+        pixels and doffs belong to that resolution (Middlebury's full-size ``calib.txt`` with
+        its quarter-size images gives depths 4 times too large), as ``stereodepth match``
+        refuses such a pair."""
         from .depth import disparity_to_depth
+
+        self._check_map_size("disparity", disparity)
 
         return disparity_to_depth(
             disparity,
