@@ -4,11 +4,19 @@
 #include <pybind11/numpy.h>
 #include <pybind11/pybind11.h>
 
+#include <atomic>
+#include <optional>
 #include <string>
+
+#if defined(__unix__)
+#include <signal.h>
+#include <unistd.h>
+#endif
 
 #include "stereodepth/block_match.hpp"
 #include "stereodepth/dispatch.hpp"
 #include "stereodepth/image_view.hpp"
+#include "stereodepth/parallel.hpp"
 
 namespace stereodepth::bindings {
 
@@ -29,6 +37,87 @@ class ReleaseGil {
 
  private:
   PyThreadState* state_;
+};
+
+// Ctrl-C during a long kernel call. Python runs its SIGINT handler (KeyboardInterrupt) only
+// when the main thread is back in the interpreter, so a kernel that has released the GIL
+// would otherwise finish its work first (seconds for a large semi-global match). For a call
+// of at least kMinWork pixels x disparities on the main thread, while Python's handler is
+// the default one (signal.default_int_handler), this installs a SIGINT handler that sets the
+// call's stop flag (StopScope: the kernels stop within a few rows, throwing Stopped) and then
+// calls Python's own C handler, so that KeyboardInterrupt is raised as usual when the call
+// returns (the Stopped translator in module.cpp). The previous handler is restored when the
+// call ends. Calls from other threads, short calls, and programs with their own SIGINT
+// handler (or none) are not affected.
+class StopOnCtrlC {
+ public:
+  static constexpr double kMinWork = 16.0 * 1024 * 1024;
+
+  // With the GIL held.
+  explicit StopOnCtrlC(double work) {
+#if defined(__unix__)
+    if (work < kMinWork || !wanted()) return;
+    // Python's C handler, the same function whenever default_int_handler is the Python one.
+    if (sigaction(SIGINT, nullptr, &previous()) != 0) return;
+    struct sigaction ours {};
+    ours.sa_handler = &on_sigint;
+    ours.sa_mask = previous().sa_mask;
+    ours.sa_flags = previous().sa_flags & SA_ONSTACK;
+    stop().store(false, std::memory_order_relaxed);
+    if (sigaction(SIGINT, &ours, nullptr) != 0) return;
+    installed_ = true;
+    scope_.emplace(&stop());
+#else
+    (void)work;
+#endif
+  }
+  StopOnCtrlC(const StopOnCtrlC&) = delete;
+  StopOnCtrlC& operator=(const StopOnCtrlC&) = delete;
+  ~StopOnCtrlC() {
+#if defined(__unix__)
+    if (installed_) sigaction(SIGINT, &previous(), nullptr);
+#endif
+  }
+
+ private:
+#if defined(__unix__)
+  // Main thread (threading.main_thread()) and Python's default SIGINT handler.
+  static bool wanted() {
+    try {
+      py::module_ threading = py::module_::import("threading");
+      const py::object main_ident = threading.attr("main_thread")().attr("ident");
+      if (!main_ident.equal(threading.attr("get_ident")())) return false;
+      py::module_ signal = py::module_::import("signal");
+      const py::object handler = signal.attr("getsignal")(signal.attr("SIGINT"));
+      return handler.is(signal.attr("default_int_handler"));
+    } catch (const py::error_already_set&) {
+      return false;  // at interpreter shutdown, say: no Ctrl-C handling then
+    }
+  }
+  // Static, not the call's own: a handler running late on another thread must not touch a
+  // finished call's memory. Only the main thread makes calls with the handler, one at a time.
+  static std::atomic<bool>& stop() {
+    static std::atomic<bool> s{false};
+    return s;
+  }
+  static struct sigaction& previous() {
+    static struct sigaction p {};
+    return p;
+  }
+  static void on_sigint(int sig) {
+    stop().store(true, std::memory_order_relaxed);
+    const struct sigaction& prev = previous();
+    if (prev.sa_flags & SA_SIGINFO) {
+      if (prev.sa_sigaction != nullptr) prev.sa_sigaction(sig, nullptr, nullptr);
+    } else if (prev.sa_handler != SIG_DFL && prev.sa_handler != SIG_IGN &&
+               prev.sa_handler != nullptr) {
+      prev.sa_handler(sig);
+    }
+  }
+
+  bool installed_ = false;
+#endif
+  std::optional<StopScope> scope_;
 };
 
 inline std::string shape_str(const py::array& a) {

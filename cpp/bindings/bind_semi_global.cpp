@@ -20,6 +20,8 @@ void compute_py(SemiGlobalMatcher& self, const py::array& left, const py::array&
     conf_arr = py::reinterpret_borrow<py::array>(confidence);
     c = output_view(conf_arr, "confidence");
   }
+  StopOnCtrlC stop(static_cast<double>(l.rows) * static_cast<double>(l.cols) *
+                   self.params().num_disparities);
   ReleaseGil release;
   self.compute(l, r, d, c);
 }

@@ -48,6 +48,11 @@ PYBIND11_MODULE(_core, m) {
       if (p) std::rethrow_exception(p);
     } catch (const std::invalid_argument& e) {
       PyErr_SetString(PyExc_ValueError, e.what());
+    } catch (const stereodepth::Stopped&) {
+      // Ctrl-C stopped the kernel (StopOnCtrlC): Python's handler, run now, raises
+      // KeyboardInterrupt; should it not raise, KeyboardInterrupt all the same, as the
+      // call has no result.
+      if (PyErr_CheckSignals() == 0 && !PyErr_Occurred()) PyErr_SetNone(PyExc_KeyboardInterrupt);
     }
   });
 

@@ -447,6 +447,7 @@ void BlockMatcher::compute(const StereoImage& left, const StereoImage& right,
     std::atomic<std::uint64_t>& mine = ranges[w];
     detail::MatchArgs a = common;
     for (;;) {
+      throw_if_stopped();  // Ctrl-C: every worker stops at its next rows
       // Claim the next rows of this worker's range.
       std::uint64_t cur = mine.load();
       std::ptrdiff_t y0 = 0, y1 = 0;

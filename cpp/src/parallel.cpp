@@ -135,6 +135,22 @@ int resolve_threads(int requested) {
 
 namespace {
 
+// The stop flag of the call this thread works for (StopScope).
+thread_local const std::atomic<bool>* t_stop = nullptr;
+
+}  // namespace
+
+StopScope::StopScope(const std::atomic<bool>* flag) : saved_(t_stop) { t_stop = flag; }
+
+StopScope::~StopScope() { t_stop = saved_; }
+
+bool stop_requested() {
+  const std::atomic<bool>* f = t_stop;
+  return f != nullptr && f->load(std::memory_order_relaxed);
+}
+
+namespace {
+
 // The bands of one parallel_for_rows call. Bands are claimed in order through `next`, by the
 // pool's workers and by the calling thread alike, so that the caller runs every band no worker
 // has started: a call never waits for a band to be picked up, only for bands already running
@@ -142,6 +158,7 @@ namespace {
 // with other callers' bands).
 struct Job {
   const std::function<void(std::ptrdiff_t, std::ptrdiff_t)>* fn = nullptr;
+  const std::atomic<bool>* stop = nullptr;  // the caller's stop flag, for every band
   std::ptrdiff_t rows = 0, bands = 0;
   std::atomic<std::ptrdiff_t> next{1};  // band 0 is the caller's
   std::atomic<std::ptrdiff_t> done{0};  // bands 1 .. bands - 1 finished
@@ -151,6 +168,7 @@ struct Job {
   std::ptrdiff_t begin(std::ptrdiff_t b) const { return rows * b / bands; }
   void run(std::ptrdiff_t b) {
     try {
+      StopScope scope(stop);
       (*fn)(begin(b), begin(b + 1));
     } catch (...) {
       errors[static_cast<std::size_t>(b)] = std::current_exception();
@@ -242,6 +260,7 @@ void run_job(std::ptrdiff_t rows, std::ptrdiff_t bands, bool together,
              const std::function<void(std::ptrdiff_t, std::ptrdiff_t)>& fn) {
   Job job;
   job.fn = &fn;
+  job.stop = t_stop;
   job.rows = rows;
   job.bands = bands;
   job.errors.resize(static_cast<std::size_t>(bands));

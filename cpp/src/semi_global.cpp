@@ -64,23 +64,28 @@ std::ptrdiff_t stripe_count(std::ptrdiff_t rows) {
 
 // Threads meet at every row (the diagonal paths read the previous row across band edges).
 // A row's share takes tens of microseconds, about what waking a blocked thread costs, so a
-// waiting thread first spins a while on the generation count, then blocks.
+// waiting thread first spins a while on the generation count, then blocks. wait() returns
+// whether the call was asked to stop, as its last arrival saw it, so that every band gets the
+// same answer (a band that stopped alone would leave the others waiting for ever).
 class Barrier {
  public:
   explicit Barrier(std::ptrdiff_t n) : n_(n) {}
-  void wait() {
+  bool wait() {
     const std::uint64_t gen = gen_.load(std::memory_order_acquire);
     if (count_.fetch_add(1, std::memory_order_acq_rel) + 1 == n_) {
       count_.store(0, std::memory_order_relaxed);
+      // Read by the others after they see the new generation; written again only when all of
+      // them have arrived once more.
+      stop_.store(stop_requested(), std::memory_order_relaxed);
       {
         std::lock_guard<std::mutex> lock(m_);
         gen_.store(gen + 1, std::memory_order_release);
       }
       cv_.notify_all();
-      return;
+      return stop_.load(std::memory_order_relaxed);
     }
     for (int i = 0; i < kSpins; ++i) {
-      if (gen_.load(std::memory_order_acquire) != gen) return;
+      if (gen_.load(std::memory_order_acquire) != gen) return stop_.load(std::memory_order_relaxed);
 #if defined(__x86_64__) || defined(_M_X64)
       _mm_pause();
 #else
@@ -89,6 +94,7 @@ class Barrier {
     }
     std::unique_lock<std::mutex> lock(m_);
     cv_.wait(lock, [&] { return gen_.load(std::memory_order_acquire) != gen; });
+    return stop_.load(std::memory_order_relaxed);
   }
 
  private:
@@ -98,6 +104,7 @@ class Barrier {
   const std::ptrdiff_t n_;
   std::atomic<std::ptrdiff_t> count_{0};
   std::atomic<std::uint64_t> gen_{0};
+  std::atomic<bool> stop_{false};
 };
 
 // The threads a call runs. Paths 4 and 8 run at most one per CPU this process may use
@@ -627,6 +634,7 @@ void SemiGlobalMatcher::compute(const StereoImage& left, const StereoImage& righ
       for (std::ptrdiff_t st = next_stripe++; st < stripes; st = next_stripe++) {
         const std::ptrdiff_t y0 = band(rows, stripes, st), y1 = band(rows, stripes, st + 1);
         for (std::ptrdiff_t y = y0; y < y1; ++y) {
+          throw_if_stopped();
           std::uint8_t* raws[3];
           int fresh = -1;
           raw.get(
@@ -690,6 +698,7 @@ void SemiGlobalMatcher::compute(const StereoImage& left, const StereoImage& righ
         const std::ptrdiff_t y0 = band(rows, stripes, st), y1 = band(rows, stripes, st + 1);
         int flip = 0;
         for (std::ptrdiff_t y = y0; y < y1; ++y) {
+          throw_if_stopped();
           std::uint16_t* raws[3];
           raw.get(rows, r, y, raws, [&](std::ptrdiff_t yy, std::uint16_t* out) {
             const std::uint16_t* lrow = src.census(0, yy);
@@ -809,7 +818,12 @@ void SemiGlobalMatcher::compute(const StereoImage& left, const StereoImage& righ
                          sums + static_cast<std::size_t>(y) * n_col, dy > 0 && v == 0);
             }
             flip = 1 - flip;
-            if (nv > 1 && nb > 1) barrier.wait();
+            // With a barrier the bands stop together, at the row its last arrival decides.
+            if (nv > 1 && nb > 1) {
+              if (barrier.wait()) throw Stopped();
+            } else {
+              throw_if_stopped();
+            }
           }
         });
       }
@@ -822,6 +836,7 @@ void SemiGlobalMatcher::compute(const StereoImage& left, const StereoImage& righ
         auto* at = aligned<std::uint16_t>(ws.scratch[static_cast<std::size_t>(b)], n_fused);
         detail::FusedRowArgs fa = fused_args(at);
         for (std::ptrdiff_t y = band(rows, nt, b); y < band(rows, nt, b + 1); ++y) {
+          throw_if_stopped();
           fa.c = costs + static_cast<std::size_t>(y) * n_col;
           fa.base = sums + static_cast<std::size_t>(y) * n_col;
           fa.g = pgrey + y * cols;
@@ -842,6 +857,7 @@ void SemiGlobalMatcher::compute(const StereoImage& left, const StereoImage& righ
       auto* winners = reinterpret_cast<std::uint32_t*>(
           (reinterpret_cast<std::uintptr_t>(tmp + 2 * ls) + 3) & ~std::uintptr_t{3});
       for (std::ptrdiff_t y = band(rows, nt, b); y < band(rows, nt, b + 1); ++y) {
+        throw_if_stopped();
         std::memcpy(total, sums + static_cast<std::size_t>(y) * n_col,
                     n_col * sizeof(std::uint16_t));
         k.horizontal_row(pp, costs + static_cast<std::size_t>(y) * n_col, pgrey + y * cols, cols,

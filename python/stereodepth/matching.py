@@ -690,11 +690,14 @@ def block_match(
     cost more than one disparity away from the winner (0 where the disparity is NaN).
 
     The steps, the validity rules and the limits are described in :mod:`stereodepth.matching`.
-    The GIL is released while the kernel runs. The calling thread keeps the matcher of its last
-    call (and its buffers, tens of MB for a 2 MP pair) while the parameters stay the same, so a
-    loop of calls costs what :meth:`StereoMatcher.compute` does; it is released when the
-    parameters change, the thread ends, or after a pair of more than
-    ``KEEP_MATCHER_MAX_PIXELS`` (8 MP). A :class:`StereoMatcher` keeps its buffers explicitly.
+    The GIL is released while the kernel runs. Ctrl-C during a call on the main thread stops
+    the kernel within a few rows and raises KeyboardInterrupt (calls of at least 16 M pixels x
+    disparities, while Python's default SIGINT handler is installed). The calling thread keeps
+    the matcher of its last call (and its buffers, tens of MB for a 2 MP pair) while the
+    parameters stay the same, so a loop of calls costs what :meth:`StereoMatcher.compute`
+    does; it is released when the parameters change, the thread ends, or after a pair of more
+    than ``KEEP_MATCHER_MAX_PIXELS`` (8 MP). A :class:`StereoMatcher` keeps its buffers
+    explicitly.
 
     Raises TypeError for a wrong type or dtype (images, parameters) and ValueError for a wrong
     value or shape, naming the parameter and what was received.

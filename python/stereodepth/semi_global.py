@@ -551,7 +551,9 @@ def semi_global_match(
 
     The steps and rules are described in :mod:`stereodepth.semi_global`. Sources: H.
     Hirschmüller, CVPR 2005 and IEEE PAMI 30(2) 2008 (semi-global matching); R. Zabih and J.
-    Woodfill, ECCV 1994 (census). The GIL is released while the kernel runs.
+    Woodfill, ECCV 1994 (census). The GIL is released while the kernel runs; Ctrl-C on the
+    main thread stops it within a few rows and raises KeyboardInterrupt, as for
+    :func:`stereodepth.block_match`.
     """
     matcher = SemiGlobalMatcher(
         num_disparities=num_disparities,

@@ -4,7 +4,9 @@
 // results never depend on the number of threads.
 #pragma once
 
+#include <atomic>
 #include <cstddef>
+#include <exception>
 #include <functional>
 #include <string>
 
@@ -39,5 +41,32 @@ void parallel_for_rows(std::ptrdiff_t rows, int threads, std::ptrdiff_t min_rows
 // return then. Throws std::system_error when the threads cannot be started, and rethrows a
 // band's exception like parallel_for_rows.
 void run_bands_together(std::ptrdiff_t n, const std::function<void(std::ptrdiff_t)>& fn);
+
+// Stopping a call early (Ctrl-C). A caller that may be interrupted gives its thread a stop
+// flag (StopScope); parallel_for_rows and run_bands_together hand the caller's flag to the
+// threads that run its bands, and the kernels call throw_if_stopped() between rows, which
+// throws Stopped once the flag is set. A call that is not stopped gives the same results.
+struct Stopped : std::exception {
+  const char* what() const noexcept override { return "stopped: the caller asked it to stop"; }
+};
+
+// Sets this thread's stop flag (null: none) for the scope's lifetime.
+class StopScope {
+ public:
+  explicit StopScope(const std::atomic<bool>* flag);
+  ~StopScope();
+  StopScope(const StopScope&) = delete;
+  StopScope& operator=(const StopScope&) = delete;
+
+ private:
+  const std::atomic<bool>* saved_;
+};
+
+// Whether the call this thread works for was asked to stop.
+bool stop_requested();
+
+inline void throw_if_stopped() {
+  if (stop_requested()) throw Stopped();
+}
 
 }  // namespace stereodepth
