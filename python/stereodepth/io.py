@@ -471,32 +471,58 @@ def read_pfm(path: str | os.PathLike[str]) -> np.ndarray:
     the body must have exactly the size the header gives. PFM has no comments: a ``#`` in
     the header is refused.
 
-    Raises FileNotFoundError for a missing file, IsADirectoryError for a folder and ValueError
+    The header is parsed from the file's first bytes and the size it gives checked against
+    the file's before the body is read: a file truncated or padded (to gigabytes) is refused
+    at once, reading a few kB.
+
+    Raises FileNotFoundError for a missing file, IsADirectoryError for a folder, ValueError
     naming the file and the fault: a bad magic, a non-numeric, zero or negative width or height, a
-    non-numeric, zero or non-finite scale, a comment, a truncated body or extra bytes."""
+    non-numeric, zero or non-finite scale, a comment, a truncated body or extra bytes (how
+    many), and MemoryError naming the file and its size when the array does not fit in
+    memory (about twice the body's size is needed while the rows are turned)."""
     p = _as_path(path)
     require_file(p, "PFM file")
-    data = p.read_bytes()
-    if data[:2] not in (b"PF", b"Pf") or not data[2:3].isspace():
-        raise ValueError(f"{p}: not a PFM file: it must start with 'PF' or 'Pf', got {data[:8]!r}")
-    channels = 3 if data[:2] == b"PF" else 1
-    tokens, end = _header_tokens(p, data, 3, comments=False, what="PFM")
-    width = _size(p, tokens[0], "width", "PFM")
-    height = _size(p, tokens[1], "height", "PFM")
-    if _FLOAT_RE.fullmatch(tokens[2]) is None:
-        raise ValueError(f"{p}: PFM scale must be a number, got {tokens[2]!r}")
-    scale = float(tokens[2])
-    if scale == 0 or not np.isfinite(scale):
-        raise ValueError(
-            f"{p}: bad PFM scale {tokens[2]!r}: it must be finite and not 0 (its sign gives "
-            "the byte order)"
-        )
-    count = width * height * channels
-    desc = f"{width}x{height}x{channels} PFM"
-    body = _body(p, data, end, count * 4, desc)
-    a = np.frombuffer(body, dtype="<f4" if scale < 0 else ">f4", count=count)
+    with p.open("rb") as f:
+        file_size = os.fstat(f.fileno()).st_size
+
+        def parse(data: bytes, whole: bool) -> tuple[int, int, int, float, int, int]:
+            if len(data) < 3 and not whole:
+                raise _NeedMore
+            if data[:2] not in (b"PF", b"Pf") or not data[2:3].isspace():
+                if len(data) < 8 and not whole:  # the message shows 8 bytes
+                    raise _NeedMore
+                raise ValueError(
+                    f"{p}: not a PFM file: it must start with 'PF' or 'Pf', got {data[:8]!r}"
+                )
+            channels = 3 if data[:2] == b"PF" else 1
+            tokens, end = _header_tokens(p, data, 3, comments=False, what="PFM", whole=whole)
+            width = _size(p, tokens[0], "width", "PFM")
+            height = _size(p, tokens[1], "height", "PFM")
+            if _FLOAT_RE.fullmatch(tokens[2]) is None:
+                raise ValueError(f"{p}: PFM scale must be a number, got {tokens[2]!r}")
+            scale = float(tokens[2])
+            if scale == 0 or not np.isfinite(scale):
+                raise ValueError(
+                    f"{p}: bad PFM scale {tokens[2]!r}: it must be finite and not 0 (its sign "
+                    "gives the byte order)"
+                )
+            count = width * height * channels
+            desc = f"{width}x{height}x{channels} PFM"
+            start = _body_start(p, data, whole, end, file_size, count * 4, desc)
+            return width, height, channels, scale, count, start
+
+        width, height, channels, scale, count, start = _parse_head(f, file_size, parse)
+        desc = f"{width}x{height}x{channels} PFM"
+        a = _read_body(p, f, start, np.dtype("<f4" if scale < 0 else ">f4"), count, desc)
     shape = (height, width) if channels == 1 else (height, width, 3)
-    return a.reshape(shape)[::-1].astype(np.float32)  # native order, top to bottom, a copy
+    try:
+        out: np.ndarray = a.reshape(shape)[::-1].astype(np.float32)  # native, top to bottom
+        return out
+    except MemoryError:
+        raise MemoryError(
+            f"{p}: not enough memory to read the {desc} ({count * 4} bytes of data, twice that "
+            "while its rows are turned)"
+        ) from None
 
 
 # --- exact headers: PFM and PNM ---------------------------------------------------------------
@@ -512,10 +538,41 @@ _SEP_COMMENTS_RE = re.compile(rb"(?:\s|#[^\r\n]*)+")
 _TOKEN_RE = re.compile(rb"[^\s#]+")
 
 
+#: The first read of a PFM or PNM file, bytes: its header, however many spaces and comments it
+#: holds, without reading the body (read only once the header's size has been checked against
+#: the file's). A longer header is read in larger and larger parts.
+_HEAD_BYTES = 1 << 16
+
+
+class _NeedMore(Exception):
+    """The part of a file read so far ends inside its header: read more of it."""
+
+
+def _parse_head(f: IO[bytes], file_size: int, parse: Any) -> Any:
+    """``parse(data, whole)`` on the first bytes of ``f``, more of them (4 times as many each
+    time) while it raises :class:`_NeedMore`; ``whole`` says whether ``data`` is the whole
+    file. The header is parsed without reading the body: a file padded to gigabytes is
+    refused in a moment, not after reading it all."""
+    n = _HEAD_BYTES
+    while True:
+        f.seek(0)
+        data = f.read(n)
+        whole = len(data) >= file_size or len(data) < n
+        try:
+            return parse(data, whole)
+        except _NeedMore:
+            if whole:  # pragma: no cover - parse raises _NeedMore only for a part
+                raise
+            n *= 4
+
+
 def _header_tokens(
-    p: Path, data: bytes, count: int, *, comments: bool, what: str
+    p: Path, data: bytes, count: int, *, comments: bool, what: str, whole: bool = True
 ) -> tuple[list[str], int]:
-    """The ``count`` header tokens after the 2-byte magic and the offset where the last ends."""
+    """The ``count`` header tokens after the 2-byte magic and the offset where the last ends.
+
+    ``data`` is the file's first bytes, the whole file when ``whole``; otherwise
+    :class:`_NeedMore` is raised where a token or a comment may go on past its end."""
     sep = _SEP_COMMENTS_RE if comments else _SEP_RE
     pos = 2
     tokens: list[str] = []
@@ -531,6 +588,8 @@ def _header_tokens(
             break
         tokens.append(t.group().decode("latin-1"))
         pos = t.end()
+    if not whole and (len(tokens) < count or pos >= len(data)):
+        raise _NeedMore
     if len(tokens) < count:
         raise ValueError(
             f"{p}: incomplete {what} header: expected {count} fields after the magic, got "
@@ -547,25 +606,57 @@ def _size(p: Path, token: str, name: str, what: str) -> int:
     return int(token)
 
 
-def _body(p: Path, data: bytes, token_end: int, size: int, desc: str) -> bytes:
-    """The last ``size`` bytes of ``data``, after checking that what lies between the
-    header's last token (ending at ``token_end``) and them is one header line end."""
-    start = len(data) - size
-    gap = data[token_end:start] if start >= token_end else b""
-    if _HEADER_END_RE.fullmatch(gap) is not None:
-        return data[start:]
+def _body_start(
+    p: Path, data: bytes, whole: bool, token_end: int, file_size: int, size: int, desc: str
+) -> int:
+    """Where the body of a binary PFM or PNM starts, after checking that the file holds one
+    header line end after the header's last token (ending at ``token_end`` in ``data``, the
+    file's first bytes) and then exactly ``size`` bytes: ValueError naming the file for a
+    header without its line end, a truncated body or extra bytes, from the file's size
+    (``file_size``) alone, before the body is read."""
     end = _HEADER_END_RE.match(data, token_end)
-    if end is None and token_end < len(data):
+    if end is None and not whole:
+        rest = data[token_end:]
+        if len(rest) < 4 or re.fullmatch(rb"[ \t]*\r?", rest) is not None:
+            raise _NeedMore  # the line end may lie beyond what was read
+    if end is None and token_end < file_size:
         raise ValueError(
             f"{p}: {desc}: the header must end with one line break (LF or CR LF), got "
             f"{data[token_end : token_end + 4]!r}"
         )
-    avail = len(data) - (end.end() if end is not None else token_end)
+    start = end.end() if end is not None else token_end
+    avail = file_size - start
     if avail < size:
         raise ValueError(f"{p}: truncated {desc}: needs {size} bytes of data, got {avail}")
-    raise ValueError(
-        f"{p}: {desc} has {avail - size} bytes more than its header and {size} bytes of data"
-    )
+    if avail > size:
+        raise ValueError(
+            f"{p}: {desc} has {avail - size} bytes more than its header and {size} bytes of data"
+        )
+    return start
+
+
+def _read_body(
+    p: Path, f: IO[bytes], start: int, dtype: np.dtype, count: int, desc: str
+) -> np.ndarray:
+    """``count`` values of ``dtype`` read from ``f`` at byte ``start``, straight into a new
+    array (no second copy as bytes); MemoryError naming the file when there is no room for
+    it, ValueError when the file has shrunk since its size was checked."""
+    size = count * dtype.itemsize
+    try:
+        out = np.empty(count, dtype)
+    except MemoryError:
+        raise MemoryError(
+            f"{p}: not enough memory to read the {desc} ({size} bytes of data)"
+        ) from None
+    view = out.view(np.uint8).data  # a memoryview of its bytes
+    f.seek(start)
+    got = 0
+    while got < size:
+        n = f.readinto(view[got:])  # type: ignore[attr-defined]
+        if not n:
+            raise ValueError(f"{p}: truncated {desc}: needs {size} bytes of data, got {got}")
+        got += n
+    return out
 
 
 #: PNM magic numbers: (name, samples per pixel, plain (ASCII) raster, has a maxval).
@@ -577,6 +668,35 @@ _PNM_KINDS = {
     b"P5": ("PGM", 1, False, True),
     b"P6": ("PPM", 3, False, True),
 }
+
+
+def _plain_raster(
+    p: Path, data: bytes, end: int, name: str, has_maxval: bool, count: int, desc: str
+) -> np.ndarray:
+    """The samples of a plain (ASCII) PBM, PGM or PPM (P1 to P3) whose header ends at byte
+    ``end`` of ``data``, the whole file: ``count`` of them, each checked."""
+    rest = data[end:]
+    if rest[:1] and not rest[:1].isspace():
+        raise ValueError(f"{p}: {name} header must end with whitespace, got {rest[:8]!r}")
+    if not has_maxval:  # P1: one character per pixel, whitespace anywhere
+        raster = bytes(rest.translate(None, b" \t\r\n\v\f"))
+        bad = raster.translate(None, b"01")
+        if bad:
+            raise ValueError(f"{p}: PBM samples must be 0 or 1, got {bad[:8]!r}")
+        values: np.ndarray = np.frombuffer(raster, np.uint8) - ord("0")
+    else:
+        words = rest.split()
+        if not all(w.isdigit() for w in words):
+            first = next(w for w in words if not w.isdigit())
+            raise ValueError(f"{p}: {name} samples must be whole numbers, got {first[:16]!r}")
+        if len(words) != count:
+            raise ValueError(f"{p}: {desc} needs {count} samples, got {len(words)}")
+        if max(len(w.lstrip(b"0")) for w in words) > 5:  # keeps int64 from overflowing
+            raise ValueError(f"{p}: {desc} has a sample above the maxval")
+        values = np.array([int(w) for w in words], dtype=np.int64)
+    if len(values) != count:
+        raise ValueError(f"{p}: {desc} needs {count} samples, got {len(values)}")
+    return values
 
 
 def read_pnm(path: str | os.PathLike[str]) -> np.ndarray:
@@ -596,59 +716,79 @@ def read_pnm(path: str | os.PathLike[str]) -> np.ndarray:
     shifted. The body must have exactly the size the header gives; a plain (ASCII) raster
     exactly width * height * samples values.
 
-    Raises FileNotFoundError for a missing file, IsADirectoryError for a folder and ValueError
+    A binary file's (P4 to P6) header is parsed from its first bytes and the size it gives
+    checked against the file's before the body is read: a file truncated or padded (to
+    gigabytes) is refused at once, reading a few kB. A plain (ASCII) raster has no exact size
+    and is read whole.
+
+    Raises FileNotFoundError for a missing file, IsADirectoryError for a folder, ValueError
     naming the file and the fault: a bad magic (PAM, P7, is not read), non-numeric, zero or negative
     width, height or maxval, a maxval above 65535, a sample above the maxval, a truncated body or
-    extra bytes."""
+    extra bytes (how many), and MemoryError naming the file and its size when the image (or a
+    plain file's text) does not fit in memory."""
     p = _as_path(path)
     require_file(p, "PNM file")
-    data = p.read_bytes()
-    kind = _PNM_KINDS.get(data[:2])
-    if kind is None or not (data[2:3].isspace() or data[2:3] == b"#"):
-        raise ValueError(
-            f"{p}: not a PBM/PGM/PPM file: it must start with P1 to P6, got {data[:8]!r}"
-        )
-    name, samples, plain, has_maxval = kind
-    tokens, end = _header_tokens(p, data, 3 if has_maxval else 2, comments=True, what=name)
-    width = _size(p, tokens[0], "width", name)
-    height = _size(p, tokens[1], "height", name)
-    maxval = _size(p, tokens[2], "maxval", name) if has_maxval else 1
-    if maxval > 65535:
-        raise ValueError(f"{p}: {name} maxval must be at most 65535, got {maxval}")
-    dtype = np.dtype(np.uint8 if maxval < 256 else np.uint16)
-    count = width * height * samples
-    desc = f"{width}x{height} {name}" + (f" with maxval {maxval}" if has_maxval else "")
-    shape = (height, width) if samples == 1 else (height, width, samples)
-    if plain:
-        rest = data[end:]
-        if rest[:1] and not rest[:1].isspace():
-            raise ValueError(f"{p}: {name} header must end with whitespace, got {rest[:8]!r}")
-        if not has_maxval:  # P1: one character per pixel, whitespace anywhere
-            raster = bytes(rest.translate(None, b" \t\r\n\v\f"))
-            bad = raster.translate(None, b"01")
-            if bad:
-                raise ValueError(f"{p}: PBM samples must be 0 or 1, got {bad[:8]!r}")
-            values = np.frombuffer(raster, np.uint8) - ord("0")
+    with p.open("rb") as f:
+        file_size = os.fstat(f.fileno()).st_size
+
+        def parse(data: bytes, whole: bool) -> tuple[Any, ...]:
+            if len(data) < 3 and not whole:
+                raise _NeedMore
+            kind = _PNM_KINDS.get(data[:2])
+            if kind is None or not (data[2:3].isspace() or data[2:3] == b"#"):
+                if len(data) < 8 and not whole:  # the message shows 8 bytes
+                    raise _NeedMore
+                raise ValueError(
+                    f"{p}: not a PBM/PGM/PPM file: it must start with P1 to P6, got {data[:8]!r}"
+                )
+            name, samples, plain, has_maxval = kind
+            tokens, end = _header_tokens(
+                p, data, 3 if has_maxval else 2, comments=True, what=name, whole=whole
+            )
+            width = _size(p, tokens[0], "width", name)
+            height = _size(p, tokens[1], "height", name)
+            maxval = _size(p, tokens[2], "maxval", name) if has_maxval else 1
+            if maxval > 65535:
+                raise ValueError(f"{p}: {name} maxval must be at most 65535, got {maxval}")
+            dtype = np.dtype(np.uint8 if maxval < 256 else np.uint16)
+            desc = f"{width}x{height} {name}" + (f" with maxval {maxval}" if has_maxval else "")
+            if plain:  # no exact size: the raster is read whole, below
+                return kind, width, height, maxval, dtype, desc, end
+            # P4: rows of bits, each row padded to a whole byte; P5, P6: big-endian samples.
+            size = (
+                (width + 7) // 8 * height
+                if not has_maxval
+                else width * height * samples * dtype.itemsize
+            )
+            return (
+                kind,
+                width,
+                height,
+                maxval,
+                dtype,
+                desc,
+                _body_start(p, data, whole, end, file_size, size, desc),
+            )
+
+        kind, width, height, maxval, dtype, desc, end = _parse_head(f, file_size, parse)
+        name, samples, plain, has_maxval = kind
+        count = width * height * samples
+        shape = (height, width) if samples == 1 else (height, width, samples)
+        if plain:
+            try:
+                f.seek(0)
+                values = _plain_raster(p, f.read(), end, name, has_maxval, count, desc)
+            except MemoryError:
+                raise MemoryError(
+                    f"{p}: not enough memory to read the plain (ASCII) {desc} ({file_size} bytes)"
+                ) from None
+        elif not has_maxval:  # P4
+            row_bytes = (width + 7) // 8
+            body = _read_body(p, f, end, np.dtype(np.uint8), row_bytes * height, desc)
+            bits = np.unpackbits(body.reshape(height, row_bytes), axis=1)
+            values = bits[:, :width]
         else:
-            words = rest.split()
-            if not all(w.isdigit() for w in words):
-                first = next(w for w in words if not w.isdigit())
-                raise ValueError(f"{p}: {name} samples must be whole numbers, got {first[:16]!r}")
-            if len(words) != count:
-                raise ValueError(f"{p}: {desc} needs {count} samples, got {len(words)}")
-            if max(len(w.lstrip(b"0")) for w in words) > 5:  # keeps int64 from overflowing
-                raise ValueError(f"{p}: {desc} has a sample above the maxval")
-            values = np.array([int(w) for w in words], dtype=np.int64)
-        if len(values) != count:
-            raise ValueError(f"{p}: {desc} needs {count} samples, got {len(values)}")
-    elif not has_maxval:  # P4: rows of bits, each row padded to a whole byte
-        row_bytes = (width + 7) // 8
-        body = _body(p, data, end, row_bytes * height, desc)
-        bits = np.unpackbits(np.frombuffer(body, np.uint8).reshape(height, row_bytes), axis=1)
-        values = bits[:, :width]
-    else:
-        body = _body(p, data, end, count * dtype.itemsize, desc)
-        values = np.frombuffer(body, dtype.newbyteorder(">"), count=count)
+            values = _read_body(p, f, end, dtype.newbyteorder(">"), count, desc)
     if not has_maxval:
         return np.ascontiguousarray(np.where(values.reshape(shape) == 1, 0, 255).astype(np.uint8))
     top = int(values.max())
