@@ -254,8 +254,13 @@ def test_outputs_equal_the_direct_computation(tmp_path: Path, fmt: str) -> None:
             got_d = np.load(out / f"{name}.disparity.npy")
             got_z = np.load(out / f"{name}.depth.npy")
         elif fmt == "pfm":
+            # The disparity in Middlebury's convention, +inf where there is none (a NaN hole
+            # is scored as a disparity by its evaldisp): NaN read back by read_disparity_pfm.
+            # The depth is a plain PFM (a depth of +inf is disparity 0, a real value).
+            raw = io.read_pfm(out / f"{name}.disparity.pfm")
+            assert np.array_equal(raw == np.inf, np.isnan(disparity)) and not np.isnan(raw).any()
             got_d, got_z = (
-                io.read_pfm(out / f"{name}.disparity.pfm"),
+                io.read_disparity_pfm(out / f"{name}.disparity.pfm"),
                 io.read_pfm(out / f"{name}.depth.pfm"),
             )
         else:

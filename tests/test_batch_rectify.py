@@ -157,7 +157,12 @@ def test_batch_equals_match_on_the_same_raw_pair(
     ) == 0  # fmt: skip
     summary = json.loads(capsys.readouterr().out)
     assert summary["rectified"] is True
-    assert (out / "p0.disparity.pfm").read_bytes() == (m / "disparity.pfm").read_bytes()
+    # batch writes the disparity in Middlebury's convention (+inf holes, write_disparity_pfm);
+    # compared as maps, so that either convention of match's file reads the same.
+    assert (
+        io.read_disparity_pfm(out / "p0.disparity.pfm").tobytes()
+        == io.read_disparity_pfm(m / "disparity.pfm").tobytes()
+    )
     assert (out / "p0.depth.pfm").read_bytes() == (m / "depth.pfm").read_bytes()
     record = json.loads((out / "p0.record.json").read_text())
     assert record["calibration_source"] == f"--calib {ros_l}, {ros_r} (rectified)"
@@ -228,7 +233,7 @@ def test_vertical_rig_matched_transposed_as_match_does(
     match = stereodepth.block_match if method == "bm" else stereodepth.semi_global_match
     horizontal = match(s.left, s.right, num_disparities=32)
     assert isinstance(horizontal, np.ndarray)
-    disparity = io.read_pfm(out / "p0.disparity.pfm")
+    disparity = io.read_disparity_pfm(out / "p0.disparity.pfm")  # +inf holes read as NaN
     assert disparity.tobytes() == np.ascontiguousarray(horizontal.T).tobytes()
     m = tmp_path / "match"
     assert run_cli(

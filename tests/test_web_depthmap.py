@@ -23,7 +23,7 @@ from PIL import Image
 
 import stereodepth.web.depthmap as depthmap
 from stereodepth import block_match, disparity_to_depth, reproject
-from stereodepth.io import read_image, read_pfm
+from stereodepth.io import read_disparity_pfm, read_image, read_pfm
 from stereodepth.match_pair import default_num_disparities, prepare_pair, sgm_available
 from stereodepth.sample import SAMPLE_BASELINE_MM, SAMPLE_FOCAL_PX, sample_pair
 from stereodepth.web.app import create_app
@@ -232,7 +232,9 @@ def test_downloads_are_the_libraries_files(client: TestClient, pair: Any, tmp_pa
         assert "attachment" in r.headers["content-disposition"]
         (tmp_path / name).write_bytes(r.content)
         files[name] = tmp_path / name
-    assert same(read_pfm(files["disparity.pfm"]), disparity)
+    # Middlebury's convention: +inf where there is no disparity (read back as NaN).
+    assert same(read_disparity_pfm(files["disparity.pfm"]), disparity)
+    assert np.array_equal(read_pfm(files["disparity.pfm"]) == np.inf, np.isnan(disparity))
     assert same(np.load(files["disparity.npy"]), disparity)
     depth = disparity_to_depth(disparity, focal_px=SAMPLE_FOCAL_PX, baseline_m=0.12)
     assert same(np.load(files["depth.npy"]), depth)

@@ -25,11 +25,13 @@ from ._validate import native_order
 __all__ = [
     "TEMP_MARKER",
     "atomic_write",
+    "read_disparity_pfm",
     "read_disparity_png16",
     "read_image",
     "read_pfm",
     "read_pnm",
     "remove_temp_files",
+    "write_disparity_pfm",
     "write_disparity_png16",
     "write_npy",
     "write_pfm",
@@ -425,8 +427,9 @@ def read_disparity_png16(path: str | os.PathLike[str]) -> np.ndarray:
 def write_pfm(path: str | os.PathLike[str], array: np.ndarray, *, scale: float = 1.0) -> None:
     """A (H, W) or (H, W, 3) float array as PFM (float32, little-endian), atomically.
 
-    PFM stores rows bottom to top; NaN and infinities are kept as they are (Middlebury's tools
-    read infinity as "unknown"; stereodepth writes NaN).
+    PFM stores rows bottom to top; NaN and infinities are kept as they are. For a disparity
+    map to be read by Middlebury's tools, which take only +infinity as "unknown" (a NaN is
+    scored as a disparity), write it with :func:`write_disparity_pfm`.
 
     Raises TypeError for a non-float ``array`` or a ``scale`` that is not a real number (a
     str, a bool) and ValueError for another shape, a finite value beyond float32's range
@@ -438,18 +441,24 @@ def write_pfm(path: str | os.PathLike[str], array: np.ndarray, *, scale: float =
         raise TypeError(f"array must have a float dtype, got {a.dtype}")
     if not (a.ndim == 2 or (a.ndim == 3 and a.shape[2] == 3)) or 0 in a.shape:
         raise ValueError(f"array must have shape (H, W) or (H, W, 3), got {a.shape}")
+    # A str or bool scale reached numpy (a TypeError naming no parameter) or was written as 1.
+    scale = check.positive("scale", scale)
+    _write_pfm(path, a, scale, "array")
+
+
+def _write_pfm(path: str | os.PathLike[str], a: np.ndarray, scale: float, name: str) -> None:
+    """:func:`write_pfm` of a checked float array ``a``, after refusing a value beyond
+    float32 (ValueError naming the parameter ``name``)."""
     if a.dtype.itemsize > 4:
         beyond = np.isfinite(a) & (np.abs(a) > np.finfo(np.float32).max)
         if beyond.any():
             where = tuple(int(i) for i in np.argwhere(beyond)[0])
             raise ValueError(
-                "array must fit in float32 (PFM stores float32; beyond, a value becomes an "
+                f"{name} must fit in float32 (PFM stores float32; beyond, a value becomes an "
                 f"infinity, read as unknown), got {float(a[where])!r} at row {where[0]}, "
                 f"column {where[1]} ({int(beyond.sum())} such value"
                 f"{'s' if beyond.sum() > 1 else ''})"
             )
-    # A str or bool scale reached numpy (a TypeError naming no parameter) or was written as 1.
-    scale = check.positive("scale", scale)
     kind = "Pf" if a.ndim == 2 else "PF"
     height, width = a.shape[:2]
     header = f"{kind}\n{width} {height}\n{-float(scale)}\n".encode("ascii")
@@ -457,6 +466,65 @@ def write_pfm(path: str | os.PathLike[str], array: np.ndarray, *, scale: float =
     with atomic_write(path) as f:
         f.write(header)
         f.write(body.tobytes())
+
+
+def write_disparity_pfm(path: str | os.PathLike[str], disparity: np.ndarray) -> None:
+    """A float disparity map in Middlebury's format, atomically: a grey PFM (``Pf``, float32
+    little-endian, scale -1, rows bottom to top, as :func:`write_pfm`) of the disparity in
+    pixels, +infinity where there is none.
+
+    The format (MiddEval3's README: "disparities ... in PFM format ... infinity for unknown
+    values"; its ``evaldisp`` and ``computemask`` take only +infinity as invalid): a NaN hole,
+    as stereodepth's matchers give, would be scored as a disparity, so every NaN is written as
+    +infinity. A +infinity in ``disparity`` is already Middlebury's hole and is written as
+    one (a ground truth read with :func:`read_pfm` is written back unchanged). Read back with
+    :func:`read_disparity_pfm` (holes NaN), not :func:`read_pfm` (holes +infinity). Depth
+    maps are not disparities: write them with :func:`write_pfm` (a depth of +infinity is
+    disparity 0, a real value).
+
+    ``disparity`` is a (H, W) float32 or float64 numpy array (float64 is stored as float32).
+
+    Raises TypeError for anything else than such an array (a masked array: fill it first),
+    ValueError for another shape, a -infinity (no disparity, and Middlebury would score it as
+    one; the row and column of the first are named) or a finite value beyond float32's range
+    (about 3.4e38), writing nothing; an OSError naming ``path`` when it cannot be written,
+    ``path`` then left as it was."""
+    d = _check_2d("disparity", disparity, (np.float32, np.float64))
+    negative = np.isneginf(d)
+    if negative.any():
+        row, col = (int(i) for i in np.argwhere(negative)[0])
+        count = int(negative.sum())
+        raise ValueError(
+            "disparity must not hold -inf (Middlebury's PFM has +inf for unknown; NaN or +inf "
+            f"mark a hole), got -inf at row {row}, column {col} ({count} such value"
+            f"{'s' if count > 1 else ''})"
+        )
+    _write_pfm(path, np.where(np.isnan(d), np.inf, d), 1.0, "disparity")
+
+
+def read_disparity_pfm(path: str | os.PathLike[str]) -> np.ndarray:
+    """A disparity map in Middlebury's format as (H, W) float32 pixels, NaN where there is
+    none.
+
+    The format (MiddEval3's ``disp0GT.pfm`` and submissions, also what
+    :func:`write_disparity_pfm` writes): a grey PFM (``Pf``, read by :func:`read_pfm`, any
+    byte order and scale) with +infinity for "unknown". Every value that is not finite gives
+    NaN: +infinity (Middlebury's hole), NaN (a hole in stereodepth's disparity PFMs written
+    with :func:`write_pfm`) and -infinity (no disparity either; scored as no value, as
+    :func:`stereodepth.metrics.evaluate` scores any value that is not finite); every finite
+    value is kept as stored.
+
+    Raises FileNotFoundError for a missing file, IsADirectoryError for a folder, ValueError
+    naming the file for a colour (``PF``) file, which holds no disparity map, and every error
+    of :func:`read_pfm`."""
+    p = _as_path(path)
+    a = read_pfm(p)
+    if a.ndim != 2:
+        raise ValueError(
+            f"{p}: a disparity PFM is a grey (Pf) map, got a colour (PF) PFM of shape {a.shape}"
+        )
+    a[~np.isfinite(a)] = np.nan
+    return a
 
 
 def read_pfm(path: str | os.PathLike[str]) -> np.ndarray:

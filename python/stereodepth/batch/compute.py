@@ -62,8 +62,10 @@ def _write_map(path: Path, kind: str, array: np.ndarray, fmt: str) -> None:
 
     if fmt == "npy":
         io.write_npy(path, array)
+    elif fmt == "pfm" and kind == "disparity":
+        io.write_disparity_pfm(path, array)  # Middlebury's: +inf where there is none
     elif fmt == "pfm":
-        io.write_pfm(path, array)
+        io.write_pfm(path, array)  # a depth of +inf is disparity 0, not a hole
     elif kind == "disparity":
         io.write_disparity_png16(path, array)
     else:

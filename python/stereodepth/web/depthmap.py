@@ -780,7 +780,7 @@ def download_bytes(stored: Stored, name: str) -> bytes:
     with tempfile.TemporaryDirectory(prefix="stereodepth-web-") as tmp:
         path = Path(tmp) / name
         if name == "disparity.pfm":
-            sio.write_pfm(path, stored.disparity)
+            sio.write_disparity_pfm(path, stored.disparity)  # Middlebury's: +inf holes
         elif name == "disparity.npy":
             sio.write_npy(path, stored.disparity)
         elif name == "depth.npy":
