@@ -235,8 +235,14 @@ def atomic_write(path: str | os.PathLike[str], *, text: bool = False) -> Iterato
     device, a pipe or a socket (``/dev/null``, ``/dev/stdout``, a FIFO) is written to as
     ``open`` writes it, never replaced by a file. A file without write permission is not
     replaced: PermissionError naming ``path``, as ``open`` refuses it.
-    Raises IsADirectoryError naming ``path`` when it is a folder, before writing anything,
-    and the OSError of a folder that takes no new file (missing, read-only) naming ``path``.
+    Raises IsADirectoryError naming ``path`` when it is a folder, before writing anything;
+    the OSError of a folder that takes no new file naming ``path`` (FileNotFoundError "the
+    folder '<folder>' does not exist", NotADirectoryError "'<part>' is a file, not a folder",
+    PermissionError for a read-only one); and every OSError of writing, flushing, syncing or
+    renaming (a full disk: ENOSPC, a file too large: EFBIG) as the same error type and errno
+    naming ``path`` ("cannot write <name>: <reason>", its ``filename`` the path), never the
+    temporary file, after removing that file. An OSError of the block that names another
+    file, and every other exception, is raised as it is.
     """
     p = _as_path(path)
     if p.is_dir():  # else the rename's error names the temporary file, not the user's path
@@ -249,8 +255,11 @@ def atomic_write(path: str | os.PathLike[str], *, text: bool = False) -> Iterato
             stream: IO[Any] = open(p, "w", encoding="utf-8") if text else open(p, "wb")  # noqa: SIM115
         except OSError as exc:  # a socket, or a device that takes no writes
             raise type(exc)(exc.errno, f"cannot write {p.name}: {exc.strerror}", str(p)) from None
-        with stream:
-            yield stream
+        try:
+            with stream:
+                yield stream
+        except OSError as exc:  # a full disk, a device that fails: name the path
+            raise _naming(exc, p) from None
         return
     # A link is written through: replacing the link itself by the new file left the file
     # it named (on a shared disk, say) with the old data, and the link gone.
@@ -261,9 +270,12 @@ def atomic_write(path: str | os.PathLike[str], *, text: bool = False) -> Iterato
     try:
         fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_BINARY", 0), 0o666)
     except OSError as exc:
-        # A folder that is missing, read-only or takes no new files (/proc): name the user's
-        # path, not the temporary one the user never gave.
-        raise type(exc)(exc.errno, f"cannot write {p.name}: {exc.strerror}", str(p)) from None
+        # A folder that is missing, read-only or takes no new files (/proc), or a file where
+        # a folder should be: name the user's path, not the temporary one the user never gave.
+        why = _folder_fault(target) if exc.errno in (errno.ENOENT, errno.ENOTDIR) else None
+        raise type(exc)(
+            exc.errno, f"cannot write {p.name}: {why or exc.strerror}", str(p)
+        ) from None
     try:
         f: IO[Any] = os.fdopen(fd, "w", encoding="utf-8") if text else os.fdopen(fd, "wb")
         with f:
@@ -275,11 +287,43 @@ def atomic_write(path: str | os.PathLike[str], *, text: bool = False) -> Iterato
                     os.fchmod(f.fileno(), os.stat(target).st_mode & 0o7777)
             os.fsync(f.fileno())
         os.replace(tmp, target)
-    except BaseException:
+    except BaseException as exc:
         with contextlib.suppress(OSError):
             tmp.unlink()
+        if isinstance(exc, OSError):  # a full disk: name the user's path, not the temporary one
+            raise _naming(exc, p, tmp) from None
         raise
-    _fsync_dir(target.parent)
+    try:
+        _fsync_dir(target.parent)
+    except OSError as exc:
+        raise _naming(exc, p) from None
+
+
+def _naming(exc: OSError, p: Path, *ours: Path) -> OSError:
+    """``exc``, raised while writing ``p``, as the same error naming ``p`` ("cannot write
+    <name>: <reason>", ``filename`` the path) when it named no file or only one of ``ours``
+    (the temporary file): a full disk gave "[Errno 28] No space left on device" and no path.
+    An error naming another file, or with no errno (not the system's), is returned as it is."""
+    if exc.errno is None or exc.filename not in (None, *(str(o) for o in ours)):
+        return exc
+    return type(exc)(exc.errno, f"cannot write {p.name}: {exc.strerror}", str(p))
+
+
+def _folder_fault(target: Path) -> str | None:
+    """Why the folder of ``target`` takes no file, when a part of its path is missing ("the
+    folder '<path>' does not exist") or is a file ("'<path>' is a file, not a folder"); None
+    when neither (a permission the process lacks, say)."""
+    folder = Path(os.path.abspath(target)).parent
+    for part in [*reversed(folder.parents), folder]:
+        try:
+            mode = os.stat(part).st_mode
+        except FileNotFoundError:
+            return f"the folder {str(folder)!r} does not exist"
+        except OSError:
+            return None
+        if not stat.S_ISDIR(mode):
+            return f"{str(part)!r} is a file, not a folder"
+    return None
 
 
 def _refuse_read_only(target: Path, p: Path) -> None:
@@ -332,10 +376,33 @@ def remove_temp_files(directory: str | os.PathLike[str]) -> list[Path]:
 
 # --- writers ----------------------------------------------------------------------------------
 def write_npy(path: str | os.PathLike[str], array: np.ndarray) -> None:
-    """``numpy.save`` to exactly ``path`` (no ``.npy`` appended), atomically."""
+    """``numpy.save`` of ``array`` (any shape and numeric, bool, string or structured dtype;
+    a sequence numpy makes an array of) to exactly ``path`` (no ``.npy`` appended),
+    atomically, in NumPy's ``.npy`` format (format version 1.0 to 3.0, as numpy chooses),
+    without pickles.
+
+    Raises TypeError naming ``array`` for a masked array (fill it first) or one holding Python
+    objects (dtype object, or a structured dtype with an object field: ``.npy`` stores those
+    only as pickles, which :func:`numpy.load` refuses by default), ValueError naming
+    ``array`` for a sequence numpy cannot make an array of (a ragged list), both before
+    writing anything, and OSError naming ``path`` when it cannot be written (see
+    :func:`atomic_write`); ``path`` is then left as it was."""
     check.not_masked("array", array)
+    try:
+        a = np.asarray(array)
+    except ValueError as exc:
+        raise ValueError(
+            "array must be a numpy array or a sequence numpy makes one of (rows of equal "
+            f"length), got a {type(array).__name__} it cannot: {exc}"
+        ) from None
+    if a.dtype.hasobject:
+        raise TypeError(
+            f"array must not hold Python objects (dtype {a.dtype}: .npy stores them only as "
+            "pickles, which numpy.load refuses by default); convert it to a numeric, bool or "
+            "string dtype"
+        )
     with atomic_write(path) as f:
-        np.save(f, np.asarray(array), allow_pickle=False)
+        np.save(f, a, allow_pickle=False)
 
 
 def _check_2d(name: str, array: Any, dtypes: tuple[type, ...]) -> np.ndarray:
