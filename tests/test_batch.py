@@ -269,7 +269,8 @@ def test_outputs_equal_the_direct_computation(tmp_path: Path, fmt: str) -> None:
                 io.read_image(out / f"{name}.depth.png"),
             )
             d64 = disparity.astype(np.float64)
-            disparity = np.where(np.isfinite(d64) & (d64 > 0), np.rint(d64 * 256), 0).astype(
+            # KITTI's round(d * 256), half up (the devkit's uint16()), 0 where there is none
+            disparity = np.where(np.isfinite(d64) & (d64 > 0), np.floor(d64 * 256 + 0.5), 0).astype(
                 np.uint16
             )
         np.testing.assert_array_equal(got_d, disparity, strict=True)

@@ -509,7 +509,8 @@ def test_disparity_png16_is_kitti_format(tmp_path: Path) -> None:
     io.write_disparity_png16(tmp_path / "d.png", d)
     raw = io.read_image(tmp_path / "d.png")
     assert raw.dtype == np.uint16
-    want = [[0, 256, 2688, 65533], [0, 0, 0, 65535], [0, 1, 25600, 640]]
+    # float32 100.00195 is exactly 100 + 1/512: 25600.5, rounded half up as KITTI's devkit
+    want = [[0, 256, 2688, 65533], [0, 0, 0, 65535], [0, 1, 25601, 640]]
     assert raw.tolist() == want
     ok = raw > 0
     np.testing.assert_allclose(raw[ok] / 256, d[ok], atol=1 / 512)

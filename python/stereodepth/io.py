@@ -443,18 +443,27 @@ def write_png16(
 
 
 def write_disparity_png16(path: str | os.PathLike[str], disparity: np.ndarray) -> None:
-    """A float disparity map in KITTI's format, atomically: uint16 PNG of round(d * 256), 0
-    where the disparity is NaN, infinite, <= 0 or too small to encode (< 1/512 px): the format
-    has no negative values and 0 means "no value". Read back with
+    """A float disparity map in KITTI's format, atomically: a 16-bit greyscale PNG of
+    round(d * 256), rounded half up (1/512 px gives 1, 3/512 px gives 2), and 0 for "no
+    value" where the disparity is NaN, infinite, <= 0 or too small to encode (below 1/512 px,
+    which rounds to 0): the format has no negative values.
+
+    The format is the KITTI stereo devkit's (``disp_write.m``: ``uint16(d * 256)``, which
+    rounds half away from zero, the same as half up for these positive values; 0 is invalid).
+    ``disparity`` is a (H, W) float32 or float64 numpy array in pixels. Read back with
     :func:`read_disparity_png16` (not ``read_image(path) / 256``, which reads the holes as
     disparity 0, a point at infinity).
 
-    Raises ValueError, writing nothing, for a finite disparity above the format's largest,
-    65535 / 256 = 255.996 px (it was once capped there: a wrong value, not a hole); write PFM
-    or ``.npy`` for larger search ranges."""
+    Raises TypeError for anything else than such an array, ValueError for another shape or,
+    writing nothing, for a finite disparity that rounds above the format's largest, 65535 /
+    256 = 255.996 px (it was once capped there: a wrong value, not a hole): write PFM or
+    ``.npy`` for larger search ranges; an OSError naming ``path`` when it cannot be written,
+    ``path`` then left as it was."""
     d = _check_2d("disparity", disparity, (np.float32, np.float64)).astype(np.float64)
     ok = np.isfinite(d) & (d > 0)
-    v = np.rint(np.where(ok, d, 0.0) * 256.0)
+    # d * 256 is exact in float64 (a power of two), and so is + 0.5 below 2 ** 52: floor
+    # rounds half up, where numpy's rint rounds half to even and made exactly 1/512 px a hole.
+    v = np.floor(np.where(ok, d, 0.0) * 256.0 + 0.5)
     if v.max(initial=0.0) > 65535.0:
         raise ValueError(
             f"disparity up to {float(d[ok].max()):g} px does not fit a 16-bit disparity PNG "
