@@ -508,7 +508,8 @@ def test_a_failed_write_leaves_no_outputs(
     monkeypatch: pytest.MonkeyPatch,
 ) -> None:
     """An output name taken by a folder is refused before any work; a write that fails after
-    others removes the run's outputs (the disparity and depth used to stay, without a cloud)."""
+    others leaves none of the run's outputs (the disparity and depth used to stay, without a
+    cloud), and an earlier run's file of the same name as it was (it used to be removed)."""
     out = tmp_path / "out"
     (out / "points.ply").mkdir(parents=True)
     rig = ["--focal-px", "100", "--baseline-mm", "100", "--no-preview", "--ply"]
@@ -527,7 +528,8 @@ def test_a_failed_write_leaves_no_outputs(
     (out / "depth.npy").write_bytes(b"an earlier run's depth")
     code, _, err = run(capsys, *pair, *rig, "-o", f"{out}/")
     assert code == 1 and "No space left on device" in err and err.count("\n") == 1
-    assert list(out.iterdir()) == []
+    assert list(out.iterdir()) == [out / "depth.npy"]
+    assert (out / "depth.npy").read_bytes() == b"an earlier run's depth"
 
 
 def test_ply_of_a_12_bit_pair_is_coloured_as_matched(

@@ -10,13 +10,16 @@ the message names the option as the user typed it (``--subpixel-px``, not the li
 from __future__ import annotations
 
 import argparse
+import contextlib
 import importlib
 import json
 import math
 import os
 import re
+import signal
 import sys
-from collections.abc import Sequence
+import threading
+from collections.abc import Iterator, Sequence
 from typing import Any, NoReturn
 
 from .rig import StereoRig
@@ -33,6 +36,28 @@ _SUBCOMMAND_MODULES: tuple[str, ...] = (
 
 class UsageError(Exception):
     """Bad input on the command line: reported in one line, exit status 2."""
+
+
+@contextlib.contextmanager
+def signals_held() -> Iterator[list[int]]:
+    """For the block's duration SIGINT and SIGTERM are only recorded in the yielded list,
+    not acted on: for a step that must not stop halfway (renaming a finished set of outputs
+    into place). The caller decides what a recorded signal means afterwards. A no-op outside
+    the main thread."""
+    caught: list[int] = []
+    if threading.current_thread() is not threading.main_thread():
+        yield caught
+        return
+
+    def record(signum: int, frame: Any) -> None:
+        caught.append(signum)
+
+    previous = {sig: signal.signal(sig, record) for sig in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        yield caught
+    finally:
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
 
 
 def one_line(text: object) -> str:

@@ -48,6 +48,8 @@ import contextlib
 import dataclasses
 import json
 import os
+import secrets
+import stat
 import sys
 import time
 from pathlib import Path
@@ -124,7 +126,11 @@ def register(subparsers: Any) -> None:
         type=path_arg,
         default=".",
         metavar="PATH",
-        help="a folder (existing, or ending in /) or a file-name prefix (default: .)",
+        help="a folder (existing, or ending in /) or a file-name prefix (default: .). A run "
+        "replaces the whole set of match's files there: once its own are written it removes "
+        "those of an earlier run it does not write (another format, a points.ply, previews or "
+        "rectified pair not asked for this time; listed as 'removed'); a failed run leaves "
+        "the earlier set as it was. Other files are never touched",
     )
     o.add_argument(
         "--disparity-format", choices=tuple(DISPARITY_FORMATS), default="pfm", help="default pfm"
@@ -435,6 +441,11 @@ def run(args: argparse.Namespace) -> int:
     try:
         out = {key: paths[name] for key, name in names.items()}
         _refuse_overwriting_inputs(args, out)
+        from .io import _refuse_read_only
+
+        for path in _stale_outputs(args, names):  # before any work, as a read-only output
+            if not path.is_symlink():
+                _refuse_read_only(path, path)
 
         rectify_s = None
         if rectifier is not None:
@@ -465,15 +476,38 @@ def run(args: argparse.Namespace) -> int:
                 confidence=rule.from_rows(True, result.confidence),
                 depth=rule.from_rows(True, result.depth),
             )
+        # The set is written beside its final names first and renamed into place only once
+        # every file and the summary are written: a run that fails or is stopped (Ctrl-C,
+        # SIGTERM) leaves none of its outputs and the earlier run's set as it was, as a new
+        # disparity beside an old depth would pass for one result.
+        staged = _staging_paths(out)
         try:
-            _write_outputs(args, out, result, rig, left_img, right_img)
-        except BaseException:
-            # A run that fails leaves none of its outputs: a new disparity beside an old depth
-            # would pass for one result.
-            for path in out.values():
-                if path.is_file():
-                    path.unlink()
-            raise
+            _write_outputs(args, staged, result, rig, left_img, right_img)
+            stale = _stale_outputs(args, names)
+            summary = result.summary()
+            summary.update(
+                {
+                    "left": str(args.left),
+                    "right": str(args.right),
+                    "calibration": source,
+                    "rectified": rectifier is not None,
+                    "outputs": {k: str(v) for k, v in out.items()},
+                    "removed": [str(p) for p in stale],
+                }
+            )
+            if rectifier is not None:
+                summary["raw_size"] = list(rectifier.image_size)
+                summary["rectified_size"] = list(rectifier.output_size)
+                summary["rectify_time_s"] = rectify_s
+            # The summary before the commit: a summary that cannot be printed (stdout full or
+            # closed) fails the run, and then it leaves no outputs.
+            _print_summary(summary, left_img, as_json=args.json)
+            _commit(staged, out, stale)
+        finally:
+            for tmp in staged.values():
+                if tmp not in out.values():  # a staged file not renamed into place
+                    with contextlib.suppress(OSError):
+                        tmp.unlink()
     except BaseException:
         # A failed run (the matcher refused the pair, a write failed) leaves no new
         # empty --out folder behind: it left one, made before the pair was matched.
@@ -481,25 +515,137 @@ def run(args: argparse.Namespace) -> int:
             with contextlib.suppress(OSError):
                 folder.rmdir()  # only when empty
         raise
-    summary = result.summary()
-    summary.update(
-        {
-            "left": str(args.left),
-            "right": str(args.right),
-            "calibration": source,
-            "rectified": rectifier is not None,
-            "outputs": {k: str(v) for k, v in out.items()},
-        }
-    )
-    if rectifier is not None:
-        summary["raw_size"] = list(rectifier.image_size)
-        summary["rectified_size"] = list(rectifier.output_size)
-        summary["rectify_time_s"] = rectify_s
-    if args.json:
-        print(json.dumps(summary, indent=2, allow_nan=False))
-    else:
-        _print(summary, left_img)
     return 0
+
+
+#: Every file name match writes, in every format: the set an --out folder or prefix holds.
+OWNED_NAMES: tuple[str, ...] = (
+    *dict.fromkeys(
+        [
+            *("disparity" + ext for ext in DISPARITY_FORMATS.values()),
+            *("depth" + ext for ext in DEPTH_FORMATS.values()),
+        ]
+    ),
+    "disparity-preview.png",
+    "depth-preview.png",
+    "points.ply",
+    "left-rectified.png",
+    "right-rectified.png",
+)
+
+
+def _print_summary(summary: dict[str, Any], left: np.ndarray, *, as_json: bool) -> None:
+    """Prints and flushes the summary; OSError saying so when it cannot reach stdout (full,
+    or closed: Python then has no sys.stdout, and print() wrote nothing without a word).
+    BrokenPipeError (the reader went away) as it is."""
+    if sys.stdout is None:
+        raise OSError("cannot print the summary: stdout is closed")
+    try:
+        if as_json:
+            print(json.dumps(summary, indent=2, allow_nan=False))
+        else:
+            _print(summary, left)
+        sys.stdout.flush()
+    except BrokenPipeError:
+        raise
+    except OSError as exc:
+        raise OSError(f"cannot print the summary: {exc.strerror or exc}") from None
+
+
+def _staging_paths(out: dict[str, Path]) -> dict[str, Path]:
+    """Where each output is written before the commit: a hidden name beside the file it
+    replaces (beside a link's target: a link is written through, as io.atomic_write does),
+    with the same suffix. A device or a pipe (``/dev/null``) is written directly. A read-only
+    file is refused here, before any work, as io.atomic_write refuses it."""
+    from .io import NAME_MAX_BYTES, _refuse_read_only
+
+    staged = {}
+    for key, path in out.items():
+        try:
+            mode = os.stat(path).st_mode
+        except OSError:
+            mode = None
+        if mode is not None and not (stat.S_ISREG(mode) or stat.S_ISDIR(mode)):
+            staged[key] = path
+            continue
+        target = Path(os.path.realpath(path)) if path.is_symlink() else path
+        _refuse_read_only(target, path)
+        tail = f".{_STAGING_MARKER}-{secrets.token_hex(6)}{target.suffix}"
+        room = NAME_MAX_BYTES - 1 - len(tail.encode())
+        stem = target.stem.encode(errors="surrogateescape")[:room].decode(errors="ignore")
+        staged[key] = target.with_name(f".{stem or 'x'}{tail}")
+    return staged
+
+
+_STAGING_MARKER = "stereodepth-match"
+
+
+def _stale_outputs(args: argparse.Namespace, names: dict[str, str]) -> list[Path]:
+    """The files of the set match owns at --out (:data:`OWNED_NAMES`) that this run does not
+    write: an earlier run's (another format, a cloud or previews no longer asked for). Never
+    a folder, nor one of the command's input files (``match left-rectified.png
+    right-rectified.png`` without --write-rectified)."""
+    written = set(names.values())
+    is_dir = args.out.endswith(("/", os.sep)) or Path(args.out).is_dir()
+    inputs = [v for v in (args.left, args.right, args.calib, args.calib_right) if v is not None]
+    stale = []
+    for name in OWNED_NAMES:
+        if name in written:
+            continue
+        path = Path(args.out) / name if is_dir else Path(args.out + name)
+        if not os.path.lexists(path) or path.is_dir():
+            continue
+        if any(_same_file(path, given) for given in inputs):
+            continue
+        stale.append(path)
+    return stale
+
+
+def _same_file(a: Path, b: str) -> bool:
+    try:
+        return os.path.samefile(a, b)
+    except OSError:
+        return False
+
+
+def _commit(staged: dict[str, Path], out: dict[str, Path], stale: list[Path]) -> None:
+    """Renames the staged outputs into place and removes the earlier run's ``stale`` files,
+    with Ctrl-C and SIGTERM held meanwhile: once this starts the run completes, and counts as
+    done (a signal that came meanwhile is dropped)."""
+    from .cli import signals_held
+
+    with signals_held():
+        done: list[Path] = []
+        try:
+            for key, tmp in staged.items():
+                path = out[key]
+                if tmp == path:  # a device or a pipe, written directly
+                    continue
+                target = Path(os.path.realpath(path)) if path.is_symlink() else path
+                os.replace(tmp, target)
+                done.append(target)
+                staged[key] = path  # renamed: not a staged file to remove any more
+        except BaseException:
+            for target in done:  # leave none of a failed run's outputs
+                with contextlib.suppress(OSError):
+                    target.unlink()
+            raise
+        for path in stale:
+            with contextlib.suppress(FileNotFoundError):
+                path.unlink()
+        for folder in {p.parent for p in done}:
+            with contextlib.suppress(OSError):
+                _fsync_dir(folder)
+
+
+def _fsync_dir(folder: Path) -> None:
+    if os.name != "posix":  # pragma: no cover
+        return
+    fd = os.open(folder, os.O_RDONLY)
+    try:
+        os.fsync(fd)
+    finally:
+        os.close(fd)
 
 
 def _write_outputs(
@@ -601,7 +747,7 @@ def _print(s: dict[str, Any], left: np.ndarray) -> None:
         )
     for key, path in s["outputs"].items():
         rows.append((key.replace("_", " "), path))
+    rows.extend(("removed", path) for path in s["removed"])
     width = max(len(k) for k, _ in rows)
     for key, value in rows:
         print(f"{key.ljust(width)}  {value}")
-    sys.stdout.flush()

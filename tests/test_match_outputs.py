@@ -1,0 +1,230 @@
+"""``stereodepth match`` replaces the whole set of its files at --out: the outputs of an earlier
+run that this one does not write are removed once the new set is complete, and only those
+(never another file, never an input); a run that fails, or cannot print its summary, leaves
+the earlier set as it was."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+pytest.importorskip("PIL", reason="reading images needs Pillow (the batch extra)")
+pytest.importorskip("matplotlib", reason="the previews need the plot extra")
+
+from PIL import Image
+
+from stereodepth.cli import main
+from stereodepth.sample import sample_pair
+
+PYTHON_DIR = Path(__file__).resolve().parents[1] / "python"
+RIG = ["--focal-px", "300", "--baseline-mm", "50", "--threads", "1"]
+
+
+@pytest.fixture
+def pair(tmp_path: Path) -> tuple[Path, Path]:
+    s = sample_pair(96, 64)
+    Image.fromarray(s.left).save(tmp_path / "l.png")
+    Image.fromarray(s.right).save(tmp_path / "r.png")
+    return tmp_path / "l.png", tmp_path / "r.png"
+
+
+def run(capsys: pytest.CaptureFixture[str], *args: Any) -> tuple[int, str, str]:
+    code = main(["match", *map(str, args)])
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+def contents(folder: Path) -> dict[str, bytes]:
+    return {p.name: p.read_bytes() for p in folder.iterdir() if p.is_file()}
+
+
+def test_the_testers_three_runs_leave_one_set(
+    pair: tuple[Path, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Run 1 with a rig, previews and a cloud; run 2 with another search range, no previews,
+    disparity as npy; run 3 without a rig: out/ held run 3's disparity beside run 2's depth
+    and run 1's cloud and previews. Now each run leaves its own set only, lists what it
+    removed, and leaves other files alone."""
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "notes.txt").write_text("mine")
+    (out / "depth.txt").write_text("not match's")
+    code, _, err = run(capsys, *pair, *RIG, "--ply", "-o", f"{out}/")
+    assert code == 0, err
+    assert set(contents(out)) == {
+        "notes.txt",
+        "depth.txt",
+        "disparity.pfm",
+        "depth.npy",
+        "disparity-preview.png",
+        "depth-preview.png",
+        "points.ply",
+    }
+    code, text, err = run(
+        capsys,
+        *pair,
+        *RIG,
+        "--num-disparities",
+        "32",
+        "--no-preview",
+        "--disparity-format",
+        "npy",
+        "--json",
+        "-o",
+        f"{out}/",
+    )
+    assert code == 0, err
+    assert set(contents(out)) == {"notes.txt", "depth.txt", "disparity.npy", "depth.npy"}
+    removed = json.loads(text)["removed"]
+    assert sorted(Path(p).name for p in removed) == sorted(
+        ["disparity.pfm", "disparity-preview.png", "depth-preview.png", "points.ply"]
+    )
+    code, text, err = run(
+        capsys, *pair, "--threads", "1", "--num-disparities", "16", "--no-preview", "-o", out
+    )
+    assert code == 0, err
+    assert set(contents(out)) == {"notes.txt", "depth.txt", "disparity.pfm"}
+    assert "removed" in text and "depth.npy" in text
+    assert (out / "notes.txt").read_text() == "mine"
+
+
+def test_a_prefix_owns_its_names_only(
+    pair: tuple[Path, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """With a prefix the set is the prefix's: another prefix's files in the same folder, and
+    the folder's own disparity.pfm, stay."""
+    (tmp_path / "b-depth.npy").write_bytes(b"b's")
+    (tmp_path / "disparity.pfm").write_bytes(b"the folder's")
+    (tmp_path / "a-points.ply").write_bytes(b"a's earlier cloud")
+    code, _, err = run(capsys, *pair, *RIG, "--no-preview", "-o", tmp_path / "a-")
+    assert code == 0, err
+    names = set(contents(tmp_path))
+    assert {"a-disparity.pfm", "a-depth.npy", "b-depth.npy", "disparity.pfm"} <= names
+    assert "a-points.ply" not in names
+    assert (tmp_path / "disparity.pfm").read_bytes() == b"the folder's"
+
+
+def test_an_input_named_like_an_output_is_never_removed(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """The rectified pair of an earlier --write-rectified run, matched again from the same
+    folder without --write-rectified: its names are match's, but they are this run's inputs."""
+    s = sample_pair(96, 64)
+    Image.fromarray(s.left).save(tmp_path / "left-rectified.png")
+    Image.fromarray(s.right).save(tmp_path / "right-rectified.png")
+    before = contents(tmp_path)
+    code, _, err = run(
+        capsys,
+        tmp_path / "left-rectified.png",
+        tmp_path / "right-rectified.png",
+        "--no-preview",
+        "--threads",
+        "1",
+        "-o",
+        f"{tmp_path}/",
+    )
+    assert code == 0, err
+    after = contents(tmp_path)
+    assert {k: after[k] for k in before} == before
+
+
+def test_a_failed_run_keeps_the_earlier_set_whole(
+    pair: tuple[Path, Path],
+    tmp_path: Path,
+    capsys: pytest.CaptureFixture[str],
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """A write that fails after others (the cloud, after the disparity and depth) leaves the
+    earlier set byte for byte (its disparity and depth were replaced or removed) and no
+    temporary file."""
+    out = tmp_path / "out"
+    code, _, err = run(capsys, *pair, *RIG, "--ply", "-o", f"{out}/")
+    assert code == 0, err
+    before = contents(out)
+
+    import stereodepth.pointcloud
+
+    def disk_full(*args: Any, **kwargs: Any) -> None:
+        raise OSError(28, "No space left on device")
+
+    monkeypatch.setattr(stereodepth.pointcloud, "write_ply", disk_full)
+    code, _, err = run(
+        capsys, *pair, *RIG, "--num-disparities", "16", "--no-preview", "--ply", "-o", out
+    )
+    assert code == 1 and "No space left on device" in err and err.count("\n") == 1
+    assert contents(out) == before
+    assert sorted(p.name for p in out.iterdir()) == sorted(before)
+
+
+def test_a_read_only_earlier_output_is_refused_before_any_work(
+    pair: tuple[Path, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """An earlier run's file this run would remove, made read-only (kept on purpose), is
+    refused as a read-only output is: nothing written, nothing removed."""
+    out = tmp_path / "out"
+    out.mkdir()
+    ply = out / "points.ply"
+    ply.write_bytes(b"kept")
+    ply.chmod(0o444)
+    code, _, err = run(capsys, *pair, *RIG, "--no-preview", "-o", out)
+    assert code == 1 and "read-only" in err and err.count("\n") == 1
+    assert sorted(p.name for p in out.iterdir()) == ["points.ply"]
+
+
+def test_owned_names_are_every_name_match_writes() -> None:
+    from stereodepth.match_command import OWNED_NAMES
+
+    assert set(OWNED_NAMES) == {
+        "disparity.pfm",
+        "disparity.npy",
+        "disparity.png",
+        "depth.npy",
+        "depth.pfm",
+        "depth.png",
+        "disparity-preview.png",
+        "depth-preview.png",
+        "points.ply",
+        "left-rectified.png",
+        "right-rectified.png",
+    }
+
+
+def command(tmp_path: Path, argv: list[str], stdout: Any) -> subprocess.CompletedProcess[str]:
+    return subprocess.run(
+        [sys.executable, "-m", "stereodepth", *argv],
+        cwd=tmp_path,
+        env={**os.environ, "PYTHONPATH": str(PYTHON_DIR)},
+        stdout=stdout,
+        stderr=subprocess.PIPE,
+        text=True,
+        timeout=300,
+    )
+
+
+def test_match_that_cannot_print_its_summary_fails_and_leaves_no_outputs(
+    pair: tuple[Path, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """stdout on /dev/full: the summary cannot be printed. The run used to exit 1 with every
+    output written (of a failed run); now it fails before its outputs are put in place, and
+    the earlier set stays as it was."""
+    if not Path("/dev/full").exists():
+        pytest.skip("no /dev/full")
+    out = tmp_path / "out"
+    code, _, err = run(capsys, *pair, *RIG, "--ply", "-o", f"{out}/")
+    assert code == 0, err
+    before = contents(out)
+    argv = ["match", "l.png", "r.png", *RIG, "--num-disparities", "16", "--no-preview"]
+    for extra in ([], ["--json"]):
+        with open("/dev/full", "w") as full:
+            done = command(tmp_path, [*argv, *extra, "-o", "out"], full)
+        assert done.returncode == 1
+        assert done.stderr.startswith("stereodepth match: error: cannot print the summary")
+        assert done.stderr.count("\n") == 1
+        assert contents(out) == before
+        assert sorted(p.name for p in out.iterdir()) == sorted(before)
