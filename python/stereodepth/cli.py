@@ -4,7 +4,10 @@ Bad input prints one line, ``stereodepth <command>: error: ...``, and exits with
 the message names the option as the user typed it (``--subpixel-px``, not the library's
 ``disparity_step_px``), and usage mistakes that argparse finds end with a pointer to
 ``--help`` instead of the whole usage text. A missing optional extra (matplotlib for
-``--plot``, say) or a file that cannot be written prints one line and exits with 1.
+``--plot``, say) or a file that cannot be written prints one line and exits with 1. Ctrl-C
+prints "interrupted" and exits with 130; SIGTERM (``timeout``, ``kill``) is handled as
+Ctrl-C for the command's duration, through the same clean-up, then prints "terminated" and
+exits with 143.
 """
 
 from __future__ import annotations
@@ -36,6 +39,50 @@ _SUBCOMMAND_MODULES: tuple[str, ...] = (
 
 class UsageError(Exception):
     """Bad input on the command line: reported in one line, exit status 2."""
+
+
+class Terminated(KeyboardInterrupt):
+    """SIGTERM during a command (``timeout``, ``kill``, a process manager): raised where
+    Ctrl-C's KeyboardInterrupt would be, so that the same clean-up runs; the command then
+    says "terminated" and exits with 143 (128 + 15) instead of 130."""
+
+
+#: Whether SIGTERM arrived during the command that :func:`main` runs.
+_terminated = False
+
+
+def terminated() -> bool:
+    """Whether the running command got SIGTERM (its exit status is then 143)."""
+    return _terminated
+
+
+@contextlib.contextmanager
+def _sigterm_as_interrupt() -> Iterator[None]:
+    """For the block's duration SIGTERM is handled as Ctrl-C is at that moment: by the
+    SIGINT handler in place when it is one of ours (batch's stop flag on Dask), else by
+    raising :class:`Terminated` (a KeyboardInterrupt). Python's default for SIGTERM was to
+    die at once: a half-written set of outputs, batch's lock file left, no report. A no-op
+    outside the main thread, where handlers cannot be set."""
+    global _terminated
+    _terminated = False
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+
+    def handler(signum: int, frame: Any) -> None:
+        global _terminated
+        _terminated = True
+        current = signal.getsignal(signal.SIGINT)
+        if callable(current) and current is not signal.default_int_handler:
+            current(signal.SIGINT, frame)
+            return
+        raise Terminated
+
+    previous = signal.signal(signal.SIGTERM, handler)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, previous)
 
 
 @contextlib.contextmanager
@@ -417,14 +464,22 @@ def main(argv: Sequence[str] | None = None) -> int:
     if extras:  # name the subcommand whose options these are not
         _subparser(parser, args.command).error(f"unrecognized arguments: {' '.join(extras)}")
     try:
-        return int(args.func(args))
+        with _sigterm_as_interrupt():
+            code = int(args.func(args))
+        if _terminated:  # the command stopped on SIGTERM as on Ctrl-C, and returned
+            print(f"stereodepth {args.command}: terminated", file=sys.stderr)
+            return 143
+        return code
     except (UsageError, ValueError, TypeError) as exc:
         print(f"stereodepth {args.command}: error: {one_line(exc)}", file=sys.stderr)
         return 2
     except ImportError as exc:  # an optional extra that is not installed
         print(f"stereodepth {args.command}: error: {one_line(exc)}", file=sys.stderr)
         return 1
-    except KeyboardInterrupt:
+    except KeyboardInterrupt:  # Ctrl-C, or SIGTERM (Terminated, or one that came after Ctrl-C)
+        if _terminated:
+            print(f"stereodepth {args.command}: terminated", file=sys.stderr)
+            return 143
         print(f"stereodepth {args.command}: interrupted", file=sys.stderr)
         return 130
     except BrokenPipeError:

@@ -120,7 +120,8 @@ Errors
 
 Exit status: 0 when every pair succeeded or was already done, 1 when any failed (or an
 optional extra is missing), 2 for a usage error, 130 when interrupted (Ctrl-C: the pairs in
-flight finish, the rest are reported as cancelled).
+flight finish, the rest are reported as cancelled), 143 when terminated (SIGTERM, from
+``timeout`` or ``kill``: the same as Ctrl-C).
 """
 
 from __future__ import annotations

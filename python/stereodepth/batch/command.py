@@ -17,7 +17,7 @@ from .. import _validate as check
 from .._extras import require
 from .._methods import METHODS, check_method
 from ..calib import Calibration
-from ..cli import KeyValueOnce, key_value_option, path_arg
+from ..cli import KeyValueOnce, key_value_option, path_arg, terminated
 from .calibration import (
     COMMAND_LINE,
     BatchRectifier,
@@ -566,6 +566,8 @@ def run(args: argparse.Namespace) -> int:
         notes=notes,
     )
     data = report.as_dict()
+    if report.interrupted and terminated():  # SIGTERM: stopped as by Ctrl-C, exit 143
+        data["exit_status"] = 143
     data["input"] = str(args.input)
     data["output"] = str(out_dir)
     try:
@@ -584,6 +586,8 @@ def run(args: argparse.Namespace) -> int:
     elif report.failed:
         for rec in report.failed:
             print(f"stereodepth batch: failed {rec['stem']}: {rec['error']}", file=sys.stderr)
+    if report.interrupted and terminated():
+        return 143  # stereodepth's main says "terminated"
     if report.interrupted:
         print("stereodepth batch: interrupted", file=sys.stderr)
     return report.exit_status

@@ -105,21 +105,26 @@ def _run_embedded(
     from concurrent.futures import FIRST_COMPLETED, ThreadPoolExecutor, wait
 
     pool = ThreadPoolExecutor(max_workers=EMBEDDED_IN_FLIGHT, thread_name_prefix="stereodepth")
-    futures = {pool.submit(process_pair, p, options, threads): i for i, p in todo}
-    pending = set(futures)
+    futures: dict[Any, int] = {}
+    handled: set[Any] = set()
     try:
+        # Submitted inside the try: a Ctrl-C (or SIGTERM) while the pairs were submitted
+        # left the pairs already running unwatched, reported as cancelled, and writing their
+        # files after the report.
+        for i, p in todo:
+            futures[pool.submit(process_pair, p, options, threads)] = i
+        pending = set(futures)
         while pending:
             finished, pending = wait(pending, timeout=0.5, return_when=FIRST_COMPLETED)
             for f in finished:
                 done(futures[f], f.result())
+                handled.add(f)
     except KeyboardInterrupt:
         # Let the pairs in flight finish (their files are then complete); drop the rest.
-        for f in pending:
-            f.cancel()
-        pool.shutdown(wait=True)
-        for f in pending:
-            if f.done() and not f.cancelled():
-                done(futures[f], f.result())
+        pool.shutdown(wait=True, cancel_futures=True)
+        for f, i in futures.items():
+            if f not in handled and f.done() and not f.cancelled():
+                done(i, f.result())
         raise
     pool.shutdown(wait=True)
 
@@ -443,6 +448,22 @@ def _sigint_handled_by(handler: Any) -> Iterator[None]:
 
 
 @contextlib.contextmanager
+def _sigterm_held() -> Iterator[list[int]]:
+    """SIGTERM is only recorded in the yielded list for the block's duration (while a local
+    cluster starts, when a KeyboardInterrupt must not land in Dask's calls); the previous
+    handler comes back after. A no-op outside the main thread."""
+    caught: list[int] = []
+    if threading.current_thread() is not threading.main_thread():
+        yield caught
+        return
+    previous = signal.signal(signal.SIGTERM, lambda signum, frame: caught.append(signum))
+    try:
+        yield caught
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+
+
+@contextlib.contextmanager
 def _ctrl_c_witness() -> Iterator[Callable[[], bool]]:
     """A small process of this process group that a Ctrl-C ends, for a block during which
     this process ignores SIGINT (while a local cluster starts: a Ctrl-C then was lost, and the
@@ -528,7 +549,12 @@ def _dask_client(
     # SIGINT ignored (their children inherit it), so that this process alone stops the job
     # and shuts the cluster down, rather than each worker dying with a traceback. This
     # process ignores it too meanwhile; the witness hears a Ctrl-C of those seconds for it.
-    with _ctrl_c_witness() as witness, _sigint_handled_by(signal.SIG_IGN):
+    # SIGTERM (stereodepth's main handles it as Ctrl-C) is held the same way meanwhile.
+    with (
+        _ctrl_c_witness() as witness,
+        _sigterm_held() as sigterm,
+        _sigint_handled_by(signal.SIG_IGN),
+    ):
         cluster = LocalCluster(  # type: ignore[no-untyped-call]
             n_workers=workers,
             threads_per_worker=1,
@@ -539,5 +565,7 @@ def _dask_client(
         )
     if witness():  # the handler in place now (_sigint_as_flag's: the job stops) gets it
         signal.raise_signal(signal.SIGINT)
+    if sigterm:  # likewise, through the SIGTERM handler in place now
+        signal.raise_signal(signal.SIGTERM)
     with cluster, Client(cluster) as client:  # type: ignore[no-untyped-call]
         yield client, f"local dask cluster of {workers} worker processes", task_threads

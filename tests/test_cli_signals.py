@@ -1,0 +1,172 @@
+"""SIGTERM (what ``timeout``, ``kill`` and process managers send) stops a command as Ctrl-C
+does, through the same clean-up, with one line "terminated" and exit status 143; Ctrl-C keeps
+130. Real subprocesses, real signals: each command runs under a small driver that slows one
+step down and says on stderr when it is there, so that the signal lands mid-run."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+pytest.importorskip("PIL", reason="reading images needs Pillow (the batch extra)")
+
+from PIL import Image
+
+from stereodepth.sample import sample_pair
+
+PYTHON_DIR = Path(__file__).resolve().parents[1] / "python"
+
+#: Runs ``main(argv)`` with ``module.attribute`` wrapped: the wrapper prints READY on stderr,
+#: then sleeps ``pause`` seconds before calling the original (the signal lands in the sleep).
+DRIVER = """
+import importlib, sys, time
+module, attribute, pause = sys.argv[1], sys.argv[2], float(sys.argv[3])
+target = importlib.import_module(module)
+original = getattr(target, attribute)
+def slow(*args, **kwargs):
+    print("READY", file=sys.stderr, flush=True)
+    time.sleep(pause)
+    return original(*args, **kwargs)
+setattr(target, attribute, slow)
+from stereodepth.cli import main
+sys.exit(main(sys.argv[4:]))
+"""
+
+
+def start(
+    cwd: Path, module: str, attribute: str, pause: float, *argv: str
+) -> subprocess.Popen[str]:
+    env = {**os.environ, "PYTHONPATH": str(PYTHON_DIR)}
+    return subprocess.Popen(
+        [sys.executable, "-c", DRIVER, module, attribute, str(pause), *argv],
+        cwd=cwd,
+        env=env,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+
+
+def signal_when_ready(proc: subprocess.Popen[str], sig: int) -> tuple[int, str, str]:
+    """Sends ``sig`` once the driver said READY; the exit status, stdout and the rest of
+    stderr."""
+    assert proc.stderr is not None
+    deadline = time.monotonic() + 120
+    while True:
+        line = proc.stderr.readline()
+        assert line, f"the command ended before READY: {proc.wait()}"
+        if line.strip() == "READY":
+            break
+        assert time.monotonic() < deadline
+    proc.send_signal(sig)
+    out, err = proc.communicate(timeout=120)
+    return proc.returncode, out, err
+
+
+@pytest.fixture
+def pair(tmp_path: Path) -> tuple[str, str]:
+    s = sample_pair(96, 64)
+    Image.fromarray(s.left).save(tmp_path / "l.png")
+    Image.fromarray(s.right).save(tmp_path / "r.png")
+    return "l.png", "r.png"
+
+
+RIG = ["--focal-px", "100", "--baseline-mm", "100", "--threads", "1"]
+
+SIGNALS = [
+    pytest.param(signal.SIGTERM, 143, "terminated", id="SIGTERM"),
+    pytest.param(signal.SIGINT, 130, "interrupted", id="SIGINT"),
+]
+
+
+@pytest.mark.parametrize(("sig", "status", "word"), SIGNALS)
+def test_match_stopped_mid_write_keeps_the_earlier_set(
+    tmp_path: Path, pair: tuple[str, str], sig: int, status: int, word: str
+) -> None:
+    """Signalled while writing its outputs (the disparity and depth written, the cloud not
+    yet), match leaves the earlier run's set as it was, no new file and no temporary file,
+    prints one line and exits 143 for SIGTERM (it was killed outright: a new disparity
+    beside the old cloud), 130 for Ctrl-C."""
+    pytest.importorskip("matplotlib", reason="the previews need the plot extra")
+    out = tmp_path / "out"
+    first = subprocess.run(
+        [sys.executable, "-m", "stereodepth", "match", *pair, *RIG, "--ply", "-o", "out/"],
+        cwd=tmp_path,
+        env={**os.environ, "PYTHONPATH": str(PYTHON_DIR)},
+        capture_output=True,
+        text=True,
+    )
+    assert first.returncode == 0, first.stderr
+    before = {p.name: p.read_bytes() for p in out.iterdir()}
+    assert set(before) == {
+        "disparity.pfm",
+        "depth.npy",
+        "disparity-preview.png",
+        "depth-preview.png",
+        "points.ply",
+    }
+    argv = ["match", *pair, *RIG, "--num-disparities", "16", "--ply", "--no-preview"]
+    proc = start(tmp_path, "stereodepth.pointcloud", "write_ply", 60, *argv, "-o", "out/")
+    code, stdout, err = signal_when_ready(proc, sig)
+    assert code == status
+    assert err == f"stereodepth match: {word}\n"
+    assert stdout == ""
+    assert {p.name: p.read_bytes() for p in out.iterdir()} == before
+
+
+@pytest.mark.parametrize(("sig", "status", "word"), SIGNALS)
+def test_batch_stopped_like_ctrl_c(
+    tmp_path: Path, pair: tuple[str, str], sig: int, status: int, word: str
+) -> None:
+    """Signalled with a pair in flight, batch lets it finish, cancels the rest, writes its
+    report (exit_status 143 for SIGTERM), removes its lock and exits with one line on
+    stderr; the same command then resumes. SIGTERM used to kill it outright: the lock
+    left, no report."""
+    inp = tmp_path / "in"
+    inp.mkdir()
+    s = sample_pair(96, 64)
+    for stem in ("a", "b", "c", "d", "e"):
+        Image.fromarray(s.left).save(inp / f"{stem}_left.png")
+        Image.fromarray(s.right).save(inp / f"{stem}_right.png")
+    argv = ["batch", "in", "-o", "out", "--quiet", *RIG, "--num-disparities", "16"]
+    proc = start(tmp_path, "stereodepth.batch.runners", "process_pair", 2, *argv)
+    code, _, err = signal_when_ready(proc, sig)
+    assert code == status, err
+    assert err.endswith(f"stereodepth batch: {word}\n") and "Traceback" not in err
+    assert err.count(word) == 1
+    out = tmp_path / "out"
+    assert not (out / ".stereodepth-batch.lock").exists()
+    report = json.loads((out / "report.json").read_text())
+    assert report["interrupted"] is True and report["exit_status"] == status
+    statuses = sorted(p["status"] for p in report["pairs"])
+    assert "cancelled" in statuses and "ok" in statuses
+    assert not [p.name for p in out.iterdir() if ".stereodepth-" in p.name and p.name[0] == "."]
+
+    again = subprocess.run(
+        [sys.executable, "-m", "stereodepth", *argv],
+        cwd=tmp_path,
+        env={**os.environ, "PYTHONPATH": str(PYTHON_DIR)},
+        capture_output=True,
+        text=True,
+    )
+    assert again.returncode == 0, again.stderr
+    report = json.loads((out / "report.json").read_text())
+    assert {p["status"] for p in report["pairs"]} <= {"ok", "skipped"}
+    assert "skipped" in {p["status"] for p in report["pairs"]}
+
+
+def test_calc_sigterm_outside_a_command_is_not_caught() -> None:
+    """The handler is in place for the command's duration only: main leaves SIGTERM's
+    handler as it found it."""
+    from stereodepth.cli import main
+
+    before = signal.getsignal(signal.SIGTERM)
+    assert main(["calc", "--baseline-mm", "50", "--focal-px", "300", "--json"]) == 0
+    assert signal.getsignal(signal.SIGTERM) is before
