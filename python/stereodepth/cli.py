@@ -430,6 +430,16 @@ def _calc(args: argparse.Namespace) -> int:
     return 0
 
 
+#: The subcommands whose product is what they print on stdout, and what that is: they refuse
+#: to run with stdout closed (match's summary is part of its run: a run that cannot print it
+#: fails, and leaves no outputs).
+_STDOUT_PRODUCTS: dict[str, str] = {
+    "calc": "its results",
+    "eval": "its results",
+    "match": "its summary",
+}
+
+
 def build_parser() -> argparse.ArgumentParser:
     from . import __version__
 
@@ -463,6 +473,16 @@ def main(argv: Sequence[str] | None = None) -> int:
     args, extras = parser.parse_known_args(argv)
     if extras:  # name the subcommand whose options these are not
         _subparser(parser, args.command).error(f"unrecognized arguments: {' '.join(extras)}")
+    lost = _STDOUT_PRODUCTS.get(args.command)
+    if lost is not None and sys.stdout is None:
+        # Started with stdout closed (>&-): Python then has no sys.stdout, and print() writes
+        # nothing without a word (calc exited 0 having shown nothing).
+        print(
+            f"stereodepth {args.command}: error: stdout is closed, so {lost} would be lost: "
+            "redirect it to a file or to /dev/null",
+            file=sys.stderr,
+        )
+        return 1
     try:
         with _sigterm_as_interrupt():
             code = int(args.func(args))
