@@ -497,14 +497,91 @@ def _opencv_factory(
     return make
 
 
+#: The largest odd SGBM block size whose P2 (32 * size**2) fits OpenCV's int.
+_SGBM_MAX_BLOCK_SIZE = 8191
+
+_C_INT = (-(2**31), 2**31 - 1)
+
+
+def _at_least(low: int) -> tuple[Callable[[int], bool], str]:
+    return (lambda v: v >= low), f"an integer >= {low}"
+
+
+def _within(low: int, high: int) -> tuple[Callable[[int], bool], str]:
+    return (lambda v: low <= v <= high), f"an integer in {low}..{high}"
+
+
+#: What OpenCV takes for each ``--opencv-option`` (its setter's value), by matcher class:
+#: ``compute`` refuses some values (StereoBM's pre-filter) and silently replaces others
+#: (StereoSGBM's negative uniqueness ratio by 10, a P1 <= 0 by 2); both are refused here.
+_OPENCV_OPTION_RULES: dict[str, dict[str, tuple[Callable[[int], bool], str]]] = {
+    "bm": {
+        "pre_filter_type": (
+            lambda v: v in (0, 1),
+            "0 (PREFILTER_NORMALIZED_RESPONSE) or 1 (PREFILTER_XSOBEL)",
+        ),
+        "pre_filter_size": (lambda v: v % 2 == 1 and 5 <= v <= 255, "an odd integer in 5..255"),
+        "pre_filter_cap": _within(1, 63),
+        "texture_threshold": _at_least(0),
+        "uniqueness_ratio": _at_least(0),
+        "speckle_window_size": _at_least(0),
+        "speckle_range": _at_least(0),
+        "disp12_max_diff": _within(*_C_INT),
+        "smaller_block_size": _at_least(0),
+    },
+    "sgbm": {
+        "pre_filter_cap": _at_least(1),
+        "uniqueness_ratio": _at_least(0),
+        "speckle_window_size": _at_least(0),
+        "speckle_range": _at_least(0),
+        "disp12_max_diff": _within(*_C_INT),
+        "p1": _at_least(1),
+        "p2": _at_least(1),
+        "mode": (
+            lambda v: v in (0, 1, 2, 3),
+            "0 (MODE_SGBM), 1 (MODE_HH), 2 (MODE_SGBM_3WAY) or 3 (MODE_HH4)",
+        ),
+    },
+}
+
+
+def _check_opencv_options(options: dict[str, Any], methods: set[str]) -> None:
+    """Each ``--opencv-option`` value checked against what the selected OpenCV matchers take,
+    before any scene is read: one line naming the option and the matcher (``mode=99`` was
+    taken without a word)."""
+    kinds = {("bm" if m == "opencv-bm" else "sgbm"): m for m in sorted(methods)}
+    for key, value in options.items():
+        for kind, method in kinds.items():
+            rules = _OPENCV_OPTION_RULES[kind]
+            if key not in rules:
+                continue  # a setter of the other matcher, or unknown: checked by the caller
+            ok, what = rules[key]
+            is_int = isinstance(value, int) and not isinstance(value, bool)
+            if not (is_int and _C_INT[0] <= value <= _C_INT[1] and ok(value)):
+                raise _usage_error(
+                    f"--opencv-option {key}={value!r} rejected by {method}: {key} must be {what}"
+                )
+    p1, p2 = options.get("p1"), options.get("p2")
+    if isinstance(p1, int) and isinstance(p2, int) and not p2 > p1:
+        raise _usage_error(f"--opencv-option p2={p2!r}: OpenCV's P2 must be > P1, got p1={p1}")
+
+
 def _check_block_size(variant: Variant) -> None:
     bs = variant.block_size
     if bs is None:
         return
     if variant.method == "opencv-bm" and not (bs % 2 == 1 and 5 <= bs <= 255):
         raise ValueError(f"block size of opencv-bm must be an odd integer in 5..255, got {bs}")
-    if variant.method.startswith("opencv-sgbm") and not (bs % 2 == 1 and bs >= 1):
-        raise ValueError(f"block size of {variant.method} must be an odd integer >= 1, got {bs}")
+    if variant.method.startswith("opencv-sgbm") and not (
+        bs % 2 == 1 and 1 <= bs <= _SGBM_MAX_BLOCK_SIZE
+    ):
+        # eval passes P2 = 32 * block size**2: 9999 was "integer won't fit into a C int",
+        # from OpenCV, naming no parameter, once the scenes were read.
+        raise ValueError(
+            f"block size of {variant.method} must be an odd integer in "
+            f"1..{_SGBM_MAX_BLOCK_SIZE} (eval gives OpenCV P2 = 32 x its square, a C int), "
+            f"got {bs}"
+        )
     if variant.method == "stereodepth":
         # The largest over the costs (census); a smaller limit of cost=sad is the matcher's.
         top = max(MAX_BLOCK_SIZE.values())
@@ -974,7 +1051,8 @@ def register(subparsers: Any) -> None:
         metavar="KEY=VALUE",
         help="OpenCV matcher parameter, repeatable: uniqueness_ratio=10 calls "
         "setUniquenessRatio(10) on every selected OpenCV matcher that has it (mode=2 runs "
-        "SGBM as MODE_SGBM_3WAY)",
+        "SGBM as MODE_SGBM_3WAY); each value is checked first against what OpenCV takes "
+        "(mode 0..3, pre_filter_cap 1..63 for BM, ...)",
     )
     m.add_argument(
         "--channel-order",
@@ -1175,6 +1253,7 @@ def run(args: argparse.Namespace) -> int:
                     raise _usage_error(
                         f"--opencv-option {key}: no selected OpenCV matcher has set{_camel(key)}()"
                     )
+            _check_opencv_options(opencv_options, methods & set(_OPENCV_METHODS))
             factory = _opencv_factory(cv2, opencv_options, args.channel_order)
             for name in _OPENCV_METHODS:
                 factories[name] = factory

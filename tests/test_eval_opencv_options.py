@@ -1,0 +1,129 @@
+"""``stereodepth eval``'s OpenCV parameters checked before any scene runs: SGBM's block size
+range-checked as opencv-bm's is (9999 was OpenCV's "integer won't fit into a C int"), and
+every ``--opencv-option`` value against what OpenCV takes (``mode=99`` was taken without a
+word): one line naming the parameter, exit status 2, nothing on stdout."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+pytest.importorskip("cv2")
+pytest.importorskip("PIL", reason="reading images needs Pillow (the batch extra)")
+
+from PIL import Image
+
+from stereodepth.cli import main
+
+
+@pytest.fixture
+def scenes(tmp_path: Path) -> Path:
+    root = tmp_path / "scenes"
+    scene = root / "s1"
+    scene.mkdir(parents=True)
+    rng = np.random.default_rng(0)
+    left = rng.integers(0, 255, (64, 128), dtype=np.uint8)
+    Image.fromarray(left).save(scene / "left.png")
+    Image.fromarray(np.roll(left, -5, axis=1)).save(scene / "right.png")
+    np.save(scene / "disp_gt.npy", np.full((64, 128), 5, np.float32))
+    return root
+
+
+def run(capsys: pytest.CaptureFixture[str], *argv: str) -> tuple[int, str, str]:
+    code = main(["eval", *argv])
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+BAD = [
+    (
+        ["--method", "opencv-sgbm", "--block-size", "9999"],
+        "block size of opencv-sgbm must be an odd integer in 1..8191",
+    ),
+    (
+        ["--method", "opencv-sgbm-3way:8193"],
+        "block size of opencv-sgbm-3way must be an odd integer in 1..8191",
+    ),
+    (
+        ["--method", "opencv-sgbm", "--opencv-option", "mode=99"],
+        "--opencv-option mode=99 rejected by opencv-sgbm: mode must be 0 (MODE_SGBM), 1 "
+        "(MODE_HH), 2 (MODE_SGBM_3WAY) or 3 (MODE_HH4)",
+    ),
+    (
+        ["--method", "opencv-bm", "opencv-sgbm-hh", "--opencv-option", "mode=-1"],
+        "--opencv-option mode=-1 rejected by opencv-sgbm-hh",
+    ),
+    (
+        ["--method", "opencv-bm", "--opencv-option", "pre_filter_type=5"],
+        "pre_filter_type=5 rejected by opencv-bm: pre_filter_type must be 0",
+    ),
+    (
+        ["--method", "opencv-bm", "--opencv-option", "pre_filter_size=4"],
+        "pre_filter_size must be an odd integer in 5..255",
+    ),
+    (
+        ["--method", "opencv-bm", "--opencv-option", "pre_filter_cap=64"],
+        "pre_filter_cap=64 rejected by opencv-bm: pre_filter_cap must be an integer in 1..63",
+    ),
+    (
+        ["--method", "opencv-bm", "opencv-sgbm", "--opencv-option", "texture_threshold=-1"],
+        "texture_threshold=-1 rejected by opencv-bm",
+    ),
+    (
+        ["--method", "opencv-sgbm", "--opencv-option", "uniqueness_ratio=-1"],
+        "uniqueness_ratio=-1 rejected by opencv-sgbm: uniqueness_ratio must be an integer >= 0",
+    ),
+    (
+        ["--method", "opencv-sgbm", "--opencv-option", "uniqueness_ratio=1.5"],
+        "uniqueness_ratio=1.5 rejected by opencv-sgbm",
+    ),
+    (
+        ["--method", "opencv-bm", "--opencv-option", "speckle_range=99999999999"],
+        "speckle_range=99999999999 rejected by opencv-bm",
+    ),
+    (
+        ["--method", "opencv-sgbm", "--opencv-option", "speckle_window_size=true"],
+        "speckle_window_size=True rejected by opencv-sgbm",
+    ),
+    (
+        ["--method", "opencv-sgbm", "--opencv-option", "p1=0"],
+        "p1=0 rejected by opencv-sgbm: p1 must be an integer >= 1",
+    ),
+    (
+        ["--method", "opencv-sgbm", "--opencv-option", "p1=100", "--opencv-option", "p2=50"],
+        "--opencv-option p2=50: OpenCV's P2 must be > P1, got p1=100",
+    ),
+]
+
+
+@pytest.mark.parametrize(("argv", "message"), BAD)
+def test_bad_opencv_parameters_one_line_exit_2(
+    scenes: Path, capsys: pytest.CaptureFixture[str], argv: list[str], message: str
+) -> None:
+    code, out, err = run(capsys, str(scenes), *argv, "--repeat", "1")
+    assert (code, out) == (2, "")
+    assert err.startswith("stereodepth eval: error: ") and err.count("\n") == 1
+    assert message in err
+    assert "C int" not in err or "P2 = 32" in err
+
+
+@pytest.mark.parametrize(
+    "argv",
+    [
+        ["--method", "opencv-sgbm:31"],
+        ["--method", "opencv-bm", "--opencv-option", "pre_filter_type=1"],
+        ["--method", "opencv-sgbm", "--opencv-option", "mode=2"],
+        ["--method", "opencv-bm", "--opencv-option", "pre_filter_cap=63"],
+        ["--method", "opencv-bm", "--opencv-option", "disp12_max_diff=-1"],
+        ["--method", "opencv-sgbm", "--opencv-option", "p1=10", "--opencv-option", "p2=200"],
+        ["--method", "opencv-bm", "opencv-sgbm", "--opencv-option", "texture_threshold=5"],
+    ],
+)
+def test_good_opencv_parameters_run(
+    scenes: Path, capsys: pytest.CaptureFixture[str], argv: list[str]
+) -> None:
+    code, out, err = run(capsys, str(scenes), *argv, "--repeat", "1", "--threads", "1")
+    assert code == 0, err
+    assert "s1" in out
