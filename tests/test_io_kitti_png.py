@@ -31,3 +31,17 @@ def test_disparity_png16_rounds_half_up_as_the_docstring_and_kittis_devkit(
     with pytest.raises(ValueError, match=r"disparity up to 255\.998 px does not fit"):
         io.write_disparity_png16(tmp_path / "e.png", np.array([[255 + 511 / 512]]))
     assert not (tmp_path / "e.png").exists()
+
+
+def test_disparity_png16_rounds_exactly_next_to_a_half(tmp_path: Path) -> None:
+    # float64 disparities one ulp either side of a half step: floor(x + 0.5) rounded the sum
+    # first, so that just below 1/512 px (x = 0.49999999999999994) became 1.
+    halves = (np.arange(0, 65535) + 0.5) / 256
+    below = np.nextafter(halves, 0)
+    above = np.nextafter(halves, np.inf)
+    d = np.stack([below, above])[:, :65534]
+    io.write_disparity_png16(tmp_path / "d.png", d)
+    got = io.read_image(tmp_path / "d.png").astype(np.int64)
+    k = np.arange(65534)
+    assert (got[0] == k).all()  # just below (k + 1/2) / 256 px: k (0, a hole, for k = 0)
+    assert (got[1] == k + 1).all()

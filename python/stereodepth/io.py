@@ -461,9 +461,12 @@ def write_disparity_png16(path: str | os.PathLike[str], disparity: np.ndarray) -
     ``path`` then left as it was."""
     d = _check_2d("disparity", disparity, (np.float32, np.float64)).astype(np.float64)
     ok = np.isfinite(d) & (d > 0)
-    # d * 256 is exact in float64 (a power of two), and so is + 0.5 below 2 ** 52: floor
-    # rounds half up, where numpy's rint rounds half to even and made exactly 1/512 px a hole.
-    v = np.floor(np.where(ok, d, 0.0) * 256.0 + 0.5)
+    # Half up, exactly (numpy's rint rounds half to even and made exactly 1/512 px a hole):
+    # d * 256 is exact in float64 (a power of two), and so is its fraction, but adding 0.5
+    # first rounds the sum (0.49999999999999994 + 0.5 is 1.0).
+    scaled = np.where(ok, d, 0.0) * 256.0
+    whole = np.floor(scaled)
+    v = whole + (scaled - whole >= 0.5)
     if v.max(initial=0.0) > 65535.0:
         raise ValueError(
             f"disparity up to {float(d[ok].max()):g} px does not fit a 16-bit disparity PNG "
