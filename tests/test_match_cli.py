@@ -20,7 +20,7 @@ import stereodepth
 from stereodepth import block_match, colorize, disparity_to_depth, reproject
 from stereodepth.cli import main
 from stereodepth.colormap import COLORBAR_HEIGHT_PX
-from stereodepth.io import read_image, read_pfm
+from stereodepth.io import read_disparity_pfm, read_image, read_pfm
 from stereodepth.match_pair import default_num_disparities, sgm_available
 from stereodepth.sample import sample_pair
 
@@ -83,8 +83,10 @@ def test_middlebury_calib_folder_outputs(
         ["disparity.pfm", "depth.npy", "disparity-preview.png", "depth-preview.png", "points.ply"]
     )
     # The disparity is the library's block matcher with Middlebury's ndisp.
-    disparity = read_pfm(out / "disparity.pfm")
+    disparity = read_disparity_pfm(out / "disparity.pfm")
     assert same(disparity, block_match(left, right, num_disparities=PIANO["ndisp"]))
+    # On disk, Middlebury's convention: +inf where there is no disparity.
+    assert np.array_equal(read_pfm(out / "disparity.pfm") == np.inf, np.isnan(disparity))
     # The depth is disparity_to_depth of that disparity with the calibration, bit for bit.
     depth = np.load(out / "depth.npy")
     expected = disparity_to_depth(
@@ -231,7 +233,7 @@ def test_kitti_calib_file(tmp_path: Path, capsys: pytest.CaptureFixture[str]) ->
         "--no-preview",
     )
     assert code == 0, err
-    d = read_pfm(tmp_path / "k-disparity.pfm")
+    d = read_disparity_pfm(tmp_path / "k-disparity.pfm")
     baseline_m = -tx / f
     depth = disparity_to_depth(d, focal_px=f, baseline_m=baseline_m)
     assert same(np.load(tmp_path / "k-depth.npy"), depth)
@@ -460,7 +462,7 @@ def test_sgm_path_with_a_stand_in_matcher(
     }
     left, right = read_image(pair[0]), read_image(pair[1])
     assert same(
-        read_pfm(tmp_path / "s" / "disparity.pfm"),
+        read_disparity_pfm(tmp_path / "s" / "disparity.pfm"),
         block_match(left, right, num_disparities=32, block_size=3),
     )
     code, _, err = run(capsys, *pair, "--method", "sgm", "--cost", "sad", "-o", f"{tmp_path}/t/")
@@ -551,7 +553,7 @@ def test_ply_of_a_12_bit_pair_is_coloured_as_matched(
     rig = ["--focal-px", "100", "--baseline-mm", "100", "--no-preview", "--ply"]
     code, _, err = run(capsys, tmp_path / "l.png", tmp_path / "r.png", *rig, "-o", tmp_path / "m-")
     assert code == 0, err
-    d = read_pfm(tmp_path / "m-disparity.pfm")
+    d = read_disparity_pfm(tmp_path / "m-disparity.pfm")
     ok = np.isfinite(reproject(d, focal_px=100.0, baseline_m=0.1)).all(axis=-1)
     data = (tmp_path / "m-points.ply").read_bytes()
     body = data[data.index(b"end_header\n") + len(b"end_header\n") :]

@@ -27,7 +27,7 @@ from PIL import Image
 from stereodepth import block_match, disparity_to_depth
 from stereodepth.calib import read_stereo_calibration
 from stereodepth.cli import main
-from stereodepth.io import read_image, read_pfm
+from stereodepth.io import read_disparity_pfm, read_image
 from stereodepth.match_pair import default_num_disparities
 from stereodepth.rectify import StereoRectifier
 from stereodepth.sample import sample_pair
@@ -95,7 +95,7 @@ def check_outputs(
     rect_l, rect_r = rect.rectify(read_image(left), read_image(right))
     h, w = rect_l.shape[:2]
     expected = block_match(rect_l, rect_r, num_disparities=default_num_disparities(w))
-    disparity = read_pfm(out / "disparity.pfm")
+    disparity = read_disparity_pfm(out / "disparity.pfm")
     assert same(disparity, expected)
     rig = rect.rig
     depth = np.load(out / "depth.npy")
@@ -295,7 +295,7 @@ def test_vertical_rig_is_matched_along_its_columns(
     assert rect.vertical
     assert all(same(a, b) for a, b in zip(rect.rectify(up, down), (up, down), strict=True))
     expected = block_match(s.left, s.right, num_disparities=32).T
-    disparity = read_pfm(out / "disparity.pfm")
+    disparity = read_disparity_pfm(out / "disparity.pfm")
     assert disparity.shape == (h, w) and same(disparity, np.ascontiguousarray(expected))
     depth = np.load(out / "depth.npy")
     ok = np.isfinite(disparity)

@@ -4,9 +4,9 @@ a point cloud, with a summary on stdout (``--json`` for one JSON object).
 Outputs go to ``--out``: a folder (an existing one, or a path ending in ``/``, created) with
 files ``disparity.<ext>``, ``depth.<ext>``, ``disparity-preview.png``, ``depth-preview.png``
 and ``points.ply``; or a prefix (``--out results/teddy-`` writes ``results/teddy-disparity.pfm``
-and so on; its folder must exist). Formats: disparity as PFM (float32, NaN holes; default),
-``npy`` or ``png16`` (KITTI's uint16 of d x 256, 0 for holes: 0 to 255.996 px, refused for a
-search range outside that); depth as ``npy`` (float32
+and so on; its folder must exist). Formats: disparity as PFM (float32, +inf holes, as
+Middlebury's; default), ``npy`` (float32, NaN holes) or ``png16`` (KITTI's uint16 of d x 256, 0
+for holes: 0 to 255.996 px, refused for a search range outside that); depth as ``npy`` (float32
 metres, NaN where unknown; default), ``pfm``, or ``png16`` (uint16 millimetres, 0 unknown,
 65535 for 65.535 m and farther).
 The previews are the colourised maps pixel for pixel with a colour bar and unit under them
@@ -665,7 +665,7 @@ def _write_outputs(
         write_png(out["right_rectified"], right_img)
     d = result.disparity
     if args.disparity_format == "pfm":
-        io.write_pfm(out["disparity"], d)
+        io.write_disparity_pfm(out["disparity"], d)  # Middlebury's: +inf where there is none
     elif args.disparity_format == "npy":
         io.write_npy(out["disparity"], d)
     else:
