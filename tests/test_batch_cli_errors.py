@@ -96,7 +96,7 @@ ROWS: list[tuple[list[str], str]] = [
     (["--pair-names", "cam0", "cam0"], "--pair-names: the left and right names must differ"),
     (["--pair-names", "cam", "cam1"], "--pair-names: neither name may be part of the other"),
     (["--pair-names", "cam0"], "argument --pair-names: expected 2 arguments"),
-    (["--report", "{tmp}/nowhere/r.json"], "the folder {tmp}/nowhere does not exist"),
+    (["--report", "{tmp}/nowhere/r.json"], "the folder '{tmp}/nowhere' does not exist"),
     (["--report", "{tmp}/out/teddy.record.json"], "pair 'teddy' writes that file"),
     (["--report", "{tmp}/in/teddy/im0.png"], "that is an input of pair 'teddy'"),
     (["--report", "{tmp}"], "--report must be a file, got the folder"),

@@ -88,7 +88,8 @@ def test_report_into_a_missing_folder_is_refused_before_any_pair(
     status, _, err = run(capsys, tmp_path / "in", "-o", out, "--report", report, "--quiet")
     assert status == 2
     assert err == (
-        f"stereodepth batch: error: --report {report}: the folder {report.parent} does not exist\n"
+        f"stereodepth batch: error: --report {report}: the folder {str(report.parent)!r} "
+        "does not exist\n"
     )
     assert not out.exists()  # no pair was computed
     # a report inside OUTDIR (created by the job) is fine

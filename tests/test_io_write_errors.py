@@ -121,13 +121,32 @@ def test_a_file_where_a_folder_should_be_is_named_as_one(tmp_path: Path) -> None
     assert sorted(p.name for p in tmp_path.iterdir()) == ["afile"]
 
 
-@pytest.mark.xfail(
-    reason="write_ply checks its folder itself (stereodepth/pointcloud.py, outside this change)"
-)
-def test_write_ply_names_a_file_where_a_folder_should_be(tmp_path: Path) -> None:
+def test_every_writer_with_its_own_folder_check_names_a_file_in_the_way(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    # write_ply, save_colorized, save_charts, `calc --plot` and `batch --report` check their
+    # folder themselves; each called a regular file in the way a folder that "does not exist".
+    from stereodepth import StereoRig, save_colorized
+    from stereodepth.cli import main
+    from stereodepth.plotting import save_charts
+
     (tmp_path / "afile").write_bytes(b"mine")
+    inside = tmp_path / "afile"
     with pytest.raises(NotADirectoryError, match="is a file, not a folder"):
-        write_ply(tmp_path / "afile" / "x.ply", np.ones((3, 3)))
+        write_ply(inside / "x.ply", np.ones((3, 3)))
+    with pytest.raises(FileNotFoundError, match=r"the folder .*nowhere' does not exist"):
+        write_ply(tmp_path / "nowhere" / "x.ply", np.ones((3, 3)))
+    if importlib.util.find_spec("matplotlib") is not None:  # the plot extra
+        with pytest.raises(ValueError, match=r"afile' is a file, not a folder"):
+            save_colorized(inside / "c.png", np.ones((3, 3)))
+        rig = StereoRig.from_pixels(baseline_mm=100, focal_px=700)
+        with pytest.raises(ValueError, match=r"afile' is a file, not a folder"):
+            save_charts(rig, inside / "c.png")
+    plot = ["calc", "--baseline-mm", "100", "--focal-px", "700", "--disparity-px", "35"]
+    assert main([*plot, "--plot", str(inside / "c.png")]) == 2
+    err = capsys.readouterr().err
+    assert "afile' is a file, not a folder" in err and err.count("\n") == 1
+    assert inside.read_bytes() == b"mine"
 
 
 @pytest.mark.parametrize(

@@ -212,7 +212,10 @@ def test_save_charts_rejects_before_writing(tmp_path: Path) -> None:
         save_charts(ARM, out, disparity_px=-1)
     with pytest.raises(ValueError, match=r"must end in \.png, \.svg, \.pdf, got '.*charts\.txt'"):
         save_charts(ARM, tmp_path / "charts.txt")
-    with pytest.raises(ValueError, match=r"the chart file's folder must exist, got '.*nowhere'"):
+    with pytest.raises(
+        ValueError,
+        match=r"the chart file's folder must exist: the folder '.*nowhere' does not exist",
+    ):
         save_charts(ARM, tmp_path / "nowhere" / "c.png")
     with pytest.raises(TypeError, match=r"path must be a str or os.PathLike, got int 3"):
         save_charts(ARM, 3)  # type: ignore[arg-type]

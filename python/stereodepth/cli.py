@@ -387,9 +387,10 @@ def _calc(args: argparse.Namespace) -> int:
         if out.suffix.lower() not in FORMATS:
             raise UsageError(f"--plot must name a .png, .svg or .pdf file, got {args.plot!r}")
         if not out.parent.is_dir():
-            raise UsageError(
-                f"--plot: the folder {str(out.parent)!r} does not exist, got {args.plot!r}"
-            )
+            from .io import folder_fault
+
+            why = folder_fault(out) or f"the folder {str(out.parent)!r} cannot be read"
+            raise UsageError(f"--plot: {why}, got {args.plot!r}")
         if out.is_dir():
             raise UsageError(f"--plot must name a file, got the folder {args.plot!r}")
     rig = _rig_from_args(args)

@@ -347,7 +347,10 @@ def save_colorized(
     if out.suffix.lower() != ".png":
         raise ValueError(f"path must end in .png, got {str(out)!r}")
     if not out.parent.is_dir():
-        raise ValueError(f"path's folder must exist, got {str(out.parent)!r}")
+        from .io import folder_fault
+
+        why = folder_fault(out) or f"the folder {str(out.parent)!r} cannot be read"
+        raise ValueError(f"path's folder must exist: {why}, got {str(out)!r}")
     for name, text in (("quantity", quantity), ("unit", unit)):
         if not isinstance(text, str):
             raise TypeError(f"{name} must be a str, got {type(text).__name__} {text!r}")

@@ -272,7 +272,7 @@ def atomic_write(path: str | os.PathLike[str], *, text: bool = False) -> Iterato
     except OSError as exc:
         # A folder that is missing, read-only or takes no new files (/proc), or a file where
         # a folder should be: name the user's path, not the temporary one the user never gave.
-        why = _folder_fault(target) if exc.errno in (errno.ENOENT, errno.ENOTDIR) else None
+        why = folder_fault(target) if exc.errno in (errno.ENOENT, errno.ENOTDIR) else None
         raise type(exc)(
             exc.errno, f"cannot write {p.name}: {why or exc.strerror}", str(p)
         ) from None
@@ -309,10 +309,11 @@ def _naming(exc: OSError, p: Path, *ours: Path) -> OSError:
     return type(exc)(exc.errno, f"cannot write {p.name}: {exc.strerror}", str(p))
 
 
-def _folder_fault(target: Path) -> str | None:
+def folder_fault(target: str | os.PathLike[str]) -> str | None:
     """Why the folder of ``target`` takes no file, when a part of its path is missing ("the
     folder '<path>' does not exist") or is a file ("'<path>' is a file, not a folder"); None
-    when neither (a permission the process lacks, say)."""
+    when neither (a permission the process lacks, say). Every writer's own folder check says
+    it so (a file in the way was once called a folder that "does not exist")."""
     folder = Path(os.path.abspath(target)).parent
     for part in [*reversed(folder.parents), folder]:
         try:

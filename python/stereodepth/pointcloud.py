@@ -323,10 +323,15 @@ def write_ply(
     target = os.fspath(path)
     if not target:  # "" is not the current folder
         raise ValueError("path must not be empty, got ''")
-    folder = os.path.dirname(os.path.abspath(target))
-    if not os.path.isdir(folder):
-        raise FileNotFoundError(
-            errno.ENOENT, f"cannot write the PLY file: the folder {folder!r} does not exist", target
+    from .io import folder_fault
+
+    fault = folder_fault(target)
+    if fault is not None:
+        missing = fault.startswith("the folder")  # else a file is in the way
+        raise (FileNotFoundError if missing else NotADirectoryError)(
+            errno.ENOENT if missing else errno.ENOTDIR,
+            f"cannot write the PLY file: {fault}",
+            target,
         )
     if os.path.isdir(target):
         raise IsADirectoryError(errno.EISDIR, "cannot write the PLY file over a folder", target)

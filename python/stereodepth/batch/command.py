@@ -86,7 +86,8 @@ def register(subparsers: Any) -> None:
         choices=sorted(FORMATS),
         default="npy",
         help="npy: float32 (NaN invalid); png16: depth in mm and disparity x 256 "
-        "(0 invalid; depth 65535 for 65.535 m and farther); pfm: float32 (default npy)",
+        "(0 invalid; depth 65535 for 65.535 m and farther); pfm: float32 (disparity +inf "
+        "invalid, as Middlebury; depth NaN) (default npy)",
     )
     o.add_argument(
         "--ply", action="store_true", help="also write a coloured binary PLY point cloud in metres"
@@ -369,7 +370,10 @@ def _report_path(args: argparse.Namespace, out_dir: Path) -> Path:
     folder = report.parent
     if folder.resolve() != out_dir.resolve():
         if not folder.is_dir():
-            raise UsageError(f"--report {report}: the folder {folder} does not exist")
+            from ..io import folder_fault
+
+            why = folder_fault(report) or f"the folder {folder} cannot be read"
+            raise UsageError(f"--report {report}: {why}")
         if not os.access(folder, os.W_OK | os.X_OK):
             raise UsageError(f"--report {report}: cannot write in {folder}")
     return report
