@@ -1,7 +1,8 @@
 """``stereodepth match`` replaces the whole set of its files at --out: the outputs of an earlier
-run that this one does not write are removed once the new set is complete, and only those
-(never another file, never an input); a run that fails, or cannot print its summary, leaves
-the earlier set as it was."""
+run that this one does not write are removed once the new set is complete, and only those:
+the files the earlier run's record (a hidden file beside them) lists, unchanged since; never
+another file, a file of the same name that match did not write or that was changed since, or
+an input. A run that fails, or cannot print its summary, leaves the earlier set as it was."""
 
 from __future__ import annotations
 
@@ -40,8 +41,16 @@ def run(capsys: pytest.CaptureFixture[str], *args: Any) -> tuple[int, str, str]:
     return code, out, err
 
 
+MANIFEST = ".stereodepth-match.json"
+
+
 def contents(folder: Path) -> dict[str, bytes]:
-    return {p.name: p.read_bytes() for p in folder.iterdir() if p.is_file()}
+    """The files of ``folder`` but match's record of its last run."""
+    return {
+        p.name: p.read_bytes()
+        for p in folder.iterdir()
+        if p.is_file() and not p.name.endswith("stereodepth-match.json")
+    }
 
 
 def test_the_testers_three_runs_leave_one_set(
@@ -97,17 +106,51 @@ def test_the_testers_three_runs_leave_one_set(
 def test_a_prefix_owns_its_names_only(
     pair: tuple[Path, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    """With a prefix the set is the prefix's: another prefix's files in the same folder, and
-    the folder's own disparity.pfm, stay."""
-    (tmp_path / "b-depth.npy").write_bytes(b"b's")
+    """With a prefix the set is the prefix's: another prefix's run in the same folder, and
+    the folder's own disparity.pfm, stay; the prefix's earlier cloud goes."""
+    code, _, err = run(capsys, *pair, *RIG, "--no-preview", "--ply", "-o", tmp_path / "b-")
+    assert code == 0, err
+    code, _, err = run(capsys, *pair, *RIG, "--no-preview", "--ply", "-o", tmp_path / "a-")
+    assert code == 0, err
     (tmp_path / "disparity.pfm").write_bytes(b"the folder's")
-    (tmp_path / "a-points.ply").write_bytes(b"a's earlier cloud")
     code, _, err = run(capsys, *pair, *RIG, "--no-preview", "-o", tmp_path / "a-")
     assert code == 0, err
     names = set(contents(tmp_path))
-    assert {"a-disparity.pfm", "a-depth.npy", "b-depth.npy", "disparity.pfm"} <= names
-    assert "a-points.ply" not in names
+    assert {"a-disparity.pfm", "a-depth.npy", "b-depth.npy", "b-points.ply"} <= names
+    assert "disparity.pfm" in names and "a-points.ply" not in names
     assert (tmp_path / "disparity.pfm").read_bytes() == b"the folder's"
+    assert (tmp_path / ".a-stereodepth-match.json").is_file()
+    assert (tmp_path / ".b-stereodepth-match.json").is_file()
+
+
+def test_files_match_did_not_write_or_that_changed_since_stay(
+    pair: tuple[Path, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A points.ply of the user's in the folder (the default --out is '.'), and an earlier
+    run's depth.npy edited since, are not match's to remove: a name alone is no proof."""
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "points.ply").write_bytes(b"the user's own cloud")
+    code, _, err = run(capsys, *pair, *RIG, "--no-preview", "-o", out)
+    assert code == 0, err
+    assert (out / "points.ply").read_bytes() == b"the user's own cloud"
+    (out / "depth.npy").write_bytes(b"edited")
+    code, text, err = run(capsys, *pair, "--threads", "1", "--no-preview", "-o", out)
+    assert code == 0, err
+    assert (out / "depth.npy").read_bytes() == b"edited"
+    assert (out / "points.ply").read_bytes() == b"the user's own cloud"
+    assert "removed" not in text
+    # Without its record nothing is removed, and a damaged record is no record.
+    for record in (None, b"{not json", b'{"files": ["depth.npy"]}'):
+        code, _, err = run(capsys, *pair, *RIG, "--no-preview", "--ply", "-o", out)
+        assert code == 0, err
+        if record is None:
+            (out / MANIFEST).unlink()
+        else:
+            (out / MANIFEST).write_bytes(record)
+        code, _, err = run(capsys, *pair, "--threads", "1", "--no-preview", "-o", out)
+        assert code == 0, err
+        assert (out / "points.ply").is_file() and (out / "depth.npy").is_file()
 
 
 def test_an_input_named_like_an_output_is_never_removed(
@@ -159,7 +202,7 @@ def test_a_failed_run_keeps_the_earlier_set_whole(
     )
     assert code == 1 and "No space left on device" in err and err.count("\n") == 1
     assert contents(out) == before
-    assert sorted(p.name for p in out.iterdir()) == sorted(before)
+    assert sorted(p.name for p in out.iterdir()) == sorted([*before, MANIFEST])
 
 
 def test_a_read_only_earlier_output_is_refused_before_any_work(
@@ -168,13 +211,14 @@ def test_a_read_only_earlier_output_is_refused_before_any_work(
     """An earlier run's file this run would remove, made read-only (kept on purpose), is
     refused as a read-only output is: nothing written, nothing removed."""
     out = tmp_path / "out"
-    out.mkdir()
-    ply = out / "points.ply"
-    ply.write_bytes(b"kept")
-    ply.chmod(0o444)
+    code, _, err = run(capsys, *pair, *RIG, "--no-preview", "--ply", "-o", f"{out}/")
+    assert code == 0, err
+    (out / "points.ply").chmod(0o444)
+    before = contents(out)
     code, _, err = run(capsys, *pair, *RIG, "--no-preview", "-o", out)
     assert code == 1 and "read-only" in err and err.count("\n") == 1
-    assert sorted(p.name for p in out.iterdir()) == ["points.ply"]
+    assert contents(out) == before
+    assert sorted(p.name for p in out.iterdir()) == sorted([*before, MANIFEST])
 
 
 def test_owned_names_are_every_name_match_writes() -> None:
@@ -227,4 +271,4 @@ def test_match_that_cannot_print_its_summary_fails_and_leaves_no_outputs(
         assert done.stderr.startswith("stereodepth match: error: cannot print the summary")
         assert done.stderr.count("\n") == 1
         assert contents(out) == before
-        assert sorted(p.name for p in out.iterdir()) == sorted(before)
+        assert sorted(p.name for p in out.iterdir()) == sorted([*before, MANIFEST])

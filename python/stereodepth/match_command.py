@@ -128,8 +128,9 @@ def register(subparsers: Any) -> None:
         metavar="PATH",
         help="a folder (existing, or ending in /) or a file-name prefix (default: .). A run "
         "replaces the whole set of match's files there: once its own are written it removes "
-        "those of an earlier run it does not write (another format, a points.ply, previews or "
-        "rectified pair not asked for this time; listed as 'removed'); a failed run leaves "
+        "those an earlier run wrote that it does not write (another format, a points.ply, "
+        "previews or rectified pair not asked for this time; listed as 'removed'), as a "
+        "hidden record there lists them and if they are unchanged since; a failed run leaves "
         "the earlier set as it was. Other files are never touched",
     )
     o.add_argument(
@@ -503,6 +504,7 @@ def run(args: argparse.Namespace) -> int:
             # closed) fails the run, and then it leaves no outputs.
             _print_summary(summary, left_img, as_json=args.json)
             _commit(staged, out, stale)
+            _write_manifest(args.out, out, names)
         finally:
             for tmp in staged.values():
                 if tmp not in out.values():  # a staged file not renamed into place
@@ -580,25 +582,76 @@ def _staging_paths(out: dict[str, Path]) -> dict[str, Path]:
 _STAGING_MARKER = "stereodepth-match"
 
 
+#: The record of the files a run wrote, beside them: ``.stereodepth-match.json`` in an --out
+#: folder, ``.<prefix>stereodepth-match.json`` beside a prefix's files.
+MANIFEST_NAME = "stereodepth-match.json"
+
+
+def _manifest_path(out: str) -> Path:
+    """Where the record of ``--out``'s last run lies."""
+    if out.endswith(("/", os.sep)) or Path(out).is_dir():
+        return Path(out) / f".{MANIFEST_NAME}"
+    prefix = Path(out)
+    return prefix.with_name(f".{prefix.name}{MANIFEST_NAME}")
+
+
 def _stale_outputs(args: argparse.Namespace, names: dict[str, str]) -> list[Path]:
-    """The files of the set match owns at --out (:data:`OWNED_NAMES`) that this run does not
-    write: an earlier run's (another format, a cloud or previews no longer asked for). Never
-    a folder, nor one of the command's input files (``match left-rectified.png
-    right-rectified.png`` without --write-rectified)."""
+    """The files of an earlier run at --out that this run does not write (another format, a
+    cloud or previews no longer asked for): those its record lists (:func:`_manifest_path`)
+    under a name of :data:`OWNED_NAMES`, still as that run left them (same size and
+    modification time). A file of such a name that match did not write, or that was changed
+    since, is the user's and stays; so does a folder, and one of the command's input files
+    (``match left-rectified.png right-rectified.png`` without --write-rectified)."""
+    try:
+        record = json.loads(_manifest_path(args.out).read_text(encoding="utf-8"))
+        files = record["files"] if isinstance(record, dict) else {}
+    except (OSError, ValueError, KeyError):
+        return []
+    if not isinstance(files, dict):
+        return []
     written = set(names.values())
     is_dir = args.out.endswith(("/", os.sep)) or Path(args.out).is_dir()
     inputs = [v for v in (args.left, args.right, args.calib, args.calib_right) if v is not None]
     stale = []
     for name in OWNED_NAMES:
-        if name in written:
+        if name in written or not isinstance(files.get(name), dict):
             continue
         path = Path(args.out) / name if is_dir else Path(args.out + name)
-        if not os.path.lexists(path) or path.is_dir():
+        try:
+            st = path.lstat()
+        except OSError:
+            continue
+        seen = files[name]
+        if not stat.S_ISREG(st.st_mode) or (st.st_size, st.st_mtime_ns) != (
+            seen.get("size"),
+            seen.get("mtime_ns"),
+        ):
             continue
         if any(_same_file(path, given) for given in inputs):
             continue
         stale.append(path)
     return stale
+
+
+def _write_manifest(out_arg: str, out: dict[str, Path], names: dict[str, str]) -> None:
+    """Records the files this run wrote, for the next run's :func:`_stale_outputs`. Best
+    effort: the outputs are in place already, and without a record the next run removes
+    nothing."""
+    from .io import atomic_write
+
+    files = {}
+    for key, path in out.items():
+        try:
+            st = path.lstat()
+        except OSError:
+            continue
+        if stat.S_ISREG(st.st_mode):
+            files[names[key]] = {"size": st.st_size, "mtime_ns": st.st_mtime_ns}
+    with (
+        contextlib.suppress(OSError, ValueError),
+        atomic_write(_manifest_path(out_arg), text=True) as f,
+    ):
+        f.write(json.dumps({"files": files}, indent=1) + "\n")
 
 
 def _same_file(a: Path, b: str) -> bool:
