@@ -272,3 +272,31 @@ def test_match_that_cannot_print_its_summary_fails_and_leaves_no_outputs(
         assert done.stderr.count("\n") == 1
         assert contents(out) == before
         assert sorted(p.name for p in out.iterdir()) == sorted([*before, MANIFEST])
+
+
+def test_a_killed_runs_staged_files_are_removed_by_the_next_run(
+    pair: tuple[Path, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A run killed outright (SIGKILL) leaves its staged files (hidden names with a random
+    token); the next run at the same --out removes those of match's names, and nothing that
+    only looks alike."""
+    out = tmp_path / "out"
+    out.mkdir()
+    left_behind = [
+        ".disparity.stereodepth-match-0123456789ab.pfm",
+        ".points.stereodepth-match-abcdef012345.ply",
+        ".depth-preview.stereodepth-match-00000000000f.png",
+    ]
+    alike = [
+        ".notes.stereodepth-match-0123456789ab.txt",  # not a name match writes
+        ".disparity.stereodepth-match-0123.pfm",  # not its token
+        "disparity.stereodepth-match-0123456789ab.pfm",  # not hidden
+        ".b-disparity.stereodepth-match-0123456789ab.pfm",  # another prefix's
+    ]
+    for name in left_behind + alike:
+        (out / name).write_bytes(b"x")
+    code, _, err = run(capsys, *pair, *RIG, "--no-preview", "-o", out)
+    assert code == 0, err
+    names = set(contents(out))
+    assert not names & set(left_behind)
+    assert set(alike) <= names

@@ -48,6 +48,7 @@ import contextlib
 import dataclasses
 import json
 import os
+import re
 import secrets
 import stat
 import sys
@@ -481,6 +482,7 @@ def run(args: argparse.Namespace) -> int:
         # every file and the summary are written: a run that fails or is stopped (Ctrl-C,
         # SIGTERM) leaves none of its outputs and the earlier run's set as it was, as a new
         # disparity beside an old depth would pass for one result.
+        _remove_killed_runs_files(args.out)
         staged = _staging_paths(out)
         try:
             _write_outputs(args, staged, result, rig, left_img, right_img)
@@ -580,6 +582,32 @@ def _staging_paths(out: dict[str, Path]) -> dict[str, Path]:
 
 
 _STAGING_MARKER = "stereodepth-match"
+
+
+def _remove_killed_runs_files(out: str) -> list[Path]:
+    """Removes the staged files a killed run (SIGKILL, a power cut) left at ``--out``: hidden
+    files named as :func:`_staging_paths` names them for one of :data:`OWNED_NAMES` (a random
+    token no other program writes). Returns what it removed."""
+    is_dir = out.endswith(("/", os.sep)) or Path(out).is_dir()
+    folder, prefix = (Path(out), "") if is_dir else (Path(out).parent, Path(out).name)
+    token = re.compile(r"\." + _STAGING_MARKER + r"-[0-9a-f]{12}$")
+    wanted = {(Path(prefix + n).stem, Path(n).suffix) for n in OWNED_NAMES}
+    removed: list[Path] = []
+    try:
+        entries = list(folder.iterdir())
+    except OSError:
+        return removed
+    for entry in entries:
+        name = entry.name
+        stem, suffix = Path(name[1:]).stem, Path(name).suffix
+        m = token.search(stem) if name.startswith(".") else None
+        if m is None or (stem[: m.start()], suffix) not in wanted:
+            continue
+        with contextlib.suppress(OSError):
+            if entry.is_file() and not entry.is_symlink():
+                entry.unlink()
+                removed.append(entry)
+    return removed
 
 
 #: The record of the files a run wrote, beside them: ``.stereodepth-match.json`` in an --out
