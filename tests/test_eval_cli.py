@@ -1323,3 +1323,28 @@ def test_unreadable_npy_is_one_line_naming_the_file(
     assert status == 2 and out == "", err
     assert err.count("\n") == 1 and err.startswith("stereodepth eval: error: "), err
     assert str(scenes_dir / "rds-a" / fragment) in err, err
+
+
+@pytest.mark.parametrize("layout", ["ours", "middlebury"])
+def test_a_scene_folder_without_its_right_image_is_refused_up_front(
+    scenes_dir: Path, capsys: pytest.CaptureFixture[str], layout: str
+) -> None:
+    """A folder with a scene's left image and ground truth but no right image was taken as a
+    scene, and the run failed on it with exit status 1 after matching the scenes before it."""
+    folder = scenes_dir / "zz-incomplete"
+    folder.mkdir()
+    left, _, gt = random_dot_pair(32, 64, [5], rgb=False, seed=3)
+    if layout == "ours":
+        write_png(folder / "left.png", left)
+        np.save(folder / "disp_gt.npy", gt)
+        missing, gt_name = "right.png", "disp_gt.npy"
+    else:
+        write_png(folder / "im0.png", left)
+        write_pfm(folder / "disp0GT.pfm", gt)
+        missing, gt_name = "im1.png", "disp0GT.pfm"
+    status, out, err = run_eval(capsys, str(scenes_dir), "--repeat", "1")
+    assert status == 2 and out == ""
+    assert f"holds {'left.png' if layout == 'ours' else 'im0.png'} and {gt_name} but not " in err
+    assert f"not {missing}: a scene folder holds all three" in err and err.count("\n") == 1
+    with pytest.raises(ValueError, match=f"but not {missing}"):
+        find_scenes(scenes_dir)

@@ -283,8 +283,20 @@ def _meta_max_disparity(path: Path) -> float | None:
     return number
 
 
+def _require_right(path: Path, right: str, left: str, gt: str) -> None:
+    """A folder with a scene's left image and ground truth but not its right image is an
+    incomplete scene: refused before any scene runs (it was taken as a scene, and the whole
+    run failed on it with exit status 1 after the scenes before it)."""
+    if not (path / right).is_file():
+        raise ValueError(
+            f"{str(path)!r} holds {left} and {gt} but not {right}: a scene folder holds all "
+            "three (add it, or move the folder out of DIR)"
+        )
+
+
 def _scene_at(path: Path) -> Scene | None:
     if (path / "left.png").is_file() and (path / "disp_gt.npy").is_file():
+        _require_right(path, "right.png", "left.png", "disp_gt.npy")
         mask = path / "mask_nonocc.npy"
         meta = path / "meta.json"
         return Scene(
@@ -298,6 +310,7 @@ def _scene_at(path: Path) -> Scene | None:
         )
     gts = [path / n for n in ("disp0GT.pfm", "disp0.pfm") if (path / n).is_file()]
     if (path / "im0.png").is_file() and gts:
+        _require_right(path, "im1.png", "im0.png", gts[0].name)
         max_disp = None
         calib_size = None
         if (path / "calib.txt").is_file():
@@ -325,7 +338,8 @@ def find_scenes(root: str | os.PathLike[str], patterns: Sequence[str] = ()) -> l
     """The scenes in ``root`` (its sub-folders in name order, or ``root`` itself when it is a
     scene), keeping those whose folder name matches one of the shell ``patterns`` if any are
     given. Raises ValueError when ``root`` is not a folder (or is empty: not the current
-    folder) or nothing matches, and TypeError for a ``root`` that is not a str or
+    folder), a folder holds a scene's left image and ground truth but not its right image,
+    or nothing matches, and TypeError for a ``root`` that is not a str or
     os.PathLike or ``patterns`` that are not a sequence of str (a str alone was taken as its
     characters, and a ``*`` among them matched every scene)."""
     from .io import _as_path
