@@ -296,6 +296,13 @@ NOT_ROTATION = r"must be a rotation \(R R\^T = I and det R = \+1 within 1e-05\)"
         ({"image_width": 0}, r"image_width, image_height must be two whole numbers > 0"),
         ({"image_width": 640.5}, r"image_width, image_height must be two whole numbers > 0"),
         ({"image_height": None}, r"image_width and image_height go together"),
+        # The rectifier's limit, with the file and the key (it named neither).
+        (
+            {"image_width": 10**20},
+            r"image_width, image_height must be at most 32000 x 32000 pixels, got "
+            r"\(100000000000000000000, 480\)",
+        ),
+        ({"image_height": 32001}, r"image_width, image_height must be at most 32000 x 32000"),
         ({"imageSize": "[ 640 ]"}, r"imageSize must be \(width, height\), got \[640\]"),
         (
             {"image_width": "wide"},

@@ -216,6 +216,10 @@ def _check_model(value: Any, where: str, key: str) -> str:
     return _MODEL_ALIASES[value.strip().lower()]
 
 
+#: The largest image side a calibration may give: the rectifier's and remap's limit.
+MAX_IMAGE_SIDE = 32000
+
+
 def _check_image_size(value: Any, where: str, key: str) -> tuple[int, int]:
     if isinstance(value, np.ndarray):
         value = value.reshape(-1).tolist()
@@ -228,6 +232,14 @@ def _check_image_size(value: Any, where: str, key: str) -> tuple[int, int]:
         if f is None or not (f.is_integer() and f > 0):
             raise _fail(where, f"{key} must be two whole numbers > 0, got {_shown(value)}")
         out.append(int(f))
+    if max(out) > MAX_IMAGE_SIDE:
+        # The rectifier's limit, said here with the file and the key (it was "calib.image_size
+        # must be at most 32000 x 32000 pixels", naming neither).
+        raise _fail(
+            where,
+            f"{key} must be at most {MAX_IMAGE_SIDE} x {MAX_IMAGE_SIDE} pixels, got "
+            f"{_shown(value)}",
+        )
     return out[0], out[1]
 
 
