@@ -41,7 +41,8 @@ are written to a temporary folder of the server's choosing. Matching runs in wor
 ``{"detail": [{"loc": ["body", field], "msg": ..., "type": ...}]}`` at its field, a body
 too large 413, a body not sent as ``application/json`` 415 (a form or text/plain POST is one
 any web site can make a browser send to this server), a missing extra (Pillow, matplotlib)
-503 with the install hint; none 500.
+503 with the install hint; none 500. A client that closes the connection before it has sent
+the whole body is dropped without an answer or a logged error.
 """
 
 from __future__ import annotations
@@ -846,18 +847,34 @@ def _not_json(request: Request) -> Response | None:
     )
 
 
+class _ClientGone(Exception):
+    """The client closed the connection before it had sent the whole body."""
+
+
+def _client_gone() -> Response:
+    """The answer to a client that left mid-upload: nobody reads it (the server drops it),
+    but the route ends as usual, without the traceback and 500 of ClientDisconnect."""
+    return Response(status_code=400)
+
+
 async def _read_body(request: Request, limit: int) -> bytes | None:
-    """The body, or None when it is larger than ``limit`` (read no further than that)."""
+    """The body, or None when it is larger than ``limit`` (read no further than that);
+    :class:`_ClientGone` when the client closes the connection before its end."""
+    from starlette.requests import ClientDisconnect
+
     declared = request.headers.get("content-length")
     if declared is not None and declared.isdigit() and int(declared) > limit:
         return None
     chunks: list[bytes] = []
     size = 0
-    async for chunk in request.stream():
-        size += len(chunk)
-        if size > limit:
-            return None
-        chunks.append(chunk)
+    try:
+        async for chunk in request.stream():
+            size += len(chunk)
+            if size > limit:
+                return None
+            chunks.append(chunk)
+    except ClientDisconnect:
+        raise _ClientGone from None
     return b"".join(chunks)
 
 
@@ -908,7 +925,10 @@ def make_router(limits: DepthMapLimits) -> APIRouter:
     async def depthmap(request: Request) -> Response:
         if (refused := _not_json(request)) is not None:
             return refused
-        data = await _read_body(request, limits.max_body_bytes)
+        try:
+            data = await _read_body(request, limits.max_body_bytes)
+        except _ClientGone:
+            return _client_gone()
         if data is None:
             return _error_response(
                 [
@@ -1039,7 +1059,10 @@ def add_calib_route(router: APIRouter) -> None:
     async def calib(request: Request) -> Response:
         if (refused := _not_json(request)) is not None:
             return refused
-        data = await _read_body(request, 200_000)
+        try:
+            data = await _read_body(request, 200_000)
+        except _ClientGone:
+            return _client_gone()
         if data is None:
             return _error_response(
                 [BadInput(["body", "calib"], "calib: the file is too large")], 413

@@ -1,0 +1,160 @@
+"""``stereodepth serve`` as a real process on a free loopback port, with real sockets and real
+signals: a client that leaves mid-upload does not make it print a traceback."""
+
+from __future__ import annotations
+
+import json
+import os
+import queue
+import re
+import signal
+import socket
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+pytest.importorskip("fastapi", reason="the web extra is not installed")
+pytest.importorskip("uvicorn", reason="the web extra is not installed")
+
+from stereodepth.web import serve
+
+#: The grace period of serve (seconds) for requests in flight.
+GRACE_S: float = getattr(serve, "GRACE_S", 3.0)
+
+CALIB = (
+    "cam0=[1000 0 100; 0 1000 80; 0 0 1]\ndoffs=0\nbaseline=100\nwidth=200\nheight=160\nndisp=64\n"
+)
+PYTHON_DIR = Path(__file__).resolve().parents[1] / "python"
+START_TIMEOUT_S = 30
+
+
+class Server:
+    """``stereodepth serve --port 0`` in a subprocess; its port from its first line."""
+
+    def __init__(self, *args: str) -> None:
+        env = {**os.environ, "PYTHONPATH": str(PYTHON_DIR)}
+        self.proc = subprocess.Popen(
+            [sys.executable, "-m", "stereodepth.cli", "serve", "--port", "0", *args],
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            text=True,
+            env=env,
+        )
+        lines: queue.Queue[str] = queue.Queue()
+        assert self.proc.stdout is not None
+        stdout = self.proc.stdout
+
+        def read() -> None:
+            for line in stdout:
+                lines.put(line)
+
+        self.reader = threading.Thread(target=read, daemon=True)
+        self.reader.start()
+        self.lines = lines
+        try:
+            first = lines.get(timeout=START_TIMEOUT_S)
+        except queue.Empty:
+            self.proc.kill()
+            raise AssertionError(f"the server did not start in {START_TIMEOUT_S} s") from None
+        found = re.search(r"http://([^\s/]+):(\d+)/", first)
+        assert found, first
+        self.port = int(found.group(2))
+
+    def stop(self, sig: int, timeout: float) -> tuple[int | None, float, str, str]:
+        """Sends ``sig``; the exit status (None: still running after ``timeout`` s, then
+        killed), the seconds it took, the rest of stdout and stderr."""
+        t0 = time.monotonic()
+        self.proc.send_signal(sig)
+        try:
+            code: int | None = self.proc.wait(timeout=timeout)
+        except subprocess.TimeoutExpired:
+            code = None
+            self.proc.kill()
+            self.proc.wait()
+        took = time.monotonic() - t0
+        assert self.proc.stderr is not None
+        err = self.proc.stderr.read()
+        self.reader.join(timeout=10)
+        out = []
+        while not self.lines.empty():
+            out.append(self.lines.get())
+        return code, took, "".join(out), err
+
+    def kill(self) -> None:
+        """Ends the process if it still runs, and closes its pipes."""
+        if self.proc.poll() is None:
+            self.proc.kill()
+            self.proc.wait()
+        self.reader.join(timeout=10)  # it ends at the end of the server's output
+        assert self.proc.stdout is not None and self.proc.stderr is not None
+        self.proc.stdout.close()
+        self.proc.stderr.close()
+
+
+def raw(port: int, request: bytes, *, read: bool = True) -> bytes:
+    """Sends ``request`` as is on a new connection; the whole answer (the server closes)."""
+    with socket.create_connection(("127.0.0.1", port), timeout=10) as s:
+        s.sendall(request)
+        if not read:
+            return b""
+        chunks = []
+        while True:
+            try:
+                chunk = s.recv(65536)
+            except TimeoutError:
+                break
+            if not chunk:
+                break
+            chunks.append(chunk)
+    return b"".join(chunks)
+
+
+def stalled_upload(port: int, path: str = "/api/depthmap", length: int = 100_000) -> socket.socket:
+    """A connection that sent the headers of a JSON POST and a few bytes of its body, and
+    then nothing more (kept open)."""
+    s = socket.create_connection(("127.0.0.1", port), timeout=10)
+    s.sendall(
+        f"POST {path} HTTP/1.1\r\nHost: 127.0.0.1:{port}\r\n"
+        f"Content-Type: application/json\r\nContent-Length: {length}\r\n\r\n".encode()
+        + b'{"left": "iVBO'
+    )
+    time.sleep(0.5)  # the server has read them and waits for the rest
+    return s
+
+
+def status_of(answer: bytes) -> int:
+    head = answer.split(b"\r\n", 1)[0].decode("latin-1")
+    found = re.match(r"HTTP/1\.[01] (\d{3})", head)
+    assert found, answer[:200]
+    return int(found.group(1))
+
+
+def body_of(answer: bytes) -> Any:
+    return json.loads(answer.split(b"\r\n\r\n", 1)[1])
+
+
+# --- 2. a client that leaves mid-upload -----------------------------------------------------------
+@pytest.mark.parametrize("path", ["/api/depthmap", "/api/calib"])
+def test_a_client_that_leaves_mid_upload_leaves_no_traceback(path: str) -> None:
+    server = Server()
+    try:
+        for _ in range(3):
+            stalled_upload(server.port, path, length=100).close()
+        time.sleep(0.5)
+        # The server still answers.
+        answer = raw(
+            server.port,
+            f"GET /api/fields HTTP/1.1\r\nHost: 127.0.0.1:{server.port}\r\n"
+            "Connection: close\r\n\r\n".encode(),
+        )
+        assert status_of(answer) == 200
+    finally:
+        code, _, _, err = server.stop(signal.SIGINT, timeout=GRACE_S + 10)
+        server.kill()
+    assert code == 0
+    assert "Traceback" not in err and "ClientDisconnect" not in err and "ERROR" not in err, err
