@@ -1,5 +1,6 @@
 """``stereodepth serve`` as a real process on a free loopback port, with real sockets and real
-signals: a client that leaves mid-upload does not make it print a traceback."""
+signals: a client that stalls or leaves mid-upload cannot hold the server or make it print a
+traceback."""
 
 from __future__ import annotations
 
@@ -136,6 +137,64 @@ def status_of(answer: bytes) -> int:
 
 def body_of(answer: bytes) -> Any:
     return json.loads(answer.split(b"\r\n\r\n", 1)[1])
+
+
+# --- 1. a stalled upload cannot hold the server ---------------------------------------------------
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM], ids=["SIGINT", "SIGTERM"])
+def test_a_stalled_upload_does_not_keep_the_server_from_stopping(sig: int) -> None:
+    server = Server()
+    stalled = stalled_upload(server.port)
+    try:
+        code, took, out, err = server.stop(sig, timeout=GRACE_S + 10)
+    finally:
+        stalled.close()
+        server.kill()
+    assert code is not None, err
+    assert took < GRACE_S + 5, took
+    assert "Traceback" not in err and "ERROR" not in err, err
+    assert "stopped" in out
+
+
+def test_a_second_ctrl_c_stops_at_once_without_a_traceback() -> None:
+    server = Server()
+    stalled = stalled_upload(server.port)
+    try:
+        server.proc.send_signal(signal.SIGINT)
+        time.sleep(0.3)
+        code, took, _, err = server.stop(signal.SIGINT, timeout=GRACE_S + 10)
+    finally:
+        stalled.close()
+        server.kill()
+    assert code is not None, err
+    assert took < GRACE_S, took
+    assert "Traceback" not in err and "ERROR" not in err, err
+
+
+def test_requests_in_flight_complete_within_the_grace_period() -> None:
+    """A client whose upload arrives during the grace period gets its answer."""
+    server = Server()
+    body = json.dumps({"calib": CALIB}).encode()
+    conn = socket.create_connection(("127.0.0.1", server.port), timeout=10)
+    try:
+        conn.sendall(
+            f"POST /api/calib HTTP/1.1\r\nHost: 127.0.0.1:{server.port}\r\n"
+            f"Content-Type: application/json\r\nContent-Length: {len(body)}\r\n\r\n".encode()
+            + body[:5]
+        )
+        time.sleep(0.3)
+        server.proc.send_signal(signal.SIGTERM)
+        time.sleep(0.5)
+        conn.sendall(body[5:])
+        answer = b""
+        while chunk := conn.recv(65536):
+            answer += chunk
+    finally:
+        conn.close()
+    code, _, _, err = server.stop(signal.SIGTERM, timeout=GRACE_S + 10)
+    server.kill()
+    assert status_of(answer) == 200, answer
+    assert body_of(answer)["baseline_mm"] == 100
+    assert code is not None and "Traceback" not in err, err
 
 
 # --- 2. a client that leaves mid-upload -----------------------------------------------------------

@@ -1,7 +1,10 @@
 """``stereodepth serve``: the calculator as a local web page (FastAPI app on uvicorn).
 
 Listens on 127.0.0.1 (this machine only) unless ``--host`` says otherwise, and prints where
-on start-up. ``--port 0`` takes any free port. Ctrl+C (or SIGTERM) stops it.
+on start-up. ``--port 0`` takes any free port. Ctrl+C (or SIGTERM) stops it: the requests
+in flight get :data:`GRACE_S` (3) seconds to finish, then the connections still open are
+closed (a depth map already being matched is finished first: its worker thread cannot be
+interrupted); a second Ctrl+C closes them at once.
 """
 
 from __future__ import annotations
@@ -18,6 +21,10 @@ DEFAULT_PORT = 8000
 # The depth-map view's upload limits (stereodepth.web.depthmap's defaults).
 DEFAULT_MAX_UPLOAD_MB = 20.0
 DEFAULT_MAX_MEGAPIXELS = 4.0
+#: Seconds that the requests in flight get to finish once the server is told to stop; then
+#: it closes every connection still open, so that a stalled or slow client (an upload that
+#: never ends, an answer never read) cannot keep it running.
+GRACE_S = 3.0
 
 
 def register(subparsers: Any) -> None:
@@ -106,6 +113,47 @@ def url_of(sock: socket.socket) -> str:
     return f"http://{host}:{port}/"
 
 
+def _server(uvicorn: Any, config: Any) -> Any:
+    """A ``uvicorn.Server`` whose shutdown gives the requests in flight :data:`GRACE_S`
+    seconds and then closes the connections still open (uvicorn's own waits for every
+    client to finish, however long it takes). A second signal closes them at once, where
+    uvicorn's cancelled the requests' tasks and logged each with a traceback."""
+
+    class Server(uvicorn.Server):  # type: ignore[misc]
+        hurry = False
+
+        def handle_exit(self, sig: int, frame: Any) -> None:
+            if self.should_exit:  # a second Ctrl-C or SIGTERM: stop waiting
+                self.hurry = True
+                return
+            super().handle_exit(sig, frame)
+
+        async def shutdown(self, sockets: list[socket.socket] | None = None) -> None:
+            import asyncio
+
+            dropper = asyncio.create_task(self._drop_connections_after_grace())
+            try:
+                await super().shutdown(sockets=sockets)
+            finally:
+                dropper.cancel()
+
+        async def _drop_connections_after_grace(self) -> None:
+            import asyncio
+
+            loop = asyncio.get_running_loop()
+            deadline = loop.time() + GRACE_S
+            while loop.time() < deadline and not self.hurry:
+                await asyncio.sleep(0.05)
+            # The client is gone for the request: its body ends (ClientDisconnect, which the
+            # routes answer quietly) and what it sends goes nowhere, so its task ends.
+            for connection in list(self.server_state.connections):
+                transport = getattr(connection, "transport", None)
+                if transport is not None:
+                    transport.abort()
+
+    return Server(config)
+
+
 def run(args: argparse.Namespace) -> int:
     """Serves until interrupted; returns the exit status."""
     try:
@@ -147,7 +195,7 @@ def run(args: argparse.Namespace) -> int:
     config = uvicorn.Config(
         create_app(**limits), log_level="warning", access_log=False, lifespan="off"
     )
-    server = uvicorn.Server(config)
+    server = _server(uvicorn, config)
     try:
         # uvicorn shuts down gracefully on Ctrl+C or SIGTERM, then raises the signal again.
         server.run(sockets=[sock])
