@@ -1,6 +1,6 @@
 """``stereodepth serve`` as a real process on a free loopback port, with real sockets and real
 signals: a client that stalls or leaves mid-upload cannot hold the server or make it print a
-traceback."""
+traceback, and either signal stops it with one line and exit status 0."""
 
 from __future__ import annotations
 
@@ -149,7 +149,7 @@ def test_a_stalled_upload_does_not_keep_the_server_from_stopping(sig: int) -> No
     finally:
         stalled.close()
         server.kill()
-    assert code is not None, err
+    assert code == 0, (code, err)
     assert took < GRACE_S + 5, took
     assert "Traceback" not in err and "ERROR" not in err, err
     assert "stopped" in out
@@ -165,7 +165,7 @@ def test_a_second_ctrl_c_stops_at_once_without_a_traceback() -> None:
     finally:
         stalled.close()
         server.kill()
-    assert code is not None, err
+    assert code == 0, (code, err)
     assert took < GRACE_S, took
     assert "Traceback" not in err and "ERROR" not in err, err
 
@@ -194,7 +194,7 @@ def test_requests_in_flight_complete_within_the_grace_period() -> None:
     server.kill()
     assert status_of(answer) == 200, answer
     assert body_of(answer)["baseline_mm"] == 100
-    assert code is not None and "Traceback" not in err, err
+    assert code == 0 and "Traceback" not in err, (code, err)
 
 
 # --- 2. a client that leaves mid-upload -----------------------------------------------------------
@@ -217,3 +217,23 @@ def test_a_client_that_leaves_mid_upload_leaves_no_traceback(path: str) -> None:
         server.kill()
     assert code == 0
     assert "Traceback" not in err and "ClientDisconnect" not in err and "ERROR" not in err, err
+
+
+# --- 3. signals and the exit status ---------------------------------------------------------------
+@pytest.mark.parametrize(
+    ("sig", "line"),
+    [
+        (signal.SIGINT, "stereodepth serve: stopped (Ctrl-C)"),
+        (signal.SIGTERM, "stereodepth serve: stopped (SIGTERM)"),
+    ],
+    ids=["SIGINT", "SIGTERM"],
+)
+def test_either_signal_stops_the_server_with_one_line_and_status_0(sig: int, line: str) -> None:
+    server = Server()
+    try:
+        code, _, out, err = server.stop(sig, timeout=GRACE_S + 10)
+    finally:
+        server.kill()
+    assert code == 0, (code, err)
+    assert out.strip() == line, out
+    assert err == "", err  # neither "terminated" nor "interrupted", nor a traceback

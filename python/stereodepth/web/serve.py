@@ -4,16 +4,21 @@ Listens on 127.0.0.1 (this machine only) unless ``--host`` says otherwise, and p
 on start-up. ``--port 0`` takes any free port. Ctrl+C (or SIGTERM) stops it: the requests
 in flight get :data:`GRACE_S` (3) seconds to finish, then the connections still open are
 closed (a depth map already being matched is finished first: its worker thread cannot be
-interrupted); a second Ctrl+C closes them at once.
+interrupted); a second Ctrl+C closes them at once. Either signal is the server's normal
+end: it prints one line, ``stereodepth serve: stopped (Ctrl-C)`` or ``stopped (SIGTERM)``,
+on stdout and exits with status 0 (not the command line's 130 and 143 for other commands).
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import ipaddress
+import signal
 import socket
 import sys
 import threading
+from collections.abc import Iterator
 from typing import Any
 
 DEFAULT_HOST = "127.0.0.1"
@@ -25,6 +30,37 @@ DEFAULT_MAX_MEGAPIXELS = 4.0
 #: it closes every connection still open, so that a stalled or slow client (an upload that
 #: never ends, an answer never read) cannot keep it running.
 GRACE_S = 3.0
+_STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM)
+_SIGNAL_NAMES: dict[int, str] = {signal.SIGINT: "Ctrl-C", signal.SIGTERM: "SIGTERM"}
+
+
+class _Stopped(Exception):
+    """A signal before the server ran (while the web extra loads)."""
+
+    def __init__(self, signum: int) -> None:
+        super().__init__(signum)
+        self.signum = signum
+
+
+@contextlib.contextmanager
+def _signals_stop() -> Iterator[None]:
+    """For the block's duration SIGINT and SIGTERM raise :class:`_Stopped` (the server,
+    once running, handles them itself). The command line's handlers (Ctrl-C's
+    KeyboardInterrupt, SIGTERM's ``Terminated``) would make a server's normal end an
+    'interrupted' (130) or 'terminated' (143). A no-op outside the main thread."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+
+    def stop(signum: int, frame: Any) -> None:
+        raise _Stopped(signum)
+
+    previous = {sig: signal.signal(sig, stop) for sig in _STOP_SIGNALS}
+    try:
+        yield
+    finally:
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
 
 
 def register(subparsers: Any) -> None:
@@ -121,12 +157,30 @@ def _server(uvicorn: Any, config: Any) -> Any:
 
     class Server(uvicorn.Server):  # type: ignore[misc]
         hurry = False
+        #: The signal that stopped the server (None: not a signal).
+        stopped_by: int | None = None
+
+        @contextlib.contextmanager
+        def capture_signals(self) -> Iterator[None]:
+            # uvicorn's raised the signal again once the server had stopped: KeyboardInterrupt
+            # for Ctrl-C, and for SIGTERM the command line's "terminated" and exit status 143.
+            # A signal is how a server ends; run() says which one stopped it.
+            if threading.current_thread() is not threading.main_thread():
+                yield
+                return
+            previous = {sig: signal.signal(sig, self.handle_exit) for sig in _STOP_SIGNALS}
+            try:
+                yield
+            finally:
+                for sig, handler in previous.items():
+                    signal.signal(sig, handler)
 
         def handle_exit(self, sig: int, frame: Any) -> None:
-            if self.should_exit:  # a second Ctrl-C or SIGTERM: stop waiting
+            if self.stopped_by is not None:  # a second Ctrl-C or SIGTERM: stop waiting
                 self.hurry = True
                 return
-            super().handle_exit(sig, frame)
+            self.stopped_by = sig
+            self.should_exit = True
 
         async def shutdown(self, sockets: list[socket.socket] | None = None) -> None:
             import asyncio
@@ -155,7 +209,17 @@ def _server(uvicorn: Any, config: Any) -> Any:
 
 
 def run(args: argparse.Namespace) -> int:
-    """Serves until interrupted; returns the exit status."""
+    """Serves until Ctrl-C or SIGTERM, then prints ``stopped (Ctrl-C)`` or ``stopped
+    (SIGTERM)`` and returns 0: a signal is a server's normal end."""
+    try:
+        with _signals_stop():
+            return _run(args)
+    except _Stopped as stop:  # before the server ran
+        print(f"stereodepth serve: stopped ({_SIGNAL_NAMES[stop.signum]})", flush=True)
+        return 0
+
+
+def _run(args: argparse.Namespace) -> int:
     try:
         import uvicorn
 
@@ -197,11 +261,9 @@ def run(args: argparse.Namespace) -> int:
     )
     server = _server(uvicorn, config)
     try:
-        # uvicorn shuts down gracefully on Ctrl+C or SIGTERM, then raises the signal again.
         server.run(sockets=[sock])
-    except KeyboardInterrupt:
-        pass
     finally:
         sock.close()
-    print("stereodepth serve: stopped", flush=True)
+    how = _SIGNAL_NAMES.get(server.stopped_by)
+    print(f"stereodepth serve: stopped{f' ({how})' if how else ''}", flush=True)
     return 0
