@@ -1,6 +1,7 @@
 """``stereodepth serve`` as a real process on a free loopback port, with real sockets and real
 signals: a client that stalls or leaves mid-upload cannot hold the server or make it print a
-traceback, and either signal stops it with one line and exit status 0."""
+traceback, either signal stops it with one line and exit status 0, and a request whose Host
+is not this server (DNS rebinding) is refused with 400."""
 
 from __future__ import annotations
 
@@ -237,3 +238,81 @@ def test_either_signal_stops_the_server_with_one_line_and_status_0(sig: int, lin
     assert code == 0, (code, err)
     assert out.strip() == line, out
     assert err == "", err  # neither "terminated" nor "interrupted", nor a traceback
+
+
+# --- 4. the Host header -------------------------------------------------------------------------
+def get(port: int, host: str | None, http: str = "1.1", path: str = "/api/fields") -> bytes:
+    head = f"GET {path} HTTP/{http}\r\n"
+    if host is not None:
+        head += f"Host: {host}\r\n"
+    return raw(port, (head + "Connection: close\r\n\r\n").encode())
+
+
+@pytest.fixture(scope="module")
+def loopback_server() -> Any:
+    server = Server()
+    yield server
+    server.stop(signal.SIGINT, timeout=GRACE_S + 10)
+    server.kill()
+
+
+@pytest.mark.parametrize(
+    "host", ["127.0.0.1:{port}", "localhost:{port}", "LocalHost:{port}", "[::1]:{port}"]
+)
+def test_a_loopback_host_is_answered(loopback_server: Server, host: str) -> None:
+    answer = get(loopback_server.port, host.format(port=loopback_server.port))
+    assert status_of(answer) == 200, answer[:300]
+
+
+@pytest.mark.parametrize(
+    "host",
+    [
+        "evil.example.com:{port}",
+        "evil.example.com",
+        "127.0.0.1:{other}",
+        "127.0.0.1",
+        "localhost.evil.example.com:{port}",
+        "10.0.0.1:{port}",
+        "",
+    ],
+)
+def test_another_host_is_refused_with_400(loopback_server: Server, host: str) -> None:
+    port = loopback_server.port
+    shown = host.format(port=port, other=port + 1)
+    for path in ("/api/fields", "/", "/api/calc?baseline_mm=1&focal_px=1"):
+        answer = get(port, shown, path=path)
+        assert status_of(answer) == 400, answer[:300]
+        (item,) = body_of(answer)["detail"]
+        assert item["loc"] == ["header", "host"]
+        assert repr(shown) in item["msg"] and "\n" not in item["msg"], item
+        assert f"127.0.0.1:{port}" in item["msg"]
+    # The POST the rebinding page would make: refused before its body is read.
+    answer = raw(
+        port,
+        f"POST /api/depthmap HTTP/1.1\r\nHost: {shown}\r\nContent-Type: application/json\r\n"
+        'Content-Length: 15\r\nConnection: close\r\n\r\n{"sample":true}'.encode(),
+    )
+    assert status_of(answer) == 400
+
+
+def test_a_request_without_host_is_refused(loopback_server: Server) -> None:
+    answer = get(loopback_server.port, None, http="1.0")  # HTTP/1.0 may omit it
+    assert status_of(answer) == 400
+    (item,) = body_of(answer)["detail"]
+    assert item["loc"] == ["header", "host"] and "no Host header" in item["msg"], item
+    answer = get(loopback_server.port, None, http="1.1")  # HTTP/1.1 must have it (h11)
+    assert status_of(answer) == 400
+
+
+def test_a_server_on_every_interface_answers_its_addresses_not_other_names() -> None:
+    server = Server("--host", "0.0.0.0")
+    try:
+        port = server.port
+        for host in (f"127.0.0.1:{port}", f"localhost:{port}", f"192.0.2.7:{port}"):
+            assert status_of(get(port, host)) == 200, host
+        for host in (f"evil.example.com:{port}", f"192.0.2.7:{port + 1}"):
+            assert status_of(get(port, host)) == 400, host
+    finally:
+        code, _, _, err = server.stop(signal.SIGINT, timeout=GRACE_S + 10)
+        server.kill()
+    assert code == 0, err
