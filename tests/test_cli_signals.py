@@ -19,9 +19,12 @@ pytest.importorskip("PIL", reason="reading images needs Pillow (the batch extra)
 
 from PIL import Image
 
+import stereodepth
 from stereodepth.sample import sample_pair
 
-PYTHON_DIR = Path(__file__).resolve().parents[1] / "python"
+#: Where this process imported stereodepth from (the source tree with an in-place build, or
+#: site-packages after `pip install .`), for the child processes to import the same.
+PYTHON_DIR = Path(stereodepth.__file__).resolve().parents[1]
 
 #: Runs ``main(argv)`` with ``module.attribute`` wrapped: the wrapper prints READY on stderr,
 #: then sleeps ``pause`` seconds before calling the original (the signal lands in the sleep).
@@ -61,10 +64,15 @@ def signal_when_ready(proc: subprocess.Popen[str], sig: int) -> tuple[int, str, 
     deadline = time.monotonic() + 120
     while True:
         line = proc.stderr.readline()
-        assert line, f"the command ended before READY: {proc.wait()}"
+        if not line or time.monotonic() > deadline:
+            # Say why, and close the pipes (left open, they were reported as ResourceWarnings
+            # of whatever test ran next).
+            if line:
+                proc.kill()
+            _, err = proc.communicate(timeout=120)
+            raise AssertionError(f"the command ended before READY ({proc.returncode}): {err}")
         if line.strip() == "READY":
             break
-        assert time.monotonic() < deadline
     proc.send_signal(sig)
     out, err = proc.communicate(timeout=120)
     return proc.returncode, out, err

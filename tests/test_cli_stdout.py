@@ -14,9 +14,12 @@ pytest.importorskip("PIL", reason="reading images needs Pillow (the batch extra)
 
 from PIL import Image
 
+import stereodepth
 from stereodepth.sample import sample_pair
 
-PYTHON_DIR = Path(__file__).resolve().parents[1] / "python"
+#: Where this process imported stereodepth from (the source tree with an in-place build, or
+#: site-packages after `pip install .`), for the child processes to import the same.
+PYTHON_DIR = Path(stereodepth.__file__).resolve().parents[1]
 RIG = ["--focal-px", "300", "--baseline-mm", "50", "--threads", "1"]
 
 

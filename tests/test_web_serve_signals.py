@@ -23,6 +23,7 @@ import pytest
 pytest.importorskip("fastapi", reason="the web extra is not installed")
 pytest.importorskip("uvicorn", reason="the web extra is not installed")
 
+import stereodepth
 from stereodepth.web import serve
 
 #: The grace period of serve (seconds) for requests in flight.
@@ -31,7 +32,9 @@ GRACE_S: float = getattr(serve, "GRACE_S", 3.0)
 CALIB = (
     "cam0=[1000 0 100; 0 1000 80; 0 0 1]\ndoffs=0\nbaseline=100\nwidth=200\nheight=160\nndisp=64\n"
 )
-PYTHON_DIR = Path(__file__).resolve().parents[1] / "python"
+#: Where this process imported stereodepth from (the source tree with an in-place build, or
+#: site-packages after `pip install .`), for the child processes to import the same.
+PYTHON_DIR = Path(stereodepth.__file__).resolve().parents[1]
 START_TIMEOUT_S = 30
 
 

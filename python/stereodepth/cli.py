@@ -7,7 +7,7 @@ the message names the option as the user typed it (``--subpixel-px``, not the li
 ``--plot``, say) or a file that cannot be written prints one line and exits with 1. Ctrl-C
 prints "interrupted" and exits with 130; SIGTERM (``timeout``, ``kill``) is handled as
 Ctrl-C for the command's duration, through the same clean-up, then prints "terminated" and
-exits with 143.
+exits with 143; except ``serve``, for which either signal is its normal end ("stopped", 0).
 """
 
 from __future__ import annotations

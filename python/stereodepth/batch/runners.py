@@ -108,11 +108,17 @@ def _run_embedded(
     futures: dict[Any, int] = {}
     handled: set[Any] = set()
     try:
-        # Submitted inside the try: a Ctrl-C (or SIGTERM) while the pairs were submitted
-        # left the pairs already running unwatched, reported as cancelled, and writing their
-        # files after the report.
-        for i, p in todo:
-            futures[pool.submit(process_pair, p, options, threads)] = i
+        # Submitted inside the try, with Ctrl-C and SIGTERM held until every future is in
+        # `futures`: one that landed inside pool.submit (after a worker had started its pair,
+        # before the future was recorded) left that pair running unwatched, reported as
+        # cancelled while it wrote its files. A signal held meanwhile is raised again here.
+        from ..cli import signals_held
+
+        with signals_held() as caught:
+            for i, p in todo:
+                futures[pool.submit(process_pair, p, options, threads)] = i
+        for sig in dict.fromkeys(caught):
+            signal.raise_signal(sig)
         pending = set(futures)
         while pending:
             finished, pending = wait(pending, timeout=0.5, return_when=FIRST_COMPLETED)
