@@ -86,11 +86,13 @@ def _sigterm_as_interrupt() -> Iterator[None]:
 
 
 @contextlib.contextmanager
-def signals_held() -> Iterator[list[int]]:
-    """For the block's duration SIGINT and SIGTERM are only recorded in the yielded list,
-    not acted on: for a step that must not stop halfway (renaming a finished set of outputs
-    into place). The caller decides what a recorded signal means afterwards. A no-op outside
-    the main thread."""
+def signals_held(
+    signals: tuple[int, ...] = (signal.SIGINT, signal.SIGTERM),
+) -> Iterator[list[int]]:
+    """For the block's duration ``signals`` (SIGINT and SIGTERM) are only recorded in the
+    yielded list, not acted on: for a step that must not stop halfway (renaming a finished
+    set of outputs into place, submitting batch's pairs, starting a Dask cluster). The caller
+    decides what a recorded signal means afterwards. A no-op outside the main thread."""
     caught: list[int] = []
     if threading.current_thread() is not threading.main_thread():
         yield caught
@@ -99,7 +101,7 @@ def signals_held() -> Iterator[list[int]]:
     def record(signum: int, frame: Any) -> None:
         caught.append(signum)
 
-    previous = {sig: signal.signal(sig, record) for sig in (signal.SIGINT, signal.SIGTERM)}
+    previous = {sig: signal.signal(sig, record) for sig in signals}
     try:
         yield caught
     finally:

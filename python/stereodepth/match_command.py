@@ -694,6 +694,7 @@ def _commit(staged: dict[str, Path], out: dict[str, Path], stale: list[Path]) ->
     with Ctrl-C and SIGTERM held meanwhile: once this starts the run completes, and counts as
     done (a signal that came meanwhile is dropped)."""
     from .cli import signals_held
+    from .io import _fsync_dir as io_fsync_dir
 
     with signals_held():
         done: list[Path] = []
@@ -716,17 +717,7 @@ def _commit(staged: dict[str, Path], out: dict[str, Path], stale: list[Path]) ->
                 path.unlink()
         for folder in {p.parent for p in done}:
             with contextlib.suppress(OSError):
-                _fsync_dir(folder)
-
-
-def _fsync_dir(folder: Path) -> None:
-    if os.name != "posix":  # pragma: no cover
-        return
-    fd = os.open(folder, os.O_RDONLY)
-    try:
-        os.fsync(fd)
-    finally:
-        os.close(fd)
+                io_fsync_dir(folder)
 
 
 def _write_outputs(

@@ -454,22 +454,6 @@ def _sigint_handled_by(handler: Any) -> Iterator[None]:
 
 
 @contextlib.contextmanager
-def _sigterm_held() -> Iterator[list[int]]:
-    """SIGTERM is only recorded in the yielded list for the block's duration (while a local
-    cluster starts, when a KeyboardInterrupt must not land in Dask's calls); the previous
-    handler comes back after. A no-op outside the main thread."""
-    caught: list[int] = []
-    if threading.current_thread() is not threading.main_thread():
-        yield caught
-        return
-    previous = signal.signal(signal.SIGTERM, lambda signum, frame: caught.append(signum))
-    try:
-        yield caught
-    finally:
-        signal.signal(signal.SIGTERM, previous)
-
-
-@contextlib.contextmanager
 def _ctrl_c_witness() -> Iterator[Callable[[], bool]]:
     """A small process of this process group that a Ctrl-C ends, for a block during which
     this process ignores SIGINT (while a local cluster starts: a Ctrl-C then was lost, and the
@@ -531,6 +515,8 @@ def _sigint_as_flag() -> Iterator[threading.Event]:
 def _dask_client(
     scheduler: str | None, workers: int | None, threads: int | None
 ) -> Iterator[tuple[Any, str, int | None]]:
+    from ..cli import signals_held
+
     try:
         from distributed import Client, LocalCluster
     except ImportError as exc:  # pragma: no cover - depends on the environment
@@ -558,7 +544,7 @@ def _dask_client(
     # SIGTERM (stereodepth's main handles it as Ctrl-C) is held the same way meanwhile.
     with (
         _ctrl_c_witness() as witness,
-        _sigterm_held() as sigterm,
+        signals_held((signal.SIGTERM,)) as sigterm,
         _sigint_handled_by(signal.SIG_IGN),
     ):
         cluster = LocalCluster(  # type: ignore[no-untyped-call]
