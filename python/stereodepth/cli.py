@@ -389,9 +389,9 @@ def _calc(args: argparse.Namespace) -> int:
         if out.suffix.lower() not in FORMATS:
             raise UsageError(f"--plot must name a .png, .svg or .pdf file, got {args.plot!r}")
         if not out.parent.is_dir():
-            from .io import folder_fault
+            from .io import no_folder_reason
 
-            why = folder_fault(out) or f"the folder {str(out.parent)!r} cannot be read"
+            why = no_folder_reason(out)
             raise UsageError(f"--plot: {why}, got {args.plot!r}")
         if out.is_dir():
             raise UsageError(f"--plot must name a file, got the folder {args.plot!r}")

@@ -347,9 +347,9 @@ def save_colorized(
     if out.suffix.lower() != ".png":
         raise ValueError(f"path must end in .png, got {str(out)!r}")
     if not out.parent.is_dir():
-        from .io import folder_fault
+        from .io import no_folder_reason
 
-        why = folder_fault(out) or f"the folder {str(out.parent)!r} cannot be read"
+        why = no_folder_reason(out)
         raise ValueError(f"path's folder must exist: {why}, got {str(out)!r}")
     for name, text in (("quantity", quantity), ("unit", unit)):
         if not isinstance(text, str):

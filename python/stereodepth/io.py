@@ -327,6 +327,13 @@ def folder_fault(target: str | os.PathLike[str]) -> str | None:
     return None
 
 
+def no_folder_reason(target: str | os.PathLike[str]) -> str:
+    """For a writer whose folder check failed: :func:`folder_fault`'s reason, or that the
+    folder cannot be read (a permission the process lacks)."""
+    folder = Path(os.path.abspath(target)).parent
+    return folder_fault(target) or f"the folder {str(folder)!r} cannot be read"
+
+
 def _refuse_read_only(target: Path, p: Path) -> None:
     """PermissionError naming ``p`` when ``target`` is a file without write permission.
 

@@ -159,10 +159,16 @@ def register(subparsers: Any) -> None:
     p.set_defaults(func=run)
 
 
+def _out_is_folder(out: str) -> bool:
+    """Whether ``--out`` names a folder (an existing one, or a path ending in a separator),
+    rather than a prefix of the file names."""
+    return out.endswith(("/", os.sep)) or Path(out).is_dir()
+
+
 def _missing_folders(out: str) -> list[Path]:
     """The folders :func:`output_paths` would make for ``out`` (a folder that does not exist
     yet and its missing parents), deepest first; none for a prefix."""
-    if not out.endswith(("/", os.sep)) and not Path(out).is_dir():
+    if not _out_is_folder(out):
         return []
     missing = []
     folder = Path(out).absolute()
@@ -182,7 +188,7 @@ def output_paths(out: str, names: list[str]) -> dict[str, Path]:
         problem = name_too_long(part)
         if problem is not None:
             raise _Usage(f"--out: {problem}")
-    is_dir = out.endswith(("/", os.sep)) or Path(out).is_dir()
+    is_dir = _out_is_folder(out)
     if is_dir:
         folder = Path(out)
         if folder.exists() and not folder.is_dir():
@@ -588,7 +594,7 @@ def _remove_killed_runs_files(out: str) -> list[Path]:
     """Removes the staged files a killed run (SIGKILL, a power cut) left at ``--out``: hidden
     files named as :func:`_staging_paths` names them for one of :data:`OWNED_NAMES` (a random
     token no other program writes). Returns what it removed."""
-    is_dir = out.endswith(("/", os.sep)) or Path(out).is_dir()
+    is_dir = _out_is_folder(out)
     folder, prefix = (Path(out), "") if is_dir else (Path(out).parent, Path(out).name)
     token = re.compile(r"\." + _STAGING_MARKER + r"-[0-9a-f]{12}$")
     wanted = {(Path(prefix + n).stem, Path(n).suffix) for n in OWNED_NAMES}
@@ -617,7 +623,7 @@ MANIFEST_NAME = "stereodepth-match.json"
 
 def _manifest_path(out: str) -> Path:
     """Where the record of ``--out``'s last run lies."""
-    if out.endswith(("/", os.sep)) or Path(out).is_dir():
+    if _out_is_folder(out):
         return Path(out) / f".{MANIFEST_NAME}"
     prefix = Path(out)
     return prefix.with_name(f".{prefix.name}{MANIFEST_NAME}")
@@ -638,7 +644,7 @@ def _stale_outputs(args: argparse.Namespace, names: dict[str, str]) -> list[Path
     if not isinstance(files, dict):
         return []
     written = set(names.values())
-    is_dir = args.out.endswith(("/", os.sep)) or Path(args.out).is_dir()
+    is_dir = _out_is_folder(args.out)
     inputs = [v for v in (args.left, args.right, args.calib, args.calib_right) if v is not None]
     stale = []
     for name in OWNED_NAMES:

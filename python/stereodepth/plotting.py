@@ -146,9 +146,9 @@ def save_charts(
     out = Path(path)
     fmt = _format(out)
     if not out.parent.is_dir():
-        from .io import folder_fault
+        from .io import no_folder_reason
 
-        why = folder_fault(out) or f"the folder {str(out.parent)!r} cannot be read"
+        why = no_folder_reason(out)
         raise ValueError(f"the chart file's folder must exist: {why}, got {str(out)!r}")
     if not 10 <= check.integer("dpi", dpi, minimum=10) <= 1200:
         raise ValueError(f"dpi must be an integer from 10 to 1200, got {dpi!r}")

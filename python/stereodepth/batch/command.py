@@ -370,9 +370,9 @@ def _report_path(args: argparse.Namespace, out_dir: Path) -> Path:
     folder = report.parent
     if folder.resolve() != out_dir.resolve():
         if not folder.is_dir():
-            from ..io import folder_fault
+            from ..io import no_folder_reason
 
-            why = folder_fault(report) or f"the folder {folder} cannot be read"
+            why = no_folder_reason(report)
             raise UsageError(f"--report {report}: {why}")
         if not os.access(folder, os.W_OK | os.X_OK):
             raise UsageError(f"--report {report}: cannot write in {folder}")
