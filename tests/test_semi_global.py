@@ -380,7 +380,12 @@ def test_candidates_outside_the_image_never_win() -> None:
         speckle_window=0,
     )
     x = np.arange(50)
-    assert (d <= x[None, :]).all()
+    # Columns 0 and 1 have one and two candidates inside the image, none more than one
+    # disparity from the other: no rival to tell the winner from, NaN (border="clip").
+    assert np.isnan(d[:, :2]).all()
+    # Column 2 (candidates 0, 1, 2) loses a winner of 1 the same way.
+    assert ((d[:, 2] == 0) | (d[:, 2] == 2) | np.isnan(d[:, 2])).all()
+    assert (d[:, 3:] <= x[None, 3:]).all()
 
 
 # ------------------------------------------------------------------------------------------

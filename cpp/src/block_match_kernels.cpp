@@ -21,6 +21,7 @@
 // Every path computes the same integers, and the floating-point steps use the same IEEE
 // operations in the same order as the numpy oracle.
 #include "block_match_kernels.hpp"
+#include "band_rule.hpp"
 
 #include <algorithm>
 #include <cmath>
@@ -1722,6 +1723,7 @@ void row_pass(const RowCtx& c) {
   if (!c.first_pass_only) decide_generic(c);
   if (c.clip_border) border_band(c);
 #endif
+  if (c.clip_border && !c.first_pass_only) drop_unrivalled(c.drow, c.crow, c.cols, c.min_d, c.nd);
 }
 
 // ------------------------------------------------------------------------------------------

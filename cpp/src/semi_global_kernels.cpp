@@ -11,6 +11,7 @@
 #endif
 
 #include "semi_global_kernels.hpp"
+#include "band_rule.hpp"
 
 #include <algorithm>
 #include <array>
@@ -470,6 +471,7 @@ void decide_row(const DecideArgs& a, const uint16_t* s, float* disp, float* conf
                              : 0.0f;
     }
   }
+  if (a.clip_border) drop_unrivalled(disp, conf, cols, dmin, nd);
 }
 
 // ------------------------------------------------------------------------------------------
@@ -1625,6 +1627,7 @@ inline void decide_fused(const FusedRowArgs& a) {
                                : 0.0f;
     }
   }
+  if (d.clip_border) drop_unrivalled(a.disp, a.conf, cols, dmin, nd);
 }
 
 template <class V, bool kVertical, bool kBase>

@@ -224,6 +224,10 @@ def block_match(
     far = np.abs(ks[None, None, :] - kbest[..., None]) > 1
     second = np.where(far, agg_in, sentinel).min(axis=2)
     has_second = second < sentinel
+    if o.border == "clip":
+        # The band's pixels whose candidates inside the image all lie within one disparity of
+        # the winner (at most three, next to the edge): nothing to tell the winner from.
+        ok &= has_second | cand_in.all(axis=2)
     if o.uniqueness_factor > 0:
         # best * factor may overflow to inf (a ratio near 1e308): no second cost passes then
         with np.errstate(over="ignore"):

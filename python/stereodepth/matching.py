@@ -45,9 +45,11 @@ Steps, in the kernel and in the oracle alike:
      right image (the left ``min_disparity + num_disparities - 1`` columns, and for a negative
      ``min_disparity`` the right ``-min_disparity`` ones) is matched over the disparities ``d``
      whose ``x - d`` lies in ``[0, W)``; the others never win, count for neither the
-     uniqueness check nor the sub-pixel fit (which needs both neighbours inside), and the
-     pixel is NaN only when no ``d`` is inside. ``border="opencv"`` makes every such pixel
-     NaN, as OpenCV's StereoBM and StereoSGBM do;
+     uniqueness check nor the sub-pixel fit (which needs both neighbours inside). The pixel
+     is NaN when no ``d`` is inside, or when every ``d`` inside lies within one disparity of
+     the winner (no second-best cost to tell the winner from: the first two or three
+     columns, whose true match has mostly left the right image). ``border="opencv"`` makes
+     every such pixel NaN, as OpenCV's StereoBM and StereoSGBM do;
    - texture: the block sum of ``min(|sobel_x|, 31)`` (the clipped gradient, on the same scale
      as the SAD prefilter) must be ``>= texture_threshold * block_size**2``, so
      ``texture_threshold`` is a mean gradient per pixel in grey levels (of 0..255; for uint16,
@@ -680,7 +682,8 @@ def block_match(
         costs mean the same from frame to frame. ValueError for uint8 images.
     border
         ``"clip"``: pixels near the left edge, whose search range leaves the right image, are
-        matched over the disparities inside it; ``"opencv"``: they are NaN, as OpenCV's.
+        matched over the disparities inside it (NaN where those leave the winner no rival
+        more than one disparity away); ``"opencv"``: they are NaN, as OpenCV's.
 
     Returns
     -------

@@ -23,9 +23,11 @@ Steps, in the kernel and in the oracle alike:
 3. The border band (``border="clip"``, the default): a candidate ``d`` whose right pixel
    ``x - d`` lies outside the right image costs the most a cost can be
    (``16 * block_size**2``) and never wins; a pixel is matched over the candidates that lie
-   inside the image, and is NaN only when none does. ``border="opencv"`` makes every pixel
-   whose full search range leaves the right image NaN, as OpenCV does (the leftmost
-   ``min_disparity + num_disparities - 1`` columns).
+   inside the image, and is NaN when none does or when every one inside lies within one
+   disparity of the winner (step 5: no second-best sum to tell it from; the first two or
+   three columns). ``border="opencv"`` makes every pixel whose full search range leaves
+   the right image NaN, as OpenCV does (the leftmost ``min_disparity + num_disparities - 1``
+   columns).
 4. Paths: for each direction r (``paths=4``: from the left, the right, above and below;
    ``paths=8`` adds the four diagonals; ``paths=3``, one pass over the image: from the left,
    the right and above, the path from above starting again at the first row of each stripe,
@@ -514,7 +516,8 @@ def semi_global_match(
         it off.
     border
         ``"clip"``: pixels near the image's left edge are matched over the disparities whose
-        right pixel lies in the image; ``"opencv"``: those pixels are NaN, as OpenCV's.
+        right pixel lies in the image (NaN where those leave the winner no rival more than
+        one disparity away); ``"opencv"``: those pixels are NaN, as OpenCV's.
     fill
         Fill the pixels left NaN with the smaller of the nearest valid disparities to their
         left and right on the row (background interpolation; off by default).
