@@ -84,10 +84,11 @@ import os
 import statistics
 import sys
 import time
+import tokenize
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Any
+from typing import Any, BinaryIO
 
 import numpy as np
 
@@ -240,12 +241,18 @@ class Scene:
 
 
 def _load_npy(path: Path) -> np.ndarray:
-    """A ``.npy`` array (no pickles), or ValueError naming the file: numpy's own errors for
-    an empty, truncated or foreign file name no file (an empty one raised EOFError, a
-    traceback)."""
+    """A ``.npy`` array (no pickles), or ValueError naming the file and what is wrong with it.
+
+    The file must hold exactly the bytes its header's dtype and shape give after the header:
+    numpy read a padded file without a word (the stray bytes ignored), took a truncated one's
+    header at its word (a damaged shape made it allocate terabytes: MemoryError), raised
+    tokenize's TokenError for a damaged header, EOFError for an empty file, and named no file
+    in its other errors."""
     try:
         with open(path, "rb") as f:
             head = f.read(6)
+            if head == b"\x93NUMPY":
+                _check_npy_size(path, f)
     except OSError as exc:
         raise ValueError(f"{path}: not a readable .npy array ({exc})") from None
     # numpy takes any other file for a pickle, and says it "contains pickled data".
@@ -259,6 +266,44 @@ def _load_npy(path: Path) -> np.ndarray:
         arr.close()
         raise ValueError(f"{path}: not a .npy array (an .npz archive)")
     return arr
+
+
+def _check_npy_size(path: Path, f: BinaryIO) -> None:
+    """Reads the header of the open ``.npy`` file ``f`` and checks the file's size against
+    it: ValueError naming ``path`` for a header numpy cannot parse, a negative dimension, or
+    fewer or more bytes after the header than its dtype and shape give. An array of Python
+    objects (pickled: no fixed size) is left to np.load, which refuses it."""
+    from numpy.lib import format as npy
+
+    f.seek(0)
+    try:
+        version = npy.read_magic(f)
+        if version == (1, 0):
+            shape, _, dtype = npy.read_array_header_1_0(f)
+        elif version == (2, 0):
+            shape, _, dtype = npy.read_array_header_2_0(f)
+        else:  # 3.0 is for structured arrays with non-Latin-1 field names, never read here
+            raise ValueError(
+                f"format version {version[0]}.{version[1]}, expected 1.0 or 2.0 "
+                "(a plain float or bool array)"
+            )
+    except (ValueError, SyntaxError, tokenize.TokenError, EOFError) as exc:
+        # TokenError's str is its args tuple: ('EOF in multi-line statement', (2, 0))
+        reason = exc.args[0] if isinstance(exc, tokenize.TokenError) and exc.args else exc
+        raise ValueError(f"{path}: not a readable .npy array (its header: {reason})") from None
+    if dtype.hasobject:
+        return
+    if any(n < 0 for n in shape):
+        raise ValueError(f"{path}: not a readable .npy array (its header gives shape {shape})")
+    header = f.tell()
+    held = os.fstat(f.fileno()).st_size - header
+    data = math.prod(shape) * dtype.itemsize
+    if held != data:
+        what = "truncated" if held < data else f"followed by {held - data} stray byte(s)"
+        raise ValueError(
+            f"{path}: .npy array {what}: its header gives {dtype} {shape}, {data} bytes of "
+            f"data, but the file holds {held} bytes after its {header}-byte header"
+        )
 
 
 def _meta_max_disparity(path: Path) -> float | None:
