@@ -1,10 +1,11 @@
 """``stereodepth eval`` on damaged or unusual inputs: .npy files whose size disagrees with
-their header."""
+their header; OpenCV's error messages kept whole, on one line."""
 
 from __future__ import annotations
 
 import io
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -123,3 +124,63 @@ def test_npy_of_the_right_size_is_read(scene: Path) -> None:
             f.write(b"\0")
         with pytest.raises(ValueError, match="followed by 1 stray byte"):
             _load_npy(path)
+
+
+# --------------------------------------------------------------------------------------------
+# OpenCV's errors
+
+
+def opencv_error(call: Any) -> Any:
+    """The cv2.error that ``call()`` raises (skips when this OpenCV does not raise)."""
+    cv2 = pytest.importorskip("cv2")
+    try:
+        call()
+    except cv2.error as exc:
+        return exc
+    pytest.skip("this OpenCV does not raise here")
+
+
+def test_opencv_error_keeps_its_explanation_on_one_line(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """SGBM's error for images too narrow for the search range says why on its second line
+    and gives the values on the next ones: only the last ("'...width/2' is 2") was kept."""
+    cv2 = pytest.importorskip("cv2")
+    left, right = textured_pair(32, 34, 5, seed=2)  # 34 - 32 disparities <= block size 5 // 2
+    folder = write_scene(tmp_path / "narrow", left, right, 5.0)
+    sgbm = cv2.StereoSGBM_create(minDisparity=0, numDisparities=32, blockSize=5, P1=200, P2=800)
+    exc = opencv_error(lambda: sgbm.compute(left, right))
+    explanation = [line.lstrip(">").strip() for line in exc.err.strip().splitlines()]
+    assert len(explanation) > 1  # the case: several lines
+    status, out, err = run_eval(
+        capsys, str(folder), "--method", "opencv-sgbm", "--num-disparities", "32", "--repeat", "1"
+    )
+    assert status == 2 and out == ""
+    assert err.startswith("stereodepth eval: error: scene narrow: opencv-sgbm: opencv-sgbm ")
+    assert err.count("\n") == 1, err
+    for text in explanation:
+        assert text and text in err, (text, err)
+    assert f"({exc.code}:" in err and f"in function '{exc.func}'" in err
+    assert exc.file not in err  # the source location left out
+
+
+def test_opencv_message_forms() -> None:
+    """One line each: the code, kind, check and function of a one-line error, without
+    OpenCV's version and source file; the bindings' lines below it after ": "."""
+    from stereodepth.evaluation import _cv_message
+
+    cv2 = pytest.importorskip("cv2")
+    grey16 = np.zeros((40, 60), np.uint16)
+    exc = opencv_error(lambda: cv2.StereoBM_create(16, 9).compute(grey16, grey16))
+    message = _cv_message(exc)
+    assert "\n" not in message and exc.err.strip() in message
+    assert message.startswith(f"({exc.code}:") and message.endswith(f"in function '{exc.func}'")
+    assert exc.file not in message and not message.startswith("OpenCV")
+    grey = np.zeros((40, 60), np.uint8)
+    exc = opencv_error(lambda: cv2.StereoBM_create(16, 9).compute("left", grey))
+    message = _cv_message(exc)
+    assert "\n" not in message and message.startswith(f"({exc.code}:")
+    for line in exc.err.strip().splitlines():
+        assert line.lstrip(">").strip() in message
+    assert _cv_message(ValueError("")) == "ValueError"
+    assert _cv_message(ValueError(" one\n two ")) == "one: two"

@@ -81,6 +81,7 @@ import fnmatch
 import json
 import math
 import os
+import re
 import statistics
 import sys
 import time
@@ -476,10 +477,26 @@ def _stereodepth_factory(
     return make
 
 
+#: The start of an OpenCV error message: its version, source location and "error:"
+#: (``OpenCV(4.10.0) /path/stereobm.cpp:1172: error: ``; ``OpenCV(5.0.0) :-1: error: `` for
+#: the bindings' own).
+_CV_LOCATION = re.compile(r"^OpenCV\([^)]*\)\s*.*?:-?\d+:\s*error:\s*")
+
+
 def _cv_message(exc: BaseException) -> str:
-    """The last line of an OpenCV error: the failed check, without the source location."""
-    lines = str(exc).strip().splitlines()
-    return lines[-1].strip() if lines else type(exc).__name__
+    """An OpenCV error on one line, without its version and source location: the code and
+    kind with the failed check or explanation and the function (``(-215:Assertion failed)
+    left.depth() == CV_8U in function 'compute'``), then, after ": ", the lines OpenCV adds
+    below it without their ``>`` marks (a CV_Check's explanation and values, the overloads
+    tried), joined by spaces. Only the last line was kept: "'params.calcSADWindowSize().width/2'
+    is 2" of SGBM's "Your input images are too small for your window size and max disparity
+    ..." error. A message of another form is kept whole, on one line."""
+    lines = [line.strip() for line in str(exc).strip().splitlines() if line.strip()]
+    if not lines:
+        return type(exc).__name__
+    first = _CV_LOCATION.sub("", lines[0]) or lines[0]
+    rest = [text for line in lines[1:] if (text := line.lstrip(">").strip())]
+    return f"{first}: {' '.join(rest)}" if rest else first
 
 
 def _camel(key: str) -> str:
