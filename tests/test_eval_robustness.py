@@ -4,6 +4,7 @@ their header; OpenCV's error messages kept whole, on one line."""
 from __future__ import annotations
 
 import io
+import json
 from pathlib import Path
 from typing import Any
 
@@ -184,3 +185,157 @@ def test_opencv_message_forms() -> None:
         assert line.lstrip(">").strip() in message
     assert _cv_message(ValueError("")) == "ValueError"
     assert _cv_message(ValueError(" one\n two ")) == "one: two"
+
+
+# --------------------------------------------------------------------------------------------
+# Scenes OpenCV's matchers do not take: 16-bit images
+
+
+@pytest.fixture
+def mixed_depths(tmp_path: Path) -> Path:
+    """Three scenes, the middle one (b16) 16-bit: the same texture as a, scaled by 257."""
+    root = tmp_path / "scenes"
+    for name, seed in (("a", 1), ("b16", 1), ("c", 2)):
+        left, right = textured_pair(48, 96, 6, seed=seed)
+        if name == "b16":
+            left, right = (image.astype(np.uint16) * 257 for image in (left, right))
+        write_scene(root / name, left, right, 6.0)
+    return root
+
+
+def by_variant(entries: list[dict[str, Any]]) -> dict[tuple[str, Any, bool], dict[str, Any]]:
+    return {(e["method"], e["block_size"], e.get("best", False)): e for e in entries}
+
+
+def test_a_16_bit_scene_is_not_applicable_to_opencv_and_scored_for_the_others(
+    mixed_depths: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """One 16-bit scene ended the whole run (exit status 2) when an OpenCV method was asked
+    for: now OpenCV's rows there are n/a with the reason, every other method and scene is
+    scored, and each mean says how many scenes it is over."""
+    pytest.importorskip("cv2")
+    status, out, err = run_eval(
+        capsys, str(mixed_depths), "--method", "stereodepth", "opencv-bm:9,15", "opencv-sgbm",
+        "--repeat", "1", "--json",
+    )  # fmt: skip
+    assert status == 0, err
+    report = json.loads(out)
+    assert report["scenes"] == ["a", "b16", "c"]
+    scored = [(r["scene"], r["method"], r["block_size"], r["best"]) for r in report["results"]]
+    opencv = [("opencv-bm", 9, False), ("opencv-bm", 15, False)]
+    opencv += [("opencv-bm", None, True), ("opencv-sgbm", 5, False)]
+    assert [s[0] for s in scored if s[1] == "stereodepth"] == ["a", "b16", "c"]
+    assert {(m, b) for _, m, b, best in scored if m != "stereodepth" and not best} == {
+        (m, b) for m, b, best in opencv if not best
+    }
+    assert {s[0] for s in scored if s[1] != "stereodepth"} == {"a", "c"}
+    na = report["not_applicable"]
+    assert [(x["scene"], x["method"], x["block_size"]) for x in na] == [
+        ("b16", "opencv-bm", 9),
+        ("b16", "opencv-bm", 15),
+        ("b16", "opencv-sgbm", 5),
+    ]
+    for x in na:
+        assert "8-bit images only" in x["reason"] and "uint16" in x["reason"], x
+    # 16-bit fed to our matcher as it is: b16 is a's texture, scaled
+    (ours_a,) = [r for r in report["results"] if r["scene"] == "a" and r["method"] == "stereodepth"]
+    (ours_b,) = [r for r in report["results"] if r["scene"] == "b16"]
+    assert ours_b["metrics"]["density"] > 0.5 and ours_b["metrics"]["bad_2_est"] < 0.05
+    assert ours_a["metrics"]["density"] > 0.5
+    means = by_variant(report["means"])
+    (ours,) = [m for m in report["means"] if m["method"] == "stereodepth"]
+    assert ours["scenes"] == 3 and ours["scenes_not_applicable"] == []
+    for method, block, best in opencv:
+        mean = means[(method, block, best)]
+        assert mean["scenes"] == 2 and mean["scenes_not_applicable"] == ["b16"], mean
+        rows = [
+            r
+            for r in report["results"]
+            if r["method"] == method and r["best"] == best and (best or r["block_size"] == block)
+        ]
+        assert [r["scene"] for r in rows] == ["a", "c"]
+        for key in ("bad_2", "density", "avgerr"):
+            want = sum(r["metrics"][key] for r in rows) / 2
+            assert mean["metrics"][key] == pytest.approx(want, rel=1e-12), key
+    assert {t["scenes"] for t in report["time_ratios"]} == {2}
+    (note,) = report["notes"]
+    assert note.startswith("opencv-bm, opencv-sgbm not run on 1 of 3 scene(s) (b16): ")
+    assert err == f"stereodepth eval: {note}\n"
+
+
+@pytest.mark.parametrize("markdown", [False, True])
+def test_the_tables_mark_not_applicable_rows_and_partial_means(
+    mixed_depths: Path, capsys: pytest.CaptureFixture[str], markdown: bool
+) -> None:
+    pytest.importorskip("cv2")
+    extra = ["--markdown"] if markdown else []
+    status, out, err = run_eval(
+        capsys, str(mixed_depths), "--method", "bm", "opencv-sgbm", "--repeat", "1", *extra
+    )
+    assert status == 0, err
+    if markdown:
+        cells = [[c.strip() for c in line.strip("| ").split("|")] for line in out.splitlines()]
+    else:
+        cells = [line.split() for line in out.splitlines()]
+    rows = {(c[0], c[1]): c for c in cells if len(c) > 5}
+    assert [c for c in rows[("b16", "opencv-sgbm")][2:] if c] == ["5", *["n/a"] * 11]
+    assert rows[("b16", "stereodepth")][3:5] == ["16", "nonocc"]
+    assert all(rows[(s, m)][5] != "n/a" for s in ("a", "c") for m in ("stereodepth", "opencv-sgbm"))
+    assert ("mean", "stereodepth") in rows and ("mean", "opencv-sgbm") not in rows
+    if markdown:
+        assert rows[("mean 2/3", "opencv-sgbm")][2] == "5"
+    else:  # split on spaces: "mean" "2/3" "opencv-sgbm"
+        assert any(c[:3] == ["mean", "2/3", "opencv-sgbm"] for c in cells)
+    assert "n/a: opencv-sgbm not run on b16: OpenCV's StereoBM and StereoSGBM take 8-bit " in out
+    assert (
+        "mean 2/3: the means of opencv-sgbm are over the 2 of the 3 scenes it ran on: "
+        "not comparable with means over all of them"
+    ) in out
+    assert "median over 2 scene(s)" in out
+
+
+def test_a_method_not_applicable_on_every_scene_has_no_means(
+    mixed_depths: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    pytest.importorskip("cv2")
+    status, out, err = run_eval(
+        capsys, str(mixed_depths), "--scene", "b16", "--method", "bm", "opencv-bm", "--repeat", "1"
+    )
+    assert status == 0, err
+    assert "mean 0/1  opencv-bm    9" in out and out.count("n/a") == 2 * 11 + 1, out
+    assert "mean 0/1: opencv-bm ran on none of the 1 scenes: no means" in out
+    report = json.loads(
+        run_eval(
+            capsys, str(mixed_depths), "--scene", "b16", "--method", "bm", "opencv-bm",
+            "--repeat", "1", "--json",
+        )[1]
+    )  # fmt: skip
+    mean = by_variant(report["means"])[("opencv-bm", 9, False)]
+    assert mean["scenes"] == 0 and mean["scenes_not_applicable"] == ["b16"]
+    assert set(mean["metrics"].values()) == {None} and mean["time_s"] is None
+
+
+def test_nothing_to_evaluate_is_an_error_before_any_matching(
+    mixed_depths: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Only OpenCV methods, and no 8-bit scene: nothing would be scored."""
+    import stereodepth.evaluation as evaluation
+
+    pytest.importorskip("cv2")
+    calls: list[str] = []
+    monkeypatch.setattr(evaluation, "_timed", lambda *a, **k: calls.append("matched"))
+    (mixed_depths / "zz16").mkdir()
+    for name in ("left.png", "right.png", "disp_gt.npy"):
+        (mixed_depths / "zz16" / name).write_bytes((mixed_depths / "b16" / name).read_bytes())
+    for scenes, where in ((["b16"], "scene b16"), (["*16"], "any of the 2 scenes (b16, zz16)")):
+        patterns = [a for s in scenes for a in ("--scene", s)]
+        status, out, err = run_eval(
+            capsys, str(mixed_depths), *patterns, "--method", "opencv-bm", "opencv-sgbm"
+        )
+        assert status == 2 and out == ""
+        assert err == (
+            f"stereodepth eval: error: nothing to evaluate: opencv-bm, opencv-sgbm cannot run "
+            f"on {where}: OpenCV's StereoBM and StereoSGBM take 8-bit images only, got uint16 "
+            "(stereodepth and sgm take 16-bit images: --method stereodepth sgm)\n"
+        )
+    assert calls == []

@@ -49,10 +49,22 @@ Methods
     the lowest ``--best-by`` metric (bad-2 by default).
 
 Checks
-    Every scene is read and checked before any is matched (its files, a mask selecting no
-    pixel with ground truth, a declared range its ground truth leaves, 8-bit images for the
-    OpenCV methods), so that a fault in the last scene ends the run before the work on the
-    others, not after it.
+    Every scene is read and checked before any is matched (its files, left and right images
+    of one size and bit depth, a mask selecting no pixel with ground truth, a declared range
+    its ground truth leaves), so that a fault in the last scene ends the run before the work
+    on the others, not after it.
+
+Scenes an OpenCV method cannot take
+    OpenCV's StereoBM and StereoSGBM take 8-bit images only. On a scene whose images are not
+    8-bit (16-bit PNGs) the OpenCV methods are not run: each of their rows there reads
+    ``n/a`` (``not_applicable`` in ``--json``, with the reason), a note on stderr names the
+    methods and scenes, and every other method and scene is scored as usual. The ``mean``
+    row of a variant scored on K of the run's N scenes reads ``mean K/N``, with a line under
+    the table saying that its means are over those K scenes only (``scenes`` and
+    ``scenes_not_applicable`` of its ``means`` entry in ``--json``): means over different
+    scene sets are not comparable. Time ratios are over the scenes both methods ran. The exit
+    status is 0 when anything was scored; when no method can run on any scene (only OpenCV
+    methods, every scene 16-bit), it is an error before any matching (exit status 2).
 
 Timing
     Each method is run once to warm up, then ``--repeat`` times (default 3); the time is the
@@ -67,11 +79,11 @@ Scores
     scene has a mask (``region`` nonocc), else over all pixels with ground truth (``all``);
     ``--no-mask`` always uses all. ``D1`` is KITTI's outlier rate (off by more than 3 px and
     5 %; holes count), ``d1`` and ``d1_est`` in ``--json``. Percentages in the tables,
-    fractions in ``--json``. The ``mean`` rows average each score over the scenes (every
-    scene weighs the same) and the times; their ``ns/(px*d)`` is the total time over the total
-    work. The ``--json`` object also records the options given (``options``,
-    ``sgm_options``, ``opencv_options``: each a dict of the ``KEY=VALUE`` pairs after
-    conversion, empty when none was given).
+    fractions in ``--json``. The ``mean`` rows average each score over the scenes the
+    variant was scored on (every scene weighs the same) and the times; their ``ns/(px*d)`` is
+    the total time over the total work. The ``--json`` object also records the options given
+    (``options``, ``sgm_options``, ``opencv_options``: each a dict of the ``KEY=VALUE`` pairs
+    after conversion, empty when none was given) and the names of the scenes (``scenes``).
 """
 
 from __future__ import annotations
@@ -102,9 +114,11 @@ from .metrics import DisparityMetrics, evaluate, negative_ground_truth
 __all__ = [
     "METHODS",
     "EvalResult",
+    "NotApplicable",
     "Scene",
     "Variant",
     "find_scenes",
+    "format_not_applicable",
     "format_table",
     "num_disparities_for",
     "register",
@@ -188,7 +202,8 @@ class Scene:
     def load(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray | None]:
         """(left, right, gt, mask): the images as read by :func:`stereodepth.io.read_image`,
         the float ground truth (NaN or inf where unknown) and the bool mask or None. Raises
-        ValueError naming the file when a part is malformed or the shapes disagree, or when
+        ValueError naming the file when a part is malformed, the shapes or the images' bit
+        depths (dtypes) disagree, or when
         the ground truth has a negative finite value (:mod:`stereodepth.metrics`' rule: every
         method searches from 0, and neither KITTI nor Middlebury has negative disparities)."""
         from .io import read_image, read_pfm
@@ -199,6 +214,12 @@ class Scene:
             raise ValueError(
                 f"scene {self.name}: left and right images must have the same shape, "
                 f"got {left.shape} and {right.shape}"
+            )
+        if left.dtype != right.dtype:
+            # Every matcher refused the pair, only when this scene's turn came.
+            raise ValueError(
+                f"scene {self.name}: left and right images must have the same bit depth, got "
+                f"{left.dtype} ({self.left_path.name}) and {right.dtype} ({self.right_path.name})"
             )
         size = (left.shape[1], left.shape[0])
         if self.calib_size is not None and self.calib_size != size:
@@ -719,6 +740,43 @@ class EvalResult:
         }
 
 
+@dataclass(frozen=True)
+class NotApplicable:
+    """One method at one block size that eval did not run on one scene, and why: OpenCV's
+    matchers on a scene whose images are not 8-bit. It stands for that row in the table
+    (``n/a``), and the method's means are over its other scenes."""
+
+    scene: str
+    variant: Variant
+    reason: str
+
+    def as_dict(self) -> dict[str, Any]:
+        return {
+            "scene": self.scene,
+            "method": self.variant.method,
+            "block_size": self.variant.block_size,
+            "reason": self.reason,
+        }
+
+
+#: A row of eval's results: a scored variant on a scene, or one not run there.
+Row = EvalResult | NotApplicable
+
+#: What OpenCV's matchers take: 8-bit images only (``CV_8UC1``; eval converts colour to grey).
+_OPENCV_8_BIT = "OpenCV's StereoBM and StereoSGBM take 8-bit images only"
+
+
+def _not_applicable(
+    scene: str, variants: Sequence[Variant], image: np.ndarray
+) -> list[NotApplicable]:
+    """The variants that cannot run on a scene whose images are like ``image``: the OpenCV
+    methods on images that are not 8-bit (16-bit PNGs, which stereodepth and sgm take)."""
+    if image.dtype == np.uint8:
+        return []
+    reason = f"{_OPENCV_8_BIT}, got {image.dtype}"
+    return [NotApplicable(scene, v, reason) for v in variants if v.method in _OPENCV_METHODS]
+
+
 def _timed(
     match: Matcher, left: np.ndarray, right: np.ndarray, repeat: int
 ) -> tuple[np.ndarray, tuple[float, ...]]:
@@ -806,9 +864,6 @@ def _scene_inputs(
             f"scene {scene.name}: {scene.mask_path}: the mask selects none of the "
             f"{int(known.sum())} pixels with ground truth (--no-mask scores them all)"
         )
-    opencv = sorted({v.method for v in variants} & set(_OPENCV_METHODS))
-    if opencv and left.dtype != np.uint8:  # they failed here only after the scenes before
-        raise ValueError(f"scene {scene.name}: {opencv[0]} needs 8-bit images, got {left.dtype}")
     return left, right, gt, mask, num_disparities
 
 
@@ -883,26 +938,47 @@ _COLUMNS = (
 )
 
 
-def _label(row: EvalResult) -> tuple[str, str]:
+def _label(row: Row) -> tuple[str, str]:
     bs = row.variant.block_size
     block = "default" if bs is None else str(bs)
-    return row.variant.method, f"best={block}" if row.best else block
+    best = isinstance(row, EvalResult) and row.best
+    return row.variant.method, f"best={block}" if best else block
 
 
 def _num(value: float, digits: int = 2) -> str:
     return "-" if math.isnan(value) else f"{value:.{digits}f}"
 
 
-def _means(rows: Sequence[EvalResult]) -> list[dict[str, Any]]:
-    """One entry per method variant (and per method's best rows), in first-seen order."""
+def _scored(rows: Sequence[Row]) -> list[EvalResult]:
+    return [r for r in rows if isinstance(r, EvalResult)]
+
+
+def _group_key(r: Row) -> tuple[str, int | None, bool]:
+    best = isinstance(r, EvalResult) and r.best
+    return (r.variant.method, None if best else r.variant.block_size, best)
+
+
+def _means(rows: Sequence[Row]) -> list[dict[str, Any]]:
+    """One entry per method variant (and per method's best rows), in first-seen order, with
+    ``scenes`` the number of scenes it was scored on and ``scenes_not_applicable`` the names
+    of those it did not run on (:class:`NotApplicable`): its means are over the others only.
+    A variant scored on no scene has NaN means."""
     groups: dict[tuple[str, int | None, bool], list[EvalResult]] = {}
+    skipped: dict[tuple[str, int | None, bool], list[str]] = {}
     for r in rows:
-        key = (r.variant.method, None if r.best else r.variant.block_size, r.best)
-        groups.setdefault(key, []).append(r)
+        groups.setdefault(_group_key(r), [])
+        if isinstance(r, EvalResult):
+            groups[_group_key(r)].append(r)
+    for r in rows:
+        if isinstance(r, NotApplicable):
+            best_key = (r.variant.method, None, True)
+            for key in (_group_key(r), best_key):  # the best row too, when the method has one
+                if key in groups and r.scene not in skipped.setdefault(key, []):
+                    skipped[key].append(r.scene)
     out = []
     for (method, bs, best), group in groups.items():
         metrics = {
-            k: statistics.fmean(float(getattr(r.metrics, k)) for r in group)
+            k: statistics.fmean(float(getattr(r.metrics, k)) for r in group) if group else math.nan
             for k in DisparityMetrics.__dataclass_fields__
             if k not in ("evaluated", "estimated")
         }
@@ -913,18 +989,22 @@ def _means(rows: Sequence[EvalResult]) -> list[dict[str, Any]]:
                 "block_size": bs,
                 "best": best,
                 "scenes": len(group),
+                "scenes_not_applicable": skipped.get((method, bs, best), []),
                 "metrics": metrics,
-                "time_s": total_time / len(group),
-                "ns_per_px_disparity": total_time * 1e9 / sum(r.work for r in group),
+                "time_s": total_time / len(group) if group else math.nan,
+                "ns_per_px_disparity": (
+                    total_time * 1e9 / sum(r.work for r in group) if group else math.nan
+                ),
             }
         )
     return out
 
 
-def time_ratios(rows: Sequence[EvalResult]) -> list[dict[str, Any]]:
+def time_ratios(rows: Sequence[Row]) -> list[dict[str, Any]]:
     """Our matchers' time over each peer's, per scene, and their median over the scenes both
     ran: one entry per pair of one of our variants (``stereodepth``, ``sgm``) and a peer's
-    (every other method: OpenCV's)."""
+    (every other method: OpenCV's). :class:`NotApplicable` rows are left out."""
+    rows = _scored(rows)
     mine_methods = ("stereodepth", "sgm")
     ours = [r for r in rows if r.variant.method in mine_methods and not r.best]
     others = [r for r in rows if r.variant.method not in mine_methods and not r.best]
@@ -952,7 +1032,7 @@ def time_ratios(rows: Sequence[EvalResult]) -> list[dict[str, Any]]:
     return out
 
 
-def format_time_ratios(rows: Sequence[EvalResult]) -> str:
+def format_time_ratios(rows: Sequence[Row]) -> str:
     """One line per :func:`time_ratios` entry."""
 
     def name(method: str, block: int | None) -> str:
@@ -966,10 +1046,14 @@ def format_time_ratios(rows: Sequence[EvalResult]) -> str:
     )
 
 
-def _table_rows(rows: Sequence[EvalResult]) -> list[list[str]]:
+def _table_rows(rows: Sequence[Row]) -> list[list[str]]:
     cells = []
+    none = ["n/a"] * (len(_COLUMNS) - 5)  # a variant not run: no scores, no time
     for r in rows:
         method, block = _label(r)
+        if isinstance(r, NotApplicable):
+            cells.append([r.scene, method, block, "", "", *none])
+            continue
         m = r.metrics
         cells.append(
             [
@@ -983,12 +1067,16 @@ def _table_rows(rows: Sequence[EvalResult]) -> list[list[str]]:
                 _num(r.ns_per_px_disparity, 3),
             ]
         )
+    total = len(dict.fromkeys(r.scene for r in rows))
     for mean in _means(rows):
         bs = mean["block_size"]
         block = "best" if mean["best"] else ("default" if bs is None else str(bs))
+        if not mean["scenes"]:  # not run on any scene
+            cells.append([f"mean 0/{total}", mean["method"], block, "", "", *none])
+            continue
         cells.append(
             [
-                "mean",
+                "mean" if mean["scenes"] == total else f"mean {mean['scenes']}/{total}",
                 mean["method"],
                 block,
                 "",
@@ -1001,8 +1089,51 @@ def _table_rows(rows: Sequence[EvalResult]) -> list[list[str]]:
     return cells
 
 
-def format_table(rows: Sequence[EvalResult], *, markdown: bool = False) -> str:
-    """The per-scene table with a ``mean`` row per method variant, as text or Markdown."""
+def _shorten(names: Sequence[str], most: int = 5) -> str:
+    shown = ", ".join(names[:most])
+    return shown if len(names) <= most else f"{shown} and {len(names) - most} more"
+
+
+def format_not_applicable(rows: Sequence[Row]) -> str:
+    """The lines that explain the table's ``n/a`` rows (the methods not run, where and why)
+    and its ``mean K/N`` rows (means over K of the run's N scenes); "" when every variant
+    was scored on every scene."""
+    scenes_of: dict[tuple[str, str], list[str]] = {}  # (reason, method) -> scenes
+    for r in rows:
+        if isinstance(r, NotApplicable):
+            scenes = scenes_of.setdefault((r.reason, r.variant.method), [])
+            if r.scene not in scenes:
+                scenes.append(r.scene)
+    grouped: dict[tuple[str, tuple[str, ...]], list[str]] = {}  # methods alike, together
+    for (reason, method), scenes in scenes_of.items():
+        grouped.setdefault((reason, tuple(scenes)), []).append(method)
+    lines = [
+        f"n/a: {', '.join(methods)} not run on {_shorten(scenes)}: {reason}"
+        for (reason, scenes), methods in grouped.items()
+    ]
+    total = len(dict.fromkeys(r.scene for r in rows))
+    covered: dict[int, dict[str, None]] = {}  # scenes -> methods
+    for mean in _means(rows):
+        if mean["scenes"] < total:
+            covered.setdefault(mean["scenes"], {})[mean["method"]] = None
+    for count, methods in covered.items():
+        names = ", ".join(methods)
+        lines.append(
+            f"mean 0/{total}: {names} ran on none of the {total} scenes: no means"
+            if count == 0
+            else f"mean {count}/{total}: the means of {names} are over the {count} of the "
+            f"{total} scenes {'it' if len(methods) == 1 else 'each'} ran on: not comparable "
+            "with means over all of them"
+        )
+    return "\n".join(lines)
+
+
+def format_table(rows: Sequence[Row], *, markdown: bool = False) -> str:
+    """The per-scene table with a ``mean`` row per method variant, as text or Markdown.
+
+    A :class:`NotApplicable` in ``rows`` is a row of ``n/a``; the mean row of a variant
+    scored on fewer scenes than ``rows`` name reads ``mean K/N`` (K of the N scenes), and
+    :func:`format_not_applicable` gives the lines that say why."""
     cells = _table_rows(rows)
     numeric = [i == 3 or i >= 5 for i in range(len(_COLUMNS))]  # not scene, method, block, region
     if markdown:
@@ -1019,7 +1150,7 @@ def format_table(rows: Sequence[EvalResult], *, markdown: bool = False) -> str:
 
     out = [line(_COLUMNS), "  ".join("-" * w for w in widths)]
     for i, c in enumerate(cells):
-        if c[0] == "mean" and i > 0 and cells[i - 1][0] != "mean":
+        if i == len(rows) and i > 0:  # the mean rows follow the scenes' after a blank line
             out.append("")
         out.append(line(c))
     return "\n".join(out)
@@ -1084,7 +1215,8 @@ def register(subparsers: Any) -> None:
         "opencv-sgbm-3way, opencv-sgbm-hh, opencv-sgbm-3way-padded (3WAY on the pair padded on "
         "the left by N columns), each optionally with its own block sizes "
         "(opencv-bm:9,15); default: stereodepth. OpenCV methods are skipped with a note when "
-        "cv2 does not import",
+        "cv2 does not import, and are n/a on scenes whose images are not 8-bit (the others "
+        "are scored; means over fewer scenes read mean K/N)",
     )
     m.add_argument(
         "--block-size",
@@ -1265,6 +1397,35 @@ def _jsonable(value: Any) -> Any:
     return value
 
 
+def _not_applicable_notes(skipped: Sequence[NotApplicable], total: int) -> list[str]:
+    """One stderr note per reason: the methods not run, on how many scenes and which."""
+    by_reason: dict[str, dict[str, None]] = {}
+    scenes: dict[str, dict[str, None]] = {}
+    for x in skipped:
+        by_reason.setdefault(x.reason, {})[x.variant.method] = None
+        scenes.setdefault(x.reason, {})[x.scene] = None
+    notes = []
+    for reason, methods in by_reason.items():
+        names = list(scenes[reason])
+        notes.append(
+            f"{', '.join(methods)} not run on {len(names)} of {total} scene(s) "
+            f"({_shorten(names)}): {reason}; those rows are n/a, and the means of "
+            f"{', '.join(methods)} are over the other {total - len(names)} scene(s)"
+        )
+    return notes
+
+
+def _nothing_to_evaluate(skipped: Sequence[NotApplicable], total: int) -> str:
+    """The error when no method can run on any scene (every one OpenCV's, every scene 16-bit)."""
+    methods = ", ".join(dict.fromkeys(x.variant.method for x in skipped))
+    names = _shorten(list(dict.fromkeys(x.scene for x in skipped)))
+    where = f"scene {names}" if total == 1 else f"any of the {total} scenes ({names})"
+    return (
+        f"nothing to evaluate: {methods} cannot run on {where}: {skipped[0].reason} "
+        "(stereodepth and sgm take 16-bit images: --method stereodepth sgm)"
+    )
+
+
 def run(args: argparse.Namespace) -> int:
     """Runs ``stereodepth eval``; returns the exit status."""
     from ._extras import require
@@ -1363,28 +1524,45 @@ def run(args: argparse.Namespace) -> int:
 
     # Every scene checked before any is matched: a fault in the last one (a mask selecting
     # nothing, a range its ground truth leaves) ended the run after the others' work, and
-    # their results were lost with it.
+    # their results were lost with it. A scene an OpenCV method cannot take (16-bit images)
+    # is no fault: that method's rows there are n/a, and the others' are scored.
+    not_run: dict[str, list[NotApplicable]] = {}
     for scene in scenes:
-        _scene_inputs(
+        left, *_ = _scene_inputs(
             scene, variants, num_disparities=args.num_disparities, use_mask=not args.no_mask
         )
+        not_run[scene.name] = _not_applicable(scene.name, variants, left)
+    not_applicable = [x for xs in not_run.values() for x in xs]
+    if len(not_applicable) == len(scenes) * len(variants):
+        raise ValueError(_nothing_to_evaluate(not_applicable, len(scenes)))
+    for note in _not_applicable_notes(not_applicable, len(scenes)):
+        notes.append(note)
+        print(f"stereodepth eval: {note}", file=sys.stderr)
 
-    rows: list[EvalResult] = []
+    rows: list[Row] = []
     saved_threads = cv2.getNumThreads() if cv2 is not None else None
     try:
         if cv2 is not None:
             cv2.setNumThreads(threads)
         for scene in scenes:
-            rows += _evaluate_scene(
-                scene,
-                variants,
-                factories,
-                repeat=args.repeat,
-                num_disparities=args.num_disparities,
-                use_mask=not args.no_mask,
-                best_by=args.best_by,
-                progress=progress,
+            missing = {x.variant: x for x in not_run[scene.name]}
+            scored = (
+                _evaluate_scene(
+                    scene,
+                    [v for v in variants if v not in missing],
+                    factories,
+                    repeat=args.repeat,
+                    num_disparities=args.num_disparities,
+                    use_mask=not args.no_mask,
+                    best_by=args.best_by,
+                    progress=progress,
+                )
+                if len(missing) < len(variants)
+                else []
             )
+            for method in dict.fromkeys(v.method for v in variants):  # in the variants' order
+                rows += [r for r in scored if r.variant.method == method]
+                rows += [missing[v] for v in variants if v.method == method and v in missing]
     finally:
         if cv2 is not None and saved_threads is not None:
             cv2.setNumThreads(saved_threads)
@@ -1405,15 +1583,21 @@ def run(args: argparse.Namespace) -> int:
             "stereodepth_version": __version__,
             "opencv_version": None if cv2 is None else str(cv2.__version__),
             "notes": notes,
-            "results": [r.as_dict() for r in rows],
+            "scenes": [scene.name for scene in scenes],
+            "results": [r.as_dict() for r in _scored(rows)],
+            "not_applicable": [r.as_dict() for r in rows if isinstance(r, NotApplicable)],
             "means": _means(rows),
             "time_ratios": time_ratios(rows),
         }
         print(json.dumps(_jsonable(report), indent=2, allow_nan=False))
         return 0
     ratios = format_time_ratios(rows)
+    why = format_not_applicable(rows)
     if args.markdown:
         print(format_table(rows, markdown=True))
+        if why:
+            print()
+            print(why.replace("\n", "  \n"))
         if ratios:
             print()
             print(ratios.replace("\n", "  \n"))  # Markdown line breaks
@@ -1425,6 +1609,9 @@ def run(args: argparse.Namespace) -> int:
     )
     print()
     print(format_table(rows))
+    if why:
+        print()
+        print(why)
     if ratios:
         print()
         print(ratios)
