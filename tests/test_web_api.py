@@ -20,13 +20,17 @@ from stereodepth.charts import chart_data
 from stereodepth.cli import main
 from stereodepth.web.app import FIELDS, Summary, create_app
 
+#: The test client's address: the app answers only a Host that names this machine (DNS
+#: rebinding), and the client's default, "testserver", does not.
+LOCAL = "http://localhost"
+
 ARM: dict[str, Any] = {"baseline_mm": 150, "focal_mm": 6, "pixel_um": 2.8, "width_px": 1280}
 CAR: dict[str, Any] = {"baseline_mm": 250, "focal_mm": 12, "pixel_um": 4.2, "width_px": 2048}
 
 
 @pytest.fixture(scope="module")
 def client() -> TestClient:
-    return TestClient(create_app())
+    return TestClient(create_app(), base_url=LOCAL)
 
 
 def calc(client: TestClient, **params: Any) -> Any:

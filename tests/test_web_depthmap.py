@@ -28,12 +28,16 @@ from stereodepth.match_pair import default_num_disparities, prepare_pair, sgm_av
 from stereodepth.sample import SAMPLE_BASELINE_MM, SAMPLE_FOCAL_PX, sample_pair
 from stereodepth.web.app import create_app
 
+#: The test client's address: the app answers only a Host that names this machine (DNS
+#: rebinding), and the client's default, "testserver", does not.
+LOCAL = "http://localhost"
+
 RIG = {"baseline_mm": SAMPLE_BASELINE_MM, "focal_px": SAMPLE_FOCAL_PX}
 
 
 @pytest.fixture(scope="module")
 def client() -> TestClient:
-    return TestClient(create_app())
+    return TestClient(create_app(), base_url=LOCAL)
 
 
 @pytest.fixture(scope="module")
@@ -535,7 +539,9 @@ def test_without_matplotlib_a_clear_answer_not_500(
     import sys
 
     monkeypatch.setitem(sys.modules, "matplotlib", None)  # import matplotlib raises
-    r = TestClient(create_app()).post("/api/depthmap", json={"sample": True, "rig": RIG})
+    r = TestClient(create_app(), base_url=LOCAL).post(
+        "/api/depthmap", json={"sample": True, "rig": RIG}
+    )
     assert r.status_code == 503
     assert r.json()["detail"][0]["msg"] == (
         'colour maps need matplotlib: pip install "stereodepth[plot]"'
@@ -725,7 +731,7 @@ def test_a_body_not_sent_as_json_is_refused(client: TestClient) -> None:
 def test_limits_in_bytes_and_pixels(pair: Any) -> None:
     left, right = encode(pair.left), encode(pair.right)
     size = len(base64.b64decode(left))
-    small = TestClient(create_app(max_upload_bytes=size - 1, max_pixels=96 * 72))
+    small = TestClient(create_app(max_upload_bytes=size - 1, max_pixels=96 * 72), base_url=LOCAL)
     r = small.post("/api/depthmap", json={"left": left, "right": right, "rig": RIG})
     assert r.status_code == 422
     item = r.json()["detail"][0]
@@ -738,7 +744,7 @@ def test_limits_in_bytes_and_pixels(pair: Any) -> None:
     r = small.post("/api/depthmap", json={"left": big, "right": right, "rig": RIG})
     assert r.status_code == 413 and r.json()["detail"][0]["type"] == "too_large"
     # Pixels: one pixel more than the limit.
-    tight = TestClient(create_app(max_pixels=96 * 72 - 1))
+    tight = TestClient(create_app(max_pixels=96 * 72 - 1), base_url=LOCAL)
     r = tight.post("/api/depthmap", json={"left": left, "right": right, "rig": RIG})
     assert r.status_code == 422
     msg = r.json()["detail"][0]["msg"]
@@ -750,7 +756,7 @@ def test_limits_in_bytes_and_pixels(pair: Any) -> None:
         + png_chunk(b"IDAT", zlib.compress(b""))
         + png_chunk(b"IEND", b"")
     )
-    huge = TestClient(create_app(max_pixels=10**9))
+    huge = TestClient(create_app(max_pixels=10**9), base_url=LOCAL)
     r = huge.post("/api/depthmap", json={"left": b64(bomb), "right": right, "rig": RIG})
     assert r.status_code == 422
     item = r.json()["detail"][0]
@@ -778,7 +784,7 @@ def test_two_uploads_at_once_both_complete_and_the_server_keeps_answering(
     grey_left = encode(np.asarray(Image.fromarray(pair.left).convert("L")))
     grey_right = encode(np.asarray(Image.fromarray(pair.right).convert("L")))
     answers: dict[int, Any] = {}
-    with TestClient(create_app()) as c:
+    with TestClient(create_app(), base_url=LOCAL) as c:
 
         def upload(i: int, left_b64: str, right_b64: str) -> None:
             answers[i] = c.post(

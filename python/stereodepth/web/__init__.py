@@ -3,6 +3,8 @@
 - :mod:`stereodepth.web.app`: the FastAPI app (``create_app()``): the page, its static files
   and plotly.js from the installed plotly package (offline), and the JSON API ``/api/calc``
   with its OpenAPI schema at ``/openapi.json``.
+- :mod:`stereodepth.web.host`: the app's Host-header check (against DNS rebinding), which
+  ``create_app(allowed_hosts=...)`` sets; by default localhost, 127.0.0.1 and [::1].
 - :mod:`stereodepth.web.serve`: the ``serve`` subcommand (uvicorn on 127.0.0.1).
 
 Needs the ``web`` extra: ``pip install "stereodepth[web]"``. This package imports nothing

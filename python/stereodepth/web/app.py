@@ -17,11 +17,15 @@ whose result still leaves the range of a double (a disparity of 5e-324 px, a pix
 µm) answers 422 at that parameter, as the library raises ValueError for it; null means only
 "not available" or a true infinity (the depth at disparity 0).
 
-The page works offline: plotly.js is served from the installed ``plotly`` package.
+The page works offline: plotly.js is served from the installed ``plotly`` package. The app
+answers only requests whose Host header names this server (``create_app``'s
+``allowed_hosts``, :mod:`stereodepth.web.host`: 400 at ``["header", "host"]`` for others,
+against DNS rebinding), under ``stereodepth serve``, another ASGI server or mounted.
 """
 
 from __future__ import annotations
 
+from collections.abc import Iterable
 from dataclasses import dataclass
 from importlib import resources
 from pathlib import Path
@@ -39,6 +43,7 @@ from .. import __version__
 from ..charts import chart_data
 from ..rig import StereoRig
 from .depthmap import DEFAULT_MAX_PIXELS, DEFAULT_MAX_UPLOAD_BYTES, DepthMapLimits, make_router
+from .host import AllowedHosts, HostCheck
 
 __all__ = ["FIELDS", "create_app"]
 
@@ -520,12 +525,30 @@ def _plotly_js() -> Path:
 
 
 def create_app(
-    *, max_upload_bytes: int = DEFAULT_MAX_UPLOAD_BYTES, max_pixels: int = DEFAULT_MAX_PIXELS
+    *,
+    max_upload_bytes: int = DEFAULT_MAX_UPLOAD_BYTES,
+    max_pixels: int = DEFAULT_MAX_PIXELS,
+    allowed_hosts: Iterable[str] | None = None,
 ) -> FastAPI:
     """The web calculator's app: the page at ``/``, the API under ``/api``, with the depth-map
     view's upload limits (bytes per image file, pixels per image; see
-    :mod:`stereodepth.web.depthmap`)."""
+    :mod:`stereodepth.web.depthmap`).
+
+    The app answers only requests whose Host header is one of ``allowed_hosts`` (against DNS
+    rebinding; :mod:`stereodepth.web.host`), under whichever server runs it: by default
+    (None) ``localhost``, ``127.0.0.1`` and ``[::1]`` at the port the server listens on, and
+    the IP address the connection came in on; others answer 400 at ``["header", "host"]``.
+    Entries are names or IP addresses, each optionally with ``:port``; ``0.0.0.0`` or ``::``
+    stands for any IP address, ``"*"`` turns the check off (behind a proxy that checks the
+    Host itself). ``stereodepth serve`` passes these with its ``--host``, the address it bound
+    and, bound to every interface, ``0.0.0.0`` and the machine's host name. Under ``uvicorn
+    --factory``, a factory of your own passes them: ``lambda: create_app(allowed_hosts=[...])``.
+
+    Raises TypeError for a limit that is not an integer or ``allowed_hosts`` that is not a
+    list of strings, ValueError for a limit < 1 or an entry of ``allowed_hosts`` that is not
+    a host name, an IP address, either with ``:port``, or ``"*"``."""
     limits = DepthMapLimits(max_upload_bytes=max_upload_bytes, max_pixels=max_pixels)
+    hosts = AllowedHosts(allowed_hosts)
     app = FastAPI(
         title="stereodepth calculator",
         version=__version__,
@@ -538,6 +561,9 @@ def create_app(
         docs_url=None,
         redoc_url=None,
     )
+
+    # Before every route (and inside security_headers, so that its 400 has the headers too).
+    app.add_middleware(HostCheck, allowed=hosts)
 
     @app.middleware("http")
     async def security_headers(request: Request, call_next: Any) -> Response:

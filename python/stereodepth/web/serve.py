@@ -1,14 +1,14 @@
 """``stereodepth serve``: the calculator as a local web page (FastAPI app on uvicorn).
 
 Listens on 127.0.0.1 (this machine only) unless ``--host`` says otherwise, and prints where
-on start-up; answers only requests whose Host header names this server (:class:`HostCheck`:
-400 for others, against DNS rebinding). ``--port 0`` takes any free port. Ctrl+C (or
-SIGTERM) stops it: the requests in flight get :data:`GRACE_S` (3) seconds to finish, then
-the connections still open are closed (a depth map already being matched is finished first:
-its worker thread cannot be interrupted); a second Ctrl+C closes them at once. Either signal
-is the server's normal end: it prints one line, ``stereodepth serve: stopped (Ctrl-C)`` or
-``stopped (SIGTERM)``, on stdout and exits with status 0 (not the command line's 130 and 143
-for other commands).
+on start-up; answers only requests whose Host header names this server (:func:`allowed_hosts`,
+which the app checks itself, :mod:`stereodepth.web.host`: 400 for others, against DNS
+rebinding). ``--port 0`` takes any free port. Ctrl+C (or SIGTERM) stops it: the requests in
+flight get :data:`GRACE_S` (3) seconds to finish, then the connections still open are
+closed (a depth map already being matched is finished first: its worker thread cannot be
+interrupted); a second Ctrl+C closes them at once. Either signal is the server's normal end:
+it prints one line, ``stereodepth serve: stopped (Ctrl-C)`` or ``stopped (SIGTERM)``, on
+stdout and exits with status 0 (not the command line's 130 and 143 for other commands).
 """
 
 from __future__ import annotations
@@ -16,7 +16,6 @@ from __future__ import annotations
 import argparse
 import contextlib
 import ipaddress
-import json
 import signal
 import socket
 import sys
@@ -152,114 +151,22 @@ def url_of(sock: socket.socket) -> str:
     return f"http://{host}:{port}/"
 
 
-_LOOPBACK_NAMES = ("127.0.0.1", "localhost", "::1")
+def allowed_hosts(host: str, sock: socket.socket) -> list[str]:
+    """The Host header values the server answers (``create_app``'s ``allowed_hosts``): at the
+    port it listens on, ``localhost``, ``127.0.0.1``, ``[::1]``, the ``--host`` given and the
+    address bound; when bound to every interface (``0.0.0.0``, ``::``), also any IP address (a
+    page loaded from an address is this server's own) and this machine's host name."""
+    from .host import LOOPBACK_HOSTS
 
-
-def _split_host(value: str) -> tuple[str, int | None] | None:
-    """A Host header's name (lower case, without the brackets of an IPv6 address) and port
-    (None: none given), or None when it is not of that form."""
-    if value.startswith("["):
-        name, sep, rest = value[1:].partition("]")
-        if not sep:
-            return None
-    else:
-        name, sep, rest = value.partition(":")
-        rest = sep + rest
-    if rest == "":
-        return name.lower(), None
-    digits = rest[1:]
-    if not (rest.startswith(":") and digits.isascii() and digits.isdigit() and len(digits) <= 5):
-        return None
-    return name.lower(), int(digits)
-
-
-class HostCheck:
-    """ASGI middleware: refuses, with 400 and a one-line reason, every request whose Host
-    header does not name this server. A page of another site whose name its DNS then points
-    at 127.0.0.1 (DNS rebinding) runs in the browser as that site's, so the browser lets it
-    read this server's answers; its requests still carry its own name in Host.
-
-    Answered: the port the server listens on, with ``localhost``, ``127.0.0.1``, ``[::1]``,
-    the ``--host`` given and the address bound; when bound to every interface (``0.0.0.0``,
-    ``::``), also any IP address (a page loaded from an address is this server's own) and
-    this machine's host name. The port may be left out only when it is 80."""
-
-    def __init__(self, app: Any, host: str, sock: socket.socket) -> None:
-        self.app = app
-        bound, self.port = sock.getsockname()[:2]
-        names = {*_LOOPBACK_NAMES, host.lower().strip("[]"), str(bound).lower()}
-        try:
-            self.any_address = ipaddress.ip_address(bound).is_unspecified
-        except ValueError:
-            self.any_address = False
-        if self.any_address:
-            hostname = socket.gethostname().lower()
-            names.add(hostname)
-            self.expected = (
-                f"localhost:{self.port}, {hostname}:{self.port} or an IP address with :{self.port}"
-            )
-        else:
-            shown = [f"[{n}]" if ":" in n else n for n in sorted(names)]
-            self.expected = ", ".join(f"{n}:{self.port}" for n in shown)
-        self.names = frozenset(names)
-
-    def allows(self, value: str | None) -> bool:
-        """Whether a request with this Host header (None: none) is answered."""
-        if value is None:
-            return False
-        parts = _split_host(value)
-        if parts is None:
-            return False
-        name, port = parts
-        if (self.port if port is None and self.port == 80 else port) != self.port:
-            return False
-        if name in self.names:
-            return True
-        if self.any_address:
-            try:
-                ipaddress.ip_address(name)
-            except ValueError:
-                return False
-            return True
-        return False
-
-    async def __call__(self, scope: Any, receive: Any, send: Any) -> None:
-        if scope["type"] not in ("http", "websocket"):
-            await self.app(scope, receive, send)
-            return
-        values = [v.decode("latin-1") for k, v in scope.get("headers", ()) if k == b"host"]
-        value = values[0] if len(values) == 1 else None
-        if self.allows(value):
-            await self.app(scope, receive, send)
-            return
-        if scope["type"] == "websocket":
-            await send({"type": "websocket.close", "code": 1008})
-            return
-        if not values:
-            got = "no Host header"
-        elif len(values) > 1:
-            got = f"{len(values)} Host headers"
-        else:
-            got = f"Host {values[0][:60]!r}"
-        msg = (
-            f"the Host header must name this server ({self.expected}), got {got}: "
-            "a page of another site cannot use it"
-        )
-        body = json.dumps(
-            {"detail": [{"loc": ["header", "host"], "msg": msg, "type": "invalid_host"}]}
-        ).encode()
-        await send(
-            {
-                "type": "http.response.start",
-                "status": 400,
-                "headers": [
-                    (b"content-type", b"application/json"),
-                    (b"content-length", str(len(body)).encode()),
-                    (b"connection", b"close"),
-                ],
-            }
-        )
-        await send({"type": "http.response.body", "body": body})
+    bound = str(sock.getsockname()[0])
+    hosts = [*LOOPBACK_HOSTS, host.strip(), bound]
+    try:
+        every_interface = ipaddress.ip_address(bound).is_unspecified
+    except ValueError:
+        every_interface = False
+    if every_interface:
+        hosts.append(socket.gethostname().lower())
+    return [h for h in hosts if h]
 
 
 def _server(uvicorn: Any, config: Any) -> Any:
@@ -370,7 +277,7 @@ def _run(args: argparse.Namespace) -> int:
         threading.Thread(target=webbrowser.open, args=(url,), daemon=True).start()
 
     config = uvicorn.Config(
-        HostCheck(create_app(**limits), args.host, sock),
+        create_app(allowed_hosts=allowed_hosts(args.host, sock), **limits),
         log_level="warning",
         access_log=False,
         lifespan="off",

@@ -1,0 +1,275 @@
+"""The app's own Host-header check (against DNS rebinding), whichever server runs it: the ASGI
+test client, the app mounted in another app, and real uvicorn processes on a free loopback
+port started as ``uvicorn stereodepth.web.app:create_app --factory`` (no ``stereodepth
+serve``, which had been the only entry point with the check) and with a factory of one's own
+that sets ``allowed_hosts``."""
+
+from __future__ import annotations
+
+import json
+import os
+import queue
+import re
+import signal
+import socket
+import subprocess
+import sys
+import threading
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+pytest.importorskip("fastapi", reason="the web extra is not installed")
+pytest.importorskip("uvicorn", reason="the web extra is not installed")
+
+from fastapi.testclient import TestClient
+from starlette.applications import Starlette
+from starlette.routing import Mount
+
+import stereodepth
+from stereodepth.web.app import create_app
+from stereodepth.web.host import AllowedHosts
+
+#: Where this process imported stereodepth from, for the child processes to import the same.
+PYTHON_DIR = Path(stereodepth.__file__).resolve().parents[1]
+START_TIMEOUT_S = 30
+
+
+def refusal(r: Any) -> str:
+    """The message of a 400 for the Host header."""
+    assert r.status_code == 400, r.text
+    (item,) = r.json()["detail"]
+    assert item["loc"] == ["header", "host"] and item["type"] == "invalid_host", item
+    assert "\n" not in item["msg"]
+    return str(item["msg"])
+
+
+# --- the ASGI test client --------------------------------------------------------------------
+@pytest.fixture(scope="module")
+def app() -> Any:
+    return create_app()
+
+
+@pytest.mark.parametrize(
+    "base_url", ["http://localhost", "http://127.0.0.1:8000", "http://[::1]:8000"]
+)
+def test_the_app_answers_loopback_hosts_at_its_port(app: Any, base_url: str) -> None:
+    assert TestClient(app, base_url=base_url).get("/api/fields").status_code == 200
+
+
+@pytest.mark.parametrize(
+    "host",
+    [
+        "evil.example.com",
+        "evil.example.com:8000",
+        "localhost.evil.example.com:8000",
+        "127.0.0.1:8001",  # another port: not this server
+        "127.0.0.1",  # port 80
+        "testserver",
+        "",
+        "[::1",
+    ],
+)
+@pytest.mark.parametrize("path", ["/api/fields", "/", "/api/calc?baseline_mm=1&focal_px=1"])
+def test_the_app_refuses_another_host(app: Any, host: str, path: str) -> None:
+    client = TestClient(app, base_url="http://127.0.0.1:8000")
+    msg = refusal(client.get(path, headers={"host": host}))
+    assert msg == (
+        "the Host header must name this server (localhost:8000, 127.0.0.1:8000 or "
+        f"[::1]:8000), got Host {host!r}: a page of another site cannot use it"
+    )
+    # The security headers are on the refusal too.
+    assert (
+        "default-src 'self'"
+        in client.get(path, headers={"host": host}).headers["content-security-policy"]
+    )
+
+
+def test_the_rebinding_post_is_refused_before_its_body_is_read(app: Any) -> None:
+    client = TestClient(app, base_url="http://127.0.0.1:8000")
+    r = client.post(
+        "/api/depthmap", json={"sample": True}, headers={"host": "evil.example.com:8000"}
+    )
+    refusal(r)
+
+
+def test_the_client_default_host_is_refused_with_the_hosts_answered() -> None:
+    msg = refusal(TestClient(create_app()).get("/api/fields"))
+    assert "localhost:80" in msg and "got Host 'testserver'" in msg
+
+
+def test_the_connections_own_ip_address_is_answered(app: Any) -> None:
+    # uvicorn --host 0.0.0.0 reached at a LAN address: the scope's server is that address.
+    client = TestClient(app, base_url="http://192.0.2.7:8000")
+    assert client.get("/api/fields").status_code == 200
+    assert "192.0.2.7:8000" in refusal(client.get("/api/fields", headers={"host": "x.example"}))
+
+
+@pytest.mark.parametrize(
+    ("allowed", "answered", "refused"),
+    [
+        pytest.param(["calc.lan"], ["calc.lan:8000"], ["localhost:8000", "calc.lan:80"], id="name"),
+        pytest.param(
+            ["localhost:8080"],
+            ["localhost:8080"],
+            ["localhost:8000", "127.0.0.1:8080"],
+            id="port-mapping",
+        ),
+        pytest.param(
+            ["0.0.0.0"],
+            ["10.1.2.3:8000", "[fe80::1]:8000", "127.0.0.1:8000"],
+            ["localhost:8000", "10.1.2.3:8001", "evil.example.com:8000"],
+            id="any-address",
+        ),
+        pytest.param(["::1"], ["[::1]:8000", "[0:0:0:0:0:0:0:1]:8000"], ["[::2]:8000"], id="ipv6"),
+        pytest.param(["*"], ["evil.example.com", "x:1"], [], id="any-host"),
+    ],
+)
+def test_allowed_hosts_sets_the_hosts_answered(
+    allowed: list[str], answered: list[str], refused: list[str]
+) -> None:
+    client = TestClient(create_app(allowed_hosts=allowed), base_url="http://127.0.0.1:8000")
+    for host in answered:
+        assert client.get("/api/fields", headers={"host": host}).status_code == 200, host
+    for host in refused:
+        refusal(client.get("/api/fields", headers={"host": host}))
+
+
+def test_a_mounted_app_checks_the_host() -> None:
+    outer = Starlette(routes=[Mount("/calc", app=create_app())])
+    client = TestClient(outer, base_url="http://localhost:8000")
+    assert client.get("/calc/api/fields").status_code == 200
+    refusal(client.get("/calc/api/fields", headers={"host": "evil.example.com:8000"}))
+
+
+@pytest.mark.parametrize(
+    ("hosts", "error", "msg"),
+    [
+        ("localhost", TypeError, "allowed_hosts must be a list of host names, got 'localhost' "),
+        (5, TypeError, "allowed_hosts must be a list of host names, got 5"),
+        ([5], TypeError, "allowed_hosts must hold strings, got 5"),
+        (["http://x"], ValueError, "allowed_hosts must hold host names or IP addresses"),
+        (["x:port"], ValueError, "got 'x:port'"),
+        ([""], ValueError, "got ''"),
+        (["a b"], ValueError, "got 'a b'"),
+    ],
+)
+def test_bad_allowed_hosts_raise_naming_the_parameter(
+    hosts: Any, error: type[Exception], msg: str
+) -> None:
+    with pytest.raises(error, match=re.escape(msg)):
+        create_app(allowed_hosts=hosts)
+
+
+def test_the_hosts_in_words() -> None:
+    assert AllowedHosts().expected(8000) == "localhost:8000, 127.0.0.1:8000 or [::1]:8000"
+    assert AllowedHosts().expected(None) == "localhost, 127.0.0.1 or [::1]"
+    every = AllowedHosts(["localhost", "127.0.0.1", "0.0.0.0", "box"])
+    assert every.expected(8000) == "localhost:8000, box:8000 or an IP address with :8000"
+
+
+# --- real servers on loopback ----------------------------------------------------------------
+class Uvicorn:
+    """``python -m uvicorn ... --port 0`` in a subprocess; its port from its log line."""
+
+    def __init__(self, *args: str, path: Path | None = None) -> None:
+        pythonpath = [str(PYTHON_DIR)] + ([str(path)] if path else [])
+        env = {**os.environ, "PYTHONPATH": os.pathsep.join(pythonpath)}
+        self.proc = subprocess.Popen(
+            [sys.executable, "-m", "uvicorn", *args, "--host", "127.0.0.1", "--port", "0"],
+            stdout=subprocess.DEVNULL,
+            stderr=subprocess.PIPE,
+            text=True,
+            env=env,
+        )
+        lines: queue.Queue[str] = queue.Queue()
+        assert self.proc.stderr is not None
+        stderr = self.proc.stderr
+        self.log: list[str] = []
+
+        def read() -> None:
+            for line in stderr:
+                self.log.append(line)
+                lines.put(line)
+
+        self.reader = threading.Thread(target=read, daemon=True)
+        self.reader.start()
+        while True:
+            try:
+                line = lines.get(timeout=START_TIMEOUT_S)
+            except queue.Empty:
+                self.stop()
+                raise AssertionError(f"uvicorn did not start: {''.join(self.log)}") from None
+            found = re.search(r"Uvicorn running on http://127\.0\.0\.1:(\d+)", line)
+            if found:
+                self.port = int(found.group(1))
+                return
+            if self.proc.poll() is not None:
+                self.stop()
+                raise AssertionError(f"uvicorn ended: {''.join(self.log)}")
+
+    def get(self, host: str) -> tuple[int, Any]:
+        """GET /api/fields with this Host header: the status and the JSON body."""
+        request = f"GET /api/fields HTTP/1.1\r\nHost: {host}\r\nConnection: close\r\n\r\n"
+        with socket.create_connection(("127.0.0.1", self.port), timeout=10) as s:
+            s.sendall(request.encode())
+            answer = b""
+            while chunk := s.recv(65536):
+                answer += chunk
+        head, _, body = answer.partition(b"\r\n\r\n")
+        found = re.match(rb"HTTP/1\.[01] (\d{3})", head)
+        assert found, answer[:200]
+        return int(found.group(1)), json.loads(body)
+
+    def stop(self) -> None:
+        if self.proc.poll() is None:
+            self.proc.send_signal(signal.SIGINT)
+            try:
+                self.proc.wait(timeout=10)
+            except subprocess.TimeoutExpired:
+                self.proc.kill()
+                self.proc.wait()
+        self.reader.join(timeout=10)
+        assert self.proc.stderr is not None
+        self.proc.stderr.close()
+
+
+def test_uvicorn_factory_refuses_another_host() -> None:
+    server = Uvicorn("stereodepth.web.app:create_app", "--factory")
+    try:
+        port = server.port
+        for host in (f"127.0.0.1:{port}", f"localhost:{port}", f"[::1]:{port}"):
+            assert server.get(host)[0] == 200, host
+        for host in (f"evil.example.com:{port}", f"127.0.0.1:{port + 1}", "localhost"):
+            status, body = server.get(host)
+            assert status == 400, host
+            (item,) = body["detail"]
+            assert item["loc"] == ["header", "host"]
+            assert repr(host) in item["msg"] and f"127.0.0.1:{port}" in item["msg"]
+    finally:
+        server.stop()
+    assert "Traceback" not in "".join(server.log)
+
+
+def test_a_factory_of_ones_own_sets_the_allowed_hosts(tmp_path: Path) -> None:
+    (tmp_path / "my_calc.py").write_text(
+        "from stereodepth.web.app import create_app\n\n\n"
+        "def app():\n"
+        "    return create_app(allowed_hosts=['calc.lan', 'localhost'])\n"
+    )
+    server = Uvicorn("my_calc:app", "--factory", path=tmp_path)
+    try:
+        port = server.port
+        assert server.get(f"calc.lan:{port}")[0] == 200
+        assert server.get(f"localhost:{port}")[0] == 200
+        # Not listed (127.0.0.1, the address the connection came in on, is answered too).
+        for host in (f"[::1]:{port}", f"evil.example.com:{port}"):
+            status, body = server.get(host)
+            assert status == 400, host
+            assert (
+                f"(calc.lan:{port}, localhost:{port} or 127.0.0.1:{port})"
+                in (body["detail"][0]["msg"])
+            )
+    finally:
+        server.stop()
