@@ -284,7 +284,8 @@ def test_rule_matches_the_schema_range() -> None:
         pytest.param(
             {**ARM, "doffs_px": 3},
             "doffs_px",
-            "doffs_px goes with focal_px (a calibration in pixels)",
+            "doffs_px goes with focal_px (a calibration in pixels), got doffs_px 3 with focal_mm "
+            "and pixel_um",
             id="doffs-with-mm",
         ),
         pytest.param(
@@ -313,6 +314,19 @@ def test_rule_matches_the_schema_range() -> None:
             "width_px",
             "width_px must be an integer >= 1 and <= 1000000, got 1280.5",
             id="fraction",
+        ),
+        pytest.param(  # was "... at most 1000 values", without how many came
+            {**ARM, "table_disparities_px": list(range(1, 1002))},
+            "table_disparities_px",
+            "table_disparities_px takes at most 1000 values, got 1001",
+            id="table-too-long",
+        ),
+        pytest.param(  # was at ["query"], at no parameter
+            {"baseline_mm": 1e-300, "focal_px": 1e-300},
+            "baseline_mm",
+            "baseline_mm=1e-300 with a focal length of 1e-300 px gives B*f = 0.0 m*px, outside "
+            "the range of a double",
+            id="library-name-equals",
         ),
     ],
 )

@@ -702,7 +702,10 @@ def test_depth_view_bad_upload_shows_a_message_at_the_field(page: Page, tmp_path
     p.click("#run-depth")
     error = p.locator("#left-error")
     page.expect(error).to_be_visible()
-    page.expect(error).to_have_text("left: not an image Pillow can read; give a PNG or JPEG file")
+    page.expect(error).to_have_text(
+        "left: not an image Pillow can read; give a PNG or JPEG file, got 12 bytes of text "
+        "beginning 'not an image'"
+    )
     page.expect(p.locator("#depth-status")).to_contain_text("Not computed")
     page.expect(p.locator("#right-error")).to_be_hidden()
     # A bad rig value is shown at the rig's input.

@@ -339,7 +339,7 @@ def test_middlebury_calib_fills_the_rig(client: TestClient) -> None:
     for bad, msg in [
         ("baseline=1\n", "calib: calib.txt: missing field 'cam0'"),
         ("cam0=[1 2; 3 4]\nbaseline=3\n", "cam0 must be a 3x3 matrix"),
-        ("", "calib: give the text of a Middlebury calib.txt"),
+        ("", "calib must be the text of a Middlebury calib.txt, got an empty text"),
     ]:
         r = client.post("/api/calib", json={"calib": bad})
         assert r.status_code == 422
@@ -371,7 +371,8 @@ def bad_cases(pair: Any) -> list[tuple[dict[str, Any], list[Any], str]]:
         (
             {"left": b64(b"just some text"), "right": right},
             ["body", "left"],
-            "left: not an image Pillow can read; give a PNG or JPEG file",
+            "left: not an image Pillow can read; give a PNG or JPEG file, got 14 bytes of text "
+            "beginning 'just some text'",
         ),
         (
             {"left": left, "right": encode(pair.right[:, :90])},
@@ -409,11 +410,11 @@ def bad_cases(pair: Any) -> list[tuple[dict[str, Any], list[Any], str]]:
             ["body", "right"],
             "right must have the bit depth of left (16-bit), got 8-bit",
         ),
-        ({"right": right}, ["body", "left"], "left: choose an image file"),
+        ({"right": right}, ["body", "left"], "left is required: choose an image file"),
         ({"left": left, "right": left}, ["body", "right"], "right: the same file as left"),
         ({"left": "%%%not base64", "right": right}, ["body", "left"], "left: not valid base64"),
         ({"left": b64(b""), "right": right}, ["body", "left"], "left: the file is empty"),
-        ({"left": 5, "right": right}, ["body", "left"], "give the image file as base64"),
+        ({"left": 5, "right": right}, ["body", "left"], "left must be the image file as base64"),
         (
             {"left": left, "right": right, "rig": {"baseline_mm": -1, "focal_px": 700}},
             ["body", "rig", "baseline_mm"],
@@ -655,10 +656,14 @@ def test_sgm_with_a_stand_in_matcher(
 
 def test_not_json_and_not_an_object(client: TestClient) -> None:
     r = client.post("/api/depthmap", content=b"{nope", headers={"content-type": "application/json"})
-    assert r.status_code == 422 and r.json()["detail"][0]["msg"] == "the request must be JSON"
+    assert r.status_code == 422
+    assert r.json()["detail"][0]["msg"] == (
+        "the request must be JSON, got text that is not: Expecting property name enclosed in "
+        "double quotes at line 1 column 2"
+    )
     r = client.post("/api/depthmap", json=[1, 2])
     assert r.status_code == 422
-    assert r.json()["detail"][0]["msg"] == "the request must be a JSON object"
+    assert r.json()["detail"][0]["msg"] == "the request must be a JSON object, got an array"
     # JSON nested deeper than Python's recursion limit was a 500 (RecursionError).
     deep = b"[" * 100_000 + b"]" * 100_000
     for url in ("/api/depthmap", "/api/calib"):
@@ -805,3 +810,259 @@ def test_two_uploads_at_once_both_complete_and_the_server_keeps_answering(
             t.join(timeout=60)
     assert answers[0].status_code == 200 and answers[1].status_code == 200
     assert answers[0].json()["id"] != answers[1].json()["id"]
+
+
+# --- each message names its field and what was received -----------------------------------------
+def messages_cases() -> list[Any]:
+    """(body, loc, the whole message): messages that had named neither the field nor what
+    came (in the comments: what they said before)."""
+    pair = sample_pair(96, 72, seed=4)
+    left, right = encode(pair.left), encode(pair.right)
+    png = base64.b64decode(left)
+    rig_fields = "baseline_mm, focal_mm, pixel_um, focal_px, doffs_px"
+    return [
+        pytest.param(  # "rig must be an object with the calculator's fields"
+            {"sample": True, "rig": None},
+            ["body", "rig"],
+            "rig is required: an object with baseline_mm, and focal_px (and doffs_px) or "
+            "focal_mm and pixel_um",
+            id="rig-missing",
+        ),
+        pytest.param(
+            {"sample": True, "rig": [150, 700]},
+            ["body", "rig"],
+            f"rig must be an object with the calculator's fields ({rig_fields}), got an array",
+            id="rig-array",
+        ),
+        pytest.param(  # a 401-digit number, shown whole
+            {"sample": True, "rig": {"baseline_mm": 10**400, "focal_px": 700}},
+            ["body", "rig", "baseline_mm"],
+            "baseline_mm must be a number > 0 and <= 1000000, got 10000000000000000000... "
+            "(401 digits)",
+            id="huge-integer",
+        ),
+        pytest.param(  # at ["body", "rig"], not at the field
+            {"sample": True, "rig": {"baseline_mm": 1e-300, "focal_px": 1e-300}},
+            ["body", "rig", "baseline_mm"],
+            "baseline_mm=1e-300 with a focal length of 1e-300 px gives B*f = 0.0 m*px, outside "
+            "the range of a double",
+            id="rig-library-error",
+        ),
+        pytest.param(  # at ["body"]: the library's focal_px * baseline_m and float64 advice
+            {"sample": True, "rig": {"baseline_mm": 1, "focal_mm": 1e-300, "pixel_um": 1000}},
+            ["body", "rig"],
+            "rig: focal length 1e-300 px times baseline 0.001 m is 1e-303 px*m, outside the range "
+            "float32 depth maps can be computed from ([1.175e-38, 3.403e+38] px*m): check the "
+            "units",
+            id="rig-float32",
+        ),
+        pytest.param(  # "doffs_px goes with focal_px (a calibration in pixels)"
+            {
+                "sample": True,
+                "rig": {"baseline_mm": 1, "focal_mm": 4, "pixel_um": 2, "doffs_px": 3},
+            },
+            ["body", "rig", "doffs_px"],
+            "doffs_px goes with focal_px (a calibration in pixels), got doffs_px 3 with focal_mm "
+            "and pixel_um",
+            id="doffs-with-mm",
+        ),
+        pytest.param(  # got True
+            {"sample": True, "num_disparities": True},
+            ["body", "num_disparities"],
+            "num_disparities must be an integer from 1 to 4096, got true",
+            id="json-true",
+        ),
+        pytest.param(  # the whole string, however long
+            {"sample": True, "method": "x" * 1000},
+            ["body", "method"],
+            f"method must be bm or sgm, got {'x' * 40 + '...'!r}",
+            id="long-string",
+        ),
+        pytest.param(  # got inf (the number it became)
+            {"sample": True, "cx_px": 10**400},
+            ["body", "cx_px"],
+            "cx_px must be a finite number (px) of magnitude at most 1e+06, got "
+            "10000000000000000000... (401 digits)",
+            id="principal-point-as-sent",
+        ),
+        pytest.param(  # "left: choose an image file"
+            {"right": right},
+            ["body", "left"],
+            "left is required: choose an image file (or sample: true)",
+            id="image-missing",
+        ),
+        pytest.param(  # "left: give the image file as base64 text"
+            {"left": 5, "right": right},
+            ["body", "left"],
+            "left must be the image file as base64 text (or a data: URL), got the number 5",
+            id="image-not-text",
+        ),
+        pytest.param(  # "left: a data URL must be base64"
+            {"left": "data:image/png," + left, "right": right},
+            ["body", "left"],
+            "left: a data URL must be base64 (data:<type>;base64,<data>), got 'data:image/png'",
+            id="data-url-not-base64",
+        ),
+        pytest.param(  # "left: not valid base64"
+            {"left": left[:10] + "-" + left[11:], "right": right},
+            ["body", "left"],
+            "left: not valid base64, got '-' at character 11 (base64 has A-Z, a-z, 0-9, + and /, "
+            "and = at the end)",
+            id="base64-character",
+        ),
+        pytest.param(
+            {"left": "QUJDRA=", "right": right},
+            ["body", "left"],
+            "left: not valid base64, got 7 characters (1 of them = at the end): the text is cut "
+            "short or its = padding is wrong",
+            id="base64-padding",
+        ),
+        pytest.param(  # "left: not an image Pillow can read; give a PNG or JPEG file"
+            {"left": b64(b"\x00\x01\x02\x03\xfe\xff\x00\x00\x00"), "right": right},
+            ["body", "left"],
+            "left: not an image Pillow can read; give a PNG or JPEG file, got 9 bytes beginning "
+            "00 01 02 03 fe ff 00 00",
+            id="binary-not-image",
+        ),
+        pytest.param(  # the same: a PNG cut inside its header
+            {"left": b64(png[:30]), "right": right},
+            ["body", "left"],
+            "left: the image is truncated or damaged: a PNG file of 30 bytes that Pillow cannot "
+            "read",
+            id="png-cut-short",
+        ),
+    ]
+
+
+@pytest.mark.parametrize(("body", "loc", "msg"), messages_cases())
+def test_each_message_names_the_field_and_what_was_received(
+    client: TestClient, body: dict[str, Any], loc: list[str], msg: str
+) -> None:
+    r = post(client, **body)
+    assert r.status_code == 422, r.text
+    found = [d for d in r.json()["detail"] if d["loc"] == loc]
+    assert found, r.json()
+    assert found[0]["msg"] == msg
+
+
+def test_null_is_the_default_for_method_and_sample(client: TestClient, pair: Any) -> None:
+    # As for the other fields; they were "method must be bm or sgm, got None" and "sample
+    # must be true or false, got None".
+    r = post(client, left=encode(pair.left), right=encode(pair.right), method=None, sample=None)
+    assert r.status_code == 200, r.text
+    assert r.json()["method"] == "bm" and r.json()["sample"] is False
+
+
+@pytest.mark.parametrize(
+    ("content", "msg"),
+    [
+        pytest.param(b"", "the request must be JSON, got an empty body", id="empty"),
+        pytest.param(
+            b'{"sample": tru}',
+            "the request must be JSON, got text that is not: Expecting value at line 1 column 12",
+            id="not-json",
+        ),
+        pytest.param(
+            b'{"sample": "\xff"}',
+            "the request must be JSON in UTF-8, got byte 0xff at position 12",
+            id="not-utf8",
+        ),
+        pytest.param(
+            b'{"num_disparities": ' + b"9" * 5000 + b"}",
+            "the request must be JSON whose integers have at most 4300 digits, got one with more",
+            id="integer-too-long",
+        ),
+        pytest.param(b"[1, 2]", "the request must be a JSON object, got an array", id="array"),
+        pytest.param(b"NaN", "the request must be a JSON object, got the number nan", id="nan"),
+        pytest.param(b'"left"', "the request must be a JSON object, got a string", id="string"),
+        pytest.param(b"null", "the request must be a JSON object, got null", id="null"),
+    ],
+)
+@pytest.mark.parametrize("url", ["/api/depthmap", "/api/calib"])
+def test_a_body_that_is_not_a_json_object_is_named(
+    client: TestClient, url: str, content: bytes, msg: str
+) -> None:
+    # Each was "the request must be JSON" or "the request must be a JSON object".
+    r = client.post(url, content=content, headers={"content-type": "application/json"})
+    assert r.status_code == 422, r.text
+    assert r.json()["detail"] == [{"loc": ["body"], "msg": msg, "type": "value_error"}]
+
+
+@pytest.mark.parametrize(
+    ("body", "status", "loc", "msg"),
+    [
+        pytest.param(  # "calib: give the text of a Middlebury calib.txt"
+            {},
+            422,
+            ["body", "calib"],
+            "calib is required: the text of a Middlebury calib.txt",
+            id="missing",
+        ),
+        pytest.param(
+            {"calib": ["baseline=1"]},
+            422,
+            ["body", "calib"],
+            "calib must be the text of a Middlebury calib.txt, got an array",
+            id="array",
+        ),
+        pytest.param(
+            {"calib": " \n"},
+            422,
+            ["body", "calib"],
+            "calib must be the text of a Middlebury calib.txt, got an empty text",
+            id="blank",
+        ),
+        pytest.param(  # ignored: the answer was "give the text of a Middlebury calib.txt"
+            {"calib_txt": "baseline=1"},
+            422,
+            ["body", "calib_txt"],
+            "calib_txt is not a field of /api/calib, got 'baseline=1' (its fields: calib)",
+            id="misspelt",
+        ),
+        pytest.param(  # "calib: a calib.txt is a few lines; this file is too large"
+            {"calib": "#" * 150_000},
+            422,
+            ["body", "calib"],
+            "calib: a calib.txt is a few lines; this one is 150000 characters, more than the "
+            "limit of 100000",
+            id="long",
+        ),
+        pytest.param(  # "calib: the file is too large"
+            {"calib": "#" * 250_000},
+            413,
+            ["body", "calib"],
+            "calib: the file is too large: the request is more than 200000 bytes (a calib.txt "
+            "is a few lines)",
+            id="too-large",
+        ),
+    ],
+)
+def test_calib_messages_name_what_was_received(
+    client: TestClient, body: dict[str, Any], status: int, loc: list[str], msg: str
+) -> None:
+    r = client.post("/api/calib", json=body)
+    assert r.status_code == status, r.text
+    (item,) = r.json()["detail"]
+    assert item["loc"] == loc and item["msg"] == msg, item
+
+
+def test_unknown_results_and_files_are_named(client: TestClient) -> None:
+    # Both were "no such result or file" at ["path"] (and "no such result (or too old)").
+    r = client.post("/api/depthmap", json={"sample": True, "rig": RIG})
+    key = r.json()["id"]
+    gone = (
+        "key: no result 'nope'; the server keeps the last 6 depth maps (and none across a "
+        "restart): compute it again"
+    )
+    for url in ("/api/depthmap/nope/point?x=1&y=1", "/api/depthmap/nope/depth.npy"):
+        r = client.get(url)
+        assert r.status_code == 404, url
+        assert r.json()["detail"] == [{"loc": ["path", "key"], "msg": gone, "type": "value_error"}]
+    r = client.get(f"/api/depthmap/{key}/depth.txt")
+    assert r.status_code == 404
+    (item,) = r.json()["detail"]
+    assert item["loc"] == ["path", "name"]
+    assert item["msg"] == (
+        "name must be one of disparity.pfm, disparity.npy, depth.npy, depth.pfm, depth-mm.png, "
+        "points.ply, got 'depth.txt'"
+    )

@@ -273,9 +273,10 @@ def _unprocessable(errors: list[dict[str, Any]]) -> JSONResponse:
 
 
 def _library_error(exc: Exception, names: dict[str, str]) -> dict[str, Any]:
-    """The library's message, located at the parameter it names (messages begin with it)."""
+    """The library's message, located at the parameter it names (messages begin with it, as
+    ``name ...`` or ``name=value ...``)."""
     msg = str(exc)
-    first = msg.split(" ", 1)[0]
+    first = msg.split(" ", 1)[0].split("=", 1)[0]
     field = names.get(first, first)
     if field in FIELDS:
         return _error(field, field + msg[len(first) :])
@@ -315,7 +316,9 @@ def _request_error(err: dict[str, Any]) -> dict[str, Any]:
     if kind == "missing":
         msg = f"{field.name} is required"
     elif kind == "too_long":
-        msg = f"{field.name} takes at most {_TABLE_MAX_ROWS} values"
+        given = err.get("input")
+        got = f", got {len(given)}" if isinstance(given, (list, tuple)) else ""
+        msg = f"{field.name} takes at most {_TABLE_MAX_ROWS} values{got}"
     else:
         label = field.name if len(loc) < 3 else f"{field.name}[{loc[2]}]"
         msg = f"{label} must be {field.rule}, got {_shown(err.get('input'))}"
@@ -361,7 +364,13 @@ def _rig(
         if v is None
     ]
     if doffs_px:
-        errors.append(_error("doffs_px", "doffs_px goes with focal_px (a calibration in pixels)"))
+        errors.append(
+            _error(
+                "doffs_px",
+                f"doffs_px goes with focal_px (a calibration in pixels), got doffs_px "
+                f"{_number(doffs_px)} with focal_mm and pixel_um",
+            )
+        )
     if errors or focal_mm is None or pixel_um is None:
         return errors
     return StereoRig(baseline_mm, focal_mm, pixel_um, width_px=width_px, height_px=height_px)

@@ -20,9 +20,11 @@
   requires, since a calibration of another resolution would scale every depth.
 
 Numbers may come as JSON numbers or as numeric strings (what the page's form fields hold);
-an integer field also takes a float with an integral value (``16.0``). A field not named
-here, in the request or in ``rig`` (a misspelt ``doffs``), answers 422 at that field, and so
-does a key given twice in one object (JSON would keep the last one).
+an integer field also takes a float with an integral value (``16.0``); null is the same as a
+field not given. A field not named here, in the request or in ``rig`` (a misspelt
+``doffs``), answers 422 at that field, and so does a key given twice in one object (JSON
+would keep the last one). ``POST /api/calib`` takes ``{"calib": "<text of calib.txt>"}``
+alone, with the same rules.
 
 The answer has the summary (size, density, time, ranges), the images as PNG data URLs (the
 left image, the colourised disparity and depth), the colour bars (limits and the colour table),
@@ -38,7 +40,9 @@ the request body is read up to what two such images need and no further (413 bey
 are decoded in memory and results kept in memory (the last few, under a random id); downloads
 are written to a temporary folder of the server's choosing. Matching runs in worker threads
 (at most two at once) so the server keeps answering. Every bad input answers 422 with
-``{"detail": [{"loc": ["body", field], "msg": ..., "type": ...}]}`` at its field, a body
+``{"detail": [{"loc": ["body", field], "msg": ..., "type": ...}]}`` at its field, whose
+message names the field and what it got (a long value cut to about 40 characters), an
+unknown result id or download 404 at ``["path", "key"]`` or ``["path", "name"]``, a body
 too large 413, a body not sent as ``application/json`` 415 (a form or text/plain POST is one
 any web site can make a browser send to this server), a missing extra (Pillow, matplotlib)
 503 with the install hint; none 500. A client that closes the connection before it has sent
@@ -53,6 +57,7 @@ import io
 import json
 import math
 import secrets
+import sys
 import tempfile
 import threading
 import warnings
@@ -128,12 +133,68 @@ def _mp(n: float) -> str:
     return f"{n / 1e6:.3g} MP"
 
 
+def _shown(value: Any) -> str:
+    """A received JSON value for a message: true, false and null as JSON writes them, a
+    string or list as Python's repr, each cut to about 40 characters (a JSON integer has no
+    size limit: one of 400 digits was shown whole)."""
+    if value is None or isinstance(value, bool):
+        return json.dumps(value)
+    if isinstance(value, int):
+        digits = str(value)
+        return digits if len(digits) <= 40 else f"{digits[:20]}... ({len(digits)} digits)"
+    if isinstance(value, str) and len(value) > 40:
+        return repr(value[:40] + "...")
+    try:
+        text = repr(value)
+    except RecursionError:  # an array nested thousands deep
+        text = f"a {'list' if isinstance(value, list) else 'object'} nested too deeply"
+    return text if len(text) <= 40 else text[:40] + "..."
+
+
+def _json_kind(value: Any) -> str:
+    """What a JSON value is, in JSON's words: an array, a string, a number, ..."""
+    if isinstance(value, dict):
+        return "an object"
+    if isinstance(value, list):
+        return "an array"
+    if isinstance(value, str):
+        return "a string"
+    if value is None or isinstance(value, bool):
+        return json.dumps(value)
+    return f"the number {_shown(value)}"
+
+
 # --- decoding an upload -----------------------------------------------------------------------
 def _png_colour_bits(data: bytes) -> tuple[int, int] | None:
     """(bit depth, colour type) from a PNG's IHDR, or None."""
     if data[:8] == b"\x89PNG\r\n\x1a\n" and len(data) >= 26 and data[12:16] == b"IHDR":
         return data[24], data[25]
     return None
+
+
+_SIGNATURES = {b"\x89PNG\r\n\x1a\n": "PNG", b"\xff\xd8\xff": "JPEG"}
+
+
+def _unreadable(field: str, data: bytes) -> str:
+    """The message for a file Pillow cannot open, with what it got: a PNG or JPEG cut short
+    (its first bytes are one's), text, or other bytes (their first, in hex)."""
+    n = len(data)
+    for signature, kind in _SIGNATURES.items():
+        if data.startswith(signature):
+            return (
+                f"{field}: the image is truncated or damaged: a {kind} file of {n} bytes that "
+                "Pillow cannot read"
+            )
+    head = data[:24]
+    try:
+        text = head.decode("utf-8")
+    except UnicodeDecodeError:
+        text = ""
+    if text and text.isprintable():
+        got = f"{n} bytes of text beginning {text!r}"
+    else:
+        got = f"{n} bytes beginning {data[:8].hex(' ')}"
+    return f"{field}: not an image Pillow can read; give a PNG or JPEG file, got {got}"
 
 
 def decode_image(field: str, data: bytes, limits: DepthMapLimits) -> np.ndarray:
@@ -169,9 +230,7 @@ def decode_image(field: str, data: bytes, limits: DepthMapLimits) -> np.ndarray:
                 "too_large",
             ) from None
         except UnidentifiedImageError:
-            raise BadInput(
-                loc, f"{field}: not an image Pillow can read; give a PNG or JPEG file"
-            ) from None
+            raise BadInput(loc, _unreadable(field, data)) from None
         except (OSError, ValueError, SyntaxError) as exc:
             raise BadInput(loc, f"{field}: not a readable image ({exc})") from None
     with im:
@@ -227,19 +286,46 @@ def decode_image(field: str, data: bytes, limits: DepthMapLimits) -> np.ndarray:
 def _b64(field: str, value: Any) -> bytes:
     loc = ["body", field]
     if not isinstance(value, str):
-        raise BadInput(loc, f"{field}: give the image file as base64 text")
+        raise BadInput(
+            loc,
+            f"{field} must be the image file as base64 text (or a data: URL), got "
+            f"{_json_kind(value)}",
+        )
     text = value
     if text.startswith("data:"):
         head, sep, text = text.partition(",")
         if not sep or ";base64" not in head:
-            raise BadInput(loc, f"{field}: a data URL must be base64")
+            raise BadInput(
+                loc,
+                f"{field}: a data URL must be base64 (data:<type>;base64,<data>), got "
+                f"{_shown(head if sep else value)}",
+            )
     if any(c in text for c in " \t\r\n"):
         # MIME base64 (RFC 2045; GNU base64, openssl) wraps its lines: the breaks carry nothing.
         text = "".join(text.split())
     try:
         return base64.b64decode(text, validate=True)
     except (binascii.Error, ValueError):
-        raise BadInput(loc, f"{field}: not valid base64") from None
+        raise BadInput(loc, f"{field}: not valid base64, {_not_base64(text)}") from None
+
+
+_BASE64 = frozenset("ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/")
+
+
+def _not_base64(text: str) -> str:
+    """What is wrong with text that base64 refused: its first character that base64 does not
+    have, else its length or padding."""
+    body = text.rstrip("=")
+    for i, c in enumerate(body):
+        if c not in _BASE64:
+            return (
+                f"got {c!r} at character {i + 1} (base64 has A-Z, a-z, 0-9, + and /, and = at "
+                "the end)"
+            )
+    return (
+        f"got {len(text)} characters ({len(text) - len(body)} of them = at the end): the text "
+        "is cut short or its = padding is wrong"
+    )
 
 
 # --- the request --------------------------------------------------------------------------------
@@ -299,12 +385,12 @@ def _number(loc: list[str], name: str, value: Any, rule_text: str) -> float | No
     if value is None or (isinstance(value, str) and value.strip() == ""):
         return None
     if isinstance(value, bool):
-        raise BadInput(loc, f"{name} must be {rule_text}, got {value!r}")
+        raise BadInput(loc, f"{name} must be {rule_text}, got {_shown(value)}")
     if isinstance(value, str):
         try:
             v = float(value)
         except ValueError:
-            raise BadInput(loc, f"{name} must be {rule_text}, got {value[:40]!r}") from None
+            raise BadInput(loc, f"{name} must be {rule_text}, got {_shown(value)}") from None
     elif isinstance(value, float):
         v = value
     elif isinstance(value, int):
@@ -315,16 +401,28 @@ def _number(loc: list[str], name: str, value: Any, rule_text: str) -> float | No
         except OverflowError:
             v = math.inf if value > 0 else -math.inf
     else:
-        raise BadInput(loc, f"{name} must be {rule_text}, got {value!r}")
+        raise BadInput(loc, f"{name} must be {rule_text}, got {_shown(value)}")
     return v
 
 
 def _rig_of(body: dict[str, Any]) -> Any:
-    from .app import FIELDS, _rig
+    from .._calib_rule import rig_range_problem
+    from .app import FIELDS, _library_error, _rig
 
     raw = body.get("rig")
+    if raw is None:
+        raise BadInput(
+            ["body", "rig"],
+            "rig is required: an object with baseline_mm, and focal_px (and doffs_px) or "
+            "focal_mm and pixel_um",
+            "missing",
+        )
     if not isinstance(raw, dict):
-        raise BadInput(["body", "rig"], "rig must be an object with the calculator's fields")
+        raise BadInput(
+            ["body", "rig"],
+            f"rig must be an object with the calculator's fields ({', '.join(_RIG_NAMES)}), "
+            f"got {_json_kind(raw)}",
+        )
     values: dict[str, float | None] = {}
     errors: list[BadInput] = _unknown(["body", "rig"], "rig", raw, _RIG_NAMES)
     for name in _RIG_NAMES:
@@ -342,7 +440,9 @@ def _rig_of(body: dict[str, Any]) -> Any:
             if ok and f.maximum is not None:
                 ok = v <= f.maximum
             if not ok:
-                errors.append(BadInput(loc, f"{name} must be {f.rule}, got {raw.get(name)!r}"))
+                errors.append(
+                    BadInput(loc, f"{name} must be {f.rule}, got {_shown(raw.get(name))}")
+                )
                 continue
         values[name] = v
     if errors:
@@ -360,9 +460,16 @@ def _rig_of(body: dict[str, Any]) -> Any:
             None,
         )
     except (ValueError, TypeError, ArithmeticError) as exc:
-        raise BadInput(["body", "rig"], str(exc)) from None
+        # The library's message begins with the parameter ("baseline_mm=1e-300 with ...").
+        found = _library_error(exc, {})
+        raise BadInput(["body", "rig", *found["loc"][1:]], found["msg"]) from None
     if isinstance(rig, list):
         raise ExceptionGroupLike([BadInput(["body", "rig", e["loc"][-1]], e["msg"]) for e in rig])
+    # The depth map is float32: B*f beyond its range was answered at the body with the
+    # library's message, which names its own parameters and suggests float64 input.
+    problem = rig_range_problem(float(rig.focal_px), rig.baseline_mm / 1000.0, rig.doffs_px)
+    if problem is not None:
+        raise BadInput(["body", "rig"], f"rig: {problem}")
     return rig
 
 
@@ -385,11 +492,11 @@ def _int_field(body: dict[str, Any], name: str, lo: int, hi: int) -> int | None:
         try:
             v = int(value.strip())
         except ValueError:
-            raise BadInput(loc, f"{name} must be {rule}, got {value[:40]!r}") from None
+            raise BadInput(loc, f"{name} must be {rule}, got {_shown(value)}") from None
     if isinstance(v, float) and v.is_integer():
         v = int(v)
     if isinstance(v, bool) or not isinstance(v, int) or not lo <= v <= hi:
-        raise BadInput(loc, f"{name} must be {rule}, got {value!r}")
+        raise BadInput(loc, f"{name} must be {rule}, got {_shown(value)}")
     return v
 
 
@@ -423,8 +530,26 @@ def _load_json(data: bytes) -> Any:
             f"{key} is given twice ({shown}): give it once",
             "repeated",
         ) from None
-    except (ValueError, UnicodeDecodeError):
-        raise BadInput(["body"], "the request must be JSON") from None
+    except UnicodeDecodeError as exc:
+        raise BadInput(
+            ["body"],
+            f"the request must be JSON in UTF-8, got byte 0x{exc.object[exc.start]:02x} at "
+            f"position {exc.start}",
+        ) from None
+    except json.JSONDecodeError as exc:
+        got = (
+            "an empty body"
+            if not data.strip()
+            else f"text that is not: {exc.msg} at line {exc.lineno} column {exc.colno}"
+        )
+        raise BadInput(["body"], f"the request must be JSON, got {got}") from None
+    except ValueError:  # an integer of more digits than Python converts (3.10.7 on)
+        limit = getattr(sys, "get_int_max_str_digits", lambda: 4300)()
+        raise BadInput(
+            ["body"],
+            f"the request must be JSON whose integers have at most {limit} digits, got one "
+            "with more",
+        ) from None
     except RecursionError:  # arrays or objects nested thousands deep
         raise BadInput(["body"], "the request must be JSON nested less deeply") from None
 
@@ -439,7 +564,7 @@ def parse_job(body: Any, limits: DepthMapLimits) -> Job:
     from ..matching import MAX_BLOCK_SIZE, MAX_NUM_DISPARITIES
 
     if not isinstance(body, dict):
-        raise BadInput(["body"], "the request must be a JSON object")
+        raise BadInput(["body"], f"the request must be a JSON object, got {_json_kind(body)}")
     errors: list[BadInput] = _unknown(["body"], "/api/depthmap", body, _BODY_NAMES)
     try:
         rig = _rig_of(body)
@@ -448,9 +573,13 @@ def parse_job(body: Any, limits: DepthMapLimits) -> Job:
     except ExceptionGroupLike as g:
         errors.extend(g.errors)
 
-    method = body.get("method", "bm")
+    method = body.get("method")
+    if method is None:  # null: the default, as for the other fields
+        method = "bm"
     if method not in METHODS:
-        errors.append(BadInput(["body", "method"], f"method must be bm or sgm, got {method!r}"))
+        errors.append(
+            BadInput(["body", "method"], f"method must be bm or sgm, got {_shown(method)}")
+        )
     elif method == "sgm" and not sgm_available():
         errors.append(
             BadInput(
@@ -460,7 +589,7 @@ def parse_job(body: Any, limits: DepthMapLimits) -> Job:
         )
     cost = body.get("cost")
     if cost is not None and (not isinstance(cost, str) or cost not in MAX_BLOCK_SIZE):
-        errors.append(BadInput(["body", "cost"], f"cost must be census or sad, got {cost!r}"))
+        errors.append(BadInput(["body", "cost"], f"cost must be census or sad, got {_shown(cost)}"))
     nums: dict[str, int | None] = {}
     for name, lo, hi in (
         ("num_disparities", 1, MAX_NUM_DISPARITIES),
@@ -484,7 +613,7 @@ def parse_job(body: Any, limits: DepthMapLimits) -> Job:
                 raise BadInput(
                     ["body", "disparity_step_px"],
                     f"disparity_step_px must be a number > 0 and <= 1000, got "
-                    f"{body.get('disparity_step_px')!r}",
+                    f"{_shown(body.get('disparity_step_px'))}",
                 )
             step = got
     except BadInput as e:
@@ -496,7 +625,7 @@ def parse_job(body: Any, limits: DepthMapLimits) -> Job:
         try:
             v = _number(["body", name], name, body.get(name), rule)
             if v is not None and not (math.isfinite(v) and abs(v) <= MAX_PRINCIPAL_POINT_PX):
-                raise BadInput(["body", name], f"{name} must be {rule}, got {v!r}")
+                raise BadInput(["body", name], f"{name} must be {rule}, got {_shown(body[name])}")
             centre[name] = v
         except BadInput as e:
             errors.append(e)
@@ -512,15 +641,19 @@ def parse_job(body: Any, limits: DepthMapLimits) -> Job:
             errors.append(
                 BadInput(
                     ["body", "calib_size"],
-                    f"calib_size must be [width, height], two integers > 0, got {size!r}"[:200],
+                    f"calib_size must be [width, height], two integers > 0, got {_shown(size)}",
                 )
             )
         else:
             calib_size = (size[0], size[1])
 
-    sample = body.get("sample", False)
+    sample = body.get("sample")
+    if sample is None:  # null: the default, as for the other fields
+        sample = False
     if not isinstance(sample, bool):
-        errors.append(BadInput(["body", "sample"], f"sample must be true or false, got {sample!r}"))
+        errors.append(
+            BadInput(["body", "sample"], f"sample must be true or false, got {_shown(sample)}")
+        )
         sample = False
     left = right = None
     truth = None
@@ -540,7 +673,11 @@ def parse_job(body: Any, limits: DepthMapLimits) -> Job:
         for field in ("left", "right"):
             if body.get(field) is None:
                 errors.append(
-                    BadInput(["body", field], f"{field}: choose an image file", "missing")
+                    BadInput(
+                        ["body", field],
+                        f"{field} is required: choose an image file (or sample: true)",
+                        "missing",
+                    )
                 )
                 continue
             try:
@@ -878,6 +1015,14 @@ async def _read_body(request: Request, limit: int) -> bytes | None:
     return b"".join(chunks)
 
 
+def _no_result(key: str) -> BadInput:
+    return BadInput(
+        ["path", "key"],
+        f"key: no result {_shown(key)}; the server keeps the last {KEPT_RESULTS} depth maps "
+        "(and none across a restart): compute it again",
+    )
+
+
 def make_router(limits: DepthMapLimits) -> APIRouter:
     """The depth view's routes, with these upload limits."""
     import anyio
@@ -977,7 +1122,7 @@ def make_router(limits: DepthMapLimits) -> APIRouter:
             return _error_response(twice)
         stored = results.get(key)
         if stored is None:
-            return _error_response([BadInput(["path", "key"], "no such result (or too old)")], 404)
+            return _error_response([_no_result(key)], 404)
         h, w = stored.disparity.shape
         bad = [
             BadInput(["query", n], f"{n} must be an integer from 0 to {m - 1}, got {v}")
@@ -1007,8 +1152,16 @@ def make_router(limits: DepthMapLimits) -> APIRouter:
     @router.get("/api/depthmap/{key}/{name}", summary="Downloads: disparity, depth, PLY")
     def download(key: str, name: str) -> Response:
         stored = results.get(key)
-        if stored is None or name not in DOWNLOADS:
-            return _error_response([BadInput(["path"], "no such result or file")], 404)
+        errors = [] if stored is not None else [_no_result(key)]
+        if name not in DOWNLOADS:
+            errors.append(
+                BadInput(
+                    ["path", "name"],
+                    f"name must be one of {', '.join(DOWNLOADS)}, got {_shown(name)}",
+                )
+            )
+        if errors or stored is None:
+            return _error_response(errors, 404)
         return Response(
             download_bytes(stored, name),
             media_type=DOWNLOADS[name],
@@ -1018,15 +1171,27 @@ def make_router(limits: DepthMapLimits) -> APIRouter:
     return router
 
 
+_CALIB_MAX_CHARS = 100_000
+_CALIB_MAX_BODY = 200_000
+
+
 def parse_calib(text: Any) -> dict[str, Any]:
     """A Middlebury calib.txt's rig for the page, or BadInput at ``calib``."""
     from ..calib import read_middlebury_calib
 
     loc = ["body", "calib"]
+    if text is None:
+        raise BadInput(loc, "calib is required: the text of a Middlebury calib.txt", "missing")
     if not isinstance(text, str) or not text.strip():
-        raise BadInput(loc, "calib: give the text of a Middlebury calib.txt")
-    if len(text) > 100_000:
-        raise BadInput(loc, "calib: a calib.txt is a few lines; this file is too large")
+        got = _json_kind(text) if not isinstance(text, str) else "an empty text"
+        raise BadInput(loc, f"calib must be the text of a Middlebury calib.txt, got {got}")
+    if len(text) > _CALIB_MAX_CHARS:
+        raise BadInput(
+            loc,
+            f"calib: a calib.txt is a few lines; this one is {len(text)} characters, more than "
+            f"the limit of {_CALIB_MAX_CHARS}",
+            "too_large",
+        )
     try:
         text.encode("utf-8")
     except UnicodeEncodeError as exc:  # a lone surrogate ("\ud800" in the JSON): no text file
@@ -1060,19 +1225,33 @@ def add_calib_route(router: APIRouter) -> None:
         if (refused := _not_json(request)) is not None:
             return refused
         try:
-            data = await _read_body(request, 200_000)
+            data = await _read_body(request, _CALIB_MAX_BODY)
         except _ClientGone:
             return _client_gone()
         if data is None:
             return _error_response(
-                [BadInput(["body", "calib"], "calib: the file is too large")], 413
+                [
+                    BadInput(
+                        ["body", "calib"],
+                        f"calib: the file is too large: the request is more than "
+                        f"{_CALIB_MAX_BODY} bytes (a calib.txt is a few lines)",
+                        "too_large",
+                    )
+                ],
+                413,
             )
         try:
             body = _load_json(data)
         except BadInput as e:
             return _error_response([e])
         if not isinstance(body, dict):
-            return _error_response([BadInput(["body"], "the request must be a JSON object")])
+            return _error_response(
+                [BadInput(["body"], f"the request must be a JSON object, got {_json_kind(body)}")]
+            )
+        # A misspelt field ({"calib_txt": ...}) was ignored: the answer was "give the text".
+        unknown = _unknown(["body"], "/api/calib", body, ("calib",))
+        if unknown:
+            return _error_response(unknown)
         try:
             return JSONResponse(parse_calib(body.get("calib")))
         except BadInput as e:
