@@ -153,6 +153,8 @@ def test_a_mounted_app_checks_the_host() -> None:
         (["x:port"], ValueError, "got 'x:port'"),
         ([""], ValueError, "got ''"),
         (["a b"], ValueError, "got 'a b'"),
+        (["*.example.com"], ValueError, "got '*.example.com'"),  # no wildcards: never matched
+        (["localhost:70000"], ValueError, "got 'localhost:70000'"),
     ],
 )
 def test_bad_allowed_hosts_raise_naming_the_parameter(

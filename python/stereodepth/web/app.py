@@ -551,7 +551,8 @@ def create_app(
     stands for any IP address, ``"*"`` turns the check off (behind a proxy that checks the
     Host itself). ``stereodepth serve`` passes these with its ``--host``, the address it bound
     and, bound to every interface, ``0.0.0.0`` and the machine's host name. Under ``uvicorn
-    --factory``, a factory of your own passes them: ``lambda: create_app(allowed_hosts=[...])``.
+    --factory``, a factory of your own passes them (``def app(): return
+    create_app(allowed_hosts=[...])``, then ``uvicorn mymodule:app --factory``).
 
     Raises TypeError for a limit that is not an integer or ``allowed_hosts`` that is not a
     list of strings, ValueError for a limit < 1 or an entry of ``allowed_hosts`` that is not

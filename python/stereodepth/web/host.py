@@ -76,8 +76,8 @@ def _shown(name: str, port: int | None) -> str:
 class AllowedHosts:
     """The Host header values a server answers (see the module's doc for the entries).
     Raises TypeError for ``hosts`` that is not a list of strings (a single string too: give
-    ``["name"]``), ValueError naming an entry that is not a host name, address or
-    ``name:port``."""
+    ``["name"]``), ValueError naming an entry that is not a host name or IP address, either
+    optionally with ``:port`` (1 to 65535), or ``"*"`` (no wildcards in names)."""
 
     def __init__(self, hosts: Iterable[str] | None = None) -> None:
         if hosts is None:
@@ -99,7 +99,9 @@ class AllowedHosts:
             # A bare IPv6 address ("::1") has colons of its own: no port.
             parts = (text, None) if _ip(text) is not None else _split_host(text)
             name = "" if parts is None else parts[0]
-            if parts is None or not name or any(c in name for c in "/?#@ \t[]"):
+            bad_port = parts is not None and parts[1] is not None and not 0 < parts[1] < 65536
+            # "*.example.com" or "a,b" would be names no Host has: refused, not never matched
+            if parts is None or not name or bad_port or any(c in name for c in "/?#@*, \t[]"):
                 raise ValueError(
                     "allowed_hosts must hold host names or IP addresses, each optionally with "
                     f":port, or '*', got {entry[:60]!r}"
@@ -150,7 +152,7 @@ class AllowedHosts:
         return self.entries if extra in self.entries else (*self.entries, extra)
 
     def expected(self, port: int | None, address: str | None = None) -> str:
-        """The hosts answered, in words, e.g. ``localhost:8000, 127.0.0.1:8000, [::1]:8000``."""
+        """The hosts answered, in words: ``localhost:8000, 127.0.0.1:8000 or [::1]:8000``."""
         entries = self._with(address)
         anywhere = [p if p is not None else port for n, p in entries if n == _ANY_ADDRESS]
         names = [

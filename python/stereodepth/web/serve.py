@@ -156,7 +156,7 @@ def allowed_hosts(host: str, sock: socket.socket) -> list[str]:
     port it listens on, ``localhost``, ``127.0.0.1``, ``[::1]``, the ``--host`` given and the
     address bound; when bound to every interface (``0.0.0.0``, ``::``), also any IP address (a
     page loaded from an address is this server's own) and this machine's host name."""
-    from .host import LOOPBACK_HOSTS
+    from .host import LOOPBACK_HOSTS, AllowedHosts
 
     bound = str(sock.getsockname()[0])
     hosts = [*LOOPBACK_HOSTS, host.strip(), bound]
@@ -166,7 +166,15 @@ def allowed_hosts(host: str, sock: socket.socket) -> list[str]:
         every_interface = False
     if every_interface:
         hosts.append(socket.gethostname().lower())
-    return [h for h in hosts if h]
+
+    def usable(name: str) -> bool:  # a --host that getaddrinfo took but no Host can name
+        try:
+            AllowedHosts([name])
+        except ValueError:
+            return False
+        return True
+
+    return [h for h in hosts if usable(h)]
 
 
 def _server(uvicorn: Any, config: Any) -> Any:
