@@ -13,6 +13,7 @@ from hypothesis import strategies as st
 
 import stereodepth
 from stereodepth import _core, reference
+from stereodepth.depth import DepthOptions
 
 IN_DTYPES = [np.float16, np.float32, np.float64, np.int16, np.uint16]
 OUT_DTYPES = [np.float32, np.uint16]
@@ -181,6 +182,63 @@ def test_uint16_millimetres_round_half_even_and_clamp() -> None:
         d, focal_px=1.0, baseline_m=0.0025, dtype=np.uint16, max_depth_m=10.0
     )
     assert mm[0, 3] == 0  # beyond max_depth_m is invalid, not clamped
+
+
+def uint16_depth_every_way(d: np.ndarray, **kw: Any) -> list[np.ndarray]:
+    """Millimetre depth of ``d`` (``kw``: focal_px, baseline_m, scale, min_depth_m) from the
+    oracle, disparity_to_depth and the kernel of every instruction set this CPU runs."""
+    kw = {"dtype": np.uint16, "scale": None, "min_depth_m": None, **kw}
+    got = [reference.disparity_to_depth(d, **kw), stereodepth.disparity_to_depth(d, **kw)]
+    o = DepthOptions(
+        d,
+        focal_px=kw["focal_px"],
+        baseline_m=kw["baseline_m"],
+        doffs_px=0.0,
+        scale=kw["scale"],
+        dtype=np.uint16,
+        min_depth_m=kw["min_depth_m"],
+        max_depth_m=None,
+        invalid_value=None,
+    )
+    for isa in stereodepth.build_info()["supported_isas"]:
+        out = np.empty(d.shape, np.uint16)
+        args = (o.focal_px, o.baseline_m, o.doffs_px, o.scale, o.min_depth_m, o.max_depth_m)
+        _core.disparity_to_depth(d, out, *args, o.invalid_value, o.invalid_below, 1, isa=isa)
+        got.append(out)
+    return got
+
+
+def test_uint16_millimetres_keep_a_valid_depth_under_half_a_millimetre() -> None:
+    """0 is "no depth" in millimetres: a valid depth that rounded to 0 (0.5 mm or less) was
+    written as a hole. It is 1 mm, the nearest valid value, as anything beyond 65.535 m is
+    65535; natively, in every instruction set, and in the oracle."""
+    # f B = 1e-3 m px: d px is 1 / d mm away.
+    mm = [0.0, 0.3, 0.49, 0.5, 0.51, 0.99, 1.0, 1.49, 1.51, 2.49, 1e-300]
+    d = np.array([[1.0 / v if v else 1e300 for v in mm] + [0.0, np.nan, -1.0]])
+    want = [[1, 1, 1, 1, 1, 1, 1, 1, 2, 2, 1, 0, 0, 0]]
+    for got in uint16_depth_every_way(d, focal_px=1.0, baseline_m=1e-3):
+        assert got.tolist() == want
+    # A depth under min_depth_m is still invalid, not 1 mm; one above it and under 0.5 mm is 1.
+    for got in uint16_depth_every_way(d, focal_px=1.0, baseline_m=1e-3, min_depth_m=4e-4):
+        assert got.tolist() == [[0, 0, 1, 1, 1, 1, 1, 1, 2, 2, 0, 0, 0, 0]]
+
+
+@pytest.mark.parametrize("in_dtype", IN_DTYPES, ids=lambda d: np.dtype(d).name)
+def test_uint16_millimetres_of_a_tiny_rig_have_no_false_holes(in_dtype: type) -> None:
+    """A rig so small that a depth is under half a millimetre (f B = 1e-7 m px) unless its
+    disparity is all but 0 (the special values): every such valid pixel is 1 mm, every hole
+    0, for every input dtype, and the kernels agree with the oracle bit for bit."""
+    rng = np.random.default_rng(5)
+    d = random_disparity(rng, in_dtype, (3, 257))
+    kw = {"focal_px": 1e-4, "baseline_m": 1e-3, "scale": default_scale(in_dtype)}
+    z = stereodepth.disparity_to_depth(d, **{**kw, "dtype": np.float32})
+    valid = np.isfinite(z)
+    near = valid & (z < 4e-4)
+    assert near.mean() > 0.5
+    oracle, *native = uint16_depth_every_way(d, **kw)
+    assert np.all(oracle[near] == 1) and np.all(oracle[valid] >= 1) and np.all(oracle[~valid] == 0)
+    for got in native:
+        assert_same(got, oracle)
 
 
 def test_zero_disparity_is_invalid_and_tiny_is_infinite_and_invalid() -> None:

@@ -97,9 +97,12 @@ void row_to_u16(const void* vin, std::uint16_t* out, std::ptrdiff_t n,
     bool ok = (den > 0.0) & (den < kInf) & (z >= p.min) & (z <= p.max);
     if (p.has_invalid) ok &= (d != p.invalid);
     if (p.has_below) ok &= (d >= p.below);
-    // Round half to even (the default rounding mode), clamp to the format's range.
+    // Round half to even (the default rounding mode), clamp to the format's valid range:
+    // 65535 for 65.535 m and farther, 1 for 1 mm and nearer (0.5 mm or less rounded to 0,
+    // which the format reads as "no depth": a valid pixel became a hole).
     double mm = std::nearbyint(z * 1000.0);
     mm = mm < 65535.0 ? mm : 65535.0;
+    mm = mm > 1.0 ? mm : 1.0;
     out[i] = ok ? static_cast<std::uint16_t>(mm) : std::uint16_t{0};
   }
 }

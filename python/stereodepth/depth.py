@@ -239,8 +239,9 @@ def disparity_to_depth(
         Disparity in pixels per raw unit. Default 1 for float input, 1/16 for int16.
     dtype
         ``numpy.float32``: metres with NaN where invalid. ``numpy.uint16``: millimetres, rounded
-        half to even, 0 where invalid and 65535 for anything farther (the depth-camera / ROS
-        format).
+        half to even, 0 where invalid (the depth-camera / ROS format), and clamped to the
+        valid values: 65535 for 65.535 m and farther, 1 for 1 mm and nearer (a valid depth of
+        0.5 mm or less rounds to 0, which would read as invalid).
     min_depth_m, max_depth_m
         Depths outside this range are invalid. By default only non-finite depths are; an
         infinite float32 depth (a disparity so near 0 that the depth overflows float32) is

@@ -8,7 +8,7 @@ and so on; its folder must exist). Formats: disparity as PFM (float32, +inf hole
 Middlebury's; default), ``npy`` (float32, NaN holes) or ``png16`` (KITTI's uint16 of d x 256, 0
 for holes: 0 to 255.996 px, refused for a search range outside that); depth as ``npy`` (float32
 metres, NaN where unknown; default), ``pfm``, or ``png16`` (uint16 millimetres, 0 unknown,
-65535 for 65.535 m and farther).
+1 for 1 mm and nearer, 65535 for 65.535 m and farther).
 The previews are the colourised maps pixel for pixel with a colour bar and unit under them
 (:func:`stereodepth.save_colorized`); they need the ``plot`` extra (``--no-preview`` skips them).
 
@@ -141,8 +141,8 @@ def register(subparsers: Any) -> None:
         "--depth-format",
         choices=tuple(DEPTH_FORMATS),
         default="npy",
-        help="npy or pfm: float32 m; png16: uint16 mm, 0 unknown, 65535 for 65.535 m and "
-        "farther (default npy)",
+        help="npy or pfm: float32 m; png16: uint16 mm, 0 unknown, 1 for 1 mm and nearer, "
+        "65535 for 65.535 m and farther (default npy)",
     )
     o.add_argument("--no-preview", action="store_true", help="skip the colour previews")
     o.add_argument(

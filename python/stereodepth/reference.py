@@ -100,7 +100,8 @@ def disparity_to_depth(
             if o.dtype == np.float32:
                 depth = np.where(ok, zf, np.float32(np.nan))
             else:
-                mm = np.minimum(np.rint(np.where(ok, z, 0.0) * 1000.0), 65535.0)
+                # 65535 for 65.535 m and farther, 1 for 1 mm and nearer (0 is a hole).
+                mm = np.clip(np.rint(np.where(ok, z, 0.0) * 1000.0), 1.0, 65535.0)
                 depth = np.where(ok, mm, 0).astype(np.uint16)
     result[...] = depth
     return result

@@ -83,8 +83,8 @@ Output, per pair with stem S, in OUTDIR
     ``S.disparity.EXT`` and ``S.depth.EXT`` (EXT by ``--format``: ``npy`` float32 disparity in
     pixels and depth in metres, NaN where invalid; ``png`` for ``png16``: disparity x 256 as
     KITTI (0 to 255.996 px: a search range outside that is refused), depth in millimetres, 0
-    where invalid, 65535 for 65.535 m and farther; ``pfm`` float32, disparity +inf where
-    invalid as Middlebury's, depth NaN),
+    where invalid, 1 for 1 mm and nearer, 65535 for 65.535 m and farther; ``pfm`` float32,
+    disparity +inf where invalid as Middlebury's, depth NaN),
     ``S.ply`` with ``--ply`` (binary, coloured by the left image, metres), and
     ``S.record.json`` last: the pair's record (status, inputs, calibration, options, outputs,
     density, time), written for a failed pair too. At the end, ``report.json`` (or

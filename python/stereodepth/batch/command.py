@@ -86,8 +86,8 @@ def register(subparsers: Any) -> None:
         choices=sorted(FORMATS),
         default="npy",
         help="npy: float32 (NaN invalid); png16: depth in mm and disparity x 256 "
-        "(0 invalid; depth 65535 for 65.535 m and farther); pfm: float32 (disparity +inf "
-        "invalid, as Middlebury; depth NaN) (default npy)",
+        "(0 invalid; depth 1 for 1 mm and nearer, 65535 for 65.535 m and farther); pfm: "
+        "float32 (disparity +inf invalid, as Middlebury; depth NaN) (default npy)",
     )
     o.add_argument(
         "--ply", action="store_true", help="also write a coloured binary PLY point cloud in metres"
