@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import contextlib
 import inspect
 import json
 import math
@@ -481,6 +482,39 @@ def print_summary(report: BatchReport, report_path: Path, file: Any = None) -> N
     print(f"report: {report_path}", file=out)
 
 
+def _show_summary(report: BatchReport, report_path: Path) -> None:
+    """Prints the summary on stdout, once every output and the report are written: a summary
+    that cannot be printed loses no work, so the exit status stays the report's (it was 1,
+    and a job whose pairs were all done looked failed). The reader gone (a broken pipe:
+    ``stereodepth batch ... | head -1``) ends it quietly, as it ends ``match``'s; stdout
+    closed (``>&-``) or unwritable (full) is said in one line on stderr, naming the report.
+    (``match`` fails instead: its summary is printed before its outputs are in place.)"""
+    why: str | None = "stdout is closed"  # Python has no sys.stdout: print() writes nothing
+    if sys.stdout is not None:
+        try:
+            print_summary(report, report_path)
+            sys.stdout.flush()
+            return
+        except BrokenPipeError:
+            why = None
+        except OSError as exc:
+            why = exc.strerror or str(exc)
+        # What is still buffered would fail again at exit ("Exception ignored ..."): it goes
+        # to /dev/null instead, as cli.main does after a broken pipe.
+        with contextlib.suppress(OSError, ValueError):
+            devnull = os.open(os.devnull, os.O_WRONLY)
+            try:
+                os.dup2(devnull, sys.stdout.fileno())
+            finally:
+                os.close(devnull)
+    if why is not None:
+        print(
+            f"stereodepth batch: note: cannot print the summary ({why}); the report, "
+            f"{report_path}, holds every pair's status",
+            file=sys.stderr,
+        )
+
+
 def run(args: argparse.Namespace) -> int:
     """Runs ``stereodepth batch``; returns the exit status.
 
@@ -586,7 +620,7 @@ def run(args: argparse.Namespace) -> int:
         )
         return 1
     if not args.quiet:
-        print_summary(report, report_path)
+        _show_summary(report, report_path)
     elif report.failed:
         for rec in report.failed:
             print(f"stereodepth batch: failed {rec['stem']}: {rec['error']}", file=sys.stderr)
