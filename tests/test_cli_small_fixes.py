@@ -1,8 +1,7 @@
-"""Three defects a new user met in the commands: a valid depth under half a millimetre written
+"""Small defects a new user met in the commands: a valid depth under half a millimetre written
 as "no depth" (0) in the millimetre PNGs of ``match`` and ``batch``; ``batch`` exiting 1 after
-every output was written when its summary could not be printed; and the advice ``match`` and
-``batch`` give for a calibration whose first camera is the right one (a rig calibrated upside
-down gives one too)."""
+every output was written when its summary could not be printed. (The third, the advice for a
+calibration whose first camera is the right one, is tested in test_match_rectify.py.)"""
 
 from __future__ import annotations
 

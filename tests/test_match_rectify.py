@@ -367,6 +367,78 @@ def test_bad_input_one_line_exit_2(tmp_path: Path, capsys: pytest.CaptureFixture
     assert not list(tmp_path.glob("x-*")) and not list(Path.cwd().glob("disparity*"))
 
 
+def turned_180(calib: Any) -> Any:
+    """The calibration of the same two cameras with their images turned by 180 degrees: each
+    camera's frame turned about its axis (x and y negated), so cx, cy mirror, the tangential
+    distortion changes sign, R becomes Rz R Rz and T Rz T."""
+    w, h = calib.image_size
+    rz = np.diag([-1.0, -1.0, 1.0])
+
+    def k(m: np.ndarray) -> np.ndarray:
+        m = m.copy()
+        m[0, 2], m[1, 2] = w - 1 - m[0, 2], h - 1 - m[1, 2]
+        return m
+
+    def d(v: np.ndarray) -> np.ndarray:
+        v = v.copy().ravel()
+        v[2:4] = -v[2:4]  # p1, p2
+        return v
+
+    return calib.__class__(
+        **{
+            **calib.__dict__,
+            **{"K1": k(calib.K1), "K2": k(calib.K2), "D1": d(calib.D1), "D2": d(calib.D2)},
+            **{"R": rz @ calib.R @ rz, "T": rz @ calib.T},
+        }
+    )
+
+
+def test_a_rig_calibrated_upside_down_is_told_what_happened_and_what_to_do(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A rig rolled by 180 degrees (both cameras upside down) and calibrated so, its cameras
+    named by their side in the world: camera 1 is the rig's right camera (b), now on the
+    world's left, and in its own, turned, frame the other is on its left. That calibration is
+    the rig's with the cameras swapped (R.T, -R.T @ T). The advice was "swap the cameras",
+    with no cause, read as files given the other way round, which is not it: the images
+    swapped alone are refused the same. The message now names both causes, and both of the
+    remedies it gives work: the calibration's cameras swapped along with the images, or the
+    images turned by 180 degrees and calibrated again."""
+    pytest.importorskip("yaml", reason="YAML calibrations need PyYAML (the calib extra)")
+    s = sample_pair(160, 96)
+    a, b, c = raw_files(tmp_path, s.left, s.right)  # a: the rig's left camera, b: its right
+    # Camera 1 is the rig's right one (b), on the world's left when the rig is upside down.
+    swap = {"K1": c.K2, "D1": c.D2, "K2": c.K1, "D2": c.D1, "R": c.R.T, "T": -c.R.T @ c.T}
+    world = c.__class__(**{**c.__dict__, **swap})
+    upside = write_opencv_yaml(tmp_path / "upside.yml", world, stored=False)
+    mm = ("--calib", upside, "--translation-unit", "mm", "--no-preview", "--json")
+    for left, right in ((b, a), (a, b)):  # as named in the world, then the images swapped
+        code, out, err = run(capsys, left, right, *mm, "-o", f"{tmp_path}/x/")
+        assert (code, out) == (2, ""), err
+        assert err.count("\n") == 1 and "first camera is right of the second" in err
+        assert "The calibration names the right camera first" in err
+        assert "rig upside down (rolled 180 degrees)" in err
+        assert "not the images' order (swapping them alone does not help)" in err
+        assert "Swap the cameras: the calibration's camera 1 and camera 2" in err
+        assert "turn the images 180 degrees and calibrate again" in err
+        assert not (tmp_path / "x").exists()
+    # The remedies: the cameras swapped (calibration and images), or the images turned.
+    turned = write_opencv_yaml(tmp_path / "turned.yml", turned_180(world), stored=False)
+    for name, arr in (("b180.png", read_image(b)), ("a180.png", read_image(a))):
+        Image.fromarray(np.ascontiguousarray(arr[::-1, ::-1])).save(tmp_path / name)
+    fixed = write_opencv_yaml(tmp_path / "fixed.yml", c, stored=False)
+    for left, right, calib in (
+        (a, b, fixed),
+        (tmp_path / "b180.png", tmp_path / "a180.png", turned),
+    ):
+        code, out, err = run(
+            capsys, left, right, "--calib", calib, "--translation-unit", "mm", "--no-preview",
+            "--json", "-o", f"{tmp_path}/{calib.stem}/",
+        )  # fmt: skip
+        assert code == 0, err
+        assert json.loads(out)["density"] > 0.5
+
+
 def test_split_opencv_files_without_a_size_take_image_size(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:

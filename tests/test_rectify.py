@@ -655,7 +655,8 @@ def test_rectifier_rig_and_q() -> None:
     with pytest.raises(ValueError, match=r"first camera is right of the second .*swap"):
         rs.rig  # noqa: B018 - the property raises
     upside = calib_of(dataclasses.replace(vertical, R=vertical.R.T, T=-vertical.R.T @ vertical.T))
-    with pytest.raises(ValueError, match=r"first camera is below the second \(P2\[1, 3\]"):
+    below = r"first camera is below the second in the rectified frame \(P2\[1, 3\].*lower camera"
+    with pytest.raises(ValueError, match=below):
         StereoRectifier.from_calibration(upside).rig  # noqa: B018 - the property raises
 
 

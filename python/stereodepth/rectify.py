@@ -879,17 +879,28 @@ class StereoRectifier:
         ``doffs_px = P2[0, 2] - P1[0, 2]`` (0 with zero_disparity), and the output size.
 
         Raises ValueError when the first camera is to the right of (or, for a vertical rig,
-        below) the second: its disparities would be negative."""
+        below) the second in the rectified frame: its disparities would be negative. The
+        calibration alone decides this: it names that camera first, made so, or made with the
+        rig upside down (rolled 180 degrees) and its cameras named by their place in the world
+        (each camera's frame is then turned: the camera on the world's left has the other on
+        its own left). Images given in the other order than the calibration's are not seen
+        here; they match to almost nothing."""
         f = float(self._P1[0, 0])
         i = _baseline_axis(self._P1, self._P2)
         relative = float(self._P2[i, 3] - self._P1[i, 3])
         if relative > 0:
-            axis, side = ("x", "right of") if i == 0 else ("y", "below")
+            axis, side, which = ("x", "right of", "right") if i == 0 else ("y", "below", "lower")
             raise ValueError(
-                f"the first camera is {side} the second (P2[{i}, 3] - P1[{i}, 3] = "
-                f"{relative:g} > 0, T[{i}] > 0): its disparities along {axis} are "
-                "negative, which the matchers do not search; swap the cameras (the images and "
-                "the calibration's camera 1 and camera 2)"
+                f"the first camera is {side} the second in the rectified frame (P2[{i}, 3] - "
+                f"P1[{i}, 3] = {relative:g} > 0, T[{i}] > 0): its disparities along {axis} "
+                "would be negative, which the matchers do not search. The calibration names "
+                f"the {which} camera first: made so, or with the rig upside down (rolled 180 "
+                "degrees) and its cameras named by their place in the world; not the images' "
+                "order (swapping them alone does not help). Swap the cameras: the "
+                "calibration's camera 1 and camera 2 (or calibrate again, the other first) and "
+                "the images with them; an upside-down rig's outputs are then upside down, as "
+                "its images (to have them upright, turn the images 180 degrees and calibrate "
+                "again)"
             )
         baseline_m = -relative / float(self._P2[0, 0])
         doffs = float(self._P2[i, 2] - self._P1[i, 2])
