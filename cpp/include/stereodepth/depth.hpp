@@ -46,8 +46,8 @@ struct DisparityStack {
 void disparity_to_depth(const DisparityStack& in, const StackView<float>& out,
                         const DepthParams& params, int threads = 0, Isa isa = default_isa());
 
-// Uint16 millimetres, rounded half to even, with 0 where invalid and 65535 for anything
-// farther. Computed in float64.
+// Uint16 millimetres, rounded half to even, with 0 where invalid, 65535 for anything
+// farther and 1 for any valid depth of 1 mm and nearer. Computed in float64.
 void disparity_to_depth(const DisparityStack& in, const StackView<std::uint16_t>& out,
                         const DepthParams& params, int threads = 0, Isa isa = default_isa());
 
