@@ -10,13 +10,10 @@ from __future__ import annotations
 
 import json
 import os
-import queue
 import re
 import shutil
-import signal
 import subprocess
 import sys
-import threading
 import time
 import urllib.error
 import urllib.request
@@ -25,6 +22,7 @@ from pathlib import Path
 from typing import Any
 
 import pytest
+from server_process import ServerProcess, serve
 
 from stereodepth import StereoRig
 from stereodepth.cli import main
@@ -43,52 +41,6 @@ ARM_ARGS = ["--baseline-mm", "150", "--focal-mm", "6", "--pixel-um", "2.8", "--w
 START_TIMEOUT_S = 30
 
 
-class Server:
-    """``stereodepth serve --port 0`` in a subprocess; its URL from its first line."""
-
-    def __init__(self, *args: str, env: dict[str, str] | None = None) -> None:
-        self.proc = subprocess.Popen(
-            [sys.executable, "-m", "stereodepth.cli", "serve", *args],
-            stdout=subprocess.PIPE,
-            stderr=subprocess.PIPE,
-            text=True,
-            env=None if env is None else {**os.environ, **env},
-        )
-        lines: queue.Queue[str] = queue.Queue()
-        assert self.proc.stdout is not None
-        stdout = self.proc.stdout
-
-        def read() -> None:
-            for line in stdout:
-                lines.put(line)
-
-        self.reader = threading.Thread(target=read, daemon=True)
-        self.reader.start()
-        try:
-            self.first_line = lines.get(timeout=START_TIMEOUT_S)
-        except queue.Empty:
-            self.stop()
-            raise AssertionError(f"the server did not start in {START_TIMEOUT_S} s") from None
-        found = re.search(r"http://[^\s]+/", self.first_line)
-        assert found, self.first_line
-        self.url = found.group(0)
-
-    def stop(self) -> tuple[int, str]:
-        if self.proc.poll() is None:
-            self.proc.send_signal(signal.SIGINT)
-            try:
-                self.proc.wait(timeout=15)
-            except subprocess.TimeoutExpired:
-                self.proc.kill()
-                self.proc.wait()
-        self.reader.join(timeout=10)  # it ends at the end of the server's output
-        assert self.proc.stdout is not None and self.proc.stderr is not None
-        self.proc.stdout.close()
-        err = self.proc.stderr.read()
-        self.proc.stderr.close()
-        return self.proc.returncode, err
-
-
 def get_json(url: str) -> tuple[int, Any]:
     try:
         with urllib.request.urlopen(url, timeout=10) as r:
@@ -99,7 +51,7 @@ def get_json(url: str) -> tuple[int, Any]:
 
 # --- the real server -----------------------------------------------------------------------------
 def test_serve_listens_on_loopback_answers_and_stops() -> None:
-    server = Server("--port", "0")
+    server = serve("--port", "0")
     try:
         assert server.url.startswith("http://127.0.0.1:")
         assert "the calculator is at" in server.first_line
@@ -116,7 +68,7 @@ def test_serve_listens_on_loopback_answers_and_stops() -> None:
         with urllib.request.urlopen(server.url, timeout=10) as r:
             assert b"Stereo depth calculator" in r.read()
     finally:
-        code, err = server.stop()
+        code, _, _, err = server.stop()
     assert code == 0, err
 
 
@@ -124,7 +76,7 @@ def test_serve_open_opens_the_page(tmp_path: Path) -> None:
     opened = tmp_path / "opened.txt"
     # webbrowser runs $BROWSER with the URL for %s: here, a script that notes it.
     fake = f"{sys.executable} -c \"import sys; open(sys.argv[1], 'w').write(sys.argv[2])\""
-    server = Server("--port", "0", "--open", env={"BROWSER": f"{fake} {opened} %s"})
+    server = serve("--port", "0", "--open", env={"BROWSER": f"{fake} {opened} %s"})
     try:
         for _ in range(100):
             if opened.exists() and opened.read_text():
@@ -132,7 +84,7 @@ def test_serve_open_opens_the_page(tmp_path: Path) -> None:
             time.sleep(0.1)
         assert opened.read_text() == server.url
     finally:
-        code, err = server.stop()
+        code, _, _, err = server.stop()
     assert code == 0, err
 
 
@@ -178,10 +130,10 @@ def chromium_executable() -> str | None:
 
 
 @pytest.fixture(scope="module")
-def server() -> Iterator[Server]:
-    s = Server("--port", "0")
+def server() -> Iterator[ServerProcess]:
+    s = serve("--port", "0")
     yield s
-    code, err = s.stop()
+    code, _, _, err = s.stop()
     assert code == 0, err
 
 
@@ -270,7 +222,7 @@ def context(browser: Any) -> Iterator[Any]:
 
 
 @pytest.fixture
-def page(context: Any, server: Server) -> Iterator[Page]:
+def page(context: Any, server: ServerProcess) -> Iterator[Page]:
     p = Page(context, server.url)
     yield p
     p.close()

@@ -7,14 +7,8 @@ that sets ``allowed_hosts``."""
 from __future__ import annotations
 
 import json
-import os
-import queue
 import re
-import signal
 import socket
-import subprocess
-import sys
-import threading
 from pathlib import Path
 from typing import Any
 
@@ -24,16 +18,12 @@ pytest.importorskip("fastapi", reason="the web extra is not installed")
 pytest.importorskip("uvicorn", reason="the web extra is not installed")
 
 from fastapi.testclient import TestClient
+from server_process import ServerProcess
 from starlette.applications import Starlette
 from starlette.routing import Mount
 
-import stereodepth
 from stereodepth.web.app import create_app
 from stereodepth.web.host import AllowedHosts
-
-#: Where this process imported stereodepth from, for the child processes to import the same.
-PYTHON_DIR = Path(stereodepth.__file__).resolve().parents[1]
-START_TIMEOUT_S = 30
 
 
 def refusal(r: Any) -> str:
@@ -172,44 +162,17 @@ def test_the_hosts_in_words() -> None:
 
 
 # --- real servers on loopback ----------------------------------------------------------------
-class Uvicorn:
+class Uvicorn(ServerProcess):
     """``python -m uvicorn ... --port 0`` in a subprocess; its port from its log line."""
 
     def __init__(self, *args: str, path: Path | None = None) -> None:
-        pythonpath = [str(PYTHON_DIR)] + ([str(path)] if path else [])
-        env = {**os.environ, "PYTHONPATH": os.pathsep.join(pythonpath)}
-        self.proc = subprocess.Popen(
-            [sys.executable, "-m", "uvicorn", *args, "--host", "127.0.0.1", "--port", "0"],
-            stdout=subprocess.DEVNULL,
-            stderr=subprocess.PIPE,
-            text=True,
-            env=env,
+        super().__init__(
+            ["-m", "uvicorn", *args, "--host", "127.0.0.1", "--port", "0"],
+            ready=r"Uvicorn running on http://127\.0\.0\.1:(\d+)",
+            stream="stderr",
+            extra_path=path,
         )
-        lines: queue.Queue[str] = queue.Queue()
-        assert self.proc.stderr is not None
-        stderr = self.proc.stderr
-        self.log: list[str] = []
-
-        def read() -> None:
-            for line in stderr:
-                self.log.append(line)
-                lines.put(line)
-
-        self.reader = threading.Thread(target=read, daemon=True)
-        self.reader.start()
-        while True:
-            try:
-                line = lines.get(timeout=START_TIMEOUT_S)
-            except queue.Empty:
-                self.stop()
-                raise AssertionError(f"uvicorn did not start: {''.join(self.log)}") from None
-            found = re.search(r"Uvicorn running on http://127\.0\.0\.1:(\d+)", line)
-            if found:
-                self.port = int(found.group(1))
-                return
-            if self.proc.poll() is not None:
-                self.stop()
-                raise AssertionError(f"uvicorn ended: {''.join(self.log)}")
+        self.port = int(self.ready.group(1))
 
     def get(self, host: str) -> tuple[int, Any]:
         """GET /api/fields with this Host header: the status and the JSON body."""
@@ -223,18 +186,6 @@ class Uvicorn:
         found = re.match(rb"HTTP/1\.[01] (\d{3})", head)
         assert found, answer[:200]
         return int(found.group(1)), json.loads(body)
-
-    def stop(self) -> None:
-        if self.proc.poll() is None:
-            self.proc.send_signal(signal.SIGINT)
-            try:
-                self.proc.wait(timeout=10)
-            except subprocess.TimeoutExpired:
-                self.proc.kill()
-                self.proc.wait()
-        self.reader.join(timeout=10)
-        assert self.proc.stderr is not None
-        self.proc.stderr.close()
 
 
 def test_uvicorn_factory_refuses_another_host() -> None:

@@ -6,16 +6,10 @@ is not this server (DNS rebinding) is refused with 400."""
 from __future__ import annotations
 
 import json
-import os
-import queue
 import re
 import signal
 import socket
-import subprocess
-import sys
-import threading
 import time
-from pathlib import Path
 from typing import Any
 
 import pytest
@@ -23,7 +17,9 @@ import pytest
 pytest.importorskip("fastapi", reason="the web extra is not installed")
 pytest.importorskip("uvicorn", reason="the web extra is not installed")
 
-import stereodepth
+from server_process import ServerProcess
+from server_process import serve as serve_process
+
 from stereodepth.web import serve
 
 #: The grace period of serve (seconds) for requests in flight.
@@ -32,73 +28,11 @@ GRACE_S: float = getattr(serve, "GRACE_S", 3.0)
 CALIB = (
     "cam0=[1000 0 100; 0 1000 80; 0 0 1]\ndoffs=0\nbaseline=100\nwidth=200\nheight=160\nndisp=64\n"
 )
-#: Where this process imported stereodepth from (the source tree with an in-place build, or
-#: site-packages after `pip install .`), for the child processes to import the same.
-PYTHON_DIR = Path(stereodepth.__file__).resolve().parents[1]
-START_TIMEOUT_S = 30
 
 
-class Server:
-    """``stereodepth serve --port 0`` in a subprocess; its port from its first line."""
-
-    def __init__(self, *args: str) -> None:
-        env = {**os.environ, "PYTHONPATH": str(PYTHON_DIR)}
-        self.proc = subprocess.Popen(
-            [sys.executable, "-m", "stereodepth.cli", "serve", "--port", "0", *args],
-            stdout=subprocess.PIPE,
-            stderr=subprocess.PIPE,
-            text=True,
-            env=env,
-        )
-        lines: queue.Queue[str] = queue.Queue()
-        assert self.proc.stdout is not None
-        stdout = self.proc.stdout
-
-        def read() -> None:
-            for line in stdout:
-                lines.put(line)
-
-        self.reader = threading.Thread(target=read, daemon=True)
-        self.reader.start()
-        self.lines = lines
-        try:
-            first = lines.get(timeout=START_TIMEOUT_S)
-        except queue.Empty:
-            self.proc.kill()
-            raise AssertionError(f"the server did not start in {START_TIMEOUT_S} s") from None
-        found = re.search(r"http://([^\s/]+):(\d+)/", first)
-        assert found, first
-        self.port = int(found.group(2))
-
-    def stop(self, sig: int, timeout: float) -> tuple[int | None, float, str, str]:
-        """Sends ``sig``; the exit status (None: still running after ``timeout`` s, then
-        killed), the seconds it took, the rest of stdout and stderr."""
-        t0 = time.monotonic()
-        self.proc.send_signal(sig)
-        try:
-            code: int | None = self.proc.wait(timeout=timeout)
-        except subprocess.TimeoutExpired:
-            code = None
-            self.proc.kill()
-            self.proc.wait()
-        took = time.monotonic() - t0
-        assert self.proc.stderr is not None
-        err = self.proc.stderr.read()
-        self.reader.join(timeout=10)
-        out = []
-        while not self.lines.empty():
-            out.append(self.lines.get())
-        return code, took, "".join(out), err
-
-    def kill(self) -> None:
-        """Ends the process if it still runs, and closes its pipes."""
-        if self.proc.poll() is None:
-            self.proc.kill()
-            self.proc.wait()
-        self.reader.join(timeout=10)  # it ends at the end of the server's output
-        assert self.proc.stdout is not None and self.proc.stderr is not None
-        self.proc.stdout.close()
-        self.proc.stderr.close()
+def start(*args: str) -> ServerProcess:
+    """``stereodepth serve --port 0`` in a subprocess, its port from its first line."""
+    return serve_process("--port", "0", *args)
 
 
 def raw(port: int, request: bytes, *, read: bool = True) -> bytes:
@@ -146,7 +80,7 @@ def body_of(answer: bytes) -> Any:
 # --- 1. a stalled upload cannot hold the server ---------------------------------------------------
 @pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM], ids=["SIGINT", "SIGTERM"])
 def test_a_stalled_upload_does_not_keep_the_server_from_stopping(sig: int) -> None:
-    server = Server()
+    server = start()
     stalled = stalled_upload(server.port)
     try:
         code, took, out, err = server.stop(sig, timeout=GRACE_S + 10)
@@ -160,7 +94,7 @@ def test_a_stalled_upload_does_not_keep_the_server_from_stopping(sig: int) -> No
 
 
 def test_a_second_ctrl_c_stops_at_once_without_a_traceback() -> None:
-    server = Server()
+    server = start()
     stalled = stalled_upload(server.port)
     try:
         server.proc.send_signal(signal.SIGINT)
@@ -176,7 +110,7 @@ def test_a_second_ctrl_c_stops_at_once_without_a_traceback() -> None:
 
 def test_requests_in_flight_complete_within_the_grace_period() -> None:
     """A client whose upload arrives during the grace period gets its answer."""
-    server = Server()
+    server = start()
     body = json.dumps({"calib": CALIB}).encode()
     conn = socket.create_connection(("127.0.0.1", server.port), timeout=10)
     try:
@@ -204,7 +138,7 @@ def test_requests_in_flight_complete_within_the_grace_period() -> None:
 # --- 2. a client that leaves mid-upload -----------------------------------------------------------
 @pytest.mark.parametrize("path", ["/api/depthmap", "/api/calib"])
 def test_a_client_that_leaves_mid_upload_leaves_no_traceback(path: str) -> None:
-    server = Server()
+    server = start()
     try:
         for _ in range(3):
             stalled_upload(server.port, path, length=100).close()
@@ -233,7 +167,7 @@ def test_a_client_that_leaves_mid_upload_leaves_no_traceback(path: str) -> None:
     ids=["SIGINT", "SIGTERM"],
 )
 def test_either_signal_stops_the_server_with_one_line_and_status_0(sig: int, line: str) -> None:
-    server = Server()
+    server = start()
     try:
         code, _, out, err = server.stop(sig, timeout=GRACE_S + 10)
     finally:
@@ -253,7 +187,7 @@ def get(port: int, host: str | None, http: str = "1.1", path: str = "/api/fields
 
 @pytest.fixture(scope="module")
 def loopback_server() -> Any:
-    server = Server()
+    server = start()
     yield server
     server.stop(signal.SIGINT, timeout=GRACE_S + 10)
     server.kill()
@@ -262,7 +196,7 @@ def loopback_server() -> Any:
 @pytest.mark.parametrize(
     "host", ["127.0.0.1:{port}", "localhost:{port}", "LocalHost:{port}", "[::1]:{port}"]
 )
-def test_a_loopback_host_is_answered(loopback_server: Server, host: str) -> None:
+def test_a_loopback_host_is_answered(loopback_server: ServerProcess, host: str) -> None:
     answer = get(loopback_server.port, host.format(port=loopback_server.port))
     assert status_of(answer) == 200, answer[:300]
 
@@ -279,7 +213,7 @@ def test_a_loopback_host_is_answered(loopback_server: Server, host: str) -> None
         "",
     ],
 )
-def test_another_host_is_refused_with_400(loopback_server: Server, host: str) -> None:
+def test_another_host_is_refused_with_400(loopback_server: ServerProcess, host: str) -> None:
     port = loopback_server.port
     shown = host.format(port=port, other=port + 1)
     for path in ("/api/fields", "/", "/api/calc?baseline_mm=1&focal_px=1"):
@@ -298,7 +232,7 @@ def test_another_host_is_refused_with_400(loopback_server: Server, host: str) ->
     assert status_of(answer) == 400
 
 
-def test_a_request_without_host_is_refused(loopback_server: Server) -> None:
+def test_a_request_without_host_is_refused(loopback_server: ServerProcess) -> None:
     answer = get(loopback_server.port, None, http="1.0")  # HTTP/1.0 may omit it
     assert status_of(answer) == 400
     (item,) = body_of(answer)["detail"]
@@ -308,7 +242,7 @@ def test_a_request_without_host_is_refused(loopback_server: Server) -> None:
 
 
 def test_a_server_on_every_interface_answers_its_addresses_not_other_names() -> None:
-    server = Server("--host", "0.0.0.0")
+    server = start("--host", "0.0.0.0")
     try:
         port = server.port
         for host in (f"127.0.0.1:{port}", f"localhost:{port}", f"192.0.2.7:{port}"):
