@@ -105,3 +105,27 @@ def test_both_edges_agree_with_the_oracle(method: str, min_d: int, nd: int, isa:
     np.testing.assert_array_equal(
         np.isnan(full), np.isnan(oracle(left, right, num_disparities=nd, min_disparity=min_d))
     )
+
+
+@pytest.mark.parametrize("method", sorted(MATCHERS))
+@pytest.mark.parametrize("w", [1, 2, 3, 4])
+@pytest.mark.parametrize(("min_d", "nd"), [(-2, 6), (-5, 10), (-1, 3), (0, 4)])
+def test_images_of_a_few_columns_agree_with_the_oracle(
+    method: str, w: int, min_d: int, nd: int
+) -> None:
+    """An image of at most 3 columns with a negative min_disparity: each pixel's range is
+    clipped on both sides to w candidates, away from both edges' columns of the rule."""
+    native, oracle, _ = MATCHERS[method]
+    big = np.random.default_rng(w * 100 + nd).integers(0, 256, (40, 60), dtype=np.uint8)
+    shift = min_d + nd // 2
+    left = np.ascontiguousarray(big[:, 20 : 20 + w])
+    right = np.ascontiguousarray(big[:, 20 - shift : 20 - shift + w])
+    kw = {"num_disparities": nd, "min_disparity": min_d, "return_confidence": True}
+    for extra in ({}, bare(method)):
+        d, conf = native(left, right, **kw, **extra)
+        od, oconf = oracle(left, right, **kw, **extra)
+        np.testing.assert_array_equal(np.isnan(d), np.isnan(od))
+        np.testing.assert_allclose(d, od, rtol=0, atol=1e-3)
+        np.testing.assert_allclose(conf, oconf, rtol=0, atol=1e-6)
+        if w <= 2 and w < nd:
+            assert np.isnan(d).all()  # every pixel has 1 or 2 candidates: never a rival

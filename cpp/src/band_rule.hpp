@@ -39,9 +39,14 @@ inline void drop_unrivalled(float* disp, float* conf, std::ptrdiff_t cols, std::
       if (conf) conf[x] = 0.0f;
     }
   };
-  // The left edge: x - min_d in 0 .. 2; the right edge (min_disparity < 0): x - min_d - cols +
-  // 1 in nd - 3 .. nd - 1. Where the two meet (cols small) a pixel may be seen twice: the
-  // rule is the same both times.
+  // A pixel clipped on one side only has at most 3 candidates at the left edge (x - min_d in
+  // 0 .. 2) or at the right one (min_disparity < 0: x - min_d - cols + 1 in nd - 3 .. nd - 1);
+  // one clipped on both sides has cols of them, wherever it is: an image of at most 3
+  // columns is checked whole. A pixel seen twice is judged the same both times.
+  if (cols <= 3) {
+    for (std::ptrdiff_t x = 0; x < cols; ++x) check(x);
+    return;
+  }
   for (std::ptrdiff_t i = 0; i < 3; ++i) {
     const std::ptrdiff_t left = min_d + i;
     const std::ptrdiff_t right = min_d + cols - 1 + nd - 3 + i;

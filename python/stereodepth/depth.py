@@ -240,8 +240,8 @@ def disparity_to_depth(
     dtype
         ``numpy.float32``: metres with NaN where invalid. ``numpy.uint16``: millimetres, rounded
         half to even, 0 where invalid (the depth-camera / ROS format), and clamped to the
-        valid values: 65535 for 65.535 m and farther, 1 for 1 mm and nearer (a valid depth of
-        0.5 mm or less rounds to 0, which would read as invalid).
+        valid values: 65535 for 65.535 m and farther, 1 for 1 mm and nearer (so that a valid
+        depth never becomes 0).
     min_depth_m, max_depth_m
         Depths outside this range are invalid. By default only non-finite depths are; an
         infinite float32 depth (a disparity so near 0 that the depth overflows float32) is

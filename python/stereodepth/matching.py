@@ -690,7 +690,9 @@ def block_match(
     The float32 (H, W) disparity in pixels, NaN where there is no reliable match; with
     ``return_confidence=True``, ``(disparity, confidence)``, the confidence float32 in
     [0, 1]: ``(second - best) / second`` from the cost curve, where ``second`` is the least
-    cost more than one disparity away from the winner (0 where the disparity is NaN).
+    cost more than one disparity away from the winner (0 where the disparity is NaN; 1 when
+    there is no such cost, which happens only with ``num_disparities <= 3``: with so few
+    candidates the confidence says nothing).
 
     The steps, the validity rules and the limits are described in :mod:`stereodepth.matching`.
     The GIL is released while the kernel runs. Ctrl-C during a call on the main thread stops

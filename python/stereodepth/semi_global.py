@@ -531,7 +531,12 @@ def semi_global_match(
         use at most that many, whatever is asked (their passes meet at every row). The
         output does not depend on it.
     return_confidence
-        Also return the confidence, ``(second - best) / second`` of the path sums.
+        Also return the confidence, ``(second - best) / second`` of the path sums (``second``
+        the least sum more than one disparity away from the winner; 1 when there is none,
+        which happens only with ``num_disparities <= 3``). It measures the margin of the
+        aggregated sums, which the paths carry across a textureless region from its
+        surroundings and the border: there it can be high though the pixel itself is flat (a
+        uniform image gives disparity 0 at confidence 1, as OpenCV's SGBM gives 0).
     channel_order, intensity_range
         As :func:`stereodepth.block_match`: ``"rgb"`` or ``"bgr"`` (``cv2.imread``) for
         (H, W, 3) images; for uint16 pairs the range stretched onto the scale of uint8
