@@ -1349,3 +1349,57 @@ def test_a_scene_folder_without_its_right_image_is_refused_up_front(
     assert f"not {missing}: a scene folder holds all three" in err and err.count("\n") == 1
     with pytest.raises(ValueError, match=f"but not {missing}"):
         find_scenes(scenes_dir)
+
+
+# --------------------------------------------------------------------------------------------
+# --scene reads and checks the selected scenes only
+
+
+@pytest.mark.parametrize(
+    ("fault", "message"),
+    [
+        ("meta", "meta.json: max_disp must be a finite number >= 0, got inf"),
+        ("calib", "calib.txt"),
+        ("right", "holds left.png and disp_gt.npy but not right.png"),
+    ],
+)
+def test_a_broken_scene_left_out_by_scene_does_not_matter(
+    scenes_dir: Path, capsys: pytest.CaptureFixture[str], fault: str, message: str
+) -> None:
+    """Every scene's meta.json (calib.txt, right image) was read and checked whatever --scene
+    said: a broken scene left out ended the run (exit status 2). Selected, it still does,
+    with the same error as without --scene."""
+    broken = scenes_dir / "zz-broken"
+    if fault == "calib":
+        _, left, right, gt = middlebury_pair(broken, rgb=False)
+        (broken / "calib.txt").write_text("ndisp=many\n")
+    else:
+        left, right, gt = random_dot_pair(32, 64, [4], rgb=False, seed=5)
+        write_scene(broken, left, right, gt)
+        if fault == "meta":
+            (broken / "meta.json").write_text('{"max_disp": 1e400}')
+        else:
+            (broken / "right.png").unlink()
+    status, _, err = run_eval(capsys, str(scenes_dir))
+    assert status == 2 and message in err and err.count("\n") == 1, err
+    for patterns in (["rds-b"], ["rds-*"], ["rds-a", "rds-b"]):
+        argv = [a for p in patterns for a in ("--scene", p)]
+        report = run_json(capsys, str(scenes_dir), *argv, "--repeat", "1")
+        assert report["scenes"] == [s for s in ("rds-a", "rds-b") if s in report["scenes"]]
+        assert len(report["scenes"]) == (1 if patterns == ["rds-b"] else 2)
+    for patterns in (["zz-*"], ["rds-b", "zz-broken"]):
+        argv = [a for p in patterns for a in ("--scene", p)]
+        assert run_eval(capsys, str(scenes_dir), *argv, "--repeat", "1") == (2, "", err)
+
+
+def test_scene_matching_nothing_lists_every_scene_without_reading_them(
+    scenes_dir: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    left, right, gt = random_dot_pair(32, 64, [4], rgb=False, seed=5)
+    write_scene(scenes_dir / "zz-broken", left, right, gt, meta={"max_disp": -1})
+    status, out, err = run_eval(capsys, str(scenes_dir), "--scene", "nothing*")
+    assert (status, out) == (2, "")
+    assert err == (
+        f"stereodepth eval: error: --scene nothing* matches no scene in {str(scenes_dir)!r}; "
+        "there are: rds-a, rds-b, zz-broken\n"
+    )

@@ -1,7 +1,9 @@
 """The ``stereodepth eval`` command: stereo matchers on scenes with ground truth, scored and timed.
 
 Scenes
-    Every sub-folder of DIR that holds a scene (or DIR itself, when it is one), in name order.
+    Every sub-folder of DIR that holds a scene (or DIR itself, when it is one), in name order;
+    with ``--scene PATTERN``, those whose folder name matches. Only those are read and checked:
+    a broken scene that ``--scene`` leaves out does not matter.
     Two layouts are read:
 
     - ours (``shared/data/stereo``): ``left.png``, ``right.png``, ``disp_gt.npy`` (float
@@ -49,10 +51,10 @@ Methods
     the lowest ``--best-by`` metric (bad-2 by default).
 
 Checks
-    Every scene is read and checked before any is matched (its files, left and right images
-    of one size and bit depth, a mask selecting no pixel with ground truth, a declared range
-    its ground truth leaves), so that a fault in the last scene ends the run before the work
-    on the others, not after it.
+    Every selected scene is read and checked before any is matched (its files, left and right
+    images of one size and bit depth, a mask selecting no pixel with ground truth, a declared
+    range its ground truth leaves), so that a fault in the last scene ends the run before the
+    work on the others, not after it.
 
 Scenes an OpenCV method cannot take
     OpenCV's StereoBM and StereoSGBM take 8-bit images only. On a scene whose images are not
@@ -361,6 +363,15 @@ def _require_right(path: Path, right: str, left: str, gt: str) -> None:
         )
 
 
+def _holds_scene(path: Path) -> bool:
+    """Whether ``path`` holds a scene's left image and ground truth (either layout), its other
+    files neither read nor checked: :func:`_scene_at` does that, for the selected scenes."""
+    if (path / "left.png").is_file() and (path / "disp_gt.npy").is_file():
+        return True
+    gts = ("disp0GT.pfm", "disp0.pfm")
+    return (path / "im0.png").is_file() and any((path / n).is_file() for n in gts)
+
+
 def _scene_at(path: Path) -> Scene | None:
     if (path / "left.png").is_file() and (path / "disp_gt.npy").is_file():
         _require_right(path, "right.png", "left.png", "disp_gt.npy")
@@ -404,11 +415,12 @@ def _scene_at(path: Path) -> Scene | None:
 def find_scenes(root: str | os.PathLike[str], patterns: Sequence[str] = ()) -> list[Scene]:
     """The scenes in ``root`` (its sub-folders in name order, or ``root`` itself when it is a
     scene), keeping those whose folder name matches one of the shell ``patterns`` if any are
-    given. Raises ValueError when ``root`` is not a folder (or is empty: not the current
-    folder), a folder holds a scene's left image and ground truth but not its right image,
-    or nothing matches, and TypeError for a ``root`` that is not a str or
-    os.PathLike or ``patterns`` that are not a sequence of str (a str alone was taken as its
-    characters, and a ``*`` among them matched every scene)."""
+    given. Only the kept scenes are read (``meta.json``, ``calib.txt``) and checked. Raises
+    ValueError when ``root`` is not a folder (or is empty: not the current folder), a kept
+    folder holds a scene's left image and ground truth but not its right image or a
+    malformed ``meta.json`` / ``calib.txt``, or nothing matches, and TypeError for a ``root``
+    that is not a str or os.PathLike or ``patterns`` that are not a sequence of str (a str
+    alone was taken as its characters, and a ``*`` among them matched every scene)."""
     from .io import _as_path
 
     base = _as_path(root, "root")
@@ -420,25 +432,26 @@ def find_scenes(root: str | os.PathLike[str], patterns: Sequence[str] = ()) -> l
         )
     if not base.is_dir():
         raise ValueError(f"DIR must be a folder of scenes, got {str(base)!r} (not a folder)")
-    itself = _scene_at(base)
-    if itself is not None:
-        found = [itself]
+    # Only the selected scenes are read (meta.json, calib.txt) and checked: a broken scene
+    # that --scene left out ended the run.
+    if _holds_scene(base):
+        found = [base]
     else:
-        found = [s for p in sorted(base.iterdir()) if p.is_dir() and (s := _scene_at(p))]
+        found = [p for p in sorted(base.iterdir()) if p.is_dir() and _holds_scene(p)]
     if not found:
         raise ValueError(
             f"no scene in {str(base)!r}: a scene folder holds left.png, right.png and "
             "disp_gt.npy, or im0.png, im1.png and disp0GT.pfm / disp0.pfm"
         )
     if patterns:
-        kept = [s for s in found if any(fnmatch.fnmatchcase(s.name, p) for p in patterns)]
+        kept = [f for f in found if any(fnmatch.fnmatchcase(f.name, p) for p in patterns)]
         if not kept:
             raise ValueError(
                 f"--scene {' '.join(patterns)} matches no scene in {str(base)!r}; "
-                f"there are: {', '.join(s.name for s in found)}"
+                f"there are: {', '.join(f.name for f in found)}"
             )
         found = kept
-    return found
+    return [scene for folder in found if (scene := _scene_at(folder)) is not None]
 
 
 def num_disparities_for(max_disparity_px: float) -> int:
