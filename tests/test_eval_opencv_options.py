@@ -73,7 +73,8 @@ BAD = [
     ),
     (
         ["--method", "opencv-sgbm", "--opencv-option", "uniqueness_ratio=-1"],
-        "uniqueness_ratio=-1 rejected by opencv-sgbm: uniqueness_ratio must be an integer >= 0",
+        "uniqueness_ratio=-1 rejected by opencv-sgbm: uniqueness_ratio must be an integer in "
+        "0..2147483647",
     ),
     (
         ["--method", "opencv-sgbm", "--opencv-option", "uniqueness_ratio=1.5"],
@@ -81,7 +82,8 @@ BAD = [
     ),
     (
         ["--method", "opencv-bm", "--opencv-option", "speckle_range=99999999999"],
-        "speckle_range=99999999999 rejected by opencv-bm",
+        "speckle_range=99999999999 rejected by opencv-bm: speckle_range must be an integer in "
+        "0..2147483647",
     ),
     (
         ["--method", "opencv-sgbm", "--opencv-option", "speckle_window_size=true"],
@@ -89,7 +91,19 @@ BAD = [
     ),
     (
         ["--method", "opencv-sgbm", "--opencv-option", "p1=0"],
-        "p1=0 rejected by opencv-sgbm: p1 must be an integer >= 1",
+        "p1=0 rejected by opencv-sgbm: p1 must be an integer in 1..2147483647",
+    ),
+    (  # the upper bound was left out: "p1 must be an integer >= 1"
+        ["--method", "opencv-sgbm", "--opencv-option", "p1=100000000000"],
+        "p1=100000000000 rejected by opencv-sgbm: p1 must be an integer in 1..2147483647",
+    ),
+    (
+        ["--method", "opencv-sgbm", "--opencv-option", "p2=2147483648"],
+        "p2=2147483648 rejected by opencv-sgbm: p2 must be an integer in 1..2147483647",
+    ),
+    (
+        ["--method", "opencv-bm", "--opencv-option", "texture_threshold=2147483648"],
+        "texture_threshold must be an integer in 0..2147483647",
     ),
     (
         ["--method", "opencv-sgbm", "--opencv-option", "p1=100", "--opencv-option", "p2=50"],

@@ -614,7 +614,8 @@ _C_INT = (-(2**31), 2**31 - 1)
 
 
 def _at_least(low: int) -> tuple[Callable[[int], bool], str]:
-    return (lambda v: v >= low), f"an integer >= {low}"
+    """From ``low`` up to the largest C int: OpenCV's setters take an int."""
+    return _within(low, _C_INT[1])
 
 
 def _within(low: int, high: int) -> tuple[Callable[[int], bool], str]:
