@@ -1403,3 +1403,44 @@ def test_scene_matching_nothing_lists_every_scene_without_reading_them(
         f"stereodepth eval: error: --scene nothing* matches no scene in {str(scenes_dir)!r}; "
         "there are: rds-a, rds-b, zz-broken\n"
     )
+
+
+# --------------------------------------------------------------------------------------------
+# Counts in messages: 1 pixel, 2 pixels
+
+
+def test_one_pixel_beyond_the_declared_range_is_singular(
+    scenes_dir: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """It read "1 pixels beyond the search range"."""
+    gt = np.load(scenes_dir / "rds-b" / "disp_gt.npy")
+    gt[np.isfinite(gt)] = 3.0
+    gt[0, -1] = 20.0
+    np.save(scenes_dir / "rds-b" / "disp_gt.npy", gt)
+    (scenes_dir / "rds-b" / "meta.json").write_text('{"max_disp": 3}')
+    status, _, err = run_eval(capsys, str(scenes_dir), "--scene", "rds-b")
+    assert status == 2
+    assert "the ground truth reaches 20 px (1 pixel beyond the search range 0 .. 15 " in err, err
+    gt[0, -2] = 20.0
+    np.save(scenes_dir / "rds-b" / "disp_gt.npy", gt)
+    status, _, err = run_eval(capsys, str(scenes_dir), "--scene", "rds-b")
+    assert "the ground truth reaches 20 px (2 pixels beyond the search range 0 .. 15 " in err, err
+
+
+def test_a_mask_leaving_out_the_only_pixel_with_ground_truth(
+    scenes_dir: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """It read "the mask selects none of the 1 pixels with ground truth"."""
+    scene = scenes_dir / "rds-a"
+    gt = np.full((64, 128), np.nan, np.float32)
+    gt[10, 20] = 5.0
+    np.save(scene / "disp_gt.npy", gt)
+    mask = np.ones((64, 128), bool)
+    mask[10, 20] = False
+    np.save(scene / "mask_nonocc.npy", mask)
+    status, out, err = run_eval(capsys, str(scenes_dir), "--scene", "rds-a")
+    assert (status, out) == (2, "")
+    assert err.endswith(
+        "mask_nonocc.npy: the mask leaves out the only pixel with ground truth (--no-mask "
+        "scores it)\n"
+    ), err

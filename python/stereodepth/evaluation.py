@@ -803,6 +803,11 @@ def _timed(
     return out, tuple(times)
 
 
+def _count(n: int, noun: str) -> str:
+    """``n`` and ``noun``, plural unless ``n`` is 1: "1 pixel", "3 pixels"."""
+    return f"{n} {noun}" if n == 1 else f"{n} {noun}s"
+
+
 def _with_best(rows: list[EvalResult], best_by: str) -> list[EvalResult]:
     """Adds, after the rows of each method run at several block sizes, a copy of the best."""
     out: list[EvalResult] = []
@@ -856,7 +861,7 @@ def _scene_inputs(
             # searched a range the true disparities leave: every method scored badly, exit 0.
             raise ValueError(
                 f"scene {scene.name}: the ground truth reaches {float(gt[beyond].max()):g} px "
-                f"({int(beyond.sum())} pixels beyond the search range 0 .. "
+                f"({_count(int(beyond.sum()), 'pixel')} beyond the search range 0 .. "
                 f"{num_disparities - 1} that {source} gives): correct it, or give "
                 "--num-disparities"
             )
@@ -875,8 +880,13 @@ def _scene_inputs(
         raise ValueError(f"scene {scene.name}: the ground truth has no finite value")
     if mask is not None and not (known & mask).any():
         raise ValueError(
-            f"scene {scene.name}: {scene.mask_path}: the mask selects none of the "
-            f"{int(known.sum())} pixels with ground truth (--no-mask scores them all)"
+            f"scene {scene.name}: {scene.mask_path}: the mask "
+            + (
+                "leaves out the only pixel with ground truth (--no-mask scores it)"
+                if known.sum() == 1
+                else f"selects none of the {int(known.sum())} pixels with ground truth "
+                "(--no-mask scores them all)"
+            )
         )
     return left, right, gt, mask, num_disparities
 
@@ -1132,8 +1142,9 @@ def format_not_applicable(rows: Sequence[Row]) -> str:
             covered.setdefault(mean["scenes"], {})[mean["method"]] = None
     for count, methods in covered.items():
         names = ", ".join(methods)
+        none = f"ran on none of the {total} scenes" if total > 1 else "did not run on the scene"
         lines.append(
-            f"mean 0/{total}: {names} ran on none of the {total} scenes: no means"
+            f"mean 0/{total}: {names} {none}: no means"
             if count == 0
             else f"mean {count}/{total}: the means of {names} are over the {count} of the "
             f"{total} scenes {'it' if len(methods) == 1 else 'each'} ran on: not comparable "
