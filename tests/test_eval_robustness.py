@@ -156,9 +156,12 @@ def test_opencv_error_keeps_its_explanation_on_one_line(
     status, out, err = run_eval(
         capsys, str(folder), "--method", "opencv-sgbm", "--num-disparities", "32", "--repeat", "1"
     )
-    assert status == 2 and out == ""
-    assert err.startswith("stereodepth eval: error: scene narrow: opencv-sgbm: opencv-sgbm ")
-    assert err.count("\n") == 1, err
+    assert status == 2 and out == ""  # refused on the only scene: nothing scored
+    assert err.startswith(
+        "stereodepth eval: error: nothing was scored: no method ran on the scene: "
+        "scene narrow: opencv-sgbm (block 5): OpenCV refused the images: ("
+    )
+    assert err.count("\n") == 1 and err.count("opencv-sgbm") == 1, err
     for text in explanation:
         assert text and text in err, (text, err)
     assert f"({exc.code}:" in err and f"in function '{exc.func}'" in err
@@ -339,3 +342,197 @@ def test_nothing_to_evaluate_is_an_error_before_any_matching(
             "(stereodepth and sgm take 16-bit images: --method stereodepth sgm)\n"
         )
     assert calls == []
+
+
+# --------------------------------------------------------------------------------------------
+# Scenes an OpenCV matcher refuses: images too small for its block size and range
+
+
+@pytest.fixture
+def with_tiny(tmp_path: Path) -> Path:
+    """Two 8-bit scenes: big (48 x 96 px) and tiny (12 x 20 px, too narrow for SGBM with
+    block size 31 and 16 disparities: 20 - 16 > 31 // 2 fails)."""
+    root = tmp_path / "scenes"
+    write_scene(root / "big", *textured_pair(48, 96, 6, seed=1), 6.0)
+    write_scene(root / "tiny", *textured_pair(12, 20, 3, seed=3), 3.0)
+    return root
+
+
+def test_a_scene_opencv_refuses_is_not_applicable_to_that_method(
+    with_tiny: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """OpenCV refusing one scene's images (a cv2.error from compute) ended the whole run
+    (exit status 2, no table): now that row is n/a with OpenCV's explanation, as on a 16-bit
+    scene, and every other row is scored."""
+    cv2 = pytest.importorskip("cv2")
+    left, right = textured_pair(12, 20, 3, seed=3)
+    sgbm = cv2.StereoSGBM_create(minDisparity=0, numDisparities=16, blockSize=31)
+    exc = opencv_error(lambda: sgbm.compute(left, right))
+    argv = [str(with_tiny), "--method", "stereodepth", "opencv-sgbm:5,31", "--repeat", "1"]
+    status, out, err = run_eval(capsys, *argv, "--json")
+    assert status == 0, err
+    report = json.loads(out)
+    scored = [(r["scene"], r["method"], r["block_size"], r["best"]) for r in report["results"]]
+    assert scored == [
+        ("big", "stereodepth", 9, False),
+        ("big", "opencv-sgbm", 5, False),
+        ("big", "opencv-sgbm", 31, False),
+        ("big", "opencv-sgbm", r_best(report, "big"), True),
+        ("tiny", "stereodepth", 9, False),
+        ("tiny", "opencv-sgbm", 5, False),  # no best= row: block 31 did not run there
+    ]
+    (na,) = report["not_applicable"]
+    assert (na["scene"], na["method"], na["block_size"]) == ("tiny", "opencv-sgbm", 31)
+    assert na["reason"].startswith("OpenCV refused the images: (")
+    assert "too small for your window size and max disparity" in na["reason"]
+    assert exc.err.strip().splitlines()[0].lstrip(">").strip() in na["reason"]
+    means = by_variant(report["means"])
+    assert means[("stereodepth", 9, False)]["scenes"] == 2
+    assert means[("opencv-sgbm", 5, False)]["scenes"] == 2
+    for key in (("opencv-sgbm", 31, False), ("opencv-sgbm", None, True)):
+        assert means[key]["scenes"] == 1 and means[key]["scenes_not_applicable"] == ["tiny"]
+    (note,) = report["notes"]
+    assert note.startswith(
+        "opencv-sgbm (block 31) not run on 1 of 2 scene(s) (tiny): OpenCV refused the images: ("
+    )
+    assert note.endswith(
+        "; those rows are n/a, and the means of opencv-sgbm (block 31) are over the other 1 "
+        "scene(s)"
+    )
+    assert err == f"stereodepth eval: {note}\n"
+    # the tables: an n/a row, mean 1/2 and the reason under the table
+    status, out, err = run_eval(capsys, *argv)
+    assert status == 0 and err == f"stereodepth eval: {note}\n"
+    rows = [line.split() for line in out.splitlines()]
+    assert ["tiny", "opencv-sgbm", "31", *["n/a"] * 11] in rows
+    assert any(r[:4] == ["mean", "1/2", "opencv-sgbm", "31"] for r in rows), out
+    assert any(r[:4] == ["mean", "1/2", "opencv-sgbm", "best"] for r in rows), out
+    assert "n/a: opencv-sgbm not run on tiny: OpenCV refused the images: (" in out
+
+
+def r_best(report: dict[str, Any], scene: str) -> int:
+    """The block size of the best= row of ``scene``."""
+    (best,) = [r for r in report["results"] if r["scene"] == scene and r["best"]]
+    block: int = best["block_size"]
+    return block
+
+
+def test_opencv_refusing_every_scene_is_an_error(
+    with_tiny: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Nothing scored: an error, one line, naming the scene, the method (once) and why."""
+    pytest.importorskip("cv2")
+    status, out, err = run_eval(
+        capsys, str(with_tiny), "--scene", "tiny", "--method", "opencv-sgbm:31", "opencv-bm:15"
+    )
+    assert (status, out) == (2, "")
+    assert err.startswith(
+        "stereodepth eval: error: nothing was scored: no method ran on the scene: "
+        "scene tiny: opencv-sgbm (block 31): OpenCV refused the images: ("
+    )
+    assert err.endswith(" (and 1 more refusal(s))\n") and err.count("\n") == 1, err
+
+
+class FakeMatcher:
+    """An OpenCV matcher whose compute returns ``raw`` or raises ``error``."""
+
+    def __init__(self, raw: np.ndarray | None = None, error: Exception | None = None):
+        self.raw, self.error = raw, error
+
+    def compute(self, left: np.ndarray, right: np.ndarray) -> np.ndarray:
+        if self.error is not None:
+            raise self.error
+        assert self.raw is not None and self.raw.shape == left.shape[:2]
+        return self.raw.copy()
+
+
+def test_an_opencv_failure_that_is_no_refusal_ends_the_run(
+    scene: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Out of memory is not OpenCV refusing the scene's images: the run ends as before,
+    naming the method once (it read "opencv-sgbm: opencv-sgbm failed: ...")."""
+    cv2 = pytest.importorskip("cv2")
+    error = cv2.error("OpenCV(5.0.0) alloc.cpp:73: error: (-4:Insufficient memory) Failed")
+    error.code = cv2.Error.StsNoMem
+    monkeypatch.setattr(cv2, "StereoSGBM_create", lambda **kw: FakeMatcher(error=error))
+    status, out, err = run_eval(capsys, str(scene), "--method", "stereodepth", "opencv-sgbm")
+    assert (status, out) == (2, "")
+    assert err == (
+        "stereodepth eval: error: scene s1: opencv-sgbm: OpenCV failed: (-4:Insufficient "
+        "memory) Failed\n"
+    )
+
+
+def test_our_matchers_errors_still_end_the_run(
+    scene: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    from stereodepth import matching
+
+    pytest.importorskip("cv2")
+
+    class Failing:
+        def __init__(self, **kwargs: Any) -> None:
+            pass
+
+        def compute(self, left: np.ndarray, right: np.ndarray) -> np.ndarray:
+            raise ValueError("a bug to see")
+
+    monkeypatch.setattr(matching, "StereoMatcher", Failing)
+    status, out, err = run_eval(capsys, str(scene), "--method", "opencv-bm", "stereodepth")
+    assert (status, out) == (2, "")
+    assert err == "stereodepth eval: error: scene s1: stereodepth: a bug to see\n"
+
+
+# --------------------------------------------------------------------------------------------
+# OpenCV's values outside the searched range: holes, and said
+
+
+def test_opencv_values_outside_the_searched_range_are_holes(
+    scene: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """StereoBM on a narrow image returns uninitialised values (-31960 .. 32521 on 12 x 20
+    px): those above the range were scored as disparities (avgerr 767 px, exit status 0)
+    and those below silently taken as holes. All are holes now, and a note says how many."""
+    cv2 = pytest.importorskip("cv2")
+    raw = np.full((64, 128), 5 * 16, np.int16)  # the truth: 5 px everywhere
+    raw[0, :4] = [-31960, 32521, 16 * 16, -1]  # beyond 0 .. 15 px, and not the hole -16
+    raw[1, :3] = [-16, 15 * 16 + 15, 0]  # a hole, the range's ends
+    monkeypatch.setattr(cv2, "StereoBM_create", lambda **kw: FakeMatcher(raw=raw))
+    status, out, err = run_eval(
+        capsys, str(scene), "--method", "opencv-bm", "--num-disparities", "16", "--json"
+    )
+    assert status == 0, err
+    report = json.loads(out)
+    (row,) = report["results"]
+    assert row["metrics"]["density"] == pytest.approx(1 - 5 / (64 * 128))
+    assert row["metrics"]["avgerr"] == pytest.approx((10.9375 + 5) / (64 * 128 - 5))
+    (note,) = report["notes"]
+    assert note == (
+        "opencv-bm (block 9) on scene s1: OpenCV returned 4 pixels outside the searched range "
+        "0 .. 15 px (raw values -31960 .. 32521, disparity x 16, OpenCV's hole being -16): not "
+        "matches; scored as holes"
+    )
+    assert err == f"stereodepth eval: {note}\n"
+    raw[0, 1:4] = 80
+    status, out, err = run_eval(
+        capsys, str(scene), "--method", "opencv-bm", "--num-disparities", "16"
+    )
+    assert status == 0, err
+    assert "OpenCV returned 1 pixel outside the searched range 0 .. 15 px (raw values " in err
+
+
+def test_opencv_bm_on_a_narrow_image_scores_no_garbage(
+    with_tiny: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """The real case (whether OpenCV returns garbage depends on its memory)."""
+    pytest.importorskip("cv2")
+    status, out, err = run_eval(
+        capsys, str(with_tiny), "--scene", "tiny", "--method", "opencv-bm", "--json"
+    )
+    assert status == 0, err
+    (row,) = json.loads(out)["results"]
+    assert row["metrics"]["avgerr"] is None or row["metrics"]["avgerr"] <= 15
+    for line in err.splitlines():
+        assert line.startswith(
+            "stereodepth eval: opencv-bm (block 9) on scene tiny: OpenCV returned "
+        )

@@ -45,10 +45,16 @@ Methods
     how OpenCV users get a disparity there (the peer of our border band); the padding is timed.
     OpenCV's int16 output (disparity x 16) becomes float32 / 16 with the values below
     ``minDisparity * 16`` = 0 (no match; OpenCV writes ``(minDisparity - 1) * 16``) as NaN,
-    by :func:`stereodepth.from_opencv_disparity`. OpenCV runs only when ``cv2`` imports;
-    otherwise its methods are skipped with a note. ``METHOD:9,15`` (or ``--block-size 9 15``)
-    runs a method with each block size and adds a ``best=`` row per scene: the block size with
-    the lowest ``--best-by`` metric (bad-2 by default).
+    by :func:`stereodepth.from_opencv_disparity`. A raw value outside the searched range,
+    neither that hole value (-16) nor in ``0 .. num_disparities * 16 - 1``, is no result of
+    matching (OpenCV's StereoBM returns uninitialised memory, values such as -31960 ..
+    32521, on images too narrow for its block size and range: 12 x 20 px with block size 9
+    and 16 disparities): it is a hole too, and a note on stderr (and in ``notes`` of
+    ``--json``) names the method, block size and scene and says how many pixels held one.
+    That check is not timed. OpenCV runs only when ``cv2`` imports; otherwise its methods are
+    skipped with a note. ``METHOD:9,15`` (or ``--block-size 9 15``) runs a method with each
+    block size and adds a ``best=`` row per scene: the block size with the lowest
+    ``--best-by`` metric (bad-2 by default).
 
 Checks
     Every selected scene is read and checked before any is matched (its files, left and right
@@ -67,6 +73,15 @@ Scenes an OpenCV method cannot take
     scene sets are not comparable. Time ratios are over the scenes both methods ran. The exit
     status is 0 when anything was scored; when no method can run on any scene (only OpenCV
     methods, every scene 16-bit), it is an error before any matching (exit status 2).
+
+    A scene whose images an OpenCV matcher's ``compute`` refuses (a ``cv2.error``: images too
+    small for the block size and search range, say) is the same: that variant's row there is
+    ``n/a`` with OpenCV's explanation as the reason, the means of the method are over its
+    other scenes (``mean K/N``), and a note on stderr says so, after the matching. A method run
+    at several block sizes has no ``best=`` row on a scene where one of them is n/a. When
+    nothing was scored at all, it is an error (exit status 2) naming the first refusal.
+    Anything else that fails (our matchers' errors, OpenCV refusing its parameters or running
+    out of memory) ends the run, naming the scene and method.
 
 Timing
     Each method is run once to warm up, then ``--repeat`` times (default 3); the time is the
@@ -542,9 +557,9 @@ def _opencv_factory(
 ) -> Callable[[Variant, int], Matcher]:
     to_grey = cv2.COLOR_BGR2GRAY if channel_order == "bgr" else cv2.COLOR_RGB2GRAY
 
-    def grey(img: np.ndarray, method: str) -> np.ndarray:
+    def grey(img: np.ndarray) -> np.ndarray:
         if img.dtype != np.uint8:
-            raise ValueError(f"{method} needs 8-bit images, got {img.dtype}")
+            raise ValueError(f"{_OPENCV_8_BIT}, got {img.dtype}")
         if img.ndim == 3:
             return np.asarray(cv2.cvtColor(img, to_grey))
         return img
@@ -552,7 +567,7 @@ def _opencv_factory(
     def make(variant: Variant, num_disparities: int) -> Matcher:
         bs = variant.block_size
         if bs is None:
-            raise ValueError(f"{variant.method} needs a block size, got None")
+            raise ValueError("OpenCV's matchers need a block size, got None")
         try:
             if variant.method == "opencv-bm":
                 matcher = cv2.StereoBM_create(numDisparities=num_disparities, blockSize=bs)
@@ -572,9 +587,7 @@ def _opencv_factory(
                     mode=modes[variant.method],
                 )
         except cv2.error as exc:
-            raise ValueError(
-                f"{variant.method} rejected its parameters: {_cv_message(exc)}"
-            ) from exc
+            raise ValueError(f"OpenCV rejected the parameters: {_cv_message(exc)}") from exc
         for key, value in options.items():
             setter = getattr(matcher, "set" + _camel(key), None)
             if setter is not None:
@@ -582,29 +595,61 @@ def _opencv_factory(
                     setter(value)
                 except (cv2.error, TypeError) as exc:
                     raise ValueError(
-                        f"--opencv-option {key}={value!r} rejected by {variant.method}: "
-                        f"{_cv_message(exc)}"
+                        f"--opencv-option {key}={value!r} rejected by OpenCV: {_cv_message(exc)}"
                     ) from exc
 
         pad = num_disparities if variant.method == "opencv-sgbm-3way-padded" else 0
 
         def padded(img: np.ndarray) -> np.ndarray:
-            g = grey(img, variant.method)
+            g = grey(img)
             if pad == 0:
                 return g
             return np.asarray(cv2.copyMakeBorder(g, 0, 0, pad, 0, cv2.BORDER_REPLICATE))
 
-        def match(left: np.ndarray, right: np.ndarray) -> np.ndarray:
+        def compute(left: np.ndarray, right: np.ndarray) -> np.ndarray:
+            left, right = padded(left), padded(right)
             try:
-                raw = matcher.compute(padded(left), padded(right))[:, pad:]
+                return np.asarray(matcher.compute(left, right))[:, pad:]
             except cv2.error as exc:
-                raise ValueError(f"{variant.method} failed: {_cv_message(exc)}") from exc
-            # eval searches from 0 (minDisparity=0): holes are the raw values below 0.
-            return from_opencv_disparity(raw, min_disparity=0)
+                if getattr(exc, "code", None) == cv2.Error.StsNoMem:  # not about the input
+                    raise ValueError(f"OpenCV failed: {_cv_message(exc)}") from exc
+                raise _Refused(f"OpenCV refused the images: {_cv_message(exc)}") from exc
 
-        return match
+        return _OpenCVMatch(compute, num_disparities)
 
     return make
+
+
+class _Refused(Exception):
+    """An OpenCV matcher's ``compute`` refused a scene's images (a cv2.error): images too
+    small for its block size and search range, say. The args hold the reason."""
+
+
+class _OpenCVMatch:
+    """An OpenCV matcher's ``compute`` (int16, disparity x 16, searching from 0) decoded by
+    :func:`stereodepth.from_opencv_disparity`; :meth:`beyond_range` then tells which pixels of
+    the last result held a raw value outside the searched range."""
+
+    def __init__(self, compute: Callable[[np.ndarray, np.ndarray], np.ndarray], num_disp: int):
+        self._compute = compute
+        self._num_disparities = num_disp
+        self._raw: np.ndarray | None = None
+
+    def __call__(self, left: np.ndarray, right: np.ndarray) -> np.ndarray:
+        self._raw = self._compute(left, right)
+        # eval searches from 0 (minDisparity=0): holes are the raw values below 0.
+        return from_opencv_disparity(self._raw, min_disparity=0)
+
+    def beyond_range(self) -> tuple[np.ndarray, str]:
+        """The pixels of the last result whose raw value is neither a disparity of the
+        searched range ``0 .. (num_disparities * 16 - 1)`` nor OpenCV's hole ``-16``
+        (minDisparity 0), and the span of those values ("" when there is none): not a
+        result of matching (StereoBM leaves pixels of narrow images uninitialised)."""
+        assert self._raw is not None
+        raw = self._raw
+        bad = ((raw < 0) & (raw != -16)) | (raw >= self._num_disparities * 16)
+        span = f"{int(raw[bad].min())} .. {int(raw[bad].max())}" if bad.any() else ""
+        return bad, span
 
 
 #: The largest odd SGBM block size whose P2 (32 * size**2) fits OpenCV's int.
@@ -757,8 +802,9 @@ class EvalResult:
 @dataclass(frozen=True)
 class NotApplicable:
     """One method at one block size that eval did not run on one scene, and why: OpenCV's
-    matchers on a scene whose images are not 8-bit. It stands for that row in the table
-    (``n/a``), and the method's means are over its other scenes."""
+    matchers on a scene whose images are not 8-bit, or whose images OpenCV refused. It
+    stands for that row in the table (``n/a``), and the method's means are over its other
+    scenes."""
 
     scene: str
     variant: Variant
@@ -808,9 +854,12 @@ def _count(n: int, noun: str) -> str:
     return f"{n} {noun}" if n == 1 else f"{n} {noun}s"
 
 
-def _with_best(rows: list[EvalResult], best_by: str) -> list[EvalResult]:
-    """Adds, after the rows of each method run at several block sizes, a copy of the best."""
-    out: list[EvalResult] = []
+def _with_best(rows: list[Row], best_by: str) -> list[Row]:
+    """Adds, after the rows of each method run at several block sizes, a copy of the best;
+    none on a scene where one of them was not run (:class:`NotApplicable`): the best of
+    some of the block sizes only is not the best of them all, and the scene counts among
+    those the ``best`` rows' means leave out."""
+    out: list[Row] = []
     i = 0
     while i < len(rows):
         j = i
@@ -818,13 +867,14 @@ def _with_best(rows: list[EvalResult], best_by: str) -> list[EvalResult]:
             j += 1
         group = rows[i:j]
         out += group
-        if len(group) > 1:
+        scored = _scored(group)
+        if len(group) > 1 and len(scored) == len(group):
 
             def key(r: EvalResult) -> tuple[float, int]:
                 v = getattr(r.metrics, best_by)
                 return (math.inf if math.isnan(v) else v, r.variant.block_size or 0)
 
-            out.append(replace(min(group, key=key), best=True))
+            out.append(replace(min(scored, key=key), best=True))
         i = j
     return out
 
@@ -901,15 +951,26 @@ def _evaluate_scene(
     use_mask: bool,
     best_by: str,
     progress: Callable[[str], None] | None,
-) -> list[EvalResult]:
+    notes: list[str] | None = None,
+) -> list[Row]:
+    """The rows of ``variants`` on ``scene``, in their order, each method's best row after
+    its own. An OpenCV matcher that refuses the scene's images (:class:`_Refused`) gives a
+    :class:`NotApplicable` row; any other error ends the run, naming the scene and method.
+    A note for each OpenCV result with raw values outside the searched range (scored as
+    holes) is appended to ``notes``."""
     left, right, gt, mask, num_disparities = _scene_inputs(
         scene, variants, num_disparities=num_disparities, use_mask=use_mask
     )
-    rows = []
+    rows: list[Row] = []
     for variant in variants:
         try:
             match = factories[variant.method](variant, num_disparities)
             disparity, times = _timed(match, left, right, repeat)
+        except _Refused as exc:
+            rows.append(NotApplicable(scene.name, variant, str(exc)))
+            if progress is not None:
+                progress(f"{scene.name}: {' block '.join(_label(rows[-1]))}: n/a ({exc})")
+            continue
         except (ValueError, TypeError) as exc:
             raise type(exc)(f"scene {scene.name}: {variant.method}: {exc}") from exc
         if disparity.dtype.kind != "f" or disparity.shape != gt.shape:
@@ -917,6 +978,20 @@ def _evaluate_scene(
                 f"scene {scene.name}: {variant.method} returned {disparity.dtype} "
                 f"{disparity.shape}, expected float {gt.shape}"
             )
+        if isinstance(match, _OpenCVMatch):
+            # StereoBM on a narrow image returns uninitialised values (-31960 .. 32521 on
+            # 12 x 20 px), scored as disparities up to 2000 px: holes, and said.
+            beyond, span = match.beyond_range()
+            count = int(beyond.sum())
+            if count:
+                disparity = np.where(beyond, np.float32(np.nan), disparity)
+                if notes is not None:
+                    notes.append(
+                        f"{variant.method} (block {variant.block_size}) on scene {scene.name}: "
+                        f"OpenCV returned {_count(count, 'pixel')} outside the searched range "
+                        f"0 .. {num_disparities - 1} px (raw values {span}, disparity x 16, "
+                        "OpenCV's hole being -16): not matches; scored as holes"
+                    )
         row = EvalResult(
             scene=scene.name,
             variant=variant,
@@ -1240,8 +1315,9 @@ def register(subparsers: Any) -> None:
         "opencv-sgbm-3way, opencv-sgbm-hh, opencv-sgbm-3way-padded (3WAY on the pair padded on "
         "the left by N columns), each optionally with its own block sizes "
         "(opencv-bm:9,15); default: stereodepth. OpenCV methods are skipped with a note when "
-        "cv2 does not import, and are n/a on scenes whose images are not 8-bit (the others "
-        "are scored; means over fewer scenes read mean K/N)",
+        "cv2 does not import, and are n/a on scenes whose images are not 8-bit or that OpenCV "
+        "refuses (too small, say; the others are scored; means over fewer scenes read mean "
+        "K/N)",
     )
     m.add_argument(
         "--block-size",
@@ -1422,16 +1498,24 @@ def _jsonable(value: Any) -> Any:
     return value
 
 
-def _not_applicable_notes(skipped: Sequence[NotApplicable], total: int) -> list[str]:
-    """One stderr note per reason: the methods not run, on how many scenes and which."""
-    by_reason: dict[str, dict[str, None]] = {}
-    scenes: dict[str, dict[str, None]] = {}
+def _not_applicable_notes(
+    skipped: Sequence[NotApplicable], total: int, *, per_variant: bool = False
+) -> list[str]:
+    """One stderr note per reason: the methods not run, on how many scenes and which. With
+    ``per_variant`` (OpenCV's refusals, which may leave out one block size of a method and
+    not another), one per reason and variant, named with its block size."""
+    by_reason: dict[tuple[str, str], dict[str, None]] = {}
+    scenes: dict[tuple[str, str], dict[str, None]] = {}
     for x in skipped:
-        by_reason.setdefault(x.reason, {})[x.variant.method] = None
-        scenes.setdefault(x.reason, {})[x.scene] = None
+        name = x.variant.method
+        if per_variant:
+            name += f" (block {x.variant.block_size})"
+        key = (x.reason, name if per_variant else "")
+        by_reason.setdefault(key, {})[name] = None
+        scenes.setdefault(key, {})[x.scene] = None
     notes = []
-    for reason, methods in by_reason.items():
-        names = list(scenes[reason])
+    for (reason, variant), methods in by_reason.items():
+        names = list(scenes[(reason, variant)])
         notes.append(
             f"{', '.join(methods)} not run on {len(names)} of {total} scene(s) "
             f"({_shorten(names)}): {reason}; those rows are n/a, and the means of "
@@ -1448,6 +1532,19 @@ def _nothing_to_evaluate(skipped: Sequence[NotApplicable], total: int) -> str:
     return (
         f"nothing to evaluate: {methods} cannot run on {where}: {skipped[0].reason} "
         "(stereodepth and sgm take 16-bit images: --method stereodepth sgm)"
+    )
+
+
+def _nothing_scored(refused: Sequence[NotApplicable], total: int) -> str:
+    """The error when nothing was scored: OpenCV refused the scenes (``refused``) its
+    matchers were run on, and every other row is n/a."""
+    first = refused[0]
+    more = len(refused) - 1
+    where = "the scene" if total == 1 else f"any of the {total} scenes"
+    return (
+        f"nothing was scored: no method ran on {where}: scene "
+        f"{first.scene}: {first.variant.method} (block {first.variant.block_size}): "
+        f"{first.reason}" + (f" (and {more} more refusal(s))" if more else "")
     )
 
 
@@ -1565,6 +1662,7 @@ def run(args: argparse.Namespace) -> int:
         print(f"stereodepth eval: {note}", file=sys.stderr)
 
     rows: list[Row] = []
+    warnings: list[str] = []  # OpenCV's values beyond the searched range
     saved_threads = cv2.getNumThreads() if cv2 is not None else None
     try:
         if cv2 is not None:
@@ -1581,6 +1679,7 @@ def run(args: argparse.Namespace) -> int:
                     use_mask=not args.no_mask,
                     best_by=args.best_by,
                     progress=progress,
+                    notes=warnings,
                 )
                 if len(missing) < len(variants)
                 else []
@@ -1591,6 +1690,14 @@ def run(args: argparse.Namespace) -> int:
     finally:
         if cv2 is not None and saved_threads is not None:
             cv2.setNumThreads(saved_threads)
+    # The scenes an OpenCV matcher refused (images too small for its block size and range):
+    # n/a rows, as on 16-bit scenes; they ended the whole run.
+    refused = [r for r in rows if isinstance(r, NotApplicable) and r not in not_applicable]
+    if refused and not _scored(rows):
+        raise ValueError(_nothing_scored(refused, len(scenes)))
+    for note in _not_applicable_notes(refused, len(scenes), per_variant=True) + warnings:
+        notes.append(note)
+        print(f"stereodepth eval: {note}", file=sys.stderr)
 
     if args.json:
         from . import __version__
