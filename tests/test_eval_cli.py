@@ -897,7 +897,17 @@ def test_shared_scene_stereodepth(
         ),
         (
             ["--num-disparities", "20"],
-            "--num-disparities must be a positive multiple of 16, got 20",
+            "--num-disparities must be a positive multiple of 16 and <= 4096, got 20",
+        ),
+        # No upper bound: the matcher's "num_disparities must be ..." (OpenCV's "integer
+        # won't fit into a C int"), once a scene was read.
+        (
+            ["--num-disparities", str(2**56)],
+            f"--num-disparities must be a positive multiple of 16 and <= 4096, got {2**56}",
+        ),
+        (
+            ["--num-disparities", "4112"],
+            "--num-disparities must be a positive multiple of 16 and <= 4096, got 4112",
         ),
         (
             ["--method", "opencv-bm:4"],

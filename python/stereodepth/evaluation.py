@@ -18,9 +18,9 @@ Disparity range
     ``num_disparities = 16 * ceil((D + 1) / 16)`` (OpenCV needs a multiple of 16), where D, the
     largest ground-truth disparity, is ``max_disp`` from ``meta.json``, else ``ndisp - 1`` from
     ``calib.txt``, else the ceiling of the largest finite ground-truth value.
-    ``--num-disparities`` overrides it for every scene. A declared D (meta.json's or
-    calib.txt's) whose range the ground truth leaves (a value of another resolution) is an
-    error naming the scene.
+    ``--num-disparities`` (a multiple of 16, at most 4096) overrides it for every scene. A
+    declared D (meta.json's or calib.txt's) whose range the ground truth leaves (a value of
+    another resolution) is an error naming the scene.
 
 Methods
     ``stereodepth`` (or ``bm``, as ``match`` and ``batch`` call it):
@@ -1562,10 +1562,14 @@ def run(args: argparse.Namespace) -> int:
             f"got {args.threads}"
         )
     if args.num_disparities is not None and (
-        args.num_disparities < 16 or args.num_disparities % 16
+        not 16 <= args.num_disparities <= MAX_NUM_DISPARITIES or args.num_disparities % 16
     ):
+        # Beyond our matchers' limit it was their "num_disparities must be ...", or OpenCV's
+        # "integer won't fit into a C int", once a scene was read (OpenCV's int16 output
+        # holds disparities up to 2047 px only).
         raise ValueError(
-            f"--num-disparities must be a positive multiple of 16, got {args.num_disparities}"
+            f"--num-disparities must be a positive multiple of 16 and <= {MAX_NUM_DISPARITIES}, "
+            f"got {args.num_disparities}"
         )
     threads = args.threads or check.available_cores()
     options = dict(args.option)
