@@ -3,6 +3,7 @@ waited for until it prints where it listens, stopped by a signal."""
 
 from __future__ import annotations
 
+import json
 import os
 import queue
 import re
@@ -124,12 +125,34 @@ class ServerProcess:
                 pipe.close()
 
 
-def serve(*args: str, env: dict[str, str] | None = None) -> ServerProcess:
+#: ``python -c`` for ``stereodepth serve`` with host names of the test's own (``sys.argv[1]``,
+#: JSON: name -> the address, or addresses, its look-up gives; see :func:`serve`).
+_SERVE_WITH_NAMES = """
+import json, socket, sys
+names = json.loads(sys.argv.pop(1))
+real = socket.getaddrinfo
+def getaddrinfo(host, *args, **kwargs):
+    found = names.get(host.lower() if isinstance(host, str) else host)
+    if found is None:
+        return real(host, *args, **kwargs)
+    return [info for address in found for info in real(address, *args, **kwargs)]
+socket.getaddrinfo = getaddrinfo
+from stereodepth.cli import main
+sys.exit(main(sys.argv[1:]))
+"""
+
+
+def serve(
+    *args: str, env: dict[str, str] | None = None, names: dict[str, list[str]] | None = None
+) -> ServerProcess:
     """``stereodepth serve args...``, started once it prints its URL (``ready`` group 1 the
-    host, group 2 the port, group 0 the URL with its final slash)."""
-    server = ServerProcess(
-        ["-m", "stereodepth.cli", "serve", *args], ready=r"http://([^\s/]+):(\d+)/", env=env
-    )
+    host, group 2 the port, group 0 the URL with its final slash). ``names``: host names that
+    resolve, in the server's process only, to these addresses (as /etc/hosts would map them;
+    other names as usual)."""
+    command = ["-m", "stereodepth.cli"]
+    if names is not None:
+        command = ["-c", _SERVE_WITH_NAMES, json.dumps(names)]
+    server = ServerProcess([*command, "serve", *args], ready=r"http://([^\s/]+):(\d+)/", env=env)
     server.port = int(server.ready.group(2))
     server.url = server.ready.group(0)
     return server

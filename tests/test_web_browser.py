@@ -88,6 +88,11 @@ def test_serve_open_opens_the_page(tmp_path: Path) -> None:
     assert code == 0, err
 
 
+ALLOW_HOST_RULE = (
+    "--allow-host must be a host name or IP address, optionally with :PORT (1 to 65535), or '*'"
+)
+
+
 @pytest.mark.parametrize(
     ("args", "message"),
     [
@@ -95,13 +100,26 @@ def test_serve_open_opens_the_page(tmp_path: Path) -> None:
         (["--host", "no.such.host.invalid"], "--host must be an address of this machine"),
         (["--max-upload-mb", "0"], "--max-upload-mb must be a number > 0 and <= 10000, got 0"),
         (["--max-megapixels", "nan"], "--max-megapixels must be a number > 0 and <= 10000"),
+        (["--allow-host", "x:port"], f"{ALLOW_HOST_RULE}, got 'x:port'"),
+        (["--allow-host", "localhost:0"], f"{ALLOW_HOST_RULE}, got 'localhost:0'"),
+        (["--allow-host", ""], f"{ALLOW_HOST_RULE}, got ''"),
+        (["--allow-host", "*.lan"], f"{ALLOW_HOST_RULE}, got '*.lan'"),  # no wildcards
+        (["--allow-host", "a,b"], f"{ALLOW_HOST_RULE}, got 'a,b'"),
+        (["--allow-host", "http://box:8080/"], f"{ALLOW_HOST_RULE}, got 'http://box:8080/'"),
+        # each one, before the server listens (on a --port it could not take)
+        (
+            ["--allow-host", "box", "--allow-host", "[::1", "--port", "70000"],
+            f"{ALLOW_HOST_RULE}, got '[::1'",
+        ),
     ],
 )
 def test_serve_rejects_bad_options(
     capsys: pytest.CaptureFixture[str], args: list[str], message: str
 ) -> None:
     assert main(["serve", *args]) == 2
-    assert capsys.readouterr().err.startswith(f"stereodepth serve: error: {message}")
+    out, err = capsys.readouterr()
+    assert err.startswith(f"stereodepth serve: error: {message}")
+    assert err.count("\n") == 1 and out == "", (out, err)
 
 
 def test_serve_reports_a_busy_port(capsys: pytest.CaptureFixture[str]) -> None:

@@ -48,26 +48,39 @@ def test_the_app_answers_loopback_hosts_at_its_port(app: Any, base_url: str) -> 
     assert TestClient(app, base_url=base_url).get("/api/fields").status_code == 200
 
 
+#: The end of a refusal that cannot name the entry that would answer the Host.
+ANY_NAME_HINT = (
+    "(to answer a name: stereodepth serve --allow-host NAME[:PORT], "
+    "or create_app(allowed_hosts=[...]))"
+)
+
+
 @pytest.mark.parametrize(
-    "host",
+    ("host", "entry"),
     [
-        "evil.example.com",
-        "evil.example.com:8000",
-        "localhost.evil.example.com:8000",
-        "127.0.0.1:8001",  # another port: not this server
-        "127.0.0.1",  # port 80
-        "testserver",
-        "",
-        "[::1",
+        ("evil.example.com", "evil.example.com:80"),  # no port: 80
+        ("evil.example.com:8000", "evil.example.com:8000"),
+        ("localhost.evil.example.com:8000", "localhost.evil.example.com:8000"),
+        ("127.0.0.1:8001", "127.0.0.1:8001"),  # another port: not this server
+        ("127.0.0.1", "127.0.0.1:80"),
+        ("testserver", "testserver:80"),
+        ("", None),
+        ("[::1", None),
     ],
 )
 @pytest.mark.parametrize("path", ["/api/fields", "/", "/api/calc?baseline_mm=1&focal_px=1"])
-def test_the_app_refuses_another_host(app: Any, host: str, path: str) -> None:
+def test_the_app_refuses_another_host(app: Any, host: str, entry: str | None, path: str) -> None:
     client = TestClient(app, base_url="http://127.0.0.1:8000")
     msg = refusal(client.get(path, headers={"host": host}))
+    hint = (
+        ANY_NAME_HINT
+        if entry is None
+        else f"(to answer it: stereodepth serve --allow-host {entry}, "
+        f"or create_app(allowed_hosts=[{entry!r}]))"
+    )
     assert msg == (
         "the Host header must name this server (localhost:8000, 127.0.0.1:8000 or "
-        f"[::1]:8000), got Host {host!r}: a page of another site cannot use it"
+        f"[::1]:8000), got Host {host!r}: a page of another site cannot use it {hint}"
     )
     # The security headers are on the refusal too.
     assert (
@@ -82,6 +95,48 @@ def test_the_rebinding_post_is_refused_before_its_body_is_read(app: Any) -> None
         "/api/depthmap", json={"sample": True}, headers={"host": "evil.example.com:8000"}
     )
     refusal(r)
+
+
+@pytest.mark.parametrize(
+    ("base_url", "host"),
+    [
+        ("http://127.0.0.1:8000", "localhost:8080"),  # docker -p 8080:8000
+        ("http://127.0.0.1:8000", "MyRobot.local:8000"),
+        ("http://127.0.0.1:8000", "proxy.example"),  # a proxy that passes its Host: port 80
+        ("https://127.0.0.1:8000", "proxy.example"),  # over https: port 443
+        ("http://127.0.0.1:8000", "[fe80::1]:8000"),
+        ("http://127.0.0.1:8000", "192.0.2.7"),
+    ],
+)
+def test_the_entry_that_the_refusal_names_answers_the_host(base_url: str, host: str) -> None:
+    msg = refusal(TestClient(create_app(), base_url=base_url).get("/", headers={"host": host}))
+    found = re.search(
+        r"\(to answer it: stereodepth serve --allow-host (\S+), or "
+        r"create_app\(allowed_hosts=\[(.+)\]\)\)$",
+        msg,
+    )
+    assert found, msg
+    entry = found.group(1)
+    assert found.group(2) == repr(entry)
+    if base_url.startswith("https") and ":" not in host:
+        assert entry == f"{host}:443"
+    client = TestClient(create_app(allowed_hosts=[entry]), base_url=base_url)
+    assert client.get("/api/fields", headers={"host": host}).status_code == 200
+
+
+@pytest.mark.parametrize(
+    "host",
+    [
+        "a;rm -rf x",  # not a name to show as a command line
+        "$(x).example",
+        "a'b",
+        "x" * 61,  # longer than the refusal shows
+    ],
+)
+def test_the_refusal_of_an_odd_host_shows_the_form_of_an_entry(host: str) -> None:
+    client = TestClient(create_app(), base_url="http://127.0.0.1:8000")
+    msg = refusal(client.get("/api/fields", headers={"host": host}))
+    assert msg.endswith(f"a page of another site cannot use it {ANY_NAME_HINT}"), msg
 
 
 def test_the_client_default_host_is_refused_with_the_hosts_answered() -> None:

@@ -5,11 +5,14 @@ is not this server (DNS rebinding) is refused with 400."""
 
 from __future__ import annotations
 
+import ipaddress
 import json
 import re
 import signal
 import socket
 import time
+import urllib.error
+import urllib.request
 from typing import Any
 
 import pytest
@@ -30,9 +33,10 @@ CALIB = (
 )
 
 
-def start(*args: str) -> ServerProcess:
-    """``stereodepth serve --port 0`` in a subprocess, its port from its first line."""
-    return serve_process("--port", "0", *args)
+def start(*args: str, names: dict[str, list[str]] | None = None) -> ServerProcess:
+    """``stereodepth serve --port 0`` in a subprocess, its port from its first line (``names``:
+    host names of the test's own, see :func:`server_process.serve`)."""
+    return serve_process("--port", "0", *args, names=names)
 
 
 def raw(port: int, request: bytes, *, read: bool = True) -> bytes:
@@ -241,15 +245,159 @@ def test_a_request_without_host_is_refused(loopback_server: ServerProcess) -> No
     assert status_of(answer) == 400
 
 
-def test_a_server_on_every_interface_answers_its_addresses_not_other_names() -> None:
-    server = start("--host", "0.0.0.0")
+@pytest.mark.parametrize(
+    ("host", "names", "shown"),
+    [
+        ("0.0.0.0", None, "0.0.0.0"),
+        # A name for every interface: the warning says which address it is.
+        ("anywhere.test", {"anywhere.test": ["0.0.0.0"]}, "anywhere.test (0.0.0.0)"),
+    ],
+)
+def test_a_server_on_every_interface_answers_its_addresses_not_other_names(
+    host: str, names: dict[str, list[str]] | None, shown: str
+) -> None:
+    server = start("--host", host, names=names)
     try:
         port = server.port
-        for host in (f"127.0.0.1:{port}", f"localhost:{port}", f"192.0.2.7:{port}"):
-            assert status_of(get(port, host)) == 200, host
-        for host in (f"evil.example.com:{port}", f"192.0.2.7:{port + 1}"):
-            assert status_of(get(port, host)) == 400, host
+        # A page address that a browser can open on this machine (not http://0.0.0.0:PORT/),
+        # and that the server answers.
+        assert server.url == f"http://127.0.0.1:{port}/", server.first_line
+        assert fetch(server.url)[0] == 200
+        for name in (f"127.0.0.1:{port}", f"localhost:{port}", f"192.0.2.7:{port}"):
+            assert status_of(get(port, name)) == 200, name
+        for name in (f"evil.example.com:{port}", f"192.0.2.7:{port + 1}"):
+            assert status_of(get(port, name)) == 400, name
     finally:
         code, _, _, err = server.stop(signal.SIGINT, timeout=GRACE_S + 10)
         server.kill()
     assert code == 0, err
+    assert err == (
+        f"stereodepth serve: warning: listening on {shown}, which other machines may reach; "
+        "the default 127.0.0.1 keeps the page on this machine\n"
+    )
+
+
+# --- 5. names for loopback, and the names --allow-host adds ---------------------------------------
+def fetch(url: str, host: str | None = None) -> tuple[int, Any]:
+    """GET ``url`` + ``api/fields`` as a browser opening ``url`` would (its Host from the URL),
+    or with another Host: the status and the JSON body."""
+    opener = urllib.request.build_opener(urllib.request.ProxyHandler({}))
+    request = urllib.request.Request(url + "api/fields", headers={"Host": host} if host else {})
+    try:
+        with opener.open(request, timeout=10) as r:
+            return int(r.status), json.load(r)
+    except urllib.error.HTTPError as e:
+        with e:
+            return int(e.code), json.load(e)
+
+
+@pytest.mark.parametrize(
+    ("name", "address", "url_host"),
+    [
+        ("vm.test", "127.0.0.1", "127.0.0.1"),
+        ("VM.test", "127.0.0.1", "127.0.0.1"),
+        ("myhost.test", "127.0.1.1", "127.0.1.1"),  # Debian's line for the machine's own name
+        ("vm6.test", "::1", "[::1]"),
+    ],
+)
+def test_a_name_for_loopback_is_not_warned_about_and_its_url_is_answered(
+    name: str, address: str, url_host: str
+) -> None:
+    """``--host NAME``, NAME a name for a loopback address (as /etc/hosts maps the machine's
+    own name): no warning that other machines may reach it, and the page's address printed is
+    where it listens and answered by its Host check, as is the name."""
+    server = start("--host", name, names={name.lower(): [address]})
+    try:
+        port = server.port
+        assert server.url == f"http://{url_host}:{port}/", server.first_line
+        status, body = fetch(server.url)
+        assert status == 200, body
+        assert fetch(server.url, f"{name}:{port}")[0] == 200
+        assert fetch(server.url, f"evil.example.com:{port}")[0] == 400
+    finally:
+        code, _, _, err = server.stop(signal.SIGINT, timeout=GRACE_S + 10)
+        server.kill()
+    assert code == 0, err
+    assert err == "", err
+
+
+def test_the_machines_own_name_for_loopback_is_not_warned_about() -> None:
+    """The same with this machine's real name and resolver, when it maps it to loopback."""
+    name = socket.gethostname()
+    try:
+        infos = socket.getaddrinfo(name, 0, type=socket.SOCK_STREAM, flags=socket.AI_PASSIVE)
+    except OSError:
+        pytest.skip(f"this machine's name {name!r} does not resolve")
+    addresses = {str(info[4][0]) for info in infos}
+    if not all(ipaddress.ip_address(a).is_loopback for a in addresses):
+        pytest.skip(f"this machine's name {name!r} is not loopback only: {sorted(addresses)}")
+    server = start("--host", name)
+    try:
+        assert fetch(server.url)[0] == 200, server.first_line
+        assert fetch(server.url, f"{name}:{server.port}")[0] == 200
+    finally:
+        code, _, _, err = server.stop(signal.SIGINT, timeout=GRACE_S + 10)
+        server.kill()
+    assert code == 0 and err == "", (code, err)
+
+
+def test_allow_host_adds_names_at_their_ports() -> None:
+    """Docker's ``-p 8080:PORT`` (``Host: localhost:8080``) and a robot's mDNS name at the
+    server's own port; the names answered before still are, other names and ports are not."""
+    server = start("--allow-host", "localhost:8080", "--allow-host", "MyRobot.local")
+    try:
+        port = server.port
+        for host in ("localhost:8080", f"myrobot.local:{port}", f"127.0.0.1:{port}"):
+            assert status_of(get(port, host)) == 200, host
+        for host in ("127.0.0.1:8080", f"myrobot.local:{port + 1}", "myrobot.local"):
+            answer = get(port, host)
+            assert status_of(answer) == 400, host
+            (item,) = body_of(answer)["detail"]
+            assert f"[::1]:{port}, localhost:8080 or myrobot.local:{port})" in item["msg"]
+    finally:
+        code, _, _, err = server.stop(signal.SIGINT, timeout=GRACE_S + 10)
+        server.kill()
+    assert code == 0 and err == "", (code, err)
+
+
+def test_allow_host_star_answers_every_host_with_a_warning() -> None:
+    server = start("--allow-host", "*")
+    try:
+        for host in ("evil.example.com", f"10.0.0.1:{server.port + 1}"):
+            assert status_of(get(server.port, host)) == 200, host
+    finally:
+        code, _, _, err = server.stop(signal.SIGINT, timeout=GRACE_S + 10)
+        server.kill()
+    assert code == 0, err
+    assert err == (
+        "stereodepth serve: warning: --allow-host '*' answers every Host header, which turns "
+        "off the check against DNS rebinding: only behind a proxy that checks the Host itself\n"
+    )
+
+
+@pytest.mark.parametrize(
+    ("host", "entry"),
+    [("myrobot.local:{port}", "myrobot.local:{port}"), ("proxy.example", "proxy.example:80")],
+)
+def test_the_refusal_says_how_to_answer_the_host(host: str, entry: str) -> None:
+    """The 400 names the --allow-host that answers that Host, and that one does."""
+    server = start()
+    try:
+        port = server.port
+        answer = get(port, host.format(port=port))
+        assert status_of(answer) == 400
+        (item,) = body_of(answer)["detail"]
+        entry = entry.format(port=port)
+        assert item["msg"].endswith(
+            f"a page of another site cannot use it (to answer it: stereodepth serve "
+            f"--allow-host {entry}, or create_app(allowed_hosts=[{entry!r}]))"
+        ), item
+    finally:
+        server.stop(signal.SIGINT, timeout=GRACE_S + 10)
+        server.kill()
+    server = start("--allow-host", entry)
+    try:
+        assert status_of(get(server.port, host.format(port=port))) == 200
+    finally:
+        server.stop(signal.SIGINT, timeout=GRACE_S + 10)
+        server.kill()

@@ -550,7 +550,8 @@ def create_app(
     Entries are names or IP addresses, each optionally with ``:port``; ``0.0.0.0`` or ``::``
     stands for any IP address, ``"*"`` turns the check off (behind a proxy that checks the
     Host itself). ``stereodepth serve`` passes these with its ``--host``, the address it bound
-    and, bound to every interface, ``0.0.0.0`` and the machine's host name. Under ``uvicorn
+    and, bound to every interface, ``0.0.0.0`` and the machine's host name, and the entries of
+    its ``--allow-host`` options. Under ``uvicorn
     --factory``, a factory of your own passes them (``def app(): return
     create_app(allowed_hosts=[...])``, then ``uvicorn mymodule:app --factory``).
 

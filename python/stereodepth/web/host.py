@@ -16,6 +16,8 @@ The hosts answered (``create_app(allowed_hosts=...)``), each an entry of
   interface (a page loaded from an IP address is the server's own: rebinding needs a name);
 - ``*``: every Host, no check (only behind a proxy that checks the Host itself).
 
+``stereodepth serve`` takes the same entries with ``--allow-host`` (repeated for more).
+
 The default, :data:`LOOPBACK_HOSTS`: ``localhost``, ``127.0.0.1`` and ``[::1]``. Always
 answered as well: the IP address the connection came in on, as the server reports it (the
 address the client typed). A Host without a port means 80 (443 over https).
@@ -25,6 +27,7 @@ from __future__ import annotations
 
 import ipaddress
 import json
+import re
 from collections.abc import Iterable
 from typing import Any
 
@@ -35,6 +38,8 @@ LOOPBACK_HOSTS = ("localhost", "127.0.0.1", "[::1]")
 #: The entry of ``allowed_hosts`` that turns the check off.
 ANY_HOST = "*"
 _ANY_ADDRESS = ""  # an entry's name for "any IP address"
+# A host name that a refusal may show as an entry to type (no characters a shell would read).
+_PLAIN_NAME = re.compile(r"[a-z0-9_][a-z0-9_.-]*")
 
 
 def _split_host(value: str) -> tuple[str, int | None] | None:
@@ -168,6 +173,23 @@ class AllowedHosts:
         return ", ".join(names[:-1]) + " or " + names[-1]
 
 
+def _hint(value: str | None, default_port: int) -> str:
+    """How to have this Host answered too: the entry that names it (its name with the port it
+    means, a Host without a port meaning ``default_port``), when it is a plain host name or IP
+    address; else the form of one."""
+    parts = None if value is None or len(value) > 60 else _split_host(value)
+    if parts is not None and parts[0] and (_ip(parts[0]) or _PLAIN_NAME.fullmatch(parts[0])):
+        entry = _shown(parts[0], default_port if parts[1] is None else parts[1])
+        return (
+            f"to answer it: stereodepth serve --allow-host {entry}, "
+            f"or create_app(allowed_hosts=[{entry!r}])"
+        )
+    return (
+        "to answer a name: stereodepth serve --allow-host NAME[:PORT], "
+        "or create_app(allowed_hosts=[...])"
+    )
+
+
 def _json_400(msg: str) -> tuple[dict[str, Any], bytes]:
     body = json.dumps(
         {"detail": [{"loc": ["header", "host"], "msg": msg, "type": "invalid_host"}]}
@@ -185,7 +207,8 @@ def _json_400(msg: str) -> tuple[dict[str, Any], bytes]:
 
 
 class HostCheck:
-    """ASGI middleware: refuses, with 400 and a one-line reason at ``["header", "host"]``,
+    """ASGI middleware: refuses, with 400 and a one-line reason at ``["header", "host"]``
+    (which ends with the ``--allow-host`` or ``allowed_hosts`` entry that would answer it),
     every request whose Host header is not one of ``allowed`` (an :class:`AllowedHosts`, or
     its entries; default :data:`LOOPBACK_HOSTS`), before the app reads its body; a WebSocket
     is closed with 1008. Raises what :class:`AllowedHosts` raises for bad entries."""
@@ -218,7 +241,8 @@ class HostCheck:
             got = f"Host {values[0][:60]!r}"
         msg = (
             f"the Host header must name this server ({self.allowed.expected(port, address)}), "
-            f"got {got}: a page of another site cannot use it"
+            f"got {got}: a page of another site cannot use it "
+            f"({_hint(value, default_port)})"
         )
         start, body = _json_400(msg)
         await send(start)

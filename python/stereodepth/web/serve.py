@@ -1,9 +1,11 @@
 """``stereodepth serve``: the calculator as a local web page (FastAPI app on uvicorn).
 
-Listens on 127.0.0.1 (this machine only) unless ``--host`` says otherwise, and prints where
-on start-up; answers only requests whose Host header names this server (:func:`allowed_hosts`,
+Listens on 127.0.0.1 (this machine only) unless ``--host`` says otherwise (a warning on
+stderr when the address it binds is not a loopback one), and prints the page's address on
+start-up; answers only requests whose Host header names this server (:func:`allowed_hosts`,
 which the app checks itself, :mod:`stereodepth.web.host`: 400 for others, against DNS
-rebinding). ``--port 0`` takes any free port. Ctrl+C (or SIGTERM) stops it: the requests in
+rebinding), and the names that ``--allow-host`` adds (a port mapping, a robot's mDNS name, a
+reverse proxy). ``--port 0`` takes any free port. Ctrl+C (or SIGTERM) stops it: the requests in
 flight get :data:`GRACE_S` (3) seconds to finish, then the connections still open are
 closed (a depth map already being matched is finished first: its worker thread cannot be
 interrupted); a second Ctrl+C closes them at once. Either signal is the server's normal end:
@@ -20,7 +22,7 @@ import signal
 import socket
 import sys
 import threading
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 from typing import Any
 
 DEFAULT_HOST = "127.0.0.1"
@@ -91,6 +93,18 @@ def register(subparsers: Any) -> None:
         default=DEFAULT_PORT,
         help=f"TCP port (default {DEFAULT_PORT}; 0: any free port)",
     )
+    p.add_argument(
+        "--allow-host",
+        action="append",
+        metavar="NAME[:PORT]",
+        help="also answer requests whose Host header is NAME at the port the server listens "
+        "on, or NAME:PORT (the port the browser uses, which a Host without one gives as 80): "
+        "a port mapping (docker -p 8080:8000: localhost:8080 and 127.0.0.1:8080), an mDNS name "
+        "(myrobot.local), a reverse proxy's name; repeat it for more. Others get 400, "
+        "against DNS rebinding (by default only localhost, 127.0.0.1, [::1], --host and the "
+        "address bound are answered). 0.0.0.0: any IP address; '*': every Host, no check, "
+        "only behind a proxy that checks the Host itself",
+    )
     p.add_argument("--open", action="store_true", help="open the page in a web browser")
     p.add_argument(
         "--max-upload-mb",
@@ -109,13 +123,34 @@ def register(subparsers: Any) -> None:
     p.set_defaults(func=run)
 
 
-def _is_loopback(host: str) -> bool:
-    if host == "localhost":
-        return True
-    try:
-        return ipaddress.ip_address(host).is_loopback
-    except ValueError:
-        return False
+def _ip_of(sock: socket.socket) -> ipaddress.IPv4Address | ipaddress.IPv6Address:
+    """The IP address a socket is bound to (an IPv4-mapped IPv6 one as IPv4)."""
+    ip = ipaddress.ip_address(str(sock.getsockname()[0]).partition("%")[0])
+    mapped = getattr(ip, "ipv4_mapped", None)
+    return mapped if mapped is not None else ip
+
+
+def is_loopback(sock: socket.socket) -> bool:
+    """Whether a bound socket is reachable from this machine only: bound to a loopback
+    address, whichever name ``--host`` gave for it (``localhost``, or the machine's own name
+    that /etc/hosts maps to 127.0.0.1 or 127.0.1.1)."""
+    return _ip_of(sock).is_loopback
+
+
+def allow_hosts(entries: Sequence[str] | None) -> list[str]:
+    """The ``--allow-host`` entries (None: none), checked: ValueError naming the option and the
+    first one that is not a host name or IP address, optionally with ``:PORT``, or ``'*'``."""
+    from .host import AllowedHosts
+
+    for entry in entries or ():
+        try:
+            AllowedHosts([entry])
+        except ValueError:
+            raise ValueError(
+                "--allow-host must be a host name or IP address, optionally with :PORT "
+                f"(1 to 65535), or '*', got {entry[:60]!r}"
+            ) from None
+    return list(entries or ())
 
 
 def bind(host: str, port: int) -> socket.socket:
@@ -144,18 +179,24 @@ def bind(host: str, port: int) -> socket.socket:
 
 
 def url_of(sock: socket.socket) -> str:
-    """The page's address for a bound socket."""
+    """The page's address for a bound socket: at the address bound, which the server's Host
+    check answers whatever name ``--host`` gave for it; bound to every interface (``0.0.0.0``,
+    ``::``), at the loopback address of that family (a browser cannot open ``0.0.0.0`` on
+    every system)."""
     host, port = sock.getsockname()[:2]
+    if _ip_of(sock).is_unspecified:
+        host = "127.0.0.1" if sock.family == socket.AF_INET else "::1"
     if sock.family == socket.AF_INET6:
         host = f"[{host}]"
     return f"http://{host}:{port}/"
 
 
-def allowed_hosts(host: str, sock: socket.socket) -> list[str]:
+def allowed_hosts(host: str, sock: socket.socket, extra: Sequence[str] = ()) -> list[str]:
     """The Host header values the server answers (``create_app``'s ``allowed_hosts``): at the
     port it listens on, ``localhost``, ``127.0.0.1``, ``[::1]``, the ``--host`` given and the
     address bound; when bound to every interface (``0.0.0.0``, ``::``), also any IP address (a
-    page loaded from an address is this server's own) and this machine's host name."""
+    page loaded from an address is this server's own) and this machine's host name; then the
+    ``extra`` entries (``--allow-host``, checked by :func:`allow_hosts`)."""
     from .host import LOOPBACK_HOSTS, AllowedHosts
 
     bound = str(sock.getsockname()[0])
@@ -174,7 +215,7 @@ def allowed_hosts(host: str, sock: socket.socket) -> list[str]:
             return False
         return True
 
-    return [h for h in hosts if usable(h)]
+    return [h for h in hosts if usable(h)] + list(extra)
 
 
 def _server(uvicorn: Any, config: Any) -> Any:
@@ -248,6 +289,16 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _run(args: argparse.Namespace) -> int:
+    # The options first (status 2, whether or not the web extra is installed).
+    limits = {}
+    for flag, value, scale in (
+        ("--max-upload-mb", args.max_upload_mb, "max_upload_bytes"),
+        ("--max-megapixels", args.max_megapixels, "max_pixels"),
+    ):
+        if not (value > 0 and value <= 1e4):
+            raise ValueError(f"{flag} must be a number > 0 and <= 10000, got {value:g}")
+        limits[scale] = max(1, int(value * 1e6))
+    extra = allow_hosts(args.allow_host)
     try:
         import uvicorn
 
@@ -260,20 +311,22 @@ def _run(args: argparse.Namespace) -> int:
         )
         return 1
 
-    limits = {}
-    for flag, value, scale in (
-        ("--max-upload-mb", args.max_upload_mb, "max_upload_bytes"),
-        ("--max-megapixels", args.max_megapixels, "max_pixels"),
-    ):
-        if not (value > 0 and value <= 1e4):
-            raise ValueError(f"{flag} must be a number > 0 and <= 10000, got {value:g}")
-        limits[scale] = max(1, int(value * 1e6))
     sock = bind(args.host, args.port)
     url = url_of(sock)
-    if not _is_loopback(args.host):
+    if not is_loopback(sock):
+        bound = str(_ip_of(sock))
+        shown = args.host if args.host.strip() == bound else f"{args.host} ({bound})"
         print(
-            f"stereodepth serve: warning: listening on {args.host}, which other machines "
+            f"stereodepth serve: warning: listening on {shown}, which other machines "
             "may reach; the default 127.0.0.1 keeps the page on this machine",
+            file=sys.stderr,
+            flush=True,
+        )
+    if any(entry.strip() == "*" for entry in extra):
+        print(
+            "stereodepth serve: warning: --allow-host '*' answers every Host header, which "
+            "turns off the check against DNS rebinding: only behind a proxy that checks "
+            "the Host itself",
             file=sys.stderr,
             flush=True,
         )
@@ -285,7 +338,7 @@ def _run(args: argparse.Namespace) -> int:
         threading.Thread(target=webbrowser.open, args=(url,), daemon=True).start()
 
     config = uvicorn.Config(
-        create_app(allowed_hosts=allowed_hosts(args.host, sock), **limits),
+        create_app(allowed_hosts=allowed_hosts(args.host, sock, extra), **limits),
         log_level="warning",
         access_log=False,
         lifespan="off",
