@@ -399,36 +399,48 @@ def test_a_rig_calibrated_upside_down_is_told_what_happened_and_what_to_do(
     """A rig rolled by 180 degrees (both cameras upside down) and calibrated so, its cameras
     named by their side in the world: camera 1 is the rig's right camera (b), now on the
     world's left, and in its own, turned, frame the other is on its left. That calibration is
-    the rig's with the cameras swapped (R.T, -R.T @ T). The advice was "swap the cameras",
-    with no cause, read as files given the other way round, which is not it: the images
-    swapped alone are refused the same. The message now names both causes, and both of the
-    remedies it gives work: the calibration's cameras swapped along with the images, or the
-    images turned by 180 degrees and calibrated again."""
+    the rig's with the cameras swapped (R.T, -R.T @ T). The refusal said "swap the cameras:
+    the calibration's camera 1 and camera 2", which a user did with K1, K2 and D1, D2 alone:
+    refused the same. It now gives the T received, OpenCV's convention and the complete swap
+    (R by R.T, T by -R.T @ T), in one short line; K and D swapped alone are still refused,
+    the complete swap matches, and so does the other remedy for an upside-down rig (the
+    images turned by 180 degrees and calibrated again), whose outputs are upright."""
     pytest.importorskip("yaml", reason="YAML calibrations need PyYAML (the calib extra)")
     s = sample_pair(160, 96)
     a, b, c = raw_files(tmp_path, s.left, s.right)  # a: the rig's left camera, b: its right
+    assert np.abs(c.R - np.eye(3)).max() > 1e-3  # R.T is not R: the swap must turn it
     # Camera 1 is the rig's right one (b), on the world's left when the rig is upside down.
     swap = {"K1": c.K2, "D1": c.D2, "K2": c.K1, "D2": c.D1, "R": c.R.T, "T": -c.R.T @ c.T}
     world = c.__class__(**{**c.__dict__, **swap})
     upside = write_opencv_yaml(tmp_path / "upside.yml", world, stored=False)
-    mm = ("--calib", upside, "--translation-unit", "mm", "--no-preview", "--json")
-    for left, right in ((b, a), (a, b)):  # as named in the world, then the images swapped
+    kd = {"K1": world.K2, "D1": world.D2, "K2": world.K1, "D2": world.D1}
+    kd_only = write_opencv_yaml(tmp_path / "kd.yml", c.__class__(**{**world.__dict__, **kd}),
+                                stored=False)  # fmt: skip
+    t = ", ".join(f"{v + 0.0:.6g}" for v in world.T)
+    for left, right, calib in ((b, a, upside), (a, b, upside), (a, b, kd_only)):
+        mm = ("--calib", calib, "--translation-unit", "mm", "--no-preview", "--json")
         code, out, err = run(capsys, left, right, *mm, "-o", f"{tmp_path}/x/")
         assert (code, out) == (2, ""), err
         assert err.count("\n") == 1 and "first camera is right of the second" in err
-        assert "The calibration names the right camera first" in err
-        assert "rig upside down (rolled 180 degrees)" in err
-        assert "not the images' order (swapping them alone does not help)" in err
-        assert "Swap the cameras: the calibration's camera 1 and camera 2" in err
-        assert "turn the images 180 degrees and calibrate again" in err
+        message = err.split(f"{calib}: ", 1)[1].strip()
+        assert len(message) < 320, message  # about 700 before
+        assert message.startswith(f"the first camera is right of the second: T = [{t}] m")
+        assert "OpenCV's x2 = R @ x1 + T gives T[0] < 0 when the left camera is first" in err
+        assert "If T's sign is wrong, negate it" in err
+        assert "swap K1/K2 and D1/D2 and replace R by R.T, T by -R.T @ T" in err
+        assert message.endswith("Give the left image first")
         assert not (tmp_path / "x").exists()
-    # The remedies: the cameras swapped (calibration and images), or the images turned.
+    # The remedies: the complete swap as the message gives it, with the left image first; or
+    # the images turned (upright outputs for an upside-down rig).
+    complete = {"R": world.R.T, "T": -world.R.T @ world.T}
+    fixed = c.__class__(**{**world.__dict__, **kd, **complete})
+    np.testing.assert_allclose(fixed.T, c.T, atol=1e-15)
+    fixed_yaml = write_opencv_yaml(tmp_path / "fixed.yml", fixed, stored=False)
     turned = write_opencv_yaml(tmp_path / "turned.yml", turned_180(world), stored=False)
     for name, arr in (("b180.png", read_image(b)), ("a180.png", read_image(a))):
         Image.fromarray(np.ascontiguousarray(arr[::-1, ::-1])).save(tmp_path / name)
-    fixed = write_opencv_yaml(tmp_path / "fixed.yml", c, stored=False)
     for left, right, calib in (
-        (a, b, fixed),
+        (a, b, fixed_yaml),
         (tmp_path / "b180.png", tmp_path / "a180.png", turned),
     ):
         code, out, err = run(
@@ -437,6 +449,50 @@ def test_a_rig_calibrated_upside_down_is_told_what_happened_and_what_to_do(
         )  # fmt: skip
         assert code == 0, err
         assert json.loads(out)["density"] > 0.5
+
+
+def test_a_hand_written_t_of_the_wrong_sign_is_named(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """The likeliest cause of a first camera on the right: an OpenCV YAML written by hand with
+    K1 = K2, D = 0, R = I and T = [+baseline, 0, 0], where OpenCV's x2 = R x1 + T wants
+    T[0] = -baseline for a left-first rig. The refusal did not name it; it now gives the T
+    received and the convention, and the negated T matches."""
+    pytest.importorskip("yaml", reason="YAML calibrations need PyYAML (the calib extra)")
+    s = sample_pair(96, 64)
+    Image.fromarray(s.left).save(tmp_path / "left.png")
+    Image.fromarray(s.right).save(tmp_path / "right.png")
+
+    def matrix(rows: int, cols: int, data: list[float]) -> str:
+        values = ", ".join(repr(float(v)) for v in data)
+        return f"!!opencv-matrix\n   rows: {rows}\n   cols: {cols}\n   dt: d\n   data: [{values}]"
+
+    def calibration(name: str, tx: float) -> Path:
+        k = matrix(3, 3, [100, 0, 47.5, 0, 100, 31.5, 0, 0, 1])
+        d = matrix(1, 5, [0] * 5)
+        identity = matrix(3, 3, [1, 0, 0, 0, 1, 0, 0, 0, 1])
+        fields = {"K1": k, "D1": d, "K2": k, "D2": d, "R": identity, "T": matrix(3, 1, [tx, 0, 0])}
+        text = "".join(f"{key}: {value}\n" for key, value in fields.items())
+        path = tmp_path / name
+        path.write_text(f"%YAML:1.0\n---\n{text}imageSize: [96, 64]\n")
+        return path
+
+    left, right = tmp_path / "left.png", tmp_path / "right.png"
+    flags = ("--num-disparities", "32", "--no-preview", "--json")
+    swapped = calibration("swapped.yml", 0.17)
+    code, out, err = run(capsys, left, right, "--calib", swapped, *flags, "-o", f"{tmp_path}/x/")
+    assert (code, out) == (2, ""), err
+    assert err == (
+        f"stereodepth match: error: --calib: {swapped}: the first camera is right of the "
+        "second: T = [0.17, 0, 0] m, and OpenCV's x2 = R @ x1 + T gives T[0] < 0 when the left "
+        "camera is first. If T's sign is wrong, negate it; if the cameras are named the other "
+        "way, swap K1/K2 and D1/D2 and replace R by R.T, T by -R.T @ T. Give the left image "
+        "first\n"
+    )
+    fixed = calibration("fixed.yml", -0.17)
+    code, out, err = run(capsys, left, right, "--calib", fixed, *flags, "-o", f"{tmp_path}/y/")
+    assert code == 0, err
+    assert json.loads(out)["density"] > 0.5
 
 
 def test_split_opencv_files_without_a_size_take_image_size(

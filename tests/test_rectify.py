@@ -652,12 +652,77 @@ def test_rectifier_rig_and_q() -> None:
     swapped = calib_of(dataclasses.replace(rig, R=rig.R.T, T=-rig.R.T @ rig.T))
     rs = StereoRectifier.from_calibration(swapped)
     assert rs.P2[0, 3] > 0
-    with pytest.raises(ValueError, match=r"first camera is right of the second .*swap"):
+    with pytest.raises(ValueError, match=r"first camera is right of the second: T = \[.*swap"):
         rs.rig  # noqa: B018 - the property raises
     upside = calib_of(dataclasses.replace(vertical, R=vertical.R.T, T=-vertical.R.T @ vertical.T))
-    below = r"first camera is below the second in the rectified frame \(P2\[1, 3\].*lower camera"
+    below = r"first camera is below the second: T = .* T\[1\] < 0 when the upper camera is first"
     with pytest.raises(ValueError, match=below):
         StereoRectifier.from_calibration(upside).rig  # noqa: B018 - the property raises
+
+
+def _refusal(calib: Calib) -> str:
+    """The message of the rig of a calibration that names the cameras wrongly."""
+    with pytest.raises(
+        ValueError, match=r"^the first camera is (right of|below) the second"
+    ) as info:
+        StereoRectifier.from_calibration(calib).rig  # noqa: B018 - the property raises
+    return str(info.value)
+
+
+@pytest.mark.parametrize("rig", [RIGS[0], RIGS[3]], ids=lambda r: r.name)
+def test_rig_refusal_names_t_the_convention_and_the_complete_swap(rig: Rig) -> None:
+    """A calibration whose first camera is the right (lower) one: the refusal was about 700
+    characters, said "swap the calibration's camera 1 and camera 2", which a user did with K
+    and D alone (refused the same), and did not name the likeliest cause, a hand-written T of
+    the wrong sign. It now gives the T received, OpenCV's convention and the complete swap;
+    the remedies it names work, and K and D swapped alone are still refused."""
+    i = 1 if rig.name.startswith("v") else 0
+    first = ("left", "upper")[i]
+    good = StereoRectifier.from_calibration(calib_of(rig)).rig
+    # The cameras named the other way: what the calibration of the same rig with camera 1 and
+    # camera 2 exchanged is (OpenCV's x2 = R x1 + T).
+    named = dataclasses.replace(
+        rig, K1=rig.K2, D1=rig.D2, K2=rig.K1, D2=rig.D1, R=rig.R.T, T=-rig.R.T @ rig.T
+    )
+    message = _refusal(calib_of(named))
+    assert "\n" not in message and len(message) < 320, message  # 700 before
+    side = ("right of", "below")[i]
+    received = "[" + ", ".join(f"{v + 0.0:.6g}" for v in named.T) + "]"
+    assert message.startswith(f"the first camera is {side} the second: T = {received} m"), message
+    assert f"x2 = R @ x1 + T gives T[{i}] < 0 when the {first} camera is first" in message
+    assert "If T's sign is wrong, negate it" in message
+    assert "swap K1/K2 and D1/D2 and replace R by R.T, T by -R.T @ T" in message
+    assert message.endswith(f"Give the {first} image first")
+    # K and D swapped alone: the same R and T, refused the same.
+    kd_only = dataclasses.replace(named, K1=named.K2, D1=named.D2, K2=named.K1, D2=named.D1)
+    assert _refusal(calib_of(kd_only)) == message
+    # The complete swap, as the message gives it, is the rig's own calibration back.
+    complete = {"R": named.R.T, "T": -named.R.T @ named.T}
+    swapped = dataclasses.replace(kd_only, **complete)
+    rig_back = StereoRectifier.from_calibration(calib_of(swapped)).rig
+    assert rig_back.baseline_mm == pytest.approx(good.baseline_mm, rel=1e-9)
+    assert rig_back.focal_px == pytest.approx(good.focal_px, rel=1e-9)
+    # A hand-written T of the wrong sign, the likeliest cause: named, and negating it works.
+    flipped = dataclasses.replace(rig, T=-rig.T)
+    message = _refusal(calib_of(flipped))
+    assert f"T = [{', '.join(f'{v + 0.0:.6g}' for v in flipped.T)}] m" in message, message
+    assert flipped.T[i] > 0 and "If T's sign is wrong, negate it" in message
+    fixed = StereoRectifier.from_calibration(calib_of(dataclasses.replace(flipped, T=-flipped.T)))
+    assert fixed.rig.baseline_mm == pytest.approx(good.baseline_mm, rel=1e-9)
+
+
+def test_rig_refusal_of_stored_projections_that_disagree_with_t() -> None:
+    """A file whose own P1, P2 put the first camera on the right although its T is that of a
+    left-first rig: negating T is not the remedy there, and the message does not say it is."""
+    rig = RIGS[0]
+    r = stereo_rectify(rig.K1, rig.D1, rig.K2, rig.D2, rig.size, rig.R, rig.T)
+    P2 = r.P2.copy()
+    P2[0, 3] = -P2[0, 3]
+    assert rig.T[0] < 0 and P2[0, 3] > 0
+    message = _refusal(calib_of(rig, R1=r.R1, R2=r.R2, P1=r.P1, P2=P2))
+    assert message.startswith("the first camera is right of the second in the rectified frame")
+    assert "T = [" in message and "its P1, P2 if it holds them" in message
+    assert "negate" not in message
 
 
 def test_rectifier_uses_the_files_transforms_unless_asked() -> None:

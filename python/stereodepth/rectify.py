@@ -543,6 +543,7 @@ class StereoRectifier:
             else _size("new_image_size", new_image_size),
             rectification=r,
             threads=threads,
+            T=_real_matrix("T", T, (3,)),
         )
 
     def _setup(
@@ -557,8 +558,10 @@ class StereoRectifier:
         output_size: tuple[int, int],
         rectification: Rectification | None,
         threads: int | None,
+        T: np.ndarray | None,
     ) -> None:
         self._threads = check.threads(threads)
+        self._T = T  # the translation received, for the message of rig
         self._image_size = image_size
         self._output_size = output_size
         self._model = model
@@ -647,6 +650,7 @@ class StereoRectifier:
                 output_size=size,
                 rectification=None,
                 threads=threads,
+                T=_received_t(calib.T),
             )
             self._from_rectified(calib)
             return self
@@ -691,6 +695,7 @@ class StereoRectifier:
             output_size=out_size,
             rectification=rect,
             threads=threads,
+            T=_received_t(calib.T),
         )
         return self
 
@@ -880,27 +885,37 @@ class StereoRectifier:
 
         Raises ValueError when the first camera is to the right of (or, for a vertical rig,
         below) the second in the rectified frame: its disparities would be negative. The
-        calibration alone decides this: it names that camera first, made so, or made with the
-        rig upside down (rolled 180 degrees) and its cameras named by their place in the world
-        (each camera's frame is then turned: the camera on the world's left has the other on
-        its own left). Images given in the other order than the calibration's are not seen
-        here; they match to almost nothing."""
+        message gives the T received and OpenCV's convention (``x2 = R @ x1 + T``: T is the
+        first camera's origin in the second camera's frame, so ``T[0] < 0`` when the left camera
+        is first, ``T[1] < 0`` when the upper one is), and both remedies: a T of the wrong sign
+        (the likeliest cause, in a hand-written file) is negated; a calibration that names the
+        cameras the other way (made so, or with the rig upside down, rolled 180 degrees, and
+        its cameras named by their place in the world: each camera's frame is then turned, and
+        the camera on the world's left has the other on its own left) is swapped completely:
+        K1 with K2, D1 with D2, R by R.T and T by -R.T @ T (swapping K and D alone leaves R, T
+        those of the same refused rig; an upside-down rig's outputs are then upside down, as
+        its images: turned 180 degrees and calibrated again, they are upright). The images'
+        order is not seen here: images given the other way round than a calibration's cameras
+        match to almost nothing."""
         f = float(self._P1[0, 0])
         i = _baseline_axis(self._P1, self._P2)
         relative = float(self._P2[i, 3] - self._P1[i, 3])
         if relative > 0:
-            axis, side, which = ("x", "right of", "right") if i == 0 else ("y", "below", "lower")
+            side, first = ("right of", "left") if i == 0 else ("below", "upper")
+            t = self._T
+            if t is not None and t[i] > 0:
+                raise ValueError(
+                    f"the first camera is {side} the second: T = {_vector(t)} m, and OpenCV's "
+                    f"x2 = R @ x1 + T gives T[{i}] < 0 when the {first} camera is first. If T's "
+                    "sign is wrong, negate it; if the cameras are named the other way, swap "
+                    f"K1/K2 and D1/D2 and replace R by R.T, T by -R.T @ T. Give the {first} "
+                    "image first"
+                )
+            received = "" if t is None else f", T = {_vector(t)} m"
             raise ValueError(
                 f"the first camera is {side} the second in the rectified frame (P2[{i}, 3] - "
-                f"P1[{i}, 3] = {relative:g} > 0, T[{i}] > 0): its disparities along {axis} "
-                "would be negative, which the matchers do not search. The calibration names "
-                f"the {which} camera first: made so, or with the rig upside down (rolled 180 "
-                "degrees) and its cameras named by their place in the world; not the images' "
-                "order (swapping them alone does not help). Swap the cameras: the "
-                "calibration's camera 1 and camera 2 (or calibrate again, the other first) and "
-                "the images with them; an upside-down rig's outputs are then upside down, as "
-                "its images (to have them upright, turn the images 180 degrees and calibrate "
-                "again)"
+                f"P1[{i}, 3] = {relative:g} > 0{received}): check the calibration's R and T "
+                "(OpenCV's x2 = R @ x1 + T) and its P1, P2 if it holds them"
             )
         baseline_m = -relative / float(self._P2[0, 0])
         doffs = float(self._P2[i, 2] - self._P1[i, 2])
@@ -920,6 +935,22 @@ class StereoRectifier:
             f"StereoRectifier({w}x{h} -> {ow}x{oh}, model={self._model!r}, "
             f"focal_px={float(self._P1[0, 0]):.6g}, resamples={not self._identity})"
         )
+
+
+def _vector(t: np.ndarray) -> str:
+    """A translation for a message: ``[0.17, 0, 0]``."""
+    return "[" + ", ".join(f"{float(v) + 0.0:.6g}" for v in t) + "]"  # + 0.0: no "-0"
+
+
+def _received_t(value: Any) -> np.ndarray | None:
+    """A calibration's T for :attr:`StereoRectifier.rig`'s message only: a finite (3,)
+    float64 array, None when it is not one (a rectifier built from the calibration's own P1,
+    P2 does not otherwise read T, and must not be refused for it)."""
+    try:
+        t = np.asarray(value, dtype=np.float64).reshape(-1)
+    except (TypeError, ValueError):
+        return None
+    return t if t.shape == (3,) and bool(np.all(np.isfinite(t))) else None
 
 
 def _baseline_axis(P1: np.ndarray, P2: np.ndarray) -> int:
