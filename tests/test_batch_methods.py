@@ -275,3 +275,108 @@ def test_tuple_option_reaches_the_matcher(tmp_path: Path) -> None:
         np.testing.assert_array_equal(np.load(out / "s0.disparity.npy"), want, strict=True)
         record = json.loads((out / "s0.record.json").read_text())
         assert record["matcher_options"] == {"intensity_range": [0, 4095]}
+
+
+def _pgm16(path: Path, image: np.ndarray, maxval: int = 4095) -> None:
+    """A binary 16-bit PGM with a comment in its header (samples big-endian)."""
+    head = f"P5\n# made by a test\n{image.shape[1]} {image.shape[0]}\n{maxval}\n".encode()
+    path.write_bytes(head + image.astype(">u2").tobytes())
+
+
+def _scenes(root: Path, bits: dict[str, str]) -> Path:
+    """``root/in/<name>/left.*, right.*`` for each name: "8" an 8-bit PNG pair, "16" a 16-bit
+    PNG pair, "16pgm" a 16-bit PGM pair."""
+    pair = sample_pair(96, 64, seed=3)
+    grey = [np.ascontiguousarray(im[..., 1]) for im in (pair.left, pair.right)]
+    for name, kind in bits.items():
+        scene = root / "in" / name
+        scene.mkdir(parents=True)
+        for side, image in zip(("left", "right"), grey, strict=True):
+            if kind == "8":
+                Image.fromarray(image).save(scene / f"{side}.png")
+            elif kind == "16":
+                io.write_png16(scene / f"{side}.png", image.astype(np.uint16) * 16)
+            else:
+                _pgm16(scene / f"{side}.pgm", image.astype(np.uint16) * 16)
+    return root / "in"
+
+
+RIG = ("--focal-px", "100", "--baseline-mm", "100", "--num-disparities", "16")
+
+
+@pytest.mark.parametrize("method", ["bm", "sgm"])
+def test_intensity_range_on_8_bit_pairs_is_refused_before_the_first_pair(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], method: str
+) -> None:
+    """``--option intensity_range=0,4095`` (README's example of an option checked before the
+    first pair) applies to 16-bit images only: on 8-bit pairs every pair failed and the job
+    exited 1. It is now refused up front, from the images' headers: one line, exit status 2,
+    nothing written."""
+    inp = _scenes(tmp_path, {"a": "8", "b": "8"})
+    out = tmp_path / "out"
+    option = ("--method", method, "--option", "intensity_range=0,4095")
+    assert run_cli("batch", inp, "-o", out, *RIG, *option) == 2
+    captured = capsys.readouterr()
+    assert captured.out == "" and captured.err.count("\n") == 1, captured.err
+    assert captured.err == (
+        "stereodepth batch: error: --option intensity_range=0,4095 applies to 16-bit images "
+        "only (8-bit ones are matched as they are), and all 2 pairs are 8-bit (the first: a, "
+        f"{inp / 'a' / 'left.png'}): drop it\n"
+    )
+    assert not out.exists()
+    # One pair: said so.
+    assert run_cli("batch", inp / "a", "-o", out, *RIG, *option) == 2
+    assert "and the pair is 8-bit (a: " in capsys.readouterr().err
+    assert not out.exists()
+
+
+def test_intensity_range_in_a_folder_mixing_8_and_16_bit_pairs(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A folder mixing 8- and 16-bit pairs is refused as a whole, naming how many pairs are
+    8-bit and the first (their left images' headers: a PNG's mode, a PGM's maxval); without
+    the 8-bit pair it runs, the 16-bit PGM pair included."""
+    inp = _scenes(tmp_path, {"a": "16", "b": "8", "c": "16pgm"})
+    out = tmp_path / "out"
+    option = ("--option", "intensity_range=0,4095", "--quiet")
+    assert run_cli("batch", inp, "-o", out, *RIG, *option) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "Traceback" not in err, err
+    assert (
+        f"and 1 of the 3 pairs are 8-bit (b: {inp / 'b' / 'left.png'}): drop it, or run it "
+        "on the 16-bit pairs alone\n"
+    ) in err
+    assert not out.exists()
+    for f in (inp / "b").iterdir():
+        f.unlink()
+    (inp / "b").rmdir()
+    assert run_cli("batch", inp, "-o", out, *RIG, *option) == 0
+    for name in ("a", "c"):
+        record = json.loads((out / f"{name}.record.json").read_text())
+        assert record["status"] == "ok" and record["matcher_options"] == {
+            "intensity_range": [0, 4095]
+        }
+
+
+def test_sample_bits_reads_the_header(tmp_path: Path) -> None:
+    """The bit depth read_image gives, from the header only; None where the header does not
+    say (the pair's own read then fails with its message)."""
+    from stereodepth.batch.command import sample_bits
+
+    grey = np.arange(64 * 96, dtype=np.uint16).reshape(64, 96) % 4096
+    Image.fromarray((grey % 256).astype(np.uint8)).save(tmp_path / "8.png")
+    Image.fromarray(np.dstack([(grey % 256).astype(np.uint8)] * 3)).save(tmp_path / "rgb.png")
+    io.write_png16(tmp_path / "16.png", grey)
+    _pgm16(tmp_path / "16.pgm", grey)
+    (tmp_path / "8.pgm").write_bytes(b"P5 96 64 255\n" + (grey % 256).astype(np.uint8).tobytes())
+    (tmp_path / "p1.pbm").write_bytes(b"P1\n2 1\n0 1\n")
+    Image.fromarray(grey.astype(np.float32)).save(tmp_path / "f.tif")
+    (tmp_path / "garbage.png").write_bytes(b"not an image")
+    cases = {
+        "8.png": 8, "rgb.png": 8, "16.png": 16, "16.pgm": 16, "8.pgm": 8, "p1.pbm": 8,
+        "f.tif": None, "garbage.png": None, "missing.png": None,
+    }  # fmt: skip
+    for name, bits in cases.items():
+        assert sample_bits(tmp_path / name) == bits, name
+        if bits is not None:  # what read_image gives
+            assert io.read_image(tmp_path / name).dtype == (np.uint8 if bits == 8 else np.uint16)

@@ -281,6 +281,70 @@ def _matcher_options(args: argparse.Namespace) -> dict[str, Any]:
     return opts
 
 
+def sample_bits(path: Path) -> int | None:
+    """8 or 16: the bit depth :func:`stereodepth.io.read_image` gives the image at ``path``,
+    from its header alone (a PNM's maxval, Pillow's mode before any pixel is decoded); None
+    when the header does not say (a missing or unreadable file, floating-point or 16-bit colour
+    samples, which reading the pair refuses with its own message)."""
+    import re
+
+    from ..io import _GREY16_MODES, _pil, _raw_modes
+
+    Image = _pil()
+    try:
+        with path.open("rb") as f:
+            head = f.read(1024)
+        if head[:2] in (b"P1", b"P4"):  # PBM: read as 8-bit grey
+            return 8
+        if head[:2] in (b"P2", b"P3", b"P5", b"P6"):  # the maxval is the fourth token
+            tokens = re.findall(rb"\S+", re.sub(rb"#[^\r\n]*", b" ", head))[:4]
+            if len(tokens) < 4 or not tokens[3].isdigit():
+                return None
+            return 8 if int(tokens[3]) < 256 else 16
+        with Image.open(path) as im:
+            if im.mode in _GREY16_MODES:
+                return 16
+            if (
+                im.mode == "F"
+                or im.mode.startswith("F;")
+                or any(";16" in m for m in _raw_modes(im))
+            ):
+                return None
+            return 8
+    except (OSError, SyntaxError, ValueError, Image.DecompressionBombError):
+        return None
+
+
+def _check_intensity_range(pairs: Sequence[Pair], matcher: dict[str, Any]) -> None:
+    """``--option intensity_range`` applies to 16-bit images only (an 8-bit pair given it
+    fails): refused before the first pair when any pair to be matched has an 8-bit left image,
+    told by each left image's header (:func:`sample_bits`; a folder mixing 8- and 16-bit pairs
+    is refused, naming how many are 8-bit and the first). A header that does not say is left
+    to the pair, whose read gives its own error."""
+    value = matcher.get("intensity_range")
+    if value is None:
+        return
+    runnable = [p for p in pairs if not p.problem]
+    eight = [p for p in runnable if sample_bits(p.left) == 8]
+    if not eight:
+        return
+    typed = ",".join(map(str, value)) if isinstance(value, (tuple, list)) else str(value)
+    n, m, first = len(eight), len(runnable), eight[0]
+    where = f"{first.stem}: {first.left}" if n == 1 else f"the first: {first.stem}, {first.left}"
+    found = (
+        "the pair is 8-bit"
+        if m == 1
+        else f"all {m} pairs are 8-bit"
+        if n == m
+        else f"{n} of the {m} pairs are 8-bit"
+    )
+    fix = "drop it" if n == m else "drop it, or run it on the 16-bit pairs alone"
+    raise UsageError(
+        f"--option intensity_range={typed} applies to 16-bit images only (8-bit ones are "
+        f"matched as they are), and {found} ({where}): {fix}"
+    )
+
+
 def _raw_rectification(
     args: argparse.Namespace,
 ) -> tuple[BatchRectifier, Calibration] | None:
@@ -572,6 +636,7 @@ def run(args: argparse.Namespace) -> int:
         [("INPUT", args.input), ("--calib", args.calib), ("--calib-right", args.calib_right)],
     )
     _check_outputs_are_not_inputs(pairs, options, [args.calib, args.calib_right])
+    _check_intensity_range(pairs, options.matcher)
     if args.format == "png16":  # KITTI's disparity PNG holds at most 65535 / 256 px
         lowest = int(options.matcher.get("min_disparity", 0))
         if lowest < 0:  # and no negative disparities: they would be written as holes
