@@ -712,8 +712,10 @@ def test_ros_rejects_swapped_and_malformed(tmp_path: Path) -> None:
             read_stereo_calibration(lp, second_path=rp)
     p_swapped = np.hstack([P_LEFT[:, :3], np.array([[690.0 * 0.12], [0.0], [0.0]])])
     lp, rp = ros_pair(tmp_path, {}, {"p": p_swapped})
-    with pytest.raises(ValueError, match=r"right\.yaml: projection_matrix Tx = 82\.8 > 0"):
+    with pytest.raises(ValueError, match=r"right\.yaml: projection_matrix Tx = 82\.8 > 0") as e:
         read_stereo_calibration(lp, second_path=rp)
+    # both causes: files swapped, or a Tx of the wrong sign (ROS's convention named)
+    assert "Tx = -fx * baseline < 0" in str(e.value) and "Tx's sign wrong" in str(e.value)
 
 
 # --- Kalibr -----------------------------------------------------------------------------------
@@ -1080,8 +1082,14 @@ def test_to_rig_rejects() -> None:
     k = {"K2": K1}
     with pytest.raises(ValueError, match=r"a rectified horizontal pair has T = \(-B, 0, 0\)"):
         StereoCalibration(**fields(**rect, **k, T=[-0.1, 0.01, 0])).to_rig()
-    with pytest.raises(ValueError, match=r"the right camera must be to the right of the left"):
+    with pytest.raises(ValueError, match=r"the right camera must be to the right of the left") as e:
         StereoCalibration(**fields(**rect, **k, T=[0.1, 0, 0])).to_rig()
+    # the convention and the remedies, as StereoRectifier.rig's refusal
+    assert "T[0] = 0.1 m" in str(e.value) and "T[0] < 0" in str(e.value)
+    assert "replace R by R.T, T by -R.T @ T" in str(e.value)
+    p_right = P_LEFT + np.array([[0, 0, 0, 50.0], [0, 0, 0, 0], [0, 0, 0, 0]])
+    with pytest.raises(ValueError, match=r"P2\[0, 3\] - P1\[0, 3\] = 50\.0; OpenCV's"):
+        StereoCalibration(**fields(P1=P_LEFT, P2=p_right)).to_rig()
     p1 = P_LEFT
     p2 = P_LEFT + np.array([[0, 0, 0, 0], [0, 0, 0, -50.0], [0, 0, 0, 0]])
     with pytest.raises(ValueError, match=r"P2 is of a vertical pair"):

@@ -173,7 +173,8 @@ def read_ros_stereo_calibration(
         raise _fail(
             right["where"],
             f"projection_matrix Tx = {pr[0, 3]} > 0: this camera is left of the other "
-            "(are the files swapped?)",
+            "(ROS gives the right camera Tx = -fx * baseline < 0): are the files swapped, or "
+            "Tx's sign wrong?",
         )
     _check_implicit_baseline(
         float(np.linalg.norm(right["t"] - left["t"])),

@@ -154,6 +154,7 @@ class StereoCalibration:
             if abs(t[1]) > 1e-9 * abs(t[0]) or abs(t[2]) > 1e-9 * abs(t[0]):
                 raise _fail(where, f"a rectified horizontal pair has T = (-B, 0, 0), got {t}")
             focal, baseline, doffs = k1[0, 0], -t[0], k2[0, 2] - k1[0, 2]
+            got = f"T[0] = {float(t[0])!r} m"
         elif self.P1 is not None and self.P2 is not None:
             from ..rectify import _baseline_axis
 
@@ -171,6 +172,7 @@ class StereoCalibration:
             focal = p1[0, 0]
             baseline = -(p2[0, 3] - p1[0, 3]) / p2[0, 0]
             doffs = p2[0, 2] - p1[0, 2]
+            got = f"P2[0, 3] - P1[0, 3] = {float(p2[0, 3] - p1[0, 3])!r}"
         else:
             raise _fail(
                 where,
@@ -178,10 +180,14 @@ class StereoCalibration:
                 "first (the rectified pair's rig comes with the rectification)",
             )
         if not baseline > 0:
+            # As StereoRectifier.rig's refusal: the sign convention and both remedies.
             raise _fail(
                 where,
-                f"the right camera must be to the right of the left one, got a "
-                f"baseline of {baseline!r} m",
+                f"the right camera must be to the right of the left one, got a baseline of "
+                f"{float(baseline)!r} m ({got}; OpenCV's x2 = R @ x1 + T gives T[0] < 0 and "
+                "P2[0, 3] < 0 when the left camera is first). If T's sign is wrong, negate it; "
+                "if the cameras are named the other way, swap K1/K2 and D1/D2 and replace R "
+                "by R.T, T by -R.T @ T",
             )
         return StereoRig.from_pixels(
             baseline_mm=float(baseline) * 1000.0,
