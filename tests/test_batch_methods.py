@@ -343,7 +343,7 @@ def test_intensity_range_in_a_folder_mixing_8_and_16_bit_pairs(
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "Traceback" not in err, err
     assert (
-        f"and 1 of the 3 pairs are 8-bit (b: {inp / 'b' / 'left.png'}): drop it, or run it "
+        f"and 1 of the 3 pairs is 8-bit (b: {inp / 'b' / 'left.png'}): drop it, or run it "
         "on the 16-bit pairs alone\n"
     ) in err
     assert not out.exists()

@@ -653,3 +653,39 @@ def test_outputs_never_overwrite_the_inputs(
     assert f"--out: '{left}' would overwrite LEFT '{left}'" in err
     assert {p: p.read_bytes() for p in (left, right)} == before
     assert not (tmp_path / "disparity.pfm").exists()
+
+
+def test_a_refused_file_with_its_own_rectification_is_told_to_compute_it_anew(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A file that also holds R1, R2, P1, P2 (as OpenCV's stereo_calib sample writes them),
+    made from a T of the wrong sign: the rig is refused from those P's, and correcting T alone
+    leaves them as they were, refused again. The message says so (delete them, or --alpha -1),
+    and --alpha -1 with the corrected T matches."""
+    cv2 = pytest.importorskip("cv2", reason="opencv-python-headless is not installed")
+    pytest.importorskip("yaml", reason="YAML calibrations need PyYAML (the calib extra)")
+    s = sample_pair(160, 96)
+    a, b, c = raw_files(tmp_path, s.left, s.right)
+
+    def with_own(calib: Any) -> Any:
+        d1, d2 = (np.asarray(v, np.float64).reshape(1, -1) for v in (calib.D1, calib.D2))
+        t = np.asarray(calib.T, np.float64).reshape(3, 1)
+        r1, r2, p1, p2, *_ = cv2.stereoRectify(
+            calib.K1, d1, calib.K2, d2, tuple(calib.image_size), calib.R, t, alpha=-1
+        )
+        return calib.__class__(**{**calib.__dict__, "R1": r1, "R2": r2, "P1": p1, "P2": p2})
+
+    wrong = with_own(c.__class__(**{**c.__dict__, "T": -c.T}))
+    negated_only = c.__class__(**{**wrong.__dict__, "T": c.T})  # T corrected, its P's not
+    wrong_yaml = write_opencv_yaml(tmp_path / "wrong.yml", wrong, stored=True)
+    negated_yaml = write_opencv_yaml(tmp_path / "negated.yml", negated_only, stored=True)
+    hint = "this file also holds R1, R2, P1, P2, made from its R and T"
+    for calib in (wrong_yaml, negated_yaml):
+        mm = ("--calib", calib, "--translation-unit", "mm", "--no-preview", "--json")
+        code, out, err = run(capsys, a, b, *mm, "-o", f"{tmp_path}/x/")
+        assert (code, out) == (2, ""), err
+        assert err.count("\n") == 1 and hint in err and "--alpha -1" in err
+    mm = ("--calib", negated_yaml, "--translation-unit", "mm", "--no-preview", "--json")
+    code, out, err = run(capsys, a, b, *mm, "--alpha", "-1", "-o", f"{tmp_path}/y/")
+    assert code == 0, err
+    assert json.loads(out)["density"] > 0.5

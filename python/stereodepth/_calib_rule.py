@@ -263,7 +263,16 @@ def raw_rectifier(
     try:
         rectifier.rig  # noqa: B018 - refuses a pair whose first camera is the right one
     except ValueError as exc:
-        raise ValueError(f"--calib: {calib}: {exc}") from None
+        stored = alpha is None and stereo.P1 is not None and stereo.P2 is not None
+        # The file's own R1, R2, P1, P2 were computed from its R and T: a change of T (or of
+        # the cameras' order) leaves them as they were, and the rig still refused.
+        hint = (
+            "; this file also holds R1, R2, P1, P2, made from its R and T: after correcting "
+            "those, delete them or pass --alpha -1 to compute them anew"
+            if stored
+            else ""
+        )
+        raise ValueError(f"--calib: {calib}: {exc}{hint}") from None
     return rectifier
 
 

@@ -336,7 +336,7 @@ def _check_intensity_range(pairs: Sequence[Pair], matcher: dict[str, Any]) -> No
         if m == 1
         else f"all {m} pairs are 8-bit"
         if n == m
-        else f"{n} of the {m} pairs are 8-bit"
+        else f"{n} of the {m} pairs {'is' if n == 1 else 'are'} 8-bit"
     )
     fix = "drop it" if n == m else "drop it, or run it on the 16-bit pairs alone"
     raise UsageError(
