@@ -521,18 +521,54 @@ def test_opencv_values_outside_the_searched_range_are_holes(
     assert "OpenCV returned 1 pixel outside the searched range 0 .. 15 px (raw values " in err
 
 
-def test_opencv_bm_on_a_narrow_image_scores_no_garbage(
+def test_opencv_bm_with_an_empty_valid_region_is_not_applicable(
     with_tiny: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    """The real case (whether OpenCV returns garbage depends on its memory)."""
-    pytest.importorskip("cv2")
-    status, out, err = run_eval(
-        capsys, str(with_tiny), "--scene", "tiny", "--method", "opencv-bm", "--json"
-    )
+    """StereoBM writes no pixel when its valid disparity region is empty (tiny: 20 x 12 px,
+    block size 9, 16 disparities): what the memory held was scored, garbage within the
+    searched range as well as outside it, different from run to run. That row is n/a now,
+    the other scene's scored."""
+    cv2 = pytest.importorskip("cv2")
+    whole = (0, 0, 20, 12)
+    assert cv2.getValidDisparityROI(whole, whole, 0, 16, 9)[2:] == (0, 0)
+    argv = [str(with_tiny), "--method", "opencv-bm", "--repeat", "1"]
+    status, out, err = run_eval(capsys, *argv, "--json")
     assert status == 0, err
-    (row,) = json.loads(out)["results"]
-    assert row["metrics"]["avgerr"] is None or row["metrics"]["avgerr"] <= 15
-    for line in err.splitlines():
-        assert line.startswith(
-            "stereodepth eval: opencv-bm (block 9) on scene tiny: OpenCV returned "
-        )
+    report = json.loads(out)
+    assert [(r["scene"], r["method"]) for r in report["results"]] == [("big", "opencv-bm")]
+    (na,) = report["not_applicable"]
+    assert (na["scene"], na["method"], na["block_size"]) == ("tiny", "opencv-bm", 9)
+    assert na["reason"] == (
+        "OpenCV's valid disparity region is empty for this size, window and range "
+        "(cv2.getValidDisparityROI: 20 x 12 px, block size 9, 16 disparities): StereoBM "
+        "leaves its output unwritten"
+    )
+    status, out, err = run_eval(capsys, *argv, "--scene", "tiny")
+    assert (status, out) == (2, "")
+    assert "nothing was scored" in err and "valid disparity region is empty" in err
+
+
+def test_opencv_bm_writes_its_hole_value_outside_a_non_empty_valid_region() -> None:
+    """Where the valid region is not empty, StereoBM writes -16 (its hole) outside it: eval
+    has nothing to mask there. A pre-filled output shows what StereoBM left unwritten."""
+    cv2 = pytest.importorskip("cv2")
+    left, right = textured_pair(20, 30, 3, seed=2)
+    whole = (0, 0, 30, 20)
+    x, y, w, h = cv2.getValidDisparityROI(whole, whole, 0, 16, 9)
+    assert w > 0 and h > 0
+    out = cv2.StereoBM_create(numDisparities=16, blockSize=9).compute(
+        left, right, np.full((20, 30), 1234, np.int16)
+    )
+    outside = np.ones(out.shape, bool)
+    outside[y : y + h, x : x + w] = False
+    assert outside.any() and (out[outside] == -16).all()
+
+
+def test_opencv_sgbm_writes_every_pixel_on_a_narrow_image() -> None:
+    """StereoSGBM (3-way: the mode that takes 20 x 12 px with block 9 and 16 disparities)
+    has no such failure: a pre-filled output is overwritten everywhere."""
+    cv2 = pytest.importorskip("cv2")
+    left, right = textured_pair(12, 20, 3, seed=3)
+    sgbm = cv2.StereoSGBM_create(0, 16, 9, mode=cv2.STEREO_SGBM_MODE_SGBM_3WAY)
+    out = sgbm.compute(left, right, np.full((12, 20), 1234, np.int16))
+    assert not (out == 1234).any() and out.min() >= -16 and out.max() < 16 * 16

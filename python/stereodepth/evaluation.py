@@ -47,11 +47,15 @@ Methods
     ``minDisparity * 16`` = 0 (no match; OpenCV writes ``(minDisparity - 1) * 16``) as NaN,
     by :func:`stereodepth.from_opencv_disparity`. A raw value outside the searched range,
     neither that hole value (-16) nor in ``0 .. num_disparities * 16 - 1``, is no result of
-    matching (OpenCV's StereoBM returns uninitialised memory, values such as -31960 ..
-    32521, on images too narrow for its block size and range: 12 x 20 px with block size 9
-    and 16 disparities): it is a hole too, and a note on stderr (and in ``notes`` of
-    ``--json``) names the method, block size and scene and says how many pixels held one.
-    That check is not timed. OpenCV runs only when ``cv2`` imports; otherwise its methods are
+    matching: it is a hole too, and a note on stderr (and in ``notes`` of ``--json``) names
+    the method, block size and scene and says how many pixels held one. That check is not
+    timed. StereoBM writes no pixel at all when its valid disparity region
+    (``cv2.getValidDisparityROI``) is empty for the images' size, its block size and the
+    range, as on images a little wider than the range (20 x 12 px with block size 9 and 16
+    disparities; a 384 px wide scene with ``--num-disparities 384``): it returns uninitialised
+    memory, in the range as well as outside it, so ``opencv-bm`` is not run there (an ``n/a``
+    row, below). Outside a non-empty region it writes its hole value; StereoSGBM writes
+    every pixel. OpenCV runs only when ``cv2`` imports; otherwise its methods are
     skipped with a note. ``METHOD:9,15`` (or ``--block-size 9 15``) runs a method with each
     block size and adds a ``best=`` row per scene: the block size with the lowest
     ``--best-by`` metric (bad-2 by default).
@@ -76,7 +80,8 @@ Scenes an OpenCV method cannot take
 
     A scene whose images an OpenCV matcher's ``compute`` refuses (a ``cv2.error``: images too
     small for the block size and search range, say) is the same: that variant's row there is
-    ``n/a`` with OpenCV's explanation as the reason, the means of the method are over its
+    ``n/a`` with OpenCV's explanation as the reason (or, for ``opencv-bm``, that its valid
+    disparity region is empty), the means of the method are over its
     other scenes (``mean K/N``), and a note on stderr says so, after the matching. A method run
     at several block sizes has no ``best=`` row on a scene where one of them is n/a. When
     nothing was scored at all, it is an error (exit status 2) naming the first refusal.
@@ -608,6 +613,8 @@ def _opencv_factory(
 
         def compute(left: np.ndarray, right: np.ndarray) -> np.ndarray:
             left, right = padded(left), padded(right)
+            if variant.method == "opencv-bm":
+                _check_bm_region(cv2, left.shape[1], left.shape[0], num_disparities, bs)
             try:
                 return np.asarray(matcher.compute(left, right))[:, pad:]
             except cv2.error as exc:
@@ -620,9 +627,29 @@ def _opencv_factory(
     return make
 
 
+def _check_bm_region(cv2: Any, width: int, height: int, num_disparities: int, bs: int) -> None:
+    """:class:`_Refused` when StereoBM's valid disparity region
+    (``cv2.getValidDisparityROI``) is empty for ``width`` x ``height`` px images, block size
+    ``bs`` and ``num_disparities`` from 0: StereoBM then writes none of its output and returns
+    what the memory held (a width between about ``num_disparities`` and ``num_disparities +
+    bs - 2``: 20 x 12 px with 16 disparities and block 9; Tsukuba, 384 px wide, with 384),
+    garbage within the searched range as well as outside it. Where the region is not empty,
+    StereoBM writes its hole value (-16) outside it. StereoSGBM writes every pixel."""
+    whole = (0, 0, width, height)
+    _, _, w, h = cv2.getValidDisparityROI(whole, whole, 0, num_disparities, bs)
+    if w <= 0 or h <= 0:
+        raise _Refused(
+            "OpenCV's valid disparity region is empty for this size, window and range "
+            f"(cv2.getValidDisparityROI: {width} x {height} px, block size {bs}, "
+            f"{num_disparities} disparities): StereoBM leaves its output unwritten"
+        )
+
+
 class _Refused(Exception):
     """An OpenCV matcher's ``compute`` refused a scene's images (a cv2.error): images too
-    small for its block size and search range, say. The args hold the reason."""
+    small for its block size and search range, say; or eval did not run it on images it
+    would leave its output unwritten for (StereoBM's valid disparity region empty). The
+    args hold the reason."""
 
 
 class _OpenCVMatch:
