@@ -307,6 +307,8 @@ def test_a_method_not_applicable_on_every_scene_has_no_means(
     assert status == 0, err
     assert "mean 0/1  opencv-bm    9" in out and out.count("n/a") == 2 * 11 + 1, out
     assert "mean 0/1: opencv-bm did not run on the scene: no means" in out  # not "1 scenes"
+    # not "the means of opencv-bm are over the other 0 scene(s)"
+    assert err.endswith("; those rows are n/a, and opencv-bm has no means\n"), err
     report = json.loads(
         run_eval(
             capsys, str(mixed_depths), "--scene", "b16", "--method", "bm", "opencv-bm",
@@ -396,8 +398,7 @@ def test_a_scene_opencv_refuses_is_not_applicable_to_that_method(
         "opencv-sgbm (block 31) not run on 1 of 2 scene(s) (tiny): OpenCV refused the images: ("
     )
     assert note.endswith(
-        "; those rows are n/a, and the means of opencv-sgbm (block 31) are over the other 1 "
-        "scene(s)"
+        "; those rows are n/a, and the means of opencv-sgbm (block 31) are over the other 1 scene"
     )
     assert err == f"stereodepth eval: {note}\n"
     # the tables: an n/a row, mean 1/2 and the reason under the table
@@ -407,7 +408,54 @@ def test_a_scene_opencv_refuses_is_not_applicable_to_that_method(
     assert ["tiny", "opencv-sgbm", "31", *["n/a"] * 11] in rows
     assert any(r[:4] == ["mean", "1/2", "opencv-sgbm", "31"] for r in rows), out
     assert any(r[:4] == ["mean", "1/2", "opencv-sgbm", "best"] for r in rows), out
-    assert "n/a: opencv-sgbm not run on tiny: OpenCV refused the images: (" in out
+    # block 5 was scored on tiny: the lines under the table name block 31
+    assert "n/a: opencv-sgbm:31 not run on tiny: OpenCV refused the images: (" in out
+    assert "opencv-sgbm not run" not in out
+    assert (
+        "mean 1/2: the means of opencv-sgbm:31, opencv-sgbm:best are over the 1 of the 2 "
+        "scenes each ran on: not comparable with means over all of them"
+    ) in out
+
+
+def test_the_lines_under_the_table_name_the_block_size(
+    with_tiny: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """opencv-bm:9,15 with block 15 n/a on mid and tiny, block 9 on tiny only: the footer
+    said "opencv-bm not run on ..." beside block 9's scores there, and "the means of
+    opencv-bm are over ..." twice, with two counts."""
+    pytest.importorskip("cv2")
+    write_scene(with_tiny / "mid", *textured_pair(20, 26, 3, seed=4), 3.0)  # BM 15: empty
+    status, out, err = run_eval(capsys, str(with_tiny), "--method", "opencv-bm:9,15")
+    assert status == 0, err
+    under = out.split("\n\n")[3].splitlines()
+    assert under == [
+        f"n/a: opencv-bm:15 not run on mid, tiny: {EMPTY_REGION}",
+        f"n/a: opencv-bm:9 not run on tiny: {EMPTY_REGION}",
+        "mean 2/3: the means of opencv-bm:9 are over the 2 of the 3 scenes it ran on: not "
+        "comparable with means over all of them",
+        "mean 1/3: the means of opencv-bm:15, opencv-bm:best are over the 1 of the 3 scenes "
+        "each ran on: not comparable with means over all of them",
+    ], out
+    assert err.splitlines() == [
+        f"stereodepth eval: opencv-bm (block 15) not run on 2 of 3 scene(s) (mid, tiny): "
+        f"{EMPTY_REGION}; those rows are n/a, and the means of opencv-bm (block 15) are over "
+        "the other 1 scene",
+        f"stereodepth eval: opencv-bm (block 9) not run on 1 of 3 scene(s) (tiny): "
+        f"{EMPTY_REGION}; those rows are n/a, and the means of opencv-bm (block 9) are over "
+        "the other 2 scenes",
+    ]
+    # all the block sizes of a method n/a on the same scenes: the method named alone
+    status, out, err = run_eval(capsys, str(with_tiny), "--method", "opencv-bm:9,15", "bm")
+    assert status == 0, err
+    assert f"n/a: opencv-bm not run on tiny: {EMPTY_REGION}" not in out
+    status, out, err = run_eval(
+        capsys, str(with_tiny), "--scene", "tiny", "--method", "opencv-bm:9,15", "bm"
+    )
+    assert status == 0, err
+    assert f"n/a: opencv-bm not run on tiny: {EMPTY_REGION}" in out
+    assert "mean 0/1: opencv-bm:9, opencv-bm:15 did not run on the scene: no means" in out
+    # one scene: no "over the other 0 scene(s)"
+    assert "other 0" not in err and err.count("opencv-bm (block 9) has no means") == 1, err
 
 
 def r_best(report: dict[str, Any], scene: str) -> int:
@@ -521,6 +569,12 @@ def test_opencv_values_outside_the_searched_range_are_holes(
     assert "OpenCV returned 1 pixel outside the searched range 0 .. 15 px (raw values " in err
 
 
+EMPTY_REGION = (
+    "OpenCV's valid disparity region is empty for this size, window and range "
+    "(cv2.getValidDisparityROI): StereoBM leaves its output unwritten"
+)
+
+
 def test_opencv_bm_with_an_empty_valid_region_is_not_applicable(
     with_tiny: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
@@ -538,11 +592,7 @@ def test_opencv_bm_with_an_empty_valid_region_is_not_applicable(
     assert [(r["scene"], r["method"]) for r in report["results"]] == [("big", "opencv-bm")]
     (na,) = report["not_applicable"]
     assert (na["scene"], na["method"], na["block_size"]) == ("tiny", "opencv-bm", 9)
-    assert na["reason"] == (
-        "OpenCV's valid disparity region is empty for this size, window and range "
-        "(cv2.getValidDisparityROI: 20 x 12 px, block size 9, 16 disparities): StereoBM "
-        "leaves its output unwritten"
-    )
+    assert na["reason"] == EMPTY_REGION
     status, out, err = run_eval(capsys, *argv, "--scene", "tiny")
     assert (status, out) == (2, "")
     assert "nothing was scored" in err and "valid disparity region is empty" in err

@@ -83,7 +83,10 @@ Scenes an OpenCV method cannot take
     ``n/a`` with OpenCV's explanation as the reason (or, for ``opencv-bm``, that its valid
     disparity region is empty), the means of the method are over its
     other scenes (``mean K/N``), and a note on stderr says so, after the matching. A method run
-    at several block sizes has no ``best=`` row on a scene where one of them is n/a. When
+    at several block sizes has no ``best=`` row on a scene where one of them is n/a. The
+    lines under the table name such a method's variants with their block sizes
+    (``opencv-bm:15``, ``opencv-bm:best`` for its best= rows), the stderr notes as
+    ``opencv-bm (block 15)``. When
     nothing was scored at all, it is an error (exit status 2) naming the first refusal.
     Anything else that fails (our matchers' errors, OpenCV refusing its parameters or running
     out of memory) ends the run, naming the scene and method.
@@ -638,10 +641,10 @@ def _check_bm_region(cv2: Any, width: int, height: int, num_disparities: int, bs
     whole = (0, 0, width, height)
     _, _, w, h = cv2.getValidDisparityROI(whole, whole, 0, num_disparities, bs)
     if w <= 0 or h <= 0:
+        # No sizes in the reason: the scenes and variants it holds for share a line.
         raise _Refused(
             "OpenCV's valid disparity region is empty for this size, window and range "
-            f"(cv2.getValidDisparityROI: {width} x {height} px, block size {bs}, "
-            f"{num_disparities} disparities): StereoBM leaves its output unwritten"
+            "(cv2.getValidDisparityROI): StereoBM leaves its output unwritten"
         )
 
 
@@ -1220,36 +1223,68 @@ def _shorten(names: Sequence[str], most: int = 5) -> str:
     return shown if len(names) <= most else f"{shown} and {len(names) - most} more"
 
 
+def _block_sizes(rows: Sequence[Row]) -> dict[str, set[int | None]]:
+    """The block sizes each method of ``rows`` was run at (or not run at: n/a)."""
+    sizes: dict[str, set[int | None]] = {}
+    for r in rows:
+        if not (isinstance(r, EvalResult) and r.best):
+            sizes.setdefault(r.variant.method, set()).add(r.variant.block_size)
+    return sizes
+
+
+def _variant_names(rows: Sequence[Row]) -> Callable[[str, int | None, bool], str]:
+    """How the lines under the table name a variant of ``rows``: ``opencv-bm:15`` (as
+    ``--method`` spells it) for a method run at several block sizes, ``opencv-bm:best`` for
+    its best= rows, the method alone for one run at one block size."""
+    sizes = _block_sizes(rows)
+
+    def name(method: str, block_size: int | None, best: bool = False) -> str:
+        if best:
+            return f"{method}:best"
+        if len(sizes.get(method, ())) > 1:
+            return f"{method}:{block_size}"
+        return method
+
+    return name
+
+
 def format_not_applicable(rows: Sequence[Row]) -> str:
-    """The lines that explain the table's ``n/a`` rows (the methods not run, where and why)
+    """The lines that explain the table's ``n/a`` rows (the variants not run, where and why)
     and its ``mean K/N`` rows (means over K of the run's N scenes); "" when every variant
-    was scored on every scene."""
-    scenes_of: dict[tuple[str, str], list[str]] = {}  # (reason, method) -> scenes
+    was scored on every scene. A variant of a method run at several block sizes is named
+    with its block size (``opencv-bm:15``), unless all of them are in the same line."""
+    name = _variant_names(rows)
+    scenes_of: dict[tuple[str, Variant], list[str]] = {}  # (reason, variant) -> scenes
     for r in rows:
         if isinstance(r, NotApplicable):
-            scenes = scenes_of.setdefault((r.reason, r.variant.method), [])
+            scenes = scenes_of.setdefault((r.reason, r.variant), [])
             if r.scene not in scenes:
                 scenes.append(r.scene)
-    grouped: dict[tuple[str, tuple[str, ...]], list[str]] = {}  # methods alike, together
-    for (reason, method), scenes in scenes_of.items():
-        grouped.setdefault((reason, tuple(scenes)), []).append(method)
-    lines = [
-        f"n/a: {', '.join(methods)} not run on {_shorten(scenes)}: {reason}"
-        for (reason, scenes), methods in grouped.items()
-    ]
+    grouped: dict[tuple[str, tuple[str, ...]], list[Variant]] = {}  # variants alike, together
+    for (reason, variant), scenes in scenes_of.items():
+        grouped.setdefault((reason, tuple(scenes)), []).append(variant)
+    sizes = _block_sizes(rows)
+    lines = []
+    for (reason, scenes), variants in grouped.items():
+        names: dict[str, None] = {}
+        for v in variants:
+            whole = {x.block_size for x in variants if x.method == v.method} == sizes[v.method]
+            names[v.method if whole else name(v.method, v.block_size)] = None
+        lines.append(f"n/a: {', '.join(names)} not run on {_shorten(scenes)}: {reason}")
     total = len(dict.fromkeys(r.scene for r in rows))
-    covered: dict[int, dict[str, None]] = {}  # scenes -> methods
+    covered: dict[int, dict[str, None]] = {}  # scenes -> variants
     for mean in _means(rows):
         if mean["scenes"] < total:
-            covered.setdefault(mean["scenes"], {})[mean["method"]] = None
-    for count, methods in covered.items():
-        names = ", ".join(methods)
+            label = name(mean["method"], mean["block_size"], mean["best"])
+            covered.setdefault(mean["scenes"], {})[label] = None
+    for count, labels in covered.items():
+        names_ = ", ".join(labels)
         none = f"ran on none of the {total} scenes" if total > 1 else "did not run on the scene"
         lines.append(
-            f"mean 0/{total}: {names} {none}: no means"
+            f"mean 0/{total}: {names_} {none}: no means"
             if count == 0
-            else f"mean {count}/{total}: the means of {names} are over the {count} of the "
-            f"{total} scenes {'it' if len(methods) == 1 else 'each'} ran on: not comparable "
+            else f"mean {count}/{total}: the means of {names_} are over the {count} of the "
+            f"{total} scenes {'it' if len(labels) == 1 else 'each'} ran on: not comparable "
             "with means over all of them"
         )
     return "\n".join(lines)
@@ -1543,10 +1578,17 @@ def _not_applicable_notes(
     notes = []
     for (reason, variant), methods in by_reason.items():
         names = list(scenes[(reason, variant)])
+        which = ", ".join(methods)
+        other = total - len(names)
+        # With one scene it read "the means of opencv-bm are over the other 0 scene(s)".
+        means = (
+            f"{which} {'has' if len(methods) == 1 else 'have'} no means"
+            if other == 0
+            else f"the means of {which} are over the other {_count(other, 'scene')}"
+        )
         notes.append(
-            f"{', '.join(methods)} not run on {len(names)} of {total} scene(s) "
-            f"({_shorten(names)}): {reason}; those rows are n/a, and the means of "
-            f"{', '.join(methods)} are over the other {total - len(names)} scene(s)"
+            f"{which} not run on {len(names)} of {total} scene(s) "
+            f"({_shorten(names)}): {reason}; those rows are n/a, and {means}"
         )
     return notes
 
