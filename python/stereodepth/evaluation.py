@@ -1238,7 +1238,7 @@ def _variant_names(rows: Sequence[Row]) -> Callable[[str, int | None, bool], str
     its best= rows, the method alone for one run at one block size."""
     sizes = _block_sizes(rows)
 
-    def name(method: str, block_size: int | None, best: bool = False) -> str:
+    def name(method: str, block_size: int | None, best: bool) -> str:
         if best:
             return f"{method}:best"
         if len(sizes.get(method, ())) > 1:
@@ -1261,16 +1261,16 @@ def format_not_applicable(rows: Sequence[Row]) -> str:
             if r.scene not in scenes:
                 scenes.append(r.scene)
     grouped: dict[tuple[str, tuple[str, ...]], list[Variant]] = {}  # variants alike, together
-    for (reason, variant), scenes in scenes_of.items():
-        grouped.setdefault((reason, tuple(scenes)), []).append(variant)
+    for (reason, variant), where in scenes_of.items():
+        grouped.setdefault((reason, tuple(where)), []).append(variant)
     sizes = _block_sizes(rows)
     lines = []
-    for (reason, scenes), variants in grouped.items():
+    for (reason, on), variants in grouped.items():
         names: dict[str, None] = {}
         for v in variants:
             whole = {x.block_size for x in variants if x.method == v.method} == sizes[v.method]
-            names[v.method if whole else name(v.method, v.block_size)] = None
-        lines.append(f"n/a: {', '.join(names)} not run on {_shorten(scenes)}: {reason}")
+            names[v.method if whole else name(v.method, v.block_size, False)] = None
+        lines.append(f"n/a: {', '.join(names)} not run on {_shorten(on)}: {reason}")
     total = len(dict.fromkeys(r.scene for r in rows))
     covered: dict[int, dict[str, None]] = {}  # scenes -> variants
     for mean in _means(rows):
