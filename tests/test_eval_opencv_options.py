@@ -87,7 +87,7 @@ BAD = [
     ),
     (
         ["--method", "opencv-sgbm", "--opencv-option", "speckle_window_size=true"],
-        "speckle_window_size=True rejected by opencv-sgbm",
+        "speckle_window_size=true rejected by opencv-sgbm",
     ),
     (
         ["--method", "opencv-sgbm", "--opencv-option", "p1=0"],
@@ -107,7 +107,36 @@ BAD = [
     ),
     (
         ["--method", "opencv-sgbm", "--opencv-option", "p1=100", "--opencv-option", "p2=50"],
-        "--opencv-option p2=50: OpenCV's P2 must be > P1, got p1=100",
+        "--opencv-option p2=50: OpenCV's P2 must be > P1, got p1=100 (OpenCV would use "
+        "P2 = P1 + 1 instead)",
+    ),
+    # a p2 at or below eval's P1 (8 x 5 x 5 = 200 for block 5): OpenCV used 201 for all three
+    *(
+        (
+            ["--method", "opencv-sgbm", "--opencv-option", f"p2={p2}"],
+            f"--opencv-option p2={p2}: OpenCV's P2 must be > P1, and eval's P1 for "
+            "opencv-sgbm:5 is 200 (8 x 5 x 5): give p1 too, or a larger p2",
+        )
+        for p2 in (1, 150, 200)
+    ),
+    (  # the block size whose P1 the p2 does not pass
+        ["--method", "opencv-sgbm-3way:3,7", "--opencv-option", "p2=100"],
+        "--opencv-option p2=100: OpenCV's P2 must be > P1, and eval's P1 for "
+        "opencv-sgbm-3way:7 is 392 (8 x 7 x 7)",
+    ),
+    (  # a p1 at or above eval's P2 (32 x 5 x 5 = 800)
+        ["--method", "opencv-sgbm", "--opencv-option", "p1=800"],
+        "--opencv-option p1=800: OpenCV's P2 must be > P1, and eval's P2 for opencv-sgbm:5 "
+        "is 800 (32 x 5 x 5): give p2 too, or a smaller p1",
+    ),
+    # the value as typed: it read p1=True and p1=(10, 'p2=5')
+    (
+        ["--method", "opencv-sgbm", "--opencv-option", "p1=TRUE"],
+        "--opencv-option p1=TRUE rejected by opencv-sgbm: p1 must be an integer in ",
+    ),
+    (
+        ["--method", "opencv-sgbm", "--opencv-option", "p1=10,p2=5"],
+        "--opencv-option p1=10,p2=5 rejected by opencv-sgbm: p1 must be an integer in ",
     ),
 ]
 
@@ -132,6 +161,8 @@ def test_bad_opencv_parameters_one_line_exit_2(
         ["--method", "opencv-bm", "--opencv-option", "pre_filter_cap=63"],
         ["--method", "opencv-bm", "--opencv-option", "disp12_max_diff=-1"],
         ["--method", "opencv-sgbm", "--opencv-option", "p1=10", "--opencv-option", "p2=200"],
+        ["--method", "opencv-sgbm", "--opencv-option", "p2=201"],
+        ["--method", "opencv-sgbm", "--opencv-option", "p1=799"],
         ["--method", "opencv-bm", "opencv-sgbm", "--opencv-option", "texture_threshold=5"],
     ],
 )

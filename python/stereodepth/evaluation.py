@@ -561,7 +561,10 @@ def _camel(key: str) -> str:
 
 
 def _opencv_factory(
-    cv2: Any, options: dict[str, Any], channel_order: str = "rgb"
+    cv2: Any,
+    options: dict[str, Any],
+    channel_order: str = "rgb",
+    texts: dict[str, str] | None = None,
 ) -> Callable[[Variant, int], Matcher]:
     to_grey = cv2.COLOR_BGR2GRAY if channel_order == "bgr" else cv2.COLOR_RGB2GRAY
 
@@ -603,7 +606,8 @@ def _opencv_factory(
                     setter(value)
                 except (cv2.error, TypeError) as exc:
                     raise ValueError(
-                        f"--opencv-option {key}={value!r} rejected by OpenCV: {_cv_message(exc)}"
+                        f"--opencv-option {_as_typed(key, value, texts)} rejected by OpenCV: "
+                        f"{_cv_message(exc)}"
                     ) from exc
 
         pad = num_disparities if variant.method == "opencv-sgbm-3way-padded" else 0
@@ -699,7 +703,9 @@ def _within(low: int, high: int) -> tuple[Callable[[int], bool], str]:
 
 #: What OpenCV takes for each ``--opencv-option`` (its setter's value), by matcher class:
 #: ``compute`` refuses some values (StereoBM's pre-filter) and silently replaces others
-#: (StereoSGBM's negative uniqueness ratio by 10, a P1 <= 0 by 2); both are refused here.
+#: (StereoSGBM's negative uniqueness ratio by 10, a P1 <= 0 by 2, a P2 <= P1 by P1 + 1);
+#: all are refused here (P2 against P1 by :func:`_check_opencv_options`, each the one given
+#: or eval's for the block size).
 _OPENCV_OPTION_RULES: dict[str, dict[str, tuple[Callable[[int], bool], str]]] = {
     "bm": {
         "pre_filter_type": (
@@ -731,10 +737,15 @@ _OPENCV_OPTION_RULES: dict[str, dict[str, tuple[Callable[[int], bool], str]]] = 
 }
 
 
-def _check_opencv_options(options: dict[str, Any], methods: set[str]) -> None:
-    """Each ``--opencv-option`` value checked against what the selected OpenCV matchers take,
-    before any scene is read: one line naming the option and the matcher (``mode=99`` was
-    taken without a word)."""
+def _check_opencv_options(
+    options: dict[str, Any], variants: Sequence[Variant], texts: dict[str, str] | None = None
+) -> None:
+    """Each ``--opencv-option`` value checked against what the selected OpenCV matchers
+    (``variants``) take, before any scene is read: one line naming the option as typed
+    (``texts``: key to the text given) and the matcher (``mode=99`` was taken without a
+    word). P2 must be above P1, each the one given or eval's for the variant's block size
+    (8 and 32 x its square): OpenCV replaced a smaller P2 by P1 + 1 without a word."""
+    methods = {v.method for v in variants}
     kinds = {("bm" if m == "opencv-bm" else "sgbm"): m for m in sorted(methods)}
     for key, value in options.items():
         for kind, method in kinds.items():
@@ -745,11 +756,36 @@ def _check_opencv_options(options: dict[str, Any], methods: set[str]) -> None:
             is_int = isinstance(value, int) and not isinstance(value, bool)
             if not (is_int and _C_INT[0] <= value <= _C_INT[1] and ok(value)):
                 raise _usage_error(
-                    f"--opencv-option {key}={value!r} rejected by {method}: {key} must be {what}"
+                    f"--opencv-option {_as_typed(key, value, texts)} rejected by {method}: "
+                    f"{key} must be {what}"
                 )
     p1, p2 = options.get("p1"), options.get("p2")
-    if isinstance(p1, int) and isinstance(p2, int) and not p2 > p1:
-        raise _usage_error(f"--opencv-option p2={p2!r}: OpenCV's P2 must be > P1, got p1={p1}")
+    if p1 is None and p2 is None:
+        return
+    for v in sorted(variants, key=lambda v: (v.method, v.block_size or 0)):
+        bs = v.block_size
+        if v.method == "opencv-bm" or bs is None:
+            continue
+        eval_p1, eval_p2 = 8 * bs * bs, 32 * bs * bs
+        if p1 is not None and p2 is not None:
+            if not p2 > p1:
+                raise _usage_error(
+                    f"--opencv-option {_as_typed('p2', p2, texts)}: OpenCV's P2 must be > P1, "
+                    f"got {_as_typed('p1', p1, texts)} (OpenCV would use P2 = P1 + 1 instead)"
+                )
+            return
+        if p2 is not None and not p2 > eval_p1:
+            raise _usage_error(
+                f"--opencv-option {_as_typed('p2', p2, texts)}: OpenCV's P2 must be > P1, and "
+                f"eval's P1 for {v.method}:{bs} is {eval_p1} (8 x {bs} x {bs}): give p1 too, "
+                "or a larger p2 (OpenCV would use P2 = P1 + 1 instead)"
+            )
+        if p1 is not None and not eval_p2 > p1:
+            raise _usage_error(
+                f"--opencv-option {_as_typed('p1', p1, texts)}: OpenCV's P2 must be > P1, and "
+                f"eval's P2 for {v.method}:{bs} is {eval_p2} (32 x {bs} x {bs}): give p2 too, "
+                "or a smaller p1 (OpenCV would use P2 = P1 + 1 instead)"
+            )
 
 
 def _check_block_size(variant: Variant) -> None:
@@ -1398,8 +1434,8 @@ def register(subparsers: Any) -> None:
     )
     m.add_argument(
         "--option",
-        action=KeyValueOnce,
-        type=key_value_option,
+        action=_KeyValueText,
+        type=_key_value_text,
         default=[],
         metavar="KEY=VALUE",
         help="keyword argument for stereodepth.block_match, repeatable (e.g. cost=census, "
@@ -1407,8 +1443,8 @@ def register(subparsers: Any) -> None:
     )
     m.add_argument(
         "--sgm-option",
-        action=KeyValueOnce,
-        type=key_value_option,
+        action=_KeyValueText,
+        type=_key_value_text,
         default=[],
         metavar="KEY=VALUE",
         help="keyword argument for stereodepth.semi_global_match (method sgm), repeatable "
@@ -1416,8 +1452,8 @@ def register(subparsers: Any) -> None:
     )
     m.add_argument(
         "--opencv-option",
-        action=KeyValueOnce,
-        type=key_value_option,
+        action=_KeyValueText,
+        type=_key_value_text,
         default=[],
         metavar="KEY=VALUE",
         help="OpenCV matcher parameter, repeatable: uniqueness_ratio=10 calls "
@@ -1474,6 +1510,45 @@ def register(subparsers: Any) -> None:
     p.set_defaults(func=run)
 
 
+def _key_value_text(text: str) -> tuple[str, Any, str]:
+    """argparse type of eval's ``--option``, ``--sgm-option`` and ``--opencv-option``:
+    :func:`stereodepth.cli.key_value_option`'s (key, value) and the value as typed."""
+    key, value = key_value_option(text)
+    return key, value, text.partition("=")[2]
+
+
+class _KeyValueText(KeyValueOnce):
+    """:class:`stereodepth.cli.KeyValueOnce` that also keeps each value as the user typed it,
+    in ``<dest>_text`` (a dict, key to text): eval's messages show that text (``p1=true``
+    read ``p1=True``, ``p1=10,p2=5`` read ``p1=(10, 'p2=5')``)."""
+
+    def __call__(
+        self,
+        parser: argparse.ArgumentParser,
+        namespace: argparse.Namespace,
+        values: Any,
+        option_string: str | None = None,
+    ) -> None:
+        key, value, text = values
+        super().__call__(parser, namespace, (key, value), option_string)
+        texts = dict(getattr(namespace, f"{self.dest}_text", None) or {})
+        texts[key] = text
+        setattr(namespace, f"{self.dest}_text", texts)
+
+
+def _as_typed(key: str, value: Any, texts: dict[str, str] | None = None) -> str:
+    """``KEY=VALUE`` as the user typed it: the text kept by :class:`_KeyValueText`, else the
+    value written back as ``--option`` reads it (true, none, 0,4095)."""
+    if texts is not None and key in texts:
+        return f"{key}={texts[key]}"
+
+    def one(v: Any) -> str:
+        return str(v).lower() if v is None or isinstance(v, bool) else str(v)
+
+    shown = ",".join(map(one, value)) if isinstance(value, tuple) else one(value)
+    return f"{key}={shown}"
+
+
 def _variants(
     specs: Sequence[tuple[str, tuple[int, ...] | None]], block_sizes: Sequence[int] | None
 ) -> list[Variant]:
@@ -1507,7 +1582,9 @@ def _matcher_default_block_size() -> int:
     return default
 
 
-def _check_matcher_options(options: dict[str, Any], method: str = "stereodepth") -> None:
+def _check_matcher_options(
+    options: dict[str, Any], method: str = "stereodepth", texts: dict[str, str] | None = None
+) -> None:
     """Checks ``--option`` (``--sgm-option`` for method ``"sgm"``) against the matcher before
     any scene is read: an unknown name, or a value the matcher refuses, is a usage error
     naming the option as typed."""
@@ -1542,9 +1619,7 @@ def _check_matcher_options(options: dict[str, Any], method: str = "stereodepth")
         culprit = next((k for k in options if message.startswith(k)), None)
 
         def as_typed(key: str) -> str:
-            value = options[key]
-            shown = str(value).lower() if value is None or isinstance(value, bool) else value
-            return f"{key}={shown}"
+            return _as_typed(key, options[key], texts)
 
         typed = as_typed(culprit) if culprit is not None else " ".join(map(as_typed, options))
         raise _usage_error(f"{flag} {typed}: {message}") from None
@@ -1658,8 +1733,8 @@ def run(args: argparse.Namespace) -> int:
         raise _usage_error("--option is for stereodepth.block_match: add --method stereodepth")
     if sgm_options and "sgm" not in methods:
         raise _usage_error("--sgm-option is for stereodepth.semi_global_match: add --method sgm")
-    _check_matcher_options(options)
-    _check_matcher_options(sgm_options, "sgm")
+    _check_matcher_options(options, texts=getattr(args, "option_text", None))
+    _check_matcher_options(sgm_options, "sgm", getattr(args, "sgm_option_text", None))
     cv2: Any = None
     if methods & set(_OPENCV_METHODS):
         try:
@@ -1685,8 +1760,11 @@ def run(args: argparse.Namespace) -> int:
                     raise _usage_error(
                         f"--opencv-option {key}: no selected OpenCV matcher has set{_camel(key)}()"
                     )
-            _check_opencv_options(opencv_options, methods & set(_OPENCV_METHODS))
-            factory = _opencv_factory(cv2, opencv_options, args.channel_order)
+            opencv_texts = getattr(args, "opencv_option_text", None)
+            _check_opencv_options(
+                opencv_options, [v for v in variants if v.method in _OPENCV_METHODS], opencv_texts
+            )
+            factory = _opencv_factory(cv2, opencv_options, args.channel_order, opencv_texts)
             for name in _OPENCV_METHODS:
                 factories[name] = factory
     elif opencv_options:
