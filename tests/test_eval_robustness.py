@@ -297,6 +297,52 @@ def test_the_tables_mark_not_applicable_rows_and_partial_means(
     assert "median over 2 scene(s)" in out
 
 
+@pytest.mark.parametrize(
+    ("method", "flag", "matcher"),
+    [("sgm", "--sgm-option", "SemiGlobalMatcher"), ("bm", "--option", "StereoMatcher")],
+)
+def test_intensity_range_with_an_8_bit_scene_is_refused_before_any_matching(
+    mixed_depths: Path,
+    capsys: pytest.CaptureFixture[str],
+    monkeypatch: pytest.MonkeyPatch,
+    method: str,
+    flag: str,
+    matcher: str,
+) -> None:
+    """intensity_range is for 16-bit images: b16 was matched, then c (8-bit) ended the run
+    with exit status 2, b16's work lost. The up-front scene checks refuse it, naming the
+    option as typed and the first 8-bit scene, before any matching."""
+    from stereodepth import matching, semi_global
+
+    module = semi_global if method == "sgm" else matching
+    calls: list[str] = []
+
+    class Counted(getattr(module, matcher)):  # type: ignore[misc]
+        def compute(self, *args: Any, **kwargs: Any) -> Any:
+            calls.append("compute")
+            return super().compute(*args, **kwargs)
+
+    monkeypatch.setattr(module, matcher, Counted)
+    argv = [str(mixed_depths), "--method", method]
+    status, out, err = run_eval(capsys, *argv, flag, "intensity_range=0,4095")
+    assert (status, out) == (2, "")
+    assert err == (
+        f"stereodepth eval: error: {flag} intensity_range=0,4095: intensity_range is for "
+        f"16-bit images ({'sgm' if method == 'sgm' else 'stereodepth'} matches 8-bit ones as "
+        "they are), and scene a is 8-bit: leave the option out, or that scene (--scene)\n"
+    )
+    status, out, err = run_eval(
+        capsys, *argv, flag, "intensity_range=0,4095", "--scene", "b16", "--scene", "c"
+    )
+    assert (status, out) == (2, "") and "and scene c is 8-bit" in err, err
+    assert calls == []
+    status, out, err = run_eval(
+        capsys, *argv, flag, "intensity_range=0,65535", "--scene", "b16", "--repeat", "1"
+    )
+    assert status == 0, err
+    assert calls
+
+
 def test_a_method_not_applicable_on_every_scene_has_no_means(
     mixed_depths: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:

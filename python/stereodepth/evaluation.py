@@ -63,8 +63,9 @@ Methods
 Checks
     Every selected scene is read and checked before any is matched (its files, left and right
     images of one size and bit depth, a mask selecting no pixel with ground truth, a declared
-    range its ground truth leaves), so that a fault in the last scene ends the run before the
-    work on the others, not after it.
+    range its ground truth leaves; an ``intensity_range`` in ``--option`` or
+    ``--sgm-option``, which is for 16-bit images, with an 8-bit scene), so that a fault in
+    the last scene ends the run before the work on the others, not after it.
 
 Scenes an OpenCV method cannot take
     OpenCV's StereoBM and StereoSGBM take 8-bit images only. On a scene whose images are not
@@ -1804,6 +1805,20 @@ def run(args: argparse.Namespace) -> int:
         left, *_ = _scene_inputs(
             scene, variants, num_disparities=args.num_disparities, use_mask=not args.no_mask
         )
+        # intensity_range is for 16-bit images: our matchers refused it on an 8-bit scene
+        # when its turn came, after the work on the scenes before it, all of it lost.
+        for flag, given, method in (
+            ("--option", options, "stereodepth"),
+            ("--sgm-option", sgm_options, "sgm"),
+        ):
+            if given.get("intensity_range") is not None and left.dtype == np.uint8:
+                texts = getattr(args, f"{flag[2:].replace('-', '_')}_text", None)
+                raise _usage_error(
+                    f"{flag} {_as_typed('intensity_range', given['intensity_range'], texts)}: "
+                    f"intensity_range is for 16-bit images ({method} matches 8-bit ones as "
+                    f"they are), and scene {scene.name} is 8-bit: leave the option out, or "
+                    "that scene (--scene)"
+                )
         not_run[scene.name] = _not_applicable(scene.name, variants, left)
     not_applicable = [x for xs in not_run.values() for x in xs]
     if len(not_applicable) == len(scenes) * len(variants):
