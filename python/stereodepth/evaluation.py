@@ -679,7 +679,8 @@ class _OpenCVMatch:
         """The pixels of the last result whose raw value is neither a disparity of the
         searched range ``0 .. (num_disparities * 16 - 1)`` nor OpenCV's hole ``-16``
         (minDisparity 0), and the span of those values ("" when there is none): not a
-        result of matching (StereoBM leaves pixels of narrow images uninitialised)."""
+        result of matching. (StereoBM's unwritten output, with an empty valid region, is
+        not run at all: :func:`_check_bm_region`; this is the check of what remains.)"""
         assert self._raw is not None
         raw = self._raw
         bad = ((raw < 0) & (raw != -16)) | (raw >= self._num_disparities * 16)
@@ -1046,8 +1047,9 @@ def _evaluate_scene(
                 f"{disparity.shape}, expected float {gt.shape}"
             )
         if isinstance(match, _OpenCVMatch):
-            # StereoBM on a narrow image returns uninitialised values (-31960 .. 32521 on
-            # 12 x 20 px), scored as disparities up to 2000 px: holes, and said.
+            # Values no matching gives (StereoBM's unwritten output, -31960 .. 32521 on
+            # 20 x 12 px, was scored as disparities up to 2000 px; that case is n/a now):
+            # holes, and said.
             beyond, span = match.beyond_range()
             count = int(beyond.sum())
             if count:
