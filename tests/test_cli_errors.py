@@ -362,3 +362,32 @@ def test_a_name_too_long_for_a_file_is_a_usage_error(
     assert fragment in err
     assert "bytes long, more than a file name may be (255 bytes)" in err
     assert "Errno" not in err
+
+
+def test_python_m_stereodepth_cli_prints_one_line_for_a_subcommands_error(
+    tmp_path: Path,
+) -> None:
+    """``python -m stereodepth.cli`` runs cli.py as __main__, a second copy of the module: a
+    usage error raised by a subcommand's own module (here eval's up-front check of
+    intensity_range against an 8-bit scene) is the package module's UsageError, which that
+    copy did not catch (a traceback). It now runs the package's main."""
+    np = pytest.importorskip("numpy")
+    image = pytest.importorskip("PIL.Image")
+    scene = tmp_path / "s1"
+    scene.mkdir()
+    grey = np.random.default_rng(3).integers(0, 256, (16, 40), dtype=np.uint8)
+    image.fromarray(grey).save(scene / "left.png")
+    image.fromarray(grey).save(scene / "right.png")
+    np.save(scene / "disp_gt.npy", np.ones((16, 40), np.float32))
+    argv = ["eval", str(tmp_path), "--method", "bm", "--option", "intensity_range=0,4095"]
+    r = subprocess.run(
+        [sys.executable, "-m", "stereodepth.cli", *argv],
+        capture_output=True,
+        text=True,
+        timeout=60,
+        check=False,
+        env={**os.environ, "PYTHONPATH": str(Path(main.__code__.co_filename).parents[1])},
+    )
+    assert (r.returncode, r.stdout) == (2, ""), r.stderr
+    assert len(r.stderr.splitlines()) == 1 and "Traceback" not in r.stderr, r.stderr
+    assert r.stderr.startswith("stereodepth eval: error: --option intensity_range=0,4095")

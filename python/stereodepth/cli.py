@@ -517,4 +517,9 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    # `python -m stereodepth.cli`: this file then runs as __main__, a second copy of the
+    # module, whose UsageError is not the one the subcommands' modules raise (theirs went
+    # uncaught, a traceback): run the package's own module, as `python -m stereodepth` does.
+    from stereodepth.cli import main as package_main
+
+    sys.exit(package_main())
