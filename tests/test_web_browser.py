@@ -98,6 +98,11 @@ ALLOW_HOST_RULE = (
     [
         (["--port", "70000"], "--port must be an integer from 0 to 65535, got 70000"),
         (["--host", "no.such.host.invalid"], "--host must be an address of this machine"),
+        # an address, but another machine's (TEST-NET-1): the address is the problem, not
+        # the port
+        (["--host", "192.0.2.1"], "--host 192.0.2.1 is not an address of this machine ("),
+        (["--host", "[2001:db8::1]"], "--host [2001:db8::1] is not an address of this machine"),
+        (["--host", "[192.0.2.1]"], "--host must be an address of this machine, got '[192.0.2"),
         (["--max-upload-mb", "0"], "--max-upload-mb must be a number > 0 and <= 10000, got 0"),
         (["--max-megapixels", "nan"], "--max-megapixels must be a number > 0 and <= 10000"),
         (["--allow-host", "x:port"], f"{ALLOW_HOST_RULE}, got 'x:port'"),
@@ -120,6 +125,8 @@ def test_serve_rejects_bad_options(
     out, err = capsys.readouterr()
     assert err.startswith(f"stereodepth serve: error: {message}")
     assert err.count("\n") == 1 and out == "", (out, err)
+    if args[0] == "--host":
+        assert "--port" not in err, err
 
 
 def test_serve_reports_a_busy_port(capsys: pytest.CaptureFixture[str]) -> None:

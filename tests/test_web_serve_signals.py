@@ -321,6 +321,21 @@ def test_a_name_for_loopback_is_not_warned_about_and_its_url_is_answered(
     assert err == "", err
 
 
+@pytest.mark.parametrize("host", ["[::1]", "::1", " [::1] "])
+def test_an_ipv6_host_in_brackets_is_listened_on(host: str) -> None:
+    """``--host [::1]``, as a URL spells it (and as the help does): the address without its
+    brackets, no warning; its page's address answered."""
+    server = start("--host", host)
+    try:
+        assert server.url == f"http://[::1]:{server.port}/", server.first_line
+        assert fetch(server.url)[0] == 200
+    finally:
+        code, _, _, err = server.stop(signal.SIGINT, timeout=GRACE_S + 10)
+        server.kill()
+    assert code == 0, err
+    assert err == "", err
+
+
 def test_the_machines_own_name_for_loopback_is_not_warned_about() -> None:
     """The same with this machine's real name and resolver, when it maps it to loopback."""
     name = socket.gethostname()

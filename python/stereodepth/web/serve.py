@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import errno
 import ipaddress
 import signal
 import socket
@@ -85,7 +86,8 @@ def register(subparsers: Any) -> None:
     p.add_argument(
         "--host",
         default=DEFAULT_HOST,
-        help=f"address to listen on (default {DEFAULT_HOST}: this machine only)",
+        help=f"address to listen on (default {DEFAULT_HOST}: this machine only; an IPv6 one "
+        "with or without brackets, [::1] or ::1; 0.0.0.0 or [::]: every interface)",
     )
     p.add_argument(
         "--port",
@@ -153,12 +155,23 @@ def allow_hosts(entries: Sequence[str] | None) -> list[str]:
     return list(entries or ())
 
 
+def unbracketed(host: str) -> str:
+    """``--host`` without the brackets of an IPv6 address (``[::1]``: ``::1``), and spaces."""
+    host = host.strip()
+    ipv6 = host.startswith("[") and host.endswith("]") and ":" in host
+    return host[1:-1] if ipv6 else host
+
+
 def bind(host: str, port: int) -> socket.socket:
-    """A listening TCP socket on ``host``:``port`` (0: a free port), or ValueError."""
+    """A listening TCP socket on ``host`` (an IPv6 address with or without its brackets):
+    ``port`` (0: a free port), or ValueError naming ``--host`` (not an address of this
+    machine) or ``--port`` (taken, or not allowed)."""
     if isinstance(port, bool) or not isinstance(port, int) or not 0 <= port <= 65535:
         raise ValueError(f"--port must be an integer from 0 to 65535, got {port!r}")
     try:
-        infos = socket.getaddrinfo(host, port, type=socket.SOCK_STREAM, flags=socket.AI_PASSIVE)
+        infos = socket.getaddrinfo(
+            unbracketed(host), port, type=socket.SOCK_STREAM, flags=socket.AI_PASSIVE
+        )
     except socket.gaierror as exc:
         raise ValueError(
             f"--host must be an address of this machine, got {host!r} ({exc.strerror})"
@@ -171,6 +184,12 @@ def bind(host: str, port: int) -> socket.socket:
         sock.listen(128)
     except OSError as exc:
         sock.close()
+        if exc.errno == errno.EADDRNOTAVAIL:  # the address, not the port
+            raise ValueError(
+                f"--host {host} is not an address of this machine ({exc.strerror or exc}): "
+                "give one of its own, 127.0.0.1 (this machine only) or 0.0.0.0 (every "
+                "interface)"
+            ) from None
         raise ValueError(
             f"cannot listen on {host} port {port}: {exc.strerror or exc}; "
             "choose another --port (0 takes any free port)"
@@ -315,7 +334,7 @@ def _run(args: argparse.Namespace) -> int:
     url = url_of(sock)
     if not is_loopback(sock):
         bound = str(_ip_of(sock))
-        shown = args.host if args.host.strip() == bound else f"{args.host} ({bound})"
+        shown = args.host if unbracketed(args.host) == bound else f"{args.host} ({bound})"
         print(
             f"stereodepth serve: warning: listening on {shown}, which other machines "
             "may reach; the default 127.0.0.1 keeps the page on this machine",
