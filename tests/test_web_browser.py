@@ -110,6 +110,10 @@ ALLOW_HOST_RULE = (
         (["--allow-host", ""], f"{ALLOW_HOST_RULE}, got ''"),
         (["--allow-host", "*.lan"], f"{ALLOW_HOST_RULE}, got '*.lan'"),  # no wildcards
         (["--allow-host", "a,b"], f"{ALLOW_HOST_RULE}, got 'a,b'"),
+        (
+            ["--allow-host", "é..local", "--port", "70000"],  # refused before the port
+            f"{ALLOW_HOST_RULE}, got 'é..local' (IDNA cannot encode it: label empty or too long)",
+        ),
         (["--allow-host", "http://box:8080/"], f"{ALLOW_HOST_RULE}, got 'http://box:8080/'"),
         # each one, before the server listens (on a --port it could not take)
         (

@@ -169,6 +169,13 @@ def test_the_connections_own_ip_address_is_answered(app: Any) -> None:
         ),
         pytest.param(["::1"], ["[::1]:8000", "[0:0:0:0:0:0:0:1]:8000"], ["[::2]:8000"], id="ipv6"),
         pytest.param(["*"], ["evil.example.com", "x:1"], [], id="any-host"),
+        # A browser sends a name of other than ASCII characters in its IDNA form.
+        pytest.param(
+            ["Ünïcode.LOCAL", "日本.example:8080"],
+            ["xn--ncode-cta3g.local:8000", "XN--NCODE-CTA3G.Local:8000", "xn--wgv71a.example:8080"],
+            ["xn--ncode-cta3g.local:8001", "ncode.local:8000", "xn--wgv71a.example:8000"],
+            id="idna",
+        ),
     ],
 )
 def test_allowed_hosts_sets_the_hosts_answered(
@@ -200,6 +207,10 @@ def test_a_mounted_app_checks_the_host() -> None:
         (["a b"], ValueError, "got 'a b'"),
         (["*.example.com"], ValueError, "got '*.example.com'"),  # no wildcards: never matched
         (["localhost:70000"], ValueError, "got 'localhost:70000'"),
+        (["é..local"], ValueError, "got 'é..local' (IDNA cannot encode it: label empty or too"),
+        (["ü" * 64 + ".local"], ValueError, "(IDNA cannot encode it: label empty or too long)"),
+        (["ü/x"], ValueError, "got 'ü/x'"),  # IDNA passes the "/"
+        (["ü\u00a0x"], ValueError, "got 'ü\\xa0x'"),  # IDNA maps the no-break space to " "
     ],
 )
 def test_bad_allowed_hosts_raise_naming_the_parameter(

@@ -375,6 +375,23 @@ def test_allow_host_adds_names_at_their_ports() -> None:
     assert code == 0 and err == "", (code, err)
 
 
+def test_allow_host_answers_a_name_of_other_than_ascii_in_its_idna_form() -> None:
+    """The Host a browser sends for ``Ünïcode.local`` is its IDNA form, in any case."""
+    server = start("--allow-host", "Ünïcode.local")
+    try:
+        port = server.port
+        for host in (f"xn--ncode-cta3g.local:{port}", f"XN--NCODE-CTA3G.LOCAL:{port}"):
+            assert status_of(get(port, host)) == 200, host
+        answer = get(port, f"xn--ncode-cta3g.local:{port + 1}")
+        assert status_of(answer) == 400
+        (item,) = body_of(answer)["detail"]
+        assert f"[::1]:{port} or xn--ncode-cta3g.local:{port})" in item["msg"], item
+    finally:
+        code, _, _, err = server.stop(signal.SIGINT, timeout=GRACE_S + 10)
+        server.kill()
+    assert code == 0 and err == "", (code, err)
+
+
 def test_allow_host_star_answers_every_host_with_a_warning() -> None:
     server = start("--allow-host", "*")
     try:

@@ -10,6 +10,8 @@ The hosts answered (``create_app(allowed_hosts=...)``), each an entry of
 
 - a name or IP address (an IPv6 one with or without its brackets): that name at the port the
   server listens on (the ASGI scope's ``server``; when the server does not say, at any port);
+  a name of other than ASCII characters as its IDNA (punycode) form, which is what a browser
+  sends (``ünïcode.local`` is ``xn--ncode-cta3g.local``; Python's ``idna`` codec, IDNA 2003);
 - ``name:port``: that name at that port only (a server behind a port mapping, e.g. Docker's
   ``-p 8080:8000``, is reached at a port that is not its own);
 - ``0.0.0.0`` or ``::`` (optionally with ``:port``): any IP address, for a server on every
@@ -20,7 +22,8 @@ The hosts answered (``create_app(allowed_hosts=...)``), each an entry of
 
 The default, :data:`LOOPBACK_HOSTS`: ``localhost``, ``127.0.0.1`` and ``[::1]``. Always
 answered as well: the IP address the connection came in on, as the server reports it (the
-address the client typed). A Host without a port means 80 (443 over https).
+address the client typed). A Host without a port means 80 (443 over https); names match
+whatever their case.
 """
 
 from __future__ import annotations
@@ -82,7 +85,8 @@ class AllowedHosts:
     """The Host header values a server answers (see the module's doc for the entries).
     Raises TypeError for ``hosts`` that is not a list of strings (a single string too: give
     ``["name"]``), ValueError naming an entry that is not a host name or IP address, either
-    optionally with ``:port`` (1 to 65535), or ``"*"`` (no wildcards in names)."""
+    optionally with ``:port`` (1 to 65535), or ``"*"`` (no wildcards in names; a name of
+    other than ASCII characters that the ``idna`` codec cannot encode)."""
 
     def __init__(self, hosts: Iterable[str] | None = None) -> None:
         if hosts is None:
@@ -104,12 +108,26 @@ class AllowedHosts:
             # A bare IPv6 address ("::1") has colons of its own: no port.
             parts = (text, None) if _ip(text) is not None else _split_host(text)
             name = "" if parts is None else parts[0]
+            why = ""
+            if not name.isascii():
+                # A browser sends the name's IDNA (punycode) form: "xn--...".
+                try:
+                    name = name.encode("idna").decode("ascii").lower()
+                except UnicodeError as exc:
+                    why = f" (IDNA cannot encode it: {exc.__cause__ or exc})"
+                    name = ""
             bad_port = parts is not None and parts[1] is not None and not 0 < parts[1] < 65536
             # "*.example.com" or "a,b" would be names no Host has: refused, not never matched
-            if parts is None or not name or bad_port or any(c in name for c in "/?#@*, \t[]"):
+            if (
+                parts is None
+                or not name
+                or bad_port
+                or any(c in name for c in "/?#@*, \t[]")
+                or not name.isprintable()
+            ):
                 raise ValueError(
                     "allowed_hosts must hold host names or IP addresses, each optionally with "
-                    f":port, or '*', got {entry[:60]!r}"
+                    f":port, or '*', got {entry[:60]!r}{why}"
                 )
             ip = _ip(name)
             name = _ANY_ADDRESS if ip is not None and ip.is_unspecified else _canonical(name)

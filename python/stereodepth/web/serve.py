@@ -104,8 +104,9 @@ def register(subparsers: Any) -> None:
         "a port mapping (docker -p 8080:8000: localhost:8080 and 127.0.0.1:8080), an mDNS name "
         "(myrobot.local), a reverse proxy's name; repeat it for more. Others get 400, "
         "against DNS rebinding (by default only localhost, 127.0.0.1, [::1], --host and the "
-        "address bound are answered). 0.0.0.0: any IP address; '*': every Host, no check, "
-        "only behind a proxy that checks the Host itself",
+        "address bound are answered). A name of other than ASCII characters is answered in "
+        "the IDNA form browsers send (xn--...). 0.0.0.0: any IP address; '*': every Host, no "
+        "check, only behind a proxy that checks the Host itself",
     )
     p.add_argument("--open", action="store_true", help="open the page in a web browser")
     p.add_argument(
@@ -141,16 +142,19 @@ def is_loopback(sock: socket.socket) -> bool:
 
 def allow_hosts(entries: Sequence[str] | None) -> list[str]:
     """The ``--allow-host`` entries (None: none), checked: ValueError naming the option and the
-    first one that is not a host name or IP address, optionally with ``:PORT``, or ``'*'``."""
+    first one that is not a host name or IP address, optionally with ``:PORT``, or ``'*'`` (a
+    name of other than ASCII characters is answered in its IDNA form, ``xn--...``)."""
     from .host import AllowedHosts
 
     for entry in entries or ():
         try:
             AllowedHosts([entry])
-        except ValueError:
+        except ValueError as exc:
+            got = f"got {entry[:60]!r}"
+            why = str(exc).partition(got)[2]  # e.g. the name that IDNA cannot encode
             raise ValueError(
                 "--allow-host must be a host name or IP address, optionally with :PORT "
-                f"(1 to 65535), or '*', got {entry[:60]!r}"
+                f"(1 to 65535), or '*', {got}{why}"
             ) from None
     return list(entries or ())
 
