@@ -22,6 +22,8 @@ from server_process import ServerProcess
 from starlette.applications import Starlette
 from starlette.routing import Mount
 
+import stereodepth.web.host
+from stereodepth.web import LOOPBACK_HOSTS
 from stereodepth.web.app import create_app
 from stereodepth.web.host import AllowedHosts
 
@@ -51,7 +53,8 @@ def test_the_app_answers_loopback_hosts_at_its_port(app: Any, base_url: str) -> 
 #: The end of a refusal that cannot name the entry that would answer the Host.
 ANY_NAME_HINT = (
     "(to answer a name: stereodepth serve --allow-host NAME[:PORT], "
-    "or create_app(allowed_hosts=[...]))"
+    "or create_app(allowed_hosts=[*LOOPBACK_HOSTS, ...]) with LOOPBACK_HOSTS from "
+    "stereodepth.web)"
 )
 
 
@@ -76,7 +79,8 @@ def test_the_app_refuses_another_host(app: Any, host: str, entry: str | None, pa
         ANY_NAME_HINT
         if entry is None
         else f"(to answer it: stereodepth serve --allow-host {entry}, "
-        f"or create_app(allowed_hosts=[{entry!r}]))"
+        f"or create_app(allowed_hosts=[*LOOPBACK_HOSTS, {entry!r}]) with LOOPBACK_HOSTS from "
+        "stereodepth.web)"
     )
     assert msg == (
         "the Host header must name this server (localhost:8000, 127.0.0.1:8000 or "
@@ -112,7 +116,8 @@ def test_the_entry_that_the_refusal_names_answers_the_host(base_url: str, host: 
     msg = refusal(TestClient(create_app(), base_url=base_url).get("/", headers={"host": host}))
     found = re.search(
         r"\(to answer it: stereodepth serve --allow-host (\S+), or "
-        r"create_app\(allowed_hosts=\[(.+)\]\)\)$",
+        r"create_app\(allowed_hosts=\[\*LOOPBACK_HOSTS, (.+)\]\) with LOOPBACK_HOSTS from "
+        r"stereodepth\.web\)$",
         msg,
     )
     assert found, msg
@@ -120,8 +125,22 @@ def test_the_entry_that_the_refusal_names_answers_the_host(base_url: str, host: 
     assert found.group(2) == repr(entry)
     if base_url.startswith("https") and ":" not in host:
         assert entry == f"{host}:443"
-    client = TestClient(create_app(allowed_hosts=[entry]), base_url=base_url)
+    # As the refusal says: the Host is answered, and so are the loopback names still.
+    client = TestClient(create_app(allowed_hosts=[*LOOPBACK_HOSTS, entry]), base_url=base_url)
     assert client.get("/api/fields", headers={"host": host}).status_code == 200
+    for loopback in ("localhost:8000", "127.0.0.1:8000", "[::1]:8000"):
+        assert client.get("/api/fields", headers={"host": loopback}).status_code == 200
+
+
+def test_allowed_hosts_is_the_whole_list() -> None:
+    """``allowed_hosts`` replaces the default (``serve --allow-host`` adds to it); the default
+    is :data:`LOOPBACK_HOSTS`, from ``stereodepth.web`` as the refusal says."""
+    assert LOOPBACK_HOSTS == ("localhost", "127.0.0.1", "[::1]")
+    assert LOOPBACK_HOSTS is stereodepth.web.host.LOOPBACK_HOSTS
+    only = TestClient(create_app(allowed_hosts=["box:8000"]), base_url="http://10.0.0.1:8000")
+    assert only.get("/api/fields", headers={"host": "box:8000"}).status_code == 200
+    msg = refusal(only.get("/api/fields", headers={"host": "localhost:8000"}))
+    assert msg.startswith("the Host header must name this server (box:8000 or 10.0.0.1:8000)")
 
 
 @pytest.mark.parametrize(

@@ -422,7 +422,8 @@ def test_the_refusal_says_how_to_answer_the_host(host: str, entry: str) -> None:
         entry = entry.format(port=port)
         assert item["msg"].endswith(
             f"a page of another site cannot use it (to answer it: stereodepth serve "
-            f"--allow-host {entry}, or create_app(allowed_hosts=[{entry!r}]))"
+            f"--allow-host {entry}, or create_app(allowed_hosts=[*LOOPBACK_HOSTS, {entry!r}]) "
+            "with LOOPBACK_HOSTS from stereodepth.web)"
         ), item
     finally:
         server.stop(signal.SIGINT, timeout=GRACE_S + 10)
@@ -430,6 +431,9 @@ def test_the_refusal_says_how_to_answer_the_host(host: str, entry: str) -> None:
     server = start("--allow-host", entry)
     try:
         assert status_of(get(server.port, host.format(port=port))) == 200
+        # --allow-host adds to the names answered: the loopback ones still are.
+        for loopback in ("localhost", "127.0.0.1", "[::1]"):
+            assert status_of(get(server.port, f"{loopback}:{server.port}")) == 200, loopback
     finally:
         server.stop(signal.SIGINT, timeout=GRACE_S + 10)
         server.kill()

@@ -545,15 +545,20 @@ def create_app(
 
     The app answers only requests whose Host header is one of ``allowed_hosts`` (against DNS
     rebinding; :mod:`stereodepth.web.host`), under whichever server runs it: by default
-    (None) ``localhost``, ``127.0.0.1`` and ``[::1]`` at the port the server listens on, and
-    the IP address the connection came in on; others answer 400 at ``["header", "host"]``.
+    (None) ``localhost``, ``127.0.0.1`` and ``[::1]`` (``LOOPBACK_HOSTS``) at the port the
+    server listens on, and the IP address the connection came in on; others answer 400 at
+    ``["header", "host"]``. A list is all the names answered, in place of the default (unlike
+    ``serve --allow-host``, which adds to its names): to keep the default's, include them,
+    ``allowed_hosts=[*LOOPBACK_HOSTS, "depth.lab:8080"]`` (``from stereodepth.web import
+    LOOPBACK_HOSTS``).
     Entries are names or IP addresses, each optionally with ``:port``; ``0.0.0.0`` or ``::``
     stands for any IP address, ``"*"`` turns the check off (behind a proxy that checks the
     Host itself). ``stereodepth serve`` passes these with its ``--host``, the address it bound
     and, bound to every interface, ``0.0.0.0`` and the machine's host name, and the entries of
     its ``--allow-host`` options. Under ``uvicorn
     --factory``, a factory of your own passes them (``def app(): return
-    create_app(allowed_hosts=[...])``, then ``uvicorn mymodule:app --factory``).
+    create_app(allowed_hosts=[*LOOPBACK_HOSTS, ...])``, then ``uvicorn mymodule:app
+    --factory``).
 
     Raises TypeError for a limit that is not an integer or ``allowed_hosts`` that is not a
     list of strings, ValueError for a limit < 1 or an entry of ``allowed_hosts`` that is not

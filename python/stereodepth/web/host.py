@@ -6,7 +6,9 @@ requests still carry its own name in the Host header. :func:`stereodepth.web.app
 puts this check in front of every route, so the app refuses such requests under whichever
 server runs it (``stereodepth serve``, ``uvicorn --factory``, or mounted in another app).
 
-The hosts answered (``create_app(allowed_hosts=...)``), each an entry of
+The hosts answered (``create_app(allowed_hosts=...)``: the whole list, which replaces the
+default; to answer another name as well, keep the default's in it:
+``create_app(allowed_hosts=[*LOOPBACK_HOSTS, "depth.lab:8080"])``), each an entry of
 
 - a name or IP address (an IPv6 one with or without its brackets): that name at the port the
   server listens on (the ASGI scope's ``server``; when the server does not say, at any port);
@@ -18,7 +20,8 @@ The hosts answered (``create_app(allowed_hosts=...)``), each an entry of
   interface (a page loaded from an IP address is the server's own: rebinding needs a name);
 - ``*``: every Host, no check (only behind a proxy that checks the Host itself).
 
-``stereodepth serve`` takes the same entries with ``--allow-host`` (repeated for more).
+``stereodepth serve`` takes the same entries with ``--allow-host`` (repeated for more), which
+add to the names it answers (the default's, its ``--host`` and the address it bound).
 
 The default, :data:`LOOPBACK_HOSTS`: ``localhost``, ``127.0.0.1`` and ``[::1]``. Always
 answered as well: the IP address the connection came in on, as the server reports it (the
@@ -36,7 +39,8 @@ from typing import Any
 
 __all__ = ["ANY_HOST", "LOOPBACK_HOSTS", "AllowedHosts", "HostCheck"]
 
-#: The hosts a local server answers by default.
+#: The hosts a local server answers by default (also ``stereodepth.web.LOOPBACK_HOSTS``):
+#: ``create_app(allowed_hosts=[*LOOPBACK_HOSTS, "name:port"])`` answers another name too.
 LOOPBACK_HOSTS = ("localhost", "127.0.0.1", "[::1]")
 #: The entry of ``allowed_hosts`` that turns the check off.
 ANY_HOST = "*"
@@ -191,20 +195,25 @@ class AllowedHosts:
         return ", ".join(names[:-1]) + " or " + names[-1]
 
 
+# create_app's allowed_hosts is the whole list: the hint keeps the loopback names in it.
+_LOOPBACK_FROM = " with LOOPBACK_HOSTS from stereodepth.web"
+
+
 def _hint(value: str | None, default_port: int) -> str:
     """How to have this Host answered too: the entry that names it (its name with the port it
     means, a Host without a port meaning ``default_port``), when it is a plain host name or IP
-    address; else the form of one."""
+    address; else the form of one. ``--allow-host`` adds to the names answered, while
+    ``allowed_hosts`` is all of them, so the hint shows it with :data:`LOOPBACK_HOSTS`."""
     parts = None if value is None or len(value) > 60 else _split_host(value)
     if parts is not None and parts[0] and (_ip(parts[0]) or _PLAIN_NAME.fullmatch(parts[0])):
         entry = _shown(parts[0], default_port if parts[1] is None else parts[1])
         return (
             f"to answer it: stereodepth serve --allow-host {entry}, "
-            f"or create_app(allowed_hosts=[{entry!r}])"
+            f"or create_app(allowed_hosts=[*LOOPBACK_HOSTS, {entry!r}]){_LOOPBACK_FROM}"
         )
     return (
         "to answer a name: stereodepth serve --allow-host NAME[:PORT], "
-        "or create_app(allowed_hosts=[...])"
+        f"or create_app(allowed_hosts=[*LOOPBACK_HOSTS, ...]){_LOOPBACK_FROM}"
     )
 
 
