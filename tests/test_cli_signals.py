@@ -28,13 +28,16 @@ PYTHON_DIR = Path(stereodepth.__file__).resolve().parents[1]
 
 #: Runs ``main(argv)`` with ``module.attribute`` wrapped: the wrapper prints READY on stderr,
 #: then sleeps ``pause`` seconds before calling the original (the signal lands in the sleep).
+#: One write(2) of the whole line: batch's worker threads call the wrapper at once, and
+#: print()'s two writes (the text, then the newline) interleaved into "READYREADY", never
+#: read as READY, so the test waited for a line that never came (seen once in CI).
 DRIVER = """
-import importlib, sys, time
+import importlib, os, sys, time
 module, attribute, pause = sys.argv[1], sys.argv[2], float(sys.argv[3])
 target = importlib.import_module(module)
 original = getattr(target, attribute)
 def slow(*args, **kwargs):
-    print("READY", file=sys.stderr, flush=True)
+    os.write(2, b"READY\\n")
     time.sleep(pause)
     return original(*args, **kwargs)
 setattr(target, attribute, slow)
