@@ -619,10 +619,14 @@ def _opencv_factory(
                 return g
             return np.asarray(cv2.copyMakeBorder(g, 0, 0, pad, 0, cv2.BORDER_REPLICATE))
 
+        checked: set[tuple[int, ...]] = set()  # image shapes whose BM region is not empty
+
         def compute(left: np.ndarray, right: np.ndarray) -> np.ndarray:
             left, right = padded(left), padded(right)
-            if variant.method == "opencv-bm":
+            if variant.method == "opencv-bm" and left.shape not in checked:
+                # once per shape, not in every timed call
                 _check_bm_region(cv2, left.shape[1], left.shape[0], num_disparities, bs)
+                checked.add(left.shape)
             try:
                 return np.asarray(matcher.compute(left, right))[:, pad:]
             except cv2.error as exc:

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import contextlib
 import errno
+import functools
 import os
 import re
 import secrets
@@ -178,6 +179,33 @@ def _read_image(p: Path, *, turn: bool) -> np.ndarray:
 
 
 _GREY16_MODES = ("I;16", "I;16B", "I;16L", "I")
+
+
+def _sample_dtype(path: str | os.PathLike[str]) -> np.dtype | None:
+    """The dtype :func:`read_image` gives the image at ``path`` (uint8 or uint16), from its
+    header alone: a PNM's (:func:`read_pnm`'s header parse), Pillow's mode before any pixel
+    is decoded. None where the header does not say or :func:`read_image` would refuse the
+    file (missing, unreadable, malformed; floating-point or 16-bit colour samples): reading
+    it then gives its own message."""
+    p = Path(path)
+    Image = _pil()
+    try:
+        with p.open("rb") as f:
+            if f.read(2) in _PNM_KINDS:
+                size = os.fstat(f.fileno()).st_size
+                head = _parse_head(f, size, functools.partial(_pnm_head, p, file_size=size))
+                dtype: np.dtype = head[4]
+                return dtype
+        with Image.open(p) as im:
+            if im.mode in _GREY16_MODES:
+                return np.dtype(np.uint16)
+            if im.mode == "F" or im.mode.startswith("F;"):
+                return None
+            if any(";16" in m for m in _raw_modes(im)):
+                return None
+            return np.dtype(np.uint8)
+    except (OSError, SyntaxError, ValueError, Image.DecompressionBombError):
+        return None
 
 
 def _raw_modes(im: Any) -> list[str]:
@@ -854,6 +882,49 @@ def _plain_raster(
     return values
 
 
+def _pnm_head(p: Path, data: bytes, whole: bool, file_size: int) -> tuple[Any, ...]:
+    """The header of the PNM file ``p`` (``file_size`` bytes) from its first bytes ``data``
+    (the whole file when ``whole``; :class:`_NeedMore` where that is not enough): its kind,
+    width, height, maxval, sample dtype, a description for messages, and where its raster
+    starts (a binary body's size checked against the file's). ValueError naming the file for
+    a malformed header."""
+    if len(data) < 3 and not whole:
+        raise _NeedMore
+    kind = _PNM_KINDS.get(data[:2])
+    if kind is None or not (data[2:3].isspace() or data[2:3] == b"#"):
+        if len(data) < 8 and not whole:  # the message shows 8 bytes
+            raise _NeedMore
+        raise ValueError(
+            f"{p}: not a PBM/PGM/PPM file: it must start with P1 to P6, got {data[:8]!r}"
+        )
+    name, samples, plain, has_maxval = kind
+    tokens, end = _header_tokens(
+        p, data, 3 if has_maxval else 2, comments=True, what=name, whole=whole
+    )
+    width = _size(p, tokens[0], "width", name)
+    height = _size(p, tokens[1], "height", name)
+    maxval = _size(p, tokens[2], "maxval", name) if has_maxval else 1
+    if maxval > 65535:
+        raise ValueError(f"{p}: {name} maxval must be at most 65535, got {maxval}")
+    dtype = np.dtype(np.uint8 if maxval < 256 else np.uint16)
+    desc = f"{width}x{height} {name}" + (f" with maxval {maxval}" if has_maxval else "")
+    if plain:  # no exact size: read_pnm reads the raster whole
+        return kind, width, height, maxval, dtype, desc, end
+    # P4: rows of bits, each row padded to a whole byte; P5, P6: big-endian samples.
+    size = (
+        (width + 7) // 8 * height if not has_maxval else width * height * samples * dtype.itemsize
+    )
+    return (
+        kind,
+        width,
+        height,
+        maxval,
+        dtype,
+        desc,
+        _body_start(p, data, whole, end, file_size, size, desc),
+    )
+
+
 def read_pnm(path: str | os.PathLike[str]) -> np.ndarray:
     """A netpbm PBM, PGM or PPM file (P1 to P6) as a numpy array, the samples as stored.
 
@@ -885,46 +956,7 @@ def read_pnm(path: str | os.PathLike[str]) -> np.ndarray:
     require_file(p, "PNM file")
     with p.open("rb") as f:
         file_size = os.fstat(f.fileno()).st_size
-
-        def parse(data: bytes, whole: bool) -> tuple[Any, ...]:
-            if len(data) < 3 and not whole:
-                raise _NeedMore
-            kind = _PNM_KINDS.get(data[:2])
-            if kind is None or not (data[2:3].isspace() or data[2:3] == b"#"):
-                if len(data) < 8 and not whole:  # the message shows 8 bytes
-                    raise _NeedMore
-                raise ValueError(
-                    f"{p}: not a PBM/PGM/PPM file: it must start with P1 to P6, got {data[:8]!r}"
-                )
-            name, samples, plain, has_maxval = kind
-            tokens, end = _header_tokens(
-                p, data, 3 if has_maxval else 2, comments=True, what=name, whole=whole
-            )
-            width = _size(p, tokens[0], "width", name)
-            height = _size(p, tokens[1], "height", name)
-            maxval = _size(p, tokens[2], "maxval", name) if has_maxval else 1
-            if maxval > 65535:
-                raise ValueError(f"{p}: {name} maxval must be at most 65535, got {maxval}")
-            dtype = np.dtype(np.uint8 if maxval < 256 else np.uint16)
-            desc = f"{width}x{height} {name}" + (f" with maxval {maxval}" if has_maxval else "")
-            if plain:  # no exact size: the raster is read whole, below
-                return kind, width, height, maxval, dtype, desc, end
-            # P4: rows of bits, each row padded to a whole byte; P5, P6: big-endian samples.
-            size = (
-                (width + 7) // 8 * height
-                if not has_maxval
-                else width * height * samples * dtype.itemsize
-            )
-            return (
-                kind,
-                width,
-                height,
-                maxval,
-                dtype,
-                desc,
-                _body_start(p, data, whole, end, file_size, size, desc),
-            )
-
+        parse = functools.partial(_pnm_head, p, file_size=file_size)
         kind, width, height, maxval, dtype, desc, end = _parse_head(f, file_size, parse)
         name, samples, plain, has_maxval = kind
         count = width * height * samples

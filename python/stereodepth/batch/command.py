@@ -283,36 +283,13 @@ def _matcher_options(args: argparse.Namespace) -> dict[str, Any]:
 
 def sample_bits(path: Path) -> int | None:
     """8 or 16: the bit depth :func:`stereodepth.io.read_image` gives the image at ``path``,
-    from its header alone (a PNM's maxval, Pillow's mode before any pixel is decoded); None
-    when the header does not say (a missing or unreadable file, floating-point or 16-bit colour
-    samples, which reading the pair refuses with its own message)."""
-    import re
+    from its header alone; None when the header does not say (a missing or unreadable file,
+    floating-point or 16-bit colour samples, which reading the pair refuses with its own
+    message)."""
+    from ..io import _sample_dtype
 
-    from ..io import _GREY16_MODES, _pil, _raw_modes
-
-    Image = _pil()
-    try:
-        with path.open("rb") as f:
-            head = f.read(1024)
-        if head[:2] in (b"P1", b"P4"):  # PBM: read as 8-bit grey
-            return 8
-        if head[:2] in (b"P2", b"P3", b"P5", b"P6"):  # the maxval is the fourth token
-            tokens = re.findall(rb"\S+", re.sub(rb"#[^\r\n]*", b" ", head))[:4]
-            if len(tokens) < 4 or not tokens[3].isdigit():
-                return None
-            return 8 if int(tokens[3]) < 256 else 16
-        with Image.open(path) as im:
-            if im.mode in _GREY16_MODES:
-                return 16
-            if (
-                im.mode == "F"
-                or im.mode.startswith("F;")
-                or any(";16" in m for m in _raw_modes(im))
-            ):
-                return None
-            return 8
-    except (OSError, SyntaxError, ValueError, Image.DecompressionBombError):
-        return None
+    dtype = _sample_dtype(path)
+    return None if dtype is None else 8 * dtype.itemsize
 
 
 def _check_intensity_range(pairs: Sequence[Pair], matcher: dict[str, Any]) -> None:

@@ -85,6 +85,19 @@ def _shown(name: str, port: int | None) -> str:
     return shown if port is None else f"{shown}:{port}"
 
 
+class _BadEntry(ValueError):
+    """An entry of ``allowed_hosts`` that is not a host name or IP address (with an optional
+    ``:port``) nor ``"*"``; ``why`` adds the reason where there is one (IDNA's), for the
+    callers that word the message for their own option (serve's ``--allow-host``)."""
+
+    def __init__(self, entry: str, why: str) -> None:
+        self.entry, self.why = entry, why
+        super().__init__(
+            "allowed_hosts must hold host names or IP addresses, each optionally with "
+            f":port, or '*', got {entry[:60]!r}{why}"
+        )
+
+
 class AllowedHosts:
     """The Host header values a server answers (see the module's doc for the entries).
     Raises TypeError for ``hosts`` that is not a list of strings (a single string too: give
@@ -129,10 +142,7 @@ class AllowedHosts:
                 or any(c in name for c in "/?#@*, \t[]")
                 or not name.isprintable()
             ):
-                raise ValueError(
-                    "allowed_hosts must hold host names or IP addresses, each optionally with "
-                    f":port, or '*', got {entry[:60]!r}{why}"
-                )
+                raise _BadEntry(entry, why)
             ip = _ip(name)
             name = _ANY_ADDRESS if ip is not None and ip.is_unspecified else _canonical(name)
             if (name, parts[1]) not in entries:

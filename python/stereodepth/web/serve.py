@@ -144,17 +144,15 @@ def allow_hosts(entries: Sequence[str] | None) -> list[str]:
     """The ``--allow-host`` entries (None: none), checked: ValueError naming the option and the
     first one that is not a host name or IP address, optionally with ``:PORT``, or ``'*'`` (a
     name of other than ASCII characters is answered in its IDNA form, ``xn--...``)."""
-    from .host import AllowedHosts
+    from .host import AllowedHosts, _BadEntry
 
     for entry in entries or ():
         try:
             AllowedHosts([entry])
-        except ValueError as exc:
-            got = f"got {entry[:60]!r}"
-            why = str(exc).partition(got)[2]  # e.g. the name that IDNA cannot encode
+        except _BadEntry as exc:
             raise ValueError(
                 "--allow-host must be a host name or IP address, optionally with :PORT "
-                f"(1 to 65535), or '*', {got}{why}"
+                f"(1 to 65535), or '*', got {entry[:60]!r}{exc.why}"
             ) from None
     return list(entries or ())
 
