@@ -448,6 +448,35 @@ def cli_process(argv: list[str], prelude: str) -> subprocess.Popen[str]:
     )
 
 
+def killed_at(argv: list[str], prelude: str, line: str) -> subprocess.Popen[str]:
+    """``stereodepth`` run with ``argv`` under ``prelude`` in a process of its own, killed
+    (SIGKILL) once it prints ``line``; returns the ended process."""
+    with cli_process(argv, prelude) as proc:
+        try:
+            assert proc.stdout is not None
+            assert proc.stdout.readline().strip() == line
+        finally:
+            proc.send_signal(signal.SIGKILL)
+            proc.communicate(timeout=60)
+    return proc
+
+
+def hang_on_depth(stem: str) -> str:
+    """A prelude under which writing pair ``stem``'s depth (.npy) prints "writing the depth"
+    and hangs: its disparity is written, its depth and record not."""
+    return f"""
+import os, time
+from stereodepth import io
+_write_npy = io.write_npy
+def _hang_on_the_depth(path, array):
+    if os.path.basename(str(path)) == "{stem}.depth.npy":
+        print("writing the depth", flush=True)
+        time.sleep(120)
+    return _write_npy(path, array)
+io.write_npy = _hang_on_the_depth
+"""
+
+
 def run_cli_in(argv: list[str], cwd: Path) -> subprocess.CompletedProcess[str]:
     """``stereodepth`` run with ``argv`` in a process of its own from ``cwd`` (relative paths
     as a user in that folder types them), its output captured."""
@@ -587,22 +616,22 @@ io.write_npy = _half_then_hang
 def test_kill_leaves_no_partial_file_and_the_next_run_completes(tmp_path: Path) -> None:
     inp, out = tmp_path / "in", tmp_path / "out"
     names = middlebury_folder(inp, 6)
-    with cli_process(["batch", str(inp), "-o", str(out)], HALF_WRITE) as proc:
-        try:
-            assert proc.stdout is not None
-            assert proc.stdout.readline().strip() == "half written"
-        finally:
-            proc.send_signal(signal.SIGKILL)
-            proc.communicate(timeout=60)
+    proc = killed_at(["batch", str(inp), "-o", str(out)], HALF_WRITE, "half written")
     assert proc.returncode == -signal.SIGKILL
     assert not (out / "scene03.depth.npy").exists()
     # the half-written file (and whatever the other pair in flight was writing) as temporaries
     left_over = temp_files(out)
     assert any(t.startswith(".scene03.depth.npy.stereodepth-") for t in left_over)
     assert all(t.startswith(".") and ".stereodepth-" in t for t in left_over)
-    # everything under a final name is complete
-    records = {p.name.removesuffix(".record.json") for p in out.glob("*.record.json")}
-    assert "scene03" not in records
+    # everything under a final name is complete; the pairs in flight have the record written
+    # before their first file (status "started", listing their files), the others none
+    statuses = {
+        p.name.removesuffix(".record.json"): json.loads(p.read_text())["status"]
+        for p in out.glob("*.record.json")
+    }
+    assert statuses["scene03"] == "started"
+    assert set(statuses.values()) <= {"ok", "started"}
+    records = {stem for stem, status in statuses.items() if status == "ok"}
     for f in out.glob("*.npy"):
         stem, kind = f.name.split(".")[:2]
         want = expected_maps(inp / stem)[0 if kind == "disparity" else 1]
@@ -1039,3 +1068,44 @@ def test_non_ascii_names_and_a_csv_list(tmp_path: Path) -> None:
     )
     assert (out / "vue-été.ply").read_bytes().count(b"comment stereodepth") == 1
     assert report_of(out)["pairs"][0]["stem"] == "vue-été"
+
+
+def test_a_pair_redone_with_other_settings_and_killed_is_not_taken_for_done(
+    tmp_path: Path,
+) -> None:
+    # A finished pair redone with other settings kept the run before's "ok" record until its
+    # own: killed between its disparity and its depth, it left the new disparity beside the
+    # old depth, and the next run with the first settings said "already done" (the record
+    # compares the files' sizes, the same for both). The record written before the first file
+    # now replaces the old one, so the pair is redone.
+    inp, out = tmp_path / "in", tmp_path / "out"
+    middlebury_folder(inp, 1)
+    assert run_cli("batch", inp, "-o", out, "--quiet") == 0
+    argv = ["batch", str(inp), "-o", str(out), "--quiet", "--option", "uniqueness_ratio=40"]
+    killed_at(argv, hang_on_depth("scene00"), "writing the depth")
+    assert json.loads((out / "scene00.record.json").read_text())["status"] == "started"
+    assert run_cli("batch", inp, "-o", out, "--quiet") == 0
+    assert report_of(out)["counts"]["ok"] == 1  # redone, not skipped
+    disparity, depth = expected_maps(inp / "scene00")
+    np.testing.assert_array_equal(np.load(out / "scene00.disparity.npy"), disparity, strict=True)
+    np.testing.assert_array_equal(np.load(out / "scene00.depth.npy"), depth, strict=True)
+
+
+def test_a_workers_address_given_as_the_scheduler_is_one_line(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    # A worker speaks Dask's protocol, so the handshake passed, and the Client's own error
+    # came out as it was: "Worker.identity() got an unexpected keyword argument 'n_workers'".
+    inp, out = tmp_path / "in", tmp_path / "out"
+    middlebury_folder(inp, 1)
+    with in_process_cluster() as cluster:
+        worker = next(iter(cluster.scheduler_info["workers"]))
+        status = run_cli("batch", inp, "-o", out, "--quiet", "--scheduler", worker)
+    err = capsys.readouterr().err
+    assert status == 2, err
+    assert err.count("\n") == 1, err
+    assert err.startswith(
+        f"stereodepth batch: error: --scheduler {worker!r}: what answered there speaks Dask's "
+        "protocol but is not a scheduler (a worker's address?)"
+    ), err
+    assert not out.exists()

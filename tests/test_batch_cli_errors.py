@@ -5,12 +5,18 @@ never our classes), exit status 2, no traceback, and nothing written."""
 from __future__ import annotations
 
 import os
+import socket
+import threading
+import time
+from collections.abc import Callable, Iterator
 from pathlib import Path
 
 import numpy as np
 import pytest
 
+from stereodepth import _validate as check
 from stereodepth import cli
+from stereodepth.batch import runners
 
 Image = pytest.importorskip("PIL.Image")
 
@@ -177,6 +183,7 @@ def test_an_unreachable_scheduler_leaves_none_of_the_folders_made_for_outdir(
         raise OSError(f"Timed out trying to connect to {address} after 10 s")
 
     monkeypatch.setattr(distributed, "Client", refuse)
+    monkeypatch.setattr(runners, "_handshake", lambda scheduler, timeout: None)
     inp = scene(tmp_path)
     (tmp_path / "existing").mkdir()
     out = tmp_path / "existing" / "runs" / "2026" / "out"
@@ -237,6 +244,7 @@ def test_an_unreachable_scheduler_names_the_flag_and_leaves_no_outdir(
         raise OSError(f"Timed out trying to connect to {address} after 10 s")
 
     monkeypatch.setattr(distributed, "Client", refuse)
+    monkeypatch.setattr(runners, "_handshake", lambda scheduler, timeout: None)
     inp = scene(tmp_path)
     argv = [str(inp), "-o", str(tmp_path / "out"), "--quiet", "--scheduler", "tcp://127.0.0.1:9"]
     status, err = run(argv, capsys)
@@ -321,3 +329,89 @@ def test_a_calibration_file_whose_depths_float32_cannot_hold(
     record = (tmp_path / "out" / "teddy.record.json").read_text()
     assert f"{calib}: focal length 700 px times baseline 1e+37 m is 7e+39 px*m" in record
     assert not list((tmp_path / "out").glob("teddy.*.npy"))  # failed before matching
+
+
+def test_more_workers_than_cores_is_refused(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    # --workers had no upper bound: 5000 local worker processes took minutes and gigabytes to
+    # start on a 2-core machine, with Ctrl-C and SIGTERM held meanwhile.
+    pytest.importorskip("distributed")
+    cores = check.available_cores()
+    inp = scene(tmp_path)
+    argv = [str(inp), "-o", str(tmp_path / "out"), "--quiet", "--workers", str(cores + 1)]
+    status, err = run(argv, capsys)
+    assert_one_line(
+        status, err, f"--workers must be at most {cores} (the cores this process may use), got"
+    )
+    assert not (tmp_path / "out").exists()
+
+
+@pytest.fixture
+def not_a_scheduler() -> Iterator[Callable[[bytes | None], str]]:
+    """A loopback TCP server that accepts connections and then sends ``banner`` (None: says
+    nothing, as an HTTP server waiting for a request); returns its tcp:// address. It hangs up
+    after 20 s, so that a client that waits for ever fails the test rather than hanging it."""
+    servers: list[socket.socket] = []
+    stop = threading.Event()
+
+    def serve(banner: bytes | None) -> str:
+        srv = socket.create_server(("127.0.0.1", 0))
+        servers.append(srv)
+        srv.settimeout(0.2)
+
+        def loop() -> None:
+            held: list[tuple[float, socket.socket]] = []
+            while not stop.is_set():
+                for at, conn in [h for h in held if time.monotonic() - h[0] > 20]:
+                    conn.close()
+                    held.remove((at, conn))
+                try:
+                    conn, _ = srv.accept()
+                except OSError:
+                    continue
+                held.append((time.monotonic(), conn))
+                if banner is not None:
+                    conn.sendall(banner)
+            for _, conn in held:
+                conn.close()
+
+        threading.Thread(target=loop, daemon=True).start()
+        return f"tcp://127.0.0.1:{srv.getsockname()[1]}"
+
+    yield serve
+    stop.set()
+    for srv in servers:
+        srv.close()
+
+
+@pytest.mark.parametrize(
+    ("banner", "fragment"),
+    [
+        (None, "no Dask scheduler answered within 2.5 s"),
+        (b"SSH-2.0-OpenSSH_9.2\r\n" + bytes(range(256)) * 4, "is not a Dask scheduler"),
+    ],
+    ids=["silent", "ssh-banner"],
+)
+def test_a_scheduler_address_where_something_else_listens_is_one_line(
+    tmp_path: Path,
+    capsys: pytest.CaptureFixture[str],
+    monkeypatch: pytest.MonkeyPatch,
+    not_a_scheduler: Callable[[bytes | None], str],
+    banner: bytes | None,
+    fragment: str,
+) -> None:
+    # dask.distributed's Client bounds only the TCP connect: a peer that accepted and said
+    # nothing (an HTTP server) held the job for ever, one that sent other bytes gave a
+    # traceback (a MemoryError for a frame of exabytes).
+    pytest.importorskip("distributed")
+    monkeypatch.setattr(runners, "SCHEDULER_TIMEOUT_S", 0.5)
+    address = not_a_scheduler(banner)
+    inp = scene(tmp_path)
+    argv = [str(inp), "-o", str(tmp_path / "out"), "--quiet", "--scheduler", address]
+    started = time.monotonic()
+    status, err = run(argv, capsys)
+    assert time.monotonic() - started < 30
+    assert_one_line(status, err, f"--scheduler {address!r}: ")
+    assert fragment in err, err
+    assert not (tmp_path / "out").exists()

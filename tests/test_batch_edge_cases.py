@@ -191,6 +191,46 @@ def test_right_images_without_a_left_one_are_listed_as_skipped(tmp_path: Path) -
     ]
 
 
+@pytest.mark.parametrize(
+    ("lefts", "rights", "alone"),
+    [
+        (["0001_left.png"], ["0001_right.png", "0003_right.png"], "0003_left.png"),
+        (
+            ["im0.png"],
+            ["im1.png", "x_im1.png", "im1E.png", "im10.png", "copyright.png"],
+            "x_im0.png",
+        ),
+    ],
+)
+def test_right_images_named_with_a_token_and_no_left_one_are_listed_as_skipped(
+    tmp_path: Path,
+    capsys: pytest.CaptureFixture[str],
+    lefts: list[str],
+    rights: list[str],
+    alone: str,
+) -> None:
+    # The same in a folder of pairs named with tokens: 0003_right.png (or x_im1.png) with no
+    # left image went missing silently, while a left image with no right is a failed pair.
+    # The token must stand as a whole word: Middlebury 2014's im1E.png (the right camera's
+    # other exposure), im10.png or copyright.png are no right images.
+    inp = tmp_path / "in" / "f"
+    inp.mkdir(parents=True)
+    save_pair(inp, lefts[0], rights[0])
+    for name in rights[1:]:
+        Image.fromarray(np.zeros(SHAPE, np.uint8)).save(inp / name)
+    found = batch.discover(tmp_path / "in")
+    assert len(found.pairs) == 1
+    orphan = rights[1]
+    assert found.skipped == [(inp / orphan, f"a right image with no left image {alone}")]
+    out = tmp_path / "out"
+    argv = ["-o", out, "--num-disparities", "16", "--focal-px", "700", "--baseline-mm", "100"]
+    status, _, err = run(capsys, tmp_path / "in", *argv)
+    assert status == 0, err
+    note = f"stereodepth batch: note: skipped {inp / orphan}: a right image with no left image"
+    assert note in err
+    assert sum(orphan in n for n in report_of(out / "report.json")["notes"]) == 1
+
+
 def test_a_grey_pair_beside_the_colour_pair_is_listed_as_skipped(tmp_path: Path) -> None:
     # KITTI's image_0/image_1 beside image_2/image_3: only the colour pairs are used, and the
     # grey ones went missing silently.
@@ -283,11 +323,15 @@ def test_a_pair_failing_between_two_writes_leaves_no_output_and_a_failed_record(
     # A folder where the depth goes: the disparity was written, then the depth failed, then
     # removing the pair's files stopped at that folder (IsADirectoryError): the new disparity
     # stayed without a record, and the error blamed the record.
+    # (Without --force such a folder, which no record lists, is refused before any pair.)
     inp, out = tmp_path / "in", tmp_path / "out"
     scene(inp / "teddy")
     scene(inp / "bear", seed=1)
     (out / "teddy.depth.npy").mkdir(parents=True)
     status, _, err = run(capsys, inp, "-o", out, "--quiet")
+    assert status == 2 and "holds teddy.depth.npy, which pair 'teddy' would write" in err, err
+    assert [p.name for p in out.iterdir()] == ["teddy.depth.npy"]
+    status, _, err = run(capsys, inp, "-o", out, "--quiet", "--force")
     assert status == 1
     assert (
         f"failed teddy: [Errno 21] cannot write a file over a folder: '{out}/teddy.depth.npy'\n"
@@ -300,6 +344,28 @@ def test_a_pair_failing_between_two_writes_leaves_no_output_and_a_failed_record(
     assert {p.name for p in out.glob("teddy.*")} == {"teddy.record.json", "teddy.depth.npy"}
     assert (out / "teddy.depth.npy").is_dir()  # not ours to remove
     assert record_of(out, "bear")["status"] == "ok"
+
+
+@pytest.mark.parametrize("named", ["teddy.disparity.npy", "teddy.ply"])
+def test_a_file_of_the_users_at_an_output_path_is_not_replaced_without_force(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], named: str
+) -> None:
+    # A file that no batch job wrote (no record lists it) at one of a pair's output paths was
+    # replaced without a word, where the outputs of a job from other images are refused.
+    inp, out = tmp_path / "in", tmp_path / "out"
+    scene(inp / "teddy")
+    out.mkdir()
+    (out / named).write_bytes(b"mine")
+    status, _, err = run(capsys, inp, "-o", out, "--ply", "--quiet")
+    assert status == 2, err
+    assert f"holds {named}, which pair 'teddy' would write and no batch job's record" in err
+    assert err.count("\n") == 1 and "--force" in err
+    assert (out / named).read_bytes() == b"mine"
+    assert sorted(p.name for p in out.iterdir()) == [named]
+    # a record that lists it (an earlier run's) makes it the job's own: resumed, not refused
+    assert run(capsys, inp, "-o", out, "--ply", "--quiet", "--force")[0] == 0
+    assert run(capsys, inp, "-o", out, "--ply", "--quiet")[0] == 0
+    assert (out / named).read_bytes() != b"mine"
 
 
 def test_a_changed_run_removes_the_outputs_it_no_longer_writes(

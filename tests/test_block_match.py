@@ -604,6 +604,27 @@ def test_one_shot_checks_the_items_of_intensity_range_every_call(match: Any, ref
         match(left, right, num_disparities=8, intensity_range=refused)
 
 
+@pytest.mark.parametrize("match", [sd.block_match, sd.semi_global_match])
+def test_one_shot_follows_a_list_edited_in_place(match: Any) -> None:
+    # The kept matcher's key held the caller's intensity_range list itself: edited in place
+    # between two calls, it still equalled the key, and the second call matched with the old
+    # range (and skipped the checks of the new one).
+    rng = np.random.default_rng(7)
+    left = rng.integers(0, 4096, (40, 60)).astype(np.uint16)
+    right = np.roll(left, -3, axis=1)
+    ranges = [0, 65535]
+    match(left, right, num_disparities=8, intensity_range=ranges)
+    ranges[1] = 1000
+    edited = match(left, right, num_disparities=8, intensity_range=ranges)
+    fresh = match(left, right, num_disparities=8, intensity_range=(0, 1000))
+    wide = match(left, right, num_disparities=8, intensity_range=(0, 65535))
+    assert not np.array_equal(fresh, wide, equal_nan=True)  # the two ranges differ here
+    np.testing.assert_array_equal(edited, fresh)
+    ranges[0] = 70000
+    with pytest.raises(ValueError, match="intensity_range"):
+        match(left, right, num_disparities=8, intensity_range=ranges)
+
+
 def test_matcher_params_and_repr() -> None:
     m = sd.StereoMatcher(num_disparities=32, block_size=7, lr_max_diff=None)
     p = m.params

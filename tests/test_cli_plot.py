@@ -102,3 +102,45 @@ def test_negative_disparity_of_a_rig_with_doffs(
     summary = json.loads(capsys.readouterr().out)
     assert summary["disparity_px"] == d
     assert summary["depth_m"] == pytest.approx(10.0, rel=1e-12)
+
+
+PIXELS = ["--baseline-mm", "100", "--focal-px", "700"]
+
+
+@pytest.mark.parametrize(
+    ("argv", "message"),
+    [
+        # was matplotlib's "Data cannot be log-scaled because all values are <= 0."
+        (["--max-disparity-px", "1e-200"], "--max-disparity-px 1e-200 cannot be charted"),
+        # these two printed numpy's "RuntimeWarning: overflow encountered in exp", status 0
+        (["--disparity-px", "1e-150"], "--disparity-px 1e-150 cannot be charted"),
+        (["--max-disparity-px", "1e300"], "--max-disparity-px 1e+300 cannot be charted"),
+        (["--baseline-mm", "1e-200"], "cannot be charted"),
+    ],
+)
+def test_values_the_charts_cannot_show_are_refused_for_plots_only(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], argv: list[str], message: str
+) -> None:
+    out = tmp_path / "k.svg"
+    assert main(["calc", *PIXELS, *argv]) == 0  # the calculator takes them
+    capsys.readouterr()
+    assert main(["calc", *PIXELS, *argv, "--plot", str(out)]) == 2
+    captured = capsys.readouterr()
+    assert captured.out == ""
+    assert captured.err.startswith("stereodepth calc: error: ") and captured.err.count("\n") == 1
+    assert message in captured.err
+    assert "from 1e-100 to 1e+100" in captured.err
+    assert not out.exists()
+
+
+def test_the_range_the_refusal_names_can_be_charted(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    out = tmp_path / "k.svg"
+    for flag, bad in (("--max-disparity-px", "1e-200"), ("--disparity-px", "1e-150")):
+        assert main(["calc", *PIXELS, flag, bad, "--plot", str(out)]) == 2
+        err = capsys.readouterr().err
+        low, high = err.split("can be from ")[1].split(" px")[0].split(" to ")
+        for value in (float(low) * 1.001, float(high) / 1.001):
+            assert main(["calc", *PIXELS, flag, repr(value), "--plot", str(out)]) == 0
+            assert capsys.readouterr().err == ""

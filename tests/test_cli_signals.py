@@ -186,3 +186,56 @@ def test_calc_sigterm_outside_a_command_is_not_caught() -> None:
     before = signal.getsignal(signal.SIGTERM)
     assert main(["calc", "--baseline-mm", "50", "--focal-px", "300", "--json"]) == 0
     assert signal.getsignal(signal.SIGTERM) is before
+
+
+#: Runs ``main(argv)`` with matplotlib's import made slow, and a Ctrl-C or SIGTERM during it
+#: turned into ImportError, as pybind11 turns any exception in a compiled module's set-up
+#: (matplotlib's ft2font, _path ...): the first import says READY, then sleeps 5 s.
+IMPORT_DRIVER = """
+import importlib, os, sys, time
+original = importlib.import_module
+slowed = []
+def slow(name, *args, **kwargs):
+    if name.startswith("matplotlib") and not slowed:
+        slowed.append(name)
+        os.write(2, b"READY\\n")
+        try:
+            time.sleep(5)
+        except BaseException as exc:
+            raise ImportError(f"initialization failed: {type(exc).__name__}") from exc
+    return original(name, *args, **kwargs)
+importlib.import_module = slow
+from stereodepth.cli import main
+sys.exit(main(sys.argv[1:]))
+"""
+
+
+@pytest.mark.parametrize(("sig", "status", "word"), SIGNALS)
+def test_match_signalled_while_matplotlib_loads_stops_cleanly(
+    tmp_path: Path, pair: tuple[str, str], sig: int, status: int, word: str
+) -> None:
+    """A Ctrl-C while the previews' matplotlib loaded was read as its absence ("colour maps
+    need matplotlib", exit 1, the extra installed), and could abort the interpreter at exit:
+    the import now runs with the signals held, which act once it is done."""
+    pytest.importorskip("matplotlib", reason="the previews need the plot extra")
+    argv = ["match", *pair, *RIG, "-o", "out/"]
+    proc = subprocess.Popen(
+        [sys.executable, "-c", IMPORT_DRIVER, *argv],
+        cwd=tmp_path,
+        env={**os.environ, "PYTHONPATH": str(PYTHON_DIR)},
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    code, stdout, err = signal_when_ready(proc, sig)
+    assert (code, err) == (status, f"stereodepth match: {word}\n")
+    assert stdout == ""
+    assert not (tmp_path / "out").exists()
+
+
+def test_ctrl_c_while_the_subcommands_load_is_one_line() -> None:
+    # A Ctrl-C in the first moments (the subcommands' modules loading in build_parser) was a
+    # KeyboardInterrupt traceback and a death by the signal.
+    proc = start(Path.cwd(), "stereodepth.cli", "build_parser", 60, "calc", "--help")
+    code, stdout, err = signal_when_ready(proc, signal.SIGINT)
+    assert (code, err, stdout) == (130, "stereodepth: interrupted\n", "")

@@ -219,7 +219,7 @@ def test_the_whole_chain_is_lazy_and_checked_up_front() -> None:
                 num_disparities=4,
             ),
             TypeError,
-            "left must be uint8 or uint16 images, got dtype float32",
+            r"^left must be 2-D uint8 or uint16 grey, or \(H, W, 3\) uint8 RGB, got dtype float32$",
         ),
         (
             lambda: sdd.block_match(
@@ -359,7 +359,7 @@ def test_the_whole_chain_is_lazy_and_checked_up_front() -> None:
                 num_disparities=16,
             ),
             TypeError,
-            "left must be uint8 or uint16 images, got dtype float32",
+            r"^left must be 2-D uint8 or uint16 grey, or \(H, W, 3\) uint8 RGB, got dtype float32$",
         ),
         (
             lambda: sdd.semi_global_match(

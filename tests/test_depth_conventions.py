@@ -109,3 +109,14 @@ def test_depth_map_refuses_a_map_of_another_size_than_the_rigs() -> None:
         only_width.depth_map(np.ones((7, 81), np.float32))
     # A rig without an image size takes any map.
     sd.StereoRig.from_pixels(baseline_mm=120, focal_px=700).depth_map(good[:3, :5])
+
+
+def test_depth_map_of_a_sized_rig_names_a_ragged_list() -> None:
+    # The size check read the map's shape with np.shape, which gave numpy's own "inhomogeneous
+    # shape" message for a ragged list; a rig without a size named the parameter.
+    for rig in (
+        sd.StereoRig.from_pixels(baseline_mm=100, focal_px=500, width_px=3, height_px=2),
+        sd.StereoRig.from_pixels(baseline_mm=100, focal_px=500),
+    ):
+        with pytest.raises(ValueError, match=r"^disparity must be a rectangular array"):
+            rig.depth_map([[1, 2], [3]])

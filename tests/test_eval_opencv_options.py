@@ -1,7 +1,8 @@
 """``stereodepth eval``'s OpenCV parameters checked before any scene runs: SGBM's block size
 range-checked as opencv-bm's is (9999 was OpenCV's "integer won't fit into a C int"), and
 every ``--opencv-option`` value against what OpenCV takes (``mode=99`` was taken without a
-word): one line naming the parameter, exit status 2, nothing on stdout."""
+word; ``mode`` is now refused, as the method chooses it: ``mode=2`` ran SGBM, 3WAY and HH all
+as 3WAY under their own names): one line naming the parameter, exit status 2, nothing on stdout."""
 
 from __future__ import annotations
 
@@ -48,12 +49,33 @@ BAD = [
     ),
     (
         ["--method", "opencv-sgbm", "--opencv-option", "mode=99"],
-        "--opencv-option mode=99 rejected by opencv-sgbm: mode must be 0 (MODE_SGBM), 1 "
-        "(MODE_HH), 2 (MODE_SGBM_3WAY) or 3 (MODE_HH4)",
+        "--opencv-option mode=99: the method chooses OpenCV's SGBM mode",
     ),
     (
         ["--method", "opencv-bm", "opencv-sgbm-hh", "--opencv-option", "mode=-1"],
-        "--opencv-option mode=-1 rejected by opencv-sgbm-hh",
+        "--opencv-option mode=-1: the method chooses",
+    ),
+    (
+        # mode=2 ran every SGBM method as MODE_SGBM_3WAY under its own name
+        [
+            *("--method", "opencv-sgbm", "opencv-sgbm-3way", "opencv-sgbm-hh"),
+            *("--opencv-option", "mode=2"),
+        ],
+        "--opencv-option mode=2: the method chooses OpenCV's SGBM mode: opencv-sgbm "
+        "(MODE_SGBM), opencv-sgbm-hh (MODE_HH), opencv-sgbm-3way and opencv-sgbm-3way-padded "
+        "(MODE_SGBM_3WAY); MODE_HH4 is not offered",
+    ),
+    (
+        ["--method", "opencv-sgbm", "--opencv-option", "mode=0x1"],
+        "--opencv-option mode=0x1: the method chooses",
+    ),
+    (  # the key becomes setMode in any of these spellings: Mode=1 set it on every matcher
+        ["--method", "opencv-sgbm", "opencv-sgbm-hh", "--opencv-option", "Mode=1"],
+        "--opencv-option Mode=1: the method chooses",
+    ),
+    (
+        ["--method", "opencv-sgbm", "--opencv-option", "mode_=1"],
+        "--opencv-option mode_=1: the method chooses",
     ),
     (
         ["--method", "opencv-bm", "--opencv-option", "pre_filter_type=5"],
@@ -157,7 +179,6 @@ def test_bad_opencv_parameters_one_line_exit_2(
     [
         ["--method", "opencv-sgbm:31"],
         ["--method", "opencv-bm", "--opencv-option", "pre_filter_type=1"],
-        ["--method", "opencv-sgbm", "--opencv-option", "mode=2"],
         ["--method", "opencv-bm", "--opencv-option", "pre_filter_cap=63"],
         ["--method", "opencv-bm", "--opencv-option", "disp12_max_diff=-1"],
         ["--method", "opencv-sgbm", "--opencv-option", "p1=10", "--opencv-option", "p2=200"],

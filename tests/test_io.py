@@ -129,7 +129,7 @@ def test_read_image_too_many_pixels_is_a_value_error(
 
     monkeypatch.setattr(Image, "MAX_IMAGE_PIXELS", 100)
     Image.fromarray(np.zeros((20, 30), np.uint8)).save(tmp_path / "big.png")
-    with pytest.raises(ValueError, match=r"cannot decode image .*big\.png: Image size \(600 "):
+    with pytest.raises(ValueError, match=r"cannot decode image .*big\.png: 600 pixels, more "):
         io.read_image(tmp_path / "big.png")
     big = str(tmp_path / "big.png")
     assert cli.main(["match", big, big, "-o", f"{tmp_path}/", "--no-preview"]) == 2
@@ -1094,3 +1094,59 @@ def test_write_pfm_refuses_values_beyond_float32(tmp_path: Path) -> None:
     b = np.array([[top, -top, np.nan], [np.inf, -np.inf, 1e-50]])
     io.write_pfm(tmp_path / "y.pfm", b)
     np.testing.assert_array_equal(io.read_pfm(tmp_path / "y.pfm"), b.astype(np.float32))
+
+
+def _pair(folder: Path) -> tuple[str, str]:
+    rng = np.random.default_rng(1)
+    left = rng.integers(0, 255, (64, 128), dtype=np.uint8)
+    Image.fromarray(left).save(folder / "l.png")
+    Image.fromarray(np.roll(left, -5, axis=1)).save(folder / "r.png")
+    return str(folder / "l.png"), str(folder / "r.png")
+
+
+def test_images_over_pillows_warning_size_read_without_its_warning(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    # From Image.MAX_IMAGE_PIXELS (89.5 MP) to twice that Pillow warns: a 12000 x 12000 pair
+    # printed its DecompressionBombWarning (2 lines with a source path) under match's output.
+    # Here Pillow's limit is lowered to put a 64 x 128 pair in that range.
+    import warnings
+
+    from stereodepth import cli
+
+    monkeypatch.setattr(Image, "MAX_IMAGE_PIXELS", 5000)
+    left, right = _pair(tmp_path)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert io.read_image(left).shape == (64, 128)
+        assert io._sample_dtype(left) == np.uint8
+        code = cli.main(["match", left, right, "-o", f"{tmp_path}/out/", "--no-preview"])
+    assert code == 0
+    assert capsys.readouterr().err == ""
+
+
+def test_a_large_image_is_read_without_a_warning(tmp_path: Path) -> None:
+    import warnings
+
+    side = 9500  # 90.25 MP, over Pillow's 89.5 MP warning size
+    Image.fromarray(np.zeros((side, side), np.uint8)).save(tmp_path / "big.png")
+    before = list(warnings.filters)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert io.read_image(tmp_path / "big.png").shape == (side, side)
+    assert warnings.filters == before
+
+
+def test_more_than_max_image_pixels_names_the_file_and_its_size(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    from stereodepth import cli
+
+    monkeypatch.setattr(io, "MAX_IMAGE_PIXELS", 8000)
+    left, right = _pair(tmp_path)
+    with pytest.raises(ValueError, match=r"l\.png: 128 x 64 pixels is more than the 8,000 "):
+        io.read_image(left)
+    assert cli.main(["match", left, right, "-o", f"{tmp_path}/out/", "--no-preview"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("stereodepth match: error: LEFT: ") and err.count("\n") == 1
+    assert "128 x 64 pixels" in err

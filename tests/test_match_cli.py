@@ -585,3 +585,31 @@ def test_a_refused_pair_leaves_no_new_out_folder(
     out.mkdir(parents=True)
     code, _, err = run(capsys, left, tmp_path / "copy.png", "-o", f"{out}/")
     assert code == 2 and out.is_dir() and list(out.iterdir()) == []
+
+
+def help_text(capsys: pytest.CaptureFixture[str], command: str) -> str:
+    """``stereodepth COMMAND --help``'s text, its white space collapsed."""
+    with pytest.raises(SystemExit) as exit_info:
+        main([command, "--help"])
+    assert exit_info.value.code == 0
+    return " ".join(capsys.readouterr().out.split())
+
+
+def test_help_gives_each_methods_block_sizes(capsys: pytest.CaptureFixture[str]) -> None:
+    # --block-size said "(odd)", yet --method sgm takes 1 or 3 only (and bm 3 to 63 / 31).
+    text = help_text(capsys, "match")
+    block = text.split("--block-size N ")[1].split(" --cost {census,sad}")[0]
+    assert "sgm 1 or 3 only" in block
+    assert "3 to 63 with --cost census, 3 to 31 with --cost sad" in block
+    assert "(odd)" not in block
+    assert "1 to 4096 with either method" in text
+    assert "an integer from -32768 to 32768, either method" in text  # it said "any integer"
+    assert "--method bm only" in text.split("--cost {census,sad} ")[1]
+
+
+def test_batch_help_gives_each_methods_block_sizes(capsys: pytest.CaptureFixture[str]) -> None:
+    # The same for batch, which said "bm: odd, >= 3" without the upper limits.
+    text = help_text(capsys, "batch")
+    block = text.split("--block-size N ")[1].split(" --cost {census,sad}")[0]
+    assert "bm an odd number, 3 to 63 with --cost census, 3 to 31 with --cost sad" in block
+    assert "sgm 1 or 3 only" in block

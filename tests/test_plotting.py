@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import math
 import os
+import re
 import struct
 import warnings
 from pathlib import Path
@@ -264,3 +265,46 @@ def test_drawing_is_safe_from_threads(tmp_path: Path) -> None:
         with ThreadPoolExecutor(2) as pool:
             sizes = list(pool.map(job, range(4)))
     assert sizes == [(440, 176)] * 4
+
+
+@pytest.mark.parametrize(
+    ("rig", "kwargs"),
+    [
+        ((100, 700, 0.0), {"max_disparity_px": 1e-20}),
+        ((100, 700, 0.0), {"disparity_px": 1e-20}),
+        ((100, 700, 0.0), {"max_disparity_px": 1e50}),
+        ((100, 700, 0.0), {"disparity_px": 5, "disparity_step_px": 1e-90}),
+        ((100, 700, 50.0), {"disparity_px": -10}),
+        ((100, 700, -30.0), {"disparity_px": 40, "max_disparity_px": 1e40}),
+        # depth flat to a double (B*f/doffs): matplotlib warned of singular limits
+        ((1, 1e-40, 1e-60), {"max_disparity_px": 4e-100}),
+    ],
+)
+def test_extreme_values_draw_without_warnings(
+    tmp_path: Path, rig: tuple[float, float, float], kwargs: dict[str, Any]
+) -> None:
+    r = StereoRig.from_pixels(rig[0], rig[1], doffs_px=rig[2])
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        save_charts(r, tmp_path / "c.svg", **kwargs)
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "message"),
+    [
+        ({"max_disparity_px": 1e-200}, "max_disparity_px 1e-200 cannot be charted"),
+        ({"max_disparity_px": 1e300}, "max_disparity_px 1e+300 cannot be charted"),
+        ({"disparity_px": 1e-150}, "disparity_px 1e-150 cannot be charted"),
+        ({"disparity_px": 1, "disparity_step_px": 1e-200}, "with disparity_step_px 1e-200 cannot"),
+    ],
+)
+def test_save_charts_refuses_what_a_log_axis_cannot_show(
+    tmp_path: Path, kwargs: dict[str, Any], message: str
+) -> None:
+    rig = StereoRig.from_pixels(100, 700)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        with pytest.raises(ValueError, match=re.escape(message)):
+            save_charts(rig, tmp_path / "c.svg", **kwargs)
+    assert not (tmp_path / "c.svg").exists()
+    chart_data(rig, **kwargs)  # the data (the web page's) are still given

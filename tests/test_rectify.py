@@ -289,6 +289,71 @@ def test_undistort_points_matches_oracle() -> None:
     np.testing.assert_allclose(got, want, rtol=0, atol=1e-14)
 
 
+_K = [[50.0, 0.0, 30.0], [0.0, 50.0, 25.0], [0.0, 0.0, 1.0]]
+_D = [-0.1, 0.01, 0.0, 0.0, 0.0]
+
+
+@pytest.mark.parametrize(
+    ("T", "kw", "error", "message"),
+    [
+        ([0, 0, 0], {}, ValueError, "T must not be zero"),
+        ([1e-200, 0, 0], {}, ValueError, "T must not be zero"),  # its length underflows
+        ([0, 0, 1.0], {}, ValueError, "T must lie mostly across the optical axis"),
+        ([-0.1, 0, 0], {"distortion_model": "equidistant", "alpha": 0.0}, ValueError,
+         "alpha applies to pinhole models"),
+        ([-0.1, 0, 0], {"distortion_model": "equidistant", "balance": 2}, ValueError,
+         r"balance must be in \[0, 1\]"),
+        ([-0.1, 0, 0], {"distortion_model": "equidistant", "fov_scale": 0}, ValueError,
+         "fov_scale"),
+        ([-0.1, 0, 0], {"distortion_model": "equidistant", "fov_scale": -1.0}, ValueError,
+         "fov_scale"),
+        ([-0.1, 0, 0], {"balance": 0.5}, ValueError, "balance and fov_scale apply to equidistant"),
+        ([-0.1, 0, 0], {"fov_scale": 2.0}, ValueError, "balance and fov_scale apply to"),
+        ([-0.1, 0, 0], {"alpha": "0"}, TypeError, "alpha"),
+    ],
+)  # fmt: skip
+def test_oracle_refuses_what_the_native_rectification_refuses(
+    T: Any, kw: dict[str, Any], error: type[Exception], message: str
+) -> None:
+    # The oracle checked the arguments in part: a zero T gave ZeroDivisionError, cameras one
+    # behind the other, alpha with an equidistant rig and balance or fov_scale with a pinhole
+    # one were taken, and fov_scale <= 0 was read as 1. Both now share one set of checks.
+    d = _D[:4] if kw.get("distortion_model") == "equidistant" else _D
+    for rectify in (stereo_rectify, reference.stereo_rectify):
+        with pytest.raises(error, match=message):
+            rectify(_K, d, _K, d, (60, 50), np.eye(3), T, **kw)
+
+
+@pytest.mark.parametrize(
+    ("points", "K", "D", "model", "error", "message"),
+    [
+        ([[10.0, 20.0]], _K, _D, "fisheye", ValueError, "model must be one of"),
+        ([[10.0, 20.0]], _K, _D, "none", ValueError, "D must be empty or zero"),
+        ([[10.0, 20.0]], _K, [0.1] * 14, "plumb_bob", ValueError, "D has thin prism"),
+        ([[10.0, 20.0]], _K, [0.1] * 6, "plumb_bob", ValueError, "D must have 4 or 5 or 8"),
+        ([[10.0, 20.0]], [[50, 1, 30], [0, 50, 25], [0, 0, 1]], _D, "plumb_bob", ValueError,
+         "K must have the form"),
+        ([[10.0, 20.0]], [[1, 2], [3, 4]], _D, "plumb_bob", ValueError, r"K must have shape"),
+        ([[10.0, 20.0, 1.0], [90.0, 70.0, 1.0]], _K, _D, "plumb_bob", ValueError,
+         r"points must have shape \(N, 2\), got shape \(2, 3\)"),
+        ("points", _K, _D, "plumb_bob", TypeError, "points must be a real number or array"),
+    ],
+)  # fmt: skip
+def test_undistort_points_oracle_checks_its_arguments(
+    points: Any, K: Any, D: Any, model: str, error: type[Exception], message: str
+) -> None:
+    # It checked nothing: a misspelt model was read as no distortion, a D with model "none"
+    # ignored, D None gave NaN and points of shape (2, 3) were read as three points.
+    with pytest.raises(error, match=message):
+        reference.undistort_points(points, K, D, model)
+
+
+def test_undistort_points_oracle_takes_d_none_as_no_distortion() -> None:
+    pts = np.array([[10.0, 20.0], [90.0, 70.0]])
+    got = reference.undistort_points(pts, _K, None)
+    np.testing.assert_array_equal(got, (pts - [30.0, 25.0]) / 50.0)
+
+
 def test_rectified_cameras_are_row_aligned() -> None:
     """Property of any rectification: a 3-D point projects to the same row in both images."""
     rig = RIGS[0]

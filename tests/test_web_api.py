@@ -504,6 +504,20 @@ def test_unknown_and_repeated_parameters_are_refused(
     assert err["msg"].startswith(msg), err["msg"]
 
 
+def test_fields_takes_no_parameters(client: TestClient) -> None:
+    # As /api/calc refuses one it does not have; this ignored it.
+    r = client.get("/api/fields?name=baseline_mm")
+    assert r.status_code == 422, r.text
+    assert r.json()["detail"] == [
+        {
+            "loc": ["query", "name"],
+            "msg": "name is not a parameter of /api/fields, got 'baseline_mm' (it takes none)",
+            "type": "extra_forbidden",
+        }
+    ]
+    assert client.get("/api/fields").status_code == 200
+
+
 def test_the_table_disparities_may_repeat(client: TestClient) -> None:
     r = client.get(
         "/api/calc?baseline_mm=120&focal_px=700&table_disparities_px=7&table_disparities_px=14"

@@ -724,3 +724,98 @@ def test_depth_view_refuses_a_calib_of_another_size(page: Page, tmp_path: Path) 
         "calib: the calib.txt is for 128\u00d796 px images, the pair is 64\u00d748 px"
     )
     page.expect(p.locator("#depth-status")).to_contain_text("Not computed")
+
+
+def _calib_and_pair(tmp_path: Path, calib_size: tuple[int, int]) -> Path:
+    """A 64x48 px pair in tmp_path, and a calib.txt of calib_size with its principal point at
+    (10, 20), far from the pair's centre (31.5, 23.5)."""
+    import numpy as np
+    from PIL import Image
+
+    texture = np.random.default_rng(5).integers(0, 256, (48, 72), dtype=np.uint8)
+    Image.fromarray(texture[:, 8:]).save(tmp_path / "left.png")
+    Image.fromarray(texture[:, :64]).save(tmp_path / "right.png")
+    calib = tmp_path / "calib.txt"
+    calib.write_text(
+        "cam0=[100 0 10; 0 100 20; 0 0 1]\ndoffs=0\nbaseline=120\n"
+        f"width={calib_size[0]}\nheight={calib_size[1]}\n"
+    )
+    return calib
+
+
+@pytest.mark.browser
+@pytest.mark.parametrize("calib_size", [(128, 96), (64, 48)], ids=["other-size", "pair-size"])
+@pytest.mark.parametrize("how", ["removed", "bad-file"])
+def test_depth_view_drops_a_calib_removed_or_not_loaded(
+    page: Page, tmp_path: Path, how: str, calib_size: tuple[int, int]
+) -> None:
+    # The calib.txt's principal point and image size were sent after the file was removed
+    # (the chooser's Cancel empties it) or another failed to load, its note still shown: a
+    # pair of another size was refused as "the calib.txt is for 128x96 px images", one of its
+    # size had its 3-D points about the old principal point.
+    calib = _calib_and_pair(tmp_path, calib_size)
+    p = page.page
+    p.click("#tab-depth")
+    p.set_input_files("#calib-file", str(calib))
+    page.expect(p.locator("#calib-note")).to_contain_text("Rig from calib.txt: f = 100 px")
+    if how == "removed":
+        p.set_input_files("#calib-file", [])
+        page.expect(p.locator("#calib-note")).to_have_text(
+            "No calibration: calib.txt removed; its principal point and image size are no "
+            "longer used (the rig inputs stay as they are)."
+        )
+        page.expect(p.locator("#calib-error")).to_be_hidden()
+    else:
+        bad = tmp_path / "notes.txt"
+        bad.write_text("hello\n")
+        p.set_input_files("#calib-file", str(bad))
+        page.expect(p.locator("#calib-error")).to_have_text(
+            "calib: calib.txt: line 1 of a Middlebury calib.txt must be key=value, got 'hello'"
+        )
+        page.expect(p.locator("#calib-note")).to_have_text(
+            "No calibration: notes.txt was not loaded; calib.txt is no longer used (the rig "
+            "inputs stay as they are)."
+        )
+    # The rig inputs keep the numbers the file set, as typed ones.
+    assert p.input_value("#focal_px") == "100" and p.input_value("#baseline_mm") == "120"
+    p.set_input_files("#left-file", str(tmp_path / "left.png"))
+    p.set_input_files("#right-file", str(tmp_path / "right.png"))
+    p.click("#run-depth")
+    page.expect(p.locator("#depth-status")).to_contain_text("Done: 64\u00d748 px")
+    rig = p.evaluate("() => window.stereodepthDepth.result().rig")
+    assert (rig["cx_px"], rig["cy_px"]) == (31.5, 23.5)  # the image centre
+    assert (rig["focal_px"], rig["baseline_mm"]) == (100, 120)
+    # Removing it again, or once more, leaves the page as it starts.
+    p.set_input_files("#calib-file", [])
+    page.expect(p.locator("#calib-note")).to_have_text("Middlebury calib.txt")
+
+
+@pytest.mark.browser
+def test_depth_view_an_empty_or_pfm_upload_is_named_at_its_field(
+    page: Page, tmp_path: Path
+) -> None:
+    # Two empty files: "right: the same file as left"; a PFM: "got PPM".
+    (tmp_path / "empty-left.png").write_bytes(b"")
+    (tmp_path / "empty-right.png").write_bytes(b"")
+    pfm = b"Pf\n64 48\n-1.0\n" + bytes(4 * 64 * 48)
+    (tmp_path / "disparity.pfm").write_bytes(pfm)
+    _calib_and_pair(tmp_path, (64, 48))  # the pair's right.png
+    p = page.page
+    p.click("#tab-depth")
+    p.set_input_files("#left-file", str(tmp_path / "empty-left.png"))
+    p.set_input_files("#right-file", str(tmp_path / "empty-right.png"))
+    p.click("#run-depth")
+    for name in ("left", "right"):
+        page.expect(p.locator(f"#{name}-error")).to_have_text(
+            f"{name}: the file is empty (0 bytes); choose an image file"
+        )
+    page.expect(p.locator("#depth-status")).to_contain_text("Not computed")
+    p.set_input_files("#left-file", str(tmp_path / "disparity.pfm"))
+    p.set_input_files("#right-file", str(tmp_path / "right.png"))
+    p.click("#run-depth")
+    page.expect(p.locator("#left-error")).to_have_text(
+        f"left: must be a PNG or JPEG image, got PFM (64x48 px, {len(pfm)} bytes): PFM "
+        "holds floating-point maps, such as the disparity.pfm this page and `stereodepth "
+        "match` write, not an image to match"
+    )
+    page.expect(p.locator("#right-error")).to_be_hidden()

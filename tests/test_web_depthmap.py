@@ -924,12 +924,146 @@ def messages_cases() -> list[Any]:
             "00 01 02 03 fe ff 00 00",
             id="binary-not-image",
         ),
-        pytest.param(  # the same: a PNG cut inside its header
+        pytest.param(  # the same: a PNG cut inside its header (the size is before the cut)
             {"left": b64(png[:30]), "right": right},
             ["body", "left"],
-            "left: the image is truncated or damaged: a PNG file of 30 bytes that Pillow cannot "
-            "read",
+            "left: the image is truncated or damaged: a PNG file of 30 bytes (96x72 px by its "
+            "header) that Pillow cannot read",
             id="png-cut-short",
+        ),
+        *upload_cases(pair, png),
+    ]
+
+
+def png_header(w: int, h: int) -> bytes:
+    """A PNG of w x h px by its header, with no pixels (a decompression bomb's shape)."""
+    return (
+        b"\x89PNG\r\n\x1a\n"
+        + png_chunk(b"IHDR", struct.pack(">IIBBBBB", w, h, 8, 0, 0, 0, 0))
+        + png_chunk(b"IDAT", zlib.compress(b""))
+        + png_chunk(b"IEND", b"")
+    )
+
+
+def grey_transparent(pair: Any) -> list[tuple[int, bytes, int]]:
+    """(bits, PNG bytes, transparent pixel count): 8- and 16-bit grey PNGs of the pair's left
+    grey image whose transparency chunk names a grey level some pixels have."""
+    grey8 = np.ascontiguousarray(pair.left[..., 1]) if pair.left.ndim == 3 else pair.left
+    out = []
+    for bits, grey in ((8, grey8), (16, grey8.astype(np.uint16) * 257)):
+        key = int(grey[0, 0])
+        buf = io.BytesIO()
+        Image.fromarray(grey).save(buf, format="PNG", transparency=key)
+        out.append((bits, buf.getvalue(), int((grey == key).sum())))
+    return out
+
+
+def upload_cases(pair: Any, png: bytes) -> list[Any]:
+    """Upload messages that did not say what came (in the comments: what they said)."""
+    right = encode(pair.right)
+    pfm = b"Pf\n10 8\n-1.0\n" + bytes(4 * 80)
+    gif = io.BytesIO()
+    Image.fromarray(pair.left).convert("P").save(gif, format="GIF")
+    pgm = b"P5\n96 72\n255\n" + pair.left.tobytes()
+    jpeg = bytearray(base64.b64decode(encode(pair.left, "JPEG")))
+    sof = jpeg.index(b"\xff\xc0")  # the frame header: precision, height, width
+    jpeg[sof + 5 : sof + 9] = struct.pack(">HH", 50000, 60000)
+    transparent = np.dstack([pair.left, np.full(pair.disparity.shape, 255, np.uint8)])
+    transparent[:2, :3, 3] = 0
+    fields = (
+        "left, right, sample, rig, method, num_disparities, block_size, cost, disparity_step_px, "
+        "cx_px, cy_px, calib_size"
+    )
+    return [
+        pytest.param(  # "got PPM": Pillow's name for the Netpbm family, which holds PFM
+            {"left": b64(pfm), "right": right},
+            ["body", "left"],
+            f"left: must be a PNG or JPEG image, got PFM (10x8 px, {len(pfm)} bytes): PFM holds "
+            "floating-point maps, such as the disparity.pfm this page and `stereodepth match` "
+            "write, not an image to match",
+            id="pfm",
+        ),
+        pytest.param(  # "got PPM"
+            {"left": b64(pgm), "right": right},
+            ["body", "left"],
+            f"left: must be a PNG or JPEG image, got PGM (96x72 px, {len(pgm)} bytes)",
+            id="pgm",
+        ),
+        pytest.param(  # "got GIF"
+            {"left": b64(gif.getvalue()), "right": right},
+            ["body", "left"],
+            f"left: must be a PNG or JPEG image, got GIF (96x72 px, {len(gif.getvalue())} bytes)",
+            id="gif",
+        ),
+        pytest.param(  # "right: the same file as left": two empty files, right not named empty
+            {"left": b64(b""), "right": b64(b"")},
+            ["body", "right"],
+            "right: the file is empty (0 bytes); choose an image file",
+            id="both-empty",
+        ),
+        pytest.param(
+            {"left": b64(b""), "right": right},
+            ["body", "left"],
+            "left: the file is empty (0 bytes); choose an image file",
+            id="empty",
+        ),
+        pytest.param(  # not "the same file as left": right's own problem
+            {"left": b64(pfm), "right": b64(pfm)},
+            ["body", "right"],
+            f"right: must be a PNG or JPEG image, got PFM (10x8 px, {len(pfm)} bytes): PFM holds "
+            "floating-point maps, such as the disparity.pfm this page and `stereodepth match` "
+            "write, not an image to match",
+            id="both-pfm",
+        ),
+        pytest.param(
+            {"left": b64(png), "right": b64(png)},
+            ["body", "right"],
+            f"right: the same file as left, byte for byte (a PNG file of {len(png)} bytes (96x72 "
+            "px by its header)); choose the other image",
+            id="same-file",
+        ),
+        pytest.param(  # "the image has more pixels than Pillow opens safely, more than ..."
+            {"left": b64(png_header(60000, 60000)), "right": right},
+            ["body", "left"],
+            "left: the image is 60000x60000 px (3.6e+03 MP), more than the limit of 4 MP",
+            id="png-too-many-pixels",
+        ),
+        pytest.param(  # the same
+            {"left": b64(bytes(jpeg)), "right": right},
+            ["body", "left"],
+            "left: the image is 60000x50000 px (3e+03 MP), more than the limit of 4 MP",
+            id="jpeg-too-many-pixels",
+        ),
+        pytest.param(
+            {"left": encode(transparent), "right": right},
+            ["body", "left"],
+            "left: the image has transparent pixels (an alpha channel): 6 of its 96x72 px are "
+            "not opaque; give an opaque image",
+            id="transparent",
+        ),
+        *(
+            pytest.param(  # a grey PNG's transparency chunk was taken as opaque
+                {"left": b64(grey_trns), "right": right},
+                ["body", "left"],
+                f"left: the image has transparent pixels (an alpha channel): {n} of its 96x72 px "
+                "are not opaque; give an opaque image",
+                id=f"transparent-grey-{bits}",
+            )
+            for bits, grey_trns, n in grey_transparent(pair)
+        ),
+        pytest.param(
+            {"left": encode(pair.left), "right": b64(png16_rgb(96, 72))},
+            ["body", "right"],
+            "right: 16-bit colour PNGs are not supported, got one of 96x72 px; give 8-bit colour "
+            "or 16-bit grey",
+            id="png-16-bit-colour",
+        ),
+        pytest.param(  # repr cut at 40 characters, its closing quote with it
+            {"left_image": "A" * 100, "sample": True},
+            ["body", "left_image"],
+            f"left_image is not a field of /api/depthmap, got {'A' * 40 + '...'!r} (its fields: "
+            f"{fields})",
+            id="unknown-field-long-value",
         ),
     ]
 
@@ -943,6 +1077,109 @@ def test_each_message_names_the_field_and_what_was_received(
     found = [d for d in r.json()["detail"] if d["loc"] == loc]
     assert found, r.json()
     assert found[0]["msg"] == msg
+
+
+def test_a_truncated_image_is_named_with_its_size(client: TestClient, pair: Any) -> None:
+    # "left: the image is truncated or damaged (image file is truncated ...)": Pillow's words
+    # (in parentheses, as Pillow has them) after the file's.
+    png = base64.b64decode(encode(pair.left))
+    cut = png[: len(png) - 200]
+    r = post(client, left=b64(cut), right=encode(pair.right))
+    assert r.status_code == 422, r.text
+    (item,) = r.json()["detail"]
+    assert item["loc"] == ["body", "left"]
+    assert item["msg"].startswith(
+        f"left: the image is truncated or damaged: a 96x72 px PNG file of {len(cut)} bytes "
+        "that Pillow cannot decode ("
+    ), item["msg"]
+
+
+def test_beyond_pillows_limit_the_message_gives_the_size(pair: Any) -> None:
+    # Under a server limit above Pillow's (--max-megapixels 1000): "the image has more pixels
+    # than Pillow opens safely" gave neither the size nor Pillow's limit.
+    huge = TestClient(create_app(max_pixels=10**9), base_url=LOCAL)
+    r = huge.post(
+        "/api/depthmap",
+        json={"left": b64(png_header(20000, 20000)), "right": encode(pair.right), "rig": RIG},
+    )
+    assert r.status_code == 422, r.text
+    pillow = f"{Image.MAX_IMAGE_PIXELS / 1e6:.3g} MP"
+    assert r.json()["detail"] == [
+        {
+            "loc": ["body", "left"],
+            "msg": f"left: the image is 20000x20000 px (400 MP), more than Pillow opens safely, "
+            f"{pillow}",
+            "type": "too_large",
+        }
+    ]
+
+
+@pytest.mark.parametrize(
+    ("method", "url", "loc", "msg"),
+    [
+        pytest.param(  # ignored: the answer was pixel (1, 2)'s
+            "GET",
+            "/api/depthmap/{key}/point?x=1&y=2&z=3",
+            "z",
+            "z is not a parameter of /api/depthmap/{key}/point, got '3' (its parameters: x, y)",
+            id="point",
+        ),
+        pytest.param(
+            "GET",
+            "/api/depthmap/{key}/point?x=1&y=2&X=4&X=5",
+            "X",
+            "X is not a parameter of /api/depthmap/{key}/point, got '4', '5' (its parameters: "
+            "x, y)",
+            id="point-case",
+        ),
+        pytest.param(
+            "GET",
+            "/api/depthmap/{key}/depth.npy?format=pfm",
+            "format",
+            "format is not a parameter of /api/depthmap/{key}/{name}, got 'pfm' (it takes none)",
+            id="download",
+        ),
+        pytest.param(
+            "GET",
+            "/api/depthmap/limits?max_pixels=1",
+            "max_pixels",
+            "max_pixels is not a parameter of /api/depthmap/limits, got '1' (it takes none)",
+            id="limits",
+        ),
+        pytest.param(  # the search range asked for in the URL was not the one used
+            "POST",
+            "/api/depthmap?num_disparities=64",
+            "num_disparities",
+            "num_disparities is not a parameter of /api/depthmap, got '64' (it takes none: its "
+            "fields go in the JSON body)",
+            id="depthmap",
+        ),
+        pytest.param(
+            "POST",
+            "/api/calib?calib=calib.txt",
+            "calib",
+            "calib is not a parameter of /api/calib, got 'calib.txt' (it takes none: its fields "
+            "go in the JSON body)",
+            id="calib",
+        ),
+    ],
+)
+def test_every_route_refuses_a_query_parameter_it_does_not_have(
+    client: TestClient, method: str, url: str, loc: str, msg: str
+) -> None:
+    # As /api/calc does; each of these answered as if it had not been given.
+    key = client.post("/api/depthmap", json={"sample": True, "rig": RIG}).json()["id"]
+    body = {"calib": "x"} if "calib" in url else {"sample": True, "rig": RIG}
+    r = client.request(method, url.replace("{key}", key), json=body if method == "POST" else None)
+    assert r.status_code == 422, r.text
+    assert r.json()["detail"] == [{"loc": ["query", loc], "msg": msg, "type": "extra_forbidden"}]
+    # Without it, the same request is answered.
+    r = client.request(
+        method,
+        url.replace("{key}", key).split("?")[0] + ("?x=1&y=2" if "point" in url else ""),
+        json=body if method == "POST" else None,
+    )
+    assert r.status_code == (422 if "calib" in url else 200), r.text
 
 
 def test_null_is_the_default_for_method_and_sample(client: TestClient, pair: Any) -> None:

@@ -1139,12 +1139,23 @@ void box_row8(uint8_t* const* raws, int fresh, const uint16_t* lrow, const uint1
                          ring, out);
 }
 
+#if defined(__AVX512BW__)
+// Whether the AVX-512 build lays the transposed rows out for 512-bit vectors (32 lanes, V512)
+// rather than 256-bit ones (16 lanes, V256): when nd makes at least four 512-bit vectors. With
+// one to three, a pixel's fixed work (the shifts at the first and last vector of each path
+// step, the horizontal minima) weighs more than the wider vectors save; 256-bit vectors are
+// kept up to 12 per pixel, where fused_row_t still unrolls them. Cones, one thread, ns per
+// pixel (512-bit against 256-bit): ndisp 32: 42 against 34; 64: 39 against 38; 96: 54 against
+// 46; 128: 50 against 58; 160: 68 against 67; 192: 64 against 92.
+inline bool wide_transposed(int nd) { return nd % 32 == 0 && nd >= 128; }
+#endif
+
 // The same in the transposed layout of fused_row_t: the lanes of its vectors (32 when the
-// AVX-512 build runs V512, i.e. nd % 32 == 0; else 16).
+// AVX-512 build runs V512, i.e. wide_transposed(nd); else 16).
 void raw_row8_t(const uint16_t* lrow, const uint16_t* rrow, ptrdiff_t cols, ptrdiff_t x0,
                 ptrdiff_t x1, int radius, int nd, int min_d, uint8_t* rev, uint8_t* out) {
 #if defined(__AVX512BW__)
-  if (nd % 32 == 0) {
+  if (wide_transposed(nd)) {
     raw_row8_impl<B512, 32>(lrow, rrow, cols, x0, x1, radius, nd, min_d, rev, out);
     return;
   }
@@ -1156,7 +1167,7 @@ void box_row8_t(uint8_t* const* raws, int fresh, const uint16_t* lrow, const uin
                 uint8_t* rev, int radius, ptrdiff_t cols, ptrdiff_t x0, ptrdiff_t x1, int nd,
                 int min_d, int cmax, uint8_t* ring, uint8_t* out) {
 #if defined(__AVX512BW__)
-  if (nd % 32 == 0) {
+  if (wide_transposed(nd)) {
     box_row8_impl<B512, 32>(raws, fresh, lrow, rrow, rev, radius, cols, x0, x1, nd, min_d, cmax,
                             ring, out);
     return;
@@ -2249,7 +2260,7 @@ void fused_row_t_v(const FusedRowArgs& a) {
 
 void fused_row_t(const FusedRowArgs& a) {
 #if defined(__AVX512BW__)
-  if (a.p.nd % V512::kLanes == 0) {
+  if (wide_transposed(a.p.nd)) {
     fused_row_t_v<V512>(a);
     return;
   }

@@ -139,10 +139,11 @@ struct SemiGlobalKernels {
   int fused_lanes;       // fused_row needs nd % fused_lanes == 0
   // The same three in the transposed layout (null in the baseline build; nd % fused_lanes
   // == 0): each pixel's nd values as nv vectors of n lanes (n = 32 when the AVX-512 build
-  // runs nd % 32 == 0, else 16; nv = nd / n), lane j of vector v holding disparity index
-  // j * nv + v, so that the neighbours d - 1 and d + 1 are whole vectors. raw_row8_t and
-  // box_row8_t write their costs so; fused_row_t reads c (and base) so and needs no padding
-  // in lv (nd values per pixel). Same results as raw_row8 + box_row8 + fused_row.
+  // runs nd % 32 == 0 and nd >= 128, else 16; nv = nd / n), lane j of vector v holding
+  // disparity index j * nv + v, so that the neighbours d - 1 and d + 1 are whole vectors.
+  // raw_row8_t and box_row8_t write their costs so; fused_row_t reads c (and base) so and
+  // needs no padding in lv (nd values per pixel). Same results as raw_row8 + box_row8 +
+  // fused_row.
   RawRow8Fn raw_row8_t;
   BoxRow8Fn box_row8_t;
   FusedRowFn fused_row_t;

@@ -70,6 +70,17 @@ def options_class(method: str) -> type[Any]:
     return SemiGlobalOptions
 
 
+def block_sizes_text() -> tuple[str, str]:
+    """The block sizes each method takes, for the command lines' help: the block matcher's
+    ranges by cost ("3 to 63 with --cost census, 3 to 31 with --cost sad"; odd sizes) and the
+    semi-global matcher's sizes ("1 or 3"), from the matchers' own constants."""
+    from .matching import MAX_BLOCK_SIZE
+    from .semi_global import BLOCK_SIZES
+
+    costs = ", ".join(f"3 to {top} with --cost {cost}" for cost, top in MAX_BLOCK_SIZE.items())
+    return costs, " or ".join(map(str, BLOCK_SIZES))
+
+
 def matcher_keywords(method: str) -> list[str]:
     """The keyword options of a method's matcher class, in its signature's order (``isa``,
     for testing and benchmarking, left out)."""
@@ -93,8 +104,10 @@ def thread_matcher(method: str, **params: Any) -> Any:
     # tuple with an array. The key is built on every one-shot call, so it is kept cheap.
     # The items of a tuple or list (intensity_range) are typed too: after (1, 4095), an
     # intensity_range of (True, 4095) or (1.0, 4095) compared equal and skipped the checks.
+    # Lists are copied into the key: one kept by reference would follow the caller's later
+    # edits in place and keep answering for the old matcher.
     names = tuple(sorted(params))
-    values = tuple([params[k] for k in names])
+    values = tuple([_snapshot(params[k]) for k in names])
     key = (method, names, tuple(map(_types, values)), values)
     cached = getattr(_thread_state, "matcher", None)
     if cached is None or cached[0] != key:
@@ -103,6 +116,11 @@ def thread_matcher(method: str, **params: Any) -> Any:
         cached = (key, matcher_class(method)(**params))
         _thread_state.matcher = cached
     return cached[1]
+
+
+def _snapshot(value: Any) -> Any:
+    """``value``, a list as a tuple of its items (its type stays in the key's types)."""
+    return tuple(value) if isinstance(value, list) else value
 
 
 def _types(value: Any) -> Any:

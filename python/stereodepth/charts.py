@@ -18,7 +18,7 @@ import numpy as np
 from . import _validate as check
 from .rig import StereoRig
 
-__all__ = ["Chart", "Charts", "Marker", "Series", "chart_data"]
+__all__ = ["PLOT_RANGE", "Chart", "Charts", "Marker", "Series", "chart_data", "check_chartable"]
 
 #: Points per curve.
 DEFAULT_POINTS = 200
@@ -31,6 +31,10 @@ DEFAULT_MAX_DISPARITY_PX = 256.0
 _LARGEST = 1e300
 # How far beyond the target the disparity axis reaches when the target lies outside its range.
 _MARGIN = 1.25
+#: The numbers a drawn chart shows (disparities in px, depths and depth errors in m): on log
+#: axes spanning several hundred decades matplotlib's axis arithmetic overflows a double (a
+#: RuntimeWarning, or "Data cannot be log-scaled" when every point had overflowed).
+PLOT_RANGE = (1e-100, 1e100)
 
 
 @dataclass(frozen=True)
@@ -202,3 +206,97 @@ def chart_data(
             markers=tuple(error_markers),
         ),
     )
+
+
+def _chartable_disparities(rig: StereoRig, steps: tuple[float, ...]) -> tuple[float, float, float]:
+    """The disparities (px) whose own value, depth and depth error for every step in
+    ``steps`` lie in PLOT_RANGE: an interval, as depth and error fall with the disparity
+    (computed in log10, as B*f and the bounds may be far apart); and the smallest disparity
+    whose depth and errors do (a target <= 0 of a rig with doffs > 0 is off the log axis)."""
+    low, high = (math.log10(v) for v in PLOT_RANGE)
+    bf = math.log10(rig._bf_m_px)
+    # the depth: in PLOT_RANGE itself, and its error Z * Z / (B f) * step too
+    z_lo = max(low, 0.5 * (low + bf - math.log10(min(steps))))
+    z_hi = min(high, 0.5 * (high + bf - math.log10(max(steps))))
+    if z_lo > z_hi:
+        return math.inf, -math.inf, math.inf
+
+    def clamp(e: float) -> float:
+        return float(10.0 ** min(max(e, -300.0), 300.0))
+
+    # d + doffs = B f / Z
+    floor = clamp(bf - z_hi) - rig.doffs_px
+    d_lo = max(PLOT_RANGE[0], floor)
+    d_hi = min(PLOT_RANGE[1], clamp(bf - z_lo) - rig.doffs_px)
+    return d_lo, d_hi, floor
+
+
+def _fits(
+    rig: StereoRig, target: float | None, limit: float | None, d_lo: float, d_hi: float
+) -> bool:
+    lo, hi = _disparity_range(rig, target, limit)
+    return d_lo <= lo and hi <= d_hi
+
+
+def check_chartable(
+    rig: StereoRig,
+    *,
+    disparity_px: float | None = None,
+    disparity_step_px: float = 1.0,
+    max_disparity_px: float | None = None,
+) -> None:
+    """Raises ValueError naming the parameter, its value and the values that can be drawn
+    when the charts of :func:`chart_data` (arguments checked there) would hold a number
+    outside PLOT_RANGE: a disparity, depth or depth error that a drawn log axis cannot show
+    (the calculator's results take such values; only drawing refuses them)."""
+    steps = (1.0,) if disparity_step_px == 1.0 else (1.0, disparity_step_px)
+    d_lo, d_hi, floor = _chartable_disparities(rig, steps)
+    shift = max(0.0, -rig.doffs_px)
+    shown = f"{PLOT_RANGE[0]:g} to {PLOT_RANGE[1]:g}"
+    why = f"the charts show disparities (px), depths and depth errors (m) from {shown} only"
+    if d_lo > d_hi or (max_disparity_px is None and not _fits(rig, None, None, d_lo, d_hi)):
+        lo, hi = _disparity_range(rig, None, max_disparity_px)
+        with_step = "" if len(steps) == 1 else f" with disparity_step_px {steps[1]:g}"
+        raise ValueError(
+            f"this rig (B*f = {rig._bf_m_px:g} m*px, doffs_px {rig.doffs_px:g}){with_step} "
+            f"cannot be charted: {why}, and its disparities {lo:g} to {hi:g} px give depths or "
+            "depth errors outside that"
+        )
+    if max_disparity_px is not None and not _fits(rig, None, max_disparity_px, d_lo, d_hi):
+        # above 1 px the axis runs from 1 px to it; at or below, from a quarter of it
+        ok: list[tuple[float, float]] = []
+        if 1.0 + shift >= d_lo and d_hi - shift > 1.0:
+            ok.append((1.0, d_hi - shift))
+        if 4 * (d_lo - shift) <= min(1.0, d_hi - shift):
+            ok.append((max(4 * (d_lo - shift), 0.0), min(1.0, d_hi - shift)))
+        span = ""
+        if ok:
+            low, high = min(a for a, _ in ok), max(b for _, b in ok)
+            span = f"from {low:.4g} to {high:.4g} px" if low > 0 else f"up to {high:.4g} px"
+        raise ValueError(
+            f"max_disparity_px {max_disparity_px:g} cannot be charted: {why}"
+            + (f"; for this rig it can be {span}" if span else "")
+        )
+    if disparity_px is None:
+        return
+    t = disparity_px
+    in_range = _fits(rig, t, max_disparity_px, d_lo, d_hi)
+    if in_range:  # the target's own marks: its depth and errors (a t <= 0 is off the axis)
+        zt = float(rig._depth_unchecked(np.asarray(t, dtype=np.float64))[0])
+        marks = [zt] + [float(rig._resolution_unchecked(np.asarray(zt), s)) for s in steps]
+        if t > 0:
+            marks.append(t)
+        in_range = all(
+            PLOT_RANGE[0] <= v <= PLOT_RANGE[1] for v in marks if math.isfinite(v) and v > 0
+        )
+    if not in_range:
+        high = (d_hi - shift) / _MARGIN
+        if d_lo - shift <= 0:  # any the calculator takes, up to high
+            span = f"up to {high:.4g} px"
+        else:
+            span = f"from {_MARGIN * (d_lo - shift):.4g} to {high:.4g} px"
+            if rig.doffs_px > 0 and floor <= 0:  # and some at or below 0, off the axis
+                span = f"from {max(floor, -rig.doffs_px):.4g} to 0 or {span}"
+        raise ValueError(
+            f"disparity_px {t:g} cannot be charted: {why}; for this rig it can be {span}"
+        )

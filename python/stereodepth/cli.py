@@ -109,6 +109,25 @@ def signals_held(
             signal.signal(sig, handler)
 
 
+def import_uninterrupted(*modules: str) -> None:
+    """Imports ``modules`` with Ctrl-C and SIGTERM held until the imports end, then acted on.
+
+    matplotlib's compiled modules are pybind11's, whose module set-up turns any exception
+    into ImportError: a Ctrl-C during ``import matplotlib`` read as "colour maps need
+    matplotlib" (exit 1, the extra installed), and could leave the interpreter to abort at
+    exit. Raises the modules' ImportError; a signal that came meanwhile is raised after it."""
+    import importlib
+
+    with signals_held() as caught:
+        try:
+            for name in modules:
+                importlib.import_module(name)
+        finally:
+            pending = list(caught)
+    if pending:
+        signal.raise_signal(pending[0])
+
+
 def one_line(text: object) -> str:
     """A message on one line: its lines joined with "; "."""
     return "; ".join(line.strip() for line in str(text).strip().splitlines() if line.strip())
@@ -468,12 +487,15 @@ def _subparser(parser: argparse.ArgumentParser, command: str) -> argparse.Argume
 def main(argv: Sequence[str] | None = None) -> int:
     try:
         parser = build_parser()
+        args, extras = parser.parse_known_args(argv)
     except ValueError as exc:
         # The option help asks the core for the cores this process may use, and the core
         # refuses a mistyped STEREODEPTH_ISA (avx3): one line, before any command runs.
         print(f"stereodepth: error: {one_line(exc)}", file=sys.stderr)
         return 2
-    args, extras = parser.parse_known_args(argv)
+    except KeyboardInterrupt:  # Ctrl-C while the subcommands' modules load: no traceback
+        print("stereodepth: interrupted", file=sys.stderr)
+        return 130
     if extras:  # name the subcommand whose options these are not
         _subparser(parser, args.command).error(f"unrecognized arguments: {' '.join(extras)}")
     lost = _STDOUT_PRODUCTS.get(args.command)

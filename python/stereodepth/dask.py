@@ -59,6 +59,30 @@ def _as_dask(name: str, value: Any, *, known_shape: bool = False) -> Any:
     return value
 
 
+def _stand_in(shape: tuple[Any, ...], dtype: Any) -> np.ndarray:
+    """A read-only numpy array of ``shape`` and ``dtype`` (in the machine's byte order) that
+    takes no memory: one zero seen through zero strides, for the numpy API's shape and dtype
+    checks, whose messages then show the real shape. Unknown (NaN) sizes stand as 1."""
+    size = tuple(1 if n != n else int(n) for n in shape)
+    return np.broadcast_to(np.zeros((), dtype=np.dtype(dtype).newbyteorder("=")), size)
+
+
+def _check_disparity(d: Any) -> None:
+    """The numpy functions' dtype and shape checks of a disparity map
+    (:func:`stereodepth.depth.as_disparity`) on the dask array ``d``, with its shape in the
+    messages."""
+    from .depth import as_disparity
+
+    stand_in = _stand_in(d.shape, d.dtype)
+    try:
+        as_disparity(stand_in)
+    except ValueError as exc:
+        if stand_in.shape == d.shape:
+            raise
+        # unknown chunk sizes: the message shows them as dask does, not the stand-in's 1
+        raise ValueError(str(exc).replace(str(stand_in.shape), str(d.shape))) from None
+
+
 def _frames_per_chunk(arr: Any, frame_axes: int) -> Any:
     """``arr`` rechunked so that each chunk holds whole frames: the last ``frame_axes`` axes
     in one chunk (the leading axes keep their chunking)."""
@@ -79,8 +103,11 @@ def disparity_to_depth(disparity: Any, **options: Any) -> Any:
     d = _as_dask("disparity", disparity)
     if "out" in options:
         raise TypeError("out is not accepted for dask arrays (store the result instead)")
-    # Every check of the numpy function, now rather than at compute time, on a tiny stand-in.
-    probe = np.zeros((1,) * d.ndim, dtype=d.dtype)
+    # Every check of the numpy function, now rather than at compute time: its dtype and shape
+    # checks on a stand-in of the real shape (the messages show the user's shape, not a
+    # probe's), then the options on an empty map of the same dtype (nothing is computed).
+    _check_disparity(d)
+    probe = np.zeros((0,) * d.ndim, dtype=d.dtype)
     out_dtype = stereodepth.disparity_to_depth(probe, **options).dtype
     return d.map_blocks(
         _depth_block,
@@ -103,11 +130,12 @@ def block_match(left: Any, right: Any, **params: Any) -> Any:
     the numpy function reads it (never a stack of frames 3 or 4 px wide), so (H, W, 4) and
     (H, W, 3) uint16 raise ValueError. Returns the float32 disparity, (H, W) or (N, H, W), NaN
     where invalid. Chunks are first made to hold whole frames (``left`` and ``right`` are
-    rechunked alike); ``params`` are those of the numpy function, checked now
-    (``return_confidence`` is not accepted). Each frame is matched as the numpy function
-    matches it, so a uint16 pair is stretched over its own range, frame by frame (see
-    :mod:`stereodepth.matching`); ``intensity_range=(lo, hi)`` gives every frame of the stack
-    the same scale. :func:`semi_global_match` is its semi-global sibling."""
+    rechunked alike); ``params`` are those of the numpy function, checked now with the frames'
+    shape (an empty frame, the width times ``num_disparities``; ``return_confidence`` is not
+    accepted). Each frame is matched as the numpy function matches it, so a uint16 pair is
+    stretched over its own range, frame by frame (see :mod:`stereodepth.matching`);
+    ``intensity_range=(lo, hi)`` gives every frame of the stack the same scale.
+    :func:`semi_global_match` is its semi-global sibling."""
     return _match("bm", "block_match", left, right, params)
 
 
@@ -119,9 +147,12 @@ def semi_global_match(left: Any, right: Any, **params: Any) -> Any:
     equal bit for bit to the numpy function's. ``params`` are those of the numpy function
     (``num_disparities``, ``p1``, ``p2``, ``paths``, ``fill``, ``max_memory_mb`` ...), checked
     now, so a bad one raises TypeError or ValueError before anything is computed
-    (``return_confidence`` is not accepted). Each worker thread keeps one matcher for the
-    frames it matches (the semi-global matcher's buffers are large: ``max_memory_mb`` is per
-    thread). Source: H. Hirschmüller, IEEE PAMI 30(2), 2008."""
+    (``return_confidence`` is not accepted), and so do the checks of the frames' shape and
+    size: an empty frame, and frames that need more than ``max_memory_mb`` (with
+    ``threads=None``, what one thread needs: the cores of the machines that will match are not
+    known yet). Each worker thread keeps one matcher for the frames it matches (the
+    semi-global matcher's buffers are large: ``max_memory_mb`` is per thread). Source:
+    H. Hirschmüller, IEEE PAMI 30(2), 2008."""
     return _match("sgm", "semi_global_match", left, right, params)
 
 
@@ -129,6 +160,8 @@ def _match(method: str, name: str, left: Any, right: Any, params: dict[str, Any]
     """A matcher of :mod:`stereodepth._methods` over dask arrays: the checks of the numpy
     function ``name`` now, then one task per chunk of whole frames."""
     from stereodepth._methods import options_class
+
+    from .matching import as_image
 
     la = _as_dask("left", left, known_shape=True)
     ra = _as_dask("right", right, known_shape=True)
@@ -142,20 +175,17 @@ def _match(method: str, name: str, left: Any, right: Any, params: dict[str, Any]
         raise TypeError(f"{name}() missing required keyword argument: 'num_disparities'")
     checker = options_class(method)
     try:
-        checker(**params)
+        options = checker(**params)
     except TypeError as exc:  # the numpy function's name, not the checker's
         raise TypeError(str(exc).replace(f"{checker.__name__}.__init__()", f"{name}()")) from None
+    # Each image's dtype first, as the numpy function checks it (matching.as_image, on a 1x1
+    # frame of that dtype: its shape passes every shape check and is never shown).
+    for image_name, a in (("left", la), ("right", ra)):
+        as_image(np.zeros((1, 1), dtype=a.dtype), image_name)
     if la.shape != ra.shape:
         raise ValueError(f"left and right must have the same shape, got {la.shape} and {ra.shape}")
     if la.dtype != ra.dtype:
         raise TypeError(f"left and right must have the same dtype, got {la.dtype} and {ra.dtype}")
-    if la.dtype not in (np.uint8, np.uint16):
-        raise TypeError(f"left must be uint8 or uint16 images, got dtype {la.dtype}")
-    if la.dtype == np.uint8 and params.get("intensity_range") is not None:
-        raise ValueError(
-            "intensity_range applies to uint16 images (uint8 images are matched as they are), "
-            f"got {params['intensity_range']!r} with uint8 images"
-        )
     # (N, H, W, 3) and (H, W, 3) uint8 are RGB; (N, H, W) and (H, W) grey. A 3-D array whose
     # last axis is 3 or 4 is one colour frame, as the numpy function reads it: an (H, W, 4)
     # RGBA frame or an (H, W, 3) uint16 one was matched as H grey frames 4 or 3 px wide.
@@ -166,6 +196,12 @@ def _match(method: str, name: str, left: Any, right: Any, params: dict[str, Any]
             "left must have shape (H, W) or (N, H, W) grey, or (H, W, 3) or (N, H, W, 3) uint8 "
             f"RGB, got {la.shape} {la.dtype} (a last axis of 3 or 4 is read as colour "
             "channels, as stereodepth.block_match reads it; drop an alpha channel first)"
+        )
+    _check_frames(method, la, frame_axes, params, options)
+    if la.dtype == np.uint8 and params.get("intensity_range") is not None:
+        raise ValueError(
+            "intensity_range applies to uint16 images (uint8 images are matched as they are), "
+            f"got {params['intensity_range']!r} with uint8 images"
         )
     la = _frames_per_chunk(la, frame_axes)
     ra = ra.rechunk(la.chunks)
@@ -182,6 +218,50 @@ def _match(method: str, name: str, left: Any, right: Any, params: dict[str, Any]
         stacked=stacked,
         meta=meta,
     )
+
+
+def _check_frames(
+    method: str, left: Any, frame_axes: int, params: dict[str, Any], options: Any
+) -> None:
+    """The numpy matcher's checks of one frame of ``left``'s shape and dtype (``right``'s are
+    the same by now) with ``params`` (checked into ``options``), before anything is computed:
+    the pair's own (:func:`stereodepth.matching.check_pair`: an empty frame), then those of
+    the native kernel that depend on the frame's size alone, raised by the numpy API's
+    matcher itself, with its message, on a frame of zeros that it refuses before any work.
+
+    The kernel's checks are made so that they hold on whatever machine matches: the
+    semi-global matcher's memory (:func:`stereodepth.semi_global.memory_estimate` against
+    ``max_memory_mb``) is estimated for ``threads`` threads, or for one when ``threads`` is
+    None or 0 (every core of the machine that matches, unknown here: a worker whose cores
+    need more refuses the frame itself, as before); the block matcher's width times
+    ``num_disparities`` is checked with the disparities rounded up to a multiple of 8, the
+    fewest lanes of its kernels (AVX2 and AVX-512 round up to 16: a worker running them
+    refuses the few widths in between itself)."""
+    from .matching import StereoMatcher, check_pair
+    from .semi_global import SemiGlobalMatcher, memory_estimate
+
+    shape = tuple(int(n) for n in left.shape[-frame_axes:])
+    # np.zeros of a large frame maps zero pages: nothing is written, read or copied here
+    frame = np.zeros(shape, dtype=left.dtype)
+    check_pair(frame, frame)
+    # The kernels' checks take the frame's size only (not its dtype or channels): they are
+    # raised on a grey uint8 frame, whose matcher needs no intensity_range.
+    kernel_params = {k: v for k, v in params.items() if k != "intensity_range"}
+    rows, cols = shape[:2]
+    if method == "sgm":
+        need = memory_estimate(
+            (rows, cols),
+            num_disparities=options.num_disparities,
+            paths=options.paths,
+            threads=options.threads or 1,
+            block_size=options.block_size,
+        )
+        if need / 1048576.0 > options.max_memory_mb:
+            grey = np.zeros((rows, cols), dtype=np.uint8)
+            SemiGlobalMatcher(**kernel_params).compute(grey, grey)
+    elif cols * ((options.num_disparities + 7) // 8 * 8) >= 2**30:
+        row = np.zeros((1, cols), dtype=np.uint8)
+        StereoMatcher(**kernel_params).compute(row, row)
 
 
 def _match_block(
@@ -213,11 +293,11 @@ def reproject(disparity: Any, **options: Any) -> Any:
     d = _as_dask("disparity", disparity, known_shape=True)
     if "out" in options:
         raise TypeError("out is not accepted for dask arrays (store the result instead)")
-    if d.ndim not in (2, 3):
-        raise ValueError(f"disparity must have shape (H, W) or (N, H, W), got {d.shape}")
-    # the checks of the numpy function, on a frame-shaped (for the default cx, cy) stand-in
-    probe = np.zeros((1, *d.shape[-2:]) if d.ndim == 3 else d.shape[-2:], dtype=d.dtype)
-    stereodepth.reproject(probe, **options)
+    _check_disparity(d)
+    # The options checked by the numpy function on an empty stack of frames of the real frame
+    # shape (for the default cx, cy): every check, and no pixel reprojected while the graph is
+    # built (a frame-shaped probe did a whole frame's work, ~1 s at 8000x8000).
+    stereodepth.reproject(np.zeros((0, *d.shape[-2:]), dtype=d.dtype), **options)
     d = _frames_per_chunk(d, 2)
     return d.map_blocks(
         _reproject_block,

@@ -38,11 +38,13 @@ Methods
     P1=8*bs*bs, P2=32*bs*bs)`` (the usual penalties for one channel; mode ``MODE_SGBM`` and the
     other parameters at OpenCV's defaults) on the same grey images; default block size 5.
     ``opencv-sgbm-3way`` and ``opencv-sgbm-hh``: the same in ``MODE_SGBM_3WAY`` and
-    ``MODE_HH``. ``opencv-sgbm-3way-padded``: ``MODE_SGBM_3WAY`` on the grey pair padded on the
-    left by ``num_disparities`` columns (each image's first column repeated,
-    ``cv2.BORDER_REPLICATE``), the padding cut off the result: OpenCV then matches the left
-    band of ``num_disparities - 1`` columns that it otherwise leaves without a match, which is
-    how OpenCV users get a disparity there (the peer of our border band); the padding is timed.
+    ``MODE_HH`` (the method chooses the mode: ``--opencv-option mode=N`` is refused;
+    OpenCV's ``MODE_HH4`` is not offered). ``opencv-sgbm-3way-padded``: ``MODE_SGBM_3WAY``
+    on the grey pair padded on the left by ``num_disparities`` columns (each image's first
+    column repeated, ``cv2.BORDER_REPLICATE``), the padding cut off the result: OpenCV then
+    matches the left band of ``num_disparities - 1`` columns that it otherwise leaves without
+    a match, which is how OpenCV users get a disparity there (the peer of our border band);
+    the padding is timed.
     OpenCV's int16 output (disparity x 16) becomes float32 / 16 with the values below
     ``minDisparity * 16`` = 0 (no match; OpenCV writes ``(minDisparity - 1) * 16``) as NaN,
     by :func:`stereodepth.from_opencv_disparity`. A raw value outside the searched range,
@@ -735,12 +737,15 @@ _OPENCV_OPTION_RULES: dict[str, dict[str, tuple[Callable[[int], bool], str]]] = 
         "disp12_max_diff": _within(*_C_INT),
         "p1": _at_least(1),
         "p2": _at_least(1),
-        "mode": (
-            lambda v: v in (0, 1, 2, 3),
-            "0 (MODE_SGBM), 1 (MODE_HH), 2 (MODE_SGBM_3WAY) or 3 (MODE_HH4)",
-        ),
     },
 }
+#: ``--opencv-option mode=N`` is refused: the method name chooses StereoSGBM's mode (a mode
+#: set on every selected matcher ran them all in one mode under their own names).
+_OPENCV_MODE_REFUSED = (
+    "the method chooses OpenCV's SGBM mode: opencv-sgbm (MODE_SGBM), opencv-sgbm-hh "
+    "(MODE_HH), opencv-sgbm-3way and opencv-sgbm-3way-padded (MODE_SGBM_3WAY); MODE_HH4 is "
+    "not offered"
+)
 
 
 def _check_opencv_options(
@@ -748,8 +753,8 @@ def _check_opencv_options(
 ) -> None:
     """Each ``--opencv-option`` value checked against what the selected OpenCV matchers
     (``variants``) take, before any scene is read: one line naming the option as typed
-    (``texts``: key to the text given) and the matcher (``mode=99`` was taken without a
-    word). P2 must be above P1, each the one given or eval's for the variant's block size
+    (``texts``: key to the text given) and the matcher (``pre_filter_cap=64`` reached
+    OpenCV). P2 must be above P1, each the one given or eval's for the variant's block size
     (8 and 32 x its square): OpenCV replaced a smaller P2 by P1 + 1 without a word."""
     methods = {v.method for v in variants}
     kinds = {("bm" if m == "opencv-bm" else "sgbm"): m for m in sorted(methods)}
@@ -1464,9 +1469,10 @@ def register(subparsers: Any) -> None:
         default=[],
         metavar="KEY=VALUE",
         help="OpenCV matcher parameter, repeatable: uniqueness_ratio=10 calls "
-        "setUniquenessRatio(10) on every selected OpenCV matcher that has it (mode=2 runs "
-        "SGBM as MODE_SGBM_3WAY); each value is checked first against what OpenCV takes "
-        "(mode 0..3, pre_filter_cap 1..63 for BM, ...)",
+        "setUniquenessRatio(10) on every selected OpenCV matcher that has it; each value is "
+        "checked first against what OpenCV takes (pre_filter_cap 1..63 for BM, ...). Not "
+        "mode: the method chooses it (opencv-sgbm MODE_SGBM, opencv-sgbm-hh MODE_HH, "
+        "opencv-sgbm-3way MODE_SGBM_3WAY; MODE_HH4 is not offered)",
     )
     m.add_argument(
         "--channel-order",
@@ -1730,6 +1736,11 @@ def run(args: argparse.Namespace) -> int:
             if key in _RESERVED_OPTIONS:
                 raise _usage_error(f"{flag} {key}: {_RESERVED_OPTIONS[key]}")
     opencv_options = dict(args.opencv_option)
+    for key in opencv_options:
+        # Every spelling that reaches setMode (Mode, mode_ ...), not only "mode".
+        if _camel(key) == "Mode":
+            typed = _as_typed(key, opencv_options[key], getattr(args, "opencv_option_text", None))
+            raise _usage_error(f"--opencv-option {typed}: {_OPENCV_MODE_REFUSED}")
     variants = _variants(args.method or [("stereodepth", None)], args.block_size)
     scenes = find_scenes(args.dir, args.scene)
 

@@ -14,6 +14,8 @@ import os
 import re
 import secrets
 import stat
+import threading
+import warnings
 from collections.abc import Iterator
 from pathlib import Path
 from typing import IO, Any
@@ -24,6 +26,7 @@ from . import _validate as check
 from ._validate import native_order
 
 __all__ = [
+    "MAX_IMAGE_PIXELS",
     "TEMP_MARKER",
     "atomic_write",
     "read_disparity_pfm",
@@ -49,6 +52,54 @@ def _pil() -> Any:
     except ImportError as exc:  # pragma: no cover - depends on the environment
         raise ImportError('reading images needs Pillow: pip install "stereodepth[batch]"') from exc
     return Image
+
+
+#: The most pixels :func:`read_image` reads from a file Pillow decodes: Pillow's own refusal
+#: (twice its ``Image.MAX_IMAGE_PIXELS``, 89,478,485 by default). Pillow warns
+#: (``DecompressionBombWarning``) from its ``MAX_IMAGE_PIXELS`` up: read_image reads those
+#: images (a 12000 x 12000 pair) without that warning, and refuses larger ones with a
+#: ValueError naming the file and its size.
+MAX_IMAGE_PIXELS = 2 * 89_478_485
+
+# warnings' filters are process-wide: reads that silence Pillow's warning take turns, so that
+# none restores the filters another had changed.
+_PIL_WARNINGS_LOCK = threading.Lock()
+
+
+@contextlib.contextmanager
+def _no_bomb_warning(Image: Any) -> Iterator[None]:
+    """Pillow's DecompressionBombWarning silenced for one read (its ``MAX_IMAGE_PIXELS``
+    is not our limit: :data:`MAX_IMAGE_PIXELS` is, checked by :func:`_pil_open`)."""
+    with _PIL_WARNINGS_LOCK, warnings.catch_warnings():
+        warnings.simplefilter("ignore", Image.DecompressionBombWarning)
+        yield
+
+
+def _pil_open(Image: Any, p: Path) -> tuple[Any, bool]:
+    """``Image.open(p)`` (the header only) without Pillow's DecompressionBombWarning, and
+    whether the image is over Pillow's ``MAX_IMAGE_PIXELS`` (its decoding, where some
+    formats check again, is then to be silenced too). ValueError naming the file and its
+    size when it is over :data:`MAX_IMAGE_PIXELS` or what Pillow opens."""
+    with _no_bomb_warning(Image):
+        try:
+            im = Image.open(p)
+        except Image.DecompressionBombError as exc:  # Image.MAX_IMAGE_PIXELS lowered
+            got = re.search(r"\((\d+) pixels\)", str(exc))
+            n = f"{int(got[1]):,} pixels" if got else "more pixels"
+            raise ValueError(
+                f"cannot decode image {p}: {n}, more than the "
+                f"{2 * (Image.MAX_IMAGE_PIXELS or 0):,} Pillow opens (twice "
+                "PIL.Image.MAX_IMAGE_PIXELS)"
+            ) from None
+    w, h = im.size
+    if w * h > MAX_IMAGE_PIXELS:
+        im.close()
+        raise ValueError(
+            f"cannot decode image {p}: {w} x {h} pixels is more than the {MAX_IMAGE_PIXELS:,} "
+            "stereodepth reads"
+        )
+    limit = Image.MAX_IMAGE_PIXELS
+    return im, limit is not None and w * h > limit
 
 
 #: The EXIF orientation tag (TIFF tag 274): how the stored pixels are to be turned for display.
@@ -115,8 +166,9 @@ def read_image(path: str | os.PathLike[str]) -> np.ndarray:
     pixel frame a calibration made from OpenCV-read images refers to.
 
     Raises FileNotFoundError for a missing file, IsADirectoryError for a folder and
-    ValueError naming the file when it cannot be decoded (or is larger than Pillow opens: its
-    ``DecompressionBombError``, twice ``Image.MAX_IMAGE_PIXELS``), holds floating-point
+    ValueError naming the file when it cannot be decoded (or has more than
+    :data:`MAX_IMAGE_PIXELS`, 179 megapixels, what Pillow opens; Pillow's
+    ``DecompressionBombWarning`` for images above half that is not shown), holds floating-point
     samples (a float TIFF or a PFM: :func:`read_pfm` reads those) or is 16-bit colour or
     16-bit with alpha (Pillow would keep only the high byte of each sample)."""
     return _read_image(_as_path(path), turn=True)
@@ -133,7 +185,8 @@ def _read_image(p: Path, *, turn: bool) -> np.ndarray:
         return read_pnm(p)
     Image = _pil()
     try:
-        with Image.open(p) as im:
+        im, big = _pil_open(Image, p)
+        with im:
             if im.mode not in _GREY16_MODES and any(";16" in m for m in _raw_modes(im)):
                 # Pillow keeps only the high byte of these: 12-bit colour (0..4095) would
                 # become 0..15, an almost black image, silently.
@@ -144,7 +197,8 @@ def _read_image(p: Path, *, turn: bool) -> np.ndarray:
                     "byte; the matchers take 16-bit grey or 8-bit colour: convert it to one "
                     "of those"
                 )
-            im.load()
+            with _no_bomb_warning(Image) if big else contextlib.nullcontext():
+                im.load()
             if turn:
                 im = upright(im)
             mode = im.mode
@@ -174,8 +228,6 @@ def _read_image(p: Path, *, turn: bool) -> np.ndarray:
             return np.asarray(im.convert("RGB"), dtype=np.uint8)
     except (OSError, SyntaxError) as exc:  # Pillow's errors for truncated / corrupt files
         raise ValueError(f"cannot decode image {p}: {exc}") from exc
-    except Image.DecompressionBombError as exc:  # a header claiming over 179 megapixels
-        raise ValueError(f"cannot decode image {p}: {exc}") from exc
 
 
 _GREY16_MODES = ("I;16", "I;16B", "I;16L", "I")
@@ -196,7 +248,8 @@ def _sample_dtype(path: str | os.PathLike[str]) -> np.dtype | None:
                 head = _parse_head(f, size, functools.partial(_pnm_head, p, file_size=size))
                 dtype: np.dtype = head[4]
                 return dtype
-        with Image.open(p) as im:
+        im, _ = _pil_open(Image, p)
+        with im:
             if im.mode in _GREY16_MODES:
                 return np.dtype(np.uint16)
             if im.mode == "F" or im.mode.startswith("F;"):

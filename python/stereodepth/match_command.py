@@ -87,6 +87,15 @@ def register(subparsers: Any) -> None:
     )
     p.add_argument("left", type=path_arg, metavar="LEFT", help="the left image (PNG, JPEG, ...)")
     p.add_argument("right", type=path_arg, metavar="RIGHT", help="the right image, the same size")
+    from ._methods import block_sizes_text
+    from .matching import (
+        DEFAULT_BLOCK_SIZE,
+        MAX_ABS_MIN_DISPARITY,
+        MAX_BLOCK_SIZE,
+        MAX_NUM_DISPARITIES,
+    )
+    from .semi_global import DEFAULT_BLOCK_SIZE as SGM_BLOCK_SIZE
+
     m = p.add_argument_group("the matcher")
     m.add_argument(
         "--method",
@@ -98,13 +107,38 @@ def register(subparsers: Any) -> None:
         "--num-disparities",
         type=int,
         metavar="N",
-        help="disparities searched (default: ndisp of a Middlebury calib.txt, else an eighth "
-        "of the width rounded up to 16, from 16 to 256)",
+        help=f"disparities searched, 1 to {MAX_NUM_DISPARITIES} with either method (default: "
+        "ndisp of a Middlebury calib.txt, else an eighth of the width rounded up to 16, from "
+        "16 to 256)",
     )
-    m.add_argument("--min-disparity", type=int, default=0, metavar="N", help="default 0")
-    m.add_argument("--block-size", type=int, metavar="N", help="block matcher's block side (odd)")
-    m.add_argument("--cost", choices=("census", "sad"), help="block matcher's cost (census)")
-    m.add_argument("--threads", type=int, metavar="N", help="threads (default: every core)")
+    m.add_argument(
+        "--min-disparity",
+        type=int,
+        default=0,
+        metavar="N",
+        help=f"the smallest disparity searched, an integer from {-MAX_ABS_MIN_DISPARITY} to "
+        f"{MAX_ABS_MIN_DISPARITY}, either method (default 0)",
+    )
+    costs, sgm_sizes = block_sizes_text()
+    m.add_argument(
+        "--block-size",
+        type=int,
+        metavar="N",
+        help=f"the side of the matching block, by method: bm an odd number, {costs} (default "
+        f"{DEFAULT_BLOCK_SIZE}); sgm {sgm_sizes} only, the box its census costs are summed "
+        f"over (default {SGM_BLOCK_SIZE})",
+    )
+    m.add_argument(
+        "--cost",
+        choices=tuple(MAX_BLOCK_SIZE),
+        help="the block matcher's cost (default census); --method bm only",
+    )
+    m.add_argument(
+        "--threads",
+        type=int,
+        metavar="N",
+        help="threads, an integer >= 0, either method (default, or 0: every core)",
+    )
     r = p.add_argument_group("the rig (for depth)")
     r.add_argument(
         "--calib",
@@ -424,8 +458,13 @@ def run(args: argparse.Namespace) -> int:
         )
     want_preview = not args.no_preview
     if want_preview:
-        from .colormap import colormap_lut
+        from .cli import import_uninterrupted
+        from .colormap import _INSTALL_HINT, colormap_lut
 
+        try:
+            import_uninterrupted("matplotlib", "matplotlib.colors")
+        except ImportError as exc:
+            raise ImportError(_INSTALL_HINT) from exc
         try:  # a bad name or a missing extra (ImportError, exit 1) fails before any work
             colormap_lut(args.cmap)
         except ValueError as exc:  # named the library's cmap, not the flag

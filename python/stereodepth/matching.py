@@ -741,11 +741,12 @@ def to_opencv_disparity(disparity: Any, *, min_disparity: int = 0) -> np.ndarray
 
     Returns int16 disparity x 16, rounded to the nearest sixteenth (half away from zero), with
     holes (NaN) set to OpenCV's invalid value ``(min_disparity - 1) * 16``. Raises ValueError
-    when a finite disparity does not fit: at 2048 px or more, or below ``min_disparity``
-    (which OpenCV's readers, and :func:`stereodepth.from_opencv_disparity`, would take for a
-    hole); when the invalid value itself does not fit in int16; or for a ``disparity`` whose
-    shape is not (H, W) or (N, H, W), as every disparity map here (TypeError for one that is
-    not of floats, or is a masked array, whose mask would be ignored).
+    when a finite disparity, so rounded, does not fit: at 2048 px or more, or below
+    ``min_disparity`` (which OpenCV's readers, and :func:`stereodepth.from_opencv_disparity`,
+    would take for a hole; -0.03 px rounds to 0 and is taken with ``min_disparity=0``); when
+    the invalid value itself does not fit in int16; or for a ``disparity`` whose shape is not
+    (H, W) or (N, H, W), as every disparity map here (TypeError for one that is not of floats,
+    or is a masked array, whose mask would be ignored).
     """
     arr = check.disparity_array("disparity", disparity)
     if arr.dtype.kind != "f":

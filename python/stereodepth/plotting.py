@@ -12,7 +12,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from . import _validate as check
-from .charts import Chart, Charts, chart_data
+from .charts import PLOT_RANGE, Chart, Charts, chart_data, check_chartable
 from .io import atomic_write
 from .rig import StereoRig
 
@@ -46,8 +46,32 @@ def _label(chart: Chart, name: str, y: float) -> str:
 def _draw(ax: Axes, chart: Chart) -> None:
     import math
 
+    # the scales first: set on drawn data, they autoscale there and then (and warn)
+    if chart.x_log:
+        ax.set_xscale("log")
+    if chart.y_log:
+        ax.set_yscale("log")
+    # A curve flat to a double (depth B*f/doffs for disparities far below doffs) or a lone
+    # point: a decade either side, set before plotting (matplotlib warned of singular limits).
+    xs = [v for s in chart.series for v in s.x] + [m.x for m in chart.markers]
+    ys = [v for s in chart.series for v in s.y] + [m.y for m in chart.markers]
+    for values, axis in ((xs, ax.xaxis), (ys, ax.yaxis)):
+        shown = [v for v in values if v > 0]
+        if shown and min(shown) == max(shown):
+            ax.autoscale(False, axis="x" if axis is ax.xaxis else "y")
+            axis.set_view_interval(shown[0] / 10, shown[0] * 10, ignore=True)
     for i, s in enumerate(chart.series):
-        ax.plot(s.x, s.y, color=_SERIES_COLOURS[i % len(_SERIES_COLOURS)], lw=2, label=s.name)
+        lone = (
+            len(set(zip(s.x, s.y, strict=True))) == 1
+        )  # a flat curve's one point: a line of no length
+        ax.plot(
+            s.x,
+            s.y,
+            color=_SERIES_COLOURS[i % len(_SERIES_COLOURS)],
+            lw=2,
+            marker="o" if lone else None,
+            label=s.name,
+        )
     xs = [x for s in chart.series for x in s.x]
     for i, m in enumerate(chart.markers):
         if (chart.x_log and not m.x > 0) or (chart.y_log and not m.y > 0):
@@ -88,10 +112,6 @@ def _draw(ax: Axes, chart: Chart) -> None:
             zorder=4,
             bbox={"boxstyle": "round,pad=0.25", "fc": "white", "ec": "#fecaca", "lw": 0.8},
         )
-    if chart.x_log:
-        ax.set_xscale("log")
-    if chart.y_log:
-        ax.set_yscale("log")
     ax.set_title(chart.title, fontsize=11, loc="left", fontweight="bold")
     ax.set_xlabel(chart.x_label)
     ax.set_ylabel(chart.y_label)
@@ -104,6 +124,15 @@ def _draw(ax: Axes, chart: Chart) -> None:
 def draw_charts(charts: Charts, *, title: str | None = None) -> Figure:
     """The two charts side by side on a new matplotlib Figure (Agg canvas), under ``title``."""
     _matplotlib()
+    for chart in (charts.depth_vs_disparity, charts.error_vs_depth):
+        values = [v for s in chart.series for v in (*s.x, *s.y)]
+        values += [v for m in chart.markers for v in (m.x, m.y) if v > 0]
+        if not all(PLOT_RANGE[0] <= v <= PLOT_RANGE[1] for v in values):
+            raise ValueError(
+                f"the chart {chart.title!r} cannot be drawn: its log axes show numbers from "
+                f"{PLOT_RANGE[0]:g} to {PLOT_RANGE[1]:g} only, got "
+                f"{min(values):g} to {max(values):g}"
+            )
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 
@@ -138,7 +167,10 @@ def save_charts(
     ``path`` (.png, .svg or .pdf) and returns the path.
 
     The file is written whole or not at all: to a temporary file in the same folder, then
-    renamed over ``path``. Bad arguments raise before anything is written."""
+    renamed over ``path``. Bad arguments raise before anything is written, and so do values
+    the calculator takes but the charts cannot show (a disparity, depth or depth error
+    outside :data:`stereodepth.charts.PLOT_RANGE`: ValueError naming the parameter and the
+    values it can take for this rig)."""
     if not isinstance(path, (str, os.PathLike)):
         raise TypeError(f"path must be a str or os.PathLike, got {type(path).__name__} {path!r}")
     if not os.fspath(path):  # Path("") is "."
@@ -153,6 +185,12 @@ def save_charts(
     if not 10 <= check.integer("dpi", dpi, minimum=10) <= 1200:
         raise ValueError(f"dpi must be an integer from 10 to 1200, got {dpi!r}")
     charts = chart_data(
+        rig,
+        disparity_px=disparity_px,
+        disparity_step_px=disparity_step_px,
+        max_disparity_px=max_disparity_px,
+    )
+    check_chartable(  # values the calculator takes but a log axis cannot show
         rig,
         disparity_px=disparity_px,
         disparity_step_px=disparity_step_px,

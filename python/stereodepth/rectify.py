@@ -314,16 +314,53 @@ def stereo_rectify(
         Naming the parameter: wrong types, shapes or values, a K with skew, a wrong number of
         coefficients, an R that is not a rotation, a zero T.
     """
+    args = _checked_rectify_args(
+        K1, D1, K2, D2, image_size, R, T, alpha, new_image_size, zero_disparity,
+        distortion_model, balance, fov_scale,
+    )  # fmt: skip
+    model, k1, d1, k2, d2, (width, height), rot, t, a, new_size, zd, b, fov = args
+    new_w, new_h = (0, 0) if new_size is None else new_size
+    if model == "equidistant":
+        r = _core.fisheye_stereo_rectify(
+            k1, d1, k2, d2, width, height, rot, t, b, fov, new_w, new_h, zd
+        )
+    else:
+        r = _core.stereo_rectify(k1, d1, k2, d2, model, width, height, rot, t, a, new_w, new_h, zd)
+    _check_finite_rectification(r, k1, k2, d1, d2, t, (width, height), a)
+    return Rectification(
+        r["R1"], r["R2"], r["P1"], r["P2"], r["Q"], tuple(r["roi1"]), tuple(r["roi2"])
+    )
+
+
+def _checked_rectify_args(
+    K1: Any,
+    D1: Any,
+    K2: Any,
+    D2: Any,
+    image_size: Any,
+    R: Any,
+    T: Any,
+    alpha: Any,
+    new_image_size: Any,
+    zero_disparity: Any,
+    distortion_model: Any,
+    balance: Any,
+    fov_scale: Any,
+) -> tuple[Any, ...]:
+    """:func:`stereo_rectify`'s arguments checked, in its order: ``(model, K1, D1, K2, D2,
+    (width, height), R, T, alpha, new_image_size or None, zero_disparity, balance,
+    fov_scale)``, R the nearest rotation. Raises its TypeError or ValueError. Shared with the
+    numpy oracle (:func:`stereodepth.reference.stereo_rectify`)."""
     model = _model("distortion_model", distortion_model)
     k1 = _camera_matrix("K1", K1)
     k2 = _camera_matrix("K2", K2)
     d1 = _distortion("D1", D1, model)
     d2 = _distortion("D2", D2, model)
-    width, height = _size("image_size", image_size)
+    size = _size("image_size", image_size)
     rot = _nearest_rotation(_rotation("R", R, _ROUNDED_ROTATION))
     t = _real_matrix("T", T, (3,))
-    if not np.any(t != 0):
-        raise ValueError("T must not be zero: the cameras need a baseline, got [0, 0, 0]")
+    if not np.sqrt(float(t @ t)) > 0:  # a length that underflows too, as the native check
+        raise ValueError(f"T must not be zero: the cameras need a baseline, got {t.tolist()}")
     if abs(t[2]) >= max(abs(t[0]), abs(t[1])):
         # Bouguet's method turns the baseline into the new x (or y) axis: along the optical
         # axis, the rectified cameras would look sideways, away from what both images show.
@@ -332,7 +369,7 @@ def stereo_rectify(
             f"cameras are one behind the other, which no rectification can pair, got {t.tolist()}"
         )
     a = _alpha(alpha)
-    new_w, new_h = (0, 0) if new_image_size is None else _size("new_image_size", new_image_size)
+    new_size = None if new_image_size is None else _size("new_image_size", new_image_size)
     zd = _zero_disparity(zero_disparity)
     b = check.finite("balance", balance)
     if not 0 <= b <= 1:
@@ -344,20 +381,12 @@ def stereo_rectify(
                 "alpha applies to pinhole models; equidistant rigs take balance and fov_scale, "
                 f"got alpha={alpha!r}"
             )
-        r = _core.fisheye_stereo_rectify(
-            k1, d1, k2, d2, width, height, rot, t, b, fov, new_w, new_h, zd
+    elif b != 0.0 or fov != 1.0:
+        raise ValueError(
+            "balance and fov_scale apply to equidistant rigs; use alpha, got "
+            f"balance={balance!r}, fov_scale={fov_scale!r}"
         )
-    else:
-        if b != 0.0 or fov != 1.0:
-            raise ValueError(
-                "balance and fov_scale apply to equidistant rigs; use alpha, got "
-                f"balance={balance!r}, fov_scale={fov_scale!r}"
-            )
-        r = _core.stereo_rectify(k1, d1, k2, d2, model, width, height, rot, t, a, new_w, new_h, zd)
-    _check_finite_rectification(r, k1, k2, d1, d2, t, (width, height), a)
-    return Rectification(
-        r["R1"], r["R2"], r["P1"], r["P2"], r["Q"], tuple(r["roi1"]), tuple(r["roi2"])
-    )
+    return model, k1, d1, k2, d2, size, rot, t, a, new_size, zd, b, fov
 
 
 def _check_finite_rectification(

@@ -377,15 +377,24 @@ def _rotation_matrix(v: np.ndarray) -> np.ndarray:
 def undistort_points(points: Any, K: Any, D: Any, model: str = "plumb_bob") -> np.ndarray:
     """Oracle of the native undistortion (cv2.undistortPoints: 5 fixed-point iterations;
     cv2.fisheye.undistortPoints: Newton on theta, at most 10 steps, to 1e-8): (N, 2) pixels
-    to (N, 2) ideal normalized coordinates."""
+    to (N, 2) ideal normalized coordinates. ``K``, ``D`` and ``model`` as
+    :func:`stereodepth.stereo_rectify` takes them (``D`` None: no distortion). Raises
+    TypeError or ValueError naming the parameter, as :func:`stereo_rectify` does for them; for
+    ``points`` not of shape (N, 2)."""
+    from .rectify import _camera_matrix, _distortion, _model
+
+    m = _model("model", model)
+    K = _camera_matrix("K", K)
+    d = _distortion("D", D, m)
+    p = check.real_array("points", points)
+    if p.ndim != 2 or p.shape[1] != 2:
+        raise ValueError(f"points must have shape (N, 2), got shape {p.shape}")
     k = np.zeros(8)
-    d = np.asarray(D, dtype=np.float64).reshape(-1)
     k[: d.size] = d
-    p = np.asarray(points, dtype=np.float64).reshape(-1, 2)
     fx, fy, cx, cy = K[0, 0], K[1, 1], K[0, 2], K[1, 2]
     out = np.empty_like(p)
     for n, (u, v) in enumerate(p):
-        if model == "equidistant":
+        if m == "equidistant":
             x, y = (u - cx) / fx, (v - cy) / fy
             theta_d = min(max(-np.pi / 2, np.sqrt(x * x + y * y)), np.pi / 2)
             theta, scale, converged = theta_d, 0.0, False
@@ -413,7 +422,7 @@ def undistort_points(points: Any, K: Any, D: Any, model: str = "plumb_bob") -> n
             continue
         x = x0 = (u - cx) * (1.0 / fx)
         y = y0 = (v - cy) * (1.0 / fy)
-        if model == "plumb_bob":
+        if m == "plumb_bob":
             for _ in range(5):
                 r2 = x * x + y * y
                 icdist = (1 + ((k[7] * r2 + k[6]) * r2 + k[5]) * r2) / (
@@ -475,30 +484,14 @@ def _stereo_rectify(
     balance: float,
     fov_scale: float,
 ) -> Any:
-    from .rectify import (
-        _ROUNDED_ROTATION,
-        Rectification,
-        _alpha,
-        _camera_matrix,
-        _check_finite_rectification,
-        _distortion,
-        _model,
-        _nearest_rotation,
-        _real_matrix,
-        _rotation,
-        _size,
-        _zero_disparity,
-    )
+    from .rectify import Rectification, _check_finite_rectification, _checked_rectify_args
 
-    model = _model("distortion_model", distortion_model)
-    k1, k2 = _camera_matrix("K1", K1), _camera_matrix("K2", K2)
-    d1, d2 = _distortion("D1", D1, model), _distortion("D2", D2, model)
-    w, h = _size("image_size", image_size)
-    rot = _nearest_rotation(_rotation("R", R, _ROUNDED_ROTATION))
-    t_in = _real_matrix("T", T, (3,))
-    a = _alpha(alpha)
-    nw, nh = (w, h) if new_image_size is None else _size("new_image_size", new_image_size)
-    zero_disparity = _zero_disparity(zero_disparity)
+    args = _checked_rectify_args(
+        K1, D1, K2, D2, image_size, R, T, alpha, new_image_size, zero_disparity,
+        distortion_model, balance, fov_scale,
+    )  # fmt: skip
+    model, k1, d1, k2, d2, (w, h), rot, t_in, a, new_size, zero_disparity, balance, fov_scale = args
+    nw, nh = (w, h) if new_size is None else new_size
     r_r = _rotation_matrix(_rotation_vector(rot) * -0.5)
     t = r_r @ t_in
     if model == "equidistant":
@@ -534,7 +527,7 @@ def _stereo_rectify(
                 h * 0.5 * ar / (q[:, 1].max() - cn[1]),
             ]
             f = balance * min(fs) + (1.0 - balance) * max(fs)
-            f *= 1.0 / fov_scale if fov_scale > 0 else 1.0
+            f *= 1.0 / fov_scale
             c = np.array([-cn[0] * f + w * 0.5, (-cn[1] * f + h * ar * 0.5) / ar])
             fy = f / ar
             if new_image_size is not None:

@@ -716,7 +716,7 @@ class StereoRig:
         """A (H, W) or (N, H, W) map must match the rig's image size where it has one."""
         if self._width_px is None and self._height_px is None:
             return
-        shape = np.shape(disparity)
+        shape = check.disparity_array(name, disparity).shape  # a ragged list named, not numpy's
         if len(shape) not in (2, 3):
             return  # disparity_to_depth names the shape
         h, w = shape[-2:]

@@ -87,7 +87,10 @@ Output, per pair with stem S, in OUTDIR
     disparity +inf where invalid as Middlebury's, depth NaN),
     ``S.ply`` with ``--ply`` (binary, coloured by the left image, metres), and
     ``S.record.json`` last: the pair's record (status, inputs, calibration, options, outputs,
-    density, time), written for a failed pair too. At the end, ``report.json`` (or
+    density, time), written for a failed pair too, and first, before the pair's first file,
+    with status ``started`` and the files to come (a pair killed midway is then redone, and
+    its files are known as the job's: a file at a pair's output path that no record lists is
+    not replaced without ``--force``). At the end, ``report.json`` (or
     ``--report FILE``, whose folder must exist) lists every pair's status, time and density.
     No pair's file can be named like the report; a ``--report`` that names a file of a pair
     or an input is refused.
@@ -107,10 +110,11 @@ Output, per pair with stem S, in OUTDIR
 Running
     By default the pairs run in this process, three at a time on a thread pool, each using every
     core for the matcher. ``--workers N`` starts a local Dask cluster of N worker processes
-    (loopback only) and ``--scheduler tcp://HOST:PORT`` uses an existing dask.distributed
-    cluster, whose workers must see INPUT and OUTDIR at the same paths and have stereodepth
-    installed (relative paths are made absolute first: the workers run in folders of their
-    own). A worker that dies mid-pair is replaced and the pair is run again.
+    (loopback only; N at most the cores) and ``--scheduler tcp://HOST:PORT`` uses an existing
+    dask.distributed cluster, whose workers must see INPUT and OUTDIR at the same paths and
+    have stereodepth installed (relative paths are made absolute first: the workers run in
+    folders of their own); an address where no scheduler answers within 12 s is refused. A
+    worker that dies mid-pair is replaced and the pair is run again.
 
 Errors
     Everything no pair could get past is checked before the first pair: the options (matcher

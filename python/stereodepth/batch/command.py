@@ -137,8 +137,14 @@ def register(subparsers: Any) -> None:
         "rig; required with KITTI files, with --focal-px and with a raw --calib)",
     )
     m.add_argument("--min-disparity", type=int, metavar="D", help="smallest disparity searched")
+    from .._methods import block_sizes_text
+
+    costs, sgm_sizes = block_sizes_text()
     m.add_argument(
-        "--block-size", type=int, metavar="N", help="block side (bm: odd, >= 3; sgm: 1 or 3)"
+        "--block-size",
+        type=int,
+        metavar="N",
+        help=f"block side, by method: bm an odd number, {costs}; sgm {sgm_sizes} only",
     )
     m.add_argument("--cost", choices=("census", "sad"), help="matching cost (bm only)")
     m.add_argument(
@@ -169,7 +175,10 @@ def register(subparsers: Any) -> None:
         help="an existing dask.distributed scheduler, tcp://HOST:PORT",
     )
     r.add_argument(
-        "--workers", type=int, metavar="N", help="start a local Dask cluster of N worker processes"
+        "--workers",
+        type=int,
+        metavar="N",
+        help="start a local Dask cluster of N worker processes (at most the cores)",
     )
     r.add_argument(
         "--threads",

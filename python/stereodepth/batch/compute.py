@@ -114,6 +114,17 @@ def process_pair(pair: Pair, options: BatchOptions, threads: int | None = None) 
                 "calibration of another resolution gives wrong depths"
             )
         paths = options.output_paths(pair.stem)
+        # Before the first file, a record that lists every file this run may write (and those
+        # of the run before), in place of the run before's: a job killed before the final
+        # record leaves files that the next run knows as its own (a file that no record lists
+        # is the user's, not replaced without --force), and a pair that is redone, not done
+        # (the run before's "ok" record, left in place, passed a mix of old and new files of
+        # the same sizes for a finished pair).
+        listed = {k: {"path": str(v)} for k, v in paths.items()}
+        listed.update({f"earlier {i}": {"path": str(v)} for i, v in enumerate(sorted(earlier))})
+        _write_record(
+            options.record_path(pair.stem), {**record, "status": "started", "outputs": listed}
+        )
         if options.rectification is not None:
             # The pair as the rectified cameras see it: everything below is in their frame.
             left, right = options.rectification.rectify(left, right, threads)

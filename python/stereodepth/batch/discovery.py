@@ -126,6 +126,40 @@ def _batch_outputs(d: Path) -> set[str]:
     return names
 
 
+def _whole_token_at(stem: str, token: str) -> int:
+    """Where ``token`` last stands in ``stem`` as a whole word (no letter or digit either side:
+    x_im1, 0003_right, im1), or -1 (im1E, im10, copyright)."""
+    i = stem.rfind(token)
+    while i >= 0:
+        before = stem[i - 1] if i > 0 else ""
+        after = stem[i + len(token)] if i + len(token) < len(stem) else ""
+        if not before.isalnum() and not after.isalnum():
+            return i
+        i = stem.rfind(token, 0, i + len(token) - 1)
+    return -1
+
+
+def _rights_alone(
+    d: Path, names: Sequence[tuple[str, str]], pairs: Sequence[Pair]
+) -> list[tuple[str, str]]:
+    """(name, the left image's name it lacks) for each image in ``d`` named with a right
+    token as a whole word (x_im1.png, 0003_right.png; not im1E.png, Middlebury 2014's other
+    exposure, nor copyright.png) that is the right image of none of ``pairs``."""
+    used = {p.right.name for p in pairs}
+    outputs = _batch_outputs(d)
+    alone = []
+    for f in _images(d):
+        if f.name in used or f.name in outputs or _token_split(f.stem, names) is not None:
+            continue
+        for left_tok, right_tok in names:
+            i = _whole_token_at(f.stem, right_tok)
+            if i >= 0:
+                left = f.stem[:i] + left_tok + f.stem[i + len(right_tok) :] + f.suffix
+                alone.append((f.name, left))
+                break
+    return alone
+
+
 def _scene_pairs(d: Path, names: Sequence[tuple[str, str]], *, prefix: str | None) -> list[Pair]:
     pairs = []
     outputs = _batch_outputs(d)
@@ -262,6 +296,12 @@ def _search(
             return
         found = _scene_pairs(d, names, prefix=prefix)
         pairs.extend(found)
+        if found:
+            # A right image whose left one is missing or named otherwise (x_im1.png beside
+            # im0.png and im1.png) went missing silently, where a left one without its right
+            # is a failed pair; as in left/right folders, such images are listed.
+            for name, left_name in _rights_alone(d, names, found):
+                skipped.append((d / name, f"a right image with no left image {left_name}"))
         if not found:
             images = _images(d)
             ours = _batch_outputs(d)

@@ -226,6 +226,13 @@ def check_runner(
         check_scheduler_address(scheduler)
     if workers is not None and workers < 1:
         raise UsageError(f"--workers must be an integer >= 1, got {workers}")
+    if workers is not None and workers > (cores := check.available_cores()):
+        # Each worker is a process with its own matcher and buffers: more than the cores only
+        # compete for them, and thousands took minutes (and gigabytes) to start, deaf to
+        # Ctrl-C while the cluster started.
+        raise UsageError(
+            f"--workers must be at most {cores} (the cores this process may use), got {workers}"
+        )
     if threads is not None and threads < 0:
         raise UsageError(f"--threads must be an integer >= 0 (0: every core), got {threads}")
     if scheduler is not None or workers is not None:
@@ -333,6 +340,7 @@ def _run_locked(
             removed += len(remove_temp_files(out_dir))
             if not options.force:
                 _refuse_replacing_other_images(pairs, options)
+                _refuse_replacing_files_of_no_record(pairs, options)
             todo: list[tuple[int, Pair]] = []
             for i, p in enumerate(pairs):
                 earlier = None if options.force else completed_record(p, options)
@@ -418,6 +426,29 @@ def _refuse_replacing_other_images(pairs: Sequence[Pair], options: BatchOptions)
                 f"images ({before[0]}, {before[1]}; this job's are {p.left}, {p.right}): "
                 "choose another OUTDIR (-o), or give --force to replace them"
             )
+
+
+def _refuse_replacing_files_of_no_record(pairs: Sequence[Pair], options: BatchOptions) -> None:
+    """UsageError, before any pair runs, when a file is at one of a pair's output paths and
+    the pair's record does not list it (or there is none): no batch job wrote it, so it is
+    the user's (``l.disparity.npy`` of their own, beside the pair ``l``), and it was replaced
+    without a word. ``--force`` replaces it. A job killed mid-pair leaves only files that its
+    record, written before the first of them, lists."""
+    from .job import read_record
+    from .records import earlier_outputs
+
+    for p in pairs:
+        record = options.record_path(p.stem)
+        if record.exists() and read_record(record) is None:
+            continue  # a record of ours that cannot be read (edited by hand): the pair is redone
+        listed = earlier_outputs(p, options)
+        for path in options.output_paths(p.stem).values():
+            if path not in listed and os.path.lexists(path):
+                raise UsageError(
+                    f"OUTDIR {options.out_dir} holds {path.name}, which pair {p.stem!r} would "
+                    "write and no batch job's record lists (a file of yours?): move it, "
+                    "choose another OUTDIR (-o), or give --force to replace it"
+                )
 
 
 def _same_file(recorded: str, path: Path) -> bool:
@@ -511,6 +542,54 @@ def _sigint_as_flag() -> Iterator[threading.Event]:
         yield stop
 
 
+#: Seconds to wait for the scheduler at --scheduler: to connect, and then to answer.
+SCHEDULER_TIMEOUT_S = 10
+
+
+def _handshake(scheduler: str, timeout: float) -> None:
+    """Raises UsageError, naming ``--scheduler``, unless a dask.distributed peer at
+    ``scheduler`` completes the protocol's handshake within ``timeout`` seconds.
+
+    dask.distributed's Client bounds only the TCP connect: a server that accepts the
+    connection and never answers (an HTTP server on that port) kept it waiting for ever, and
+    one that sends other bytes (an SSH banner) had them read as a frame length, a MemoryError
+    for exabytes. The handshake runs on an event loop of its own in a thread of its own, so
+    that a caller inside a running event loop (a notebook) is not disturbed."""
+    import asyncio
+    import concurrent.futures
+
+    from distributed.comm.core import connect
+
+    async def greet() -> None:
+        # connect's own timeout ends its retries of a refused or silent connect (OSError);
+        # the outer one, a little later, the wait for the peer's half of the handshake.
+        comm = await asyncio.wait_for(connect(scheduler, timeout=timeout), timeout + 2)  # type: ignore[no-untyped-call]
+        await comm.close()
+
+    with concurrent.futures.ThreadPoolExecutor(1) as pool:
+        try:
+            pool.submit(asyncio.run, greet()).result()
+        except (asyncio.TimeoutError, TimeoutError) as exc:
+            raise UsageError(
+                f"--scheduler {scheduler!r}: no Dask scheduler answered within {timeout + 2:g} "
+                "s (something that is not one may be listening there)"
+            ) from exc
+        except OSError as exc:
+            raise UsageError(
+                f"--scheduler {scheduler!r}: cannot reach the Dask scheduler: {exc}"
+            ) from exc
+        except MemoryError as exc:
+            raise UsageError(
+                f"--scheduler {scheduler!r}: what answered there is not a Dask scheduler "
+                "(it sent bytes that read as an impossible message size)"
+            ) from exc
+        except Exception as exc:  # what the peer sent was not the protocol
+            raise UsageError(
+                f"--scheduler {scheduler!r}: what answered there is not a Dask scheduler "
+                f"({type(exc).__name__}: {exc})"
+            ) from exc
+
+
 @contextlib.contextmanager
 def _dask_client(
     scheduler: str | None, workers: int | None, threads: int | None
@@ -524,11 +603,17 @@ def _dask_client(
             'running on Dask needs dask.distributed: pip install "stereodepth[batch]"'
         ) from exc
     if scheduler is not None:
+        _handshake(scheduler, SCHEDULER_TIMEOUT_S)
         try:
-            client = Client(scheduler, timeout="10s")  # type: ignore[no-untyped-call]
+            client = Client(scheduler, timeout=f"{SCHEDULER_TIMEOUT_S}s")  # type: ignore[no-untyped-call]
         except (OSError, ValueError) as exc:
             raise UsageError(
                 f"--scheduler {scheduler!r}: cannot reach the Dask scheduler: {exc}"
+            ) from exc
+        except Exception as exc:  # a Dask peer that is not a scheduler (a worker's address)
+            raise UsageError(
+                f"--scheduler {scheduler!r}: what answered there speaks Dask's protocol but is "
+                f"not a scheduler (a worker's address?): {type(exc).__name__}: {exc}"
             ) from exc
         with client:
             yield client, f"dask {scheduler}", threads

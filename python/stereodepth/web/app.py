@@ -12,6 +12,8 @@ units of :class:`~stereodepth.StereoRig` and ``stereodepth calc``, and answers
 them), ``/openapi.json`` is the schema. Bad input answers 422 in FastAPI's error shape,
 ``{"detail": [{"loc": ["query", name], "msg": ..., "type": ...}]}``, whose message names the
 parameter, states the rule and shows what was received; no input makes the server answer 500.
+A query parameter a route does not have, on any route of the API (``/api/fields`` and the
+depth-map view's too), and one given twice where it takes one value, answer 422 at it.
 The allowed ranges are the library's rules (e.g. > 0) with a generous upper bound; a value
 whose result still leaves the range of a double (a disparity of 5e-324 px, a pixel of 1e-300
 µm) answers 422 at that parameter, as the library raises ValueError for it; null means only
@@ -25,7 +27,7 @@ against DNS rebinding), under ``stereodepth serve``, another ASGI server or moun
 
 from __future__ import annotations
 
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from importlib import resources
 from pathlib import Path
@@ -299,7 +301,7 @@ def _request_error(err: dict[str, Any]) -> dict[str, Any]:
     """FastAPI's parse and range errors, reworded in the library's style."""
     loc = [p for p in err.get("loc", ()) if isinstance(p, (str, int))]
     kind = str(err.get("type", "value_error"))
-    if kind in ("extra_forbidden", "repeated"):  # _only_known_parameters's, worded already
+    if kind in ("extra_forbidden", "repeated"):  # known_parameters's, worded already
         return {"loc": loc, "msg": str(err.get("msg")), "type": kind}
     name = loc[1] if len(loc) > 1 and isinstance(loc[1], str) else None
     field = FIELDS.get(name) if name is not None else None
@@ -448,24 +450,40 @@ _api = APIRouter()
 _REPEATABLE = {"table_disparities_px"}
 
 
-def _only_known_parameters(request: Request) -> None:
-    """422 for a parameter /api/calc does not have (a misspelt one was ignored: the answer
-    came without it) or a single-valued one given more than once (the last one was used)."""
-    errors = []
-    for name in dict.fromkeys(request.query_params.keys()):
-        values = request.query_params.getlist(name)
-        shown = ", ".join(repr(v[:40]) for v in values[:3])
-        if name not in FIELDS:
-            msg = (
-                f"{name[:40]} is not a parameter of /api/calc, got {shown} (its parameters: "
-                f"{', '.join(FIELDS)})"
-            )
-            errors.append({"loc": ("query", name[:40]), "msg": msg, "type": "extra_forbidden"})
-        elif len(values) > 1 and name not in _REPEATABLE:
-            msg = f"{name} is given {len(values)} times ({shown}): give it once"
-            errors.append({"loc": ("query", name), "msg": msg, "type": "repeated"})
-    if errors:
-        raise RequestValidationError(errors)
+def known_parameters(
+    route: str, names: Iterable[str] = (), repeatable: Iterable[str] = (), *, body: bool = False
+) -> Callable[[Request], None]:
+    """A dependency answering 422 for a query parameter ``route`` does not have (a misspelt
+    one was ignored: the answer came without it) or a single-valued one given more than once
+    (the last one was used), each at its parameter. Every route of the API takes one, so all
+    refuse what /api/calc refuses (the point query ignored ``?x=1&y=2&z=3`` without a word).
+    ``body``: the route takes its fields in a JSON body, which the message says."""
+    known = tuple(names)
+    several = frozenset(repeatable)
+    listed = f"its parameters: {', '.join(known)}" if known else "it takes none"
+    if body:
+        listed += ": its fields go in the JSON body"
+
+    def check(request: Request) -> None:
+        errors = []
+        for name in dict.fromkeys(request.query_params.keys()):
+            values = request.query_params.getlist(name)
+            shown = ", ".join(repr(v[:40]) for v in values[:3])
+            if name not in known:
+                msg = f"{name[:40]} is not a parameter of {route}, got {shown} ({listed})"
+                errors.append({"loc": ("query", name[:40]), "msg": msg, "type": "extra_forbidden"})
+            elif len(values) > 1 and name not in several:
+                msg = f"{name} is given {len(values)} times ({shown}): give it once"
+                errors.append({"loc": ("query", name), "msg": msg, "type": "repeated"})
+        if errors:
+            raise RequestValidationError(errors)
+
+    return check
+
+
+#: Refuses a parameter /api/calc does not have, and one other than table_disparities_px given
+#: more than once.
+_only_known_parameters = known_parameters("/api/calc", FIELDS, _REPEATABLE)
 
 
 @_api.get(
@@ -522,7 +540,12 @@ def calc(
     return JSONResponse(result)
 
 
-@_api.get("/api/fields", summary="The parameters of /api/calc: units and allowed ranges")
+@_api.get(
+    "/api/fields",
+    summary="The parameters of /api/calc: units and allowed ranges",
+    description="Takes no parameters: any answers 422 at it.",
+    dependencies=[Depends(known_parameters("/api/fields"))],
+)
 def fields() -> dict[str, Any]:
     return {"version": __version__, "fields": [x.to_dict() for x in FIELDS.values()]}
 

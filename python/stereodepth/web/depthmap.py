@@ -32,7 +32,9 @@ the raw float32 disparity, depth and confidence maps (base64, little-endian, row
 page reads the exact values, so the depth it shows at a pixel is ``disparity_to_depth`` of
 that pixel's disparity to the last digit), a decimated coloured point cloud, and download
 links. ``GET /api/depthmap/{id}/point?x=&y=`` gives one pixel's numbers (its 3-D point from
-:func:`stereodepth.reproject`); ``GET /api/depthmap/{id}/{file}`` the downloads.
+:func:`stereodepth.reproject`); ``GET /api/depthmap/{id}/{file}`` the downloads. A query
+parameter a route does not have (each but the point query has none), or x or y given twice,
+answers 422 at it, as ``/api/calc`` does.
 
 Limits and safety: each image at most ``max_upload_bytes`` (default 20 MB) and
 ``max_pixels`` (default 4 MP; both settable with ``create_app`` and ``stereodepth serve``);
@@ -56,7 +58,9 @@ import binascii
 import io
 import json
 import math
+import re
 import secrets
+import struct
 import sys
 import tempfile
 import threading
@@ -67,7 +71,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from fastapi import APIRouter, Request
+from fastapi import APIRouter, Depends, Request
 from fastapi.responses import JSONResponse, Response
 
 from ..io import upright
@@ -173,38 +177,116 @@ def _png_colour_bits(data: bytes) -> tuple[int, int] | None:
 
 
 _SIGNATURES = {b"\x89PNG\r\n\x1a\n": "PNG", b"\xff\xd8\xff": "JPEG"}
+# Netpbm's kinds, which Pillow all calls PPM, by their magic number.
+_NETPBM = {b"P1": "PBM", b"P4": "PBM", b"P2": "PGM", b"P5": "PGM", b"P3": "PPM", b"P6": "PPM"}
+_PFM_HEAD = re.compile(rb"P[Ff]\s+(\d+)\s+(\d+)\s")
+# JPEG's frame headers (SOF0 to SOF15 but DHT, JPG and DAC), which hold the image's size.
+_JPEG_FRAMES = frozenset(range(0xC0, 0xD0)) - {0xC4, 0xC8, 0xCC}
 
 
-def _unreadable(field: str, data: bytes) -> str:
-    """The message for a file Pillow cannot open, with what it got: a PNG or JPEG cut short
-    (its first bytes are one's), text, or other bytes (their first, in hex)."""
+def _header_size(data: bytes) -> tuple[int, int] | None:
+    """(width, height) as a PNG's IHDR or a JPEG's frame header gives it, or None: read before
+    Pillow opens the file, whose decompression-bomb check names no size."""
+    if data[:8] == b"\x89PNG\r\n\x1a\n" and len(data) >= 24 and data[12:16] == b"IHDR":
+        w, h = struct.unpack(">II", data[16:24])
+        return w, h
+    if data[:2] != b"\xff\xd8":
+        return None
+    i = 2
+    while i + 4 <= len(data) and data[i] == 0xFF:
+        marker = data[i + 1]
+        if marker == 0xFF:  # a fill byte
+            i += 1
+        elif marker == 0x01 or 0xD0 <= marker <= 0xD7:  # no length
+            i += 2
+        elif marker in _JPEG_FRAMES:
+            if i + 9 > len(data):
+                return None
+            h, w = struct.unpack(">HH", data[i + 5 : i + 9])
+            return w, h
+        elif marker in (0xD9, 0xDA):  # the end, or the scan, before any frame header
+            return None
+        else:
+            i += 2 + struct.unpack(">H", data[i + 2 : i + 4])[0]
+    return None
+
+
+def _received(data: bytes) -> str:
+    """What an upload is, for a message: a PNG or JPEG file of n bytes (with its size in px
+    when its header gives it), text (its beginning), or other bytes (their first, in hex)."""
     n = len(data)
     for signature, kind in _SIGNATURES.items():
         if data.startswith(signature):
-            return (
-                f"{field}: the image is truncated or damaged: a {kind} file of {n} bytes that "
-                "Pillow cannot read"
-            )
+            size = _header_size(data)
+            px = f" ({size[0]}x{size[1]} px by its header)" if size is not None else ""
+            return f"a {kind} file of {n} bytes{px}"
     head = data[:24]
     try:
         text = head.decode("utf-8")
     except UnicodeDecodeError:
         text = ""
     if text and text.isprintable():
-        got = f"{n} bytes of text beginning {text!r}"
+        return f"{n} bytes of text beginning {text!r}"
+    return f"{n} bytes beginning {data[:8].hex(' ')}"
+
+
+def _unreadable(field: str, data: bytes) -> str:
+    """The message for a file Pillow cannot open, with what it got: a PNG or JPEG cut short
+    (its first bytes are one's), text, or other bytes (their first, in hex)."""
+    if any(data.startswith(signature) for signature in _SIGNATURES):
+        return (
+            f"{field}: the image is truncated or damaged: {_received(data)} that Pillow cannot read"
+        )
+    return f"{field}: not an image Pillow can read; give a PNG or JPEG file, got {_received(data)}"
+
+
+def _pfm(field: str, data: bytes) -> str | None:
+    """The message for a PFM file (Pillow calls one PPM, or cannot read it), else None."""
+    head = _PFM_HEAD.match(data[:64])
+    if head is None:
+        return None
+    w, h = int(head[1]), int(head[2])
+    return (
+        f"{field}: must be a PNG or JPEG image, got PFM ({w}x{h} px, {len(data)} bytes): PFM "
+        "holds floating-point maps, such as the disparity.pfm this page and `stereodepth "
+        "match` write, not an image to match"
+    )
+
+
+def _too_many_pixels(field: str, w: int, h: int, limits: DepthMapLimits) -> BadInput:
+    return BadInput(
+        ["body", field],
+        f"{field}: the image is {w}x{h} px ({_mp(w * h)}), more than the limit of "
+        f"{_mp(limits.max_pixels)}",
+        "too_large",
+    )
+
+
+def _bomb(field: str, data: bytes, exc: Exception) -> BadInput:
+    """Pillow's decompression-bomb refusal, with the image's size: from the header of a PNG
+    or JPEG, else Pillow's count of pixels ("Image size (N pixels) exceeds limit ...")."""
+    from PIL import Image
+
+    size = _header_size(data)
+    count = re.search(r"\((\d+) pixels\)", str(exc))
+    if size is not None:
+        got = f"the image is {size[0]}x{size[1]} px ({_mp(size[0] * size[1])})"
+    elif count is not None:
+        got = f"the image has {int(count[1])} pixels ({_mp(int(count[1]))})"
     else:
-        got = f"{n} bytes beginning {data[:8].hex(' ')}"
-    return f"{field}: not an image Pillow can read; give a PNG or JPEG file, got {got}"
+        got = f"the image ({_received(data)}) has too many pixels ({exc})"
+    pillow = f"more than Pillow opens safely, {_mp(Image.MAX_IMAGE_PIXELS or 0)}"
+    return BadInput(["body", field], f"{field}: {got}, {pillow}", "too_large")
 
 
 def decode_image(field: str, data: bytes, limits: DepthMapLimits) -> np.ndarray:
     """An uploaded PNG or JPEG as (H, W) uint8/uint16 grey or (H, W, 3) uint8 RGB; BadInput
-    at ``field`` for anything else."""
+    at ``field`` for anything else, whose message says what the file is."""
     from PIL import Image, UnidentifiedImageError
 
     loc = ["body", field]
     if not data:
-        raise BadInput(loc, f"{field}: the file is empty")
+        raise BadInput(loc, f"{field}: the file is empty (0 bytes); choose an image file")
     if len(data) > limits.max_upload_bytes:
         raise BadInput(
             loc,
@@ -212,64 +294,87 @@ def decode_image(field: str, data: bytes, limits: DepthMapLimits) -> np.ndarray:
             f"{_mb(limits.max_upload_bytes)}",
             "too_large",
         )
+    if (pfm := _pfm(field, data)) is not None:
+        raise BadInput(loc, pfm)
     bits = _png_colour_bits(data)
     if bits is not None and bits[0] == 16 and bits[1] in (2, 4, 6):  # Pillow: the high byte
         kind = "grey and alpha" if bits[1] == 4 else "colour"
+        w, h = _header_size(data) or (0, 0)
         raise BadInput(
-            loc, f"{field}: 16-bit {kind} PNGs are not supported; give 8-bit colour or 16-bit grey"
+            loc,
+            f"{field}: 16-bit {kind} PNGs are not supported, got one of {w}x{h} px; give 8-bit "
+            "colour or 16-bit grey",
         )
+    # Beyond the limit by its header: refused before Pillow reads more (and before its
+    # decompression-bomb check, which names no size, refuses a larger one).
+    size = _header_size(data)
+    if size is not None and size[0] * size[1] > limits.max_pixels:
+        raise _too_many_pixels(field, *size, limits)
     with warnings.catch_warnings():
         warnings.simplefilter("error", Image.DecompressionBombWarning)
         try:
             im = Image.open(io.BytesIO(data))
-        except (Image.DecompressionBombError, Image.DecompressionBombWarning):
-            raise BadInput(
-                loc,
-                f"{field}: the image has more pixels than Pillow opens safely, more than the "
-                f"limit of {_mp(limits.max_pixels)}",
-                "too_large",
-            ) from None
+        except (Image.DecompressionBombError, Image.DecompressionBombWarning) as exc:
+            raise _bomb(field, data, exc) from None
         except UnidentifiedImageError:
             raise BadInput(loc, _unreadable(field, data)) from None
         except (OSError, ValueError, SyntaxError) as exc:
-            raise BadInput(loc, f"{field}: not a readable image ({exc})") from None
+            raise BadInput(
+                loc, f"{field}: not a readable image, got {_received(data)} ({exc})"
+            ) from None
     with im:
+        w, h = im.size
         # MPO: a JPEG followed by more images (a phone photo's gain or depth map, a stereo
         # camera's second view); Pillow reads its first, the photo browsers show.
         if im.format not in _FORMATS and im.format != "MPO":
-            raise BadInput(loc, f"{field}: must be a PNG or JPEG image, got {im.format}")
-        w, h = im.size
-        if w * h > limits.max_pixels:
+            kind = _NETPBM.get(data[:2], "PPM") if im.format == "PPM" else str(im.format)
             raise BadInput(
                 loc,
-                f"{field}: the image is {w}x{h} px ({_mp(w * h)}), more than the limit of "
-                f"{_mp(limits.max_pixels)}",
-                "too_large",
+                f"{field}: must be a PNG or JPEG image, got {kind} ({w}x{h} px, {len(data)} bytes)",
             )
+        if w * h > limits.max_pixels:
+            raise _too_many_pixels(field, w, h, limits)
         try:
             im.load()
         except (OSError, ValueError, SyntaxError) as exc:
-            raise BadInput(loc, f"{field}: the image is truncated or damaged ({exc})") from None
+            raise BadInput(
+                loc,
+                f"{field}: the image is truncated or damaged: a {w}x{h} px {im.format} file of "
+                f"{len(data)} bytes that Pillow cannot decode ({exc})",
+            ) from None
         im = upright(im)  # as the browser shows the file and read_image reads it
         mode = im.mode
+
+        def refuse_transparent(alpha: np.ndarray) -> None:
+            if (alpha != 255).any():
+                raise BadInput(
+                    loc,
+                    f"{field}: the image has transparent pixels (an alpha channel): "
+                    f"{int((alpha != 255).sum())} of its {w}x{h} px are not opaque; give an "
+                    "opaque image",
+                )
+
+        key = im.info.get("transparency")
+        if mode in ("I;16", "I;16B", "I;16L", "I", "L", "1") and isinstance(key, int):
+            # A grey PNG's transparency chunk (one grey level, transparent) was taken as
+            # opaque, where an RGB PNG's was refused; converting a 16-bit one to RGBA drops it.
+            refuse_transparent(np.where(np.asarray(im) == key, 0, 255))
         if mode in ("I;16", "I;16B", "I;16L"):
             return np.asarray(im, dtype=np.uint16)
         if mode == "I":
             a = np.asarray(im)
             if a.min() < 0 or a.max() > 65535:
-                raise BadInput(loc, f"{field}: 32-bit images are not supported")
+                raise BadInput(
+                    loc,
+                    f"{field}: 32-bit images are not supported, got a {w}x{h} px {im.format} of "
+                    f"values from {a.min()} to {a.max()}; give 16-bit grey (0 to 65535)",
+                )
             return a.astype(np.uint16)
         if mode in ("L", "1"):
             return np.asarray(im.convert("L"), dtype=np.uint8)
         if mode in ("RGBA", "LA", "PA", "P") or "transparency" in im.info:
             rgba = im.convert("RGBA")
-            alpha = np.asarray(rgba)[..., 3]
-            if (alpha != 255).any():
-                raise BadInput(
-                    loc,
-                    f"{field}: the image has transparent pixels (an alpha channel); "
-                    "give an opaque image",
-                )
+            refuse_transparent(np.asarray(rgba)[..., 3])
             rgb = np.asarray(rgba.convert("RGB"), dtype=np.uint8)
             if (
                 mode in ("LA", "P", "PA")
@@ -280,7 +385,11 @@ def decode_image(field: str, data: bytes, limits: DepthMapLimits) -> np.ndarray:
             return rgb
         if mode in ("RGB", "CMYK", "YCbCr"):
             return np.asarray(im.convert("RGB"), dtype=np.uint8)
-        raise BadInput(loc, f"{field}: images of mode {mode} are not supported")
+        raise BadInput(
+            loc,
+            f"{field}: images of mode {mode} are not supported, got a {w}x{h} px {im.format} of "
+            "that mode; give 8-bit grey or colour, or 16-bit grey",
+        )
 
 
 def _b64(field: str, value: Any) -> bytes:
@@ -368,7 +477,7 @@ def _unknown(loc: list[str], what: str, given: dict[str, Any], known: tuple[str,
     return [
         BadInput(
             [*loc, str(k)[:40]],
-            f"{str(k)[:40]} is not a field of {what}, got {repr(v)[:40]} (its fields: "
+            f"{str(k)[:40]} is not a field of {what}, got {_shown(v)} (its fields: "
             f"{', '.join(known)})",
             "extra_forbidden",
         )
@@ -682,10 +791,14 @@ def parse_job(body: Any, limits: DepthMapLimits) -> Job:
                 continue
             try:
                 files[field] = _b64(field, body[field])
-                if field == "right" and files[field] == files.get("left"):
-                    # every disparity 0, every depth unknown: `stereodepth match` refuses it too
+                # Every disparity 0, every depth unknown: `stereodepth match` refuses it too.
+                # Only of a left image that decoded: else right's own problem is named (two
+                # empty files were "the same file as left", not empty).
+                if field == "right" and "left" in images and files[field] == files["left"]:
                     raise BadInput(
-                        ["body", "right"], "right: the same file as left; choose the other image"
+                        ["body", "right"],
+                        f"right: the same file as left, byte for byte ({_received(files[field])}); "
+                        "choose the other image",
                     )
                 images[field] = decode_image(field, files[field], limits)
             except BadInput as e:
@@ -1027,12 +1140,20 @@ def make_router(limits: DepthMapLimits) -> APIRouter:
     """The depth view's routes, with these upload limits."""
     import anyio
 
+    from .app import known_parameters
+
     router = APIRouter()
     add_calib_route(router)
     results = _Results()
     jobs = anyio.CapacityLimiter(CONCURRENT_JOBS)
 
-    @router.get("/api/depthmap/limits", summary="The upload limits and the sample pair's rig")
+    # Each route refuses a query parameter it does not have, as /api/calc does (the point
+    # query ignored ?x=1&y=2&z=3, and the others any query, without a word).
+    @router.get(
+        "/api/depthmap/limits",
+        summary="The upload limits and the sample pair's rig",
+        dependencies=[Depends(known_parameters("/api/depthmap/limits"))],
+    )
     def depthmap_limits() -> dict[str, Any]:
         from ..match_pair import sgm_available
         from ..matching import DEFAULT_BLOCK_SIZE
@@ -1066,6 +1187,7 @@ def make_router(limits: DepthMapLimits) -> APIRouter:
         "/api/depthmap",
         summary="A stereo pair to disparity, depth and a point cloud (see the module's doc)",
         responses={422: {"description": "Bad input, at its field"}, 413: {}},
+        dependencies=[Depends(known_parameters("/api/depthmap", body=True))],
     )
     async def depthmap(request: Request) -> Response:
         if (refused := _not_json(request)) is not None:
@@ -1106,20 +1228,14 @@ def make_router(limits: DepthMapLimits) -> APIRouter:
         answer["downloads"] = {n: f"/api/depthmap/{key}/{n}" for n in DOWNLOADS}
         return JSONResponse(answer)
 
-    @router.get("/api/depthmap/{key}/point", summary="One pixel's disparity, depth and 3-D point")
-    def point(key: str, x: int, y: int, request: Request) -> Response:
-        twice = [
-            BadInput(
-                ["query", n],
-                f"{n} is given {len(vs)} times ({', '.join(repr(v[:40]) for v in vs[:3])}): "
-                "give it once",
-                "repeated",
-            )
-            for n in ("x", "y")
-            if len(vs := request.query_params.getlist(n)) > 1
-        ]
-        if twice:  # the last one was used without a word
-            return _error_response(twice)
+    @router.get(
+        "/api/depthmap/{key}/point",
+        summary="One pixel's disparity, depth and 3-D point",
+        description="x and y, each once; another parameter answers 422 at it.",
+        # x or y twice: the last one was used without a word
+        dependencies=[Depends(known_parameters("/api/depthmap/{key}/point", ("x", "y")))],
+    )
+    def point(key: str, x: int, y: int) -> Response:
         stored = results.get(key)
         if stored is None:
             return _error_response([_no_result(key)], 404)
@@ -1149,7 +1265,11 @@ def make_router(limits: DepthMapLimits) -> APIRouter:
             }
         )
 
-    @router.get("/api/depthmap/{key}/{name}", summary="Downloads: disparity, depth, PLY")
+    @router.get(
+        "/api/depthmap/{key}/{name}",
+        summary="Downloads: disparity, depth, PLY",
+        dependencies=[Depends(known_parameters("/api/depthmap/{key}/{name}"))],
+    )
     def download(key: str, name: str) -> Response:
         stored = results.get(key)
         errors = [] if stored is not None else [_no_result(key)]
@@ -1219,8 +1339,13 @@ def parse_calib(text: Any) -> dict[str, Any]:
 
 def add_calib_route(router: APIRouter) -> None:
     """``POST /api/calib``: ``{"calib": "<text of calib.txt>"}`` to the rig's numbers."""
+    from .app import known_parameters
 
-    @router.post("/api/calib", summary="A Middlebury calib.txt to the rig's numbers")
+    @router.post(
+        "/api/calib",
+        summary="A Middlebury calib.txt to the rig's numbers",
+        dependencies=[Depends(known_parameters("/api/calib", body=True))],
+    )
     async def calib(request: Request) -> Response:
         if (refused := _not_json(request)) is not None:
             return refused

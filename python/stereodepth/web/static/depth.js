@@ -12,6 +12,9 @@
   let busy = false;
   let centre = null;       // the principal point of an uploaded calib.txt
   let calibSize = null;    // [width, height] of the images that calib.txt describes
+  let calibName = null;    // that file's name; null: no calibration in use
+  let calibLoads = 0;      // answers for an earlier choice of file are dropped
+  const CALIB_NOTE = "Middlebury calib.txt";
 
   // --- numbers -----------------------------------------------------------------------------
   // The shortest decimal that reads back as the same float32: numpy's repr of a float32.
@@ -107,26 +110,58 @@
     return true;
   }
 
+  // Forgets the calib.txt in use: its principal point and image size are sent no more (the
+  // rig inputs stay as they are, as if typed). `note`: what the note says instead.
+  function dropCalib(note) {
+    centre = null;
+    calibSize = null;
+    calibName = null;
+    $("calib-note").textContent = note;
+  }
+
+  // A new choice of file drops the calibration in use first: a file removed (the chooser's
+  // Cancel empties it), or one that fails to load, left the earlier file's principal point
+  // and image size in every request, and its note.
   async function loadCalib() {
+    const mine = ++calibLoads;
     const file = $("calib-file").files[0];
     $("calib-error").hidden = true;
+    $("calib-error").textContent = "";
     document.querySelector('.field[data-field="calib"]').classList.remove("invalid");
-    if (!file) return;
-    let body;
-    let response;
+    const before = calibName;
+    const unused = before ? `${before} is no longer used (the rig inputs stay as they are)` : "";
+    if (!file) {
+      dropCalib(before ? `No calibration: ${before} removed; its principal point and image size are no longer used (the rig inputs stay as they are).` : CALIB_NOTE);
+      return;
+    }
+    dropCalib(`Reading ${file.name}…`);
+    const failed = (msgs) => {
+      if (mine !== calibLoads) return;
+      dropCalib(`No calibration: ${file.name} was not loaded${unused ? `; ${unused}` : ""}.`);
+      for (const msg of msgs) fieldError("calib", msg);
+    };
+    let text;
     try {
-      const text = await readAs(file, "text");
+      text = await readAs(file, "text");
+    } catch (err) {
+      failed([`calib: ${file.name} could not be read (${err && err.name ? err.name : err})`]);
+      return;
+    }
+    let response;
+    let body = null;
+    try {
       response = await fetch("/api/calib", {
         method: "POST", headers: { "Content-Type": "application/json" }, body: JSON.stringify({ calib: text }),
       });
-      body = await response.json();
+      try { body = await response.json(); } catch (err) { body = null; }
     } catch (err) {
-      fieldError("calib", "calib: the file could not be read or sent");
+      failed([`calib: ${file.name} could not be sent: the server does not answer`]);
       return;
     }
-    if (!response.ok) {
-      $("calib-error").textContent = "";
-      for (const item of body.detail || []) fieldError("calib", item.msg);
+    if (mine !== calibLoads) return;  // another file was chosen meanwhile
+    if (!response.ok || !body) {
+      const detail = body && Array.isArray(body.detail) ? body.detail.map((item) => item.msg) : [];
+      failed(detail.length ? detail : [`calib: the server answered ${response.status} for ${file.name}`]);
       return;
     }
     window.stereodepth.setRig({
@@ -136,6 +171,7 @@
     if (body.ndisp) $("num_disparities").value = String(body.ndisp);
     centre = { cx_px: body.cx_px, cy_px: body.cy_px };
     calibSize = body.width_px && body.height_px ? [body.width_px, body.height_px] : null;
+    calibName = file.name;
     $("calib-note").textContent = `Rig from ${file.name}: f = ${g(body.focal_px)} px, B = ${g(body.baseline_mm)} mm, doffs = ${g(body.doffs_px)} px` +
       (body.ndisp ? `, ndisp = ${body.ndisp}` : "");
   }
@@ -207,10 +243,9 @@
     const s = limits.sample;
     window.stereodepth.setRig({ baseline_mm: s.baseline_mm, focal_px: s.focal_px, doffs_px: s.doffs_px, width_px: s.width_px });
     $("num_disparities").value = "";
-    centre = null;
-    calibSize = null;
+    calibLoads++;  // a calib.txt still loading is not applied
     $("calib-file").value = "";
-    $("calib-note").textContent = "Middlebury calib.txt";
+    dropCalib(CALIB_NOTE);
     await run(true);
   }
 
