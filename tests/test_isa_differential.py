@@ -87,6 +87,9 @@ BLOCK_MATCH_CASES: list[tuple[tuple[int, int], str, int, dict[str, Any]]] = [
         "uniqueness_ratio": 30, "lr_max_diff": 100, "border": "opencv",
         "return_confidence": True}),
     ((30, 1), "rgb", 0, {"num_disparities": 3, "min_disparity": -1, "return_confidence": True}),
+    # 9 rows x 11000 columns x 256 costs: above the 24 MiB budget of the census cost ring, so
+    # the SIMD first pass matches the leaving row again instead of reading it back.
+    ((12, 11000), "grey", 37, {"num_disparities": 256, "return_confidence": True}),
     ((2, 5), "grey16", 1, {"num_disparities": 1, "min_disparity": 1, "cost": "sad",
                            "return_confidence": True}),
 ]  # fmt: skip
