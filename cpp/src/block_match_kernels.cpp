@@ -719,7 +719,7 @@ void winners_avx2(const RowCtx& c) {
   // directly; the byte counts of the entering row minus those of the leaving row (-8 .. 8),
   // summed in pairs by vpmaddubsw, give c_in - c_out. With AVX512_BITALG (the AVX-512 build)
   // the rows hold the whole codes and vpopcntw counts each XOR: one load, XOR and count per
-  // 16 costs instead of two loads, two XORs, two lookups, an add and a vpmaddubsw (0.87-0.92x
+  // 16 costs instead of two loads, two XORs, two lookups, an add and a vpmaddubsw (0.85-0.92x
   // the time of a whole call, Intel Emerald Rapids, one thread).
   const F* in_l = static_cast<const F*>(c.in_left);
   const F* in_r = static_cast<const F*>(c.in_rpad);

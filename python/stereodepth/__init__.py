@@ -61,7 +61,8 @@ def build_info() -> dict[str, Any]:
     """How the native core was built and what it runs on this machine.
 
     Keys: ``version``, ``compiler``, ``isa`` (the instruction set chosen at run time:
-    ``baseline``, ``avx2`` or ``avx512``; the environment variable STEREODEPTH_ISA caps it,
+    ``baseline``, ``avx2`` or ``avx512``, the last on processors with AVX-512 F, BW, VL, DQ,
+    VPOPCNTDQ and BITALG; the environment variable STEREODEPTH_ISA caps it,
     and any value of it other than ``auto``, ``baseline``, ``avx2`` or ``avx512`` makes this
     and every kernel raise ValueError),
     ``supported_isas``, ``default_threads`` (the cores this process may use), ``eigen``,
