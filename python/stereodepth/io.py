@@ -75,6 +75,13 @@ def _no_bomb_warning(Image: Any) -> Iterator[None]:
         yield
 
 
+def _bomb_pixels(exc: Exception) -> int | None:
+    """The pixel count in Pillow's decompression-bomb message ("Image size (N pixels)
+    exceeds limit ..."), or None when it has none."""
+    got = re.search(r"\((\d+) pixels\)", str(exc))
+    return int(got[1]) if got else None
+
+
 def _pil_open(Image: Any, p: Path) -> tuple[Any, bool]:
     """``Image.open(p)`` (the header only) without Pillow's DecompressionBombWarning, and
     whether the image is over Pillow's ``MAX_IMAGE_PIXELS`` (its decoding, where some
@@ -84,8 +91,8 @@ def _pil_open(Image: Any, p: Path) -> tuple[Any, bool]:
         try:
             im = Image.open(p)
         except Image.DecompressionBombError as exc:  # Image.MAX_IMAGE_PIXELS lowered
-            got = re.search(r"\((\d+) pixels\)", str(exc))
-            n = f"{int(got[1]):,} pixels" if got else "more pixels"
+            count = _bomb_pixels(exc)
+            n = f"{count:,} pixels" if count is not None else "more pixels"
             raise ValueError(
                 f"cannot decode image {p}: {n}, more than the "
                 f"{2 * (Image.MAX_IMAGE_PIXELS or 0):,} Pillow opens (twice "

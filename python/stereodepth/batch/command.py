@@ -138,6 +138,7 @@ def register(subparsers: Any) -> None:
     )
     m.add_argument("--min-disparity", type=int, metavar="D", help="smallest disparity searched")
     from .._methods import block_sizes_text
+    from ..matching import MAX_BLOCK_SIZE
 
     costs, sgm_sizes = block_sizes_text()
     m.add_argument(
@@ -146,7 +147,7 @@ def register(subparsers: Any) -> None:
         metavar="N",
         help=f"block side, by method: bm an odd number, {costs}; sgm {sgm_sizes} only",
     )
-    m.add_argument("--cost", choices=("census", "sad"), help="matching cost (bm only)")
+    m.add_argument("--cost", choices=tuple(MAX_BLOCK_SIZE), help="matching cost (bm only)")
     m.add_argument(
         "--option",
         action=KeyValueOnce,

@@ -74,7 +74,7 @@ import numpy as np
 from fastapi import APIRouter, Depends, Request
 from fastapi.responses import JSONResponse, Response
 
-from ..io import upright
+from ..io import _bomb_pixels, upright
 
 __all__ = ["DEFAULT_MAX_PIXELS", "DEFAULT_MAX_UPLOAD_BYTES", "DepthMapLimits", "make_router"]
 
@@ -268,11 +268,11 @@ def _bomb(field: str, data: bytes, exc: Exception) -> BadInput:
     from PIL import Image
 
     size = _header_size(data)
-    count = re.search(r"\((\d+) pixels\)", str(exc))
+    count = _bomb_pixels(exc)
     if size is not None:
         got = f"the image is {size[0]}x{size[1]} px ({_mp(size[0] * size[1])})"
     elif count is not None:
-        got = f"the image has {int(count[1])} pixels ({_mp(int(count[1]))})"
+        got = f"the image has {count} pixels ({_mp(count)})"
     else:
         got = f"the image ({_received(data)}) has too many pixels ({exc})"
     pillow = f"more than Pillow opens safely, {_mp(Image.MAX_IMAGE_PIXELS or 0)}"
@@ -296,10 +296,11 @@ def decode_image(field: str, data: bytes, limits: DepthMapLimits) -> np.ndarray:
         )
     if (pfm := _pfm(field, data)) is not None:
         raise BadInput(loc, pfm)
+    size = _header_size(data)
     bits = _png_colour_bits(data)
     if bits is not None and bits[0] == 16 and bits[1] in (2, 4, 6):  # Pillow: the high byte
         kind = "grey and alpha" if bits[1] == 4 else "colour"
-        w, h = _header_size(data) or (0, 0)
+        w, h = size or (0, 0)
         raise BadInput(
             loc,
             f"{field}: 16-bit {kind} PNGs are not supported, got one of {w}x{h} px; give 8-bit "
@@ -307,7 +308,6 @@ def decode_image(field: str, data: bytes, limits: DepthMapLimits) -> np.ndarray:
         )
     # Beyond the limit by its header: refused before Pillow reads more (and before its
     # decompression-bomb check, which names no size, refuses a larger one).
-    size = _header_size(data)
     if size is not None and size[0] * size[1] > limits.max_pixels:
         raise _too_many_pixels(field, *size, limits)
     with warnings.catch_warnings():
