@@ -439,7 +439,7 @@ void BlockMatcher::compute(const StereoImage& left, const StereoImage& right,
         auto& pool = ws.speckle[w];
         label = segments[w].size();
         if (pool.size() <= label) pool.resize(label + 1);
-        speckle_band(k, disparity, seg0, seg1, speckle_rf, pool[label]);
+        speckle_band(k, disparity, seg0, seg1, speckle_rf, p.speckle_window, pool[label]);
       }
       segments[w].push_back({seg0, seg1, w, label});
       seg0 = seg1 = -1;
@@ -537,7 +537,7 @@ void BlockMatcher::compute(const StereoImage& left, const StereoImage& right,
     }
     starts.push_back(rows);
     speckle_finish(k, disparity, confidence, p.speckle_window, speckle_rf, labels, starts,
-                   ws.speckle_join);
+                   ws.speckle_join, static_cast<int>(nw));
   }
 }
 
@@ -692,8 +692,8 @@ std::vector<std::pair<std::string, double>> BlockMatcher::stage_times(
     const std::vector<SpeckleBand*> bands = {&band};
     const std::vector<std::ptrdiff_t> starts = {0, rows};
     timed("speckle", [&] {
-      speckle_band(k, view, 0, rows, rf, band);
-      speckle_finish(k, view, ImageView<float>{}, p.speckle_window, rf, bands, starts, join);
+      speckle_band(k, view, 0, rows, rf, p.speckle_window, band);
+      speckle_finish(k, view, ImageView<float>{}, p.speckle_window, rf, bands, starts, join, 1);
     }, [&] {
       for (std::ptrdiff_t y = 0; y < rows; ++y) {
         std::memcpy(copy + y * cols, disparity.row(y), sizeof(float) * static_cast<std::size_t>(cols));

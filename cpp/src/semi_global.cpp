@@ -908,7 +908,7 @@ void SemiGlobalMatcher::compute(const StereoImage& left, const StereoImage& righ
     if (ws.speckle.size() < unt) ws.speckle.resize(unt);
     run_bands(nt, [&](std::ptrdiff_t b) {
       detail::speckle_band(bk, disparity, band(rows, nt, b), band(rows, nt, b + 1), rf,
-                           ws.speckle[static_cast<std::size_t>(b)]);
+                           p.speckle_window, ws.speckle[static_cast<std::size_t>(b)]);
     });
     std::vector<detail::SpeckleBand*> labels;
     std::vector<std::ptrdiff_t> starts;
@@ -918,7 +918,7 @@ void SemiGlobalMatcher::compute(const StereoImage& left, const StereoImage& righ
     }
     starts.push_back(rows);
     detail::speckle_finish(bk, disparity, confidence, p.speckle_window, rf, labels, starts,
-                           ws.speckle_join);
+                           ws.speckle_join, static_cast<int>(nt));
   }
 }
 

@@ -4,6 +4,8 @@
 #include <cmath>
 #include <limits>
 
+#include "stereodepth/parallel.hpp"
+
 namespace stereodepth::detail {
 namespace {
 
@@ -42,6 +44,12 @@ void each_new_link(const std::uint64_t* up, const RowStarts& below, const RowSta
   }
 }
 
+// Region sizes are kept up to window + 1 (see speckle_band).
+std::int64_t speckle_size_cap(int window) {
+  return std::min<std::int64_t>(static_cast<std::int64_t>(window) + 1,
+                                std::numeric_limits<std::int32_t>::max());
+}
+
 }  // namespace
 
 // |a - b| <= range for a float difference is |a - b| <= the largest float not above range.
@@ -51,9 +59,14 @@ float speckle_range_f(double range) {
   return rf;
 }
 
-// Labels rows y0 .. y1 - 1 (runs, and unions inside the band).
+// Labels rows y0 .. y1 - 1 (runs, and unions inside the band), then sizes the band's regions
+// (speckle_finish's step 1, here so that each band does it in its own thread): every run links
+// to its root (the band's lowest index in its region, as unite() keeps the lower root and
+// path halving only lowers a parent), and each root's parent becomes minus the region's size
+// in the band, capped at window + 1 (only "size > window" matters, and the cap keeps it in 32
+// bits).
 void speckle_band(const BlockMatchKernels& k, const ImageView<float>& disp,
-                  std::ptrdiff_t y0, std::ptrdiff_t y1, float rf, SpeckleBand& b) {
+                  std::ptrdiff_t y0, std::ptrdiff_t y1, float rf, int window, SpeckleBand& b) {
   const std::ptrdiff_t cols = disp.cols;
   const auto words = static_cast<std::size_t>((cols + 63) / 64);
   b.runs.clear();
@@ -95,52 +108,49 @@ void speckle_band(const BlockMatchKernels& k, const ImageView<float>& disp,
     std::swap(b.cur, b.prev);
   }
   b.row_first.push_back(static_cast<std::int32_t>(b.runs.size()));
+
+  const std::int64_t cap = speckle_size_cap(window);
+  auto capped = [&](std::int64_t n) { return static_cast<std::int32_t>(std::min(n, cap)); };
+  // A parent is never above its run, so in increasing order each run's parent p has been
+  // handled: p is a root (negative) or links to its root directly.
+  std::vector<SpeckleRun>& runs = b.runs;
+  const auto n = static_cast<std::int32_t>(runs.size());
+  for (std::int32_t j = 0; j < n; ++j) {
+    SpeckleRun& r = runs[static_cast<std::size_t>(j)];
+    const std::int64_t len = r.x1 - r.x0;
+    if (r.parent == j) {
+      r.parent = -capped(len);
+    } else {
+      const std::int32_t q = runs[static_cast<std::size_t>(r.parent)].parent;
+      if (q >= 0) r.parent = q;
+      SpeckleRun& root = runs[static_cast<std::size_t>(r.parent)];
+      root.parent = -capped(-static_cast<std::int64_t>(root.parent) + len);
+    }
+  }
 }
 
 // Joins the labellings (bands[i]: rows starts[i] .. starts[i + 1] - 1) and clears the
 // regions of at most `window` pixels.
 //
-// 1. In each band, every run links to its root (the band's lowest index in its region, as
-//    unite() keeps the lower root and path halving only lowers a parent), and each root's
-//    parent becomes minus the region's size in the band, capped at window + 1 (only
-//    "size > window" matters, and the cap keeps it in 32 bits).
+// 1. (Done by speckle_band: each band's regions sized in the band.)
 // 2. The vertical links across each boundary between bands pair the two bands' roots; those
 //    roots (O(W) per boundary) are united in a small union-find, their sizes summed (capped)
 //    and written back to each of them.
-// 3. Each run is cleared when its root's size is at most `window`.
+// 3. Each run is cleared when its root's size is at most `window`, on up to `threads`
+//    threads (bands of rows; each run is read, and each pixel written, by one thread).
 void speckle_finish(const BlockMatchKernels& k, const ImageView<float>& disp,
                     const ImageView<float>& conf, int window, float rf,
                     const std::vector<SpeckleBand*>& bands,
-                    const std::vector<std::ptrdiff_t>& starts, SpeckleJoin& join) {
+                    const std::vector<std::ptrdiff_t>& starts, SpeckleJoin& join, int threads) {
   const std::ptrdiff_t cols = disp.cols;
   const auto words = static_cast<std::size_t>((cols + 63) / 64);
   const std::size_t nb = starts.size() - 1;
-  const std::int64_t cap = std::min<std::int64_t>(static_cast<std::int64_t>(window) + 1,
-                                                  std::numeric_limits<std::int32_t>::max());
+  const std::int64_t cap = speckle_size_cap(window);
   auto capped = [&](std::int64_t n) { return static_cast<std::int32_t>(std::min(n, cap)); };
   auto root_of = [](const std::vector<SpeckleRun>& runs, std::int32_t j) {
     const std::int32_t p = runs[static_cast<std::size_t>(j)].parent;
     return p < 0 ? j : p;
   };
-  // 1.
-  for (std::size_t i = 0; i < nb; ++i) {
-    std::vector<SpeckleRun>& runs = bands[i]->runs;
-    // A parent is never above its run, so in increasing order each run's parent p has been
-    // handled: p is a root (negative) or links to its root directly.
-    const auto n = static_cast<std::int32_t>(runs.size());
-    for (std::int32_t j = 0; j < n; ++j) {
-      SpeckleRun& r = runs[static_cast<std::size_t>(j)];
-      const std::int64_t len = r.x1 - r.x0;
-      if (r.parent == j) {
-        r.parent = -capped(len);
-      } else {
-        const std::int32_t q = runs[static_cast<std::size_t>(r.parent)].parent;
-        if (q >= 0) r.parent = q;
-        SpeckleRun& root = runs[static_cast<std::size_t>(r.parent)];
-        root.parent = -capped(-static_cast<std::int64_t>(root.parent) + len);
-      }
-    }
-  }
   // 2.
   std::vector<std::int32_t> offset(nb + 1, 0);
   for (std::size_t i = 0; i < nb; ++i) {
@@ -200,12 +210,17 @@ void speckle_finish(const BlockMatchKernels& k, const ImageView<float>& disp,
   }
   // 3.
   const float nan = std::numeric_limits<float>::quiet_NaN();
-  for (std::size_t i = 0; i < nb; ++i) {
-    const std::vector<SpeckleRun>& runs = bands[i]->runs;
-    const std::vector<std::int32_t>& row_first = bands[i]->row_first;
-    for (std::size_t row = 0; row + 1 < row_first.size(); ++row) {
-      const std::ptrdiff_t y = bands[i]->y0 + static_cast<std::ptrdiff_t>(row);
-      for (std::int32_t j = row_first[row]; j < row_first[row + 1]; ++j) {
+  parallel_for_rows(starts[nb] - starts[0], threads, 64, [&](std::ptrdiff_t a, std::ptrdiff_t e) {
+    const std::ptrdiff_t ya = starts[0] + a, ye = starts[0] + e;
+    // The band holding row ya, then each row's band in turn.
+    auto i = static_cast<std::size_t>(std::upper_bound(starts.begin(), starts.end(), ya) -
+                                      starts.begin() - 1);
+    for (std::ptrdiff_t y = ya; y < ye; ++y) {
+      while (y >= starts[i + 1]) ++i;
+      const std::vector<SpeckleRun>& runs = bands[i]->runs;
+      const auto row = static_cast<std::size_t>(y - bands[i]->y0);
+      const std::int32_t j1 = bands[i]->row_first[row + 1];
+      for (std::int32_t j = bands[i]->row_first[row]; j < j1; ++j) {
         const SpeckleRun& r = runs[static_cast<std::size_t>(j)];
         const std::int32_t p =
             r.parent < 0 ? r.parent : runs[static_cast<std::size_t>(r.parent)].parent;
@@ -214,7 +229,7 @@ void speckle_finish(const BlockMatchKernels& k, const ImageView<float>& disp,
         if (conf.data) std::fill(conf.row(y) + r.x0, conf.row(y) + r.x1, 0.0f);
       }
     }
-  }
+  });
 }
 
 }  // namespace stereodepth::detail

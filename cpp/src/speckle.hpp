@@ -73,18 +73,20 @@ struct SpeckleJoin {
 // |a - b| <= range for a float difference is |a - b| <= the largest float not above range.
 float speckle_range_f(double range);
 
-// Labels rows y0 .. y1 - 1 (runs, and unions inside the band).
+// Labels rows y0 .. y1 - 1 (runs, and unions inside the band) and sizes the band's regions
+// (up to window + 1 pixels), for speckle_finish.
 void speckle_band(const BlockMatchKernels& k, const ImageView<float>& disp, std::ptrdiff_t y0,
-                  std::ptrdiff_t y1, float rf, SpeckleBand& b);
+                  std::ptrdiff_t y1, float rf, int window, SpeckleBand& b);
 
-// Joins the labellings (bands[i]: rows starts[i] .. starts[i + 1] - 1) and clears the
-// regions of at most `window` pixels (NaN, and 0 in conf when conf.data is not null). Works
+// Joins the labellings (bands[i]: rows starts[i] .. starts[i + 1] - 1, each from
+// speckle_band with the same window) and clears the regions of at most `window` pixels (NaN,
+// and 0 in conf when conf.data is not null), the clearing on up to `threads` threads. Works
 // in place in the bands' runs (their parents are then overwritten): each band's regions are
 // sized in the band, and only the regions linked across a boundary are joined, so no copy
 // of the runs and no size per run.
 void speckle_finish(const BlockMatchKernels& k, const ImageView<float>& disp,
                     const ImageView<float>& conf, int window, float rf,
                     const std::vector<SpeckleBand*>& bands,
-                    const std::vector<std::ptrdiff_t>& starts, SpeckleJoin& join);
+                    const std::vector<std::ptrdiff_t>& starts, SpeckleJoin& join, int threads);
 
 }  // namespace stereodepth::detail
