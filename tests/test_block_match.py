@@ -18,6 +18,7 @@ from hypothesis import strategies as st
 from synthetic_pairs import shifted_pair, slanted_pair
 
 import stereodepth as sd
+from stereodepth import _core
 from stereodepth import reference as ref
 from stereodepth._reference_block_match import grey
 from stereodepth.io import read_image
@@ -156,6 +157,19 @@ def test_grey_conversion_is_opencvs() -> None:
     cv2 = pytest.importorskip("cv2")
     rgb = np.random.default_rng(6).integers(0, 256, (17, 23, 3)).astype(np.uint8)
     np.testing.assert_array_equal(grey(rgb), cv2.cvtColor(rgb, cv2.COLOR_RGB2GRAY))
+
+
+@pytest.mark.parametrize("isa", sd.build_info()["supported_isas"])
+def test_native_grey_conversion_is_the_oracles_for_every_colour(isa: str) -> None:
+    # Every one of the 2^24 colours, then every width from 1 to 70 (the SIMD loop's tails).
+    every = np.arange(1 << 24, dtype=np.uint32)
+    rgb = np.stack([every >> 16, (every >> 8) & 255, every & 255], axis=-1).astype(np.uint8)
+    rgb = rgb.reshape(4096, 4096, 3)
+    np.testing.assert_array_equal(_core._rgb_to_grey(rgb, isa), grey(rgb).astype(np.uint8))
+    rng = np.random.default_rng(8)
+    for w in range(1, 71):
+        img = rng.integers(0, 256, (3, w, 3)).astype(np.uint8)
+        np.testing.assert_array_equal(_core._rgb_to_grey(img, isa), grey(img).astype(np.uint8))
 
 
 @pytest.mark.parametrize("cost", ["census", "sad"])

@@ -101,9 +101,29 @@ py::dict stage_times_py(BlockMatcher& self, const py::array& left, const py::arr
   return out;
 }
 
+// Diagnostics (tests): rgb_to_grey of an (H, W, 3) uint8 array with one instruction set.
+py::array_t<std::uint8_t> rgb_to_grey_py(const py::array& rgb, const std::string& isa) {
+  const StereoImage im = image_view(rgb, "rgb");
+  if (im.format != PixelFormat::kRgb8) {
+    throw py::value_error("rgb must be (H, W, 3) uint8, got shape " + shape_str(rgb) + " " +
+                          dtype_str(rgb));
+  }
+  const Isa chosen = resolve_isa(isa);
+  py::array_t<std::uint8_t> grey({im.rows, im.cols});
+  std::uint8_t* out = grey.mutable_data();
+  {
+    ReleaseGil release;
+    rgb_to_grey(im, out, chosen);
+  }
+  return grey;
+}
+
 }  // namespace
 
 void bind_block_match(py::module_& m) {
+  m.def("_rgb_to_grey", &rgb_to_grey_py, py::arg("rgb"), py::arg("isa") = "auto",
+        "Diagnostics for the tests: the grey levels the matchers use for an (H, W, 3) uint8 "
+        "RGB image, computed with one instruction set's kernel.");
   py::class_<BlockMatcher>(m, "BlockMatcher",
                            "Low-level matcher behind stereodepth.StereoMatcher.")
       .def(py::init([](int num_disparities, int min_disparity, int block_size,

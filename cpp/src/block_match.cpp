@@ -541,6 +541,15 @@ void BlockMatcher::compute(const StereoImage& left, const StereoImage& right,
   }
 }
 
+void rgb_to_grey(const StereoImage& rgb, std::uint8_t* grey, Isa isa) {
+  if (rgb.format != PixelFormat::kRgb8) throw std::invalid_argument("rgb must be an RGB image");
+  const detail::BlockMatchKernels& k = kernels_for(isa);
+  for (std::ptrdiff_t y = 0; y < rgb.rows; ++y) {
+    k.rgb_to_grey(static_cast<const std::uint8_t*>(rgb.data) + y * rgb.row_stride,
+                  grey + y * rgb.cols, rgb.cols);
+  }
+}
+
 void block_match(const StereoImage& left, const StereoImage& right,
                  const ImageView<float>& disparity, const ImageView<float>& confidence,
                  const BlockMatchParams& params, int threads, Isa isa) {

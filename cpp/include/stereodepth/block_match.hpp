@@ -106,6 +106,12 @@ class BlockMatcher {
   std::mutex mutex_;
 };
 
+// Diagnostics (tests): the grey levels the matchers match an 8-bit RGB image by (OpenCV's
+// COLOR_RGB2GRAY, bit for bit), computed row by row with `isa`'s kernel into `grey`
+// (rgb.rows x rgb.cols bytes, rows rgb.cols apart). Throws std::invalid_argument when rgb is
+// not RGB.
+void rgb_to_grey(const StereoImage& rgb, std::uint8_t* grey, Isa isa);
+
 // One-shot form of BlockMatcher::compute.
 void block_match(const StereoImage& left, const StereoImage& right,
                  const ImageView<float>& disparity, const ImageView<float>& confidence,
