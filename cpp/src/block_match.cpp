@@ -409,8 +409,15 @@ void BlockMatcher::compute(const StereoImage& left, const StereoImage& right,
   //    Each contiguous piece a worker matches is a segment, labelled for the speckle filter.
   const bool speckle = p.speckle_window > 0;
   const float speckle_rf = speckle_range_f(p.speckle_range);
-  constexpr std::ptrdiff_t kChunk = 4;  // rows claimed at a time
-  const std::ptrdiff_t min_steal = std::max<std::ptrdiff_t>(8, 2 * p.block_size);
+  // Rows claimed at a time, and the least a thief takes. A stolen piece starts with the
+  // block-column sums of block_size rows of pixel costs, each about a third of a row's work,
+  // so taking half of R rows pays once R / 2 exceeds block_size / 3 rows. The rows a worker
+  // cannot give away (its claimed chunk, and a remainder below twice min_steal) are what one
+  // thread may still be matching while the other waits at the end: with 4-row chunks and
+  // min_steal max(8, 2 * block_size) that wait was 5-13 % of a call on 2 threads (Art,
+  // Cones, KITTI, Intel), with 2 and block_size / 3 it was 1.5-5 %.
+  constexpr std::ptrdiff_t kChunk = 2;
+  const std::ptrdiff_t min_steal = std::max<std::ptrdiff_t>(2, (p.block_size + 2) / 3);
   std::vector<std::atomic<std::uint64_t>> ranges(nw);
   std::vector<std::atomic<std::size_t>> owner(nw);  // whose features a range's rows use
   std::vector<std::atomic<bool>> ready(nw);          // a band's features are complete
