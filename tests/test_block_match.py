@@ -172,6 +172,22 @@ def test_native_grey_conversion_is_the_oracles_for_every_colour(isa: str) -> Non
         np.testing.assert_array_equal(_core._rgb_to_grey(img, isa), grey(img).astype(np.uint8))
 
 
+@pytest.mark.parametrize(
+    ("rgb", "error"),
+    [
+        (np.zeros((4, 5, 3), np.uint16), TypeError),
+        (np.zeros((4, 5, 3), np.float32), TypeError),
+        (np.zeros((4, 5), np.uint8), ValueError),
+        (np.zeros((4, 5, 4), np.uint8), ValueError),
+        (np.zeros((0, 5, 3), np.uint8), ValueError),
+        (np.zeros((4, 0, 3), np.uint8), ValueError),
+    ],
+)
+def test_native_grey_conversion_names_what_it_takes(rgb: np.ndarray, error: type) -> None:
+    with pytest.raises(error, match=r"rgb must be \(H, W, 3\) uint8.*got shape"):
+        _core._rgb_to_grey(rgb)
+
+
 @pytest.mark.parametrize("cost", ["census", "sad"])
 def test_sixteen_bit_image_of_an_eight_bit_one_matches_the_same(cost: str) -> None:
     # uint16 pairs are stretched from their joint range onto 0..65280 (= 255 * 256) and SAD

@@ -103,11 +103,14 @@ py::dict stage_times_py(BlockMatcher& self, const py::array& left, const py::arr
 
 // Diagnostics (tests): rgb_to_grey of an (H, W, 3) uint8 array with one instruction set.
 py::array_t<std::uint8_t> rgb_to_grey_py(const py::array& rgb, const std::string& isa) {
-  const StereoImage im = image_view(rgb, "rgb");
-  if (im.format != PixelFormat::kRgb8) {
-    throw py::value_error("rgb must be (H, W, 3) uint8, got shape " + shape_str(rgb) + " " +
-                          dtype_str(rgb));
+  const std::string got = ", got shape " + shape_str(rgb) + " " + dtype_str(rgb);
+  if (!rgb.dtype().equal(py::dtype::of<std::uint8_t>())) {
+    throw py::type_error("rgb must be (H, W, 3) uint8" + got);
   }
+  if (rgb.ndim() != 3 || rgb.shape(2) != 3 || rgb.shape(0) < 1 || rgb.shape(1) < 1) {
+    throw py::value_error("rgb must be (H, W, 3) uint8 with H, W >= 1" + got);
+  }
+  const StereoImage im = image_view(rgb, "rgb");
   const Isa chosen = resolve_isa(isa);
   py::array_t<std::uint8_t> grey({im.rows, im.cols});
   std::uint8_t* out = grey.mutable_data();

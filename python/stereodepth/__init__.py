@@ -64,7 +64,8 @@ def build_info() -> dict[str, Any]:
     ``baseline``, ``avx2`` or ``avx512``, the last on processors with AVX-512 F, BW, VL, DQ,
     VPOPCNTDQ and BITALG; the environment variable STEREODEPTH_ISA caps it,
     and any value of it other than ``auto``, ``baseline``, ``avx2`` or ``avx512`` makes this
-    and every kernel raise ValueError),
+    and every kernel called with ``isa="auto"`` raise ValueError; a kernel given a named
+    ``isa`` runs that one),
     ``supported_isas``, ``default_threads`` (the cores this process may use), ``eigen``,
     ``pybind11`` and ``sanitizers``.
     """
