@@ -10,8 +10,9 @@
 
 namespace stereodepth::detail {
 
-// The speckle filter, in two steps: each band of rows labels its own pixels (in the band's
-// thread, right after matching it), then one pass joins the bands and clears small regions.
+// The speckle filter, in two steps: each band of rows labels its own pixels and sizes its
+// regions (in the band's thread, right after matching it), then a join across the bands'
+// boundaries and a pass, on the matcher's threads, that clears the small regions.
 //
 // Two 4-neighbours are linked when both are valid and differ by at most `range` (as OpenCV's
 // filterSpeckles). Each row is cut into runs of horizontally linked pixels; vertical links
