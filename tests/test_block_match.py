@@ -159,17 +159,38 @@ def test_grey_conversion_is_opencvs() -> None:
     np.testing.assert_array_equal(grey(rgb), cv2.cvtColor(rgb, cv2.COLOR_RGB2GRAY))
 
 
+@pytest.mark.parametrize("order", ["rgb", "bgr"])
 @pytest.mark.parametrize("isa", sd.build_info()["supported_isas"])
-def test_native_grey_conversion_is_the_oracles_for_every_colour(isa: str) -> None:
-    # Every one of the 2^24 colours, then every width from 1 to 70 (the SIMD loop's tails).
+def test_native_grey_conversion_is_the_oracles_for_every_colour(isa: str, order: str) -> None:
+    # Every one of the 2^24 colours, then every width from 1 to 70 (the SIMD loop's tails). A
+    # B, G, R image is converted as it is: its grey is that of the reversed (R, G, B) copy.
     every = np.arange(1 << 24, dtype=np.uint32)
     rgb = np.stack([every >> 16, (every >> 8) & 255, every & 255], axis=-1).astype(np.uint8)
     rgb = rgb.reshape(4096, 4096, 3)
-    np.testing.assert_array_equal(_core._rgb_to_grey(rgb, isa), grey(rgb).astype(np.uint8))
+
+    def want(img: np.ndarray) -> np.ndarray:
+        return np.asarray(grey(img[..., ::-1] if order == "bgr" else img)).astype(np.uint8)
+
+    np.testing.assert_array_equal(_core._rgb_to_grey(rgb, isa, order), want(rgb))
     rng = np.random.default_rng(8)
     for w in range(1, 71):
         img = rng.integers(0, 256, (3, w, 3)).astype(np.uint8)
-        np.testing.assert_array_equal(_core._rgb_to_grey(img, isa), grey(img).astype(np.uint8))
+        np.testing.assert_array_equal(_core._rgb_to_grey(img, isa, order), want(img))
+
+
+@pytest.mark.parametrize("isa", sd.build_info()["supported_isas"])
+def test_bgr_pair_is_matched_as_its_reversed_copy(isa: str) -> None:
+    # B, G, R pairs go to the kernels as they are (no reversed copy): the same disparity and
+    # confidence as the R, G, B pair, for both matchers, with widths around the SIMD step.
+    for w in (17, 18, 33, 50):
+        left, right = shifted_pair((20, w), 3, seed=w, rgb=True)
+        bl, br = np.ascontiguousarray(left[..., ::-1]), np.ascontiguousarray(right[..., ::-1])
+        for make in (sd.StereoMatcher, sd.SemiGlobalMatcher):
+            kw: dict[str, Any] = {"num_disparities": 8, "return_confidence": True, "isa": isa}
+            a = make(**kw).compute(left, right)
+            b = make(**kw, channel_order="bgr").compute(bl, br)
+            np.testing.assert_array_equal(a[0], b[0])
+            np.testing.assert_array_equal(a[1], b[1])
 
 
 @pytest.mark.parametrize(

@@ -18,7 +18,13 @@ SubpixelFit parse_subpixel(const std::string& name) {
                         "'");
 }
 
-StereoImage image_view(const py::array& a, const char* name) {
+bool parse_bgr(const std::string& channel_order) {
+  if (channel_order == "rgb") return false;
+  if (channel_order == "bgr") return true;
+  throw py::value_error("channel_order must be 'rgb' or 'bgr', got '" + channel_order + "'");
+}
+
+StereoImage image_view(const py::array& a, const char* name, bool bgr) {
   StereoImage im;
   const bool u8 = a.dtype().equal(py::dtype::of<std::uint8_t>());
   const bool u16 = a.dtype().equal(py::dtype::of<std::uint16_t>());
@@ -29,7 +35,7 @@ StereoImage image_view(const py::array& a, const char* name) {
   if (a.ndim() == 2) {
     im.format = u8 ? PixelFormat::kGrey8 : PixelFormat::kGrey16;
   } else if (a.ndim() == 3 && a.shape(2) == 3 && u8) {
-    im.format = PixelFormat::kRgb8;
+    im.format = bgr ? PixelFormat::kBgr8 : PixelFormat::kRgb8;
   } else {
     throw py::value_error(std::string(name) +
                           " must be (H, W) uint8/uint16 or (H, W, 3) uint8, got shape " +
@@ -69,9 +75,11 @@ MatchCost parse_cost(const std::string& name) {
 }
 
 void compute_py(BlockMatcher& self, const py::array& left, const py::array& right,
-                py::array& disparity, const py::object& confidence) {
-  const StereoImage l = image_view(left, "left");
-  const StereoImage r = image_view(right, "right");
+                py::array& disparity, const py::object& confidence,
+                const std::string& channel_order) {
+  const bool bgr = parse_bgr(channel_order);
+  const StereoImage l = image_view(left, "left", bgr);
+  const StereoImage r = image_view(right, "right", bgr);
   const ImageView<float> d = output_view(disparity, "disparity");
   ImageView<float> c{};
   py::array conf_arr;
@@ -102,7 +110,8 @@ py::dict stage_times_py(BlockMatcher& self, const py::array& left, const py::arr
 }
 
 // Diagnostics (tests): rgb_to_grey of an (H, W, 3) uint8 array with one instruction set.
-py::array_t<std::uint8_t> rgb_to_grey_py(const py::array& rgb, const std::string& isa) {
+py::array_t<std::uint8_t> rgb_to_grey_py(const py::array& rgb, const std::string& isa,
+                                         const std::string& channel_order) {
   const std::string got = ", got shape " + shape_str(rgb) + " " + dtype_str(rgb);
   if (!rgb.dtype().equal(py::dtype::of<std::uint8_t>())) {
     throw py::type_error("rgb must be (H, W, 3) uint8" + got);
@@ -110,7 +119,7 @@ py::array_t<std::uint8_t> rgb_to_grey_py(const py::array& rgb, const std::string
   if (rgb.ndim() != 3 || rgb.shape(2) != 3 || rgb.shape(0) < 1 || rgb.shape(1) < 1) {
     throw py::value_error("rgb must be (H, W, 3) uint8 with H, W >= 1" + got);
   }
-  const StereoImage im = image_view(rgb, "rgb");
+  const StereoImage im = image_view(rgb, "rgb", parse_bgr(channel_order));
   const Isa chosen = resolve_isa(isa);
   py::array_t<std::uint8_t> grey({im.rows, im.cols});
   std::uint8_t* out = grey.mutable_data();
@@ -125,8 +134,10 @@ py::array_t<std::uint8_t> rgb_to_grey_py(const py::array& rgb, const std::string
 
 void bind_block_match(py::module_& m) {
   m.def("_rgb_to_grey", &rgb_to_grey_py, py::arg("rgb"), py::arg("isa") = "auto",
+        py::arg("channel_order") = "rgb",
         "Diagnostics for the tests: the grey levels the matchers use for an (H, W, 3) uint8 "
-        "RGB image, computed with one instruction set's kernel.");
+        "colour image (R, G, B, or B, G, R with channel_order='bgr'), computed with one "
+        "instruction set's kernel.");
   py::class_<BlockMatcher>(m, "BlockMatcher",
                            "Low-level matcher behind stereodepth.StereoMatcher.")
       .def(py::init([](int num_disparities, int min_disparity, int block_size,
@@ -154,8 +165,9 @@ void bind_block_match(py::module_& m) {
            py::arg("speckle_range"), py::arg("threads"), py::arg("isa") = "auto",
            py::arg("clip_border") = true)
       .def("compute", &compute_py, py::arg("left"), py::arg("right"), py::arg("disparity"),
-           py::arg("confidence") = py::none(),
-           "Writes the disparity (and the confidence, unless None) of left.")
+           py::arg("confidence") = py::none(), py::arg("channel_order") = "rgb",
+           "Writes the disparity (and the confidence, unless None) of left; (H, W, 3) images "
+           "are R, G, B, or B, G, R with channel_order='bgr'.")
       .def("_stage_times", &stage_times_py, py::arg("left"), py::arg("right"),
            py::arg("disparity"), py::arg("repeats") = 5,
            "Diagnostics for bench/: each stage timed alone on one thread (seconds, the least "

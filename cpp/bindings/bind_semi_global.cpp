@@ -10,9 +10,11 @@ namespace stereodepth::bindings {
 namespace {
 
 void compute_py(SemiGlobalMatcher& self, const py::array& left, const py::array& right,
-                py::array& disparity, const py::object& confidence) {
-  const StereoImage l = image_view(left, "left");
-  const StereoImage r = image_view(right, "right");
+                py::array& disparity, const py::object& confidence,
+                const std::string& channel_order) {
+  const bool bgr = parse_bgr(channel_order);
+  const StereoImage l = image_view(left, "left", bgr);
+  const StereoImage r = image_view(right, "right", bgr);
   const ImageView<float> d = output_view(disparity, "disparity");
   ImageView<float> c{};
   py::array conf_arr;
@@ -61,8 +63,9 @@ void bind_semi_global(py::module_& m) {
            py::arg("clip_border"), py::arg("max_memory_mb"), py::arg("threads"),
            py::arg("isa") = "auto")
       .def("compute", &compute_py, py::arg("left"), py::arg("right"), py::arg("disparity"),
-           py::arg("confidence") = py::none(),
-           "Writes the disparity (and the confidence, unless None) of left.")
+           py::arg("confidence") = py::none(), py::arg("channel_order") = "rgb",
+           "Writes the disparity (and the confidence, unless None) of left; (H, W, 3) images "
+           "are R, G, B, or B, G, R with channel_order='bgr'.")
       .def_property_readonly("threads", &SemiGlobalMatcher::threads)
       .def_property_readonly("isa",
                              [](const SemiGlobalMatcher& self) { return isa_name(self.isa()); });

@@ -279,7 +279,8 @@ void BlockMatcher::compute(const StereoImage& left, const StereoImage& right,
   Workspace& ws = *workspace_;
   const int r = p.block_size / 2;
   const bool sixteen = left.format == PixelFormat::kGrey16;
-  const bool rgb = left.format == PixelFormat::kRgb8;
+  const bool rgb = is_colour(left.format);
+  const bool bgr = left.format == PixelFormat::kBgr8;
   const bool census = p.cost == MatchCost::kCensus;
   const bool texture_on = p.texture_threshold > 0;
   const std::size_t feat_size = census ? 4 : 1;
@@ -339,7 +340,7 @@ void BlockMatcher::compute(const StereoImage& left, const StereoImage& right,
       if (rgb) {
         for (std::ptrdiff_t y = wk.g0; y < wk.g1; ++y) {
           k.rgb_to_grey(static_cast<const std::uint8_t*>(src.data) + y * src.row_stride,
-                        wk.grey[im] + (y - wk.g0) * cols, cols);
+                        wk.grey[im] + (y - wk.g0) * cols, cols, bgr);
         }
         base = wk.grey[im];
         stride = cols;
@@ -549,11 +550,11 @@ void BlockMatcher::compute(const StereoImage& left, const StereoImage& right,
 }
 
 void rgb_to_grey(const StereoImage& rgb, std::uint8_t* grey, Isa isa) {
-  if (rgb.format != PixelFormat::kRgb8) throw std::invalid_argument("rgb must be an RGB image");
+  if (!is_colour(rgb.format)) throw std::invalid_argument("rgb must be a colour image");
   const detail::BlockMatchKernels& k = kernels_for(isa);
   for (std::ptrdiff_t y = 0; y < rgb.rows; ++y) {
     k.rgb_to_grey(static_cast<const std::uint8_t*>(rgb.data) + y * rgb.row_stride,
-                  grey + y * rgb.cols, rgb.cols);
+                  grey + y * rgb.cols, rgb.cols, rgb.format == PixelFormat::kBgr8);
   }
 }
 
@@ -578,7 +579,8 @@ std::vector<std::pair<std::string, double>> BlockMatcher::stage_times(
   const detail::BlockMatchKernels& k = kernels_for(isa_);
   const std::ptrdiff_t rows = left.rows, cols = left.cols;
   const int dp = (p.num_disparities + k.lanes - 1) / k.lanes * k.lanes;
-  const bool rgb = left.format == PixelFormat::kRgb8;
+  const bool rgb = is_colour(left.format);
+  const bool bgr = left.format == PixelFormat::kBgr8;
   const bool census = p.cost == MatchCost::kCensus;
   const bool texture_on = p.texture_threshold > 0;
   const std::size_t feat_size = census ? 4 : 1;
@@ -622,7 +624,7 @@ std::vector<std::pair<std::string, double>> BlockMatcher::stage_times(
     timed("grey", [&] {
       for (int im = 0; im < 2; ++im) {
         for (std::ptrdiff_t y = 0; y < rows; ++y) {
-          k.rgb_to_grey(base[im] + y * images[im]->row_stride, grey[im] + y * cols, cols);
+          k.rgb_to_grey(base[im] + y * images[im]->row_stride, grey[im] + y * cols, cols, bgr);
         }
       }
     }, nothing);

@@ -73,12 +73,16 @@ inline ptrdiff_t clamp_index(ptrdiff_t v, ptrdiff_t lo, ptrdiff_t hi) {
 // ------------------------------------------------------------------------------------------
 // Grey, census and Sobel rows.
 
-// OpenCV's COLOR_RGB2GRAY for 8-bit images, bit for bit (tests check all 2^24 colours).
-void rgb_to_grey(const uint8_t* rgb, uint8_t* grey, ptrdiff_t cols) {
+// OpenCV's COLOR_RGB2GRAY (COLOR_BGR2GRAY with bgr) for 8-bit images, bit for bit (tests
+// check all 2^24 colours): (9798 R + 19235 G + 3735 B + 16384) >> 15, with w0, w1, w2 the
+// weights of the pixel's bytes 0, 1, 2.
+void rgb_to_grey(const uint8_t* rgb, uint8_t* grey, ptrdiff_t cols, bool bgr) {
+  const uint32_t w0 = bgr ? 3735u : 9798u, w1 = 19235u, w2 = bgr ? 9798u : 3735u;
   ptrdiff_t x = 0;
 #if defined(STEREODEPTH_BM_AVX2)
   // 16 pixels at a time, in 32-bit lanes: vpshufb spreads each 128-bit half's four pixels
-  // into (R, G) and (B, 0) pairs of 16-bit lanes, and vpmaddwd sums them with the weights
+  // into (byte 0, byte 1) and (byte 2, 0) pairs of 16-bit lanes, and vpmaddwd sums them with
+  // the weights
   // (exact: at most 255 * 32768 fits a lane). A vector holds pixels 0-3 and 8-11, the other
   // 4-7 and 12-15, so that packing them gives 0-15 in order. The last of the four 16-byte
   // loads ends at byte 3 * (x + 12) + 16 <= 3 * cols: x + 18 <= cols.
@@ -86,8 +90,8 @@ void rgb_to_grey(const uint8_t* rgb, uint8_t* grey, ptrdiff_t cols) {
       _mm_setr_epi8(0, -1, 1, -1, 3, -1, 4, -1, 6, -1, 7, -1, 9, -1, 10, -1));
   const __m256i b_of = _mm256_broadcastsi128_si256(
       _mm_setr_epi8(2, -1, -1, -1, 5, -1, -1, -1, 8, -1, -1, -1, 11, -1, -1, -1));
-  const __m256i w_rg = _mm256_set1_epi32(9798 | (19235 << 16));
-  const __m256i w_b = _mm256_set1_epi32(3735);
+  const __m256i w_rg = _mm256_set1_epi32(static_cast<int>(w0 | (w1 << 16)));
+  const __m256i w_b = _mm256_set1_epi32(static_cast<int>(w2));
   const __m256i half = _mm256_set1_epi32(16384);
   auto four_and_four = [&](const uint8_t* p) {  // pixels 0-3 and 8-11 from p
     const __m256i v = _mm256_loadu2_m128i(reinterpret_cast<const __m128i*>(p + 24),
@@ -103,8 +107,8 @@ void rgb_to_grey(const uint8_t* rgb, uint8_t* grey, ptrdiff_t cols) {
   }
 #endif
   for (; x < cols; ++x) {
-    const uint32_t r = rgb[3 * x], g = rgb[3 * x + 1], b = rgb[3 * x + 2];
-    grey[x] = static_cast<uint8_t>((r * 9798u + g * 19235u + b * 3735u + 16384u) >> 15);
+    const uint32_t c0 = rgb[3 * x], c1 = rgb[3 * x + 1], c2 = rgb[3 * x + 2];
+    grey[x] = static_cast<uint8_t>((c0 * w0 + c1 * w1 + c2 * w2 + 16384u) >> 15);
   }
 }
 

@@ -123,7 +123,9 @@ inline constexpr std::size_t cost_ring_size(int lanes, std::size_t feat_size, in
 // Elements of slack after each padded row, so vector loops may overrun.
 inline constexpr std::ptrdiff_t kRowPad = 64;
 
-using RgbToGreyFn = void (*)(const std::uint8_t* rgb, std::uint8_t* grey, std::ptrdiff_t cols);
+// bgr: the channels are B, G, R (OpenCV's COLOR_BGR2GRAY) rather than R, G, B.
+using RgbToGreyFn = void (*)(const std::uint8_t* rgb, std::uint8_t* grey, std::ptrdiff_t cols,
+                             bool bgr);
 // rows: the 5 rows y-2 .. y+2 (clamped to the image), each `cols` long.
 using CensusRow8Fn = void (*)(const std::uint8_t* const* rows, std::uint32_t* out,
                               std::ptrdiff_t cols);

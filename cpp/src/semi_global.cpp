@@ -227,7 +227,7 @@ class PairRows {
   static constexpr std::ptrdiff_t kRing = 8;
 
   static int ring_images(PixelFormat f) {
-    return f == PixelFormat::kRgb8 ? 2 : f == PixelFormat::kGrey16 ? 1 : 0;
+    return is_colour(f) ? 2 : f == PixelFormat::kGrey16 ? 1 : 0;
   }
   // uint16 units of scratch for `cols` columns.
   static std::size_t n16(std::size_t c, int ring_images) {
@@ -261,8 +261,8 @@ class PairRows {
     const std::ptrdiff_t slot = y % kRing;
     std::uint8_t* g = grey_[im] + slot * cols_;
     if (tag_[im][slot] != y) {
-      if (format_ == PixelFormat::kRgb8) {
-        bk_.rgb_to_grey(row, g, cols_);
+      if (is_colour(format_)) {
+        bk_.rgb_to_grey(row, g, cols_, format_ == PixelFormat::kBgr8);
       } else {
         const auto* s16 = reinterpret_cast<const std::uint16_t*>(row);
         for (std::ptrdiff_t x = 0; x < cols_; ++x) g[x] = static_cast<std::uint8_t>(s16[x] >> 8);
@@ -502,7 +502,8 @@ void SemiGlobalMatcher::compute(const StereoImage& left, const StereoImage& righ
   const detail::BlockMatchKernels& bk = shared_kernels(isa_);
   const detail::SemiGlobalKernels& k = sgm_kernels(isa_);
   const bool sixteen = left.format == PixelFormat::kGrey16;
-  const bool rgb = left.format == PixelFormat::kRgb8;
+  const bool rgb = is_colour(left.format);
+  const bool bgr = left.format == PixelFormat::kBgr8;
   const int r = p.block_size / 2;
   const int cmax = cost_max(p.block_size);
   const auto npix = static_cast<std::size_t>(rows * cols);
@@ -536,7 +537,7 @@ void SemiGlobalMatcher::compute(const StereoImage& left, const StereoImage& righ
         for (std::ptrdiff_t y = band(rows, nt, b); y < band(rows, nt, b + 1); ++y) {
           bk.rgb_to_grey(static_cast<const std::uint8_t*>(images[im]->data) +
                              y * images[im]->row_stride,
-                         grey + static_cast<std::size_t>(im) * npix + y * cols, cols);
+                         grey + static_cast<std::size_t>(im) * npix + y * cols, cols, bgr);
         }
       }
     });

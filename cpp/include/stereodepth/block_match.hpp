@@ -52,8 +52,12 @@ struct BlockMatchParams {
 // Throws std::invalid_argument naming the parameter, the rule and the value received.
 void validate(const BlockMatchParams& params);
 
-// An input image: 8-bit grey, 16-bit grey or 8-bit RGB (3 interleaved channels).
-enum class PixelFormat { kGrey8 = 0, kGrey16 = 1, kRgb8 = 2 };
+// An input image: 8-bit grey, 16-bit grey, or 8-bit colour (3 interleaved channels: R, G, B,
+// or B, G, R as OpenCV stores them). Colour is matched as its grey, OpenCV's COLOR_RGB2GRAY
+// or COLOR_BGR2GRAY.
+enum class PixelFormat { kGrey8 = 0, kGrey16 = 1, kRgb8 = 2, kBgr8 = 3 };
+
+inline bool is_colour(PixelFormat f) { return f == PixelFormat::kRgb8 || f == PixelFormat::kBgr8; }
 
 struct StereoImage {
   const void* data = nullptr;
@@ -106,10 +110,10 @@ class BlockMatcher {
   std::mutex mutex_;
 };
 
-// Diagnostics (tests): the grey levels the matchers match an 8-bit RGB image by (OpenCV's
-// COLOR_RGB2GRAY, bit for bit), computed row by row with `isa`'s kernel into `grey`
-// (rgb.rows x rgb.cols bytes, rows rgb.cols apart). Throws std::invalid_argument when rgb is
-// not RGB.
+// Diagnostics (tests): the grey levels the matchers match an 8-bit colour image by (OpenCV's
+// COLOR_RGB2GRAY or COLOR_BGR2GRAY, bit for bit), computed row by row with `isa`'s kernel
+// into `grey` (rgb.rows x rgb.cols bytes, rows rgb.cols apart). Throws std::invalid_argument
+// when rgb is not colour.
 void rgb_to_grey(const StereoImage& rgb, std::uint8_t* grey, Isa isa);
 
 // One-shot form of BlockMatcher::compute.
