@@ -101,7 +101,8 @@ void rgb_to_grey(const uint8_t* rgb, uint8_t* grey, ptrdiff_t cols, bool bgr) {
     return _mm256_srli_epi32(_mm256_add_epi32(sum, half), 15);
   };
   for (; x + 18 <= cols; x += 16) {
-    const __m256i w = _mm256_packus_epi32(four_and_four(rgb + 3 * x), four_and_four(rgb + 3 * x + 12));
+    const __m256i w =
+        _mm256_packus_epi32(four_and_four(rgb + 3 * x), four_and_four(rgb + 3 * x + 12));
     _mm_storeu_si128(reinterpret_cast<__m128i*>(grey + x),
                      _mm_packus_epi16(_mm256_castsi256_si128(w), _mm256_extracti128_si256(w, 1)));
   }
