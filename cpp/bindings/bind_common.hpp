@@ -172,11 +172,10 @@ StackView<T> writable_stack(py::array& out, const char* name) {
                       s.frame_stride, s.row_stride};
 }
 
-// The matchers' shared checks (bind_block_match.cpp): an input image as a StereoImage, a
+// The matchers' shared checks (bind_block_match.cpp): an input image as a StereoImage (an
+// (H, W, 3) uint8 one is B, G, R with bgr), channel_order "rgb" or "bgr" as that flag, a
 // float32 output as a view, the sub-pixel fit by name.
-// An image array as the kernels take it; an (H, W, 3) uint8 one is B, G, R with bgr.
 StereoImage image_view(const py::array& a, const char* name, bool bgr = false);
-// channel_order "rgb" (false) or "bgr" (true); ValueError naming it otherwise.
 bool parse_bgr(const std::string& channel_order);
 ImageView<float> output_view(py::array& a, const char* name);
 SubpixelFit parse_subpixel(const std::string& name);

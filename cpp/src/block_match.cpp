@@ -279,7 +279,7 @@ void BlockMatcher::compute(const StereoImage& left, const StereoImage& right,
   Workspace& ws = *workspace_;
   const int r = p.block_size / 2;
   const bool sixteen = left.format == PixelFormat::kGrey16;
-  const bool rgb = is_colour(left.format);
+  const bool colour = is_colour(left.format);
   const bool bgr = left.format == PixelFormat::kBgr8;
   const bool census = p.cost == MatchCost::kCensus;
   const bool texture_on = p.texture_threshold > 0;
@@ -300,7 +300,7 @@ void BlockMatcher::compute(const StereoImage& left, const StereoImage& right,
     std::ptrdiff_t f0, f1;  // feature rows: the band and the block's reach
     std::ptrdiff_t g0, g1;  // grey rows: the feature rows and the census window's reach
     detail::BandScratch scratch;
-    std::uint8_t* grey[2];  // RGB only: grey rows g0..g1
+    std::uint8_t* grey[2];  // colour only: grey rows g0..g1
     std::uint8_t* feat[2];  // feature rows f0..f1, left and right
     std::uint8_t* texture;  // texture rows f0..f1, or null
   };
@@ -319,8 +319,8 @@ void BlockMatcher::compute(const StereoImage& left, const StereoImage& right,
     Arena arena(&ws.workers[w]);
     for (int pass = 0; pass < 2; ++pass) {
       wk.scratch = carve_band(arena, cols, dp, feat_size, k.lanes, p.block_size / 2);
-      wk.grey[0] = arena.take<std::uint8_t>(rgb ? gpix : 0);
-      wk.grey[1] = arena.take<std::uint8_t>(rgb ? gpix : 0);
+      wk.grey[0] = arena.take<std::uint8_t>(colour ? gpix : 0);
+      wk.grey[1] = arena.take<std::uint8_t>(colour ? gpix : 0);
       wk.feat[0] = arena.take<std::uint8_t>(fpix * feat_size);
       wk.feat[1] = arena.take<std::uint8_t>(fpix * feat_size);
       wk.texture = arena.take<std::uint8_t>(texture_on ? fpix : 0);
@@ -329,7 +329,7 @@ void BlockMatcher::compute(const StereoImage& left, const StereoImage& right,
     if (!texture_on) wk.texture = nullptr;
   }
 
-  // 1. A band's features: census codes or prefiltered pixels, and the texture; RGB rows are
+  // 1. A band's features: census codes or prefiltered pixels, and the texture; colour rows are
   //    turned into grey first.
   const StereoImage* images[2] = {&left, &right};
   auto band_features = [&](Worker& wk) {
@@ -337,7 +337,7 @@ void BlockMatcher::compute(const StereoImage& left, const StereoImage& right,
       const StereoImage& src = *images[im];
       const void* base = src.data;
       std::ptrdiff_t stride = sixteen ? src.row_stride / 2 : src.row_stride, row0 = 0;
-      if (rgb) {
+      if (colour) {
         for (std::ptrdiff_t y = wk.g0; y < wk.g1; ++y) {
           k.rgb_to_grey(static_cast<const std::uint8_t*>(src.data) + y * src.row_stride,
                         wk.grey[im] + (y - wk.g0) * cols, cols, bgr);
@@ -579,7 +579,7 @@ std::vector<std::pair<std::string, double>> BlockMatcher::stage_times(
   const detail::BlockMatchKernels& k = kernels_for(isa_);
   const std::ptrdiff_t rows = left.rows, cols = left.cols;
   const int dp = (p.num_disparities + k.lanes - 1) / k.lanes * k.lanes;
-  const bool rgb = is_colour(left.format);
+  const bool colour = is_colour(left.format);
   const bool bgr = left.format == PixelFormat::kBgr8;
   const bool census = p.cost == MatchCost::kCensus;
   const bool texture_on = p.texture_threshold > 0;
@@ -620,7 +620,7 @@ std::vector<std::pair<std::string, double>> BlockMatcher::stage_times(
   const std::uint8_t* base[2];
   for (int im = 0; im < 2; ++im) base[im] = static_cast<const std::uint8_t*>(images[im]->data);
   std::ptrdiff_t stride = left.row_stride;
-  if (rgb) {
+  if (colour) {
     timed("grey", [&] {
       for (int im = 0; im < 2; ++im) {
         for (std::ptrdiff_t y = 0; y < rows; ++y) {

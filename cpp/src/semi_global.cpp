@@ -502,7 +502,7 @@ void SemiGlobalMatcher::compute(const StereoImage& left, const StereoImage& righ
   const detail::BlockMatchKernels& bk = shared_kernels(isa_);
   const detail::SemiGlobalKernels& k = sgm_kernels(isa_);
   const bool sixteen = left.format == PixelFormat::kGrey16;
-  const bool rgb = is_colour(left.format);
+  const bool colour = is_colour(left.format);
   const bool bgr = left.format == PixelFormat::kBgr8;
   const int r = p.block_size / 2;
   const int cmax = cost_max(p.block_size);
@@ -518,7 +518,7 @@ void SemiGlobalMatcher::compute(const StereoImage& left, const StereoImage& righ
   auto* costs = aligned<std::uint8_t>(ws.costs, single_pass ? 0 : vol);
   auto* lcen = aligned<std::uint16_t>(ws.census_l, whole);
   auto* rcen = aligned<std::uint16_t>(ws.census_r, whole);
-  auto* grey = aligned<std::uint8_t>(ws.grey, rgb ? 2 * whole : 0);
+  auto* grey = aligned<std::uint8_t>(ws.grey, colour ? 2 * whole : 0);
   auto* pgrey = aligned<std::uint8_t>(ws.pgrey, whole);  // grey levels for P2', 8-bit scale
 
   const std::ptrdiff_t nt = std::max<std::ptrdiff_t>(1, std::min<std::ptrdiff_t>(threads, rows));
@@ -531,7 +531,7 @@ void SemiGlobalMatcher::compute(const StereoImage& left, const StereoImage& righ
   // 0. Paths 4 and 8: the grey and census images (rows split between the threads).
   const StereoImage* images[2] = {&left, &right};
   std::uint16_t* census[2] = {lcen, rcen};
-  if (rgb && !single_pass) {
+  if (colour && !single_pass) {
     run_bands(nt, [&](std::ptrdiff_t b) {
       for (int im = 0; im < 2; ++im) {
         for (std::ptrdiff_t y = band(rows, nt, b); y < band(rows, nt, b + 1); ++y) {
@@ -549,7 +549,7 @@ void SemiGlobalMatcher::compute(const StereoImage& left, const StereoImage& righ
       const StereoImage& src = *images[im];
       auto row_ptr = [&](std::ptrdiff_t y) -> const void* {
         y = std::clamp<std::ptrdiff_t>(y, 0, rows - 1);
-        if (rgb) return grey + static_cast<std::size_t>(im) * npix + y * cols;
+        if (colour) return grey + static_cast<std::size_t>(im) * npix + y * cols;
         return static_cast<const std::uint8_t*>(src.data) + y * src.row_stride;
       };
       for (std::ptrdiff_t y = band(rows, nt, b); y < band(rows, nt, b + 1); ++y) {

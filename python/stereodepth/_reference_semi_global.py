@@ -133,7 +133,8 @@ def semi_global_match(
     left_arr, right_arr = as_pair(
         left, right, channel_order=o.channel_order, intensity_range=o.intensity_range
     )
-    gl, gr = grey(left_arr), grey(right_arr)
+    gl = grey(left_arr, channel_order=o.channel_order)
+    gr = grey(right_arr, channel_order=o.channel_order)
     ig = gl.astype(np.int64)
     if left_arr.dtype == np.uint16:
         ig = ig >> 8  # grey levels on the 8-bit scale for the P2 adaptation

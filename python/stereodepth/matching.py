@@ -443,21 +443,17 @@ def as_pair(
     *,
     channel_order: str = "rgb",
     intensity_range: tuple[int, int] | None = None,
-    keep_bgr: bool = False,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """The pair as every matcher takes it: checked (:func:`check_pair`), C-contiguous,
-    (H, W, 3) images in R, G, B order (a reversed copy for ``channel_order="bgr"``, unless
-    ``keep_bgr``: the native kernels read B, G, R as it is, told by their ``channel_order``;
-    grey images have no channel order and ignore it) and uint16 pairs stretched to the scale of
-    uint8 (:func:`stretch_uint16_pair`, over ``intensity_range`` when given). The rules are step
-    1 of the module docstring. Raises ValueError when ``intensity_range`` is given for uint8
-    images (they are matched as they are)."""
-    order = check_channel_order(channel_order)
+    """The pair as every matcher takes it: checked (:func:`check_pair`), C-contiguous, with
+    ``channel_order`` checked (colour images keep their channels in the order given: the native
+    kernels and the oracles' ``grey`` weigh them by it, so a B, G, R frame is never copied) and
+    uint16 pairs stretched to the scale of uint8 (:func:`stretch_uint16_pair`, over
+    ``intensity_range`` when given). The rules are step 1 of the module docstring. Raises
+    ValueError when ``intensity_range`` is given for uint8 images (they are matched as they
+    are)."""
+    check_channel_order(channel_order)
     fixed = check_intensity_range(intensity_range)
     left_arr, right_arr = check_pair(left, right)
-    if left_arr.ndim == 3 and order == "bgr" and not keep_bgr:
-        left_arr = np.ascontiguousarray(left_arr[..., ::-1])
-        right_arr = np.ascontiguousarray(right_arr[..., ::-1])
     if left_arr.dtype == np.uint16:
         left_arr, right_arr = stretch_uint16_pair(left_arr, right_arr, fixed)
     elif fixed is not None:
@@ -586,17 +582,13 @@ def run_native(
     native: Any, options: Any, left: Any, right: Any, finish: Any = None
 ) -> np.ndarray | tuple[np.ndarray, np.ndarray]:
     """What both matchers' ``compute`` do: the pair checked and converted by :func:`as_pair`
-    (with ``options.channel_order`` and ``options.intensity_range``; a B, G, R pair is passed
-    as it is, with its order, rather than copied reversed: that copy added 40 % to the time of
-    matching a 1280 x 720 pair), the native kernel run into new float32 maps,
-    ``finish(disparity)`` if given, and the disparity returned (with the confidence when
+    (with ``options.channel_order`` and ``options.intensity_range``), the native kernel run
+    into new float32 maps with the channel order (a B, G, R pair is read as it is: a reversed
+    copy added 40 % to the time of matching a 1280 x 720 pair), ``finish(disparity)`` if
+    given, and the disparity returned (with the confidence when
     ``options.return_confidence``)."""
     left_arr, right_arr = as_pair(
-        left,
-        right,
-        channel_order=options.channel_order,
-        intensity_range=options.intensity_range,
-        keep_bgr=True,
+        left, right, channel_order=options.channel_order, intensity_range=options.intensity_range
     )
     shape = left_arr.shape[:2]
     disparity = np.empty(shape, dtype=np.float32)

@@ -83,11 +83,11 @@ class BlockMatcher {
                const ImageView<float>& disparity, const ImageView<float>& confidence);
 
   // Diagnostics for the benchmarks: each stage of compute() timed on its own, on one thread,
-  // over the whole image, in seconds (the least of `repeats` runs): "grey" (RGB images only),
+  // over the whole image, in seconds (the least of `repeats` runs): "grey" (colour images only),
   // "features" (census codes or the SAD prefilter, both images), "texture" (when the check
   // is on), "first pass" (block-column and block sums, winners, the right image's winners),
   // "second pass" (the checks and the sub-pixel step) and "speckle" (when on). Writes the
-  // disparity (without the speckle filter). 8-bit grey or RGB images only.
+  // disparity (without the speckle filter). 8-bit grey or colour images only.
   std::vector<std::pair<std::string, double>> stage_times(const StereoImage& left,
                                                           const StereoImage& right,
                                                           const ImageView<float>& disparity,

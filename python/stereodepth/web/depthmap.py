@@ -262,12 +262,12 @@ def _too_many_pixels(field: str, w: int, h: int, limits: DepthMapLimits) -> BadI
     )
 
 
-def _bomb(field: str, data: bytes, exc: Exception) -> BadInput:
-    """Pillow's decompression-bomb refusal, with the image's size: from the header of a PNG
-    or JPEG, else Pillow's count of pixels ("Image size (N pixels) exceeds limit ...")."""
+def _bomb(field: str, data: bytes, size: tuple[int, int] | None, exc: Exception) -> BadInput:
+    """Pillow's decompression-bomb refusal, with the image's size: ``size``, from the header
+    of a PNG or JPEG, else Pillow's count of pixels ("Image size (N pixels) exceeds limit
+    ...")."""
     from PIL import Image
 
-    size = _header_size(data)
     count = _bomb_pixels(exc)
     if size is not None:
         got = f"the image is {size[0]}x{size[1]} px ({_mp(size[0] * size[1])})"
@@ -315,7 +315,7 @@ def decode_image(field: str, data: bytes, limits: DepthMapLimits) -> np.ndarray:
         try:
             im = Image.open(io.BytesIO(data))
         except (Image.DecompressionBombError, Image.DecompressionBombWarning) as exc:
-            raise _bomb(field, data, exc) from None
+            raise _bomb(field, data, size, exc) from None
         except UnidentifiedImageError:
             raise BadInput(loc, _unreadable(field, data)) from None
         except (OSError, ValueError, SyntaxError) as exc:
