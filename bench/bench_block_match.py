@@ -23,10 +23,10 @@ import numpy as np
 import pytest
 
 import stereodepth as sd
-from stereodepth import reference
+from stereodepth import _core, reference
 from stereodepth._methods import _thread_state
 from stereodepth.io import read_image
-from stereodepth.matching import DEFAULT_BLOCK_SIZE
+from stereodepth.matching import DEFAULT_BLOCK_SIZE, stretch_uint16_pair
 from stereodepth.metrics import evaluate
 
 THREADS = 2
@@ -202,6 +202,44 @@ def test_speed_vs_opencv_interleaved(alternate: Any) -> None:
     print(f"median over the {len(ratios)} scenes of stereodepth / StereoBM: {median:.3f}")
     print(f"the same from the least times: {float(np.median(least_ratios)):.3f}")
     assert len(ratios) == len(SCENES)
+
+
+def test_uint16_pair_interleaved(alternate: Any) -> None:
+    """A 12-bit encoding of the 1280 x 720 pair (v * 16 + 5, uint16): its stretch alone,
+    numpy's integer division (the oracles' stretch_uint16_pair) against the native kernel the
+    matchers use, and a whole StereoMatcher.compute of the uint16 pair against the uint8 one
+    (the stretch is the only extra step; the disparities are the same)."""
+    pair = hd_pair()
+    left8, right8, nd = pair["left"], pair["right"], pair["ndisp"]
+    left = left8.astype(np.uint16) * 16 + 5
+    right = right8.astype(np.uint16) * 16 + 5
+    rounds = int(os.environ.get("STEREODEPTH_BENCH_ROUNDS", "21"))
+    matcher = sd.StereoMatcher(num_disparities=nd, threads=THREADS)
+    np.testing.assert_array_equal(matcher.compute(left, right), matcher.compute(left8, right8))
+    for a, b in zip(
+        _core._stretch_uint16_pair(left, right, None, THREADS),
+        stretch_uint16_pair(left, right),
+        strict=True,
+    ):
+        np.testing.assert_array_equal(a, b)
+    native, numpy_ = alternate(
+        lambda: _core._stretch_uint16_pair(left, right, None, THREADS),
+        lambda: stretch_uint16_pair(left, right),
+        rounds,
+    )
+    u16, u8 = alternate(
+        lambda: matcher.compute(left, right), lambda: matcher.compute(left8, right8), rounds
+    )
+    print()
+    print(f"ISA: {sd.build_info()['isa']}, {THREADS} threads, {rounds} rounds, 1280 x 720 x {nd}")
+    print("| call | median ms | ratio |")
+    print("|---|---:|---:|")
+    print(f"| stretch, numpy | {1e3 * np.median(numpy_):.2f} | |")
+    ratio = float(np.median([a / b for a, b in zip(native, numpy_, strict=True)]))
+    print(f"| stretch, native (the matchers') | {1e3 * np.median(native):.2f} | {ratio:.3f} |")
+    print(f"| StereoMatcher.compute, uint8 pair | {1e3 * np.median(u8):.2f} | |")
+    ratio = float(np.median([a / b for a, b in zip(u16, u8, strict=True)]))
+    print(f"| StereoMatcher.compute, uint16 pair | {1e3 * np.median(u16):.2f} | {ratio:.3f} |")
 
 
 def test_stage_breakdown() -> None:

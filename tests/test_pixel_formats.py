@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 
 import stereodepth as sd
-from stereodepth import cli, matching
+from stereodepth import _core, cli, matching
 from stereodepth import reference as ref
 from stereodepth._reference_block_match import grey, stretched
 from stereodepth.metrics import evaluate
@@ -124,6 +124,147 @@ def test_stretch_keeps_a_constant_pair() -> None:
     # ... which matches as any constant pair does: no texture, nothing valid but the ties.
     kw: dict[str, Any] = {"num_disparities": 4, "cost": "sad", "return_confidence": True}
     assert_agree(sd.block_match(left, left, **kw), ref.block_match(left, left, **kw))
+
+
+# The native stretch (the matchers' own, stereodepth._core._stretch_uint16_pair) against the
+# oracle's int64 formula, on every instruction set: every value 0..65535 over many spans.
+
+ISAS: list[str] = list(sd.build_info()["supported_isas"])
+EVERY_VALUE = np.arange(65536, dtype=np.uint16).reshape(256, 256)
+
+
+def span_ranges(n: int, seed: int) -> list[tuple[int, int]]:
+    """(lo, hi) for the spans where a float quotient is most likely to be off (the smallest,
+    the powers of two and their neighbours, the scale 65280 and the full range) and n random
+    ones, each at a random offset."""
+    rng = np.random.default_rng(seed)
+    spans = {1, 2, 3, 5, 7, 255, 256, 257, 4095, 4096, 65279, 65280, 65281, 65534, 65535}
+    spans |= {2**k + e for k in range(1, 16) for e in (-1, 0, 1) if 1 <= 2**k + e <= 65535}
+    spans |= {int(v) for v in rng.integers(1, 65536, n)}
+    out = []
+    for span in sorted(spans):
+        lo = int(rng.integers(0, 65536 - span))
+        out.append((lo, lo + span))
+    return out
+
+
+@pytest.mark.parametrize("isa", ISAS)
+def test_native_stretch_is_the_oracles_for_every_value(isa: str) -> None:
+    # Each range clips the values outside it; every value of 0..65535 is stretched by each.
+    wrong = []
+    for lo, hi in span_ranges(120, seed=ISAS.index(isa)):
+        nl, nr = _core._stretch_uint16_pair(EVERY_VALUE, EVERY_VALUE[::-1].copy(), (lo, hi), 0, isa)
+        ol, orr = stretched(
+            EVERY_VALUE.astype(np.int32), EVERY_VALUE[::-1].astype(np.int32), (lo, hi)
+        )
+        assert nl.dtype == nr.dtype == np.uint16
+        if not (np.array_equal(nl, ol) and np.array_equal(nr, orr)):
+            wrong.append((lo, hi))
+    assert wrong == []
+
+
+@pytest.mark.parametrize("isa", ISAS)
+@pytest.mark.parametrize("shape", [(1, 1), (1, 37), (37, 1), (130, 67), (257, 301)])
+@pytest.mark.parametrize("threads", [1, 2, 3])
+def test_native_stretch_of_the_joint_range(isa: str, shape: tuple[int, int], threads: int) -> None:
+    # Odd sizes (rows split between threads, row tails past any vector width), the range split
+    # between the two images, and the inputs left as they were.
+    rng = np.random.default_rng(shape[0] * 1000 + shape[1] + threads)
+    lo, hi = sorted(int(v) for v in rng.integers(0, 65536, 2))
+    hi = max(hi, lo + 1)
+    left = rng.integers(lo, hi + 1, shape).astype(np.uint16)
+    right = rng.integers(lo, hi + 1, shape).astype(np.uint16)
+    left.flat[-1], right.flat[0] = lo, hi
+    if left.size > 1:
+        left.flat[0] = hi
+    lc, rc = left.copy(), right.copy()
+    nl, nr = _core._stretch_uint16_pair(left, right, None, threads, isa)
+    ol, orr = matching.stretch_uint16_pair(left, right)
+    np.testing.assert_array_equal(nl, ol)
+    np.testing.assert_array_equal(nr, orr)
+    np.testing.assert_array_equal(left, lc)
+    np.testing.assert_array_equal(right, rc)
+    assert nl.flags.c_contiguous and nl is not left and nr is not right
+
+
+def test_native_stretch_keeps_a_constant_pair() -> None:
+    left = np.full((4, 5), 4000, np.uint16)
+    right = left.copy()
+    sl, sr = _core._stretch_uint16_pair(left, right)
+    assert sl is left and sr is right
+    # With a range the constant pair is stretched (here: clipped to hi, the top of the scale).
+    sl, sr = _core._stretch_uint16_pair(left, right, (0, 1000))
+    assert (sl == 65280).all() and (sr == 65280).all()
+
+
+def test_the_matchers_use_the_native_stretch(monkeypatch: pytest.MonkeyPatch) -> None:
+    # A 12-bit pair with a fixed range and with its own: the native matchers' stretch (native
+    # kernel) and the oracles' (numpy) give the same disparity, with both matchers.
+    calls = []
+    native_stretch = _core._stretch_uint16_pair
+
+    def counted(*args: Any) -> Any:
+        calls.append(args[2:])
+        return native_stretch(*args)
+
+    monkeypatch.setattr(_core, "_stretch_uint16_pair", counted)
+    rng = np.random.default_rng(3)
+    base = rng.integers(0, 4096, (40, 96)).astype(np.uint16)
+    left, right = base[:, 4:84].copy(), base[:, :80].copy()
+    for kw in ({}, {"intensity_range": (100, 3900)}):
+        for native, oracle in (
+            (sd.block_match, ref.block_match),
+            (sd.semi_global_match, ref.semi_global_match),
+        ):
+            got = native(left, right, num_disparities=8, **kw)
+            want = oracle(left, right, num_disparities=8, **kw)
+            np.testing.assert_allclose(got, want, atol=1e-3, equal_nan=True)
+            assert np.isnan(got).sum() == np.isnan(want).sum()
+    # Once per native call, with the range and the matcher's thread count (0: one per CPU).
+    assert calls == [(None, 0), (None, 0), ((100, 3900), 0), ((100, 3900), 0)]
+
+
+@pytest.mark.parametrize(
+    ("args", "exc", "match"),
+    [
+        (
+            (np.zeros((2, 2), np.uint8), np.zeros((2, 2), np.uint8)),
+            TypeError,
+            "left must be a 2-D uint16",
+        ),
+        (
+            (np.zeros((2, 2), np.uint16), np.zeros((2, 2, 1), np.uint16)),
+            ValueError,
+            "right must be a 2-D",
+        ),
+        ((np.zeros((0, 2), np.uint16), np.zeros((0, 2), np.uint16)), ValueError, "H, W >= 1"),
+        (
+            (np.zeros((2, 4), np.uint16)[:, ::2], np.zeros((2, 2), np.uint16)),
+            TypeError,
+            "C-contiguous",
+        ),
+        ((np.zeros((2, 2), np.uint16), np.zeros((2, 3), np.uint16)), ValueError, "same shape"),
+        ((np.zeros((2, 2), np.uint16), np.zeros((2, 2), np.uint16), (5, 5)), ValueError, "lo < hi"),
+        (
+            (np.zeros((2, 2), np.uint16), np.zeros((2, 2), np.uint16), (1, 70000)),
+            ValueError,
+            "65535",
+        ),
+        (
+            (np.zeros((2, 2), np.uint16), np.zeros((2, 2), np.uint16), (1, 2, 3)),
+            TypeError,
+            "two ints",
+        ),
+        (
+            (np.zeros((2, 2), np.uint16), np.zeros((2, 2), np.uint16), None, -1),
+            ValueError,
+            "threads",
+        ),
+    ],
+)
+def test_native_stretch_rejects(args: tuple[Any, ...], exc: type[Exception], match: str) -> None:
+    with pytest.raises(exc, match=match):
+        _core._stretch_uint16_pair(*args)
 
 
 # ------------------------------------------------------------------------------------------

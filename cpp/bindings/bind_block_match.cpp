@@ -1,4 +1,5 @@
 // Binds stereodepth/block_match.hpp: check and convert with the GIL held, then release it.
+#include <cstdint>
 #include <memory>
 #include <string>
 #include <utility>
@@ -6,6 +7,7 @@
 
 #include "bind_common.hpp"
 #include "stereodepth/block_match.hpp"
+#include "stereodepth/stretch.hpp"
 
 namespace stereodepth::bindings {
 
@@ -130,9 +132,80 @@ py::array_t<std::uint8_t> rgb_to_grey_py(const py::array& rgb, const std::string
   return grey;
 }
 
+// A 2-D C-contiguous uint16 array as a Uint16Image; TypeError / ValueError naming `name`.
+Uint16Image uint16_view(const py::array& a, const char* name) {
+  const std::string got = ", got shape " + shape_str(a) + " " + dtype_str(a);
+  if (!a.dtype().equal(py::dtype::of<std::uint16_t>())) {
+    throw py::type_error(std::string(name) + " must be a 2-D uint16 array" + got);
+  }
+  if (a.ndim() != 2 || a.shape(0) < 1 || a.shape(1) < 1) {
+    throw py::value_error(std::string(name) + " must be a 2-D uint16 array with H, W >= 1" +
+                          got);
+  }
+  if (!(a.flags() & py::array::c_style)) {
+    throw py::type_error(std::string(name) + " must be C-contiguous");
+  }
+  return Uint16Image{static_cast<const std::uint16_t*>(a.data()), a.shape(0), a.shape(1),
+                     a.shape(1)};
+}
+
+// The min-max stretch of a uint16 pair (stretch.hpp) over (lo, hi), or over the pair's joint
+// range when intensity_range is None, into new arrays; a constant pair without a range
+// returns the inputs themselves (matching.py's stretch_uint16_pair, step 1 of its rules).
+py::tuple stretch_uint16_pair_py(const py::array& left, const py::array& right,
+                                 const py::object& intensity_range, int threads,
+                                 const std::string& isa) {
+  const Isa chosen = resolve_isa(isa);
+  const Uint16Image l = uint16_view(left, "left");
+  const Uint16Image r = uint16_view(right, "right");
+  if (l.rows != r.rows || l.cols != r.cols) {
+    throw py::value_error("left and right must have the same shape, got " + shape_str(left) +
+                          " and " + shape_str(right));
+  }
+  if (threads < 0) {
+    throw py::value_error("threads must be >= 0 (0: one per CPU), got " +
+                          std::to_string(threads));
+  }
+  int lo = 0, hi = 0;
+  const bool fixed = !intensity_range.is_none();
+  if (fixed) {
+    std::pair<int, int> range;
+    try {
+      range = intensity_range.cast<std::pair<int, int>>();
+    } catch (const py::cast_error&) {
+      throw py::type_error("intensity_range must be None or two ints (lo, hi), got " +
+                           py::repr(intensity_range).cast<std::string>());
+    }
+    lo = range.first;
+    hi = range.second;
+    if (!(0 <= lo && lo < hi && hi <= 65535)) {
+      throw py::value_error("intensity_range must be (lo, hi) with 0 <= lo < hi <= 65535, got (" +
+                            std::to_string(lo) + ", " + std::to_string(hi) + ")");
+    }
+  }
+  py::array_t<std::uint16_t> out_l({l.rows, l.cols}), out_r({r.rows, r.cols});
+  std::uint16_t* pl = out_l.mutable_data();
+  std::uint16_t* pr = out_r.mutable_data();
+  {
+    StopOnCtrlC stop(static_cast<double>(l.rows) * static_cast<double>(l.cols));
+    ReleaseGil release;
+    if (!fixed) joint_range(l, r, threads, chosen, lo, hi);
+    if (lo < hi) stretch_uint16_pair(l, r, lo, hi, pl, pr, threads, chosen);
+  }
+  if (lo == hi) return py::make_tuple(left, right);
+  return py::make_tuple(out_l, out_r);
+}
+
 }  // namespace
 
 void bind_block_match(py::module_& m) {
+  m.def("_stretch_uint16_pair", &stretch_uint16_pair_py, py::arg("left"), py::arg("right"),
+        py::arg("intensity_range") = py::none(), py::arg("threads") = 0,
+        py::arg("isa") = "auto",
+        "The min-max stretch of a uint16 pair, 2-D C-contiguous arrays of one shape, onto "
+        "0 .. 65280 (stereodepth.matching.stretch_uint16_pair's rule, the same values): new "
+        "arrays, or the inputs themselves for a constant pair without intensity_range. "
+        "threads: 0 for one per CPU; isa: one instruction set's kernel (diagnostics).");
   m.def("_rgb_to_grey", &rgb_to_grey_py, py::arg("rgb"), py::arg("isa") = "auto",
         py::arg("channel_order") = "rgb",
         "Diagnostics for the tests: the grey levels the matchers use for an (H, W, 3) uint8 "

@@ -136,6 +136,13 @@ using SobelRow8Fn = void (*)(const std::uint8_t* const* rows, std::uint8_t* pref
                              std::uint8_t* texture, std::ptrdiff_t cols);
 using SobelRow16Fn = void (*)(const std::uint16_t* const* rows, std::uint8_t* prefiltered,
                               std::uint8_t* texture, std::ptrdiff_t cols);
+// The min-max stretch of one uint16 row (stereodepth/stretch.hpp's rule): dst[x] =
+// ((clamp(src[x], lo, hi) - lo) * 65280 + (hi - lo) / 2) / (hi - lo), 0 <= lo < hi <= 65535.
+using StretchRow16Fn = void (*)(const std::uint16_t* src, std::uint16_t* dst, std::ptrdiff_t cols,
+                                int lo, int hi);
+// The least and the largest of `lo`, `hi` and the row's values, into lo and hi.
+using RangeRow16Fn = void (*)(const std::uint16_t* src, std::ptrdiff_t cols, std::uint16_t& lo,
+                              std::uint16_t& hi);
 // Matches rows y0 .. y1 - 1. fresh: start from scratch at y0; otherwise the scratch holds the
 // column sums of row y0 - 1 (a band continued in pieces).
 using MatchBandFn = void (*)(const MatchArgs& args, const BandScratch& scratch,
@@ -154,6 +161,8 @@ struct BlockMatchKernels {
   CensusRow16Fn census_row16;
   SobelRow8Fn sobel_row8;
   SobelRow16Fn sobel_row16;
+  RangeRow16Fn range_row16;
+  StretchRow16Fn stretch_row16;
   MatchBandFn match_band;
   SpeckleLinksFn speckle_links;
 };

@@ -7,6 +7,13 @@ __version__: str
 def build_info() -> dict[str, Any]: ...
 def _cgroup_cpu_limit(root: str) -> int: ...
 def _rgb_to_grey(rgb: np.ndarray, isa: str = "auto", channel_order: str = "rgb") -> np.ndarray: ...
+def _stretch_uint16_pair(
+    left: np.ndarray,
+    right: np.ndarray,
+    intensity_range: tuple[int, int] | None = None,
+    threads: int = 0,
+    isa: str = "auto",
+) -> tuple[np.ndarray, np.ndarray]: ...
 def disparity_to_depth(
     disparity: np.ndarray,
     out: np.ndarray,

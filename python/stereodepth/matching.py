@@ -226,6 +226,18 @@ class MatcherOptions:
         self.intensity_range = check_intensity_range(intensity_range)
         self.border = check_border(border)
 
+    def stretch_native(
+        self, left: np.ndarray, right: np.ndarray, intensity_range: tuple[int, int] | None
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """:func:`stretch_uint16_pair`'s arrays (the same values) from the native kernel, on
+        ``self.threads`` threads: the range in one pass over the pair, then a float quotient
+        corrected by the exact remainder where numpy divides (a 1280 x 720 pair with 2
+        threads: about 0.6-0.8 ms, numpy 2.5 ms)."""
+        out: tuple[np.ndarray, np.ndarray] = _core._stretch_uint16_pair(
+            left, right, intensity_range, self.threads
+        )
+        return out
+
 
 def check_flag(name: str, value: Any) -> bool:
     """``value`` as a bool (bool or numpy bool only); TypeError naming ``name`` otherwise."""
@@ -443,19 +455,22 @@ def as_pair(
     *,
     channel_order: str = "rgb",
     intensity_range: tuple[int, int] | None = None,
+    stretch: Any = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """The pair as every matcher takes it: checked (:func:`check_pair`), C-contiguous, with
     ``channel_order`` checked (colour images keep their channels in the order given: the native
     kernels and the oracles' ``grey`` weigh them by it, so a B, G, R frame is never copied) and
     uint16 pairs stretched to the scale of uint8 (:func:`stretch_uint16_pair`, over
-    ``intensity_range`` when given). The rules are step 1 of the module docstring. Raises
+    ``intensity_range`` when given, or ``stretch(left, right, intensity_range)`` in its place:
+    the native matchers pass :meth:`MatcherOptions.stretch_native`, the oracles keep numpy).
+    The rules are step 1 of the module docstring. Raises
     ValueError when ``intensity_range`` is given for uint8 images (they are matched as they
     are)."""
     check_channel_order(channel_order)
     fixed = check_intensity_range(intensity_range)
     left_arr, right_arr = check_pair(left, right)
     if left_arr.dtype == np.uint16:
-        left_arr, right_arr = stretch_uint16_pair(left_arr, right_arr, fixed)
+        left_arr, right_arr = (stretch or stretch_uint16_pair)(left_arr, right_arr, fixed)
     elif fixed is not None:
         raise ValueError(
             f"intensity_range applies to uint16 images (uint8 images are matched as they are), "
@@ -582,13 +597,18 @@ def run_native(
     native: Any, options: Any, left: Any, right: Any, finish: Any = None
 ) -> np.ndarray | tuple[np.ndarray, np.ndarray]:
     """What both matchers' ``compute`` do: the pair checked and converted by :func:`as_pair`
-    (with ``options.channel_order`` and ``options.intensity_range``), the native kernel run
+    (with ``options.channel_order`` and ``options.intensity_range``; a uint16 pair is stretched
+    by :meth:`MatcherOptions.stretch_native`), the native kernel run
     into new float32 maps with the channel order (a B, G, R pair is read as it is: a reversed
     copy added 40 % to the time of matching a 1280 x 720 pair), ``finish(disparity)`` if
     given, and the disparity returned (with the confidence when
     ``options.return_confidence``)."""
     left_arr, right_arr = as_pair(
-        left, right, channel_order=options.channel_order, intensity_range=options.intensity_range
+        left,
+        right,
+        channel_order=options.channel_order,
+        intensity_range=options.intensity_range,
+        stretch=options.stretch_native,
     )
     shape = left_arr.shape[:2]
     disparity = np.empty(shape, dtype=np.float32)
