@@ -96,11 +96,12 @@ void stretch_row16(const uint16_t* __restrict src, uint16_t* __restrict dst, ptr
   const int32_t span = hi - lo, half = span / 2;
   const float inv = 1.0f / static_cast<float>(span);
   const float half_f = static_cast<float>(half);
+  const auto uspan = static_cast<uint32_t>(span);
   for (ptrdiff_t x = 0; x < cols; ++x) {
     const int32_t n = std::min(std::max(static_cast<int32_t>(src[x]), lo), hi) - lo;
     const uint32_t num = static_cast<uint32_t>(n) * 65280u + static_cast<uint32_t>(half);
     int32_t q = static_cast<int32_t>((static_cast<float>(n) * 65280.0f + half_f) * inv);
-    const auto r = static_cast<int32_t>(num - static_cast<uint32_t>(q) * static_cast<uint32_t>(span));
+    const auto r = static_cast<int32_t>(num - static_cast<uint32_t>(q) * uspan);
     q += static_cast<int32_t>(r >= span) - static_cast<int32_t>(r < 0);
     dst[x] = static_cast<uint16_t>(q);
   }

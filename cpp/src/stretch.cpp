@@ -20,7 +20,8 @@ constexpr std::ptrdiff_t kMinRowsPerBand = 64;
 
 void joint_range(const Uint16Image& a, const Uint16Image& b, int threads, Isa isa, int& lo,
                  int& hi) {
-  const detail::RangeRow16Fn row = STEREODEPTH_KERNELS_FOR(isa, block_match_kernels).range_row16;
+  const detail::RangeRow16Fn row =
+      STEREODEPTH_KERNELS_FOR(isa, block_match_kernels).range_row16;
   std::mutex mu;
   int least = 65535, largest = 0;
   // Rows 0 .. rows - 1 of a, then those of b.
@@ -46,7 +47,8 @@ void stretch_uint16_pair(const Uint16Image& a, const Uint16Image& b, int lo, int
     throw std::invalid_argument("stretch_uint16_pair needs 0 <= lo < hi <= 65535, got lo " +
                                 std::to_string(lo) + ", hi " + std::to_string(hi));
   }
-  const detail::StretchRow16Fn row = STEREODEPTH_KERNELS_FOR(isa, block_match_kernels).stretch_row16;
+  const detail::StretchRow16Fn row =
+      STEREODEPTH_KERNELS_FOR(isa, block_match_kernels).stretch_row16;
   // Rows 0 .. rows - 1 of a, then those of b, in one pass.
   parallel_for_rows(a.rows + b.rows, resolve_threads(threads), kMinRowsPerBand,
                     [&](std::ptrdiff_t r0, std::ptrdiff_t r1) {

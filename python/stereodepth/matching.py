@@ -463,9 +463,8 @@ def as_pair(
     uint16 pairs stretched to the scale of uint8 (:func:`stretch_uint16_pair`, over
     ``intensity_range`` when given, or ``stretch(left, right, intensity_range)`` in its place:
     the native matchers pass :meth:`MatcherOptions.stretch_native`, the oracles keep numpy).
-    The rules are step 1 of the module docstring. Raises
-    ValueError when ``intensity_range`` is given for uint8 images (they are matched as they
-    are)."""
+    The rules are step 1 of the module docstring. Raises ValueError when ``intensity_range``
+    is given for uint8 images (they are matched as they are)."""
     check_channel_order(channel_order)
     fixed = check_intensity_range(intensity_range)
     left_arr, right_arr = check_pair(left, right)
@@ -598,11 +597,10 @@ def run_native(
 ) -> np.ndarray | tuple[np.ndarray, np.ndarray]:
     """What both matchers' ``compute`` do: the pair checked and converted by :func:`as_pair`
     (with ``options.channel_order`` and ``options.intensity_range``; a uint16 pair is stretched
-    by :meth:`MatcherOptions.stretch_native`), the native kernel run
-    into new float32 maps with the channel order (a B, G, R pair is read as it is: a reversed
-    copy added 40 % to the time of matching a 1280 x 720 pair), ``finish(disparity)`` if
-    given, and the disparity returned (with the confidence when
-    ``options.return_confidence``)."""
+    by :meth:`MatcherOptions.stretch_native`), the native kernel run into new float32 maps
+    with the channel order (a B, G, R pair is read as it is: a reversed copy added 40 % to the
+    time of matching a 1280 x 720 pair), ``finish(disparity)`` if given, and the disparity
+    returned (with the confidence when ``options.return_confidence``)."""
     left_arr, right_arr = as_pair(
         left,
         right,
