@@ -224,47 +224,53 @@ def test_the_matchers_use_the_native_stretch(monkeypatch: pytest.MonkeyPatch) ->
     assert calls == [(None, 0), (None, 0), ((100, 3900), 0), ((100, 3900), 0)]
 
 
+U16 = np.zeros((2, 2), np.uint16)
+
+
 @pytest.mark.parametrize(
     ("args", "exc", "match"),
     [
+        ((np.zeros((2, 2), np.uint8), U16), TypeError, "left must be a 2-D uint16"),
+        ((U16, np.zeros((2, 2, 1), np.uint16)), ValueError, "right must be a 2-D"),
+        ((np.zeros((0, 2), np.uint16),) * 2, ValueError, "H, W >= 1"),
+        ((np.zeros((2, 4), np.uint16)[:, ::2], U16), TypeError, "C-contiguous"),
         (
-            (np.zeros((2, 2), np.uint8), np.zeros((2, 2), np.uint8)),
+            (np.ma.masked_array(U16, [[1, 0], [0, 0]]), U16),
             TypeError,
-            "left must be a 2-D uint16",
+            "left must not be a masked array",
         ),
-        (
-            (np.zeros((2, 2), np.uint16), np.zeros((2, 2, 1), np.uint16)),
-            ValueError,
-            "right must be a 2-D",
-        ),
-        ((np.zeros((0, 2), np.uint16), np.zeros((0, 2), np.uint16)), ValueError, "H, W >= 1"),
-        (
-            (np.zeros((2, 4), np.uint16)[:, ::2], np.zeros((2, 2), np.uint16)),
-            TypeError,
-            "C-contiguous",
-        ),
-        ((np.zeros((2, 2), np.uint16), np.zeros((2, 3), np.uint16)), ValueError, "same shape"),
-        ((np.zeros((2, 2), np.uint16), np.zeros((2, 2), np.uint16), (5, 5)), ValueError, "lo < hi"),
-        (
-            (np.zeros((2, 2), np.uint16), np.zeros((2, 2), np.uint16), (1, 70000)),
-            ValueError,
-            "65535",
-        ),
-        (
-            (np.zeros((2, 2), np.uint16), np.zeros((2, 2), np.uint16), (1, 2, 3)),
-            TypeError,
-            "two ints",
-        ),
-        (
-            (np.zeros((2, 2), np.uint16), np.zeros((2, 2), np.uint16), None, -1),
-            ValueError,
-            "threads",
-        ),
+        ((U16, np.zeros((2, 3), np.uint16)), ValueError, "same shape"),
+        # intensity_range: matching.check_intensity_range's rule, bit for bit.
+        ((U16, U16, (5, 5)), ValueError, r"intensity_range .* got \(5, 5\)"),
+        ((U16, U16, (1, 70000)), ValueError, "intensity_range .* 65535"),
+        ((U16, U16, (0, 2**40)), ValueError, "intensity_range"),
+        ((U16, U16, (0, 2**70)), ValueError, "intensity_range"),
+        ((U16, U16, (1, 2, 3)), TypeError, "intensity_range must be None or two integers"),
+        ((U16, U16, (False, True)), TypeError, "intensity_range .* got bool"),
+        ((U16, U16, (0.0, 5)), TypeError, "intensity_range .* got float"),
+        ((U16, U16, b"\x00\x05"), TypeError, "intensity_range"),
+        ((U16, U16, np.array([0, 5])), TypeError, "intensity_range"),
+        # threads: an int (not a bool) in [0, 2**31 - 1].
+        ((U16, U16, None, -1), ValueError, "threads .* got -1"),
+        ((U16, U16, None, 2**31), ValueError, "threads .* got 2147483648"),
+        ((U16, U16, None, True), TypeError, "threads .* got bool"),
+        ((U16, U16, None, 1.5), TypeError, "threads .* got float"),
+        ((U16, U16, None, None), TypeError, "threads .* got NoneType"),
     ],
 )
 def test_native_stretch_rejects(args: tuple[Any, ...], exc: type[Exception], match: str) -> None:
     with pytest.raises(exc, match=match):
         _core._stretch_uint16_pair(*args)
+
+
+def test_native_stretch_takes_what_the_public_rules_take() -> None:
+    # numpy integers and lists for the range, numpy integers for threads (as the public
+    # checks accept them).
+    left = np.array([[100, 200], [300, 400]], np.uint16)
+    want = matching.stretch_uint16_pair(left, left, (0, 5))
+    for ir in ((np.int64(0), np.uint16(5)), [0, 5]):
+        got = _core._stretch_uint16_pair(left, left, ir, np.int32(2))
+        np.testing.assert_array_equal(got[0], want[0])
 
 
 # ------------------------------------------------------------------------------------------

@@ -132,8 +132,33 @@ py::array_t<std::uint8_t> rgb_to_grey_py(const py::array& rgb, const std::string
   return grey;
 }
 
-// A 2-D C-contiguous uint16 array as a Uint16Image; TypeError / ValueError naming `name`.
+// A Python or numpy integer (not a bool) as a long long; TypeError naming `name` (with
+// `rule`) for anything else, ValueError when it does not fit.
+long long integer_of(py::handle v, const std::string& name, const std::string& rule) {
+  const bool integral = (py::isinstance<py::int_>(v) && !PyBool_Check(v.ptr())) ||
+                        py::isinstance(v, py::module_::import("numpy").attr("integer"));
+  if (!integral) {
+    throw py::type_error(name + " must be " + rule + ", got " +
+                         py::str(py::type::of(v).attr("__name__")).cast<std::string>() + " " +
+                         py::repr(v).cast<std::string>());
+  }
+  int overflow = 0;
+  const py::object as_int = py::reinterpret_steal<py::object>(PyNumber_Index(v.ptr()));
+  if (!as_int) throw py::error_already_set();
+  const long long value = PyLong_AsLongLongAndOverflow(as_int.ptr(), &overflow);
+  if (overflow != 0) {
+    throw py::value_error(name + " must be " + rule + ", got " + py::repr(v).cast<std::string>());
+  }
+  return value;
+}
+
+// A 2-D C-contiguous uint16 array as a Uint16Image; TypeError / ValueError naming `name`
+// (a masked array too: its mask would be ignored).
 Uint16Image uint16_view(const py::array& a, const char* name) {
+  if (py::isinstance(a, py::module_::import("numpy.ma").attr("MaskedArray"))) {
+    throw py::type_error(std::string(name) + " must not be a masked array (its mask would be "
+                         "ignored), got MaskedArray");
+  }
   const std::string got = ", got shape " + shape_str(a) + " " + dtype_str(a);
   if (!a.dtype().equal(py::dtype::of<std::uint16_t>())) {
     throw py::type_error(std::string(name) + " must be a 2-D uint16 array" + got);
@@ -153,8 +178,8 @@ Uint16Image uint16_view(const py::array& a, const char* name) {
 // range when intensity_range is None, into new arrays; a constant pair without a range
 // returns the inputs themselves (matching.py's stretch_uint16_pair, step 1 of its rules).
 py::tuple stretch_uint16_pair_py(const py::array& left, const py::array& right,
-                                 const py::object& intensity_range, int threads,
-                                 const std::string& isa) {
+                                 const py::object& intensity_range,
+                                 const py::object& threads_obj, const std::string& isa) {
   const Isa chosen = resolve_isa(isa);
   const Uint16Image l = uint16_view(left, "left");
   const Uint16Image r = uint16_view(right, "right");
@@ -162,26 +187,34 @@ py::tuple stretch_uint16_pair_py(const py::array& left, const py::array& right,
     throw py::value_error("left and right must have the same shape, got " + shape_str(left) +
                           " and " + shape_str(right));
   }
-  if (threads < 0) {
-    throw py::value_error("threads must be >= 0 (0: one per CPU), got " +
-                          std::to_string(threads));
+  const std::string threads_rule = "an int in [0, 2147483647] (0: one per CPU)";
+  const long long threads_ll = integer_of(threads_obj, "threads", threads_rule);
+  if (threads_ll < 0 || threads_ll > 2147483647LL) {
+    throw py::value_error("threads must be " + threads_rule + ", got " +
+                          std::to_string(threads_ll));
   }
+  const int threads = static_cast<int>(threads_ll);
+  // intensity_range: matching.check_intensity_range's rule.
+  const std::string range_rule = "None or two integers (lo, hi) with 0 <= lo < hi <= 65535";
   int lo = 0, hi = 0;
   const bool fixed = !intensity_range.is_none();
   if (fixed) {
-    std::pair<int, int> range;
-    try {
-      range = intensity_range.cast<std::pair<int, int>>();
-    } catch (const py::cast_error&) {
-      throw py::type_error("intensity_range must be None or two ints (lo, hi), got " +
+    const bool pair = (py::isinstance<py::tuple>(intensity_range) ||
+                       py::isinstance<py::list>(intensity_range)) &&
+                      py::len(intensity_range) == 2;
+    if (!pair) {
+      throw py::type_error("intensity_range must be " + range_rule + ", got " +
                            py::repr(intensity_range).cast<std::string>());
     }
-    lo = range.first;
-    hi = range.second;
-    if (!(0 <= lo && lo < hi && hi <= 65535)) {
-      throw py::value_error("intensity_range must be (lo, hi) with 0 <= lo < hi <= 65535, got (" +
-                            std::to_string(lo) + ", " + std::to_string(hi) + ")");
+    const py::sequence seq = intensity_range.cast<py::sequence>();
+    long long ends[2];
+    for (int i = 0; i < 2; ++i) ends[i] = integer_of(seq[i], "intensity_range", range_rule);
+    if (!(0 <= ends[0] && ends[0] < ends[1] && ends[1] <= 65535)) {
+      throw py::value_error("intensity_range must be " + range_rule + ", got " +
+                            py::repr(intensity_range).cast<std::string>());
     }
+    lo = static_cast<int>(ends[0]);
+    hi = static_cast<int>(ends[1]);
   }
   py::array_t<std::uint16_t> out_l({l.rows, l.cols}), out_r({r.rows, r.cols});
   std::uint16_t* pl = out_l.mutable_data();
