@@ -93,6 +93,9 @@ ROWS: list[tuple[list[str], str]] = [
     (["--calib", "{tmp}/nowhere.txt"], "--calib: calibration file not found"),
     (["--workers", "0"], "--workers must be an integer >= 1, got 0"),
     (["--threads", "-1"], "--threads must be an integer >= 0"),
+    # Beyond a C int it failed every pair (exit 1, the records written) with the matcher's
+    # message naming threads.
+    (["--threads", "2147483648"], "--threads must be an integer >= 0 and <= 2147483647"),
     (["--workers", "2", "--scheduler", "tcp://127.0.0.1:1"], "give --scheduler or --workers"),
     (["--scheduler", "foo"], "--scheduler 'foo': expected a Dask scheduler address tcp://"),
     (["--scheduler", ""], "--scheduler '': expected a Dask scheduler address tcp://HOST:PORT"),

@@ -782,3 +782,27 @@ def test_batch_options_are_checked_when_made(tmp_path: Path) -> None:
     with pytest.raises(TypeError, match=r"method must be one of 'bm', 'sgm', got NoneType None"):
         batch.BatchOptions(out_dir=tmp_path / "x", method=None)  # type: ignore[arg-type]
     assert not (tmp_path / "x").exists()
+
+
+def test_a_folder_that_cannot_be_searched_is_skipped_with_the_reason(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    # A sub-folder without read permission (Path.is_dir raises PermissionError for what is
+    # inside it) ended the whole job; it is listed and the other folders' pairs are found.
+    # (As root chmod cannot take the permission away, so the error is made by the stand-in.)
+    from stereodepth.batch import discovery
+
+    scene(tmp_path / "in" / "good")
+    locked = tmp_path / "in" / "locked"
+    (locked / "image_2").mkdir(parents=True)
+    real_is_dir = Path.is_dir
+
+    def is_dir(self: Path) -> bool:
+        if self.parent == locked:
+            raise PermissionError(13, "Permission denied", str(self))
+        return real_is_dir(self)
+
+    monkeypatch.setattr(Path, "is_dir", is_dir)
+    found = discovery.discover(tmp_path / "in")
+    assert [p.stem for p in found.pairs] == ["good"]
+    assert (locked, "cannot be searched: Permission denied") in found.skipped

@@ -162,6 +162,10 @@ BAD: list[tuple[list[str], str]] = [
         ["--method", "sgm", "--option", "p1=600"],
         "--option p1: p2 must be an integer in [p1, 16239] = [600, 16239]",
     ),
+    (  # p2 at fault, with the value given (p1 checked alone blamed p1, "got 250")
+        ["--method", "sgm", "--option", "p1=500", "--option", "p2=10"],
+        "--option p2: p2 must be an integer in [p1, 16239] = [500, 16239]",
+    ),
     (["--method", "sgm", "--option", "paths=5"], "--option paths: paths must be 3, 4 or 8, got 5"),
     (["--method", "sgm", "--option", "fill=1"], "--option fill: fill must be a bool, got int 1"),
     (["--method", "sgm", "--option", "isa=avx2"], "--option isa: not available in batch"),

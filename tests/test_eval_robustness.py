@@ -668,3 +668,25 @@ def test_opencv_sgbm_writes_every_pixel_on_a_narrow_image() -> None:
     sgbm = cv2.StereoSGBM_create(0, 16, 9, mode=cv2.STEREO_SGBM_MODE_SGBM_3WAY)
     out = sgbm.compute(left, right, np.full((12, 20), 1234, np.int16))
     assert not (out == 1234).any() and out.min() >= -16 and out.max() < 16 * 16
+
+
+# --------------------------------------------------------------------------------------------
+# A huge max_disp in meta.json
+
+
+@pytest.mark.parametrize("methods", [[], ["--method", "opencv-bm"]])
+def test_a_huge_max_disp_is_one_line_for_every_method(
+    scene: Path, capsys: pytest.CaptureFixture[str], methods: list[str]
+) -> None:
+    # 1e39 printed numpy's overflow warnings before the error (the float32 ground truth
+    # compared with the Python int), and with OpenCV's matchers alone it ended in a traceback
+    # (an OverflowError from StereoBM_create); the number itself was printed in full.
+    if methods:
+        pytest.importorskip("cv2")
+    (scene / "meta.json").write_text('{"max_disp": 1e39}')
+    status, _, err = run_eval(capsys, str(scene.parent), *methods)
+    assert status == 2
+    lines = err.strip().splitlines()
+    assert len(lines) == 1, err
+    assert "meta.json's max_disp=1e+39 needs 1e+39 disparities" in lines[0]
+    assert "--num-disparities" in lines[0]

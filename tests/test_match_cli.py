@@ -359,7 +359,11 @@ def bad_cases(tmp: Path, left: Path, right: Path) -> list[tuple[list[Any], str]]
         ([left, right, "--cmap", "nope"], "--cmap nope: cmap must be a matplotlib colour map"),
         ([left, right, "--ply"], "--ply needs a rig"),
         ([left, right, "-o", tmp / "missing" / "p-"], "the folder of the prefix"),
-        ([left, right, "--threads", "-1"], "--threads must be an integer >= 0, got -1"),
+        ([left, right, "--threads", "-1"], "--threads must be an integer >= 0 and <= 2147483647"),
+        (
+            [left, right, "--threads", "2147483648"],
+            "--threads must be an integer >= 0 and <= 2147483647, got 2147483648",
+        ),
         # the same file twice: every disparity 0, every depth unknown (batch's CSV refuses it)
         ([left, left], "LEFT and RIGHT are the same file"),
         ([left, tmp / ".." / tmp.name / left.name], "LEFT and RIGHT are the same file"),
@@ -613,3 +617,29 @@ def test_batch_help_gives_each_methods_block_sizes(capsys: pytest.CaptureFixture
     block = text.split("--block-size N ")[1].split(" --cost {census,sad}")[0]
     assert "bm an odd number, 3 to 63 with --cost census, 3 to 31 with --cost sad" in block
     assert "sgm 1 or 3 only" in block
+
+
+def test_a_read_only_output_is_refused_before_matching(
+    tmp_path: Path, pair: tuple[Path, Path], capsys: pytest.CaptureFixture[str]
+) -> None:
+    # An earlier run's disparity.pfm made read-only: a usage error naming --out before the
+    # pair is matched (it was exit 1 with the OS's "[Errno 13]" after the match), and the file
+    # is kept as it was.
+    out = tmp_path / "out"
+    code, _, err = run(capsys, *map(str, pair), "-o", f"{out}/", "--num-disparities", "16")
+    assert code == 0, err
+    kept = out / "disparity.pfm"
+    before = kept.read_bytes()
+    kept.chmod(0o444)
+    try:
+        code, text, err = run(capsys, *map(str, pair), "-o", f"{out}/", "--num-disparities", "32")
+    finally:
+        kept.chmod(0o644)
+    assert code == 2, err
+    assert text == ""
+    lines = err.strip().splitlines()
+    assert len(lines) == 1, err
+    assert lines[0].startswith(f"stereodepth match: error: --out {out}/: cannot write ")
+    assert "disparity.pfm: the file is read-only" in lines[0]
+    assert "Errno" not in lines[0]
+    assert kept.read_bytes() == before

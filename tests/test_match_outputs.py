@@ -212,14 +212,16 @@ def test_a_read_only_earlier_output_is_refused_before_any_work(
     pair: tuple[Path, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     """An earlier run's file this run would remove, made read-only (kept on purpose), is
-    refused as a read-only output is: nothing written, nothing removed."""
+    refused as a read-only output is, a usage error naming --out (exit 2): nothing written,
+    nothing removed."""
     out = tmp_path / "out"
     code, _, err = run(capsys, *pair, *RIG, "--no-preview", "--ply", "-o", f"{out}/")
     assert code == 0, err
     (out / "points.ply").chmod(0o444)
     before = contents(out)
     code, _, err = run(capsys, *pair, *RIG, "--no-preview", "-o", out)
-    assert code == 1 and "read-only" in err and err.count("\n") == 1
+    assert code == 2 and "read-only" in err and err.count("\n") == 1
+    assert err.startswith(f"stereodepth match: error: --out {out}: cannot write points.ply")
     assert contents(out) == before
     assert sorted(p.name for p in out.iterdir()) == sorted([*before, MANIFEST])
 

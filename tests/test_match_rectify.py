@@ -347,6 +347,8 @@ def test_bad_input_one_line_exit_2(tmp_path: Path, capsys: pytest.CaptureFixture
             "--distortion-model does not apply to a ROS camera_info file",
         ),
         (["--calib", middlebury, "--alpha", "0"], "--alpha does not apply"),
+        # A fault of the second file is named as --calib-right's, not --calib's.
+        (["--calib", ros, "--calib-right", tmp_path / "garbage.yml"], "error: --calib-right: "),
         (
             ["--calib", yaml, "--translation-unit", "mm", "--alpha", "-0.5"],
             "--alpha must be -1 (OpenCV's default scaling)",

@@ -215,7 +215,13 @@ def raw_calibration(
     except ImportError as exc:  # a missing extra (PyYAML): the commands exit with status 1
         raise ImportError(f"--calib: {exc}") from None
     except (OSError, ValueError) as exc:
-        raise ValueError(f"--calib: {_cli_names(str(exc))}") from None
+        text = _cli_names(str(exc))
+        # A fault of the second file (it names it first) is --calib-right's.
+        second = calib_right is not None and (
+            getattr(exc, "filename", None) == calib_right
+            or text.startswith((f"{calib_right}:", f"{Path(calib_right).name}:"))
+        )
+        raise ValueError(f"{'--calib-right' if second else '--calib'}: {text}") from None
     if stereo.rectified:  # not from the raw formats today; refuse rather than guess
         raise ValueError(f"--calib: {calib} is read as a rectified pair of unknown format")
     if no_rectify:

@@ -981,8 +981,11 @@ def _scene_inputs(
         else:  # Middlebury: max_disp is ndisp - 1
             source = f"calib.txt's ndisp={max_disp + 1:g}"
         num_disparities = num_disparities_for(max_disp)
+        # In float64: a huge max_disp (meta.json's 1e39) made numpy cast the Python int to
+        # the float32 of gt, with overflow warnings on stderr before the error.
         with np.errstate(invalid="ignore"):
-            beyond = np.isfinite(gt) & (gt > num_disparities - 1)
+            beyond = np.isfinite(gt) & (gt > np.float64(num_disparities - 1))
+        nd_text = f"{num_disparities}" if num_disparities < 10**9 else f"{num_disparities:.4g}"
         if beyond.any():
             # A max_disp or ndisp of another resolution (half-size beside full-size images)
             # searched a range the true disparities leave: every method scored badly, exit 0.
@@ -992,10 +995,15 @@ def _scene_inputs(
                 f"{num_disparities - 1} that {source} gives): correct it, or give "
                 "--num-disparities"
             )
+        if num_disparities > check.MAX_NATIVE_INT:  # OpenCV's numDisparities is a C int
+            raise ValueError(
+                f"scene {scene.name}: {source} needs {nd_text} disparities, more than any "
+                "matcher searches: correct it, or give --num-disparities"
+            )
         ours = any(v.method in ("stereodepth", "sgm") for v in variants)
         if ours and num_disparities > MAX_NUM_DISPARITIES:  # the matcher's error named no source
             raise ValueError(
-                f"scene {scene.name}: {source} needs {num_disparities} "
+                f"scene {scene.name}: {source} needs {nd_text} "
                 f"disparities, more than the matchers search ({MAX_NUM_DISPARITIES}): give "
                 "--num-disparities"
             )

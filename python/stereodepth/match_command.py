@@ -59,6 +59,7 @@ from typing import Any
 import numpy as np
 
 from . import _calib_rule
+from . import _validate as check
 from .cli import name_too_long, path_arg
 
 __all__ = ["output_paths", "register", "run"]
@@ -276,8 +277,11 @@ def _rig(
                 **rule.flags(args),
             )
             if stereo is not None:
-                if args.threads is not None and args.threads < 0:
-                    raise _Usage(f"--threads must be an integer >= 0, got {args.threads}")
+                if args.threads is not None and not 0 <= args.threads <= check.MAX_NATIVE_INT:
+                    raise _Usage(
+                        f"--threads must be an integer >= 0 and <= {check.MAX_NATIVE_INT}, "
+                        f"got {args.threads}"
+                    )
                 rectifier = rule.raw_rectifier(
                     stereo, args.calib, threads=args.threads, alpha=args.alpha
                 )
@@ -416,8 +420,10 @@ def run(args: argparse.Namespace) -> int:
         )
         if why is not None:
             raise _Usage(why if flags else f"--calib {source}: {why}")
-    if args.threads is not None and args.threads < 0:
-        raise _Usage(f"--threads must be an integer >= 0, got {args.threads}")
+    if args.threads is not None and not 0 <= args.threads <= check.MAX_NATIVE_INT:
+        raise _Usage(
+            f"--threads must be an integer >= 0 and <= {check.MAX_NATIVE_INT}, got {args.threads}"
+        )
     left_img = _read("LEFT", args.left)
     right_img = _read("RIGHT", args.right)
     if left_img.shape[:2] != right_img.shape[:2]:
@@ -490,9 +496,22 @@ def run(args: argparse.Namespace) -> int:
         _refuse_overwriting_inputs(args, out)
         from .io import _refuse_read_only
 
-        for path in _stale_outputs(args, names):  # before any work, as a read-only output
-            if not path.is_symlink():
-                _refuse_read_only(path, path)
+        # Before any work: a folder the outputs cannot be written in, and (as a read-only
+        # output) a file of an earlier run that cannot be replaced, are usage errors naming
+        # --out (they failed after the match, naming the hidden file being written).
+        folder = next(iter(out.values())).parent.absolute()
+        while not folder.exists() and folder != folder.parent:
+            folder = folder.parent
+        if folder.is_dir() and not os.access(folder, os.W_OK | os.X_OK):
+            raise _Usage(f"--out {args.out}: cannot write in {folder} (no write permission)")
+        try:
+            for path in out.values():  # (a link is written through: its target)
+                _refuse_read_only(Path(os.path.realpath(path)), path)
+            for path in _stale_outputs(args, names):
+                if not path.is_symlink():
+                    _refuse_read_only(path, path)
+        except PermissionError as exc:
+            raise _Usage(f"--out {args.out}: {exc.strerror}") from None
 
         rectify_s = None
         if rectifier is not None:
@@ -530,7 +549,14 @@ def run(args: argparse.Namespace) -> int:
         _remove_killed_runs_files(args.out)
         staged = _staging_paths(out)
         try:
-            _write_outputs(args, staged, result, rig, left_img, right_img)
+            try:
+                _write_outputs(args, staged, result, rig, left_img, right_img)
+            except OSError as exc:  # name the output, not the hidden file it is staged as
+                final = {str(v): out[k] for k, v in staged.items()}.get(exc.filename)
+                if final is None:
+                    raise
+                why = str(exc.strerror).removeprefix(f"cannot write {Path(exc.filename).name}: ")
+                raise type(exc)(exc.errno, f"cannot write {final}: {why}", str(final)) from None
             stale = _stale_outputs(args, names)
             summary = result.summary()
             summary.update(

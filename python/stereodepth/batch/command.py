@@ -265,10 +265,23 @@ def _matcher_options(args: argparse.Namespace) -> dict[str, Any]:
     except (TypeError, ValueError) as exc:
         raise UsageError(f"--num-disparities {nd}: {exc}") from exc
     checked = set(inspect.signature(checker.__init__).parameters)
-    try:  # together first: p1=600 alone is refused (the default p2 is 500), with p2=700 not
+    try:  # together first: p1=300 alone is refused (the default p2 is 250), with p2=700 not
         checker(num_disparities=nd, **{k: v for k, v in opts.items() if k in checked})
         at_fault: list[str] = []
-    except (TypeError, ValueError):
+    except (TypeError, ValueError) as exc:
+        # The matchers' messages start with the parameter at fault (p2 for p1=500 p2=10,
+        # which checking p1 alone against the default p2 blamed on p1); the longest name
+        # first, so that p2_step is not read as p2.
+        culprit = next(
+            (
+                k
+                for k in sorted(opts, key=len, reverse=True)
+                if k in checked and str(exc).startswith(k)
+            ),
+            None,
+        )
+        if culprit is not None:
+            raise UsageError(f"{typed[culprit]}: {exc}") from exc
         at_fault = list(opts)
     bases = [k for k in _BASES[method] if k in at_fault]
     context: dict[str, Any] = {}

@@ -276,6 +276,14 @@ def _search(
     searched: dict[Path, Path] = {root.resolve(): root}
 
     def visit(d: Path, rel: tuple[str, ...]) -> None:
+        # A folder that cannot be read (no permission: Path.is_dir raises for what is inside
+        # it) is listed with the reason and skipped, where it ended the whole job.
+        try:
+            search(d, rel)
+        except OSError as exc:
+            skipped.append((d, f"cannot be searched: {exc.strerror or exc}"))
+
+    def search(d: Path, rel: tuple[str, ...]) -> None:
         prefix = "_".join(rel) if rel else None
         layout = _folder_pairs(d, prefix=prefix)
         if layout is not None:
