@@ -359,6 +359,8 @@ def bad_cases(tmp: Path, left: Path, right: Path) -> list[tuple[list[Any], str]]
         ([left, right, "--cmap", "nope"], "--cmap nope: cmap must be a matplotlib colour map"),
         ([left, right, "--ply"], "--ply needs a rig"),
         ([left, right, "-o", tmp / "missing" / "p-"], "the folder of the prefix"),
+        # a prefix naming a file (or /dev/null): it wrote l.pngdisparity.pfm beside it
+        ([left, right, "-o", left], f"--out {left}: an existing file, not a folder"),
         ([left, right, "--threads", "-1"], "--threads must be an integer >= 0 and <= 2147483647"),
         (
             [left, right, "--threads", "2147483648"],

@@ -233,6 +233,13 @@ def output_paths(out: str, names: list[str]) -> dict[str, Path]:
         parent = Path(out).parent
         if not parent.is_dir():
             raise _Usage(f"--out: the folder of the prefix {out!r} does not exist: {str(parent)!r}")
+        if os.path.lexists(out):
+            # A prefix that names a file or a device: -o /dev/null wrote /dev/nulldisparity.pfm
+            # (as root), -o left.png wrote left.pngdisparity.pfm.
+            raise _Usage(
+                f"--out {out}: an existing file, not a folder; give a folder (ending in "
+                f"{os.sep} if new) or a file-name prefix that names no file"
+            )
         paths = {n: Path(out + n) for n in names}
     for path in paths.values():
         if path.is_dir():
