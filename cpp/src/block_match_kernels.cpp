@@ -93,14 +93,16 @@ void range_row16(const uint16_t* __restrict src, ptrdiff_t cols, uint16_t& lo, u
 // [-span, 2 * span)) says which. Tests compare every value with numpy's division.
 void stretch_row16(const uint16_t* __restrict src, uint16_t* __restrict dst, ptrdiff_t cols,
                    int lo, int hi) {
+  // The top of the scale, 255 * 256: matching.py's UINT16_STRETCH_TOP.
+  constexpr uint32_t kTop = 255u * 256u;
   const int32_t span = hi - lo, half = span / 2;
   const float inv = 1.0f / static_cast<float>(span);
   const float half_f = static_cast<float>(half);
   const auto uspan = static_cast<uint32_t>(span);
   for (ptrdiff_t x = 0; x < cols; ++x) {
     const int32_t n = std::min(std::max(static_cast<int32_t>(src[x]), lo), hi) - lo;
-    const uint32_t num = static_cast<uint32_t>(n) * 65280u + static_cast<uint32_t>(half);
-    int32_t q = static_cast<int32_t>((static_cast<float>(n) * 65280.0f + half_f) * inv);
+    const uint32_t num = static_cast<uint32_t>(n) * kTop + static_cast<uint32_t>(half);
+    int32_t q = static_cast<int32_t>((static_cast<float>(n) * float{kTop} + half_f) * inv);
     const auto r = static_cast<int32_t>(num - static_cast<uint32_t>(q) * uspan);
     q += static_cast<int32_t>(r >= span) - static_cast<int32_t>(r < 0);
     dst[x] = static_cast<uint16_t>(q);

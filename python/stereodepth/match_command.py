@@ -283,12 +283,7 @@ def _rig(
                 args.calib,
                 **rule.flags(args),
             )
-            if stereo is not None:
-                if args.threads is not None and not 0 <= args.threads <= check.MAX_NATIVE_INT:
-                    raise _Usage(
-                        f"--threads must be an integer >= 0 and <= {check.MAX_NATIVE_INT}, "
-                        f"got {args.threads}"
-                    )
+            if stereo is not None:  # (--threads is checked by run, before this)
                 rectifier = rule.raw_rectifier(
                     stereo, args.calib, threads=args.threads, alpha=args.alpha
                 )
@@ -419,6 +414,11 @@ def run(args: argparse.Namespace) -> int:
     from . import _calib_rule as rule
     from .match_pair import default_num_disparities, match_pair, prepare_pair
 
+    # Before the rig: a raw calibration's rectifier is made with these threads.
+    if args.threads is not None and not 0 <= args.threads <= check.MAX_NATIVE_INT:
+        raise _Usage(
+            f"--threads must be an integer >= 0 and <= {check.MAX_NATIVE_INT}, got {args.threads}"
+        )
     rig, ndisp, source, rectifier = _rig(args)
     if rig is not None:
         flags = source == "command line"
@@ -427,10 +427,6 @@ def run(args: argparse.Namespace) -> int:
         )
         if why is not None:
             raise _Usage(why if flags else f"--calib {source}: {why}")
-    if args.threads is not None and not 0 <= args.threads <= check.MAX_NATIVE_INT:
-        raise _Usage(
-            f"--threads must be an integer >= 0 and <= {check.MAX_NATIVE_INT}, got {args.threads}"
-        )
     left_img = _read("LEFT", args.left)
     right_img = _read("RIGHT", args.right)
     if left_img.shape[:2] != right_img.shape[:2]:
@@ -637,8 +633,10 @@ def _print_summary(summary: dict[str, Any], left: np.ndarray, *, as_json: bool) 
 def _staging_paths(out: dict[str, Path]) -> dict[str, Path]:
     """Where each output is written before the commit: a hidden name beside the file it
     replaces (beside a link's target: a link is written through, as io.atomic_write does),
-    with the same suffix. A device or a pipe (``/dev/null``) is written directly. A read-only
-    file is refused here, before any work, as io.atomic_write refuses it."""
+    with the same suffix. A device or a pipe in an --out folder is written directly. A
+    read-only file is refused here as io.atomic_write refuses it: run checks every output
+    before the match (naming --out); this catches one made read-only while the pair was
+    matched, as renaming over it would succeed."""
     from .io import NAME_MAX_BYTES, _refuse_read_only
 
     staged = {}

@@ -11,10 +11,6 @@
 
 namespace stereodepth {
 
-// The top of the stretched scale: 255 * 256 (after the 8-bit shift of the Sobel response,
-// the grey levels of a uint8 image). matching.py's UINT16_STRETCH_TOP.
-inline constexpr std::uint32_t kUint16StretchTop = 255u * 256u;
-
 // A rows x cols uint16 image; `stride` is in elements.
 struct Uint16Image {
   const std::uint16_t* data;
