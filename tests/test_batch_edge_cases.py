@@ -97,6 +97,60 @@ def test_report_into_a_missing_folder_is_refused_before_any_pair(
     assert status == 0 and report_of(out / "r.json")["counts"]["ok"] == 1
 
 
+@pytest.mark.parametrize("given", [True, False])
+def test_a_read_only_report_is_refused_before_any_pair(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], given: bool
+) -> None:
+    # A report kept read-only, given with --report or left in OUTDIR by an earlier run: the
+    # job failed with exit 1 after matching every pair; now a usage error before any pair.
+    scene(tmp_path / "in" / "a")
+    out = tmp_path / "out"
+    out.mkdir()
+    report = tmp_path / "kept.json" if given else out / "report.json"
+    report.write_text("{}")
+    report.chmod(0o444)
+    try:
+        argv = ["--report", report] if given else []
+        status, text, err = run(capsys, tmp_path / "in", "-o", out, *argv, "--quiet")
+    finally:
+        report.chmod(0o644)
+    assert status == 2
+    assert text == ""
+    named = f"--report {report}" if given else f"-o {out}"
+    assert err == (
+        f"stereodepth batch: error: {named}: cannot write {report.name}: the file is read-only "
+        "(no write permission); make it writable or choose another path"
+        + ("" if given else " (or give --report FILE)")
+        + "\n"
+    )
+    assert report.read_text() == "{}"
+    assert [p.name for p in out.iterdir()] == ([] if given else ["report.json"])
+
+
+def test_a_read_only_output_of_a_pair_that_fails_is_kept(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    # A result made read-only to keep it: a --force rerun cannot replace it, so the pair
+    # fails; its other stale outputs go, as for any failed pair, but that file was removed
+    # too (the writers refuse it, the clean-up of the failed pair did not).
+    inp, out = tmp_path / "in", tmp_path / "out"
+    scene(inp / "teddy")
+    assert run(capsys, inp, "-o", out, "--quiet")[0] == 0
+    kept = out / "teddy.disparity.npy"
+    before = kept.read_bytes()
+    kept.chmod(0o444)
+    try:
+        status, _, err = run(capsys, inp, "-o", out, "--force", "--quiet")
+        assert status == 1
+        assert "failed teddy: " in err and "teddy.disparity.npy: the file is read-only" in err
+        assert kept.read_bytes() == before
+        record = record_of(out, "teddy")
+        assert record["status"] == "failed"
+        assert [Path(p).name for p in record["removed"]] == ["teddy.depth.npy"]
+    finally:
+        kept.chmod(0o644)
+
+
 # --- pair names ---------------------------------------------------------------------------------
 def test_the_same_pair_name_twice_is_refused(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]

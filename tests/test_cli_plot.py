@@ -144,3 +144,26 @@ def test_the_range_the_refusal_names_can_be_charted(
         for value in (float(low) * 1.001, float(high) / 1.001):
             assert main(["calc", *PIXELS, flag, repr(value), "--plot", str(out)]) == 0
             assert capsys.readouterr().err == ""
+
+
+def test_a_read_only_plot_is_refused_before_any_work(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    # Charts of an earlier run made read-only: a usage error naming --plot, as match's --out
+    # and batch's --report give (it was exit 1 with the OS's "[Errno 13]"), the file kept.
+    kept = tmp_path / "charts.png"
+    kept.write_bytes(b"earlier charts")
+    kept.chmod(0o444)
+    try:
+        code = main(["calc", *ARM, "--disparity-px", "250", "--plot", str(kept)])
+    finally:
+        kept.chmod(0o644)
+    captured = capsys.readouterr()
+    assert code == 2
+    assert captured.out == ""
+    assert captured.err.startswith(
+        "stereodepth calc: error: --plot: cannot write charts.png: the file is read-only"
+    )
+    assert captured.err.count("\n") == 1
+    assert "Errno" not in captured.err
+    assert kept.read_bytes() == b"earlier charts"

@@ -4,7 +4,7 @@ Bad input prints one line, ``stereodepth <command>: error: ...``, and exits with
 the message names the option as the user typed it (``--subpixel-px``, not the library's
 ``disparity_step_px``), and usage mistakes that argparse finds end with a pointer to
 ``--help`` instead of the whole usage text. A missing optional extra (matplotlib for
-``--plot``, say) or a file that cannot be written prints one line and exits with 1. Ctrl-C
+``--plot``, say) or a file that fails as it is written prints one line and exits with 1. Ctrl-C
 prints "interrupted" and exits with 130; SIGTERM (``timeout``, ``kill``) is handled as
 Ctrl-C for the command's duration, through the same clean-up, then prints "terminated" and
 exits with 143; except ``serve``, for which either signal is its normal end ("stopped", 0).
@@ -414,6 +414,18 @@ def _calc(args: argparse.Namespace) -> int:
             raise UsageError(f"--plot: {why}, got {args.plot!r}")
         if out.is_dir():
             raise UsageError(f"--plot must name a file, got the folder {args.plot!r}")
+        # Before any work, as match's --out and batch's --report: a file or folder that
+        # cannot be written is a usage error (it failed in save_charts, exit 1).
+        if not os.access(out.parent, os.W_OK | os.X_OK):
+            raise UsageError(
+                f"--plot: cannot write in {out.parent} (no write permission), got {args.plot!r}"
+            )
+        from .io import _refuse_read_only
+
+        try:  # (a link is written through: its target)
+            _refuse_read_only(Path(os.path.realpath(out)), out)
+        except PermissionError as exc:
+            raise UsageError(f"--plot: {exc.strerror}, got {args.plot!r}") from None
     rig = _rig_from_args(args)
     summary = rig.summary(
         args.disparity_px,

@@ -422,6 +422,16 @@ def no_folder_reason(target: str | os.PathLike[str]) -> str:
     return folder_fault(target) or f"the folder {str(folder)!r} cannot be read"
 
 
+def _is_read_only(target: str | os.PathLike[str]) -> bool:
+    """Whether ``target`` (a link's target) is a regular file without write permission: no
+    write bit at all (even where the process could write it, as root), or none for us."""
+    try:
+        mode = os.stat(target).st_mode
+    except (OSError, ValueError):
+        return False
+    return stat.S_ISREG(mode) and (not (mode & 0o222) or not os.access(target, os.W_OK))
+
+
 def _refuse_read_only(target: Path, p: Path) -> None:
     """PermissionError naming ``p`` when ``target`` is a file without write permission.
 
@@ -429,11 +439,7 @@ def _refuse_read_only(target: Path, p: Path) -> None:
     permission, so a file the user had made read-only (chmod a-w: an input, a result to
     keep) was replaced without a word. A file with no write bit at all is refused even where
     the process could write it (root), as ``rm`` asks before removing one."""
-    try:
-        mode = os.stat(target).st_mode
-    except OSError:
-        return
-    if stat.S_ISREG(mode) and (not (mode & 0o222) or not os.access(target, os.W_OK)):
+    if _is_read_only(target):
         raise PermissionError(
             errno.EACCES,
             f"cannot write {p.name}: the file is read-only (no write permission); make it "

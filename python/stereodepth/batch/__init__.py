@@ -104,8 +104,10 @@ Output, per pair with stem S, in OUTDIR
     the same OUTDIR, its stems the first's) is refused before any pair; ``--force`` replaces
     them. A pair that is redone loses the files of its earlier run that this run does not
     write again (another ``--format``, a ``.ply`` no longer asked for, everything when it now
-    fails); its record lists them under ``removed``. One job at a time may write to OUTDIR: a
-    lock file, ``.stereodepth-batch.lock``, guards it and is removed when the job ends.
+    fails); its record lists them under ``removed``. A file without write permission (one the
+    user made read-only to keep) is never replaced or removed. One job at a time may write to
+    OUTDIR: a lock file, ``.stereodepth-batch.lock``, guards it and is removed when the job
+    ends.
 
 Running
     By default the pairs run in this process, three at a time on a thread pool, each using every

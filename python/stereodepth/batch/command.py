@@ -426,9 +426,17 @@ def _writable_folder(path: Path, what: str) -> None:
 
 def _report_path(args: argparse.Namespace, out_dir: Path) -> Path:
     """Where the report goes, checked before any work: OUTDIR/report.json, or --report FILE
-    in a folder that exists (or in OUTDIR)."""
+    in a folder that exists (or in OUTDIR), and not a read-only file (which failed the job
+    with exit 1 after every pair had been matched)."""
+    from ..io import _refuse_read_only
+
     if args.report is None:
-        return out_dir / "report.json"
+        report = out_dir / "report.json"
+        try:  # (a link is written through: its target)
+            _refuse_read_only(Path(os.path.realpath(report)), report)
+        except PermissionError as exc:
+            raise UsageError(f"-o {out_dir}: {exc.strerror} (or give --report FILE)") from None
+        return report
     report = Path(args.report)
     if report.is_dir():
         raise UsageError(f"--report must be a file, got the folder {report}")
@@ -441,6 +449,10 @@ def _report_path(args: argparse.Namespace, out_dir: Path) -> Path:
             raise UsageError(f"--report {report}: {why}")
         if not os.access(folder, os.W_OK | os.X_OK):
             raise UsageError(f"--report {report}: cannot write in {folder}")
+    try:
+        _refuse_read_only(Path(os.path.realpath(report)), report)
+    except PermissionError as exc:
+        raise UsageError(f"--report {report}: {exc.strerror}") from None
     return report
 
 

@@ -136,10 +136,13 @@ def earlier_outputs(pair: Pair, options: BatchOptions) -> set[Path]:
 def remove_files(paths: set[Path]) -> list[str]:
     """Removes the files that exist among ``paths``; returns their paths, sorted. A folder at
     one of them is no file of ours and is left (unlink raised IsADirectoryError there, and the
-    files after it stayed)."""
+    files after it stayed); so is a read-only file (a result the user made read-only to keep,
+    which io's writers refuse to replace: a pair that failed on it removed it)."""
+    from ..io import _is_read_only
+
     removed = []
     for p in sorted(paths):
-        if p.is_dir() and not p.is_symlink():
+        if (p.is_dir() and not p.is_symlink()) or _is_read_only(p):
             continue
         try:
             p.unlink()
