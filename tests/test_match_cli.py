@@ -364,7 +364,8 @@ def bad_cases(tmp: Path, left: Path, right: Path) -> list[tuple[list[Any], str]]
         ([left, right, "--threads", "-1"], "--threads must be an integer >= 0 and <= 2147483647"),
         (
             [left, right, "--threads", "2147483648"],
-            "--threads must be an integer >= 0 and <= 2147483647, got 2147483648",
+            # the words of batch and eval (the range's 0 said nothing of what it means)
+            "--threads must be an integer >= 0 and <= 2147483647 (0: every core), got 2147483648",
         ),
         # the same file twice: every disparity 0, every depth unknown (batch's CSV refuses it)
         ([left, left], "LEFT and RIGHT are the same file"),

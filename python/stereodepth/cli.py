@@ -150,6 +150,20 @@ def path_arg(value: str) -> str:
     return value
 
 
+def threads_out_of_range(threads: int | None) -> str | None:
+    """The message for a ``--threads`` the matchers cannot take, or None: the same words in
+    ``match``, ``batch`` and ``eval``, checked before any work (beyond a C int the matcher's
+    own message named ``threads``, after the images had been read)."""
+    from . import _validate as check
+
+    if threads is None or 0 <= threads <= check.MAX_NATIVE_INT:
+        return None
+    return (
+        f"--threads must be an integer >= 0 and <= {check.MAX_NATIVE_INT} (0: every core), "
+        f"got {threads}"
+    )
+
+
 def name_too_long(name: str) -> str | None:
     """Why ``name`` (one file or folder name, no separators) cannot be a file name, or None:
     more bytes than NAME_MAX (:data:`stereodepth.io.NAME_MAX_BYTES`)."""

@@ -1720,12 +1720,10 @@ def run(args: argparse.Namespace) -> int:
     require("PIL.Image", "reading images")  # before any work: one line with the install hint
     if args.repeat < 1:
         raise ValueError(f"--repeat must be an integer >= 1, got {args.repeat}")
-    if not 0 <= args.threads <= check.MAX_NATIVE_INT:  # beyond: the matcher's own message,
-        # naming threads rather than --threads, after the scene had been read
-        raise ValueError(
-            f"--threads must be an integer >= 0 and <= {check.MAX_NATIVE_INT} (0: every core), "
-            f"got {args.threads}"
-        )
+    from .cli import threads_out_of_range
+
+    if why := threads_out_of_range(args.threads):
+        raise ValueError(why)
     if args.num_disparities is not None and (
         not 16 <= args.num_disparities <= MAX_NUM_DISPARITIES or args.num_disparities % 16
     ):

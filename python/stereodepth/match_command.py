@@ -59,7 +59,6 @@ from typing import Any
 import numpy as np
 
 from . import _calib_rule
-from . import _validate as check
 from .cli import name_too_long, path_arg
 
 __all__ = ["output_paths", "register", "run"]
@@ -412,13 +411,12 @@ def _read(name: str, path: str) -> np.ndarray:
 def run(args: argparse.Namespace) -> int:
     """Matches the pair, writes the outputs, prints the summary; returns the exit status."""
     from . import _calib_rule as rule
+    from .cli import threads_out_of_range
     from .match_pair import default_num_disparities, match_pair, prepare_pair
 
     # Before the rig: a raw calibration's rectifier is made with these threads.
-    if args.threads is not None and not 0 <= args.threads <= check.MAX_NATIVE_INT:
-        raise _Usage(
-            f"--threads must be an integer >= 0 and <= {check.MAX_NATIVE_INT}, got {args.threads}"
-        )
+    if why := threads_out_of_range(args.threads):
+        raise _Usage(why)
     rig, ndisp, source, rectifier = _rig(args)
     if rig is not None:
         flags = source == "command line"

@@ -233,11 +233,10 @@ def check_runner(
         raise UsageError(
             f"--workers must be at most {cores} (the cores this process may use), got {workers}"
         )
-    if threads is not None and not 0 <= threads <= check.MAX_NATIVE_INT:
-        raise UsageError(
-            f"--threads must be an integer >= 0 and <= {check.MAX_NATIVE_INT} (0: every core), "
-            f"got {threads}"
-        )
+    from ..cli import threads_out_of_range
+
+    if why := threads_out_of_range(threads):
+        raise UsageError(why)
     if scheduler is not None or workers is not None:
         require("distributed", "running on Dask (--scheduler, --workers)")
     if progress:
