@@ -82,6 +82,13 @@ CASES: list[tuple[str, str, Callable[..., Any]]] = [
         "disparity",
         lambda: sd.disparity_to_depth(masked(DISP), focal_px=700, baseline_m=0.1),
     ),
+    (
+        "disparity_to_depth out",
+        "out",
+        lambda: sd.disparity_to_depth(
+            DISP, focal_px=700, baseline_m=0.1, out=masked(np.zeros((12, 40), np.float32))
+        ),
+    ),
     ("reproject", "disparity", lambda: sd.reproject(masked(DISP), Q=Q)),
     (
         "reproject out",

@@ -184,11 +184,15 @@ def as_disparity(disparity: Any, name: str = "disparity") -> np.ndarray:
 
 
 def prepare_out(out: Any, disparity: np.ndarray, dtype: np.dtype) -> np.ndarray:
-    """Allocates `out`, or checks a caller's array: shape, dtype, C order, writeable, overlap."""
+    """Allocates `out`, or checks a caller's array: not masked, shape, dtype, C order,
+    writeable, overlap."""
     if out is None:
         return np.empty(disparity.shape, dtype=dtype)
     if not isinstance(out, np.ndarray):
         raise TypeError(f"out must be a numpy.ndarray, got {type(out).__name__}")
+    # A masked out was written and returned with its mask: valid depths hidden as "--" (as
+    # reproject's out, refused).
+    check.not_masked("out", out)
     if out.dtype != dtype:
         raise TypeError(f"out must have dtype {dtype} (the dtype argument), got {out.dtype}")
     if out.shape != disparity.shape:
@@ -262,7 +266,8 @@ def disparity_to_depth(
         (every pixel would be a hole).
     out
         A preallocated C-contiguous array of ``dtype`` and the input's shape to write into.
-        It may be the input itself when the item sizes match (float32 in place).
+        It may be the input itself when the item sizes match (float32 in place). Not a
+        masked array (TypeError: its mask would hide depths written under it).
     threads
         Threads to split the rows over; None or 0 for every core available.
 
