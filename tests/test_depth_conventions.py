@@ -120,3 +120,25 @@ def test_depth_map_of_a_sized_rig_names_a_ragged_list() -> None:
     ):
         with pytest.raises(ValueError, match=r"^disparity must be a rectangular array"):
             rig.depth_map([[1, 2], [3]])
+
+
+def test_holes_are_the_same_in_float32_depth_uint16_depth_and_points() -> None:
+    # A float32 map whose holes are float32(0.1): invalid_value=0.1 made them holes in float32
+    # depth and in reproject, but 100 m (65535 mm) in uint16 depth, which compared in float64.
+    d32 = np.array([[0.1, 2.0, 0.1, 7.5]], dtype=np.float32)
+    # uint16 at a scale whose min_disparity / scale rounds up in float64 (21 / 0.35 is
+    # 60.00000000000001): raw 60 is 21 px, min_disparity itself, kept by float32 depth and
+    # reproject, a hole in uint16 depth.
+    u16 = np.array([[60, 59, 61, 100]], dtype=np.uint16)
+    for d, kw in (
+        (d32, {"invalid_value": 0.1}),
+        (d32.astype(np.int16), {"invalid_value": 0.1, "scale": 1.0}),
+        (u16, {"scale": 0.35, "min_disparity": 21}),
+    ):
+        z32 = sd.disparity_to_depth(d, **RIG, **kw)
+        z16 = sd.disparity_to_depth(d, **RIG, **kw, dtype=np.uint16)
+        xyz = sd.reproject(d, **RIG, **kw)
+        holes = np.isnan(z32)
+        assert holes.any() and not holes.all()
+        assert np.array_equal(z16 == 0, holes), (d.dtype, kw)
+        assert np.array_equal(np.isnan(xyz[..., 2]), holes), (d.dtype, kw)

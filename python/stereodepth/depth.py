@@ -111,6 +111,17 @@ class DepthOptions:
             self.invalid_value = check.real("invalid_value", invalid_value)
         # The raw threshold: raw < min_disparity / scale is a hole (exact for int16 x16).
         self.invalid_below: float | None = None if md is None else md / self.scale
+        if kind != np.float64:
+            # Raw values that are not float64 are compared with these in float32 by the float32
+            # depth kernel and reproject's invalid_value, in float64 by the uint16 depth kernel
+            # and reproject's threshold: a float32 map with holes of float32(0.1) and
+            # invalid_value=0.1 had them as holes in float32 depth and as 1000 m in uint16
+            # depth. Rounded to float32 here, every path compares the same numbers.
+            with np.errstate(over="ignore"):  # beyond float32: +-inf, as the kernels cast it
+                if self.invalid_value is not None:
+                    self.invalid_value = float(np.float32(self.invalid_value))
+                if self.invalid_below is not None:
+                    self.invalid_below = float(np.float32(self.invalid_below))
         if md is None:
             pass
         elif opencv_format:
@@ -252,7 +263,9 @@ def disparity_to_depth(
         invalid whatever ``max_depth_m``.
     invalid_value
         A raw value that marks holes, replacing the per-dtype default above (for int16, the
-        ``min_disparity`` rule then applies only when ``min_disparity`` is given too).
+        ``min_disparity`` rule then applies only when ``min_disparity`` is given too). For
+        input other than float64 it is compared in float32 (``0.1`` marks the float32 value
+        nearest 0.1), whatever ``dtype``; so is the ``min_disparity / scale`` threshold.
     min_disparity
         The smallest disparity the matcher searched, in pixels (OpenCV's ``minDisparity``):
         raw values below ``min_disparity / scale`` are holes. OpenCV's StereoBM and
