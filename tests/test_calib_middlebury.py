@@ -173,3 +173,39 @@ def test_rejects_binary_and_missing(tmp_path: Path) -> None:
         read_middlebury_calib(p)
     with pytest.raises(FileNotFoundError, match=r"Middlebury calib\.txt not found: .*nope\.txt"):
         read_middlebury_calib(tmp_path / "nope.txt")
+
+
+@pytest.mark.parametrize(
+    ("cams", "exc"), [("x", ValueError), ((2.0, 3), TypeError), ((1, 1), ValueError)]
+)
+def test_read_calibration_checks_cams_of_a_middlebury_file(
+    tmp_path: Path, cams: object, exc: type
+) -> None:
+    # Ignored for a Middlebury file: bad cameras went through without a word.
+    from stereodepth.calib import read_calibration
+
+    p = tmp_path / "calib.txt"
+    p.write_text(CALIB)
+    with pytest.raises(exc, match=r"^cams must be"):
+        read_calibration(p, cams)  # type: ignore[arg-type]
+    assert read_calibration(p, (2, 3)).focal_px == 3950.25  # good ones: not its business
+
+
+def test_read_calibration_refuses_a_huge_file_before_reading_it(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    # It was read whole (decoded into memory) before the readers' size limit refused it.
+    from stereodepth.calib import read_calibration
+    from stereodepth.calib._common import MAX_FILE_BYTES
+
+    p = tmp_path / "calib.txt"
+    with p.open("wb") as f:
+        f.truncate(MAX_FILE_BYTES + 1)  # sparse: no disk used
+
+    def unread(*args: object, **kwargs: object) -> None:
+        raise AssertionError("the file was read")
+
+    monkeypatch.setattr(Path, "read_text", unread)
+    monkeypatch.setattr(Path, "read_bytes", unread)
+    with pytest.raises(ValueError, match=r"calib\.txt: \d+ bytes is too large"):
+        read_calibration(p)

@@ -6,8 +6,7 @@ import os
 import re
 from typing import Any
 
-from ..io import require_file
-from ._common import _fail, _path, _read_text
+from ._common import _check_cameras, _fail, _path, _read_text
 from ._trees import _yaml_tree
 from .kalibr import read_kalibr_stereo_calibration
 from .kitti import read_kitti_calib, read_kitti_stereo_calibration
@@ -145,10 +144,21 @@ def read_calibration(
     path: str | os.PathLike[str], cams: tuple[int, int] | None = None
 ) -> Calibration:
     """A Middlebury ``calib.txt`` or a KITTI calibration file, told apart by their content.
-    A Middlebury file's ``width`` and ``height`` are the result's ``image_size``."""
+    A Middlebury file's ``width`` and ``height`` are the result's ``image_size``.
+
+    ``cams`` are the KITTI cameras (default 2 and 3); a Middlebury file has one pair and
+    does not use them, but they are checked as :func:`read_kitti_calib` checks them
+    (TypeError or ValueError naming ``cams``). Raises FileNotFoundError, IsADirectoryError,
+    and ValueError naming the file for a file that is not text or is larger than
+    ``MAX_FILE_BYTES`` (4 MiB; calibration files are a few kB), before reading it whole,
+    and every error of the reader."""
     p = _path(path)
-    require_file(p, "calibration file")
-    text = p.read_text(errors="replace")
+    if cams is not None:
+        # A Middlebury file ignored them: cams="x" or (2.0, 3) went through without a word.
+        cams = _check_cameras(cams, "cams", "KITTI ")
+    # Size-checked: read whole first, a multi-gigabyte file given by mistake was decoded
+    # into memory before the readers refused it.
+    text = _read_text(p, "calibration file")
     if re.search(r"^\s*P(_rect_0)?\d\s*:", text, flags=re.MULTILINE):
         return read_kitti_calib(p, cams or (2, 3))
     c = read_middlebury_calib(p)
