@@ -350,6 +350,17 @@ def test_opencv_rejects(tmp_path: Path, changes: dict[str, Any], message: str, f
             "R: 2\n",
             r"R is given twice \(line 7\)",
         ),
+        # Python's "cannot unpack non-iterable MappingNode object", a TypeError, for these.
+        (
+            "%YAML:1.0\nM1: !!opencv-matrix [ {rows: 3}, {cols: 3} ]\n",
+            r"line 2: an opencv-matrix must be a mapping \(rows and cols, or sizes; dt, data\), "
+            r"got a sequence",
+        ),
+        (
+            "%YAML:1.0\nM1: !!opencv-nd-matrix 5\n",
+            r"line 2: an opencv-nd-matrix must be a mapping \(rows and cols, or sizes; dt, "
+            r"data\), got '5'",
+        ),
         ("%YAML:1.0\nM1: [1, 2\n", r"not valid YAML: while parsing"),
         ("%YAML:1.0\n- 1\n- 2\n", r"a calibration file must be a YAML mapping, got list"),
         ("%YAML:1.0\n? [1, 2]\n: 3\n", r"keys must be names, got \[1, 2\]"),

@@ -114,6 +114,15 @@ def _yaml_tree(p: Path, text: str) -> dict[str, Any]:
         return out
 
     def matrix(loader: Any, node: Any) -> RawMatrix:
+        if not isinstance(node, yaml.MappingNode):
+            # mapping() took its items for key-value pairs: Python's "cannot unpack
+            # non-iterable ScalarNode object" (a TypeError) named neither file nor line.
+            got = "a sequence" if isinstance(node, yaml.SequenceNode) else _shown(node.value)
+            raise _fail(
+                where,
+                f"line {node.start_mark.line + 1}: an {node.tag.rsplit(':', 1)[-1]} must be a "
+                f"mapping (rows and cols, or sizes; dt, data), got {got}",
+            )
         return RawMatrix(mapping(loader, node))
 
     Loader.add_constructor(yaml.resolver.BaseResolver.DEFAULT_MAPPING_TAG, mapping)
