@@ -546,6 +546,8 @@ def print_summary(report: BatchReport, report_path: Path, file: Any = None) -> N
         )
     elif report.interrupted:
         print("interrupted: run the same command again to resume", file=out)
+    if report.error:
+        print(f"stopped: {report.error}: run the same command again to resume", file=out)
     for rec in report.failed:
         print(f"  failed {rec['stem']}: {rec['error']}", file=out)
     removed = sum(len(rec.get("removed") or ()) for rec in report.pairs)
@@ -701,6 +703,11 @@ def run(args: argparse.Namespace) -> int:
     elif report.failed:
         for rec in report.failed:
             print(f"stereodepth batch: failed {rec['stem']}: {rec['error']}", file=sys.stderr)
+    if report.error:
+        print(
+            f"stereodepth batch: error: {report.error}: run the same command again to resume",
+            file=sys.stderr,
+        )
     if report.interrupted and terminated():
         return 143  # stereodepth's main says "terminated"
     if report.interrupted:

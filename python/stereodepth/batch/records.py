@@ -167,6 +167,7 @@ class BatchReport:
     matcher_options: dict[str, Any] = field(default_factory=dict)
     rectification: dict[str, Any] | None = None
     force: bool = False  # --force: every pair was to be redone
+    error: str | None = None  # why the job stopped short (the Dask scheduler lost)
 
     @property
     def counts(self) -> dict[str, int]:
@@ -180,7 +181,7 @@ class BatchReport:
     def exit_status(self) -> int:
         if self.interrupted:
             return 130
-        return 1 if self.failed else 0
+        return 1 if self.failed or self.error else 0
 
     def as_dict(self) -> dict[str, Any]:
         from .. import __version__
@@ -192,6 +193,7 @@ class BatchReport:
                 "started": self.started,
                 "elapsed_s": self.elapsed_s,
                 "interrupted": self.interrupted,
+                "error": self.error,
                 "force": self.force,
                 "counts": self.counts,
                 "exit_status": self.exit_status,

@@ -29,6 +29,11 @@ EMBEDDED_IN_FLIGHT = 3
 LOCK_NAME = ".stereodepth-batch.lock"
 
 
+class ClusterLost(Exception):
+    """The Dask scheduler went away mid-job (killed, restarted, a connection that dropped):
+    the job stops, and the pairs not done are cancelled, as by Ctrl-C, not failed."""
+
+
 @contextlib.contextmanager
 def _exclusive(out_dir: Path) -> Iterator[None]:
     """Holds a lock on OUTDIR so that two jobs never write there at once; the lock file
@@ -175,6 +180,18 @@ def _run_dask(
             continue
         pending.discard(f)  # Dask calls a future's callback once
         i = futures[f]
+        if f.status == "cancelled":
+            # Not by this job (it cancels only when stopped, above): the scheduler is gone,
+            # and with it every pair not done. Those were each recorded as failed and their
+            # earlier outputs removed, although no pair was at fault and a worker may still
+            # be writing one.
+            try:
+                f.result()
+            except Exception as exc:
+                why = getattr(exc, "reason", None) or type(exc).__name__
+            else:  # pragma: no cover - a cancelled future has no result
+                why = "cancelled"
+            raise ClusterLost(f"the Dask scheduler was lost mid-job ({why})")
         try:
             record = f.result()
         except Exception as exc:  # the task itself never raises: a worker kept dying
@@ -262,7 +279,9 @@ def run_batch(
     and on a ``scheduler`` cluster a worker's cores / its number of threads.
     ``on_result`` is called in this thread with each record as it arrives. Ctrl-C
     (KeyboardInterrupt) stops the job: the pairs in flight finish, the rest are ``cancelled``,
-    and the report says ``interrupted``. Writes ``<stem>.*`` files into ``options.out_dir``;
+    and the report says ``interrupted``. A Dask scheduler lost mid-job stops it the same way,
+    its pairs not done ``cancelled`` (their earlier outputs kept), and the report's ``error``
+    says so (exit status 1). Writes ``<stem>.*`` files into ``options.out_dir``;
     the caller writes the report."""
     check_runner(scheduler=scheduler, workers=workers, threads=threads, progress=progress)
     if scheduler is not None:
@@ -327,6 +346,7 @@ def _run_locked(
     records: list[dict[str, Any] | None] = [None] * len(pairs)
     removed = 0
     interrupted = False
+    error = None
     runner = "embedded"
     before: dict[int, tuple[int, int, int] | None] = {}  # the records of the pairs to do
     with _exclusive(out_dir):
@@ -365,6 +385,8 @@ def _run_locked(
                         _run_dask(todo, options, done, task_threads, client, stop)
         except KeyboardInterrupt:
             interrupted = True
+        except ClusterLost as exc:  # the pairs not done are cancelled, as below
+            error = str(exc)
         finally:
             bar.close()
             removed += len(remove_temp_files(out_dir))
@@ -372,10 +394,10 @@ def _run_locked(
     for i, p in enumerate(pairs):
         rec = records[i]
         if rec is None:
-            # Interrupted: a pair whose result did not reach us may have finished anyway, its
-            # record then rewritten by this job. A record as it was before (--force, which
-            # redoes complete pairs), or of a pair this job never started, is the run
-            # before's: this job did not redo that pair.
+            # Interrupted (or the scheduler lost): a pair whose result did not reach us may
+            # have finished anyway, its record then rewritten by this job. A record as it was
+            # before (--force, which redoes complete pairs), or of a pair this job never
+            # started, is the run before's: this job did not redo that pair.
             redone = i in before and _record_stamp(p, options) != before[i]
             earlier = completed_record(p, options) if redone else None
             rec = record_head(p, "cancelled", options=options)
@@ -392,6 +414,7 @@ def _run_locked(
         runner=runner,
         elapsed_s=time.perf_counter() - t0,
         interrupted=interrupted,
+        error=error,
         started=started,
         removed_temp_files=removed,
         notes=list(notes),

@@ -1,0 +1,108 @@
+"""A batch job whose Dask scheduler goes away mid-job (killed, a network that drops): the
+pairs it did not finish are cancelled, not failed, and keep what an earlier run wrote."""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import signal
+import subprocess
+import sys
+import time
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from stereodepth import batch, cli
+
+pytest.importorskip("PIL.Image")
+distributed = pytest.importorskip("distributed")
+
+from test_batch import SLOW_MATCHER, middlebury_folder, outputs_bytes, temp_files  # noqa: E402
+
+
+def _wait_for(condition: Any, timeout: float = 60.0) -> None:
+    deadline = time.monotonic() + timeout
+    while not condition():
+        assert time.monotonic() < deadline, "timed out"
+        time.sleep(0.05)
+
+
+@contextlib.contextmanager
+def scheduler_and_worker(tmp_path: Path) -> Iterator[tuple[str, subprocess.Popen[bytes]]]:
+    """A Dask scheduler and one worker (one thread), each a process of its own on loopback;
+    yields the scheduler's address and process, which the test may kill."""
+    info = tmp_path / "scheduler.json"
+    common = ["--dashboard-address", "127.0.0.1:0"]
+    quiet = {"stdout": subprocess.DEVNULL, "stderr": subprocess.DEVNULL}
+    scheduler = subprocess.Popen(
+        [
+            *(sys.executable, "-m", "distributed.cli.dask_scheduler", "--host", "127.0.0.1"),
+            *("--port", "0", "--scheduler-file", str(info), *common),
+        ],
+        **quiet,  # type: ignore[call-overload]
+    )
+    worker = None
+    try:
+        _wait_for(lambda: info.exists() and info.stat().st_size > 0)
+        address = json.loads(info.read_text())["address"]
+        worker = subprocess.Popen(
+            [
+                *(sys.executable, "-m", "distributed.cli.dask_worker", address),
+                *("--nthreads", "1", "--nworkers", "1", "--no-nanny", "--host", "127.0.0.1"),
+                *common,
+            ],
+            **quiet,  # type: ignore[call-overload]
+        )
+        with distributed.Client(address, timeout="30s") as client:
+            client.wait_for_workers(1, timeout=60)
+        yield address, scheduler
+    finally:
+        for proc in (worker, scheduler):
+            if proc is not None and proc.poll() is None:
+                proc.send_signal(signal.SIGKILL)
+                proc.wait()
+
+
+@pytest.mark.cluster
+def test_a_scheduler_lost_mid_job_cancels_the_rest_and_keeps_their_earlier_outputs(
+    tmp_path: Path,
+) -> None:
+    # The pairs not yet done when the scheduler died were each recorded as failed
+    # ("FutureCancelledError ... scheduler-connection-lost"), and the earlier run's complete
+    # outputs of every one of them deleted: a --force run (or one with other options) that
+    # lost its cluster destroyed results it never got to redo. A Ctrl-C keeps them.
+    inp, out = tmp_path / "in", tmp_path / "out"
+    n = 8
+    middlebury_folder(inp, n)
+    assert cli.main(["batch", str(inp), "-o", str(out), "--quiet"]) == 0
+    before = outputs_bytes(out)
+    assert len(before) == 2 * n
+    pairs = batch.resolve_calibration(batch.find_pairs(inp))
+    with scheduler_and_worker(tmp_path) as (address, scheduler):
+        with distributed.Client(address) as client:
+            client.run(exec, SLOW_MATCHER.format(delay=0.5), {})
+
+        def kill_the_scheduler(record: dict[str, Any]) -> None:
+            if scheduler.poll() is None:
+                scheduler.send_signal(signal.SIGKILL)
+                scheduler.wait()
+
+        report = batch.run_batch(
+            pairs,
+            batch.BatchOptions(out_dir=out, force=True),
+            scheduler=address,
+            on_result=kill_the_scheduler,
+        )
+    counts = report.counts
+    assert counts["failed"] == 0, report.failed[:1]
+    assert counts["ok"] >= 1 and counts["cancelled"] >= 1
+    assert counts["ok"] + counts["cancelled"] == n
+    assert not report.interrupted
+    assert report.exit_status == 1
+    assert "scheduler" in (report.error or "")
+    # every pair keeps a complete set of outputs: the new ones or those of the run before
+    assert outputs_bytes(out).keys() == before.keys()
+    assert temp_files(out) == []
