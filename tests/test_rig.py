@@ -431,3 +431,27 @@ def test_depth_table_keeps_tuples_of_floats() -> None:
     assert t.rows == ((1.0, 2.5), (3.0, 4.0))
     assert all(type(v) is float for r in t.rows for v in r)
     assert list(t) == [{"d": 1.0, "z": 2.5}, {"d": 3.0, "z": 4.0}]
+
+
+def test_python_ints_beyond_int64_are_numbers() -> None:
+    # numpy keeps a Python int beyond int64 as an object: depth_m(10**20), a disparity a
+    # double holds, was "TypeError: disparity_px must be a real number or array, got int with
+    # dtype object" (StereoRig(baseline_mm=10**20, ...) and summary(10**20) took it), and one
+    # beyond a double (10**400) was that TypeError, not summary's ValueError naming the range.
+    rig = StereoRig(**ARM)
+    bf = rig.depth_m(1.0)  # B*f in m*px
+    assert rig.depth_m(10**20) == pytest.approx(bf / 1e20, rel=1e-15)
+    assert rig.depth_m(2**64) == rig.depth_m(float(2**64))
+    np.testing.assert_array_equal(rig.depth_m([2**64, 4]), rig.depth_m([float(2**64), 4.0]))
+    assert rig.depth_resolution_m(10**20) == rig.depth_resolution_m(1e20)
+    assert rig.table([10**20, 2]).rows == rig.table([1e20, 2.0]).rows
+    for call, name in (
+        (lambda: rig.depth_m(10**400), "disparity_px"),
+        (lambda: rig.depth_m([1, -(10**400)]), "disparity_px"),
+        (lambda: rig.disparity_px(10**400), "depth_m"),
+        (lambda: rig.table([10**400]), "disparities_px"),
+    ):
+        with pytest.raises(ValueError, match=rf"^{name} must be within the range of a double"):
+            call()
+    with pytest.raises(TypeError, match="disparity_px must be a real number or array"):
+        rig.depth_m([2**64, "1"])  # an object array of other things stays a TypeError

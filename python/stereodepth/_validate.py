@@ -137,7 +137,8 @@ def disparity_array(name: str, value: Any) -> np.ndarray:
 
 
 def real_array(name: str, value: Any) -> np.ndarray:
-    """A scalar or array of real numbers as a float64 array (NaN and inf allowed)."""
+    """A scalar or array of real numbers as a float64 array (NaN and inf allowed); ValueError
+    naming ``name`` for a Python int beyond a double."""
     if isinstance(value, (bool, np.bool_)):
         raise TypeError(f"{name} must be a real number or array, got bool {value!r}")
     not_masked(name, value)
@@ -145,6 +146,10 @@ def real_array(name: str, value: Any) -> np.ndarray:
         arr = np.asarray(value)
     except Exception as exc:  # ragged lists and the like
         raise TypeError(f"{name} must be a real number or array, got {value!r}") from exc
+    if arr.dtype == object and arr.size and all(_is_real(v) for v in arr.flat):
+        # Python ints beyond int64 (2**64, 10**20), which numpy keeps as objects: a double
+        # holds them; one beyond a double (10**400) is real()'s ValueError naming the range.
+        return np.array([real(name, v) for v in arr.flat], dtype=np.float64).reshape(arr.shape)
     if arr.dtype.kind not in "iuf":
         raise TypeError(
             f"{name} must be a real number or array, got {type(value).__name__} "
