@@ -448,6 +448,44 @@ def test_page_digits_are_printfs(page: Page) -> None:
     assert got == [f"{v:.6g}" for v in values]
 
 
+@pytest.mark.browser
+def test_page_digits_round_a_tie_to_even_as_printf(page: Page) -> None:
+    # JavaScript's toExponential rounds a value exactly halfway between two decimals away from
+    # zero, printf (and Python) to the even digit: the page showed a focal length of 1000.125
+    # px as 1000.13 where `stereodepth calc` prints 1000.12, a colour bar's 2.0625 m as 2.063
+    # (2.062), and a value that rounds past the largest double made formatG throw.
+    values = [1000.125, 1234565.0, 412462500.0, 2.0625, 12.125, 0.125, 532.5, 999999.5]
+    values += [0.0625, -2.0625, 1.0000005, 131.25, 3.5, 4.5, 1.7976931348623157e308]
+    for digits in (6, 4, 3, 2):
+        got = page.page.evaluate(
+            "([vs, d]) => vs.map(v => window.stereodepth.formatG(v, d))", [values, digits]
+        )
+        assert got == [f"{v:.{digits}g}" for v in values], digits
+    p = page.page
+    p.check('input[name="focal_mode"][value="px"]')
+    page.fill({"focal_px": "1000.125", "doffs_px": ""})
+    page.expect(p.locator("#out-focal_px .value")).to_have_text("1000.12")
+    cli = cli_text("--baseline-mm", "150", "--focal-px", "1000.125")
+    assert cli_value(cli, "focal length") == "1000.12"
+
+
+@pytest.mark.browser
+def test_readout_digits_are_numpys_repr_of_the_float32(page: Page) -> None:
+    # The readout's shortest decimal that reads back as the float32: where two of that length
+    # are equally near (the value exactly halfway), numpy takes the even one; the page took the
+    # one away from zero (a disparity of 233.015625 px read 233.01563, numpy 233.01562).
+    import numpy as np
+
+    rng = np.random.default_rng(7)
+    ties = [233.015625, 233.046875, 6340.78125, 0.000244140625, 3282233.25, 195255.625]
+    samples = rng.uniform(0.01, 500, 2000).astype(np.float32)
+    values = np.concatenate([np.float32(ties), samples, np.float32([1, 0.5, 12.5, 0.1])])
+    got = page.page.evaluate(
+        "vs => vs.map(v => window.stereodepthDepth.f32(v))", [float(v) for v in values]
+    )
+    assert got == [_f32_text(v) for v in values]
+
+
 # --- the depth-map view --------------------------------------------------------------------------
 def _hover(p: Any, selector: str, x: int, y: int, width: int, height: int) -> tuple[int, int]:
     """Moves the mouse to a whole CSS pixel inside image pixel (x, y) of the drawn map and

@@ -32,22 +32,41 @@
   let controller = null;
   let timer = null;
 
+  // value.toExponential(fraction), but a value exactly halfway between the two nearest
+  // decimals of that many digits goes to the one whose last digit is even, as C's printf,
+  // Python's % and numpy round it: JavaScript rounds it away from zero (1000.125 to six
+  // digits: 1000.12 in Python, 1000.13 in JavaScript).
+  function toExponentialEven(value, fraction) {
+    const text = value.toExponential(fraction);
+    // The value's exact decimal digits (a tie has fraction + 2 of them; 100 is the most
+    // toExponential gives, and shows such a value exactly).
+    const [exact, exp] = value.toExponential(100).split("e");
+    const digits = exact.replace("-", "").replace(".", "");
+    const tie = digits[fraction + 1] === "5" && /^0*$/.test(digits.slice(fraction + 2));
+    if (!tie || Number(digits[fraction]) % 2 === 1) return text;  // odd: away is to even
+    const kept = digits.slice(0, fraction + 1);
+    const mant = fraction > 0 ? `${kept[0]}.${kept.slice(1)}` : kept;
+    return `${value < 0 ? "-" : ""}${mant}e${exp}`;
+  }
+
   // Formats like C's %.6g (and Python's, which the CLI prints), so the page and
   // `stereodepth calc` show the same digits.
   function formatG(value, digits = 6) {
     if (value === null || value === undefined) return "—";
     if (!Number.isFinite(value)) return value > 0 ? "∞" : "—";
     if (value === 0) return "0";
-    // Round to `digits` significant digits first: that may carry into the next power of ten.
-    const rounded = Number(value.toExponential(digits - 1));
-    const exp = Math.floor(Math.log10(Math.abs(rounded)));
+    // Round to `digits` significant digits first: that may carry into the next power of ten
+    // (and past the largest double, so the exponent is read from the text).
+    const [first, firstExp] = toExponentialEven(value, digits - 1).split("e");
+    const exp = Number(firstExp);
     if (exp < -4 || exp >= digits) {
-      let [mant, e] = rounded.toExponential(digits - 1).split("e");
+      let mant = first;
       if (mant.includes(".")) mant = mant.replace(/0+$/, "").replace(/\.$/, "");
-      const sign = e[0] === "-" ? "-" : "+";
-      const mag = e.replace(/^[+-]/, "").padStart(2, "0");
+      const sign = firstExp[0] === "-" ? "-" : "+";
+      const mag = firstExp.replace(/^[+-]/, "").padStart(2, "0");
       return `${mant}e${sign}${mag}`;
     }
+    const rounded = Number(`${first}e${firstExp}`);
     let text = rounded.toFixed(Math.max(0, digits - 1 - exp));
     if (text.includes(".")) text = text.replace(/0+$/, "").replace(/\.$/, "");
     return text;
@@ -423,7 +442,7 @@
     return showErrors(detail);
   }
 
-  window.stereodepth = { formatG, rigValues, setRig, showRigErrors };  // also for tests
+  window.stereodepth = { formatG, toExponentialEven, rigValues, setRig, showRigErrors };  // also for tests
   if (document.readyState === "loading") document.addEventListener("DOMContentLoaded", start);
   else start();
 })();

@@ -17,13 +17,16 @@
   const CALIB_NOTE = "Middlebury calib.txt";
 
   // --- numbers -----------------------------------------------------------------------------
-  // The shortest decimal that reads back as the same float32: numpy's repr of a float32.
+  // The shortest decimal that reads back as the same float32: numpy's repr of a float32. Of
+  // two equally near (the value exactly halfway), the even one, as numpy (233.015625:
+  // 233.01562), else the one that reads back.
   function f32(v) {
     if (v === null || v === undefined || Number.isNaN(v)) return "—";
     if (!Number.isFinite(v)) return v > 0 ? "∞" : "−∞";
     for (let p = 1; p <= 9; p++) {
-      const s = v.toPrecision(p);
-      if (Math.fround(Number(s)) === v) return String(Number(s));
+      for (const s of [window.stereodepth.toExponentialEven(v, p - 1), v.toExponential(p - 1)]) {
+        if (Math.fround(Number(s)) === v) return String(Number(s));
+      }
     }
     return String(v);
   }
