@@ -669,6 +669,46 @@ def test_depth_view_reads_the_corner_pixels(page: Page) -> None:
 
 
 @pytest.mark.browser
+def test_a_pin_answered_after_a_new_depth_map_is_not_added_to_it(page: Page) -> None:
+    # A click pins a pixel of the depth map shown; when the point's answer came back after
+    # another depth map had been drawn (a slow answer, a quick second "Compute"), the old
+    # map's pixel was pinned on the new one, with the old map's numbers.
+    p = page.page
+    p.click("#tab-depth")
+    p.click("#use-sample")
+    page.expect(p.locator("#depth-status")).to_contain_text("Done: 320\u00d7240 px", timeout=60_000)
+    first = p.evaluate("() => window.stereodepthDepth.result().id")
+    held: list[Any] = []
+    p.route("**/point?*", lambda route: held.append(route))
+    _hover(p, "#img-depth", 205, 140, 320, 240)
+    p.mouse.down()
+    p.mouse.up()
+    for _ in range(100):
+        if held:
+            break
+        p.wait_for_timeout(50)
+    assert len(held) == 1 and first in held[0].request.url
+    p.click("#use-sample")
+    p.wait_for_function(f"() => window.stereodepthDepth.result().id !== {first!r}")
+    page.expect(p.locator("#depth-status")).to_contain_text("Done: 320\u00d7240 px")
+    with p.expect_response("**/point?*"):
+        held[0].continue_()
+    p.wait_for_timeout(300)  # the page's handler of that answer has run
+    assert p.evaluate("() => window.stereodepthDepth.pins().length") == 0
+    assert p.locator("#pin-table tbody tr").count() == 0
+    # And a pin whose request gets no answer says so, where it threw in the console.
+    p.unroute("**/point?*")
+    p.route("**/point?*", lambda route: route.abort())
+    _hover(p, "#img-depth", 60, 200, 320, 240)
+    p.mouse.down()
+    p.mouse.up()
+    page.expect(p.locator("#depth-status")).to_contain_text("not pinned")
+    assert p.evaluate("() => window.stereodepthDepth.pins().length") == 0
+    p.unroute("**/point?*")
+    page.errors = [e for e in page.errors if "ERR_FAILED" not in e]  # the aborted request
+
+
+@pytest.mark.browser
 @pytest.mark.data
 def test_depth_view_shared_scene_with_calib(
     page: Page, tmp_path: Path, stereo_data_dir: Path

@@ -421,10 +421,21 @@
     placeMarks("cursor", [{ x, y }]);
   }
 
+  // A pixel of the depth map shown: an answer that comes after another map was drawn is of
+  // the old map (it was pinned on the new one, with the old one's numbers), and is dropped.
   async function pin(x, y) {
-    const response = await fetch(`/api/depthmap/${result.id}/point?x=${x}&y=${y}`);
-    if (!response.ok) { setStatus("stale", "That result is no longer on the server; compute again."); return; }
-    const p = await response.json();
+    const mine = result;
+    let p;
+    try {
+      const response = await fetch(`/api/depthmap/${mine.id}/point?x=${x}&y=${y}`);
+      if (result !== mine) return;
+      if (!response.ok) { setStatus("stale", "That result is no longer on the server; compute again."); return; }
+      p = await response.json();
+    } catch (err) {
+      if (result === mine) setStatus("stale", `The server does not answer; pixel ${x}, ${y} is not pinned.`);
+      return;
+    }
+    if (result !== mine) return;
     p.n = pins.length ? pins[pins.length - 1].n + 1 : 1;
     pins.push(p);
     renderPins();
