@@ -422,6 +422,39 @@ def test_focal_length_in_pixels_and_use_this_baseline(page: Page) -> None:
 
 
 @pytest.mark.browser
+@pytest.mark.parametrize("disparity", ["-50", "0"])
+def test_a_target_off_the_log_axis_is_not_drawn_there(page: Page, disparity: str) -> None:
+    # With doffs > 0 a disparity of 0 or below (down to -doffs) has a finite depth, and
+    # chart_data marks it on the depth chart at that disparity, which a log axis cannot
+    # show. The page drew the red target where the last target had been (d = 250 px, Z = 0.3
+    # m) and its label "Z = 2.1 m" over the axis title, with SVG errors in the console;
+    # `stereodepth calc --plot` leaves it out, and so does the page now.
+    p = page.page
+    p.check('input[name="focal_mode"][value="px"]')
+    page.fill({"baseline_mm": "150", "focal_px": "700", "doffs_px": "100"})
+    page.expect(p.locator("#out-depth_m .value")).to_have_text("0.3")  # d = 250 px
+    p.wait_for_function(
+        "() => (document.getElementById('chart-depth').layout || {}).annotations?.length === 1"
+    )
+    p.fill("#disparity_px", disparity)
+    depth = StereoRig.from_pixels(150, 700, doffs_px=100).depth_m(float(disparity))
+    page.expect(p.locator("#out-depth_m .value")).to_have_text(f"{depth:.6g}")
+    page.expect(p.locator("#status")).to_have_text("Up to date.")
+    drawn = (
+        "id => { const g = document.getElementById(id); return g.layout.annotations.length === "
+        "%d && g.data.length === %d ? [g.data.map(t => t.name), g.layout.annotations.map(a => "
+        "a.text), (g.layout.shapes || []).length] : null; }"
+    )
+    depth_chart = p.wait_for_function(drawn % (0, 1), arg="chart-depth").json_value()
+    assert depth_chart == [["depth"], [], 0]
+    error_chart = p.wait_for_function(drawn % (2, 4), arg="chart-error").json_value()
+    assert error_chart[1] == [
+        f"ΔZ = {depth * depth / 105:.4g} m (1 px)",
+        f"ΔZ = {depth * depth * 0.25 / 105:.4g} m (0.25 px)",
+    ]
+
+
+@pytest.mark.browser
 def test_page_digits_are_printfs(page: Page) -> None:
     values = [
         1.2857142857142856,

@@ -241,7 +241,12 @@
     const first = chart.series[0];
     const descending = first && first.y.length > 1 && first.y[first.y.length - 1] < first.y[0];
     const annotations = [];
+    // A log axis has no place for a marker at or below 0: the target disparity 0 or below of a
+    // rig with doffs > 0, whose depth is finite (the other chart shows it). Plotly drew it
+    // where the last target had been, its label over the axis; `calc --plot` leaves it out.
+    const drawable = (m) => (!chart.x_log || m.x > 0) && (!chart.y_log || m.y > 0);
     chart.markers.forEach((m, i) => {
+      if (!drawable(m)) return;
       traces.push({
         type: "scatter",
         mode: "markers",
@@ -272,7 +277,7 @@
         bgcolor: "rgba(255,255,255,0.92)", bordercolor: "#fca5a5", borderwidth: 1, borderpad: 3,
       });
     });
-    const shapes = chart.markers.length ? [{
+    const shapes = chart.markers.length && drawable(chart.markers[0]) ? [{
       type: "line", xref: "x", yref: "paper", x0: chart.markers[0].x, x1: chart.markers[0].x,
       y0: 0, y1: 1, line: { color: TARGET_COLOUR, width: 1, dash: "dot" },
     }] : [];
