@@ -397,6 +397,37 @@ def test_bad_input_shows_a_message_at_its_field_and_keeps_the_results(page: Page
 
 
 @pytest.mark.browser
+def test_an_empty_focal_length_in_pixels_is_marked_at_its_input(page: Page, tmp_path: Path) -> None:
+    # Focal length given in pixels, its input left empty: the page said "Check the marked
+    # input" and marked none; its message asked for focal_mm and pixel_um, inputs this mode
+    # hides (the API, which has no modes, asks for those). In the depth view too.
+    p = page.page
+    p.check('input[name="focal_mode"][value="px"]')
+    p.fill("#focal_px", "")
+    error = p.locator("#focal_px-error")
+    page.expect(error).to_have_text("Focal length f/p is required")
+    page.expect(p.locator("#focal_px")).to_have_attribute("aria-invalid", "true")
+    page.expect(p.locator("#status")).to_have_text(
+        "Check the marked input; showing the last valid results."
+    )
+    from PIL import Image
+
+    for name in ("left", "right"):
+        Image.new("L", (64, 48), 90).save(tmp_path / f"{name}.png")
+        p.set_input_files(f"#{name}-file", str(tmp_path / f"{name}.png"))
+    p.click("#tab-depth")
+    p.click("#run-depth")
+    page.expect(p.locator("#depth-status")).to_have_text(
+        "Not computed. Check the marked inputs (the rig is on the left)."
+    )
+    page.expect(error).to_have_text("Focal length f/p is required")
+    p.click("#tab-calc")
+    p.fill("#focal_px", "700")
+    page.expect(error).to_be_hidden()
+    page.expect(p.locator("#status")).to_have_text("Up to date.")
+
+
+@pytest.mark.browser
 def test_focal_length_in_pixels_and_use_this_baseline(page: Page) -> None:
     p = page.page
     page.fill(ARM)

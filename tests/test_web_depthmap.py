@@ -1079,6 +1079,18 @@ def test_each_message_names_the_field_and_what_was_received(
     assert found[0]["msg"] == msg
 
 
+def test_a_rig_without_a_focal_length_is_missing_as_in_the_calculator(client: TestClient) -> None:
+    # /api/calc answers a rig without a focal length at focal_mm and pixel_um with type
+    # "missing" (the page marks the input it shows by it); the depth map's answer had the
+    # same messages as "value_error".
+    r = post(client, sample=True, rig={"baseline_mm": 120, "doffs_px": ""})
+    assert r.status_code == 422, r.text
+    calc = client.get("/api/calc", params={"baseline_mm": 120}).json()["detail"]
+    assert r.json()["detail"] == [
+        {**d, "loc": ["body", "rig", d["loc"][1]], "type": "missing"} for d in calc
+    ]
+
+
 def test_a_truncated_image_is_named_with_its_size(client: TestClient, pair: Any) -> None:
     # "left: the image is truncated or damaged (image file is truncated ...)": Pillow's words
     # (in parentheses, as Pillow has them) after the file's.

@@ -573,7 +573,9 @@ def _rig_of(body: dict[str, Any]) -> Any:
         found = _library_error(exc, {})
         raise BadInput(["body", "rig", *found["loc"][1:]], found["msg"]) from None
     if isinstance(rig, list):
-        raise ExceptionGroupLike([BadInput(["body", "rig", e["loc"][-1]], e["msg"]) for e in rig])
+        raise ExceptionGroupLike(
+            [BadInput(["body", "rig", e["loc"][-1]], e["msg"], e["type"]) for e in rig]
+        )
     # The depth map is float32: B*f beyond its range was answered at the body with the
     # library's message, which names its own parameters and suggests float64 input.
     problem = rig_range_problem(float(rig.focal_px), rig.baseline_mm / 1000.0, rig.doffs_px)

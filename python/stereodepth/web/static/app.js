@@ -120,13 +120,22 @@
   function showErrors(detail) {
     const general = [];
     for (const item of detail) {
-      const name = Array.isArray(item.loc) ? item.loc[1] : undefined;
+      let name = Array.isArray(item.loc) ? item.loc[1] : undefined;
+      let msg = item.msg;
+      // The focal length in pixels left empty: the API, which has no modes, asks for the
+      // focal length in mm and the pixel size, inputs this mode hides (the page said "Check
+      // the marked input" and marked none); ask for the one it shows.
+      if (mode() === "px" && item.type === "missing" && (name === "focal_mm" || name === "pixel_um")) {
+        if ($("focal_px").getAttribute("aria-invalid") === "true") continue;  // said once
+        name = "focal_px";
+        msg = "focal_px is required";
+      }
       if (name && INPUTS.includes(name) && activeInputs().includes(name)) {
         const field = document.querySelector(`.field[data-field="${name}"]`);
         field.classList.add("invalid");
         $(name).setAttribute("aria-invalid", "true");
         const box = $(`${name}-error`);
-        box.textContent = box.textContent ? `${box.textContent} ${friendly(name, item.msg)}` : friendly(name, item.msg);
+        box.textContent = box.textContent ? `${box.textContent} ${friendly(name, msg)}` : friendly(name, msg);
         box.hidden = false;
       } else {
         general.push(item.msg);

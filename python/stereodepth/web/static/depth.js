@@ -81,7 +81,7 @@
     const general = [];
     for (const item of detail) {
       const loc = Array.isArray(item.loc) ? item.loc : [];
-      if (loc[1] === "rig" && loc.length > 2) rig.push({ loc: ["query", loc[2]], msg: item.msg });
+      if (loc[1] === "rig" && loc.length > 2) rig.push({ loc: ["query", loc[2]], msg: item.msg, type: item.type });
       else if (loc[1] === "rig") general.push(`The rig: ${item.msg}`);
       else if (!(loc.length > 1 && fieldError(loc[1], item.msg))) general.push(item.msg);
     }
