@@ -288,6 +288,19 @@ def test_rule_matches_the_schema_range() -> None:
             "and pixel_um",
             id="doffs-with-mm",
         ),
+        pytest.param(  # was "... with focal_mm and pixel_um": neither was given
+            {"baseline_mm": 150, "doffs_px": 3},
+            "doffs_px",
+            "doffs_px goes with focal_px (a calibration in pixels), got doffs_px 3 without "
+            "focal_px",
+            id="doffs-without-focal",
+        ),
+        pytest.param(  # was "... with focal_mm and pixel_um": pixel_um was not given
+            {"baseline_mm": 150, "focal_mm": 6, "doffs_px": 3},
+            "doffs_px",
+            "doffs_px goes with focal_px (a calibration in pixels), got doffs_px 3 with focal_mm",
+            id="doffs-with-focal-mm",
+        ),
         pytest.param(
             {"baseline_mm": 150, "focal_px": 2000, "doffs_px": -0.5, "disparity_px": 0.2},
             "disparity_px",

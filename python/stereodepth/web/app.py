@@ -366,11 +366,14 @@ def _rig(
         if v is None
     ]
     if doffs_px:
+        # What came with it: "with focal_mm and pixel_um" was said when neither had come.
+        given = [n for n, v in (("focal_mm", focal_mm), ("pixel_um", pixel_um)) if v is not None]
+        beside = f"with {' and '.join(given)}" if given else "without focal_px"
         errors.append(
             _error(
                 "doffs_px",
                 f"doffs_px goes with focal_px (a calibration in pixels), got doffs_px "
-                f"{_number(doffs_px)} with focal_mm and pixel_um",
+                f"{_number(doffs_px)} {beside}",
             )
         )
     if errors or focal_mm is None or pixel_um is None:
