@@ -905,6 +905,22 @@ def test_a_job_of_a_scheduler_resumes_here(tmp_path: Path) -> None:
 
 
 @pytest.mark.cluster
+def test_a_scheduler_address_with_a_trailing_slash_reaches_it(tmp_path: Path) -> None:
+    # --scheduler tcp://HOST:PORT/ passes the address check (as a URL's may end), and was then
+    # handed to Dask as it was: "what answered there is not a Dask scheduler (ValueError:
+    # invalid literal for int() with base 10: '8786/')", exit 2, with a scheduler there.
+    middlebury_folder(tmp_path / "in", 2)
+    with in_process_cluster() as cluster:
+        address = cluster.scheduler_address + "/"
+        argv = ["batch", "in", "-o", "out", "--quiet", "--scheduler", address]
+        proc = run_cli_in(argv, tmp_path)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    report = report_of(tmp_path / "out")
+    assert report["counts"]["ok"] == 2
+    assert report["runner"] == f"dask {cluster.scheduler_address}"
+
+
+@pytest.mark.cluster
 def test_workers_option_starts_a_local_cluster(tmp_path: Path) -> None:
     pytest.importorskip("distributed")
     inp = tmp_path / "in"

@@ -628,6 +628,9 @@ def _dask_client(
             'running on Dask needs dask.distributed: pip install "stereodepth[batch]"'
         ) from exc
     if scheduler is not None:
+        # The address check takes a trailing "/" (HOST:PORT/, as a URL's may end); Dask's
+        # parser does not: it read the port as "8786/", "not a Dask scheduler".
+        scheduler = scheduler.removesuffix("/")
         _handshake(scheduler, SCHEDULER_TIMEOUT_S)
         try:
             client = Client(scheduler, timeout=f"{SCHEDULER_TIMEOUT_S}s")  # type: ignore[no-untyped-call]
