@@ -976,6 +976,47 @@ def test_rejected_image_too_wide_for_the_disparities() -> None:
         sd.block_match(wide, wide, num_disparities=4096)
 
 
+@pytest.mark.parametrize("isa", SUPPORTED_ISAS)
+@pytest.mark.parametrize(
+    ("num_disparities", "cols"),
+    [
+        # cols x num_disparities is below 2**30, cols x 4088 (the baseline kernels' 8 lanes)
+        # too, but not cols x 4096 (the AVX2 and AVX-512 kernels' 16): the AVX kernels refused
+        # it ("got 262144 x 4081", a product below 2**30) and the baseline ran it (35 s, 2 GB)
+        (4081, 2**18),
+        (8, 2**26),  # 8 x cols = 2**29; 16 x cols = 2**30
+    ],
+)
+def test_width_limit_is_the_same_on_every_isa(isa: str, num_disparities: int, cols: int) -> None:
+    wide = np.zeros((1, cols), np.uint8)  # zero pages: refused before anything is read
+    matcher = sd.StereoMatcher(num_disparities=num_disparities, isa=isa)
+    rounded = -(-num_disparities // 16) * 16
+    message = (
+        rf"image width times num_disparities must be below 2\^30 with num_disparities rounded "
+        rf"up to a multiple of 16 .*, got {cols} x {num_disparities} \({cols} x {rounded} = "
+    )
+    with pytest.raises(ValueError, match=message):
+        matcher.compute(wide, wide)
+    with pytest.raises(ValueError, match=message):
+        ref.block_match(wide, wide, num_disparities=num_disparities)
+
+
+def test_width_limit_is_checked_before_the_pair_is_copied() -> None:
+    # A refused pair of views (here broadcast, one pixel in memory) was made contiguous and a
+    # uint16 pair stretched first: 2 GB for a (1, 2**28) pair before the ValueError.
+    view = np.broadcast_to(np.zeros((1, 1), np.uint16), (1, 2**28))
+    before = _peak_rss_mib()
+    with pytest.raises(ValueError, match="image width times num_disparities must be below"):
+        sd.block_match(view, view, num_disparities=16)
+    assert _peak_rss_mib() - before < 256
+
+
+def _peak_rss_mib() -> float:
+    import resource
+
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+
+
 def test_matcher_rejects_missing_and_unknown_parameters() -> None:
     missing = "missing 1 required keyword-only argument: 'num_disparities'"
     with pytest.raises(TypeError, match=missing):

@@ -183,7 +183,7 @@ def block_match(
     """Oracle of :func:`stereodepth.block_match`: the same parameters, rules and tie-break
     (``threads`` is checked, then unused)."""
     o = BlockMatchOptions(num_disparities=num_disparities, **params)
-    left_arr, right_arr = check_pair(left, right)
+    left_arr, right_arr = check_pair(left, right, o.check_size)
     sixteen_bit = left_arr.dtype == np.uint16
     gl = grey(left_arr, channel_order=o.channel_order)
     gr = grey(right_arr, channel_order=o.channel_order)

@@ -85,15 +85,17 @@ among estimated pixels of 12.8 % against 15.0 %.
 
 Limits: block costs are accumulated in 16 bits, so ``block_size`` is at most 63 for census and
 31 for SAD (the largest block sum then stays below 65535); ``num_disparities`` is at most
-4096, ``|min_disparity|`` at most 32768, and the image width times ``num_disparities`` below
-2**30. Memory is O(W * num_disparities) per thread plus a few bytes per pixel; there is never
-a full cost volume. Rows are split into one band per thread (an idle thread takes over half of
-the rows another has left); the output does not depend on the number of threads or on how the
-rows were shared.
+4096, ``|min_disparity|`` at most 32768, and the image width times ``num_disparities`` rounded
+up to a multiple of 16 (the SIMD kernels' lanes; :data:`MAX_WIDTH_TIMES_DISPARITIES`) below
+2**30, on every instruction set alike. Memory is O(W * num_disparities) per thread plus a
+few bytes per pixel; there is never a full cost volume. Rows are split into one band per
+thread (an idle thread takes over half of the rows another has left); the output does not
+depend on the number of threads or on how the rows were shared.
 """
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -115,6 +117,11 @@ MAX_BLOCK_SIZE = {"census": 63, "sad": 31}
 MAX_NUM_DISPARITIES = 4096
 #: The largest ``|min_disparity|``.
 MAX_ABS_MIN_DISPARITY = 32768
+#: The image width times ``num_disparities`` rounded up to a multiple of
+#: :data:`DISPARITY_LANES` must be below this (the kernels' per-thread buffers).
+MAX_WIDTH_TIMES_DISPARITIES = 2**30
+#: The lanes the widest kernels (AVX2, AVX-512) round ``num_disparities`` up to.
+DISPARITY_LANES = 16
 #: The largest per-pixel cost of each cost function.
 PIXEL_COST_MAX = {"census": 16, "sad": 62}
 #: The cap of the x-Sobel prefilter (OpenCV's preFilterCap default).
@@ -226,6 +233,11 @@ class MatcherOptions:
         self.intensity_range = check_intensity_range(intensity_range)
         self.border = check_border(border)
 
+    def check_size(self, rows: int, cols: int) -> None:
+        """Raises ValueError when the matcher refuses a pair of ``rows`` x ``cols`` pixels
+        whatever its values, before the pair is copied or stretched; each matcher's options
+        class says what it refuses (none here)."""
+
     def stretch_native(
         self, left: np.ndarray, right: np.ndarray, intensity_range: tuple[int, int] | None
     ) -> tuple[np.ndarray, np.ndarray]:
@@ -307,6 +319,23 @@ class BlockMatchOptions(MatcherOptions):
             border=border,
         )
 
+    def check_size(self, rows: int, cols: int) -> None:
+        """The width limit of the module docstring: ``cols`` times ``num_disparities``
+        rounded up to a multiple of 16 below 2**30. The kernels round up to their own lanes
+        (8 for the baseline build, 16 for AVX2 and AVX-512), so that each refused its own
+        widths, with a message showing the product before rounding (``got 262144 x 4081``,
+        below 2**30); checked here, a pair is refused alike on every instruction set, and
+        before a view is copied or a uint16 pair stretched."""
+        rounded = -(-self.num_disparities // DISPARITY_LANES) * DISPARITY_LANES
+        if cols * rounded >= MAX_WIDTH_TIMES_DISPARITIES:
+            raise ValueError(
+                f"the image width times num_disparities must be below 2^30 with "
+                f"num_disparities rounded up to a multiple of {DISPARITY_LANES} (the kernels' "
+                f"buffers), got {cols} x {self.num_disparities} ({cols} x {rounded} = "
+                f"{cols * rounded}): match a narrower (cropped or downscaled) pair or lower "
+                f"num_disparities"
+            )
+
     def as_dict(self) -> dict[str, Any]:
         """The public parameters, resolved (``subpixel`` as the fit's name or None)."""
         return {
@@ -379,10 +408,11 @@ def check_border(border: Any) -> str:
 _IMAGE_RULE = "2-D uint8 or uint16 grey, or (H, W, 3) uint8 RGB"
 
 
-def as_image(image: Any, name: str) -> np.ndarray:
+def as_image(image: Any, name: str, *, contiguous: bool = True) -> np.ndarray:
     """Checks dtype and shape; returns a C-contiguous array in the machine's byte order
     (copying only when needed: a big-endian uint16 image, as FITS or PGM readers give, is
-    a uint16 image)."""
+    a uint16 image); with ``contiguous=False`` the array in the machine's byte order, as it
+    is laid out."""
     if not isinstance(image, np.ndarray):
         raise TypeError(
             f"{name} must be a numpy.ndarray ({_IMAGE_RULE}), got {type(image).__name__}"
@@ -400,13 +430,16 @@ def as_image(image: Any, name: str) -> np.ndarray:
         raise ValueError(
             f"{name} must have at least one row and one column, got shape {image.shape}"
         )
-    return np.ascontiguousarray(image)
+    return np.ascontiguousarray(image) if contiguous else image
 
 
-def check_pair(left: Any, right: Any) -> tuple[np.ndarray, np.ndarray]:
-    """Checks both images and that they agree; returns them C-contiguous, values unchanged."""
-    left_arr = as_image(left, "left")
-    right_arr = as_image(right, "right")
+def check_pair(
+    left: Any, right: Any, check_size: Callable[[int, int], None] | None = None
+) -> tuple[np.ndarray, np.ndarray]:
+    """Checks both images and that they agree, then ``check_size(rows, cols)`` when given
+    (a matcher's size limit, before any copy); returns them C-contiguous, values unchanged."""
+    left_arr = as_image(left, "left", contiguous=False)
+    right_arr = as_image(right, "right", contiguous=False)
     if left_arr.shape != right_arr.shape:
         raise ValueError(
             f"left and right must have the same shape, got {left_arr.shape} and {right_arr.shape}"
@@ -415,7 +448,9 @@ def check_pair(left: Any, right: Any) -> tuple[np.ndarray, np.ndarray]:
         raise TypeError(
             f"left and right must have the same dtype, got {left_arr.dtype} and {right_arr.dtype}"
         )
-    return left_arr, right_arr
+    if check_size is not None:
+        check_size(left_arr.shape[0], left_arr.shape[1])
+    return np.ascontiguousarray(left_arr), np.ascontiguousarray(right_arr)
 
 
 def stretch_uint16_pair(
@@ -456,6 +491,7 @@ def as_pair(
     channel_order: str = "rgb",
     intensity_range: tuple[int, int] | None = None,
     stretch: Any = None,
+    check_size: Callable[[int, int], None] | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """The pair as every matcher takes it: checked (:func:`check_pair`), C-contiguous, with
     ``channel_order`` checked (colour images keep their channels in the order given: the native
@@ -463,11 +499,12 @@ def as_pair(
     uint16 pairs stretched to the scale of uint8 (:func:`stretch_uint16_pair`, over
     ``intensity_range`` when given, or ``stretch(left, right, intensity_range)`` in its place:
     the native matchers pass :meth:`MatcherOptions.stretch_native`, the oracles keep numpy).
-    The rules are step 1 of the module docstring. Raises ValueError when ``intensity_range``
-    is given for uint8 images (they are matched as they are)."""
+    The rules are step 1 of the module docstring. ``check_size`` is :func:`check_pair`'s.
+    Raises ValueError when ``intensity_range`` is given for uint8 images (they are matched as
+    they are)."""
     check_channel_order(channel_order)
     fixed = check_intensity_range(intensity_range)
-    left_arr, right_arr = check_pair(left, right)
+    left_arr, right_arr = check_pair(left, right, check_size)
     if left_arr.dtype == np.uint16:
         left_arr, right_arr = (stretch or stretch_uint16_pair)(left_arr, right_arr, fixed)
     elif fixed is not None:
@@ -607,6 +644,7 @@ def run_native(
         channel_order=options.channel_order,
         intensity_range=options.intensity_range,
         stretch=options.stretch_native,
+        check_size=options.check_size,
     )
     shape = left_arr.shape[:2]
     disparity = np.empty(shape, dtype=np.float32)
