@@ -999,6 +999,16 @@ def test_width_limit_is_the_same_on_every_isa(isa: str, num_disparities: int, co
         matcher.compute(wide, wide)
     with pytest.raises(ValueError, match=message):
         ref.block_match(wide, wide, num_disparities=num_disparities)
+    # The kernels' own guard, which a direct call of the binding meets, has the same rule
+    # (the baseline rounded up to its 8 lanes and ran these pairs) and shows the product.
+    out = np.empty_like(wide, dtype=np.float32)
+    native = (
+        rf"image width times num_disparities must be below 2\^30 with num_disparities rounded "
+        rf"up to a multiple of 16, got {cols} x {num_disparities} \({cols} x {rounded} = "
+        rf"{cols * rounded}\)$"
+    )
+    with pytest.raises(ValueError, match=native):
+        matcher._native.compute(wide, wide, out, None, "rgb")
 
 
 def test_width_limit_is_checked_before_the_pair_is_copied() -> None:

@@ -131,9 +131,12 @@ def test_an_empty_uint8_frame_is_named_before_the_intensity_range(method: str) -
         (4096, 2**18),
         (8, 2**27),
         (600, 2**30 // 600 + 1),
-        # 20 x cols is below 2**30, but every kernel rounds the disparities up to its lanes
-        # (8, or 16 with AVX2 and AVX-512), and 24 x cols is not
+        # 20 x cols is below 2**30, but the limit rounds the disparities up to 16, the
+        # widest kernels' lanes, on every ISA, and 32 x cols is not
         (20, 2**30 // 24 + 1),
+        # 24 x cols is below 2**30 and passed this check (8 lanes): a baseline worker matched
+        # it and an AVX2 one refused it; every ISA refuses it now, so the graph is refused
+        (24, 2**30 // 24),
     ],
 )
 @pytest.mark.parametrize("rgb", [False, True], ids=["grey", "rgb"])
@@ -149,10 +152,9 @@ def test_block_match_width_times_disparities_is_refused_when_built(
     )
 
 
-@pytest.mark.parametrize(("num_disparities", "cols"), [(16, 2**26 - 1), (24, 2**30 // 24)])
+@pytest.mark.parametrize(("num_disparities", "cols"), [(16, 2**26 - 1), (24, 2**25 - 1)])
 def test_block_match_just_inside_the_width_limit_builds(num_disparities: int, cols: int) -> None:
-    # (24, 2**30 // 24): inside for the baseline kernels (8 lanes), which a worker may run;
-    # the AVX2 kernels' 16 lanes make it 32 x cols, which that worker refuses itself
+    # (24, 2**25 - 1): 24 rounds up to 32, and 32 x cols is just below 2**30
     a = da.zeros((3, 2, cols), dtype=np.uint8, chunks=(1, 2, cols))
     lazy = sdd.block_match(a, a, num_disparities=num_disparities)
     assert lazy.shape == (3, 2, cols)

@@ -270,9 +270,18 @@ void BlockMatcher::compute(const StereoImage& left, const StereoImage& right,
 
   const detail::BlockMatchKernels& k = kernels_for(isa_);
   const int dp = (p.num_disparities + k.lanes - 1) / k.lanes * k.lanes;
-  if (static_cast<double>(cols) * dp >= 1073741824.0) {
-    throw std::invalid_argument("the image width times num_disparities must be below 2^30, got " +
-                                std::to_string(cols) + " x " + std::to_string(p.num_disparities));
+  // The width limit rounds num_disparities up to the widest kernels' 16 lanes on every ISA,
+  // so that a pair the AVX2 and AVX-512 builds refuse is refused by the baseline too (it
+  // rounded up to its own 8 lanes; stereodepth.matching states the rule and checks it first).
+  constexpr int kLimitLanes = 16;
+  static_assert(kLimitLanes % 8 == 0, "a multiple of every kernel's lanes");
+  const std::int64_t dp16 = (p.num_disparities + kLimitLanes - 1) / kLimitLanes * kLimitLanes;
+  if (static_cast<std::int64_t>(cols) * dp16 >= (std::int64_t{1} << 30)) {
+    throw std::invalid_argument(
+        "the image width times num_disparities must be below 2^30 with num_disparities rounded "
+        "up to a multiple of 16, got " + std::to_string(cols) + " x " +
+        std::to_string(p.num_disparities) + " (" + std::to_string(cols) + " x " +
+        std::to_string(dp16) + " = " + std::to_string(static_cast<std::int64_t>(cols) * dp16) + ")");
   }
 
   std::lock_guard<std::mutex> lock(mutex_);

@@ -234,10 +234,14 @@ def _check_frames(
     ``max_memory_mb``) is estimated for ``threads`` threads, or for one when ``threads`` is
     None or 0 (every core of the machine that matches, unknown here: a worker whose cores
     need more refuses the frame itself, as before); the block matcher's width times
-    ``num_disparities`` is checked with the disparities rounded up to a multiple of 8, the
-    fewest lanes of its kernels (AVX2 and AVX-512 round up to 16: a worker running them
-    refuses the few widths in between itself)."""
-    from .matching import StereoMatcher, check_pair
+    ``num_disparities`` is checked with the disparities rounded up to a multiple of 16, the
+    rule of :mod:`stereodepth.matching` on every ISA (a worker's ISA cannot change it)."""
+    from .matching import (
+        DISPARITY_LANES,
+        MAX_WIDTH_TIMES_DISPARITIES,
+        StereoMatcher,
+        check_pair,
+    )
     from .semi_global import SemiGlobalMatcher, memory_estimate
 
     shape = tuple(int(n) for n in left.shape[-frame_axes:])
@@ -259,7 +263,9 @@ def _check_frames(
         if need / 1048576.0 > options.max_memory_mb:
             grey = np.zeros((rows, cols), dtype=np.uint8)
             SemiGlobalMatcher(**kernel_params).compute(grey, grey)
-    elif cols * ((options.num_disparities + 7) // 8 * 8) >= 2**30:
+    elif cols * (-(-options.num_disparities // DISPARITY_LANES) * DISPARITY_LANES) >= (
+        MAX_WIDTH_TIMES_DISPARITIES
+    ):  # the width limit of stereodepth.matching, the same on every worker's ISA
         row = np.zeros((1, cols), dtype=np.uint8)
         StereoMatcher(**kernel_params).compute(row, row)
 
