@@ -568,6 +568,15 @@ def _hover(p: Any, selector: str, x: int, y: int, width: int, height: int) -> tu
     )
 
 
+def _sample_depth_map(page: Any) -> Any:
+    """The depth view opened on the sample pair, its depth map drawn; returns the page."""
+    p = page.page
+    p.click("#tab-depth")
+    p.click("#use-sample")
+    page.expect(p.locator("#depth-status")).to_contain_text("Done: 320\u00d7240 px", timeout=60_000)
+    return p
+
+
 def _f32_text(v: float) -> str:
     import numpy as np
 
@@ -709,10 +718,7 @@ def test_depth_view_reads_the_corner_pixels(page: Page) -> None:
     # neither drawn nor under the cursor (the readout kept the last pixel read).
     import math
 
-    p = page.page
-    p.click("#tab-depth")
-    p.click("#use-sample")
-    page.expect(p.locator("#depth-status")).to_contain_text("Done: 320\u00d7240 px", timeout=60_000)
+    p = _sample_depth_map(page)
     w, h = 320, 240
     for key in ("left", "disparity", "depth"):
         selector = f"#img-{key}"
@@ -737,10 +743,7 @@ def test_a_pin_answered_after_a_new_depth_map_is_not_added_to_it(page: Page) -> 
     # A click pins a pixel of the depth map shown; when the point's answer came back after
     # another depth map had been drawn (a slow answer, a quick second "Compute"), the old
     # map's pixel was pinned on the new one, with the old map's numbers.
-    p = page.page
-    p.click("#tab-depth")
-    p.click("#use-sample")
-    page.expect(p.locator("#depth-status")).to_contain_text("Done: 320\u00d7240 px", timeout=60_000)
+    p = _sample_depth_map(page)
     first = p.evaluate("() => window.stereodepthDepth.result().id")
     held: list[Any] = []
     p.route("**/point?*", lambda route: held.append(route))

@@ -321,11 +321,9 @@ class BlockMatchOptions(MatcherOptions):
 
     def check_size(self, rows: int, cols: int) -> None:
         """The width limit of the module docstring: ``cols`` times ``num_disparities``
-        rounded up to a multiple of 16 below 2**30. The kernels round up to their own lanes
-        (8 for the baseline build, 16 for AVX2 and AVX-512), so that each refused its own
-        widths, with a message showing the product before rounding (``got 262144 x 4081``,
-        below 2**30); checked here, a pair is refused alike on every instruction set, and
-        before a view is copied or a uint16 pair stretched."""
+        rounded up to a multiple of 16 below 2**30, on every instruction set (the kernels'
+        own guard takes the same rule), checked here before a view is copied or a uint16
+        pair stretched."""
         rounded = -(-self.num_disparities // DISPARITY_LANES) * DISPARITY_LANES
         if cols * rounded >= MAX_WIDTH_TIMES_DISPARITIES:
             raise ValueError(
