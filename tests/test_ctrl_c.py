@@ -53,6 +53,8 @@ CHILD = textwrap.dedent(
         report["sent"] = time.monotonic()
         os.kill(os.getpid(), signal.SIGINT)
 
+    done = threading.Event()
+
     def run():
         t = time.monotonic()
         try:
@@ -62,6 +64,7 @@ CHILD = textwrap.dedent(
         except KeyboardInterrupt:
             report["result"] = "interrupted"
         report["ended"] = time.monotonic()
+        done.set()
 
     threading.Thread(target=kick, args=(full / 4,), daemon=True).start()
     if mode == "other-thread":
@@ -71,6 +74,10 @@ CHILD = textwrap.dedent(
             worker.join()
         except KeyboardInterrupt:
             report["main"] = "interrupted"
+            # Not join() alone: CPython 3.11's Thread.join, interrupted, marks the thread as
+            # stopped (bpo-45274's clean-up), and a second join() returned at once, the
+            # report read while the worker was still writing it.
+            done.wait()
             worker.join()
     else:
         try:
