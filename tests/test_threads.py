@@ -212,6 +212,38 @@ def test_python_threads_share_the_kernels_workers() -> None:
         assert all(ex.map(job, range(24)))
 
 
+_IDLE_AFTER_CALLS = """
+import time
+import numpy as np
+import stereodepth
+
+rng = np.random.default_rng(8)
+left = rng.integers(0, 256, size=(300, 200), dtype=np.uint8)
+right = np.roll(left, -3, axis=1)
+for make in (
+    lambda: stereodepth.StereoMatcher(num_disparities=32, threads=4),
+    lambda: stereodepth.SemiGlobalMatcher(num_disparities=32, threads=4),
+    lambda: stereodepth.SemiGlobalMatcher(num_disparities=32, paths=8, threads=4),
+):
+    make().compute(left, right)
+time.sleep(0.05)  # the kept workers' spin ends (0.2 ms)
+cpu, wall = time.process_time(), time.monotonic()
+time.sleep(0.5)
+print(time.process_time() - cpu, time.monotonic() - wall)
+"""
+
+
+def test_kept_workers_go_quiet_after_a_call() -> None:
+    # The pool's idle workers (and a caller waiting for its bands) spin a fraction of a
+    # millisecond before they sleep, so that the next parallel step finds them awake; then
+    # they sleep: half a second after the calls, the process uses (almost) no CPU. A spin
+    # that did not end would use a CPU for the whole half second.
+    r = run_python(_IDLE_AFTER_CALLS)
+    assert r.returncode == 0, r.stderr
+    cpu, wall = map(float, r.stdout.split())
+    assert cpu < 0.1 * wall, (cpu, wall)
+
+
 @pytest.mark.skipif(not os.path.isdir("/proc/self/task"), reason="needs Linux /proc")
 def test_many_requested_threads_keep_a_bounded_pool() -> None:
     # threads=200 splits the work into 200 bands (the same result as 1 thread), but the kept

@@ -2,7 +2,9 @@
 
 #include <algorithm>
 #include <atomic>
+#include <chrono>
 #include <condition_variable>
+#include <cstdint>
 #include <deque>
 #include <exception>
 #include <fstream>
@@ -19,6 +21,9 @@
 #endif
 #if defined(__unix__)
 #include <pthread.h>
+#endif
+#if defined(__x86_64__) || defined(__i386__)
+#include <immintrin.h>
 #endif
 
 namespace stereodepth {
@@ -151,6 +156,55 @@ bool stop_requested() {
 
 namespace {
 
+// How long an idle thread of the pool (and a caller waiting for its bands) spins before it
+// sleeps on a condition variable. Waking a sleeping thread costs 10 to 40 us on the virtual
+// machines measured (the host puts an idle vCPU to sleep): a call with 2 threads paid that at
+// every parallel step, and a 10 us pause between calls (Python's own work, as in the one-shot
+// functions) made the next call 17 us slower, 20 us made it 40 us slower (AMD EPYC guest,
+// block matching Tsukuba, a 0.5 ms call; bench/README, twentieth round). OpenMP runtimes spin for the same reason (for far
+// longer: GOMP_SPINCOUNT, KMP_BLOCKTIME's 200 ms).
+constexpr std::chrono::microseconds kSpin{200};
+
+inline void cpu_relax() {
+#if defined(__x86_64__) || defined(__i386__)
+  _mm_pause();
+#endif
+}
+
+// Spins until done() or kSpin has passed; returns done()'s last value. It yields the CPU
+// every few microseconds, so that a thread that has work (a caller woken to go on, with more
+// threads than CPUs) is not kept waiting for the spin to end.
+template <class Done>
+bool spin_until(const Done& done) {
+  const auto until = std::chrono::steady_clock::now() + kSpin;
+  for (;;) {
+    for (int i = 0; i < 64; ++i) {
+      if (done()) return true;
+      cpu_relax();
+    }
+    if (std::chrono::steady_clock::now() >= until) return done();
+    std::this_thread::yield();
+  }
+}
+
+// Threads running bands or spinning, of every call, may not exceed the CPUs this process may
+// use: a thread spins only on a CPU no band needs (with more bands than CPUs, as with several
+// calls at once, nobody spins).
+int cpu_count() {
+  static const int n = default_threads();
+  return n;
+}
+
+// Spins (spin_until) when `active` leaves a CPU free for it, counting itself in `active`
+// meanwhile; returns whether done() held by the end.
+template <class Done>
+bool spin_if_idle(std::atomic<int>& active, const Done& done) {
+  bool held = false;
+  if (active.fetch_add(1) < cpu_count()) held = spin_until(done);
+  active.fetch_sub(1);
+  return held;
+}
+
 // The bands of one parallel_for_rows call. Bands are claimed in order through `next`, by the
 // pool's workers and by the calling thread alike, so that the caller runs every band no worker
 // has started: a call never waits for a band to be picked up, only for bands already running
@@ -159,6 +213,7 @@ namespace {
 struct Job {
   const std::function<void(std::ptrdiff_t, std::ptrdiff_t)>* fn = nullptr;
   const std::atomic<bool>* stop = nullptr;  // the caller's stop flag, for every band
+  std::atomic<int>* active = nullptr;       // the pool's count of busy threads
   std::ptrdiff_t rows = 0, bands = 0;
   std::atomic<std::ptrdiff_t> next{1};  // band 0 is the caller's
   std::atomic<std::ptrdiff_t> done{0};  // bands 1 .. bands - 1 finished
@@ -167,12 +222,14 @@ struct Job {
 
   std::ptrdiff_t begin(std::ptrdiff_t b) const { return rows * b / bands; }
   void run(std::ptrdiff_t b) {
+    active->fetch_add(1);
     try {
       StopScope scope(stop);
       (*fn)(begin(b), begin(b + 1));
     } catch (...) {
       errors[static_cast<std::size_t>(b)] = std::current_exception();
     }
+    active->fetch_sub(1);
   }
   void run_claimed() {
     for (std::ptrdiff_t b = next.fetch_add(1); b < bands; b = next.fetch_add(1)) {
@@ -188,16 +245,18 @@ struct Job {
 // steps per call (paths 4 and 8 more). Workers are started on demand, up to the most bands
 // any call asked for less one, but at most max_workers() (more threads than CPUs gain nothing;
 // a call with more bands runs the rest on its own thread, with the same results; bands that
-// must run at once, run_bands_together, get a thread each whatever their number), and wait on
-// a condition variable while there is no work. They are detached and never stopped; the pool
-// is never destroyed (a static destructor joining threads at interpreter exit could wait
-// forever).
+// must run at once, run_bands_together, get a thread each whatever their number), and, when
+// there is no work, spin for kSpin on a CPU no band needs, then wait on a condition variable.
+// They are detached and never stopped; the pool is never destroyed (a static destructor
+// joining threads at interpreter exit could wait forever).
 struct Pool {
   std::mutex m;
   std::condition_variable work;  // a job was queued
   std::condition_variable left;  // a worker left a job
   std::deque<Job*> jobs;         // jobs that may still have unclaimed bands
   int workers = 0;
+  std::atomic<std::uint64_t> queued{0};  // jobs queued so far (changed under m)
+  std::atomic<int> active{0};            // threads running a band or spinning
 
   Job* open_job() {
     for (Job* j : jobs) {
@@ -208,8 +267,16 @@ struct Pool {
   void worker() {
     std::unique_lock<std::mutex> lock(m);
     for (;;) {
-      Job* j = nullptr;
-      work.wait(lock, [&] { return (j = open_job()) != nullptr; });
+      Job* j = open_job();
+      if (j == nullptr) {
+        // Spin a little before sleeping, so that the next step of a call (or the next call)
+        // finds this thread awake.
+        const std::uint64_t seen = queued.load(std::memory_order_relaxed);
+        lock.unlock();
+        spin_if_idle(active, [&] { return queued.load(std::memory_order_acquire) != seen; });
+        lock.lock();
+        work.wait(lock, [&] { return (j = open_job()) != nullptr; });
+      }
       ++j->users;
       lock.unlock();
       j->run_claimed();
@@ -265,6 +332,7 @@ void run_job(std::ptrdiff_t rows, std::ptrdiff_t bands, bool together,
   job.bands = bands;
   job.errors.resize(static_cast<std::size_t>(bands));
   Pool& p = pool();
+  job.active = &p.active;
   {
     std::lock_guard<std::mutex> lock(p.m);
     // A `together` job's bands wait for each other, so each needs a thread of its own: with
@@ -280,10 +348,14 @@ void run_job(std::ptrdiff_t rows, std::ptrdiff_t bands, bool together,
                                   " bands that must run at once");
     }
     p.jobs.push_back(&job);
+    p.queued.fetch_add(1, std::memory_order_release);
   }
   for (std::ptrdiff_t b = 1; b < bands; ++b) p.work.notify_one();
   job.run(0);
   job.run_claimed();
+  // The bands still running mostly end within microseconds of the caller's: spin for them
+  // rather than sleep at once (a woken thread starts late, above).
+  spin_if_idle(p.active, [&] { return job.done.load(std::memory_order_acquire) == bands - 1; });
   {
     // Every band is claimed now; wait for those still running, and for every worker to have
     // left the job (none may touch it once this call returns).
