@@ -157,12 +157,12 @@ bool stop_requested() {
 namespace {
 
 // How long an idle thread of the pool (and a caller waiting for its bands) spins before it
-// sleeps on a condition variable. Waking a sleeping thread costs 10 to 40 us on the virtual
-// machines measured (the host puts an idle vCPU to sleep): a call with 2 threads paid that at
-// every parallel step, and a 10 us pause between calls (Python's own work, as in the one-shot
-// functions) made the next call 17 us slower, 20 us made it 40 us slower (AMD EPYC guest,
-// block matching Tsukuba, a 0.5 ms call; bench/README, twentieth round). OpenMP runtimes spin for the same reason (for far
-// longer: GOMP_SPINCOUNT, KMP_BLOCKTIME's 200 ms).
+// sleeps on a condition variable (spin_until): waking a sleeping thread costs 10 to 40 us on
+// the virtual machines measured (the host puts an idle vCPU to sleep). With 2 threads, a call
+// paid that at every parallel step, and a 10 us pause before a call (Python's own work, as in
+// the one-shot functions) made it 17 us slower, 20 us made it 40 us slower (AMD EPYC guest,
+// block matching Tsukuba, a 0.5 ms call; bench/README, twentieth round). OpenMP runtimes spin
+// for the same reason, for far longer (GOMP_SPINCOUNT, KMP_BLOCKTIME's 200 ms).
 constexpr std::chrono::microseconds kSpin{200};
 
 inline void cpu_relax() {
@@ -171,18 +171,19 @@ inline void cpu_relax() {
 #endif
 }
 
-// Spins until done() or kSpin has passed; returns done()'s last value. It yields the CPU
-// every few microseconds, so that a thread that has work (a caller woken to go on, with more
-// threads than CPUs) is not kept waiting for the spin to end.
+// Spins until done() or kSpin has passed, yielding the CPU every few microseconds, so that a
+// thread that has work (a caller woken to go on, with more threads than CPUs) is not kept
+// waiting for the spin to end. (The semi-global matcher's row barrier spins without yielding:
+// its bands each have a CPU.)
 template <class Done>
-bool spin_until(const Done& done) {
+void spin_until(const Done& done) {
   const auto until = std::chrono::steady_clock::now() + kSpin;
   for (;;) {
     for (int i = 0; i < 64; ++i) {
-      if (done()) return true;
+      if (done()) return;
       cpu_relax();
     }
-    if (std::chrono::steady_clock::now() >= until) return done();
+    if (std::chrono::steady_clock::now() >= until) return;
     std::this_thread::yield();
   }
 }
@@ -195,14 +196,12 @@ int cpu_count() {
   return n;
 }
 
-// Spins (spin_until) when `active` leaves a CPU free for it, counting itself in `active`
-// meanwhile; returns whether done() held by the end.
+// Spins for kSpin at most (spin_until) when `active` leaves a CPU free for it, counting itself
+// in `active` meanwhile.
 template <class Done>
-bool spin_if_idle(std::atomic<int>& active, const Done& done) {
-  bool held = false;
-  if (active.fetch_add(1) < cpu_count()) held = spin_until(done);
+void spin_if_idle(std::atomic<int>& active, const Done& done) {
+  if (active.fetch_add(1) < cpu_count()) spin_until(done);
   active.fetch_sub(1);
-  return held;
 }
 
 // The bands of one parallel_for_rows call. Bands are claimed in order through `next`, by the
