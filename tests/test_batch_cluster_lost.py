@@ -1,5 +1,6 @@
-"""A batch job whose Dask scheduler goes away mid-job (killed, a network that drops): the
-pairs it did not finish are cancelled, not failed, and keep what an earlier run wrote."""
+"""A batch job whose Dask cluster cannot go on: a scheduler that goes away mid-job (killed, a
+network that drops), workers that cannot import stereodepth. The pairs it did not finish are
+cancelled, not failed, and keep what an earlier run wrote."""
 
 from __future__ import annotations
 
@@ -30,10 +31,33 @@ def _wait_for(condition: Any, timeout: float = 60.0) -> None:
         time.sleep(0.05)
 
 
+# Worker preloads: `import stereodepth` fails in the worker (as in an environment where it
+# is not installed); the worker's stereodepth says it is another version.
+HIDE_STEREODEPTH = "import sys\nsys.modules['stereodepth'] = None\n"
+OTHER_VERSION = "import stereodepth\nstereodepth.__version__ = '0.0.1'\n"
+
+
+def start_worker(address: str, *args: str) -> subprocess.Popen[bytes]:
+    """A Dask worker process (one thread, no nanny) on loopback for the scheduler at
+    ``address``."""
+    return subprocess.Popen(
+        [
+            *(sys.executable, "-m", "distributed.cli.dask_worker", address),
+            *("--nthreads", "1", "--nworkers", "1", "--no-nanny", "--host", "127.0.0.1"),
+            *("--dashboard-address", "127.0.0.1:0", *args),
+        ],
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+    )
+
+
 @contextlib.contextmanager
-def scheduler_and_worker(tmp_path: Path) -> Iterator[tuple[str, subprocess.Popen[bytes]]]:
-    """A Dask scheduler and one worker (one thread), each a process of its own on loopback;
-    yields the scheduler's address and process, which the test may kill."""
+def scheduler_and_worker(
+    tmp_path: Path, *worker_args: str
+) -> Iterator[tuple[str, subprocess.Popen[bytes]]]:
+    """A Dask scheduler and one worker (one thread, ``worker_args`` added to its command),
+    each a process of its own on loopback; yields the scheduler's address and process, which
+    the test may kill."""
     info = tmp_path / "scheduler.json"
     common = ["--dashboard-address", "127.0.0.1:0"]
     quiet = {"stdout": subprocess.DEVNULL, "stderr": subprocess.DEVNULL}
@@ -48,14 +72,7 @@ def scheduler_and_worker(tmp_path: Path) -> Iterator[tuple[str, subprocess.Popen
     try:
         _wait_for(lambda: info.exists() and info.stat().st_size > 0)
         address = json.loads(info.read_text())["address"]
-        worker = subprocess.Popen(
-            [
-                *(sys.executable, "-m", "distributed.cli.dask_worker", address),
-                *("--nthreads", "1", "--nworkers", "1", "--no-nanny", "--host", "127.0.0.1"),
-                *common,
-            ],
-            **quiet,  # type: ignore[call-overload]
-        )
+        worker = start_worker(address, *worker_args)
         with distributed.Client(address, timeout="30s") as client:
             client.wait_for_workers(1, timeout=60)
         yield address, scheduler
@@ -105,4 +122,41 @@ def test_a_scheduler_lost_mid_job_cancels_the_rest_and_keeps_their_earlier_outpu
     assert "scheduler" in (report.error or "")
     # every pair keeps a complete set of outputs: the new ones or those of the run before
     assert outputs_bytes(out).keys() == before.keys()
+    assert temp_files(out) == []
+
+
+@pytest.mark.cluster
+@pytest.mark.parametrize(
+    ("preload", "expected"),
+    [
+        (HIDE_STEREODEPTH, ["a Dask worker cannot import stereodepth", "No module named"]),
+        (OTHER_VERSION, ["the Dask workers run stereodepth 0.0.1, this is", "install"]),
+    ],
+    ids=["not-installed", "other-version"],
+)
+def test_workers_that_cannot_run_this_stereodepth_stop_the_job_before_any_pair(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], preload: str, expected: list[str]
+) -> None:
+    # Every pair went to a worker that could not import stereodepth: each was recorded as
+    # failed ("ModuleNotFoundError ..."), and the earlier run's outputs of every one of them
+    # deleted, for a fault of the cluster's environment, not of any pair. Workers of another
+    # version wrote outputs that the records credited to this one.
+    inp, out = tmp_path / "in", tmp_path / "out"
+    n = 2
+    middlebury_folder(inp, n)
+    assert cli.main(["batch", str(inp), "-o", str(out), "--quiet"]) == 0
+    before = outputs_bytes(out)
+    records = {p.name: p.read_bytes() for p in out.glob("*.record.json")}
+    assert len(before) == 2 * n and len(records) == n
+    script = tmp_path / "worker_preload.py"
+    script.write_text(preload)
+    capsys.readouterr()
+    with scheduler_and_worker(tmp_path, "--preload", str(script)) as (address, _):
+        status = cli.main(["batch", str(inp), "-o", str(out), "--force", "--scheduler", address])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert status == 1
+    assert len(err) == 1, err
+    assert all(part in err[0] for part in expected), err
+    assert outputs_bytes(out) == before
+    assert {p.name: p.read_bytes() for p in out.glob("*.record.json")} == records
     assert temp_files(out) == []

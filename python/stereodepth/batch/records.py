@@ -167,7 +167,7 @@ class BatchReport:
     matcher_options: dict[str, Any] = field(default_factory=dict)
     rectification: dict[str, Any] | None = None
     force: bool = False  # --force: every pair was to be redone
-    error: str | None = None  # why the job stopped short (the Dask scheduler lost)
+    error: str | None = None  # why the job stopped short (the Dask cluster failed it)
 
     @property
     def counts(self) -> dict[str, int]:

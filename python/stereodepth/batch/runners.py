@@ -30,8 +30,58 @@ LOCK_NAME = ".stereodepth-batch.lock"
 
 
 class ClusterLost(Exception):
-    """The Dask scheduler went away mid-job (killed, restarted, a connection that dropped):
-    the job stops, and the pairs not done are cancelled, as by Ctrl-C, not failed."""
+    """The Dask cluster cannot go on with the job: its scheduler went away mid-job (killed,
+    restarted, a connection that dropped), or its workers cannot run stereodepth (not
+    installed in their environment, or another version). The job stops, and the pairs not
+    done are cancelled, as by Ctrl-C, not failed: no pair is at fault, so their earlier
+    outputs are kept."""
+
+
+def worker_version() -> str:
+    """The stereodepth version a Dask worker runs (sent to the workers by reference, so that
+    a worker without stereodepth fails to load it)."""
+    from .. import __version__
+
+    return __version__
+
+
+def _check_workers(client: Any) -> None:
+    """Raises ClusterLost unless every worker of the client's cluster imports this version of
+    stereodepth. A worker without it failed every pair it took (each recorded as failed, its
+    earlier outputs removed), and one with another version wrote outputs that the records
+    credit to this one. A worker that joins later is not checked: without stereodepth, it ends
+    when the scheduler sends it a task (the task goes to another worker)."""
+    from .. import __version__
+
+    try:
+        versions = client.run(worker_version)
+    except Exception as exc:  # Dask re-raises a worker's ImportError as a plain Exception
+        if _is_import_error(exc):
+            raise ClusterLost(_cannot_import(exc)) from exc
+        raise ClusterLost(f"the Dask workers did not answer ({type(exc).__name__}: {exc})") from exc
+    other = sorted({str(v) for v in versions.values()} - {__version__})
+    if other:
+        raise ClusterLost(
+            f"the Dask workers run stereodepth {', '.join(other)}, this is {__version__}: "
+            f"install stereodepth {__version__} in the workers' environment"
+        )
+
+
+def _is_import_error(exc: BaseException) -> bool:
+    """Whether ``exc`` (as a worker raised it, or as Dask passed it on as text) says that
+    stereodepth cannot be imported there."""
+    text = f"{type(exc).__name__}: {exc}"
+    return "stereodepth" in text and ("ModuleNotFoundError" in text or "ImportError" in text)
+
+
+def _cannot_import(exc: BaseException) -> str:
+    from .. import __version__
+
+    what = str(exc) if type(exc) is Exception else f"{type(exc).__name__}: {exc}"
+    return (
+        f"a Dask worker cannot import stereodepth ({what}): install "
+        f'"stereodepth[batch]=={__version__}" in the workers\' environment'
+    )
 
 
 @contextlib.contextmanager
@@ -155,6 +205,7 @@ def _run_dask(
 
     if stop.is_set():  # Ctrl-C while the cluster started: no pair is sent
         raise KeyboardInterrupt
+    _check_workers(client)
     run_id = uuid.uuid4().hex[:8]
     futures = {}
     for i, p in todo:
@@ -279,9 +330,10 @@ def run_batch(
     and on a ``scheduler`` cluster a worker's cores / its number of threads.
     ``on_result`` is called in this thread with each record as it arrives. Ctrl-C
     (KeyboardInterrupt) stops the job: the pairs in flight finish, the rest are ``cancelled``,
-    and the report says ``interrupted``. A Dask scheduler lost mid-job stops it the same way,
-    its pairs not done ``cancelled`` (their earlier outputs kept), and the report's ``error``
-    says so (exit status 1). Writes ``<stem>.*`` files into ``options.out_dir``;
+    and the report says ``interrupted``. A Dask scheduler lost mid-job, or Dask workers that
+    cannot import this version of stereodepth, stop it the same way, its pairs not done
+    ``cancelled`` (their earlier outputs kept), and the report's ``error`` says so (exit
+    status 1). Writes ``<stem>.*`` files into ``options.out_dir``;
     the caller writes the report."""
     check_runner(scheduler=scheduler, workers=workers, threads=threads, progress=progress)
     if scheduler is not None:
