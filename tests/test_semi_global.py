@@ -614,6 +614,36 @@ def test_memory_estimate_and_refusal() -> None:
     assert "0.00 MiB" not in str(e.value) and "use paths=3" not in str(e.value)
 
 
+@pytest.mark.parametrize("kind", ["view", "uint16", "bgr"])
+def test_a_pair_above_max_memory_mb_is_refused_before_it_is_copied(kind: str) -> None:
+    # The estimate was checked in the kernel, after the pair had been copied (a strided view),
+    # stretched (uint16) or converted: a pair too large for memory got a MemoryError there,
+    # or took seconds and gigabytes to be refused. A broadcast view costs no memory, but
+    # every copy of it does.
+    import tracemalloc
+
+    shape = (20000, 30000) if kind != "bgr" else (20000, 30000, 3)
+    dtype = np.uint16 if kind == "uint16" else np.uint8
+    left = np.broadcast_to(np.array(7, dtype=dtype), shape)
+    right = np.broadcast_to(np.array(9, dtype=dtype), shape)
+    kwargs = {"channel_order": "bgr"} if kind == "bgr" else {}
+    tracemalloc.start()
+    try:
+        with pytest.raises(ValueError, match=r"30000x20000 px pair .* above max_memory_mb=64;"):
+            sd.semi_global_match(
+                left, right, num_disparities=64, paths=8, max_memory_mb=64, threads=1, **kwargs
+            )
+        matcher = sd.SemiGlobalMatcher(
+            num_disparities=64, paths=8, max_memory_mb=64, threads=1, **kwargs
+        )
+        with pytest.raises(ValueError, match=r"above max_memory_mb=64;"):
+            matcher.compute(left, right)
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert peak < 50_000_000, peak
+
+
 _PEAK_CHILD = """
 import json, sys
 import numpy as np

@@ -66,6 +66,13 @@ void bind_semi_global(py::module_& m) {
            py::arg("confidence") = py::none(), py::arg("channel_order") = "rgb",
            "Writes the disparity (and the confidence, unless None) of left; (H, W, 3) images "
            "are R, G, B, or B, G, R with channel_order='bgr'.")
+      .def(
+          "check_size",
+          [](const SemiGlobalMatcher& self, std::ptrdiff_t rows, std::ptrdiff_t cols) {
+            self.check_memory(rows, cols);
+          },
+          py::arg("rows"), py::arg("cols"),
+          "Raises ValueError when a rows x cols pair would need more than max_memory_mb.")
       .def_property_readonly("threads", &SemiGlobalMatcher::threads)
       .def_property_readonly("isa",
                              [](const SemiGlobalMatcher& self) { return isa_name(self.isa()); });

@@ -458,6 +458,29 @@ SemiGlobalMatcher::SemiGlobalMatcher(const SemiGlobalParams& params, int threads
 
 SemiGlobalMatcher::~SemiGlobalMatcher() = default;
 
+void SemiGlobalMatcher::check_memory(std::ptrdiff_t rows, std::ptrdiff_t cols) const {
+  const SemiGlobalParams& p = params_;
+  const int nd_win = p.num_disparities;
+  const std::size_t need =
+      semi_global_memory(rows, cols, nd_win, p.paths, threads_, isa_, p.block_size);
+  const double need_mb = static_cast<double>(need) / 1048576.0;
+  if (need_mb > p.max_memory_mb) {
+    std::ostringstream msg;
+    msg.precision(need_mb < 10.0 ? 2 : 0);  // no "needs about 0 MiB" for a tiny limit
+    msg << std::fixed << "semi-global matching of a " << cols << "x" << rows  // width x height
+        << " px pair with num_disparities=" << nd_win << " and paths=" << p.paths << " needs about "
+        << need_mb << " MiB, above max_memory_mb=";
+    msg.unsetf(std::ios::floatfield);
+    msg.precision(6);
+    msg << p.max_memory_mb << "; lower num_disparities, ";
+    if (p.paths != 3) {
+      msg << "use paths=3 (a few rows per thread instead of 3 bytes per pixel and disparity), ";
+    }
+    msg << "match a smaller (cropped or downscaled) pair, or raise max_memory_mb";
+    throw std::invalid_argument(msg.str());
+  }
+}
+
 void SemiGlobalMatcher::compute(const StereoImage& left, const StereoImage& right,
                                 const ImageView<float>& disparity,
                                 const ImageView<float>& confidence) {
@@ -477,25 +500,8 @@ void SemiGlobalMatcher::compute(const StereoImage& left, const StereoImage& righ
   const std::ptrdiff_t rows = left.rows, cols = left.cols;
   const int nd_win = p.num_disparities;  // the disparities that may win
   const int nd = run_disparities(nd_win);
-  const std::size_t need =
-      semi_global_memory(rows, cols, nd_win, p.paths, threads_, isa_, p.block_size);
+  check_memory(rows, cols);
   const int threads = team_threads(threads_, p.paths);
-  const double need_mb = static_cast<double>(need) / 1048576.0;
-  if (need_mb > p.max_memory_mb) {
-    std::ostringstream msg;
-    msg.precision(need_mb < 10.0 ? 2 : 0);  // no "needs about 0 MiB" for a tiny limit
-    msg << std::fixed << "semi-global matching of a " << cols << "x" << rows  // width x height
-        << " px pair with num_disparities=" << nd_win << " and paths=" << p.paths << " needs about "
-        << need_mb << " MiB, above max_memory_mb=";
-    msg.unsetf(std::ios::floatfield);
-    msg.precision(6);
-    msg << p.max_memory_mb << "; lower num_disparities, ";
-    if (p.paths != 3) {
-      msg << "use paths=3 (a few rows per thread instead of 3 bytes per pixel and disparity), ";
-    }
-    msg << "match a smaller (cropped or downscaled) pair, or raise max_memory_mb";
-    throw std::invalid_argument(msg.str());
-  }
 
   std::lock_guard<std::mutex> lock(mutex_);
   Workspace& ws = *workspace_;

@@ -635,14 +635,22 @@ def run_native(
     by :meth:`MatcherOptions.stretch_native`), the native kernel run into new float32 maps
     with the channel order (a B, G, R pair is read as it is: a reversed copy added 40 % to the
     time of matching a 1280 x 720 pair), ``finish(disparity)`` if given, and the disparity
-    returned (with the confidence when ``options.return_confidence``)."""
+    returned (with the confidence when ``options.return_confidence``). The sizes the matcher
+    refuses (``options.check_size``, and the native matcher's ``check_size`` where it has one:
+    the semi-global matcher's memory estimate) are refused before the pair is copied."""
+
+    def check_size(rows: int, cols: int) -> None:
+        options.check_size(rows, cols)
+        if hasattr(native, "check_size"):
+            native.check_size(rows, cols)
+
     left_arr, right_arr = as_pair(
         left,
         right,
         channel_order=options.channel_order,
         intensity_range=options.intensity_range,
         stretch=options.stretch_native,
-        check_size=options.check_size,
+        check_size=check_size,
     )
     shape = left_arr.shape[:2]
     disparity = np.empty(shape, dtype=np.float32)

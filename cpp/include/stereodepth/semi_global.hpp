@@ -61,6 +61,11 @@ class SemiGlobalMatcher {
   void compute(const StereoImage& left, const StereoImage& right,
                const ImageView<float>& disparity, const ImageView<float>& confidence);
 
+  // Throws std::invalid_argument (the estimate, the limit and how to lower the need) when a
+  // rows x cols pair would need more than params.max_memory_mb; compute() checks the same,
+  // and callers that copy or convert a pair first check it before they do.
+  void check_memory(std::ptrdiff_t rows, std::ptrdiff_t cols) const;
+
   const SemiGlobalParams& params() const { return params_; }
   int threads() const { return threads_; }
   Isa isa() const { return isa_; }
