@@ -182,8 +182,10 @@ def test_either_signal_stops_the_server_with_one_line_and_status_0(sig: int, lin
 
 
 # --- 4. the Host header -------------------------------------------------------------------------
-def get(port: int, host: str | None, http: str = "1.1", path: str = "/api/fields") -> bytes:
-    head = f"GET {path} HTTP/{http}\r\n"
+def get(
+    port: int, host: str | None, http: str = "1.1", path: str = "/api/fields", method: str = "GET"
+) -> bytes:
+    head = f"{method} {path} HTTP/{http}\r\n"
     if host is not None:
         head += f"Host: {host}\r\n"
     return raw(port, (head + "Connection: close\r\n\r\n").encode())
@@ -203,6 +205,29 @@ def loopback_server() -> Any:
 def test_a_loopback_host_is_answered(loopback_server: ServerProcess, host: str) -> None:
     answer = get(loopback_server.port, host.format(port=loopback_server.port))
     assert status_of(answer) == 200, answer[:300]
+
+
+@pytest.mark.parametrize(
+    "path",
+    ["/", "/api/fields", "/api/calc?baseline_mm=100&focal_px=800", "/static/app.js", "/nope"],
+)
+def test_head_answers_as_get_without_the_body(loopback_server: ServerProcess, path: str) -> None:
+    # FastAPI's GET routes answered HEAD with 405 (curl -I, link checkers, uptime probes).
+    port = loopback_server.port
+    host = f"127.0.0.1:{port}"
+    full, head = get(port, host, path=path), get(port, host, path=path, method="HEAD")
+    assert status_of(head) == status_of(full) != 405, head[:300]
+    full_head, body = full.split(b"\r\n\r\n", 1)
+    head_head, nothing = head.split(b"\r\n\r\n", 1)
+    assert nothing == b"" and body != b""
+
+    def fields(block: bytes) -> dict[str, str]:
+        lines = block.decode("latin-1").split("\r\n")[1:]
+        pairs = (line.split(":", 1) for line in lines)
+        return {k.strip().lower(): v.strip() for k, v in pairs if k.strip().lower() != "date"}
+
+    assert fields(head_head) == fields(full_head)
+    assert int(fields(head_head)["content-length"]) == len(body)
 
 
 @pytest.mark.parametrize(

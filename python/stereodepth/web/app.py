@@ -559,6 +559,27 @@ def _plotly_js() -> Path:
     return Path(str(resources.files("plotly") / "package_data" / "plotly.min.js"))
 
 
+class HeadAsGet:
+    """ASGI middleware: a HEAD request is routed as a GET, and its answer is sent without the
+    body (the same status and headers, Content-Length included), as RFC 9110, section 9.3.2
+    asks. FastAPI's GET routes, unlike Starlette's, answered HEAD with 405."""
+
+    def __init__(self, app: Any) -> None:
+        self.app = app
+
+    async def __call__(self, scope: Any, receive: Any, send: Any) -> None:
+        if scope["type"] != "http" or scope["method"] != "HEAD":
+            await self.app(scope, receive, send)
+            return
+
+        async def headers_only(message: Any) -> None:
+            if message["type"] == "http.response.body":
+                message = {**message, "body": b""}
+            await send(message)
+
+        await self.app({**scope, "method": "GET"}, receive, headers_only)
+
+
 def create_app(
     *,
     max_upload_bytes: int = DEFAULT_MAX_UPLOAD_BYTES,
@@ -606,6 +627,8 @@ def create_app(
 
     # Before every route (and inside security_headers, so that its 400 has the headers too).
     app.add_middleware(HostCheck, allowed=hosts)
+    # Outermost: HEAD answers as GET, headers only (FastAPI's GET routes answered it 405).
+    app.add_middleware(HeadAsGet)
 
     @app.middleware("http")
     async def security_headers(request: Request, call_next: Any) -> Response:
