@@ -147,3 +147,40 @@ def test_the_rectified_size_is_the_calibrations_image_size(
     err = capsys.readouterr().err
     assert err.count("\n") == 1
     assert "must have the size of the calibration in --calib, 1242x375 px, got 621x188" in err
+
+
+_OPENCV_P = (
+    "   rows: 3\n   cols: 4\n   dt: d\n"
+    "   data: [ 700., 0., 320., {tx}, 0., 700., 240., 0., 0., 0., 1., 0. ]\n"
+)
+
+
+@pytest.mark.parametrize(
+    "text",
+    [
+        # cv2.FileStorage's YAML of stereoRectify's P1 and P2: its "P1:" lines were read as
+        # KITTI's ("expected 'NAME: values', got '%YAML 1.2'")
+        "%YAML 1.2\n---\nP1: !!opencv-matrix\n"
+        + _OPENCV_P.format(tx="0.")
+        + "P2: !!opencv-matrix\n"
+        + _OPENCV_P.format(tx="-84."),
+        # its Q alone, and the older %YAML:1.0 header: read as a Middlebury calib.txt
+        "%YAML:1.0\nQ: !!opencv-matrix\n   rows: 4\n   cols: 4\n   dt: d\n"
+        "   data: [ 1., 0., 0., -320., 0., 1., 0., -240., 0., 0., 0., 700., 0., 0., 8.3, 0. ]\n",
+        '<?xml version="1.0"?>\n<opencv_storage>\n<P2 type_id="opencv-matrix"><rows>3</rows>'
+        "<cols>4</cols><dt>d</dt><data>700. 0. 320. -84. 0. 700. 240. 0. 0. 0. 1. 0.</data>"
+        "</P2>\n</opencv_storage>\n",
+        '{\n    "P2": {\n        "type_id": "opencv-matrix",\n        "rows": 3,'
+        '\n        "cols": 4,\n        "dt": "d",\n        "data": [ 700.0, 0.0, 320.0,'
+        " -84.0, 0.0, 700.0, 240.0, 0.0, 0.0, 0.0, 1.0, 0.0 ]\n    }\n}\n",
+    ],
+    ids=["yaml-p1-p2", "yaml-q", "xml", "json"],
+)
+def test_read_calibration_names_an_opencv_file_for_what_it_is(tmp_path: Path, text: str) -> None:
+    p = tmp_path / "stereo.yml"
+    p.write_text(text)
+    with pytest.raises(ValueError, match="an OpenCV FileStorage file") as e:
+        calib.read_calibration(p)
+    msg = str(e.value)
+    assert msg.startswith(f"{p}: an OpenCV FileStorage file, not the calibration of a"), msg
+    assert "read_stereo_calibration" in msg and "\n" not in msg

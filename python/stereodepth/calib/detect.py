@@ -22,6 +22,12 @@ _MIDDLEBURY_RE = re.compile(r"^[ \t]*cam0[ \t]*=", flags=re.MULTILINE)
 _KITTI_RE = re.compile(r"^[ \t]*P(_rect_0)?\d[ \t]*:[ \t]*[-+.\d]", flags=re.MULTILINE)
 
 
+def _is_opencv_storage(text: str) -> bool:
+    """Whether ``text`` is a file cv2.FileStorage wrote (YAML, XML or JSON)."""
+    head = text.lstrip()
+    return head.startswith(("%YAML", "<?xml", "<opencv_storage", "{")) or "!!opencv-" in text
+
+
 def _rectified_format_of(text: str) -> str | None:
     if _MIDDLEBURY_RE.search(text):
         return "middlebury"
@@ -150,8 +156,9 @@ def read_calibration(
     does not use them, but they are checked as :func:`read_kitti_calib` checks them
     (TypeError or ValueError naming ``cams``). Raises FileNotFoundError, IsADirectoryError,
     and ValueError naming the file for a file that is not text or is larger than
-    ``MAX_FILE_BYTES`` (4 MiB; calibration files are a few kB), before reading it whole,
-    and every error of the reader."""
+    ``MAX_FILE_BYTES`` (4 MiB; calibration files are a few kB), before reading it whole, for
+    an OpenCV FileStorage file (:func:`read_stereo_calibration` reads those), and every error
+    of the reader."""
     p = _path(path)
     if cams is not None:
         # A Middlebury file ignored them: cams="x" or (2.0, 3) went through without a word.
@@ -159,6 +166,16 @@ def read_calibration(
     # Size-checked: read whole first, a multi-gigabyte file given by mistake was decoded
     # into memory before the readers refused it.
     text = _read_text(p, "calibration file")
+    if _is_opencv_storage(text):
+        # Its P1: and P2: lines were read as KITTI's ("expected 'NAME: values', got '%YAML
+        # 1.2'"), a file without them as a Middlebury calib.txt.
+        raise _fail(
+            str(p),
+            "an OpenCV FileStorage file, not the calibration of a rectified pair that "
+            "read_calibration reads (a Middlebury calib.txt, a KITTI calibration file): read "
+            "an OpenCV stereo calibration (M1, D1, M2, D2, R, T) with read_stereo_calibration "
+            "and rectify the pair with it",
+        )
     if re.search(r"^\s*P(_rect_0)?\d\s*:", text, flags=re.MULTILINE):
         return read_kitti_calib(p, cams or (2, 3))
     c = read_middlebury_calib(p)
