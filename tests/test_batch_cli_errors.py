@@ -418,3 +418,25 @@ def test_a_scheduler_address_where_something_else_listens_is_one_line(
     assert_one_line(status, err, f"--scheduler {address!r}: ")
     assert fragment in err, err
     assert not (tmp_path / "out").exists()
+
+
+@pytest.mark.parametrize("quiet", [False, True], ids=["summary", "quiet"])
+def test_a_failed_pair_is_reported_on_one_line_whatever_its_error_holds(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], quiet: bool
+) -> None:
+    # A pair whose image names hold a line break (the file system allows it): its error,
+    # which names the file, was printed over two lines, the second one without the prefix.
+    pytest.importorskip("PIL.Image")
+    inp, out = tmp_path / "in", tmp_path / "out"
+    inp.mkdir()
+    (inp / "a\nb_left.png").write_bytes(b"not a png")
+    (inp / "a\nb_right.png").write_bytes(b"not a png either")
+    args = ["batch", str(inp), "-o", str(out), "--focal-px", "700", "--baseline-mm", "100"]
+    args += ["--num-disparities", "32"] + (["--quiet"] if quiet else [])
+    assert cli.main(args) == 1
+    captured = capsys.readouterr()
+    lines = (captured.err if quiet else captured.out).splitlines()
+    failed = [line for line in lines if "failed a_b:" in line]
+    assert len(failed) == 1, lines
+    assert "cannot decode image" in failed[0] and "b_left.png" in failed[0], failed
+    assert all(line.startswith(("stereodepth batch:", "  ", "1 pair", "report:")) for line in lines)

@@ -18,7 +18,7 @@ from .. import _validate as check
 from .._extras import require
 from .._methods import METHODS, check_method
 from ..calib import Calibration
-from ..cli import KeyValueOnce, key_value_option, path_arg, terminated
+from ..cli import KeyValueOnce, key_value_option, one_line, path_arg, terminated
 from .calibration import (
     COMMAND_LINE,
     BatchRectifier,
@@ -547,9 +547,11 @@ def print_summary(report: BatchReport, report_path: Path, file: Any = None) -> N
     elif report.interrupted:
         print("interrupted: run the same command again to resume", file=out)
     if report.error:
-        print(f"stopped: {report.error}: run the same command again to resume", file=out)
+        print(f"stopped: {one_line(report.error)}: run the same command again to resume", file=out)
+    # One line a pair, whatever its error holds (an image path with a line break in its name);
+    # the record keeps the error as it was.
     for rec in report.failed:
-        print(f"  failed {rec['stem']}: {rec['error']}", file=out)
+        print(f"  failed {rec['stem']}: {one_line(rec['error'])}", file=out)
     removed = sum(len(rec.get("removed") or ()) for rec in report.pairs)
     if removed:
         print(
@@ -702,10 +704,14 @@ def run(args: argparse.Namespace) -> int:
         _show_summary(report, report_path)
     elif report.failed:
         for rec in report.failed:
-            print(f"stereodepth batch: failed {rec['stem']}: {rec['error']}", file=sys.stderr)
+            print(
+                f"stereodepth batch: failed {rec['stem']}: {one_line(rec['error'])}",
+                file=sys.stderr,
+            )
     if report.error:
         print(
-            f"stereodepth batch: error: {report.error}: run the same command again to resume",
+            f"stereodepth batch: error: {one_line(report.error)}: run the same command again "
+            "to resume",
             file=sys.stderr,
         )
     if report.interrupted and terminated():
