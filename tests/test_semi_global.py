@@ -614,16 +614,17 @@ def test_memory_estimate_and_refusal() -> None:
     assert "0.00 MiB" not in str(e.value) and "use paths=3" not in str(e.value)
 
 
-@pytest.mark.parametrize("kind", ["view", "uint16", "bgr"])
+@pytest.mark.parametrize("kind", ["view", "uint16", "big-endian", "bgr"])
 def test_a_pair_above_max_memory_mb_is_refused_before_it_is_copied(kind: str) -> None:
     # The estimate was checked in the kernel, after the pair had been copied (a strided view),
     # stretched (uint16) or converted: a pair too large for memory got a MemoryError there,
-    # or took seconds and gigabytes to be refused. A broadcast view costs no memory, but
-    # every copy of it does.
+    # or took seconds and gigabytes to be refused (a big-endian pair: converted to the
+    # machine's byte order before the size was checked). A broadcast view costs no memory,
+    # but every copy of it does.
     import tracemalloc
 
     shape = (20000, 30000) if kind != "bgr" else (20000, 30000, 3)
-    dtype = np.uint16 if kind == "uint16" else np.uint8
+    dtype = {"uint16": np.dtype(np.uint16), "big-endian": np.dtype(">u2")}.get(kind, np.uint8)
     left = np.broadcast_to(np.array(7, dtype=dtype), shape)
     right = np.broadcast_to(np.array(9, dtype=dtype), shape)
     kwargs = {"channel_order": "bgr"} if kind == "bgr" else {}

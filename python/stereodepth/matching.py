@@ -409,26 +409,26 @@ _IMAGE_RULE = "2-D uint8 or uint16 grey, or (H, W, 3) uint8 RGB"
 def as_image(image: Any, name: str, *, contiguous: bool = True) -> np.ndarray:
     """Checks dtype and shape; returns a C-contiguous array in the machine's byte order
     (copying only when needed: a big-endian uint16 image, as FITS or PGM readers give, is
-    a uint16 image); with ``contiguous=False`` the array in the machine's byte order, as it
-    is laid out."""
+    a uint16 image); with ``contiguous=False`` the array as it is, not copied (in either byte
+    order: :func:`check_pair` converts it once the size is checked)."""
     if not isinstance(image, np.ndarray):
         raise TypeError(
             f"{name} must be a numpy.ndarray ({_IMAGE_RULE}), got {type(image).__name__}"
         )
     check.not_masked(name, image)
-    image = check.native_order(image)
-    if image.dtype not in (np.uint8, np.uint16):
+    dtype = image.dtype.newbyteorder("=") if not image.dtype.isnative else image.dtype
+    if dtype not in (np.uint8, np.uint16):
         raise TypeError(f"{name} must be {_IMAGE_RULE}, got dtype {image.dtype}")
     if image.ndim == 3:
-        if image.shape[2] != 3 or image.dtype != np.uint8:
-            raise ValueError(f"{name} must be {_IMAGE_RULE}, got shape {image.shape} {image.dtype}")
+        if image.shape[2] != 3 or dtype != np.uint8:
+            raise ValueError(f"{name} must be {_IMAGE_RULE}, got shape {image.shape} {dtype}")
     elif image.ndim != 2:
         raise ValueError(f"{name} must be {_IMAGE_RULE}, got shape {image.shape}")
     if image.shape[0] < 1 or image.shape[1] < 1:
         raise ValueError(
             f"{name} must have at least one row and one column, got shape {image.shape}"
         )
-    return np.ascontiguousarray(image) if contiguous else image
+    return np.ascontiguousarray(check.native_order(image)) if contiguous else image
 
 
 def check_pair(
@@ -442,13 +442,17 @@ def check_pair(
         raise ValueError(
             f"left and right must have the same shape, got {left_arr.shape} and {right_arr.shape}"
         )
-    if left_arr.dtype != right_arr.dtype:
+    if left_arr.dtype.newbyteorder("=") != right_arr.dtype.newbyteorder("="):
         raise TypeError(
             f"left and right must have the same dtype, got {left_arr.dtype} and {right_arr.dtype}"
         )
     if check_size is not None:
         check_size(left_arr.shape[0], left_arr.shape[1])
-    return np.ascontiguousarray(left_arr), np.ascontiguousarray(right_arr)
+    # The byte order too only now: a big-endian pair was converted, whole, before the check.
+    return (
+        np.ascontiguousarray(check.native_order(left_arr)),
+        np.ascontiguousarray(check.native_order(right_arr)),
+    )
 
 
 def stretch_uint16_pair(
