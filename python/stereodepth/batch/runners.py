@@ -31,34 +31,54 @@ LOCK_NAME = ".stereodepth-batch.lock"
 
 class ClusterLost(Exception):
     """The Dask cluster cannot go on with the job: its scheduler went away mid-job (killed,
-    restarted, a connection that dropped), or its workers cannot run stereodepth (not
-    installed in their environment, or another version). The job stops, and the pairs not
-    done are cancelled, as by Ctrl-C, not failed: no pair is at fault, so their earlier
-    outputs are kept."""
+    restarted, a connection that dropped), or its workers cannot run stereodepth (it or
+    Pillow not installed in their environment, another version, no answer). The job stops,
+    and the pairs not done are cancelled, as by Ctrl-C, not failed: no pair is at fault, so
+    their earlier outputs are kept."""
 
 
-def worker_version() -> str:
-    """The stereodepth version a Dask worker runs (sent to the workers by reference, so that
-    a worker without stereodepth fails to load it)."""
-    from .. import __version__
+#: How long the workers may take to answer the check before the first pair: a worker
+#: answers in milliseconds, unless it is stopped or hung.
+WORKER_CHECK_TIMEOUT_S = 30.0
 
-    return __version__
+# What the check evaluates on each worker, with the builtin eval: a function of this module
+# would not exist on a worker with an older stereodepth (nor load on one without it). It
+# imports what a pair needs there, stereodepth and Pillow (the [batch] extra's image
+# reader), and gives stereodepth's version.
+_WORKER_PROBE = "(__import__('stereodepth').__version__, __import__('PIL.Image'))[0]"
 
 
-def _check_workers(client: Any) -> None:
+def _check_workers(client: Any, stop: threading.Event) -> None:
     """Raises ClusterLost unless every worker of the client's cluster imports this version of
-    stereodepth. A worker without it failed every pair it took (each recorded as failed, its
-    earlier outputs removed), and one with another version wrote outputs that the records
-    credit to this one. A worker that joins later is not checked: without stereodepth, it ends
-    when the scheduler sends it a task (the task goes to another worker)."""
+    stereodepth and Pillow, and KeyboardInterrupt when ``stop`` is set meanwhile. A cluster
+    with no worker yet is waited for (it may be scaling up) and its first workers checked.
+
+    A worker without stereodepth ended on its first task (the job then waited for ever, or
+    failed every pair after three workers died, removing their earlier outputs); one without
+    Pillow failed every pair; one with another version wrote outputs that the records credit
+    to this one. Workers that join after the check are not checked."""
     from .. import __version__
 
+    while not _in_thread(client.nthreads, stop, None):
+        if stop.wait(0.2):
+            raise KeyboardInterrupt
     try:
-        versions = client.run(worker_version)
-    except Exception as exc:  # Dask re-raises a worker's ImportError as a plain Exception
-        if _is_import_error(exc):
-            raise ClusterLost(_cannot_import(exc)) from exc
-        raise ClusterLost(f"the Dask workers did not answer ({type(exc).__name__}: {exc})") from exc
+        versions = _in_thread(
+            lambda: client.run(eval, _WORKER_PROBE, {}), stop, WORKER_CHECK_TIMEOUT_S
+        )
+    except TimeoutError as exc:
+        raise ClusterLost(
+            f"the Dask workers did not all answer within {WORKER_CHECK_TIMEOUT_S:g} s (a "
+            "worker stopped or hung?)"
+        ) from exc
+    except Exception as exc:  # Dask re-raises a worker's error as a plain Exception
+        what = str(exc) if type(exc) is Exception else f"{type(exc).__name__}: {exc}"
+        if "ModuleNotFoundError" in what or "ImportError" in what:
+            raise ClusterLost(
+                f"a Dask worker cannot import what the pairs need ({what}): install "
+                f'"stereodepth[batch]=={__version__}" in the workers\' environment'
+            ) from exc
+        raise ClusterLost(f"the Dask workers could not be checked ({what})") from exc
     other = sorted({str(v) for v in versions.values()} - {__version__})
     if other:
         raise ClusterLost(
@@ -67,21 +87,30 @@ def _check_workers(client: Any) -> None:
         )
 
 
-def _is_import_error(exc: BaseException) -> bool:
-    """Whether ``exc`` (as a worker raised it, or as Dask passed it on as text) says that
-    stereodepth cannot be imported there."""
-    text = f"{type(exc).__name__}: {exc}"
-    return "stereodepth" in text and ("ModuleNotFoundError" in text or "ImportError" in text)
+def _in_thread(fn: Callable[[], Any], stop: threading.Event, timeout: float | None) -> Any:
+    """``fn()``, called on a thread of its own so that ``stop`` (Ctrl-C) is heard meanwhile
+    (KeyboardInterrupt) and a ``timeout`` in seconds kept (TimeoutError; the call is left to
+    end on its own)."""
+    box: dict[str, Any] = {}
 
+    def call() -> None:
+        try:
+            box["value"] = fn()
+        except BaseException as exc:  # handed to the caller
+            box["error"] = exc
 
-def _cannot_import(exc: BaseException) -> str:
-    from .. import __version__
-
-    what = str(exc) if type(exc) is Exception else f"{type(exc).__name__}: {exc}"
-    return (
-        f"a Dask worker cannot import stereodepth ({what}): install "
-        f'"stereodepth[batch]=={__version__}" in the workers\' environment'
-    )
+    thread = threading.Thread(target=call, name="stereodepth-dask-check", daemon=True)
+    thread.start()
+    deadline = None if timeout is None else time.monotonic() + timeout
+    while thread.is_alive():
+        if stop.is_set():
+            raise KeyboardInterrupt
+        if deadline is not None and time.monotonic() > deadline:
+            raise TimeoutError
+        thread.join(0.1)
+    if "error" in box:
+        raise box["error"]
+    return box["value"]
 
 
 @contextlib.contextmanager
@@ -205,7 +234,7 @@ def _run_dask(
 
     if stop.is_set():  # Ctrl-C while the cluster started: no pair is sent
         raise KeyboardInterrupt
-    _check_workers(client)
+    _check_workers(client, stop)
     run_id = uuid.uuid4().hex[:8]
     futures = {}
     for i, p in todo:
