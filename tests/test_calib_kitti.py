@@ -184,3 +184,19 @@ def test_read_calibration_names_an_opencv_file_for_what_it_is(tmp_path: Path, te
     msg = str(e.value)
     assert msg.startswith(f"{p}: an OpenCV FileStorage file, not the calibration of a"), msg
     assert "read_stereo_calibration" in msg and "\n" not in msg
+
+
+def test_read_calibration_tells_opencv_files_by_their_form_not_by_a_word(tmp_path: Path) -> None:
+    # A KITTI file that mentions "!!opencv-matrix" in a note is a KITTI file (it was refused as
+    # OpenCV's, while rectified_format called it KITTI); a file that merely starts with "{" or
+    # "%YAML" in prose keeps the Middlebury reader's message.
+    kitti = tmp_path / "calib.txt"
+    kitti.write_text(kitti_2012() + "note: converted from a !!opencv-matrix by hand\n")
+    assert calib.rectified_format(kitti) == "kitti"
+    assert calib.read_calibration(kitti).focal_px == pytest.approx(F)
+    for text in ['{"cam0": "[1 0 0; 0 1 0; 0 0 1]"}\n', "%YAML-ish notes\ncam0=[1 0 0]\n"]:
+        other = tmp_path / "other.txt"
+        other.write_text(text)
+        with pytest.raises(ValueError, match="Middlebury") as e:
+            calib.read_calibration(other)
+        assert "OpenCV" not in str(e.value)

@@ -22,10 +22,18 @@ _MIDDLEBURY_RE = re.compile(r"^[ \t]*cam0[ \t]*=", flags=re.MULTILINE)
 _KITTI_RE = re.compile(r"^[ \t]*P(_rect_0)?\d[ \t]*:[ \t]*[-+.\d]", flags=re.MULTILINE)
 
 
+_OPENCV_YAML_MATRIX_RE = re.compile(r"^[ \t]*[\w.-]+[ \t]*:[ \t]*!!opencv-", flags=re.MULTILINE)
+
+
 def _is_opencv_storage(text: str) -> bool:
-    """Whether ``text`` is a file cv2.FileStorage wrote (YAML, XML or JSON)."""
-    head = text.lstrip()
-    return head.startswith(("%YAML", "<?xml", "<opencv_storage", "{")) or "!!opencv-" in text
+    """Whether ``text`` is a file cv2.FileStorage wrote: YAML (its ``%YAML`` directive, or a
+    key whose value is tagged ``!!opencv-``), XML, or JSON with OpenCV's matrix objects."""
+    head = text.lstrip("\ufeff \t\r\n")
+    if re.match(r"%YAML[: ]?\d", head) or (head.startswith("<") and "<opencv_storage" in text):
+        return True
+    if _OPENCV_YAML_MATRIX_RE.search(text):
+        return True
+    return head.startswith("{") and '"type_id"' in text and "opencv-" in text
 
 
 def _rectified_format_of(text: str) -> str | None:
@@ -166,6 +174,8 @@ def read_calibration(
     # Size-checked: read whole first, a multi-gigabyte file given by mistake was decoded
     # into memory before the readers refused it.
     text = _read_text(p, "calibration file")
+    if _rectified_format_of(text) == "kitti":
+        return read_kitti_calib(p, cams or (2, 3))
     if _is_opencv_storage(text):
         # Its P1: and P2: lines were read as KITTI's ("expected 'NAME: values', got '%YAML
         # 1.2'"), a file without them as a Middlebury calib.txt.
