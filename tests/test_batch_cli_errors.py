@@ -421,22 +421,30 @@ def test_a_scheduler_address_where_something_else_listens_is_one_line(
 
 
 @pytest.mark.parametrize("quiet", [False, True], ids=["summary", "quiet"])
-def test_a_failed_pair_is_reported_on_one_line_whatever_its_error_holds(
-    tmp_path: Path, capsys: pytest.CaptureFixture[str], quiet: bool
+@pytest.mark.parametrize("brk", ["\n", "\r", "\x85", "\u2028"], ids=["LF", "CR", "NEL", "LS"])
+def test_a_failed_pair_is_reported_on_one_line_whatever_its_name_holds(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], quiet: bool, brk: str
 ) -> None:
-    # A pair whose image names hold a line break (the file system allows it): its error,
-    # which names the file, was printed over two lines, the second one without the prefix.
+    # A pair whose folder and image names hold a line break (the file system allows it): its
+    # stem and its error, which names the file, were printed over two lines, the second
+    # without the prefix. Escaped, the names stay what they are.
     pytest.importorskip("PIL.Image")
     inp, out = tmp_path / "in", tmp_path / "out"
-    inp.mkdir()
-    (inp / "a\nb_left.png").write_bytes(b"not a png")
-    (inp / "a\nb_right.png").write_bytes(b"not a png either")
+    scene = inp / f"sc{brk}ene"
+    scene.mkdir(parents=True)
+    (scene / "left.png").write_bytes(b"not a png")
+    (scene / "right.png").write_bytes(b"not a png either")
     args = ["batch", str(inp), "-o", str(out), "--focal-px", "700", "--baseline-mm", "100"]
     args += ["--num-disparities", "32"] + (["--quiet"] if quiet else [])
     assert cli.main(args) == 1
     captured = capsys.readouterr()
-    lines = (captured.err if quiet else captured.out).splitlines()
-    failed = [line for line in lines if "failed a_b:" in line]
+    text = captured.err if quiet else captured.out
+    lines = text.splitlines()
+    failed = [
+        line for line in lines if line.startswith(("  failed ", "stereodepth batch: failed "))
+    ]
     assert len(failed) == 1, lines
-    assert "cannot decode image" in failed[0] and "b_left.png" in failed[0], failed
+    shown = repr(brk)[1:-1]
+    assert "cannot decode image" in failed[0], failed
+    assert f"sc{shown}ene/left.png" in failed[0] or f"sc{shown}ene/right.png" in failed[0]
     assert all(line.startswith(("stereodepth batch:", "  ", "1 pair", "report:")) for line in lines)

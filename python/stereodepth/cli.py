@@ -133,6 +133,17 @@ def one_line(text: object) -> str:
     return "; ".join(line.strip() for line in str(text).strip().splitlines() if line.strip())
 
 
+# Every character str.splitlines breaks at, as Python writes it in a string literal.
+_LINE_BREAKS = {ord(c): repr(c)[1:-1] for c in "\n\r\v\f\x1c\x1d\x1e\x85\u2028\u2029"}
+
+
+def escape_line_breaks(text: object) -> str:
+    """``text`` on one line, its line breaks written as escapes (``\\n``, ``\\u2028``), so
+    that a name holding one (a file or folder name may) is shown as it is, unlike
+    :func:`one_line`, which would make it a different name."""
+    return str(text).translate(_LINE_BREAKS)
+
+
 def path_arg(value: str) -> str:
     """An argparse ``type`` for a file or folder argument: an empty one (``-o "$OUT"`` with
     OUT unset) is a usage error naming the argument, not the current folder, which pathlib

@@ -18,7 +18,14 @@ from .. import _validate as check
 from .._extras import require
 from .._methods import METHODS, check_method
 from ..calib import Calibration
-from ..cli import KeyValueOnce, key_value_option, one_line, path_arg, terminated
+from ..cli import (
+    KeyValueOnce,
+    escape_line_breaks,
+    key_value_option,
+    one_line,
+    path_arg,
+    terminated,
+)
 from .calibration import (
     COMMAND_LINE,
     BatchRectifier,
@@ -203,6 +210,13 @@ _RESERVED: dict[str, str | None] = {
     "isa": None,
 }
 _FLAGS = {"min_disparity": "--min-disparity", "block_size": "--block-size", "cost": "--cost"}
+
+
+def _failure(record: dict[str, Any]) -> str:
+    """A failed pair's stem and error on one line, whatever they hold (a file or folder name
+    with a line break in it, printed as it was, over two lines); the record keeps both as
+    they were."""
+    return f"{escape_line_breaks(record['stem'])}: {escape_line_breaks(record['error'])}"
 
 
 def _one_line_error(parser: argparse.ArgumentParser) -> Callable[[str], NoReturn]:
@@ -548,10 +562,8 @@ def print_summary(report: BatchReport, report_path: Path, file: Any = None) -> N
         print("interrupted: run the same command again to resume", file=out)
     if report.error:
         print(f"stopped: {one_line(report.error)}: run the same command again to resume", file=out)
-    # One line a pair, whatever its error holds (an image path with a line break in its name);
-    # the record keeps the error as it was.
     for rec in report.failed:
-        print(f"  failed {rec['stem']}: {one_line(rec['error'])}", file=out)
+        print(f"  failed {_failure(rec)}", file=out)
     removed = sum(len(rec.get("removed") or ()) for rec in report.pairs)
     if removed:
         print(
@@ -704,10 +716,7 @@ def run(args: argparse.Namespace) -> int:
         _show_summary(report, report_path)
     elif report.failed:
         for rec in report.failed:
-            print(
-                f"stereodepth batch: failed {rec['stem']}: {one_line(rec['error'])}",
-                file=sys.stderr,
-            )
+            print(f"stereodepth batch: failed {_failure(rec)}", file=sys.stderr)
     if report.error:
         print(
             f"stereodepth batch: error: {one_line(report.error)}: run the same command again "
