@@ -127,7 +127,7 @@ Errors
 
 Exit status: 0 when every pair succeeded or was already done, 1 when any failed (or an
 optional extra is missing, or the Dask cluster failed the job: its scheduler lost mid-job,
-or workers that cannot import this version of stereodepth, found before the first pair; the
+or workers without this version of stereodepth or Pillow, found before the first pair; the
 pairs not done are reported as cancelled and keep their earlier outputs), 2 for a usage
 error, 130 when interrupted (Ctrl-C: the pairs in flight finish, the rest are reported as
 cancelled), 143 when terminated (SIGTERM, from ``timeout`` or ``kill``: the same as Ctrl-C).
