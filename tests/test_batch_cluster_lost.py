@@ -56,10 +56,18 @@ def start_worker(address: str, *args: str) -> subprocess.Popen[bytes]:
     )
 
 
+def earlier_run(tmp_path: Path, n: int) -> tuple[Path, Path, dict[str, bytes]]:
+    """INPUT with ``n`` pairs, and OUTDIR with a complete run of them; their outputs."""
+    inp, out = tmp_path / "in", tmp_path / "out"
+    middlebury_folder(inp, n)
+    assert cli.main(["batch", str(inp), "-o", str(out), "--quiet"]) == 0
+    return inp, out, outputs_bytes(out)
+
+
 @contextlib.contextmanager
 def dask_scheduler(tmp_path: Path) -> Iterator[tuple[str, subprocess.Popen[bytes]]]:
     """A Dask scheduler, a process of its own on loopback; yields its address and process,
-    which the test may kill; the processes in ``workers`` are killed with it."""
+    which the test may kill."""
     info = tmp_path / "scheduler.json"
     scheduler = subprocess.Popen(
         [
@@ -108,11 +116,8 @@ def test_a_scheduler_lost_mid_job_cancels_the_rest_and_keeps_their_earlier_outpu
     # ("FutureCancelledError ... scheduler-connection-lost"), and the earlier run's complete
     # outputs of every one of them deleted: a --force run (or one with other options) that
     # lost its cluster destroyed results it never got to redo. A Ctrl-C keeps them.
-    inp, out = tmp_path / "in", tmp_path / "out"
     n = 8
-    middlebury_folder(inp, n)
-    assert cli.main(["batch", str(inp), "-o", str(out), "--quiet"]) == 0
-    before = outputs_bytes(out)
+    inp, out, before = earlier_run(tmp_path, n)
     assert len(before) == 2 * n
     pairs = batch.resolve_calibration(batch.find_pairs(inp))
     with scheduler_and_worker(tmp_path) as (address, scheduler):
@@ -159,11 +164,8 @@ def test_workers_that_cannot_run_this_stereodepth_stop_the_job_before_any_pair(
     # failed ("ModuleNotFoundError ..."), and the earlier run's outputs of every one of them
     # deleted, for a fault of the cluster's environment, not of any pair. Workers of another
     # version wrote outputs that the records credited to this one.
-    inp, out = tmp_path / "in", tmp_path / "out"
     n = 2
-    middlebury_folder(inp, n)
-    assert cli.main(["batch", str(inp), "-o", str(out), "--quiet"]) == 0
-    before = outputs_bytes(out)
+    inp, out, before = earlier_run(tmp_path, n)
     records = {p.name: p.read_bytes() for p in out.glob("*.record.json")}
     assert len(before) == 2 * n and len(records) == n
     script = tmp_path / "worker_preload.py"
@@ -178,14 +180,6 @@ def test_workers_that_cannot_run_this_stereodepth_stop_the_job_before_any_pair(
     assert outputs_bytes(out) == before
     assert {p.name: p.read_bytes() for p in out.glob("*.record.json")} == records
     assert temp_files(out) == []
-
-
-def earlier_run(tmp_path: Path, n: int) -> tuple[Path, Path, dict[str, bytes]]:
-    """INPUT with ``n`` pairs, and OUTDIR with a complete run of them; their outputs."""
-    inp, out = tmp_path / "in", tmp_path / "out"
-    middlebury_folder(inp, n)
-    assert cli.main(["batch", str(inp), "-o", str(out), "--quiet"]) == 0
-    return inp, out, outputs_bytes(out)
 
 
 @pytest.mark.cluster

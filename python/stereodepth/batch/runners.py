@@ -359,10 +359,11 @@ def run_batch(
     and on a ``scheduler`` cluster a worker's cores / its number of threads.
     ``on_result`` is called in this thread with each record as it arrives. Ctrl-C
     (KeyboardInterrupt) stops the job: the pairs in flight finish, the rest are ``cancelled``,
-    and the report says ``interrupted``. A Dask scheduler lost mid-job, or Dask workers that
-    cannot import this version of stereodepth, stop it the same way, its pairs not done
-    ``cancelled`` (their earlier outputs kept), and the report's ``error`` says so (exit
-    status 1). Writes ``<stem>.*`` files into ``options.out_dir``;
+    and the report says ``interrupted``. A Dask scheduler lost mid-job, or Dask workers
+    without this version of stereodepth or Pillow (or that do not answer within
+    ``WORKER_CHECK_TIMEOUT_S``; checked before the first pair), stop it the same way, its pairs
+    not done ``cancelled`` (their earlier outputs kept), and the report's ``error`` says so
+    (exit status 1). Writes ``<stem>.*`` files into ``options.out_dir``;
     the caller writes the report."""
     check_runner(scheduler=scheduler, workers=workers, threads=threads, progress=progress)
     if scheduler is not None:

@@ -186,6 +186,7 @@ def read_calibration(
             "an OpenCV stereo calibration (M1, D1, M2, D2, R, T) with read_stereo_calibration "
             "and rectify the pair with it",
         )
+    # A P line without numbers: a faulty KITTI file, whose reader says what is wrong.
     if re.search(r"^\s*P(_rect_0)?\d\s*:", text, flags=re.MULTILINE):
         return read_kitti_calib(p, cams or (2, 3))
     c = read_middlebury_calib(p)
