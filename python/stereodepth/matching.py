@@ -416,7 +416,7 @@ def as_image(image: Any, name: str, *, contiguous: bool = True) -> np.ndarray:
             f"{name} must be a numpy.ndarray ({_IMAGE_RULE}), got {type(image).__name__}"
         )
     check.not_masked(name, image)
-    dtype = image.dtype.newbyteorder("=") if not image.dtype.isnative else image.dtype
+    dtype = image.dtype.newbyteorder("=")  # what the values are, in either byte order
     if dtype not in (np.uint8, np.uint16):
         raise TypeError(f"{name} must be {_IMAGE_RULE}, got dtype {image.dtype}")
     if image.ndim == 3:

@@ -59,10 +59,8 @@ def _check_workers(client: Any, stop: threading.Event) -> None:
     to this one. Workers that join after the check are not checked."""
     from .. import __version__
 
-    while not _in_thread(client.nthreads, stop, None):
-        if stop.wait(0.2):
-            raise KeyboardInterrupt
     try:
+        _in_thread(lambda: client.wait_for_workers(1), stop, None)
         versions = _in_thread(
             lambda: client.run(eval, _WORKER_PROBE, {}), stop, WORKER_CHECK_TIMEOUT_S
         )
