@@ -112,15 +112,9 @@ def thread_matcher(method: str, **params: Any) -> Any:
     # 384 x 288). The types are compared first, so the values compared are of one type.
     cached = getattr(_thread_state, "matcher", None)
     types = tuple(map(type, params.values()))
-    if cached is not None:
-        quick = cached[2]
-        if (
-            quick is not None
-            and quick[0] == (method, types)
-            and quick[1] == tuple(params.values())
-            and quick[2] == tuple(params)
-        ):
-            return cached[1]
+    quick = (method, types, tuple(params.items()))
+    if cached is not None and cached[2] == quick:
+        return cached[1]
     names = tuple(sorted(params))
     values = tuple([_snapshot(params[k]) for k in names])
     key = (method, names, tuple(map(_types, values)), values)
@@ -128,8 +122,7 @@ def thread_matcher(method: str, **params: Any) -> Any:
         check_method(method)
         _thread_state.matcher = None  # release the old buffers before making the new ones
         plain = not any(issubclass(t, (tuple, list)) for t in types)
-        quick = ((method, types), tuple(params.values()), tuple(params)) if plain else None
-        cached = (key, matcher_class(method)(**params), quick)
+        cached = (key, matcher_class(method)(**params), quick if plain else None)
         _thread_state.matcher = cached
     return cached[1]
 
