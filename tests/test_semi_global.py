@@ -7,6 +7,7 @@ within 1e-3 px after the sub-pixel step. Images are small so the oracle stays fa
 
 from __future__ import annotations
 
+import itertools
 import json
 import os
 import subprocess
@@ -395,9 +396,15 @@ def test_candidates_outside_the_image_never_win() -> None:
 @pytest.mark.parametrize("isa", SUPPORTED_ISAS)
 @pytest.mark.parametrize("paths", [3, 4, 8])
 def test_each_isa_matches_the_scalar_path(isa: str, paths: int) -> None:
+    # Every vector width of the costs' rows (16, 32 and 64 bytes, and 32 + 16), both boxes.
     left, right, _ = slanted_pair((64, 150), d0=9.0, dx=0.1, dy=-0.03, seed=14)
-    for nd in (7, 16, 32, 33, 48, 64, 80, 96, 100, 160):
-        kw: dict[str, Any] = {"num_disparities": nd, "paths": paths, "return_confidence": True}
+    for nd, bs in itertools.product((7, 16, 32, 33, 48, 64, 80, 96, 100, 160), (1, 3)):
+        kw: dict[str, Any] = {
+            "num_disparities": nd,
+            "paths": paths,
+            "block_size": bs,
+            "return_confidence": True,
+        }
         a = sd.SemiGlobalMatcher(isa="baseline", **kw).compute(left, right)
         b = sd.SemiGlobalMatcher(isa=isa, **kw).compute(left, right)
         np.testing.assert_array_equal(a[0], b[0])
