@@ -438,11 +438,12 @@ def test_median_stage_is_the_oracles_median(isa: str, width: int) -> None:
 
 
 @pytest.mark.parametrize("isa", SUPPORTED_ISAS)
-@pytest.mark.parametrize("nd", range(16, 288, 16))
+@pytest.mark.parametrize("nd", [*range(16, 304, 16), 352])
 def test_every_vector_count_of_the_fused_row_matches_the_scalar_path(isa: str, nd: int) -> None:
     # paths=3 with ndisp a multiple of 16 takes the fused row, compiled once per vector count
     # (1 to 12 and 16 with AVX2) and once for any other count; uniqueness and confidence take
-    # its other instance.
+    # its other instance. The costs' box takes whole vectors, whole and half ones (up to 288
+    # with AVX-512), or any width (352).
     left, right, _ = slanted_pair((37, 300), d0=0.4 * nd, dx=0.05, dy=0.02, seed=nd)
     for kw in (
         {"num_disparities": nd, "uniqueness_ratio": 0},

@@ -506,6 +506,7 @@ struct B256 {
   static void store_lo(void* p, R v) {
     _mm_storeu_si128(static_cast<__m128i*>(p), _mm256_castsi256_si128(v));
   }
+  static __m128i low(R v) { return _mm256_castsi256_si128(v); }
 };
 
 // The same with 16 bytes, for the transposed layout's costs when nd is an odd multiple of 16
@@ -557,6 +558,7 @@ struct B512 {
   static void store_lo(void* p, R v) {
     _mm256_storeu_si256(static_cast<__m256i*>(p), _mm512_castsi512_si256(v));
   }
+  static __m256i low(R v) { return _mm512_castsi512_si256(v); }
 };
 #endif
 
@@ -909,28 +911,29 @@ bool box_sweep_regs_upto(int m, const uint8_t* zlo, const uint8_t* zhi, const ui
   }
 }
 
-// box_sweep_regs for nd = 32 * M2 + 16 (an odd multiple of 16, which B256 alone cannot
-// cover): M2 vectors of 32 bytes and one of 16 at the end. The sums are byte by byte, so the
-// width of the vectors does not change them (box_sweep_regs<B128, 2 * M2 + 1> gives the same
-// bytes with almost twice the instructions).
-template <int M2, int kT>
+// box_sweep_regs for nd = M2 wide vectors and one of half their width at the end (W of 2 * H
+// bytes; nd = 32 * M2 + 16 with B256 and B128, or 64 * M2 + 32 with B512 and B256), which
+// the wide vectors alone cannot cover. The sums are byte by byte, so the width of the vectors
+// does not change them (box_sweep_regs with the narrow vectors alone gives the same bytes
+// with almost twice the instructions).
+template <class W, class H, int M2, int kT>
 void box_sweep_mixed(const uint8_t* zlo, const uint8_t* zhi, const uint16_t* lrow,
                      ptrdiff_t cols, ptrdiff_t x0, ptrdiff_t x1, int min_d, int cmax,
                      const uint8_t* ring, uint8_t* fo, const uint8_t* b, const uint8_t* c,
                      uint8_t* out) {
-  using W = B256;
-  using T = B128;
-  constexpr int nd = 32 * M2 + 16;
-  constexpr ptrdiff_t t0 = 32 * M2;  // the 16-byte vector's offset
+  static_assert(W::kLanes == 2 * H::kLanes, "a wide vector is two half ones");
+  constexpr int NW = W::kLanes;
+  constexpr int nd = NW * M2 + H::kLanes;
+  constexpr ptrdiff_t t0 = NW * M2;  // the half vector's offset
   constexpr ptrdiff_t step = kT == 0 ? 1 : kT;
   typename W::R pv[M2], qv[M2];
   for (int m = 0; m < M2; ++m) {
-    const typename W::R p = W::load(ring + m * 32), q = W::load(ring + nd + m * 32);
+    const typename W::R p = W::load(ring + m * NW), q = W::load(ring + nd + m * NW);
     pv[m] = W::add(p, q);
     qv[m] = q;
   }
-  typename T::R pt = T::add(T::load(ring + t0), T::load(ring + nd + t0));
-  typename T::R qt = T::load(ring + nd + t0);
+  typename H::R pt = H::add(H::load(ring + t0), H::load(ring + nd + t0));
+  typename H::R qt = H::load(ring + nd + t0);
   for (ptrdiff_t x = x0; x < x1; ++x) {
     uint8_t* __restrict o = out + x * nd;
     const ptrdiff_t xc = x + 1 < cols ? x + 1 : cols - 1;
@@ -940,20 +943,20 @@ void box_sweep_mixed(const uint8_t* zlo, const uint8_t* zhi, const uint16_t* lro
 #pragma GCC unroll 8
     for (int m = 0; m < M2; ++m) {
       const typename W::R h =
-          W::hamming(W::load(zlo + zat + m * 32), W::load(zhi + zat + m * 32), llo, lhi);
-      W::store(fo + m * 32, h);
-      const typename W::R cs = W::add(W::add(h, W::load(b + m * 32)), W::load(c + m * 32));
-      W::store(o + m * 32, W::add(pv[m], cs));
+          W::hamming(W::load(zlo + zat + m * NW), W::load(zhi + zat + m * NW), llo, lhi);
+      W::store(fo + m * NW, h);
+      const typename W::R cs = W::add(W::add(h, W::load(b + m * NW)), W::load(c + m * NW));
+      W::store(o + m * NW, W::add(pv[m], cs));
       pv[m] = W::add(qv[m], cs);
       qv[m] = cs;
     }
     {
-      const typename T::R h = T::hamming(T::load(zlo + zat + t0), T::load(zhi + zat + t0),
-                                         _mm256_castsi256_si128(llo), _mm256_castsi256_si128(lhi));
-      T::store(fo + t0, h);
-      const typename T::R cs = T::add(T::add(h, T::load(b + t0)), T::load(c + t0));
-      T::store(o + t0, T::add(pt, cs));
-      pt = T::add(qt, cs);
+      const typename H::R h = H::hamming(H::load(zlo + zat + t0), H::load(zhi + zat + t0),
+                                         W::low(llo), W::low(lhi));
+      H::store(fo + t0, h);
+      const typename H::R cs = H::add(H::add(h, H::load(b + t0)), H::load(c + t0));
+      H::store(o + t0, H::add(pt, cs));
+      pt = H::add(qt, cs);
       qt = cs;
     }
     fo += nd;
@@ -963,9 +966,9 @@ void box_sweep_mixed(const uint8_t* zlo, const uint8_t* zhi, const uint16_t* lro
   }
 }
 
-// box_sweep_mixed for nd = 32 * m2 + 16 when 1 <= m2 <= kMax (one instance each); false for
+// box_sweep_mixed for m2 wide vectors when 1 <= m2 <= kMax (one instance each); false for
 // any other m2.
-template <int kT, int kMax, int M2 = 1>
+template <class W, class H, int kT, int kMax, int M2 = 1>
 bool box_sweep_mixed_upto(int m2, const uint8_t* zlo, const uint8_t* zhi, const uint16_t* lrow,
                           ptrdiff_t cols, ptrdiff_t x0, ptrdiff_t x1, int min_d, int cmax,
                           const uint8_t* ring, uint8_t* fo, const uint8_t* b, const uint8_t* c,
@@ -974,13 +977,22 @@ bool box_sweep_mixed_upto(int m2, const uint8_t* zlo, const uint8_t* zhi, const 
     return false;
   } else {
     if (m2 == M2) {
-      box_sweep_mixed<M2, kT>(zlo, zhi, lrow, cols, x0, x1, min_d, cmax, ring, fo, b, c, out);
+      box_sweep_mixed<W, H, M2, kT>(zlo, zhi, lrow, cols, x0, x1, min_d, cmax, ring, fo, b, c,
+                                    out);
       return true;
     }
-    return box_sweep_mixed_upto<kT, kMax, M2 + 1>(m2, zlo, zhi, lrow, cols, x0, x1, min_d, cmax,
-                                                  ring, fo, b, c, out);
+    return box_sweep_mixed_upto<W, H, kT, kMax, M2 + 1>(m2, zlo, zhi, lrow, cols, x0, x1, min_d,
+                                                        cmax, ring, fo, b, c, out);
   }
 }
+
+// Whether box_row8_impl's sweep takes nd = N * m + N / 2 (N = B::kLanes) for B.
+template <class B>
+struct HalfSweep : std::false_type {};
+#if defined(__AVX512BW__)
+template <>
+struct HalfSweep<B512> : std::true_type {};
+#endif
 
 template <class B, int kT>
 void box_row8_impl(uint8_t* const* raws, int fresh, const uint16_t* lrow, const uint16_t* rrow,
@@ -1036,7 +1048,9 @@ void box_row8_impl(uint8_t* const* raws, int fresh, const uint16_t* lrow, const 
   // sum in one sweep over the disparities (the same sums, fewer loads and loops). The ring's
   // three column sums rotate by pointer (no index mod 3 per column), the row pointers advance
   // by nd, and the border fill runs only for the columns whose range leaves the right image.
-  if (radius == 1 && f != nullptr && nd % N == 0) {
+  // (B512 also takes nd = 64 * m + 32, the transposed layout's 160, 224, ...: box_sweep_mixed.)
+  constexpr bool kHalf = HalfSweep<B>::value;
+  if (radius == 1 && f != nullptr && (nd % N == 0 || (kHalf && nd % N == N / 2))) {
     uint8_t* p = ring;  // the column sums of raw columns j - 1, j and (new) j + 1
     uint8_t* q = ring + nd;
     uint8_t* s = ring + 2 * nd;
@@ -1056,43 +1070,58 @@ void box_row8_impl(uint8_t* const* raws, int fresh, const uint16_t* lrow, const 
     const uint8_t* c = other[1] + 2 * nd;
     if constexpr (std::is_same_v<B, B128>) {
       // nd an odd multiple of 16 from 48 on: 32-byte vectors and a 16-byte one (up to 144).
-      if (nd % 32 == 16 && box_sweep_mixed_upto<kT, 4>(nd / 32, zlo, zhi, lrow, cols, x0, x1,
-                                                       min_d, cmax, ring, fo, b, c, out)) {
+      if (nd % 32 == 16 && box_sweep_mixed_upto<B256, B128, kT, 4>(nd / 32, zlo, zhi, lrow, cols,
+                                                                   x0, x1, min_d, cmax, ring,
+                                                                   fo, b, c, out)) {
         return;
       }
     }
-    // Up to 5 vectors the two sums per vector fit the 16 registers of AVX2.
-    if (box_sweep_regs_upto<B, kT, 5>(nd / N, zlo, zhi, lrow, cols, x0, x1, min_d, cmax, ring, fo,
-                                      b, c, out)) {
+#if defined(__AVX512BW__)
+    if constexpr (kHalf) {
+      // nd = 64 * m + 32 (m = 1 .. 4: up to 288): 64-byte vectors and a 32-byte one; beyond,
+      // the way of any width below.
+      if (nd % N != 0) {
+        if (box_sweep_mixed_upto<B512, B256, kT, 4>(nd / 64, zlo, zhi, lrow, cols, x0, x1,
+                                                    min_d, cmax, ring, fo, b, c, out)) {
+          return;
+        }
+      }
+    }
+#endif
+    if (nd % N == 0) {
+      // Up to 5 vectors the two sums per vector fit the 16 registers of AVX2.
+      if (box_sweep_regs_upto<B, kT, 5>(nd / N, zlo, zhi, lrow, cols, x0, x1, min_d, cmax,
+                                        ring, fo, b, c, out)) {
+        return;
+      }
+      for (ptrdiff_t x = x0; x < x1; ++x) {
+        uint8_t* __restrict o = out + x * nd;
+        const ptrdiff_t xc = x + 1 < cols ? x + 1 : cols - 1;
+        const uint8_t* __restrict lo = zlo + (cols - 1 - xc) * step;
+        const uint8_t* __restrict hi = zhi + (cols - 1 - xc) * step;
+        const uint16_t l = lrow[xc];
+        const typename B::R llo = B::set1(l & 0xFF), lhi = B::set1(l >> 8);
+        const uint8_t* __restrict pk = p;
+        const uint8_t* __restrict qk = q;
+        uint8_t* __restrict sk = s;
+        for (int k = 0; k < nd; k += N) {
+          const typename B::R h = B::hamming(B::load(lo + k), B::load(hi + k), llo, lhi);
+          B::store(fo + k, h);
+          const typename B::R cs = B::add(B::add(h, B::load(b + k)), B::load(c + k));
+          B::store(sk + k, cs);
+          B::store(o + k, B::add(B::add(B::load(pk + k), B::load(qk + k)), cs));
+        }
+        uint8_t* const t = p;
+        p = q;
+        q = s;
+        s = t;
+        fo += nd;
+        b += nd;
+        c += nd;
+        fill_border_column<kT>(o, x, cols, nd, min_d, cmax);
+      }
       return;
     }
-    for (ptrdiff_t x = x0; x < x1; ++x) {
-      uint8_t* __restrict o = out + x * nd;
-      const ptrdiff_t xc = x + 1 < cols ? x + 1 : cols - 1;
-      const uint8_t* __restrict lo = zlo + (cols - 1 - xc) * step;
-      const uint8_t* __restrict hi = zhi + (cols - 1 - xc) * step;
-      const uint16_t l = lrow[xc];
-      const typename B::R llo = B::set1(l & 0xFF), lhi = B::set1(l >> 8);
-      const uint8_t* __restrict pk = p;
-      const uint8_t* __restrict qk = q;
-      uint8_t* __restrict sk = s;
-      for (int k = 0; k < nd; k += N) {
-        const typename B::R h = B::hamming(B::load(lo + k), B::load(hi + k), llo, lhi);
-        B::store(fo + k, h);
-        const typename B::R cs = B::add(B::add(h, B::load(b + k)), B::load(c + k));
-        B::store(sk + k, cs);
-        B::store(o + k, B::add(B::add(B::load(pk + k), B::load(qk + k)), cs));
-      }
-      uint8_t* const t = p;
-      p = q;
-      q = s;
-      s = t;
-      fo += nd;
-      b += nd;
-      c += nd;
-      fill_border_column<kT>(o, x, cols, nd, min_d, cmax);
-    }
-    return;
   }
   for (ptrdiff_t x = x0; x < x1; ++x) {
     uint8_t* __restrict o = out + x * nd;
