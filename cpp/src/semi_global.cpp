@@ -581,14 +581,17 @@ void SemiGlobalMatcher::compute(const StereoImage& left, const StereoImage& righ
     }
   });
 
-  // P2' = max(P1, P2 * k // (k + step)) for each intensity step (k = p2_step; 0: P2).
-  std::int16_t p2_table[256];
-  for (int step = 0; step < 256; ++step) {
+  // P2' = max(P1, P2 * k // (k + |step|)) for each signed intensity step -255 .. 255 (k =
+  // p2_step; 0: P2), at p2_table[255 + step]: the kernels index it by the signed step, with no
+  // branch on its sign (a branch that real images mispredict about every other pixel).
+  std::int16_t p2_table[511];
+  for (int step = -255; step <= 255; ++step) {
+    const int a = step < 0 ? -step : step;
     const long long v =
-        p.p2_step > 0 ? static_cast<long long>(p.p2) * p.p2_step / (p.p2_step + step) : p.p2;
-    p2_table[step] = static_cast<std::int16_t>(std::max<long long>(v, p.p1));
+        p.p2_step > 0 ? static_cast<long long>(p.p2) * p.p2_step / (p.p2_step + a) : p.p2;
+    p2_table[255 + step] = static_cast<std::int16_t>(std::max<long long>(v, p.p1));
   }
-  detail::PathParams pp{nd, ls, p.p1, p2_table};
+  detail::PathParams pp{nd, ls, p.p1, p2_table + 255};
 
   detail::DecideArgs da{};
   da.cols = cols;

@@ -132,9 +132,9 @@ void box_row(const uint16_t* const* raws, int radius, ptrdiff_t cols, ptrdiff_t 
 // ------------------------------------------------------------------------------------------
 // Paths.
 
-inline int p2_for(const PathParams& p, int gp, int gq) {
-  return p.p2[gp > gq ? gp - gq : gq - gp];
-}
+// P2' for the grey levels gp and gq (0 .. 255) of two neighbours on a path: an indexed load
+// by the signed step (PathParams::p2), with no branch on its sign.
+inline int p2_for(const PathParams& p, int gp, int gq) { return p.p2[gp - gq]; }
 
 enum class SumMode { kWrite, kAdd };
 

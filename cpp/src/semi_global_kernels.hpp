@@ -19,7 +19,7 @@ struct PathParams {
   int nd;  // disparities
   int ls;  // int16 per pixel in path rows (>= nd + 3)
   int p1;
-  const std::int16_t* p2;  // 256 entries: P2' for each intensity step 0 .. 255
+  const std::int16_t* p2;  // P2' for each signed intensity step -255 .. 255, at p2[step]
 };
 
 // The pixel costs (census Hamming distances) of one census row pair for the columns
