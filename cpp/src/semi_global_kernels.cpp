@@ -485,14 +485,18 @@ struct B256 {
   static void store(void* p, R v) { _mm256_storeu_si256(static_cast<R*>(p), v); }
   static R set1(int v) { return _mm256_set1_epi8(static_cast<char>(v)); }
   static R add(R a, R b) { return _mm256_add_epi8(a, b); }
-  // Set bits of each byte.
+  // Set bits of each byte (the AVX-512 build: vpopcntb, BITALG; else nibbles looked up).
   static R popcount(R v) {
+#if defined(__AVX512BITALG__)
+    return _mm256_popcnt_epi8(v);
+#else
     const R table = _mm256_setr_epi8(0, 1, 1, 2, 1, 2, 2, 3, 1, 2, 2, 3, 2, 3, 3, 4, 0, 1, 1, 2,
                                      1, 2, 2, 3, 1, 2, 2, 3, 2, 3, 3, 4);
     const R low4 = _mm256_set1_epi8(0x0F);
     return _mm256_add_epi8(
         _mm256_shuffle_epi8(table, _mm256_and_si256(v, low4)),
         _mm256_shuffle_epi8(table, _mm256_and_si256(_mm256_srli_epi16(v, 4), low4)));
+#endif
   }
   static R hamming(R lo, R hi, R llo, R lhi) {
     return add(popcount(_mm256_xor_si256(lo, llo)), popcount(_mm256_xor_si256(hi, lhi)));
@@ -520,10 +524,14 @@ struct B128 {
   static R set1(int v) { return _mm_set1_epi8(static_cast<char>(v)); }
   static R add(R a, R b) { return _mm_add_epi8(a, b); }
   static R popcount(R v) {
+#if defined(__AVX512BITALG__)
+    return _mm_popcnt_epi8(v);
+#else
     const R table = _mm_setr_epi8(0, 1, 1, 2, 1, 2, 2, 3, 1, 2, 2, 3, 2, 3, 3, 4);
     const R low4 = _mm_set1_epi8(0x0F);
     return _mm_add_epi8(_mm_shuffle_epi8(table, _mm_and_si128(v, low4)),
                         _mm_shuffle_epi8(table, _mm_and_si128(_mm_srli_epi16(v, 4), low4)));
+#endif
   }
   static R hamming(R lo, R hi, R llo, R lhi) {
     return add(popcount(_mm_xor_si128(lo, llo)), popcount(_mm_xor_si128(hi, lhi)));
@@ -540,12 +548,16 @@ struct B512 {
   static R set1(int v) { return _mm512_set1_epi8(static_cast<char>(v)); }
   static R add(R a, R b) { return _mm512_add_epi8(a, b); }
   static R popcount(R v) {
+#if defined(__AVX512BITALG__)
+    return _mm512_popcnt_epi8(v);
+#else
     const R table = _mm512_broadcast_i32x4(
         _mm_setr_epi8(0, 1, 1, 2, 1, 2, 2, 3, 1, 2, 2, 3, 2, 3, 3, 4));
     const R low4 = _mm512_set1_epi8(0x0F);
     return _mm512_add_epi8(
         _mm512_shuffle_epi8(table, _mm512_and_si512(v, low4)),
         _mm512_shuffle_epi8(table, _mm512_and_si512(_mm512_srli_epi16(v, 4), low4)));
+#endif
   }
   static R hamming(R lo, R hi, R llo, R lhi) {
     return add(popcount(_mm512_xor_si512(lo, llo)), popcount(_mm512_xor_si512(hi, lhi)));
