@@ -1205,13 +1205,13 @@ void box_row8(uint8_t* const* raws, int fresh, const uint16_t* lrow, const uint1
 
 #if defined(__AVX512BW__)
 // Whether the AVX-512 build lays the transposed rows out for 512-bit vectors (32 lanes, V512)
-// rather than 256-bit ones (16 lanes, V256): when nd makes at least four 512-bit vectors. With
-// one to three, a pixel's fixed work (the shifts at the first and last vector of each path
-// step, the horizontal minima) weighs more than the wider vectors save; 256-bit vectors are
-// kept up to 12 per pixel, where fused_row_t still unrolls them. Cones, one thread, ns per
-// pixel (512-bit against 256-bit): ndisp 32: 42 against 34; 64: 39 against 38; 96: 54 against
-// 46; 128: 50 against 58; 160: 68 against 67; 192: 64 against 92.
-inline bool wide_transposed(int nd) { return nd % 32 == 0 && nd >= 128; }
+// rather than 256-bit ones (16 lanes, V256): when nd makes at least two 512-bit vectors. With
+// one, a pixel's fixed work (the shifts at the first and last vector of each path step, the
+// horizontal minima) weighs more than the wider vectors save. One thread, in-process A/B,
+// 512-bit over 256-bit time (Cones, Adirondack; bench/README, twenty-third round): ndisp 32:
+// 1.315, 1.303; 64: 0.933, 0.945; 96: 0.871, 0.888. (Before P2' lost its branch, 64 and 96
+// were the other way round: Cones, ns per pixel, 39 against 38 and 54 against 46.)
+inline bool wide_transposed(int nd) { return nd % 32 == 0 && nd >= 64; }
 #endif
 
 // The same in the transposed layout of fused_row_t: the lanes of its vectors (32 when the
