@@ -1060,7 +1060,7 @@ void box_row8_impl(uint8_t* const* raws, int fresh, const uint16_t* lrow, const 
   // sum in one sweep over the disparities (the same sums, fewer loads and loops). The ring's
   // three column sums rotate by pointer (no index mod 3 per column), the row pointers advance
   // by nd, and the border fill runs only for the columns whose range leaves the right image.
-  // (B512 also takes nd = 64 * m + 32, the transposed layout's 160, 224, ...: box_sweep_mixed.)
+  // (B512 also takes nd = 64 * m + 32, the transposed layout's 96, 160, 224, ...: box_sweep_mixed.)
   constexpr bool kHalf = HalfSweep<B>::value;
   if (radius == 1 && f != nullptr && (nd % N == 0 || (kHalf && nd % N == N / 2))) {
     uint8_t* p = ring;  // the column sums of raw columns j - 1, j and (new) j + 1
