@@ -489,9 +489,9 @@ def semi_global_match(
     block_size
         The side of the box the census costs are summed over: 1 or 3.
     p1, p2
-        Path penalties (integers, in units of the box cost, 0..16 * block_size**2) for a
-        change of one disparity and for a larger jump between neighbours;
-        ``0 <= p1 <= p2 <= min(65535 // paths, 16383) - 16 * block_size**2``.
+        Path penalties (integers, in the units of the box cost, which itself runs over
+        0..16 * block_size**2) for a change of one disparity and for a larger jump between
+        neighbours; ``0 <= p1 <= p2 <= min(65535 // paths, 16383) - 16 * block_size**2``.
     p2_step
         Grey levels of intensity step between neighbours that halve ``p2``
         (``P2' = max(p1, p2 * p2_step // (p2_step + step))``); 0 keeps ``p2`` everywhere.
