@@ -585,11 +585,11 @@ void SemiGlobalMatcher::compute(const StereoImage& left, const StereoImage& righ
   // p2_step; 0: P2), at p2_table[255 + step]: the kernels index it by the signed step, with no
   // branch on its sign (a branch that real images mispredict about every other pixel).
   std::int16_t p2_table[511];
-  for (int step = -255; step <= 255; ++step) {
-    const int a = step < 0 ? -step : step;
+  for (int step = 0; step <= 255; ++step) {
     const long long v =
-        p.p2_step > 0 ? static_cast<long long>(p.p2) * p.p2_step / (p.p2_step + a) : p.p2;
-    p2_table[255 + step] = static_cast<std::int16_t>(std::max<long long>(v, p.p1));
+        p.p2_step > 0 ? static_cast<long long>(p.p2) * p.p2_step / (p.p2_step + step) : p.p2;
+    p2_table[255 + step] = p2_table[255 - step] =
+        static_cast<std::int16_t>(std::max<long long>(v, p.p1));
   }
   detail::PathParams pp{nd, ls, p.p1, p2_table + 255};
 

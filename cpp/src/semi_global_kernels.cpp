@@ -998,14 +998,6 @@ bool box_sweep_mixed_upto(int m2, const uint8_t* zlo, const uint8_t* zhi, const 
   }
 }
 
-// Whether box_row8_impl's sweep takes nd = N * m + N / 2 (N = B::kLanes) for B.
-template <class B>
-struct HalfSweep : std::false_type {};
-#if defined(__AVX512BW__)
-template <>
-struct HalfSweep<B512> : std::true_type {};
-#endif
-
 template <class B, int kT>
 void box_row8_impl(uint8_t* const* raws, int fresh, const uint16_t* lrow, const uint16_t* rrow,
                    uint8_t* rev, int radius, ptrdiff_t cols, ptrdiff_t x0, ptrdiff_t x1, int nd,
@@ -1061,7 +1053,7 @@ void box_row8_impl(uint8_t* const* raws, int fresh, const uint16_t* lrow, const 
   // three column sums rotate by pointer (no index mod 3 per column), the row pointers advance
   // by nd, and the border fill runs only for the columns whose range leaves the right image.
   // (B512 also takes nd = 64 * m + 32, the transposed layout's 96, 160, 224, ...: box_sweep_mixed.)
-  constexpr bool kHalf = HalfSweep<B>::value;
+  constexpr bool kHalf = N == 64;  // B512 (not declared in the AVX2 build)
   if (radius == 1 && f != nullptr && (nd % N == 0 || (kHalf && nd % N == N / 2))) {
     uint8_t* p = ring;  // the column sums of raw columns j - 1, j and (new) j + 1
     uint8_t* q = ring + nd;
