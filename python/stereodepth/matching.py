@@ -96,7 +96,7 @@ depend on the number of threads or on how the rows were shared.
 from __future__ import annotations
 
 from collections.abc import Callable
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -521,9 +521,22 @@ class FixedParameters:
     """A matcher's parameters are fixed when it is made: assigning one (``m.num_disparities
     = 128``, the habit of OpenCV's setters) is an AttributeError saying so, where it made a new
     attribute that the matcher never read. Make a new matcher instead (``m.params`` gives the
-    current parameters)."""
+    current parameters).
+
+    A matcher pickles (and copies) as its parameters and the ``isa`` it was asked for: the copy
+    is a new matcher with buffers of its own, so that one can be sent to a process pool or a
+    Dask worker, where ``isa="auto"`` and ``threads=None`` pick what that machine has."""
 
     __slots__ = ()
+
+    if TYPE_CHECKING:  # what the matchers define
+        _isa_arg: str
+
+        @property
+        def params(self) -> dict[str, Any]: ...
+
+    def __reduce__(self) -> tuple[Any, tuple[Any, ...]]:
+        return (_remake_matcher, (type(self), self.params, self._isa_arg))
 
     def __setattr__(self, name: str, value: Any) -> None:
         if name.startswith("_"):
@@ -535,6 +548,11 @@ class FixedParameters:
             f"{kind}(**{{**matcher.params, {name!r}: {value!r}}}), instead of assigning "
             f"{name} = {value!r}"
         )
+
+
+def _remake_matcher(cls: Any, params: dict[str, Any], isa: str) -> Any:
+    """A new ``cls`` with ``params`` and ``isa`` (how a pickled matcher is made again)."""
+    return cls(**params, isa=isa)
 
 
 class StereoMatcher(FixedParameters):
@@ -550,10 +568,11 @@ class StereoMatcher(FixedParameters):
     by the environment variable STEREODEPTH_ISA), ``"baseline"``, ``"avx2"`` or ``"avx512"``.
     Every choice gives the same output; it exists for testing and benchmarking.
 
-    The parameters are fixed: assigning one is an AttributeError (make a new matcher).
+    The parameters are fixed: assigning one is an AttributeError (make a new matcher). A
+    matcher pickles as its parameters and ``isa`` (see :class:`FixedParameters`).
     """
 
-    __slots__ = ("_native", "_options")
+    __slots__ = ("_isa_arg", "_native", "_options")
 
     def __init__(
         self,
@@ -594,6 +613,7 @@ class StereoMatcher(FixedParameters):
         )
         if not isinstance(isa, str):
             raise TypeError(f"isa must be a str, got {type(isa).__name__} {isa!r}")
+        self._isa_arg = isa
         o = self._options
         self._native = _core.BlockMatcher(
             o.num_disparities,

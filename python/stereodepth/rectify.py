@@ -522,6 +522,9 @@ class StereoRectifier:
     The rectified images are those of the rectified cameras P1, P2: depth computed from their
     disparity (with :attr:`rig` or :attr:`Q`) is in the rectified left camera's frame, which
     is the raw left camera's frame rotated by R1 (``x_rect = R1 @ x_raw``).
+
+    A rectifier pickles (for a process pool or a Dask worker) without its remap tables, which
+    the copy builds again on first use.
     """
 
     def __init__(
@@ -609,6 +612,18 @@ class StereoRectifier:
         self._roi1, self._roi2 = _rect_tuple(roi1), _rect_tuple(roi2)
         self._tables: dict[str, tuple[Any, Any]] = {}
         self._table_pair("fixed")  # 8-bit images are the common case: build those now
+
+    # Pickling (process pools, Dask workers) drops the native remap tables, which are rebuilt
+    # from the maps on first use, like those of a new rectifier.
+    def __getstate__(self) -> dict[str, Any]:
+        state = self.__dict__.copy()
+        state.pop("_tables", None)
+        return state
+
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        self.__dict__.update(state)
+        if not self._identity:
+            self._tables = {}
 
     def _table_pair(self, precision: str) -> tuple[Any, Any]:
         """The left and right remap tables of a precision, built on first use."""

@@ -354,10 +354,11 @@ class SemiGlobalMatcher(FixedParameters):
     ``isa`` picks the instruction set of the kernel: ``"auto"``, ``"baseline"``, ``"avx2"`` or
     ``"avx512"``; every choice gives the same output.
 
-    The parameters are fixed: assigning one is an AttributeError (make a new matcher).
+    The parameters are fixed: assigning one is an AttributeError (make a new matcher). A
+    matcher pickles as its parameters and ``isa``: the copy has buffers of its own.
     """
 
-    __slots__ = ("_native", "_options")
+    __slots__ = ("_isa_arg", "_native", "_options")
 
     def __init__(
         self,
@@ -408,6 +409,7 @@ class SemiGlobalMatcher(FixedParameters):
         )
         if not isinstance(isa, str):
             raise TypeError(f"isa must be a str, got {type(isa).__name__} {isa!r}")
+        self._isa_arg = isa
         o = self._options
         self._native = _core.SemiGlobalMatcher(
             o.num_disparities,
