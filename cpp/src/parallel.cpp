@@ -173,8 +173,8 @@ inline void cpu_relax() {
 
 // Spins until done() or kSpin has passed, yielding the CPU every few microseconds, so that a
 // thread that has work (a caller woken to go on, with more threads than CPUs) is not kept
-// waiting for the spin to end. (The semi-global matcher's row barrier spins without yielding:
-// its bands each have a CPU.)
+// waiting for the spin to end. (The semi-global matcher's row barrier spins and yields the
+// same way, for longer.)
 template <class Done>
 void spin_until(const Done& done) {
   const auto until = std::chrono::steady_clock::now() + kSpin;

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <atomic>
+#include <chrono>
 #include <cmath>
 #include <condition_variable>
 #include <cstdint>
@@ -63,10 +64,16 @@ std::ptrdiff_t stripe_count(std::ptrdiff_t rows) {
 }
 
 // Threads meet at every row (the diagonal paths read the previous row across band edges).
-// A row's share takes tens of microseconds, about what waking a blocked thread costs, so a
-// waiting thread first spins a while on the generation count, then blocks. wait() returns
-// whether the call was asked to stop, as its last arrival saw it, so that every band gets the
-// same answer (a band that stopped alone would leave the others waiting for ever).
+// A row's share takes tens of microseconds, less than waking a blocked thread costs, so a
+// waiting thread spins on the generation count for up to kSpin, yielding the CPU every few
+// microseconds, and only then blocks. Both matter on a virtual machine after an idle spell
+// (a call per camera frame): the kernel may run two bands on one CPU for milliseconds, and a
+// spin of 0.1 ms without yielding then ended in a block and a wake-up at nearly every row
+// (paths=8 on Tsukuba after 50 ms idle: 14 ms, against 4.5 back to back and 6-10 with this
+// spin; more callers than CPUs gained as much; bench/README, twenty-fourth round).
+// wait() returns whether the call was asked to stop, as its last arrival saw it, so that every
+// band gets the same answer (a band that stopped alone would leave the others waiting for
+// ever).
 class Barrier {
  public:
   explicit Barrier(std::ptrdiff_t n) : n_(n) {}
@@ -84,21 +91,25 @@ class Barrier {
       cv_.notify_all();
       return stop_.load(std::memory_order_relaxed);
     }
-    for (int i = 0; i < kSpins; ++i) {
-      if (gen_.load(std::memory_order_acquire) != gen) return stop_.load(std::memory_order_relaxed);
+    auto arrived = [&] { return gen_.load(std::memory_order_acquire) != gen; };
+    const auto until = std::chrono::steady_clock::now() + kSpin;
+    for (;;) {
+      for (int i = 0; i < 64; ++i) {
+        if (arrived()) return stop_.load(std::memory_order_relaxed);
 #if defined(__x86_64__) || defined(_M_X64)
-      _mm_pause();
-#else
-      std::this_thread::yield();
+        _mm_pause();
 #endif
+      }
+      if (std::chrono::steady_clock::now() >= until) break;
+      std::this_thread::yield();
     }
     std::unique_lock<std::mutex> lock(m_);
-    cv_.wait(lock, [&] { return gen_.load(std::memory_order_acquire) != gen; });
+    cv_.wait(lock, arrived);
     return stop_.load(std::memory_order_relaxed);
   }
 
  private:
-  static constexpr int kSpins = 4000;  // roughly 0.1 ms
+  static constexpr std::chrono::microseconds kSpin{1000};
   std::mutex m_;
   std::condition_variable cv_;
   const std::ptrdiff_t n_;
