@@ -312,14 +312,14 @@ def test_after_idle() -> None:
             continue
         s = load_scene(by_name[name])
         left, right, nd = s["left"], s["right"], s["ndisp"]
-        for label, make in (
-            ("block matcher", lambda t: sd.StereoMatcher(num_disparities=nd, threads=t)),
-            ("paths=3", lambda t: sd.SemiGlobalMatcher(num_disparities=nd, threads=t)),
-            ("paths=8", lambda t: sd.SemiGlobalMatcher(num_disparities=nd, paths=8, threads=t)),
+        for label, cls, extra in (
+            ("block matcher", sd.StereoMatcher, {}),
+            ("paths=3", sd.SemiGlobalMatcher, {}),
+            ("paths=8", sd.SemiGlobalMatcher, {"paths": 8}),
         ):
             medians = []
             for threads, wait in ((THREADS, 0.0), (THREADS, pause), (1, pause)):
-                m = make(threads)
+                m = cls(num_disparities=nd, threads=threads, **extra)
                 want = m.compute(left, right)
                 times = []
                 for _ in range(rounds):
