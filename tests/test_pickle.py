@@ -15,6 +15,7 @@ from synthetic_pairs import shifted_pair
 
 import stereodepth as sd
 from stereodepth import _core
+from stereodepth.calib.stereo import _rectified_calibration
 
 LEFT, RIGHT = shifted_pair((37, 61), 5, seed=11, rgb=True)
 
@@ -70,8 +71,10 @@ def same_output(a: Any, b: Any) -> None:
 @pytest.mark.parametrize(
     "clone",
     [
-        pytest.param(lambda m: pickle.loads(pickle.dumps(m)), id="pickle"),
-        pytest.param(lambda m: pickle.loads(pickle.dumps(m, protocol=2)), id="pickle-2"),
+        *(
+            pytest.param(lambda m, p=p: pickle.loads(pickle.dumps(m, protocol=p)), id=f"pickle-{p}")
+            for p in range(pickle.HIGHEST_PROTOCOL + 1)
+        ),
         pytest.param(copy.copy, id="copy"),
         pytest.param(copy.deepcopy, id="deepcopy"),
     ],
@@ -99,6 +102,46 @@ def test_isa_request_travels_not_the_isa_run(cls: Any) -> None:
     assert pickle.loads(pickle.dumps(cls(num_disparities=16, isa="baseline"))).isa == "baseline"
 
 
+class Fixed16(sd.SemiGlobalMatcher):
+    """A subclass whose __init__ takes other arguments, with state of its own."""
+
+    def __init__(self, name: str, **kw: Any) -> None:
+        super().__init__(num_disparities=16, **kw)
+        self._name = name
+
+
+class Scaled(sd.StereoMatcher):
+    """A subclass with slots of its own and params that add a key."""
+
+    __slots__ = ("_scale",)
+
+    def __init__(self, nd: int, scale: int = 2) -> None:
+        super().__init__(num_disparities=nd)
+        self._scale = scale
+
+    @property
+    def params(self) -> dict[str, Any]:
+        return {**super().params, "scale": self._scale}
+
+
+@pytest.mark.parametrize(
+    "clone",
+    [lambda m: pickle.loads(pickle.dumps(m)), copy.copy, copy.deepcopy],
+    ids=["pickle", "copy", "deepcopy"],
+)
+def test_subclass_round_trip(clone: Any) -> None:
+    """A subclass's copy is made without its __init__ and keeps its own attributes."""
+    a = Fixed16("left", paths=4)
+    b = Scaled(24, scale=5)
+    ca, cb = clone(a), clone(b)
+    assert type(ca) is Fixed16 and type(cb) is Scaled
+    assert ca._name == "left" and cb._scale == 5
+    assert ca.params == a.params and cb.params == b.params
+    assert ca._native is not a._native and cb._native is not b._native
+    same_output(ca.compute(LEFT, RIGHT), a.compute(LEFT, RIGHT))
+    same_output(cb.compute(LEFT, RIGHT), b.compute(LEFT, RIGHT))
+
+
 def rectifier() -> sd.StereoRectifier:
     K = np.array([[80.0, 0, 30], [0, 80, 18], [0, 0, 1]])
     D = np.array([0.05, -0.01, 0.001, 0.0, 0.0])
@@ -120,28 +163,60 @@ def test_rectifier_round_trip(clone: Any) -> None:
     for side in ("left", "right"):
         for a, b in zip(c.maps(side), r.maps(side), strict=True):
             np.testing.assert_array_equal(a, b)
-    # Its remap tables are built again, its own (both precisions, the 16-bit one on demand).
+    # Its remap tables are built again, its own.
+    assert c._tables == {}
     got = [c.rectify(LEFT, RIGHT), c.rectify(*grey16)]
     for g, w in zip(got, want, strict=True):
         same_output(g, w)
-    for precision in ("fixed", "float"):
-        if precision in r._tables:
-            assert all(
-                isinstance(t, _core.RemapTable) and t is not u
-                for t, u in zip(c._table_pair(precision), r._tables[precision], strict=True)
-            )
+    assert c._tables.keys() == r._tables.keys()
+    for precision, tables in r._tables.items():
+        for t, u in zip(c._tables[precision], tables, strict=True):
+            assert isinstance(t, _core.RemapTable) and t is not u
+
+
+def test_rectifier_shallow_copy_shares_the_tables() -> None:
+    r = rectifier()
+    want = r.rectify(LEFT, RIGHT)
+    c = copy.copy(r)
+    assert c._tables is not r._tables
+    assert all(c._tables[k] is r._tables[k] for k in r._tables)  # read only: shared
+    same_output(c.rectify(LEFT, RIGHT), want)
+    c.rectify(LEFT[..., 0].astype(np.uint16), RIGHT[..., 0].astype(np.uint16))
+    assert set(c._tables) - set(r._tables)  # a precision built for the copy only
+
+
+@pytest.mark.parametrize("clone", [lambda r: pickle.loads(pickle.dumps(r)), copy.copy])
+def test_rectified_calibration_round_trip(clone: Any) -> None:
+    """The identity case (a calibration already rectified) has no tables to drop."""
+    K = np.array([[80.0, 0, 30], [0, 80, 18], [0, 0, 1]])
+    calib = _rectified_calibration(K, K, 0.1, (61, 37), "test")
+    r = sd.StereoRectifier.from_calibration(calib)
+    c = clone(r)
+    same_output(c.rectify(LEFT, RIGHT), r.rectify(LEFT, RIGHT))
+    np.testing.assert_array_equal(c.Q, r.Q)
 
 
 def match_there(matcher: Any, left: np.ndarray, right: np.ndarray) -> Any:
     return matcher.compute(left, right)
 
 
-def test_matchers_run_in_a_spawned_process() -> None:
-    """What a process pool (or a Dask worker) does: the matcher and the pair sent to a new
+def rectify_there(rectifier: Any, left: np.ndarray, right: np.ndarray) -> Any:
+    return rectifier.rectify(left, right)
+
+
+def test_matchers_and_rectifier_run_in_a_spawned_process() -> None:
+    """What a process pool (or a Dask worker) does: the object and the pair sent to a new
     interpreter, the result sent back."""
-    matchers = [sd.StereoMatcher(num_disparities=16), sd.SemiGlobalMatcher(num_disparities=16)]
+    matchers = [
+        sd.StereoMatcher(num_disparities=16),
+        sd.SemiGlobalMatcher(num_disparities=16, paths=8),
+        Fixed16("left"),
+    ]
+    r = rectifier()
     ctx = multiprocessing.get_context("spawn")
     with concurrent.futures.ProcessPoolExecutor(max_workers=1, mp_context=ctx) as pool:
         futures = [pool.submit(match_there, m, LEFT, RIGHT) for m in matchers]
+        rectified = pool.submit(rectify_there, r, LEFT, RIGHT)
         for m, f in zip(matchers, futures, strict=True):
             same_output(f.result(timeout=120), m.compute(LEFT, RIGHT))
+        same_output(rectified.result(timeout=120), r.rectify(LEFT, RIGHT))

@@ -525,18 +525,29 @@ class FixedParameters:
 
     A matcher pickles (and copies) as its parameters and the ``isa`` it was asked for: the copy
     is a new matcher with buffers of its own, so that one can be sent to a process pool or a
-    Dask worker, where ``isa="auto"`` and ``threads=None`` pick what that machine has."""
+    Dask worker, where ``isa="auto"`` and ``threads=None`` pick what that machine has. A
+    subclass's copy is made without calling its ``__init__`` (as pickle does for any object)
+    and gets its other attributes back."""
 
     __slots__ = ()
 
     if TYPE_CHECKING:  # what the matchers define
         _isa_arg: str
 
-        @property
-        def params(self) -> dict[str, Any]: ...
+    def __reduce__(self) -> tuple[Any, tuple[Any, ...], dict[str, Any]]:
+        # A subclass's own attributes, in __dict__ or in slots of its own.
+        state = dict(getattr(self, "__dict__", {}))
+        for klass in type(self).__mro__:
+            for name in getattr(klass, "__slots__", ()):
+                if name not in _NATIVE_STATE and hasattr(self, name):
+                    state[name] = getattr(self, name)
+        # The matcher's own parameters (a subclass may override ``params``).
+        options: Any = object.__getattribute__(self, "_options")
+        return (_remake_matcher, (type(self), options.as_dict(), self._isa_arg), state)
 
-    def __reduce__(self) -> tuple[Any, tuple[Any, ...]]:
-        return (_remake_matcher, (type(self), self.params, self._isa_arg))
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        for name, value in state.items():
+            object.__setattr__(self, name, value)
 
     def __setattr__(self, name: str, value: Any) -> None:
         if name.startswith("_"):
@@ -550,9 +561,18 @@ class FixedParameters:
         )
 
 
+# The attributes every matcher makes in __init__ (the rest is a subclass's).
+_NATIVE_STATE = ("_isa_arg", "_native", "_options", "__dict__", "__weakref__")
+
+
 def _remake_matcher(cls: Any, params: dict[str, Any], isa: str) -> Any:
-    """A new ``cls`` with ``params`` and ``isa`` (how a pickled matcher is made again)."""
-    return cls(**params, isa=isa)
+    """A new ``cls`` with ``params`` and ``isa`` (how a pickled matcher is made again), set up by
+    the matcher class it derives from (StereoMatcher or SemiGlobalMatcher), not by a
+    subclass's ``__init__``, whose signature may differ."""
+    base = next(k for k in cls.__mro__ if FixedParameters in k.__bases__)
+    obj = cls.__new__(cls)
+    base.__init__(obj, **params, isa=isa)
+    return obj
 
 
 class StereoMatcher(FixedParameters):

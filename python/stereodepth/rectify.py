@@ -613,8 +613,16 @@ class StereoRectifier:
         self._tables: dict[str, tuple[Any, Any]] = {}
         self._table_pair("fixed")  # 8-bit images are the common case: build those now
 
-    # Pickling (process pools, Dask workers) drops the native remap tables, which are rebuilt
-    # from the maps on first use, like those of a new rectifier.
+    # Pickling (process pools, Dask workers) and deepcopy drop the native remap tables, which
+    # are rebuilt from the maps on first use, like those of a new rectifier; copy.copy shares
+    # them (they are read only), in a dict of its own.
+    def __copy__(self) -> StereoRectifier:
+        c = type(self).__new__(type(self))
+        c.__dict__.update(self.__dict__)
+        if not self._identity:
+            c._tables = dict(self._tables)
+        return c
+
     def __getstate__(self) -> dict[str, Any]:
         state = self.__dict__.copy()
         state.pop("_tables", None)
