@@ -6,6 +6,7 @@ from __future__ import annotations
 import concurrent.futures
 import copy
 import multiprocessing
+import operator
 import pickle
 from typing import Any
 
@@ -196,27 +197,20 @@ def test_rectified_calibration_round_trip(clone: Any) -> None:
     np.testing.assert_array_equal(c.Q, r.Q)
 
 
-def match_there(matcher: Any, left: np.ndarray, right: np.ndarray) -> Any:
-    return matcher.compute(left, right)
-
-
-def rectify_there(rectifier: Any, left: np.ndarray, right: np.ndarray) -> Any:
-    return rectifier.rectify(left, right)
-
-
 def test_matchers_and_rectifier_run_in_a_spawned_process() -> None:
     """What a process pool (or a Dask worker) does: the object and the pair sent to a new
-    interpreter, the result sent back."""
+    interpreter, the result sent back. (The callables sent are the standard library's: the
+    child cannot import this test module.)"""
     matchers = [
         sd.StereoMatcher(num_disparities=16),
         sd.SemiGlobalMatcher(num_disparities=16, paths=8),
-        Fixed16("left"),
     ]
     r = rectifier()
     ctx = multiprocessing.get_context("spawn")
     with concurrent.futures.ProcessPoolExecutor(max_workers=1, mp_context=ctx) as pool:
-        futures = [pool.submit(match_there, m, LEFT, RIGHT) for m in matchers]
-        rectified = pool.submit(rectify_there, r, LEFT, RIGHT)
+        match = operator.methodcaller("compute", LEFT, RIGHT)
+        futures = [pool.submit(match, m) for m in matchers]
+        rectified = pool.submit(operator.methodcaller("rectify", LEFT, RIGHT), r)
         for m, f in zip(matchers, futures, strict=True):
             same_output(f.result(timeout=120), m.compute(LEFT, RIGHT))
         same_output(rectified.result(timeout=120), r.rectify(LEFT, RIGHT))
