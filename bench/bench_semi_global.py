@@ -20,6 +20,7 @@ from __future__ import annotations
 import json
 import math
 import os
+import time
 from pathlib import Path
 from typing import Any
 
@@ -296,8 +297,6 @@ def test_after_idle() -> None:
 
         pytest bench/bench_semi_global.py -k after_idle -s
     """
-    import time
-
     if not SCENES:
         pytest.skip("the shared scenes are absent")
     rounds = int(os.environ.get("STEREODEPTH_BENCH_ROUNDS", "11"))

@@ -22,9 +22,6 @@
 #if defined(__unix__)
 #include <pthread.h>
 #endif
-#if defined(__x86_64__) || defined(__i386__)
-#include <immintrin.h>
-#endif
 
 namespace stereodepth {
 
@@ -165,29 +162,6 @@ namespace {
 // for the same reason, for far longer (GOMP_SPINCOUNT, KMP_BLOCKTIME's 200 ms).
 constexpr std::chrono::microseconds kSpin{200};
 
-inline void cpu_relax() {
-#if defined(__x86_64__) || defined(__i386__)
-  _mm_pause();
-#endif
-}
-
-// Spins until done() or kSpin has passed, yielding the CPU every few microseconds, so that a
-// thread that has work (a caller woken to go on, with more threads than CPUs) is not kept
-// waiting for the spin to end. (The semi-global matcher's row barrier spins and yields the
-// same way, for longer.)
-template <class Done>
-void spin_until(const Done& done) {
-  const auto until = std::chrono::steady_clock::now() + kSpin;
-  for (;;) {
-    for (int i = 0; i < 64; ++i) {
-      if (done()) return;
-      cpu_relax();
-    }
-    if (std::chrono::steady_clock::now() >= until) return;
-    std::this_thread::yield();
-  }
-}
-
 // Threads running bands or spinning, of every call, may not exceed the CPUs this process may
 // use: a thread spins only on a CPU no band needs (with more bands than CPUs, as with several
 // calls at once, nobody spins).
@@ -200,7 +174,7 @@ int cpu_count() {
 // in `active` meanwhile.
 template <class Done>
 void spin_if_idle(std::atomic<int>& active, const Done& done) {
-  if (active.fetch_add(1) < cpu_count()) spin_until(done);
+  if (active.fetch_add(1) < cpu_count()) spin_until(done, kSpin);
   active.fetch_sub(1);
 }
 

@@ -11,7 +11,6 @@
 #include <sstream>
 #include <stdexcept>
 #include <string>
-#include <thread>
 #include <vector>
 
 #include "block_match_kernels.hpp"
@@ -19,10 +18,6 @@
 #include "semi_global_kernels.hpp"
 #include "speckle.hpp"
 #include "stereodepth/parallel.hpp"
-
-#if defined(__x86_64__) || defined(_M_X64)
-#include <immintrin.h>
-#endif
 
 namespace stereodepth {
 namespace {
@@ -92,19 +87,10 @@ class Barrier {
       return stop_.load(std::memory_order_relaxed);
     }
     auto arrived = [&] { return gen_.load(std::memory_order_acquire) != gen; };
-    const auto until = std::chrono::steady_clock::now() + kSpin;
-    for (;;) {
-      for (int i = 0; i < 64; ++i) {
-        if (arrived()) return stop_.load(std::memory_order_relaxed);
-#if defined(__x86_64__) || defined(_M_X64)
-        _mm_pause();
-#endif
-      }
-      if (std::chrono::steady_clock::now() >= until) break;
-      std::this_thread::yield();
+    if (!spin_until(arrived, kSpin)) {
+      std::unique_lock<std::mutex> lock(m_);
+      cv_.wait(lock, arrived);
     }
-    std::unique_lock<std::mutex> lock(m_);
-    cv_.wait(lock, arrived);
     return stop_.load(std::memory_order_relaxed);
   }
 

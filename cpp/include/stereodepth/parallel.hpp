@@ -5,10 +5,16 @@
 #pragma once
 
 #include <atomic>
+#include <chrono>
 #include <cstddef>
 #include <exception>
 #include <functional>
 #include <string>
+#include <thread>
+
+#if defined(__x86_64__) || defined(__i386__) || defined(_M_X64)
+#include <immintrin.h>
+#endif
 
 namespace stereodepth {
 
@@ -41,6 +47,27 @@ void parallel_for_rows(std::ptrdiff_t rows, int threads, std::ptrdiff_t min_rows
 // return then. Throws std::system_error when the threads cannot be started, and rethrows a
 // band's exception like parallel_for_rows.
 void run_bands_together(std::ptrdiff_t n, const std::function<void(std::ptrdiff_t)>& fn);
+
+// Spins until done() or `budget` has passed, yielding the CPU every 64 checks (a few
+// microseconds), so that a thread with work on the same CPU (more threads than CPUs, or two
+// threads the kernel put on one CPU) is not kept waiting for the spin to end. Returns whether
+// done() held. Waking a thread that blocked costs tens of microseconds on the virtual
+// machines measured, more than many waits inside a call last: the pool's idle workers and the
+// semi-global matcher's row barrier spin first, then block.
+template <class Done>
+bool spin_until(const Done& done, std::chrono::microseconds budget) {
+  const auto until = std::chrono::steady_clock::now() + budget;
+  for (;;) {
+    for (int i = 0; i < 64; ++i) {
+      if (done()) return true;
+#if defined(__x86_64__) || defined(__i386__) || defined(_M_X64)
+      _mm_pause();
+#endif
+    }
+    if (std::chrono::steady_clock::now() >= until) return false;
+    std::this_thread::yield();
+  }
+}
 
 // Stopping a call early (Ctrl-C). A caller that may be interrupted gives its thread a stop
 // flag (StopScope); parallel_for_rows and run_bands_together hand the caller's flag to the
