@@ -1917,6 +1917,60 @@ inline void pass1_pixel_t(int nv_rt, const uint8_t* __restrict cx, int16_t* __re
   *lvmin_out = static_cast<int16_t>(V::hmin(V::min(vmin[0], vmin[1])));
 }
 
+// The most vectors per pixel whose path from the left pass 1 keeps in registers: with 32
+// vector registers (AVX-512) 4, with 16 (AVX2) 2; beyond, the row in memory measured as fast
+// or faster (bench/README, twenty-fifth round).
+#if defined(__AVX512F__)
+constexpr int kRegsMax = 4;
+#else
+constexpr int kRegsMax = 2;
+#endif
+
+// pass1_pixel_t with the path from the left in registers (h: the previous pixel's kNv
+// vectors in, this pixel's out) rather than in a row of memory: a store and a load fewer per
+// vector, and no trip through the store buffer on the chain from pixel to pixel.
+template <class V, int kNv, bool kHFirst, bool kVFirst>
+inline void pass1_pixel_r(const uint8_t* __restrict cx, typename V::R (&h)[kNv],
+                          int16_t* __restrict lvx, uint16_t* __restrict px, typename V::R vp1,
+                          typename V::R mh, typename V::R p2h, typename V::R mv,
+                          typename V::R p2v, typename V::R& mh_out, int16_t* lvmin_out) {
+  using R = typename V::R;
+  constexpr int N = V::kLanes;
+  constexpr int nv = kNv;
+  const R ones = V::set1(-1);
+  PathCursor<V> w;
+  if constexpr (!kVFirst) w.start(lvx, nv);
+  R nh[kNv];
+  R hmin[2] = {ones, ones}, vmin[2] = {ones, ones};
+#pragma GCC unroll 16
+  for (int v = 0; v < nv; ++v) {
+    const R c = V::widen(cx + v * N);
+    R lh, lv;
+    if constexpr (kHFirst) {
+      lh = c;
+    } else {
+      const R lo = v > 0 ? h[v > 0 ? v - 1 : 0] : V::shift_up(V::set1(kSentinel), h[nv - 1]);
+      const R hi =
+          v + 1 < nv ? h[v + 1 < nv ? v + 1 : 0] : V::shift_down(h[0], V::set1(kSentinel));
+      lh = step_t<V>(lo, h[v], hi, c, vp1, mh, p2h);
+    }
+    if constexpr (kVFirst) {
+      lv = c;
+    } else {
+      lv = w.step(lvx, v, nv, c, vp1, mv, p2v);
+    }
+    nh[v] = lh;
+    V::store(lvx + v * N, lv);
+    V::store(px + v * N, V::add(lh, lv));
+    hmin[v & 1] = v < 2 ? lh : V::min(hmin[v & 1], lh);
+    vmin[v & 1] = v < 2 ? lv : V::min(vmin[v & 1], lv);
+  }
+#pragma GCC unroll 16
+  for (int v = 0; v < nv; ++v) h[v] = nh[v];
+  mh_out = V::hmin_v(V::min(hmin[0], hmin[1]));
+  *lvmin_out = static_cast<int16_t>(V::hmin(V::min(vmin[0], vmin[1])));
+}
+
 // Pass 2 on one pixel: the path from the right, the sums (0xFFFF outside klo .. klo + span
 // when kBorder; into px when kSecond), the winner per lane and the right winners' window.
 template <class V, int kNv, bool kFirst, bool kBorder, bool kSecond, int kSlot0 = -1>
@@ -2010,6 +2064,21 @@ void fused_row_t_impl(const FusedRowArgs& a) {
   const bool vfirst = a.gprev == nullptr;
   int16_t* lv0 = a.lv + kFusedPad;
   R mh = sent;  // the previous pixel's least path cost from the left, in every lane
+  // With at most kRegsMax vectors per pixel, the path from the left stays in registers
+  // (pass1_pixel_r); else it goes through hrow.
+  constexpr bool kRegs = kNv >= 1 && kNv <= kRegsMax;
+  R h[kRegs ? kNv : 1];
+  auto pixel = [&](auto h_first, auto v_first, const uint8_t* cx, int16_t* lvx, uint16_t* px,
+                   R mh_in, R p2h, R mv, R p2v, int16_t* lvmin) {
+    constexpr bool kH = decltype(h_first)::value, kV = decltype(v_first)::value;
+    if constexpr (kRegs) {
+      pass1_pixel_r<V, kNv, kH, kV>(cx, h, lvx, px, vp1, mh_in, p2h, mv, p2v, mh, lvmin);
+    } else {
+      pass1_pixel_t<V, kNv, kH, kV>(nv, cx, hrow, lvx, px, vp1, mh_in, p2h, mv, p2v, mh, lvmin);
+    }
+  };
+  const std::true_type first;
+  const std::false_type later;
   for (ptrdiff_t x = 0; x < cols; ++x) {
     const uint8_t* cx = a.c + x * nd;
     uint16_t* px = a.partial + x * nd;
@@ -2017,24 +2086,20 @@ void fused_row_t_impl(const FusedRowArgs& a) {
     int16_t* lvmin = a.lvmin + x;
     if (vfirst) {
       if (x == 0) {
-        pass1_pixel_t<V, kNv, true, true>(nv, cx, hrow, lvx, px, vp1, sent, sent, sent, sent,
-                                          mh, lvmin);
+        pixel(first, first, cx, lvx, px, sent, sent, sent, sent, lvmin);
       } else {
         const R p2h = V::set1(p2_for(a.p, g[x], g[x - 1]));
-        pass1_pixel_t<V, kNv, false, true>(nv, cx, hrow, lvx, px, vp1, mh, p2h, sent, sent, mh,
-                                           lvmin);
+        pixel(later, first, cx, lvx, px, mh, p2h, sent, sent, lvmin);
       }
       continue;
     }
     const R mv = V::set1(a.lvmin[x]);
     const R p2v = V::set1(p2_for(a.p, g[x], a.gprev[x]));
     if (x == 0) {
-      pass1_pixel_t<V, kNv, true, false>(nv, cx, hrow, lvx, px, vp1, sent, sent, mv, p2v, mh,
-                                         lvmin);
+      pixel(first, later, cx, lvx, px, sent, sent, mv, p2v, lvmin);
     } else {
       const R p2h = V::set1(p2_for(a.p, g[x], g[x - 1]));
-      pass1_pixel_t<V, kNv, false, false>(nv, cx, hrow, lvx, px, vp1, mh, p2h, mv, p2v, mh,
-                                          lvmin);
+      pixel(later, later, cx, lvx, px, mh, p2h, mv, p2v, lvmin);
     }
   }
 
