@@ -1917,13 +1917,14 @@ inline void pass1_pixel_t(int nv_rt, const uint8_t* __restrict cx, int16_t* __re
   *lvmin_out = static_cast<int16_t>(V::hmin(V::min(vmin[0], vmin[1])));
 }
 
-// The most vectors per pixel whose path from the left pass 1 keeps in registers: with 32
-// vector registers (AVX-512) 4, with 16 (AVX2) 2; beyond, the row in memory measured as fast
-// or faster (bench/README, twenty-fifth round).
+// The most vectors per pixel whose path from the left pass 1 keeps in registers: 6 with the
+// 32 vector registers of AVX-512, 3 with the 16 of AVX2. Against the row in memory, in one
+// process on Zen 4: 0.84-0.97 of the time of paths=3 at 1 to 5 vectors with AVX-512 and
+// 0.94-0.97 at 1 to 3 with AVX2; 0.98-1.04 (noise) beyond (bench/README, twenty-fifth round).
 #if defined(__AVX512F__)
-constexpr int kRegsMax = 4;
+constexpr int kRegsMax = 6;
 #else
-constexpr int kRegsMax = 2;
+constexpr int kRegsMax = 3;
 #endif
 
 // pass1_pixel_t with the path from the left in registers (h: the previous pixel's kNv
