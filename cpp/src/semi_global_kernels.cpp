@@ -1927,6 +1927,18 @@ constexpr int kRegsMax = 6;
 constexpr int kRegsMax = 3;
 #endif
 
+// The most vectors per pixel whose right winners' window (least sums and their indices) pass
+// 2 keeps in registers, rotating them by one vector per pixel instead of rotating slots in
+// memory: 5 with AVX-512, 3 with AVX2. In one process on Zen 4, paths=3 took 0.84-0.94 of the
+// time at 1 to 5 vectors with AVX-512 and 0.87-0.96 at 1 to 3 with AVX2; at 6 to 10 vectors
+// with AVX-512 (spills) 1.01-1.16, at 4 and 5 with AVX2 0.97-1.01 (bench/README, twenty-fifth
+// round).
+#if defined(__AVX512F__)
+constexpr int kWinMax = 5;
+#else
+constexpr int kWinMax = 3;
+#endif
+
 // pass1_pixel_t with the path from the left in registers (h: the previous pixel's kNv
 // vectors in, this pixel's out) rather than in a row of memory: a store and a load fewer per
 // vector, and no trip through the store buffer on the chain from pixel to pixel.
@@ -1974,13 +1986,15 @@ inline void pass1_pixel_r(const uint8_t* __restrict cx, typename V::R (&h)[kNv],
 
 // Pass 2 on one pixel: the path from the right, the sums (0xFFFF outside klo .. klo + span
 // when kBorder; into px when kSecond), the winner per lane and the right winners' window.
-template <class V, int kNv, bool kFirst, bool kBorder, bool kSecond, int kSlot0 = -1>
+template <class V, int kNv, bool kFirst, bool kBorder, bool kSecond, int kSlot0 = -1,
+          bool kWin = false>
 inline void pass2_pixel_t(int nv_rt, const uint8_t* __restrict cx, int16_t* __restrict hrow,
                           uint16_t* __restrict px, uint16_t* __restrict wmin,
                           uint16_t* __restrict warg, int slot0, typename V::R iota_nv,
                           typename V::R vp1, typename V::R mr, typename V::R p2r,
                           typename V::R lo_v, typename V::R span_v, typename V::R& mr_out,
-                          typename V::R& best_out, typename V::R& arg_out) {
+                          typename V::R& best_out, typename V::R& arg_out,
+                          typename V::R* wminr = nullptr, typename V::R* wargr = nullptr) {
   using R = typename V::R;
   constexpr int N = V::kLanes;
   const int nv = kNv ? kNv : nv_rt;
@@ -2007,16 +2021,21 @@ inline void pass2_pixel_t(int nv_rt, const uint8_t* __restrict cx, int16_t* __re
     if constexpr (kBorder) s = V::or_outside(s, kv, lo_v, span_v);
     if constexpr (kSecond) V::store(px + v * N, s);  // for the second best
     V::take_lt(best, barg, s, kv);
-    // With kSlot0 (slot0 known at compile time) every slot is a constant of the unrolled
-    // loop: no index arithmetic per vector.
-    const int sl = kSlot0 >= 0 ? (kSlot0 + v) % (kNv > 0 ? kNv : 1) : slot;
-    uint16_t* wp = wmin + sl * N;
-    uint16_t* ap = warg + sl * N;
-    R wv = V::load(wp), wa = V::load(ap);
-    V::take_le(wv, wa, s, kv);
-    V::store(wp, wv);
-    V::store(ap, wa);
-    if constexpr (kSlot0 < 0) slot = slot + 1 == nv ? 0 : slot + 1;
+    if constexpr (kWin) {
+      // The window in registers, vector v at index v.
+      V::take_le(wminr[v], wargr[v], s, kv);
+    } else {
+      // With kSlot0 (slot0 known at compile time) every slot is a constant of the unrolled
+      // loop: no index arithmetic per vector.
+      const int sl = kSlot0 >= 0 ? (kSlot0 + v) % (kNv > 0 ? kNv : 1) : slot;
+      uint16_t* wp = wmin + sl * N;
+      uint16_t* ap = warg + sl * N;
+      R wv = V::load(wp), wa = V::load(ap);
+      V::take_le(wv, wa, s, kv);
+      V::store(wp, wv);
+      V::store(ap, wa);
+      if constexpr (kSlot0 < 0) slot = slot + 1 == nv ? 0 : slot + 1;
+    }
     kv = V::add(kv, one);
   }
   mr_out = V::hmin_v(V::min(rmin[0], rmin[1]));
@@ -2127,6 +2146,14 @@ void fused_row_t_impl(const FusedRowArgs& a) {
     for (int k = 0; k < kNv * N; ++k) t[k] = static_cast<uint16_t>((k % kNv) * N + k / kNv);
     return t;
   }();
+  // With at most kWinMax vectors per pixel, the window stays in registers.
+  constexpr bool kWin = kNv >= 1 && kNv <= kWinMax;
+  constexpr int kWinNv = kWin ? kNv : 1;
+  R wminr[kWinNv], wargr[kWinNv];
+  for (int v = 0; v < kWinNv; ++v) {
+    wminr[v] = ones;
+    wargr[v] = V::set1(0);
+  }
   for (ptrdiff_t x = cols - 1; x >= 0; --x) {
     const uint8_t* cx = a.c + x * nd;
     uint16_t* px = a.partial + x * nd;
@@ -2146,36 +2173,48 @@ void fused_row_t_impl(const FusedRowArgs& a) {
     R best_v, arg_v;
     if (x == cols - 1) {
       lo_span(lo_v, span_v);
-      pass2_pixel_t<V, kNv, true, true, kSecond>(nv, cx, hrow, px, wmin, warg, slot0, iota_nv,
-                                                 vp1, sent, sent, lo_v, span_v, mr, best_v,
-                                                 arg_v);
+      pass2_pixel_t<V, kNv, true, true, kSecond, -1, kWin>(
+          nv, cx, hrow, px, wmin, warg, slot0, iota_nv, vp1, sent, sent, lo_v, span_v, mr,
+          best_v, arg_v, wminr, wargr);
     } else {
       // The leaving vector 0: lane 0 is final; the rest moves down one lane and becomes
-      // vector nv - 1 (same slot); vector v + 1 becomes vector v.
-      uint16_t* w0 = wmin + slot0 * N;
-      uint16_t* a0 = warg + slot0 * N;
+      // vector nv - 1 (same slot, or the last register); vector v + 1 becomes vector v.
       const ptrdiff_t xr = x + 1 - dmin;
-      if (xr >= 0 && xr < cols) a.rfinal[xr] = a0[0];
-      V::store(w0, V::shift_down(V::load(w0), ones));
-      V::store(a0, V::shift_down(V::load(a0), ones));
-      slot0 = slot0 + 1 == nv ? 0 : slot0 + 1;
+      if constexpr (kWin) {
+        if (xr >= 0 && xr < cols) a.rfinal[xr] = static_cast<uint16_t>(V::lane0(wargr[0]));
+        const R w0 = V::shift_down(wminr[0], ones), a0 = V::shift_down(wargr[0], ones);
+#pragma GCC unroll 16
+        for (int v = 0; v + 1 < kWinNv; ++v) {
+          wminr[v] = wminr[v + 1];
+          wargr[v] = wargr[v + 1];
+        }
+        wminr[kWinNv - 1] = w0;
+        wargr[kWinNv - 1] = a0;
+      } else {
+        uint16_t* w0 = wmin + slot0 * N;
+        uint16_t* a0 = warg + slot0 * N;
+        if (xr >= 0 && xr < cols) a.rfinal[xr] = a0[0];
+        V::store(w0, V::shift_down(V::load(w0), ones));
+        V::store(a0, V::shift_down(V::load(a0), ones));
+        slot0 = slot0 + 1 == nv ? 0 : slot0 + 1;
+      }
       const R p2r = V::set1(p2_for(a.p, g[x], g[x + 1]));
       if (klo != 0 || khi != nd - 1) {
         lo_span(lo_v, span_v);
-        pass2_pixel_t<V, kNv, false, true, kSecond>(nv, cx, hrow, px, wmin, warg, slot0,
-                                                    iota_nv, vp1, mr, p2r, lo_v, span_v, mr,
-                                                    best_v, arg_v);
-      } else if constexpr (kNv >= 2 && kNv <= kConstSlotsMax) {
+        pass2_pixel_t<V, kNv, false, true, kSecond, -1, kWin>(
+            nv, cx, hrow, px, wmin, warg, slot0, iota_nv, vp1, mr, p2r, lo_v, span_v, mr,
+            best_v, arg_v, wminr, wargr);
+      } else if constexpr (!kWin && kNv >= 2 && kNv <= kConstSlotsMax) {
         // One instance per slot0 (it cycles through 0 .. nv - 1, so the branch predicts).
         with_constant<kNv>(slot0, [&](auto s0) {
           pass2_pixel_t<V, kNv, false, false, kSecond, decltype(s0)::value>(
               nv, cx, hrow, px, wmin, warg, slot0, iota_nv, vp1, mr, p2r, lo_v, span_v, mr,
-              best_v, arg_v);
+              best_v, arg_v, wminr, wargr);
         });
       } else {
-        pass2_pixel_t<V, kNv, false, false, kSecond>(nv, cx, hrow, px, wmin, warg, slot0,
-                                                     iota_nv, vp1, mr, p2r, lo_v, span_v, mr,
-                                                     best_v, arg_v);
+        pass2_pixel_t<V, kNv, false, false, kSecond, -1, kWin>(
+            nv, cx, hrow, px, wmin, warg, slot0, iota_nv, vp1, mr, p2r, lo_v, span_v, mr,
+            best_v, arg_v, wminr, wargr);
       }
     }
     uint32_t* rx = res + 4 * x;
@@ -2219,7 +2258,12 @@ void fused_row_t_impl(const FusedRowArgs& a) {
       rx[3] = sum(am) | sum(ap) << 16;
     }
   }
-  // The columns still in the window are final (vector v in slot (slot0 + v) mod nv).
+  // The columns still in the window are final (vector v in slot (slot0 + v) mod nv; with
+  // the window in registers, vector v in register v, stored as slot v).
+  if constexpr (kWin) {
+    for (int v = 0; v < kWinNv; ++v) V::store(warg + v * N, wargr[v]);
+    slot0 = 0;
+  }
   for (int v = 0; v < nv; ++v) {
     const int s = (slot0 + v) % nv;
     for (int j = 0; j < N; ++j) {
