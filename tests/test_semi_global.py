@@ -456,6 +456,27 @@ def test_every_vector_count_of_the_fused_row_matches_the_scalar_path(isa: str, n
 
 
 @pytest.mark.parametrize("isa", SUPPORTED_ISAS)
+@pytest.mark.parametrize("paths", [4, 8])
+@pytest.mark.parametrize("nd", [*range(16, 304, 16), 352])
+def test_every_vector_count_of_the_plain_fused_row_matches_the_scalar_path(
+    isa: str, paths: int, nd: int
+) -> None:
+    # paths 4 and 8 end in the plain layout's fused row, whose pass 2 keeps its path and
+    # window in registers up to a few vectors per pixel (a count known when compiled) and in
+    # memory beyond: every vector count of 16, 32 and 64 lanes, with and without the
+    # second best.
+    left, right, _ = slanted_pair((29, 310), d0=0.4 * nd, dx=0.05, dy=0.02, seed=nd + paths)
+    for kw in (
+        {"num_disparities": nd, "uniqueness_ratio": 0},
+        {"num_disparities": nd, "min_disparity": -3, "uniqueness_ratio": 10,
+         "return_confidence": True},
+    ):  # fmt: skip
+        a = sd.SemiGlobalMatcher(isa="baseline", paths=paths, **kw).compute(left, right)
+        b = sd.SemiGlobalMatcher(isa=isa, paths=paths, **kw).compute(left, right)
+        np.testing.assert_array_equal(a, b)
+
+
+@pytest.mark.parametrize("isa", SUPPORTED_ISAS)
 @pytest.mark.parametrize(("nd", "md"), [(5, -7), (3, -30), (21, -40), (17, -5), (33, 8)])
 @pytest.mark.parametrize("lr_max_diff", [1.0, None])
 @pytest.mark.parametrize("paths", [3, 4, 8])

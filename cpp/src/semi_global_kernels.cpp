@@ -1485,34 +1485,47 @@ inline void pass1_pixel(int nv, const uint8_t* __restrict cx, int16_t* __restric
 // moved down one lane and updated. Returns the least sum of each lane, its lowest index in
 // arg_v and the lane's second least (the least of the others; equal to the least on a tie)
 // in sec_v.
-template <class V, bool kFirst, bool kBorder>
-inline typename V::R pass2_pixel(int nv, const uint8_t* __restrict cx, int16_t* __restrict hrow,
-                                 const uint16_t* __restrict px,
+template <class V, bool kFirst, bool kBorder, int kNv = 0>
+inline typename V::R pass2_pixel(int nv_rt, const uint8_t* __restrict cx,
+                                 int16_t* __restrict hrow, const uint16_t* __restrict px,
                                  uint16_t* __restrict wmin, uint16_t* __restrict warg,
                                  typename V::R vp1, typename V::R mr_v, typename V::R mp2r,
                                  typename V::R lo_v, typename V::R span_v, typename V::R& mr_out,
-                                 typename V::R& arg_v, typename V::R& sec_v) {
+                                 typename V::R& arg_v, typename V::R& sec_v,
+                                 typename V::R* hreg = nullptr, typename V::R* wreg = nullptr,
+                                 typename V::R* areg = nullptr) {
   using R = typename V::R;
   constexpr int N = V::kLanes;
+  const int nv = kNv > 0 ? kNv : nv_rt;
   const R sent = V::set1(kSentinel);
   const R ones = V::set1(-1);
   const R step_k = V::set1(N);
+  // kNv > 0: the path from the right and the window in registers (hreg, wreg, areg); the
+  // path is still stored to hrow, for the sums beside the winner.
+  constexpr int kR = kNv > 0 ? kNv : 1;
+  R nh[kR], nw[kR], na[kR];
   R rcur = sent;
   typename V::X xprev{};
   if constexpr (!kFirst) {
-    rcur = V::load(hrow);
+    rcur = kNv > 0 ? hreg[0] : V::load(hrow);
     xprev = V::cross(sent, rcur);
   }
-  R wcur = V::load(wmin), acur = V::load(warg);
+  R wcur = kNv > 0 ? wreg[0] : V::load(wmin), acur = kNv > 0 ? areg[0] : V::load(warg);
   R rmin_v = ones, best_v = ones, barg = V::set1(0), bsec = ones;
   R kv = V::iota();
+#pragma GCC unroll 8
   for (int i = 0; i < nv; ++i) {
     const R c = V::widen(cx + i * N);
     R lr;
     if constexpr (kFirst) {
       lr = c;
     } else {
-      const R rnext = V::load(hrow + (i + 1) * N);
+      R rnext;
+      if constexpr (kNv > 0) {
+        rnext = i + 1 < kNv ? hreg[i + 1 < kNv ? i + 1 : 0] : sent;
+      } else {
+        rnext = V::load(hrow + (i + 1) * N);
+      }
       const typename V::X xcur = V::cross(rcur, rnext);
       lr = step_vec<V>(V::up(rcur, xprev), rcur, V::down(rcur, xcur), c, vp1, mp2r, mr_v);
       rcur = rnext;
@@ -1524,16 +1537,36 @@ inline typename V::R pass2_pixel(int nv, const uint8_t* __restrict cx, int16_t* 
     if constexpr (kBorder) t = V::or_outside(t, kv, lo_v, span_v);
     bsec = V::min(bsec, V::max(best_v, t));
     V::take_lt(best_v, barg, t, kv);
-    const R wnext = V::load(wmin + (i + 1) * N);  // 0xFFFF after the last
-    const R anext = V::load(warg + (i + 1) * N);
+    R wnext, anext;  // 0xFFFF after the last
+    if constexpr (kNv > 0) {
+      wnext = i + 1 < kNv ? wreg[i + 1 < kNv ? i + 1 : 0] : ones;
+      anext = i + 1 < kNv ? areg[i + 1 < kNv ? i + 1 : 0] : ones;
+    } else {
+      wnext = V::load(wmin + (i + 1) * N);
+      anext = V::load(warg + (i + 1) * N);
+    }
     R w = V::down(wcur, V::cross(wcur, wnext));
     R wa = V::down(acur, V::cross(acur, anext));
     V::take_le(w, wa, t, kv);
-    V::store(wmin + i * N, w);
-    V::store(warg + i * N, wa);
+    if constexpr (kNv > 0) {
+      nh[kNv > 0 ? i : 0] = lr;
+      nw[kNv > 0 ? i : 0] = w;
+      na[kNv > 0 ? i : 0] = wa;
+    } else {
+      V::store(wmin + i * N, w);
+      V::store(warg + i * N, wa);
+    }
     wcur = wnext;
     acur = anext;
     kv = V::add(kv, step_k);
+  }
+  if constexpr (kNv > 0) {
+#pragma GCC unroll 8
+    for (int i = 0; i < kNv; ++i) {
+      hreg[i] = nh[i];
+      wreg[i] = nw[i];
+      areg[i] = na[i];
+    }
   }
   mr_out = V::hmin_v(rmin_v);
   arg_v = barg;
@@ -1697,6 +1730,31 @@ inline void decide_fused(const FusedRowArgs& a) {
   if (d.clip_border) drop_unrivalled(a.disp, a.conf, cols, dmin, nd);
 }
 
+// The most vectors per pixel whose path from the right and right winners' window the plain
+// layout's pass 2 (paths 4 and 8) keeps in registers: 4 with AVX-512, 2 with AVX2. In one
+// process on Zen 4, paths=8 took 0.93-1.00 of the time there; beyond (5 and 6 vectors with
+// AVX-512, 3 and 4 with AVX2) 0.96-1.05, noise (bench/README, twenty-fifth round).
+#if defined(__AVX512F__)
+constexpr int kPlainRegsMax = 4;
+#else
+constexpr int kPlainRegsMax = 2;
+#endif
+
+// fn(std::integral_constant<int, nv>{}) when 1 <= nv <= kMax, else
+// fn(std::integral_constant<int, 0>{}) (the count known at run time only).
+template <int kMax, int K = 1, class Fn>
+inline void with_vector_count(int nv, Fn&& fn) {
+  if constexpr (K > kMax) {
+    fn(std::integral_constant<int, 0>{});
+  } else {
+    if (nv == K) {
+      fn(std::integral_constant<int, K>{});
+      return;
+    }
+    with_vector_count<kMax, K + 1>(nv, fn);
+  }
+}
+
 template <class V, bool kVertical, bool kBase>
 void fused_row_impl(const FusedRowArgs& a) {
   using R = typename V::R;
@@ -1776,55 +1834,74 @@ void fused_row_impl(const FusedRowArgs& a) {
   }
   uint32_t* res = a.result;
   R mr = sent;
-  for (ptrdiff_t x = cols - 1; x >= 0; --x) {
-    const uint8_t* cx = a.c + x * nd;
-    const uint16_t* px = a.partial + x * nd;
-    const bool first = x == cols - 1;
-    if (!first) {
-      const ptrdiff_t xr = x + 1 - dmin;
-      if (xr >= 0 && xr < cols) a.rfinal[xr] = warg[0];
+  // With at most kPlainRegsMax vectors per pixel, the path from the right and the window stay
+  // in registers from pixel to pixel (then stored for the columns still in the window).
+  auto pass2 = [&](auto nv_c) {
+    constexpr int kNv = decltype(nv_c)::value;
+    constexpr int kR = kNv > 0 ? kNv : 1;
+    R hreg[kR], wreg[kR], areg[kR];
+    for (int v = 0; v < kR; ++v) {
+      hreg[v] = sent;
+      wreg[v] = V::set1(-1);
+      areg[v] = V::set1(0);
     }
-    // The candidates that may win, as in fused_row_t_impl (no candidate: every lane masked).
-    const ptrdiff_t klo = clamp_index(x - dmin - cols + 1, 0, ndw);
-    const ptrdiff_t khi = clamp_index(x - dmin, -1, ndw - 1);
-    const bool border = klo != 0 || khi != nd - 1;
-    const R lo_v = V::set1(klo > khi ? 0xFFFF : static_cast<int>(klo));
-    const R span_v = V::set1(klo > khi ? 0 : static_cast<int>(khi - klo));
-    R best_v, arg_v, sec_v;
-    if (first) {
-      best_v = pass2_pixel<V, true, true>(nv, cx, hrow, px, wmin, warg, vp1, sent, sent, lo_v,
-                                          span_v, mr, arg_v, sec_v);
-    } else {
-      const R mr_v = mr;
-      const R mp2r = V::add(mr, V::set1(p2_for(a.p, g[x], g[x + 1])));
-      if (border) {
-        best_v = pass2_pixel<V, false, true>(nv, cx, hrow, px, wmin, warg, vp1, mr_v, mp2r,
-                                             lo_v, span_v, mr, arg_v, sec_v);
-      } else {
-        best_v = pass2_pixel<V, false, false>(nv, cx, hrow, px, wmin, warg, vp1, mr_v, mp2r,
-                                              lo_v, span_v, mr, arg_v, sec_v);
+    for (ptrdiff_t x = cols - 1; x >= 0; --x) {
+      const uint8_t* cx = a.c + x * nd;
+      const uint16_t* px = a.partial + x * nd;
+      const bool first = x == cols - 1;
+      if (!first) {
+        const ptrdiff_t xr = x + 1 - dmin;
+        if (xr >= 0 && xr < cols) {
+          a.rfinal[xr] = kNv > 0 ? static_cast<uint16_t>(V::lane0(areg[0])) : warg[0];
+        }
       }
+      // The candidates that may win, as in fused_row_t_impl (no candidate: every lane masked).
+      const ptrdiff_t klo = clamp_index(x - dmin - cols + 1, 0, ndw);
+      const ptrdiff_t khi = clamp_index(x - dmin, -1, ndw - 1);
+      const bool border = klo != 0 || khi != nd - 1;
+      const R lo_v = V::set1(klo > khi ? 0xFFFF : static_cast<int>(klo));
+      const R span_v = V::set1(klo > khi ? 0 : static_cast<int>(khi - klo));
+      R best_v, arg_v, sec_v;
+      if (first) {
+        best_v = pass2_pixel<V, true, true, kNv>(nv, cx, hrow, px, wmin, warg, vp1, sent, sent,
+                                                 lo_v, span_v, mr, arg_v, sec_v, hreg, wreg,
+                                                 areg);
+      } else {
+        const R mr_v = mr;
+        const R mp2r = V::add(mr, V::set1(p2_for(a.p, g[x], g[x + 1])));
+        if (border) {
+          best_v = pass2_pixel<V, false, true, kNv>(nv, cx, hrow, px, wmin, warg, vp1, mr_v, mp2r,
+                                               lo_v, span_v, mr, arg_v, sec_v, hreg, wreg, areg);
+        } else {
+          best_v = pass2_pixel<V, false, false, kNv>(nv, cx, hrow, px, wmin, warg, vp1, mr_v, mp2r,
+                                                lo_v, span_v, mr, arg_v, sec_v, hreg, wreg, areg);
+        }
+      }
+      uint32_t* rx = res + 4 * x;
+      if (klo > khi) continue;
+      const R best_b = V::hmin_v(best_v);
+      const R kb_b = V::hmin_where_eq(arg_v, best_v, best_b);
+      // The second best: the least over the lanes of each lane's least, or of its second least
+      // where the lane's least first comes at kb - 1, kb or kb + 1 (the only index of kb - 1 ..
+      // kb + 1 in that lane: a later equal least is then the second least).
+      const uint32_t sec = V::hmin(V::blend_near(best_v, sec_v, arg_v, V::sub(kb_b, V::set1(1))));
+      const uint32_t best = V::lane0(best_b);
+      const int kb = static_cast<int>(V::lane0(kb_b));
+      rx[0] = best;
+      rx[1] = static_cast<uint32_t>(kb);
+      rx[2] = sec == 0xFFFFu ? kNone : sec;
+      // The sums beside the winner (used only when both are inside: unmasked), from the sums
+      // of the other paths and the path from the right just stored.
+      auto sum_at = [&](int k) {
+        return static_cast<uint32_t>(static_cast<uint16_t>(px[k] + static_cast<uint16_t>(hrow[k])));
+      };
+      rx[3] = (kb > 0 ? sum_at(kb - 1) : 0u) | (kb + 1 < nd ? sum_at(kb + 1) << 16 : 0u);
     }
-    uint32_t* rx = res + 4 * x;
-    if (klo > khi) continue;
-    const R best_b = V::hmin_v(best_v);
-    const R kb_b = V::hmin_where_eq(arg_v, best_v, best_b);
-    // The second best: the least over the lanes of each lane's least, or of its second least
-    // where the lane's least first comes at kb - 1, kb or kb + 1 (the only index of kb - 1 ..
-    // kb + 1 in that lane: a later equal least is then the second least).
-    const uint32_t sec = V::hmin(V::blend_near(best_v, sec_v, arg_v, V::sub(kb_b, V::set1(1))));
-    const uint32_t best = V::lane0(best_b);
-    const int kb = static_cast<int>(V::lane0(kb_b));
-    rx[0] = best;
-    rx[1] = static_cast<uint32_t>(kb);
-    rx[2] = sec == 0xFFFFu ? kNone : sec;
-    // The sums beside the winner (used only when both are inside: unmasked), from the sums
-    // of the other paths and the path from the right just stored.
-    auto sum_at = [&](int k) {
-      return static_cast<uint32_t>(static_cast<uint16_t>(px[k] + static_cast<uint16_t>(hrow[k])));
-    };
-    rx[3] = (kb > 0 ? sum_at(kb - 1) : 0u) | (kb + 1 < nd ? sum_at(kb + 1) << 16 : 0u);
-  }
+    if constexpr (kNv > 0) {
+      for (int v = 0; v < kNv; ++v) V::store(warg + v * N, areg[v]);
+    }
+  };
+  with_vector_count<kPlainRegsMax>(nv, pass2);
   // The columns still in the window are final.
   for (int k = 0; k < nd; ++k) {
     const ptrdiff_t xr = -dmin - k;
