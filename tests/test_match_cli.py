@@ -541,8 +541,8 @@ def test_a_failed_write_leaves_no_outputs(
 
     monkeypatch.setattr(stereodepth.pointcloud, "write_ply", disk_full)
     (out / "points.ply").rmdir()
-    (out / "depth.npy").write_bytes(b"an earlier run's depth")
-    code, _, err = run(capsys, *pair, *rig, "-o", f"{out}/")
+    (out / "depth.npy").write_bytes(b"an earlier run's depth")  # (replacing it takes --force)
+    code, _, err = run(capsys, *pair, *rig, "--force", "-o", f"{out}/")
     assert code == 1 and "No space left on device" in err and err.count("\n") == 1
     assert list(out.iterdir()) == [out / "depth.npy"]
     assert (out / "depth.npy").read_bytes() == b"an earlier run's depth"

@@ -2,7 +2,9 @@
 run that this one does not write are removed once the new set is complete, and only those:
 the files the earlier run's record (a hidden file beside them) lists, unchanged since; never
 another file, a file of the same name that match did not write or that was changed since, or
-an input. A run that fails, or cannot print its summary, leaves the earlier set as it was."""
+an input. A file at one of the run's own output names that the record does not list is the
+user's: the run is refused unless --force. A run that fails, or cannot print its summary,
+leaves the earlier set as it was."""
 
 from __future__ import annotations
 
@@ -143,17 +145,62 @@ def test_files_match_did_not_write_or_that_changed_since_stay(
     assert (out / "depth.npy").read_bytes() == b"edited"
     assert (out / "points.ply").read_bytes() == b"the user's own cloud"
     assert "removed" not in text
+    # Writing depth.npy and points.ply again would replace them: the record of the last run
+    # (disparity.pfm only) does not list them, so that takes --force.
+    before = contents(out)
+    code, _, err = run(capsys, *pair, *RIG, "--no-preview", "--ply", "-o", out)
+    assert code == 2 and err.count("\n") == 1, err
+    assert "depth.npy is there and no earlier match run's record lists it" in err
+    assert "--force" in err and contents(out) == before
     # Without its record nothing is removed, and a damaged record is no record.
     for record in (None, b"{not json", b'{"files": ["depth.npy"]}'):
-        code, _, err = run(capsys, *pair, *RIG, "--no-preview", "--ply", "-o", out)
+        code, _, err = run(capsys, *pair, *RIG, "--no-preview", "--ply", "--force", "-o", out)
         assert code == 0, err
         if record is None:
             (out / MANIFEST).unlink()
         else:
             (out / MANIFEST).write_bytes(record)
-        code, _, err = run(capsys, *pair, "--threads", "1", "--no-preview", "-o", out)
+        code, _, err = run(capsys, *pair, "--threads", "1", "--no-preview", "--force", "-o", out)
         assert code == 0, err
         assert (out / "points.ply").is_file() and (out / "depth.npy").is_file()
+
+
+def test_a_file_of_the_users_at_an_output_name_is_refused_without_force(
+    pair: tuple[Path, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A depth.npy of the user's in the folder (the default --out is '.'), or one reached
+    through a link, or at a prefix's name, was replaced without a word. Now the run is a
+    usage error before any work (exit 2, one line naming --out and the file), which --force
+    overrides; the files a run wrote, as its record lists them, are replaced freely."""
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "depth.npy").write_bytes(b"the user's depth")
+    (tmp_path / "a-disparity.pfm").write_bytes(b"the prefix's namesake")
+    for where, name in ((out, "depth.npy"), (tmp_path / "a-", "a-disparity.pfm")):
+        before = contents(tmp_path)
+        code, text, err = run(capsys, *pair, *RIG, "--no-preview", "-o", where)
+        assert code == 2 and text == "" and err.count("\n") == 1, err
+        assert err.startswith(f"stereodepth match: error: --out {where}: ")
+        assert f"{name} is there and no earlier match run's record lists it" in err
+        assert contents(tmp_path) == before and contents(out) == {"depth.npy": b"the user's depth"}
+    # A link at an output name (to a file of the user's elsewhere) is refused as well.
+    target = tmp_path / "elsewhere.pfm"
+    target.write_bytes(b"the user's disparity")
+    (out / "disparity.pfm").symlink_to(target)
+    code, _, err = run(capsys, *pair, *RIG, "--no-preview", "-o", out)
+    assert code == 2 and "disparity.pfm is there" in err, err
+    assert target.read_bytes() == b"the user's disparity"
+    # --force writes through the link (its target) and beside it; the next run needs no
+    # --force, since its record lists both.
+    code, _, err = run(capsys, *pair, *RIG, "--no-preview", "--force", "-o", out)
+    assert code == 0, err
+    assert (out / "disparity.pfm").is_symlink() and target.read_bytes()[:2] == b"Pf"
+    assert (out / "depth.npy").read_bytes()[:6] == b"\x93NUMPY"
+    code, _, err = run(capsys, *pair, *RIG, "--no-preview", "-o", out)
+    assert code == 0, err
+    code, _, err = run(capsys, *pair, *RIG, "--no-preview", "--force", "-o", tmp_path / "a-")
+    assert code == 0, err
+    assert (tmp_path / "a-disparity.pfm").read_bytes()[:2] == b"Pf"
 
 
 def test_an_input_named_like_an_output_is_never_removed(

@@ -1767,10 +1767,9 @@ def run(args: argparse.Namespace) -> int:
             skipped = ", ".join(sorted(methods & set(_OPENCV_METHODS)))
             how = '(pip install opencv-python-headless, or "stereodepth[bench]")'
             variants = [v for v in variants if v.method not in _OPENCV_METHODS]
-            if not variants:
-                raise _usage_error(
-                    f"{skipped} need(s) OpenCV, which is not installed {how}"
-                ) from None
+            if not variants:  # a missing extra: ImportError, exit status 1
+                why = f"{skipped} need(s) OpenCV, which is not installed {how}"
+                raise ImportError(why) from None
             notes.append(f"skipped {skipped}: OpenCV is not installed {how}")
         else:
             for key in opencv_options:

@@ -4,7 +4,9 @@ a point cloud, with a summary on stdout (``--json`` for one JSON object).
 Outputs go to ``--out``: a folder (an existing one, or a path ending in ``/``, created) with
 files ``disparity.<ext>``, ``depth.<ext>``, ``disparity-preview.png``, ``depth-preview.png``
 and ``points.ply``; or a prefix (``--out results/teddy-`` writes ``results/teddy-disparity.pfm``
-and so on; its folder must exist). Formats: disparity as PFM (float32, +inf holes, as
+and so on; its folder must exist). A file already at one of the output names that no earlier
+``match`` run there wrote (its hidden record does not list it) is refused, exit 2, unless
+``--force``. Formats: disparity as PFM (float32, +inf holes, as
 Middlebury's; default), ``npy`` (float32, NaN holes) or ``png16`` (KITTI's uint16 of d x 256, 0
 for holes: 0 to 255.996 px, refused for a search range outside that); depth as ``npy`` (float32
 metres, NaN where unknown; default), ``pfm``, or ``png16`` (uint16 millimetres, 0 unknown,
@@ -161,12 +163,20 @@ def register(subparsers: Any) -> None:
         type=path_arg,
         default=".",
         metavar="PATH",
-        help="a folder (existing, or ending in /) or a file-name prefix (default: .). A run "
-        "replaces the whole set of match's files there: once its own are written it removes "
-        "those an earlier run wrote that it does not write (another format, a points.ply, "
-        "previews or rectified pair not asked for this time; listed as 'removed'), as a "
-        "hidden record there lists them and if they are unchanged since; a failed run leaves "
-        "the earlier set as it was. Other files are never touched",
+        help="a folder (existing, or ending in /) or a file-name prefix (default: .; "
+        "-o results/teddy- writes results/teddy-disparity.pfm, ...). A run replaces the whole "
+        "set of match's files there: once its own are written it removes those an earlier run "
+        "wrote that it does not write (another format, a points.ply, previews or rectified "
+        "pair not asked for this time; listed as 'removed'), as a hidden record there lists "
+        "them and if they are unchanged since; a failed run leaves the earlier set as it was. "
+        "Other files are never touched: a file at one of its output names that the record "
+        "does not list is refused (see --force)",
+    )
+    o.add_argument(
+        "--force",
+        action="store_true",
+        help="replace files at the output names that no earlier match run at --out wrote "
+        "(refused without it: a depth.npy of yours in the folder, say)",
     )
     o.add_argument(
         "--disparity-format", choices=tuple(DISPARITY_FORMATS), default="pfm", help="default pfm"
@@ -513,6 +523,8 @@ def run(args: argparse.Namespace) -> int:
                     _refuse_read_only(path, path)
         except PermissionError as exc:
             raise _Usage(f"--out {args.out}: {exc.strerror}") from None
+        if not args.force:
+            _refuse_replacing_files_of_no_record(args.out, out, names)
 
         rectify_s = None
         if rectifier is not None:
@@ -697,6 +709,40 @@ def _manifest_path(out: str) -> Path:
     return prefix.with_name(f".{prefix.name}{MANIFEST_NAME}")
 
 
+def _recorded_files(out: str) -> dict[str, Any]:
+    """The files the record of ``--out``'s last run lists, by name, each with the size and
+    modification time it had then; none without a readable record."""
+    try:
+        record = json.loads(_manifest_path(out).read_text(encoding="utf-8"))
+        files = record["files"] if isinstance(record, dict) else {}
+    except (OSError, ValueError, KeyError):
+        return {}
+    return files if isinstance(files, dict) else {}
+
+
+def _refuse_replacing_files_of_no_record(
+    out_arg: str, out: dict[str, Path], names: dict[str, str]
+) -> None:
+    """A usage error, before any work, when a file (or a link) is at one of this run's output
+    paths and ``--out``'s record (:func:`_manifest_path`) does not list that name: no match
+    run wrote it there, so it is the user's (a ``depth.npy`` of theirs in the folder, the
+    default --out being '.'), which used to be replaced without a word. ``--force`` replaces
+    it; so does a later run once the record lists it (batch's rule, see its --force). A
+    device or a pipe at an output name is written as before."""
+    listed = _recorded_files(out_arg)
+    for key, path in out.items():
+        try:
+            st = path.lstat()
+        except OSError:
+            continue
+        if not (stat.S_ISREG(st.st_mode) or stat.S_ISLNK(st.st_mode)) or names[key] in listed:
+            continue
+        raise _Usage(
+            f"--out {out_arg}: {path.name} is there and no earlier match run's record lists "
+            "it (a file of yours?): move it, choose another --out, or give --force to replace it"
+        )
+
+
 def _stale_outputs(args: argparse.Namespace, names: dict[str, str]) -> list[Path]:
     """The files of an earlier run at --out that this run does not write (another format, a
     cloud or previews no longer asked for): those its record lists (:func:`_manifest_path`)
@@ -704,13 +750,7 @@ def _stale_outputs(args: argparse.Namespace, names: dict[str, str]) -> list[Path
     modification time). A file of such a name that match did not write, or that was changed
     since, is the user's and stays; so does a folder, and one of the command's input files
     (``match left-rectified.png right-rectified.png`` without --write-rectified)."""
-    try:
-        record = json.loads(_manifest_path(args.out).read_text(encoding="utf-8"))
-        files = record["files"] if isinstance(record, dict) else {}
-    except (OSError, ValueError, KeyError):
-        return []
-    if not isinstance(files, dict):
-        return []
+    files = _recorded_files(args.out)
     written = set(names.values())
     is_dir = _out_is_folder(args.out)
     inputs = [v for v in (args.left, args.right, args.calib, args.calib_right) if v is not None]
@@ -747,7 +787,9 @@ def _write_manifest(out_arg: str, out: dict[str, Path], names: dict[str, str]) -
             st = path.lstat()
         except OSError:
             continue
-        if stat.S_ISREG(st.st_mode):
+        # A link the run wrote through is listed too (it is then no file of the user's to
+        # refuse), though never removed as stale: _stale_outputs takes regular files only.
+        if stat.S_ISREG(st.st_mode) or stat.S_ISLNK(st.st_mode):
             files[names[key]] = {"size": st.st_size, "mtime_ns": st.st_mtime_ns}
     with (
         contextlib.suppress(OSError, ValueError),
