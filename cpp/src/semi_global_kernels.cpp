@@ -35,6 +35,30 @@
 namespace stereodepth::detail::STEREODEPTH_ISA_NS {
 namespace {
 
+// Paths 4 and 8 keep the sums of every pixel and disparity (2 bytes each: 21 MB for Cones at
+// ndisp 64), written on the way down, read and written on the way up and read by the fused
+// rows, each time a whole image after the last: beyond the caches, and perf put a fifth of
+// those passes' samples on the sums' loads and stores. The hardware prefetchers do not run
+// far enough ahead (nor across pages), so each pixel asks for the cache lines of the sums
+// kPrefetchBytes ahead of its own. In one process on Zen 4, paths=8 took 0.87-0.98 of the time
+// with one thread on the shared scenes from ndisp 32 on (Cones 0.89, Adirondack 0.88, KITTI
+// 0.90), 0.89-0.98 with two (AVX2: 0.91-1.00), and 1.00-1.05 on Tsukuba, whose 3.5 MB of sums
+// stay in the caches; 4 KB ahead and prefetcht1 measured no better (bench/README, twenty-fifth
+// round).
+constexpr ptrdiff_t kPrefetchBytes = 2048;
+
+// The cache lines that start in the bytes [p + ahead, p + ahead + bytes), asked for ahead of
+// use (kWrite: to be written; prefetchw): called for consecutive blocks, each line once.
+template <bool kWrite>
+inline void prefetch_ahead(const void* p, ptrdiff_t ahead, ptrdiff_t bytes) {
+  const std::uintptr_t lo =
+      reinterpret_cast<std::uintptr_t>(p) + static_cast<std::uintptr_t>(ahead);
+  const std::uintptr_t hi = lo + static_cast<std::uintptr_t>(bytes);
+  for (std::uintptr_t at = (lo + 63) & ~std::uintptr_t{63}; at < hi; at += 64) {
+    __builtin_prefetch(reinterpret_cast<const void*>(at), kWrite ? 1 : 0, 3);
+  }
+}
+
 using std::int16_t;
 using std::ptrdiff_t;
 using std::uint16_t;
@@ -1794,6 +1818,7 @@ void fused_row_impl(const FusedRowArgs& a) {
     const uint8_t* cx = a.c + x * nd;
     uint16_t* px = a.partial + x * nd;
     const uint16_t* bx = kBase ? a.base + x * nd : nullptr;
+    if constexpr (kBase) prefetch_ahead<false>(bx, kPrefetchBytes, 2 * nd);  // the sums ahead
     int16_t* lvx = kVertical ? lv0 + x * lvs : nullptr;
     int16_t* lvmin = kVertical ? a.lvmin + x : nullptr;
     R mv_v = sent, mp2v = sent;
@@ -2382,6 +2407,8 @@ void path_rows_impl(const PathParams& p, const uint8_t* c, const uint8_t* g, con
   const R vp1 = V::set1(p.p1);
   const R ones = V::set1(-1);
   for (ptrdiff_t x = x0; x < x1; ++x) {
+    // The sums kPrefetchBytes ahead: to be written on the way down, read on the way up.
+    prefetch_ahead<kWrite>(s + x * nd, kPrefetchBytes, 2 * nd);
     const int16_t* q[kNv];
     int16_t* out[kNv];
     R m_v[kNv], mp2_v[kNv], mn[kNv];
