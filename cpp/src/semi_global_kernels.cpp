@@ -35,16 +35,28 @@
 namespace stereodepth::detail::STEREODEPTH_ISA_NS {
 namespace {
 
+using std::int16_t;
+using std::ptrdiff_t;
+using std::uint16_t;
+using std::uint32_t;
+using std::uint8_t;
+
+inline ptrdiff_t clamp_index(ptrdiff_t v, ptrdiff_t lo, ptrdiff_t hi) {
+  return v < lo ? lo : (v > hi ? hi : v);
+}
+
+inline int16_t min16(int16_t a, int16_t b) { return a < b ? a : b; }
+
 // Paths 4 and 8 keep the sums of every pixel and disparity (2 bytes each: 21 MB for Cones at
 // ndisp 64), written on the way down, read and written on the way up and read by the fused
-// rows, each time a whole image after the last: beyond the caches, and perf put a fifth of
-// those passes' samples on the sums' loads and stores. The hardware prefetchers do not run
-// far enough ahead (nor across pages), so each pixel asks for the cache lines of the sums
-// kPrefetchBytes ahead of its own. In one process on Zen 4, paths=8 took 0.87-0.98 of the time
-// with one thread on the shared scenes from ndisp 32 on (Cones 0.89, Adirondack 0.88, KITTI
-// 0.90), 0.89-0.98 with two (AVX2: 0.91-1.00), and 1.00-1.05 on Tsukuba, whose 3.5 MB of sums
-// stay in the caches; 4 KB ahead and prefetcht1 measured no better (bench/README, twenty-fifth
-// round).
+// rows, each time a whole image after the last: beyond the caches. perf put a fifth of those
+// passes' samples on the sums' loads and stores, which the hardware prefetchers (stopping at
+// page boundaries) did not hide. So each pixel asks for the cache lines of the sums
+// kPrefetchBytes ahead of its own. In one process on Zen 4, paths=8 took 0.87-0.98 of the
+// time with one thread on the shared scenes from ndisp 32 on (Cones 0.89, Adirondack 0.88,
+// KITTI 0.90), 0.89-0.98 with two (AVX2: 0.91-1.00), and 1.00-1.05 on Tsukuba, whose 3.5 MB
+// of sums stay in the caches; 4 KB ahead and prefetcht1 measured no better (bench/README,
+// twenty-fifth round).
 constexpr ptrdiff_t kPrefetchBytes = 2048;
 
 // The cache lines that start in the bytes [p + ahead, p + ahead + bytes), asked for ahead of
@@ -58,18 +70,6 @@ inline void prefetch_ahead(const void* p, ptrdiff_t ahead, ptrdiff_t bytes) {
     __builtin_prefetch(reinterpret_cast<const void*>(at), kWrite ? 1 : 0, 3);
   }
 }
-
-using std::int16_t;
-using std::ptrdiff_t;
-using std::uint16_t;
-using std::uint32_t;
-using std::uint8_t;
-
-inline ptrdiff_t clamp_index(ptrdiff_t v, ptrdiff_t lo, ptrdiff_t hi) {
-  return v < lo ? lo : (v > hi ? hi : v);
-}
-
-inline int16_t min16(int16_t a, int16_t b) { return a < b ? a : b; }
 
 // Set bits of a 16-bit census difference, in 16-bit lanes (vectorises without popcnt).
 inline uint16_t popcount16(uint16_t v) {
