@@ -129,3 +129,33 @@ def test_images_of_a_few_columns_agree_with_the_oracle(
         np.testing.assert_allclose(conf, oconf, rtol=0, atol=1e-6)
         if w <= 2 and w < nd:
             assert np.isnan(d).all()  # every pixel has 1 or 2 candidates: never a rival
+
+
+@pytest.mark.parametrize("method", sorted(MATCHERS))
+@pytest.mark.parametrize("w", [1, 2, 41])
+@pytest.mark.parametrize("nd", [1, 5])
+def test_a_range_wholly_outside_the_image_is_refused(method: str, w: int, nd: int) -> None:
+    """Pixel x is matched at x - d, so only disparities -(w - 1) .. w - 1 can be matched at
+    all. A range beyond them on either side (a typo, or a range meant for the uncropped pair)
+    is refused by the kernels, the reusable matcher and the oracles alike, naming
+    min_disparity and the width; the range that reaches one disparity into the image is
+    matched, as the oracle matches it."""
+    native, oracle, cls = MATCHERS[method]
+    left, right = shifted_pair((9, w), 0, seed=w + nd)
+    outside = (w, w + 300, -(w - 1) - nd, -(w - 1) - nd - 300)
+    for min_d in outside:
+        message = (
+            rf"min_disparity={min_d} with num_disparities={nd} searches disparities {min_d} "
+            rf"to {min_d + nd - 1}, none of which lies inside an image {w} pixels wide"
+        )
+        for match in (native, oracle):
+            with pytest.raises(ValueError, match=message):
+                match(left, right, num_disparities=nd, min_disparity=min_d)
+        with pytest.raises(ValueError, match=message):
+            cls(num_disparities=nd, min_disparity=min_d).compute(left, right)
+    for min_d in (w - 1, -(w - 1) - nd + 1):
+        d = native(left, right, num_disparities=nd, min_disparity=min_d)
+        od = oracle(left, right, num_disparities=nd, min_disparity=min_d)
+        assert d.shape == (9, w)
+        np.testing.assert_array_equal(np.isnan(d), np.isnan(od))
+        np.testing.assert_allclose(d, od, rtol=0, atol=1e-3)

@@ -356,6 +356,12 @@ def bad_cases(tmp: Path, left: Path, right: Path) -> list[tuple[list[Any], str]]
             "num_disparities must be an integer in [1, 4096]",
         ),
         ([left, right, "--block-size", "4"], "block_size must be an odd integer"),
+        # a range no pixel of the 96 px wide pair can match: the map was NaN everywhere
+        (
+            [left, right, "--min-disparity", "96"],
+            "min_disparity=96 with num_disparities=16 searches disparities 96 to 111, none of "
+            "which lies inside an image 96 pixels wide",
+        ),
         ([left, right, "--cmap", "nope"], "--cmap nope: cmap must be a matplotlib colour map"),
         ([left, right, "--ply"], "--ply needs a rig"),
         ([left, right, "-o", tmp / "missing" / "p-"], "the folder of the prefix"),

@@ -131,7 +131,11 @@ def semi_global_match(
     tie-breaks (``threads`` and ``max_memory_mb`` are checked, then unused)."""
     o = SemiGlobalOptions(num_disparities=num_disparities, **params)
     left_arr, right_arr = as_pair(
-        left, right, channel_order=o.channel_order, intensity_range=o.intensity_range
+        left,
+        right,
+        channel_order=o.channel_order,
+        intensity_range=o.intensity_range,
+        check_size=o.check_size,
     )
     gl = grey(left_arr, channel_order=o.channel_order)
     gr = grey(right_arr, channel_order=o.channel_order)

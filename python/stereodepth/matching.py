@@ -87,7 +87,8 @@ Limits: block costs are accumulated in 16 bits, so ``block_size`` is at most 63 
 31 for SAD (the largest block sum then stays below 65535); ``num_disparities`` is at most
 4096, ``|min_disparity|`` at most 32768, and the image width times ``num_disparities`` rounded
 up to a multiple of 16 (the SIMD kernels' lanes; :data:`MAX_WIDTH_TIMES_DISPARITIES`) below
-2**30, on every instruction set alike. Memory is O(W * num_disparities) per thread plus a
+2**30, on every instruction set alike; a search range must reach into the image (some
+disparity in ``-(W - 1) .. W - 1``), for both matchers and their oracles. Memory is O(W * num_disparities) per thread plus a
 few bytes per pixel; there is never a full cost volume. Rows are split into one band per
 thread (an idle thread takes over half of the rows another has left); the output does not
 depend on the number of threads or on how the rows were shared.
@@ -236,7 +237,20 @@ class MatcherOptions:
     def check_size(self, rows: int, cols: int) -> None:
         """Raises ValueError when the matcher refuses a pair of ``rows`` x ``cols`` pixels
         whatever its values, before the pair is copied or stretched; each matcher's options
-        class says what it refuses (none here)."""
+        class adds what it refuses. Every matcher refuses a search range wholly outside the
+        image: pixel ``x`` looks for its match at ``x - d`` in the right image, so only
+        disparities in ``[-(cols - 1), cols - 1]`` can ever be matched, and a range of none of
+        them (``min_disparity >= cols``, or ``min_disparity + num_disparities - 1 <= -cols``)
+        would give a map that is NaN everywhere, most often from a typo or a crop."""
+        low = self.min_disparity
+        high = low + self.num_disparities - 1
+        if low >= cols or high <= -cols:
+            raise ValueError(
+                f"min_disparity={low} with num_disparities={self.num_disparities} searches "
+                f"disparities {low} to {high}, none of which lies inside an image {cols} "
+                f"pixels wide (pixel x is matched at x - d, so only {-(cols - 1)} to {cols - 1} "
+                f"can be): every pixel would be NaN; check min_disparity"
+            )
 
     def stretch_native(
         self, left: np.ndarray, right: np.ndarray, intensity_range: tuple[int, int] | None
@@ -323,7 +337,8 @@ class BlockMatchOptions(MatcherOptions):
         """The width limit of the module docstring: ``cols`` times ``num_disparities``
         rounded up to a multiple of 16 below 2**30, on every instruction set (the kernels'
         own guard takes the same rule), checked here before a view is copied or a uint16
-        pair stretched."""
+        pair stretched; and the search range of :meth:`MatcherOptions.check_size`."""
+        super().check_size(rows, cols)
         rounded = -(-self.num_disparities // DISPARITY_LANES) * DISPARITY_LANES
         if cols * rounded >= MAX_WIDTH_TIMES_DISPARITIES:
             raise ValueError(
@@ -746,7 +761,9 @@ def block_match(
     num_disparities
         How many disparities to search, any integer in [1, 4096].
     min_disparity
-        The smallest disparity searched, in pixels; may be negative.
+        The smallest disparity searched, in pixels; may be negative. A range with no
+        disparity in ``-(W - 1) .. W - 1`` for an image W pixels wide (no pixel has a
+        candidate inside the right image) is refused with ValueError.
     block_size
         The side of the square matching block, odd, >= 3 (at most 63 for census, 31 for SAD).
         The cost per pixel does not depend on it.

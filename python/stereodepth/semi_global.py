@@ -487,7 +487,9 @@ def semi_global_match(
     num_disparities
         How many disparities to search, any integer in [1, 4096].
     min_disparity
-        The smallest disparity searched, in pixels; may be negative.
+        The smallest disparity searched, in pixels; may be negative. A range with no
+        disparity in ``-(W - 1) .. W - 1`` for an image W pixels wide (no pixel has a
+        candidate inside the right image) is refused with ValueError.
     block_size
         The side of the box the census costs are summed over: 1 or 3.
     p1, p2
