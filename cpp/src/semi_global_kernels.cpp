@@ -59,12 +59,13 @@ inline int16_t min16(int16_t a, int16_t b) { return a < b ? a : b; }
 // twenty-fifth round).
 constexpr ptrdiff_t kPrefetchBytes = 2048;
 
-// The cache lines that start in the bytes [p + ahead, p + ahead + bytes), asked for ahead of
-// use (kWrite: to be written; prefetchw): called for consecutive blocks, each line once.
+// The cache lines that start in the bytes [p + kPrefetchBytes, p + kPrefetchBytes + bytes),
+// asked for ahead of use (kWrite: to be written; prefetchw): called for consecutive blocks,
+// each line once.
 template <bool kWrite>
-inline void prefetch_ahead(const void* p, ptrdiff_t ahead, ptrdiff_t bytes) {
+inline void prefetch_ahead(const void* p, ptrdiff_t bytes) {
   const std::uintptr_t lo =
-      reinterpret_cast<std::uintptr_t>(p) + static_cast<std::uintptr_t>(ahead);
+      reinterpret_cast<std::uintptr_t>(p) + static_cast<std::uintptr_t>(kPrefetchBytes);
   const std::uintptr_t hi = lo + static_cast<std::uintptr_t>(bytes);
   for (std::uintptr_t at = (lo + 63) & ~std::uintptr_t{63}; at < hi; at += 64) {
     __builtin_prefetch(reinterpret_cast<const void*>(at), kWrite ? 1 : 0, 3);
@@ -1818,7 +1819,7 @@ void fused_row_impl(const FusedRowArgs& a) {
     const uint8_t* cx = a.c + x * nd;
     uint16_t* px = a.partial + x * nd;
     const uint16_t* bx = kBase ? a.base + x * nd : nullptr;
-    if constexpr (kBase) prefetch_ahead<false>(bx, kPrefetchBytes, 2 * nd);  // the sums ahead
+    if constexpr (kBase) prefetch_ahead<false>(bx, 2 * nd);  // the sums ahead
     int16_t* lvx = kVertical ? lv0 + x * lvs : nullptr;
     int16_t* lvmin = kVertical ? a.lvmin + x : nullptr;
     R mv_v = sent, mp2v = sent;
@@ -2408,7 +2409,7 @@ void path_rows_impl(const PathParams& p, const uint8_t* c, const uint8_t* g, con
   const R ones = V::set1(-1);
   for (ptrdiff_t x = x0; x < x1; ++x) {
     // The sums kPrefetchBytes ahead: to be written on the way down, read on the way up.
-    prefetch_ahead<kWrite>(s + x * nd, kPrefetchBytes, 2 * nd);
+    prefetch_ahead<kWrite>(s + x * nd, 2 * nd);
     const int16_t* q[kNv];
     int16_t* out[kNv];
     R m_v[kNv], mp2_v[kNv], mn[kNv];

@@ -351,8 +351,9 @@ class SemiGlobalMatcher(FixedParameters):
     :meth:`compute` then matches a pair, reusing the matcher's buffers from one frame to the
     next. Calls from several threads on one matcher are safe (they take turns).
 
-    ``isa`` picks the instruction set of the kernel: ``"auto"``, ``"baseline"``, ``"avx2"`` or
-    ``"avx512"``; every choice gives the same output.
+    ``isa`` picks the instruction set of the kernel: ``"auto"`` (the best this CPU runs, capped
+    by the environment variable STEREODEPTH_ISA), ``"baseline"``, ``"avx2"`` or ``"avx512"``;
+    every choice gives the same output.
 
     The parameters are fixed: assigning one is an AttributeError (make a new matcher). A
     matcher pickles as its parameters and ``isa``: the copy has buffers of its own.
