@@ -59,25 +59,26 @@ float speckle_range_f(double range) {
   return rf;
 }
 
-// Labels rows y0 .. y1 - 1 (runs, and unions inside the band), then sizes the band's regions
-// (speckle_finish's step 1, here so that each band does it in its own thread): every run links
-// to its root (the band's lowest index in its region, as unite() keeps the lower root and
-// path halving only lowers a parent), and each root's parent becomes minus the region's size
-// in the band, capped at window + 1 (only "size > window" matters, and the cap keeps it in 32
-// bits).
-void speckle_band(const BlockMatchKernels& k, const ImageView<float>& disp,
-                  std::ptrdiff_t y0, std::ptrdiff_t y1, float rf, int window, SpeckleBand& b) {
-  const std::ptrdiff_t cols = disp.cols;
+void speckle_begin(std::ptrdiff_t y0, std::ptrdiff_t cols, SpeckleBand& b) {
   const auto words = static_cast<std::size_t>((cols + 63) / 64);
   b.runs.clear();
   b.y0 = y0;
+  b.y1 = y0;
   b.row_first.clear();
   b.valid.resize(words);
   b.left.resize(words);
   b.up.resize(words);
-  for (std::ptrdiff_t y = y0; y < y1; ++y) {
-    k.speckle_links(disp.row(y), y > y0 ? disp.row(y - 1) : nullptr, cols, rf, b.valid.data(),
-                    b.left.data(), b.up.data());
+}
+
+// Labels rows b.y1 .. y1 - 1 (runs, and unions with the row above inside the band).
+void speckle_rows(const BlockMatchKernels& k, const ImageView<float>& disp, std::ptrdiff_t y1,
+                  float rf, SpeckleBand& b) {
+  const std::ptrdiff_t cols = disp.cols;
+  const auto words = static_cast<std::size_t>((cols + 63) / 64);
+  for (std::ptrdiff_t y = b.y1; y < y1; ++y) {
+    const bool below_first = y > b.y0;
+    k.speckle_links(disp.row(y), below_first ? disp.row(y - 1) : nullptr, cols, rf,
+                    b.valid.data(), b.left.data(), b.up.data());
     b.cur.set(b.valid.data(), b.left.data(), words, static_cast<std::int32_t>(b.runs.size()));
     b.row_first.push_back(static_cast<std::int32_t>(b.runs.size()));
     for (std::size_t w = 0; w < words; ++w) {
@@ -98,7 +99,7 @@ void speckle_band(const BlockMatchKernels& k, const ImageView<float>& disp,
         b.runs.push_back({id, static_cast<std::int32_t>(x0), static_cast<std::int32_t>(x1)});
       }
     }
-    if (y > y0) {
+    if (below_first) {
       each_new_link(b.up.data(), b.cur, b.prev, words, [&](std::ptrdiff_t i) {
         unite(b.runs, b.cur.run_at(i), b.prev.run_at(i));
       });
@@ -107,8 +108,16 @@ void speckle_band(const BlockMatchKernels& k, const ImageView<float>& disp,
     }
     std::swap(b.cur, b.prev);
   }
-  b.row_first.push_back(static_cast<std::int32_t>(b.runs.size()));
+  b.y1 = std::max(b.y1, y1);
+}
 
+// Sizes the band's regions (speckle_finish's step 1, here so that each band does it in its
+// own thread): every run links to its root (the band's lowest index in its region, as
+// unite() keeps the lower root and path halving only lowers a parent), and each root's parent
+// becomes minus the region's size in the band, capped at window + 1 (only "size > window"
+// matters, and the cap keeps it in 32 bits).
+void speckle_end(int window, SpeckleBand& b) {
+  b.row_first.push_back(static_cast<std::int32_t>(b.runs.size()));
   const std::int64_t cap = speckle_size_cap(window);
   auto capped = [&](std::int64_t n) { return static_cast<std::int32_t>(std::min(n, cap)); };
   // A parent is never above its run, so in increasing order each run's parent p has been
@@ -127,6 +136,15 @@ void speckle_band(const BlockMatchKernels& k, const ImageView<float>& disp,
       root.parent = -capped(-static_cast<std::int64_t>(root.parent) + len);
     }
   }
+}
+
+// Labels rows y0 .. y1 - 1 and sizes the band's regions: speckle_begin, speckle_rows and
+// speckle_end in one call.
+void speckle_band(const BlockMatchKernels& k, const ImageView<float>& disp,
+                  std::ptrdiff_t y0, std::ptrdiff_t y1, float rf, int window, SpeckleBand& b) {
+  speckle_begin(y0, disp.cols, b);
+  speckle_rows(k, disp, y1, rf, b);
+  speckle_end(window, b);
 }
 
 // Joins the labellings (bands[i]: rows starts[i] .. starts[i + 1] - 1) and clears the

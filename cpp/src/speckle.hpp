@@ -56,6 +56,7 @@ struct RowStarts {
 struct SpeckleBand {
   std::vector<SpeckleRun> runs;  // parents are indices into this vector
   std::ptrdiff_t y0 = 0;                // the band's first row
+  std::ptrdiff_t y1 = 0;                // the row after the last one labelled
   std::vector<std::int32_t> row_first;  // row y0 + i: runs row_first[i] .. row_first[i + 1] - 1
   std::vector<std::uint64_t> valid, left, up;
   RowStarts cur, prev;  // after labelling, prev holds the band's last row
@@ -78,6 +79,15 @@ float speckle_range_f(double range);
 // (up to window + 1 pixels), for speckle_finish.
 void speckle_band(const BlockMatchKernels& k, const ImageView<float>& disp, std::ptrdiff_t y0,
                   std::ptrdiff_t y1, float rf, int window, SpeckleBand& b);
+
+// speckle_band in steps, for a band whose rows are matched a few at a time: speckle_begin
+// starts a band at row y0, each speckle_rows labels the rows from the last one labelled up to
+// y1 - 1 (their disparities final), and speckle_end sizes the regions. The band is the same as
+// speckle_band's for the same rows, however they were handed in.
+void speckle_begin(std::ptrdiff_t y0, std::ptrdiff_t cols, SpeckleBand& b);
+void speckle_rows(const BlockMatchKernels& k, const ImageView<float>& disp, std::ptrdiff_t y1,
+                  float rf, SpeckleBand& b);
+void speckle_end(int window, SpeckleBand& b);
 
 // Joins the labellings (bands[i]: rows starts[i] .. starts[i + 1] - 1, each from
 // speckle_band with the same window) and clears the regions of at most `window` pixels (NaN,
