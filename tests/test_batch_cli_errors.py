@@ -4,6 +4,7 @@ never our classes), exit status 2, no traceback, and nothing written."""
 
 from __future__ import annotations
 
+import json
 import os
 import socket
 import threading
@@ -58,6 +59,14 @@ ROWS: list[tuple[list[str], str]] = [
     (["--block-size", "4"], "--block-size 4: block_size must be an odd integer in [3, 63]"),
     (["--cost", "sad", "--block-size", "41"], "--block-size 41: block_size must be an odd"),
     (["--min-disparity", "99999"], "--min-disparity 99999: min_disparity must be an integer"),
+    # a search range no pixel of the 40 px wide pair can match (on either side): every pair
+    # failed after it was read, its records written, exit 1, without naming the flag
+    (
+        ["--min-disparity", "40"],
+        "--min-disparity 40: pair 'teddy' would search disparities 40 to 55, none of which lies "
+        "inside its 40x24 px images: only -39 to 39 can be matched along their longer side",
+    ),
+    (["--min-disparity", "-55"], "pair 'teddy' would search disparities -55 to -40, none of"),
     (["--num-disparities", "0"], "--num-disparities must be an integer >= 1, got 0"),
     (["--num-disparities", "5000"], "--num-disparities 5000: num_disparities must be"),
     (
@@ -448,3 +457,36 @@ def test_a_failed_pair_is_reported_on_one_line_whatever_its_name_holds(
     assert "cannot decode image" in failed[0], failed
     assert f"sc{shown}ene/left.png" in failed[0] or f"sc{shown}ene/right.png" in failed[0]
     assert all(line.startswith(("stereodepth batch:", "  ", "1 pair", "report:")) for line in lines)
+
+
+def test_a_report_of_the_users_is_refused_without_force(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A file at the report's path that is not a batch report (OUTDIR/report.json of the
+    user's, or --report naming one) is refused, unchanged, as a file of theirs at a pair's
+    output name is; --force replaces it, and a report of the job's own is replaced on the
+    next run without --force."""
+    inp = scene(tmp_path)
+    out = tmp_path / "out"
+    out.mkdir()
+    mine = out / "report.json"
+    elsewhere = tmp_path / "notes.json"
+    for report, extra in ((mine, []), (elsewhere, ["--report", str(elsewhere)])):
+        for text in ("MINE\n", '{"counts": 3}'):
+            report.write_text(text)
+            before = {f: f.stat().st_mtime_ns for f in out.iterdir()}
+            status, err = run([str(inp), "-o", str(out), "--quiet", *extra], capsys)
+            assert_one_line(
+                status,
+                err,
+                f"--report {report}: an existing file that is not a batch report (a file of "
+                "yours?)",
+            )
+            assert report.read_text() == text
+            assert {f: f.stat().st_mtime_ns for f in out.iterdir()} == before  # no pair ran
+        status, err = run([str(inp), "-o", str(out), "--quiet", "--force", *extra], capsys)
+        assert status == 0, err
+        assert json.loads(report.read_text())["counts"]["ok"] == 1
+        status, err = run([str(inp), "-o", str(out), "--quiet", *extra], capsys)
+        assert status == 0, err  # its own report: replaced
+        assert json.loads(report.read_text())["counts"]["skipped"] == 1

@@ -1126,7 +1126,13 @@ def test_native_layer_rejects_bad_parameters_too() -> None:
             np.zeros((2, 2), np.float32),
             {"min_disparity": 4000},
             ValueError,
-            r"min_disparity must be in \[-2047, 2048\]",
+            r"min_disparity must be in \[-2047, 2047\]",
+        ),
+        (  # its holes fit int16, but no disparity does (from_opencv_disparity refuses it too)
+            np.full((2, 2), np.nan, np.float32),
+            {"min_disparity": 2048},
+            ValueError,
+            r"min_disparity must be in \[-2047, 2047\] .* got 2048$",
         ),
         (
             np.zeros((2, 2), np.float32),

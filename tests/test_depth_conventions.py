@@ -58,7 +58,7 @@ def test_depth_m_refuses_the_fixed_point_dtypes(dtype: type) -> None:
     assert rig.depth_map(np.array([[160]], np.int16))[0, 0] == pytest.approx(8.4)
 
 
-@pytest.mark.parametrize("min_disparity", [3000, 2049, -2048, -100000])
+@pytest.mark.parametrize("min_disparity", [3000, 2048, -2048, -100000])
 def test_opencv_int16_min_disparity_outside_its_range_is_refused(min_disparity: int) -> None:
     raw = np.full((3, 4), 160, np.int16)
     calls = [
@@ -70,14 +70,18 @@ def test_opencv_int16_min_disparity_outside_its_range_is_refused(min_disparity: 
         ),
     ]
     for call in calls:
-        with pytest.raises(ValueError, match=r"min_disparity must be in \[-2047, 2048\]"):
+        with pytest.raises(ValueError, match=r"min_disparity must be in \[-2047, 2047\]"):
             call()
 
 
 def test_opencv_int16_min_disparity_at_its_limits_is_read() -> None:
     raw = np.array([[32752, 16, -32752, -32768]], np.int16)
-    hi = sd.disparity_to_depth(raw, min_disparity=2048, **RIG)
-    assert np.isnan(hi).all()  # nothing fits above 2048 px: all holes, as OpenCV means
+    hi = sd.disparity_to_depth(raw, min_disparity=2047, **RIG)
+    np.testing.assert_allclose(hi[0, 0], 700.0 * 0.12 / 2047.0, rtol=1e-6)  # 32752 / 16
+    assert np.isnan(hi[0, 1:]).all()  # below 2047 px: holes, as OpenCV means
+    np.testing.assert_array_equal(
+        sd.from_opencv_disparity(raw, min_disparity=2047), [[2047.0, np.nan, np.nan, np.nan]]
+    )
     lo = sd.disparity_to_depth(raw, min_disparity=-2047, doffs_px=3000.0, **RIG)
     z = 700.0 * 0.12 / (np.array([2047.0, 1.0, -2047.0]) + 3000.0)
     np.testing.assert_allclose(lo[0, :3], z, rtol=1e-6)

@@ -77,6 +77,29 @@ def test_read_image_applies_the_exif_orientation(
     got = io.read_image(path)
     want = np.ascontiguousarray(EXIF_UPRIGHT[orientation](stored))
     np.testing.assert_array_equal(got, want, strict=True)
+    # The size batch checks a job's search range against before reading any pair: the
+    # image's sides, in either order (Pillow turns a TIFF's size itself).
+    size = io._header_size(path)
+    assert size is not None and sorted(size) == sorted(got.shape[:2])
+
+
+def test_header_size_is_the_size_read_image_gives(tmp_path: Path) -> None:
+    """PGM and PPM (8- and 16-bit) by their own header; None for what read_image refuses."""
+    rng = np.random.default_rng(5)
+    for name, arr in (
+        ("g.pgm", rng.integers(0, 256, (5, 11), dtype=np.uint8)),
+        ("w.pgm", rng.integers(0, 65536, (6, 3), dtype=np.uint16)),
+        ("c.ppm", rng.integers(0, 256, (4, 13, 3), dtype=np.uint8)),
+    ):
+        kind = b"P6" if arr.ndim == 3 else b"P5"
+        top = b"65535" if arr.dtype == np.uint16 else b"255"
+        head = kind + b" %d %d " % (arr.shape[1], arr.shape[0]) + top + b"\n"
+        (tmp_path / name).write_bytes(head + arr.astype(arr.dtype.newbyteorder(">")).tobytes())
+        got = io.read_image(tmp_path / name)
+        assert io._header_size(tmp_path / name) == (got.shape[1], got.shape[0]) == arr.shape[1::-1]
+    (tmp_path / "junk.png").write_bytes(b"not an image")
+    assert io._header_size(tmp_path / "junk.png") is None
+    assert io._header_size(tmp_path / "absent.png") is None
 
 
 @pytest.mark.parametrize("orientation", sorted(EXIF_UPRIGHT))

@@ -143,14 +143,14 @@ def test_metrics_read_opencv_output_with_its_min_disparity() -> None:
                 np.zeros((2, 2), np.int16), min_disparity=1_000_000
             ),
             ValueError,
-            r"min_disparity must be in \[-2047, 2048\] .* got 1000000",
+            r"min_disparity must be in \[-2047, 2047\] .* got 1000000",
         ),
         (
             lambda: stereodepth.from_opencv_disparity(
                 np.zeros((2, 2), np.int16), min_disparity=-2048
             ),
             ValueError,
-            r"min_disparity must be in \[-2047, 2048\] .* got -2048",
+            r"min_disparity must be in \[-2047, 2047\] .* got -2048",
         ),
         (
             lambda: stereodepth.disparity_to_depth(

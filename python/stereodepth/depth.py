@@ -125,12 +125,13 @@ class DepthOptions:
         if md is None:
             pass
         elif opencv_format:
-            if not -2047 <= md <= 2048:
-                # As from_opencv_disparity: beyond, OpenCV's holes overflow int16 (and at
-                # 3000, every pixel was a hole, silently).
+            if not -2047 <= md <= 2047:
+                # As from_opencv_disparity: beyond, OpenCV's holes or its least disparity
+                # overflow int16 (at 2048 and at 3000 every pixel was a hole, silently).
                 raise ValueError(
-                    f"min_disparity must be in [-2047, 2048] for OpenCV's int16 x16 disparity "
-                    f"(its invalid value (min_disparity - 1) * 16 must fit in int16), got {md}"
+                    f"min_disparity must be in [-2047, 2047] for OpenCV's int16 x16 disparity "
+                    f"(its invalid value (min_disparity - 1) * 16 and its least disparity "
+                    f"min_disparity * 16 must fit in int16), got {md}"
                 )
         elif kind in (np.int16, np.uint16) and self.invalid_below is not None:
             top = int(np.iinfo(kind).max)
@@ -274,7 +275,7 @@ def disparity_to_depth(
         point offset (``doffs_px > 0``) negative disparities are valid: pass the negative
         ``min_disparity`` the matcher used. Other dtypes have no lower limit unless it is
         given. Raises TypeError unless it is an integer, and ValueError for int16 in OpenCV's
-        format (no ``scale``) outside [-2047, 2048], as :func:`from_opencv_disparity`, or for
+        format (no ``scale``) outside [-2047, 2047], as :func:`from_opencv_disparity`, or for
         other integer input when ``min_disparity / scale`` exceeds the dtype's largest value
         (every pixel would be a hole).
     out
@@ -345,9 +346,9 @@ def from_opencv_disparity(raw: Any, *, min_disparity: int = 0) -> np.ndarray:
 
     Raises TypeError unless ``raw`` is an int16 array (not a masked one) and
     ``min_disparity`` an integer, and ValueError for a ``raw`` whose shape is not (H, W) or
-    (N, H, W) (as every disparity map here), or a ``min_disparity`` outside [-2047, 2048],
-    which no OpenCV matcher can have (its holes, ``(minDisparity - 1) * 16``, would not fit
-    in int16; every pixel would be NaN).
+    (N, H, W) (as every disparity map here), or a ``min_disparity`` outside [-2047, 2047],
+    which no OpenCV matcher can have (its holes, ``(minDisparity - 1) * 16``, or its least
+    disparity, ``minDisparity * 16``, would not fit in int16; every pixel would be NaN).
     """
     arr: np.ndarray = check.native_order(check.disparity_array("raw", raw))
     if arr.dtype != np.int16:
@@ -355,10 +356,10 @@ def from_opencv_disparity(raw: Any, *, min_disparity: int = 0) -> np.ndarray:
     if arr.ndim not in (2, 3):  # a 0-d one failed inside numpy ("does not support item ...")
         raise ValueError(f"raw must have shape (H, W) or (N, H, W), got {arr.shape}")
     md = check_min_disparity(min_disparity)
-    if not -2047 <= md <= 2048:  # as to_opencv_disparity: beyond, OpenCV's holes overflow int16
+    if not -2047 <= md <= 2047:  # as to_opencv_disparity
         raise ValueError(
-            f"min_disparity must be in [-2047, 2048] (OpenCV's invalid value (min_disparity - 1)"
-            f" * 16 must fit in int16), got {md}"
+            f"min_disparity must be in [-2047, 2047] (OpenCV's invalid value (min_disparity - 1)"
+            f" * 16 and its least disparity min_disparity * 16 must fit in int16), got {md}"
         )
     out: np.ndarray = arr.astype(np.float32) * np.float32(1 / 16)  # exact: a power of two
     out[arr.astype(np.int32) < md * 16] = np.nan

@@ -268,6 +268,26 @@ def _sample_dtype(path: str | os.PathLike[str]) -> np.dtype | None:
         return None
 
 
+def _header_size(path: str | os.PathLike[str]) -> tuple[int, int] | None:
+    """(width, height) of the image at ``path`` from its header alone, before any EXIF
+    orientation (a quarter turn makes :func:`read_image`'s array (width, height) instead, and
+    Pillow already turns some formats' sizes); None where the header does not say or
+    :func:`read_image` would refuse the file, as :func:`_sample_dtype`."""
+    p = Path(path)
+    Image = _pil()
+    try:
+        with p.open("rb") as f:
+            if f.read(2) in _PNM_KINDS:
+                size = os.fstat(f.fileno()).st_size
+                head = _parse_head(f, size, functools.partial(_pnm_head, p, file_size=size))
+                return int(head[1]), int(head[2])
+        im, _ = _pil_open(Image, p)
+        with im:
+            return int(im.size[0]), int(im.size[1])
+    except (OSError, SyntaxError, ValueError, Image.DecompressionBombError):
+        return None
+
+
 def _raw_modes(im: Any) -> list[str]:
     """The raw modes of an opened (not yet loaded) Pillow image's tiles: how the file stores
     its samples (``RGB;16B`` for a 16-bit colour PNG, which Pillow reads as 8-bit RGB)."""

@@ -88,10 +88,11 @@ Limits: block costs are accumulated in 16 bits, so ``block_size`` is at most 63 
 4096, ``|min_disparity|`` at most 32768, and the image width times ``num_disparities`` rounded
 up to a multiple of 16 (the SIMD kernels' lanes; :data:`MAX_WIDTH_TIMES_DISPARITIES`) below
 2**30, on every instruction set alike; a search range must reach into the image (some
-disparity in ``-(W - 1) .. W - 1``), for both matchers and their oracles. Memory is O(W * num_disparities) per thread plus a
-few bytes per pixel; there is never a full cost volume. Rows are split into one band per
-thread (an idle thread takes over half of the rows another has left); the output does not
-depend on the number of threads or on how the rows were shared.
+disparity in ``-(W - 1) .. W - 1``), for both matchers and their oracles. Memory is
+O(W * num_disparities) per thread plus a few bytes per pixel; there is never a full cost
+volume. Rows are split into one band per thread (an idle thread takes over half of the rows
+another has left); the output does not depend on the number of threads or on how the rows
+were shared.
 """
 
 from __future__ import annotations
@@ -867,7 +868,8 @@ def to_opencv_disparity(disparity: Any, *, min_disparity: int = 0) -> np.ndarray
     when a finite disparity, so rounded, does not fit: at 2048 px or more, or below
     ``min_disparity`` (which OpenCV's readers, and :func:`stereodepth.from_opencv_disparity`,
     would take for a hole; -0.03 px rounds to 0 and is taken with ``min_disparity=0``); when
-    the invalid value itself does not fit in int16; or for a ``disparity`` whose shape is not
+    the invalid value or the least disparity (``min_disparity`` outside [-2047, 2047]) does
+    not fit in int16; or for a ``disparity`` whose shape is not
     (H, W) or (N, H, W), as every disparity map here (TypeError for one that is not of floats,
     or is a masked array, whose mask would be ignored).
     """
@@ -879,10 +881,10 @@ def to_opencv_disparity(disparity: Any, *, min_disparity: int = 0) -> np.ndarray
     md = check.integer("min_disparity", min_disparity)
     invalid = (md - 1) * 16
     info = np.iinfo(np.int16)
-    if not info.min <= invalid <= info.max:
+    if not (info.min <= invalid and md * 16 <= info.max):  # [-2047, 2047]
         raise ValueError(
-            f"min_disparity must be in [-2047, 2048] (OpenCV's invalid value (min_disparity - 1)"
-            f" * 16 must fit in int16), got {md}"
+            f"min_disparity must be in [-2047, 2047] (OpenCV's invalid value (min_disparity - 1)"
+            f" * 16 and its least disparity min_disparity * 16 must fit in int16), got {md}"
         )
     if np.isinf(arr).any():
         raise ValueError("disparity must be finite or NaN (holes), got an infinite value")

@@ -453,9 +453,12 @@ class StereoRig:
 
     @property
     def max_depth_m(self) -> float:
-        """The depth at a disparity of 1 px: the farthest a whole-pixel matcher can tell from
-        infinity. ``inf`` when ``doffs_px <= -1``, where a disparity of 1 px or less is already
-        at infinity."""
+        """The depth at a disparity of 1 px, ``B*f / (1 + doffs)``: the far end of a search that
+        starts at 1 px (:meth:`min_depth_m` gives the near end). Without ``doffs_px`` it is also
+        the farthest a whole-pixel matcher can tell from infinity; with it, infinity lies at
+        ``d = -doffs`` and the depth one pixel nearer is ``B*f`` (a Middlebury 2014 rig with
+        doffs 53 px: 3.37 m here, 183 m there). ``inf`` when ``doffs_px <= -1``, where a
+        disparity of 1 px is at or beyond infinity."""
         if 1.0 + self._doffs_px <= 0.0:
             return math.inf
         return float(self._depth_of("the disparity of 1 px (max depth)", 1.0))

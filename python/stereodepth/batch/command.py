@@ -359,6 +359,56 @@ def _check_intensity_range(pairs: Sequence[Pair], matcher: dict[str, Any]) -> No
     )
 
 
+def _check_search_range(pairs: Sequence[Pair], options: BatchOptions) -> None:
+    """``--min-disparity`` must leave each pair some disparity inside its images (the
+    matchers' rule: pixel x is matched at x - d, so only -(W - 1) .. W - 1 can be): refused
+    before the first pair, naming the first pair out of reach, rather than failing every pair.
+    W is bounded by the larger side of each left image, told by its header (an EXIF quarter
+    turn or a vertical rig matches along the other side), so a job this refuses could match
+    no pixel at all; a range between the two sides is left to the pair's own error, and so is
+    a header that does not say."""
+    from ..io import _header_size
+
+    low = int(options.matcher.get("min_disparity", 0))
+    if low == 0:
+        return  # 0 .. n - 1 always reaches into an image at least 1 px across
+    for p in pairs:
+        if p.problem or p.num_disparities is None:
+            continue
+        size = _header_size(p.left)
+        if size is None:
+            continue
+        extent = max(size)
+        high = low + p.num_disparities - 1
+        if low >= extent or high <= -extent:
+            raise UsageError(
+                f"--min-disparity {low}: pair {p.stem!r} would search disparities {low} to "
+                f"{high}, none of which lies inside its {size[0]}x{size[1]} px images: only "
+                f"{-(extent - 1)} to {extent - 1} can be matched along their longer side, and "
+                "every pixel would be NaN"
+            )
+
+
+def _check_report_replaceable(report: Path, force: bool) -> None:
+    """An existing file at the report's path is replaced only when it reads as a batch report
+    (a JSON object with a report's "stereodepth", "runner" and "counts"), or with ``--force``:
+    a report.json of the user's in OUTDIR was replaced without a word, where a file of theirs
+    at a pair's output name is refused (runners._refuse_replacing_files_of_no_record)."""
+    if force or not report.is_file():
+        return
+    try:
+        with report.open("rb") as f:
+            data = json.loads(f.read())
+    except (OSError, ValueError):  # (UnicodeDecodeError is a ValueError)
+        data = None
+    if isinstance(data, dict) and {"stereodepth", "runner", "counts"} <= data.keys():
+        return
+    raise UsageError(
+        f"--report {report}: an existing file that is not a batch report (a file of yours?): "
+        "move it, give --report another file, or give --force to replace it"
+    )
+
+
 def _raw_rectification(
     args: argparse.Namespace,
 ) -> tuple[BatchRectifier, Calibration] | None:
@@ -663,8 +713,10 @@ def run(args: argparse.Namespace) -> int:
         options,
         [("INPUT", args.input), ("--calib", args.calib), ("--calib-right", args.calib_right)],
     )
+    _check_report_replaceable(report_path, args.force)
     _check_outputs_are_not_inputs(pairs, options, [args.calib, args.calib_right])
     _check_intensity_range(pairs, options.matcher)
+    _check_search_range(pairs, options)
     if args.format == "png16":  # KITTI's disparity PNG holds at most 65535 / 256 px
         lowest = int(options.matcher.get("min_disparity", 0))
         if lowest < 0:  # and no negative disparities: they would be written as holes
