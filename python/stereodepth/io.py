@@ -246,33 +246,22 @@ def _sample_dtype(path: str | os.PathLike[str]) -> np.dtype | None:
     is decoded. None where the header does not say or :func:`read_image` would refuse the
     file (missing, unreadable, malformed; floating-point or 16-bit colour samples): reading
     it then gives its own message."""
-    p = Path(path)
-    Image = _pil()
-    try:
-        with p.open("rb") as f:
-            if f.read(2) in _PNM_KINDS:
-                size = os.fstat(f.fileno()).st_size
-                head = _parse_head(f, size, functools.partial(_pnm_head, p, file_size=size))
-                dtype: np.dtype = head[4]
-                return dtype
-        im, _ = _pil_open(Image, p)
-        with im:
-            if im.mode in _GREY16_MODES:
-                return np.dtype(np.uint16)
-            if im.mode == "F" or im.mode.startswith("F;"):
-                return None
-            if any(";16" in m for m in _raw_modes(im)):
-                return None
-            return np.dtype(np.uint8)
-    except (OSError, SyntaxError, ValueError, Image.DecompressionBombError):
-        return None
+    head = _image_header(path)
+    return None if head is None else head[0]
 
 
 def _header_size(path: str | os.PathLike[str]) -> tuple[int, int] | None:
     """(width, height) of the image at ``path`` from its header alone, before any EXIF
     orientation (a quarter turn makes :func:`read_image`'s array (width, height) instead, and
-    Pillow already turns some formats' sizes); None where the header does not say or
-    :func:`read_image` would refuse the file, as :func:`_sample_dtype`."""
+    Pillow already turns some formats' sizes); None where the header cannot be read."""
+    head = _image_header(path)
+    return None if head is None else head[1]
+
+
+def _image_header(path: str | os.PathLike[str]) -> tuple[np.dtype | None, tuple[int, int]] | None:
+    """What :func:`_sample_dtype` and :func:`_header_size` read: the sample dtype (None for
+    samples :func:`read_image` refuses) and the stored (width, height); None for a file whose
+    header cannot be read."""
     p = Path(path)
     Image = _pil()
     try:
@@ -280,10 +269,17 @@ def _header_size(path: str | os.PathLike[str]) -> tuple[int, int] | None:
             if f.read(2) in _PNM_KINDS:
                 size = os.fstat(f.fileno()).st_size
                 head = _parse_head(f, size, functools.partial(_pnm_head, p, file_size=size))
-                return int(head[1]), int(head[2])
+                return head[4], (int(head[1]), int(head[2]))
         im, _ = _pil_open(Image, p)
         with im:
-            return int(im.size[0]), int(im.size[1])
+            stored = (int(im.size[0]), int(im.size[1]))
+            if im.mode in _GREY16_MODES:
+                return np.dtype(np.uint16), stored
+            if im.mode == "F" or im.mode.startswith("F;"):
+                return None, stored
+            if any(";16" in m for m in _raw_modes(im)):
+                return None, stored
+            return np.dtype(np.uint8), stored
     except (OSError, SyntaxError, ValueError, Image.DecompressionBombError):
         return None
 
