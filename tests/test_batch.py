@@ -423,6 +423,14 @@ def test_resume_skips_complete_pairs_and_redoes_changed_ones(tmp_path: Path) -> 
     assert report_of(out)["counts"]["skipped"] == 3
     assert run_cli("batch", inp, "-o", out, "--quiet", "--block-size", "7", "--force") == 0
     assert report_of(out)["counts"]["ok"] == 3
+    # a calibration edited to another image size than the pair's: refused, as on a first run
+    # (it was "already done": the size was not among the settings compared)
+    calib = inp / names[2] / "calib.txt"
+    calib.write_text(calib_text().replace(f"width={SHAPE[1]}", f"width={2 * SHAPE[1]}"))
+    assert run_cli("batch", inp, "-o", out, "--quiet", "--block-size", "7") == 1
+    pairs = report_of(out)["pairs"]
+    assert [p["status"] for p in pairs] == ["skipped", "skipped", "failed"]
+    assert "a calibration of another resolution gives wrong depths" in pairs[2]["error"]
 
 
 # --- interruptions ----------------------------------------------------------------------------

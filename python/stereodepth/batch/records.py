@@ -41,6 +41,9 @@ def settings_of(pair: Pair, options: BatchOptions) -> dict[str, Any]:
         "method": options.method,
         "matcher": matcher_options(options),
         "calibration": {k: v for k, v in pair.calibration.as_dict().items() if k != "source"},
+        # The size the calibration is for: a file edited to another size than the images'
+        # was passed on a rerun as "already done", where a first run refuses the pair.
+        "calibration_size": pair.calibration.image_size,
         "rectification": None if options.rectification is None else options.rectification.as_dict(),
         "write_rectified": options.write_rectified,
     }
