@@ -684,7 +684,13 @@ def test_matcher_params_and_repr() -> None:
     assert p["lr_max_diff"] is None
     assert p["subpixel"] in ("parabola", "equiangular")
     assert repr(m).startswith("StereoMatcher(num_disparities=32")
+    assert "isa=" not in repr(m)
     assert sd.StereoMatcher(num_disparities=4, subpixel=False).params["subpixel"] is False
+    # The repr makes the same matcher, the instruction set it was made for included.
+    pinned = sd.StereoMatcher(num_disparities=32, block_size=7, isa="baseline")
+    assert repr(pinned).endswith(", isa='baseline')")
+    again = eval(repr(pinned), {"StereoMatcher": sd.StereoMatcher})
+    assert again.params == pinned.params and again.isa == "baseline"
 
 
 def test_inputs_are_not_modified_and_views_are_accepted() -> None:

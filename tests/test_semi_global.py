@@ -567,6 +567,12 @@ def test_matcher_reuses_its_buffers_across_sizes_and_reports_params() -> None:
     assert m.params["paths"] == 8 and m.params["subpixel"] == "equiangular"
     assert repr(m).startswith("SemiGlobalMatcher(num_disparities=12, ")
     assert m.isa in SUPPORTED_ISAS
+    assert "isa=" not in repr(m)
+    # The repr makes the same matcher, the instruction set it was made for included.
+    pinned = sd.SemiGlobalMatcher(num_disparities=12, paths=8, isa="baseline")
+    assert repr(pinned).endswith(", isa='baseline')")
+    again = eval(repr(pinned), {"SemiGlobalMatcher": sd.SemiGlobalMatcher})
+    assert again.params == pinned.params and again.isa == "baseline"
 
 
 def test_confidence_is_in_unit_interval_and_zero_on_holes() -> None:

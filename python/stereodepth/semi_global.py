@@ -443,8 +443,10 @@ class SemiGlobalMatcher(FixedParameters):
         return str(self._native.isa)
 
     def __repr__(self) -> str:
-        args = ", ".join(f"{k}={v!r}" for k, v in self.params.items())
-        return f"SemiGlobalMatcher({args})"
+        args = [f"{k}={v!r}" for k, v in self.params.items()]
+        if self._isa_arg != "auto":  # a matcher made for one instruction set says which
+            args.append(f"isa={self._isa_arg!r}")
+        return f"SemiGlobalMatcher({', '.join(args)})"
 
     def compute(self, left: Any, right: Any) -> np.ndarray | tuple[np.ndarray, np.ndarray]:
         """The float32 disparity of ``left`` (and the confidence, if the matcher was made
