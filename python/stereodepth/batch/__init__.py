@@ -93,11 +93,13 @@ Output, per pair with stem S, in OUTDIR
     not replaced without ``--force``). At the end, ``report.json`` (or
     ``--report FILE``, whose folder must exist) lists every pair's status, time and density.
     No pair's file can be named like the report; a ``--report`` that names a file of a pair
-    or an input is refused.
+    or an input is refused, and a file already at the report's path that is not a batch
+    report is not replaced without ``--force``.
 
     Every file is written to a temporary file and renamed, so a killed job leaves no
     half-written output. Running the same command again skips the pairs whose record matches
-    (same inputs, options and calibration, outputs present) and redoes the rest; ``--force``
+    (same inputs, options and calibration, the image size it is for included, outputs
+    present) and redoes the rest; ``--force``
     redoes all. An input is the file itself (its real path, size and time), however INPUT is
     spelled: a job resumes from another folder, or here after its Dask cluster went away. A
     job whose pair would replace a pair's outputs made from other images (a second job into

@@ -124,7 +124,8 @@ def register(subparsers: Any) -> None:
         "--force",
         action="store_true",
         help="recompute pairs whose outputs are already complete, and replace outputs of the "
-        "same names made from other images (refused without it)",
+        "same names made from other images, or a report file that no batch job wrote (refused "
+        "without it)",
     )
     o.add_argument("--quiet", action="store_true", help="no progress bar and no summary")
     m = p.add_argument_group(
