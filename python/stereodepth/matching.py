@@ -149,6 +149,12 @@ DEFAULT_SPECKLE_WINDOW = 100
 DEFAULT_SPECKLE_RANGE = 1.0
 
 
+def search_reaches(min_disparity: int, num_disparities: int, cols: int) -> bool:
+    """Whether the search range has some disparity in ``-(cols - 1) .. cols - 1``, the only
+    ones pixel x can be matched at (x - d inside an image ``cols`` pixels wide)."""
+    return min_disparity < cols and min_disparity + num_disparities - 1 > -cols
+
+
 class MatcherOptions:
     """The parameters every matcher takes (the search range, the decision's checks and
     filters, the input conventions), checked and resolved once for all of them; each matcher's
@@ -245,7 +251,7 @@ class MatcherOptions:
         would give a map that is NaN everywhere, most often from a typo or a crop."""
         low = self.min_disparity
         high = low + self.num_disparities - 1
-        if low >= cols or high <= -cols:
+        if not search_reaches(low, self.num_disparities, cols):
             raise ValueError(
                 f"min_disparity={low} with num_disparities={self.num_disparities} searches "
                 f"disparities {low} to {high}, none of which lies inside an image {cols} "

@@ -369,6 +369,7 @@ def _check_search_range(pairs: Sequence[Pair], options: BatchOptions) -> None:
     no pixel at all; a range between the two sides is left to the pair's own error, and so is
     a header that does not say."""
     from ..io import _header_size
+    from ..matching import search_reaches
 
     low = int(options.matcher.get("min_disparity", 0))
     if low == 0:
@@ -381,7 +382,7 @@ def _check_search_range(pairs: Sequence[Pair], options: BatchOptions) -> None:
             continue
         extent = max(size)
         high = low + p.num_disparities - 1
-        if low >= extent or high <= -extent:
+        if not search_reaches(low, p.num_disparities, extent):
             raise UsageError(
                 f"--min-disparity {low}: pair {p.stem!r} would search disparities {low} to "
                 f"{high}, none of which lies inside its {size[0]}x{size[1]} px images: only "
