@@ -265,13 +265,9 @@ def test_kalibr_camchain(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> 
 # --- bad input: one line, exit 2 ------------------------------------------------------------------
 
 
-def test_vertical_rig_is_matched_along_its_columns(
-    tmp_path: Path, capsys: pytest.CaptureFixture[str]
-) -> None:
-    """A rig with the second camera below the first: the sample pair transposed is exactly
-    such a pair, already rectified (R = I, T along -y, no distortion: the maps are the
-    identity), so match must give the transposed disparity of the horizontal pair, and depth
-    f B / d in the vertical pair's own orientation."""
+def _vertical_rig_files(tmp_path: Path) -> tuple[Any, np.ndarray, np.ndarray, Path]:
+    """The sample pair (96 x 64) transposed, saved as up.png and down.png (64 wide, 96 tall),
+    and the calibration of that rectified vertical rig (second camera below the first)."""
     pytest.importorskip("yaml", reason="YAML calibrations need PyYAML (the calib extra)")
     s = sample_pair(96, 64)
     up, down = (np.ascontiguousarray(np.swapaxes(a, 0, 1)) for a in (s.left, s.right))
@@ -283,7 +279,40 @@ def test_vertical_rig_is_matched_along_its_columns(
         K1=K, D1=np.zeros(5), K2=K, D2=np.zeros(5), R=np.eye(3), T=np.array([0, -0.1, 0]),
         image_size=(w, h),
     )  # fmt: skip
-    yaml = write_opencv_yaml(tmp_path / "vertical.yml", c, stored=False)
+    return s, up, down, write_opencv_yaml(tmp_path / "vertical.yml", c, stored=False)
+
+
+@pytest.mark.parametrize("method", ["bm", "sgm"])
+def test_a_vertical_rigs_error_speaks_of_its_height(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], method: str
+) -> None:
+    """The matchers' errors are about the pair they match, which for a vertical rig is the
+    transposed one: a search range beyond the 96 px tall (64 px wide) images was refused as
+    lying outside "an image 96 pixels wide". The message now says which side that is."""
+    _, up, _, yaml = _vertical_rig_files(tmp_path)
+    assert up.shape[:2] == (96, 64)
+    code, text, err = run(
+        capsys, tmp_path / "up.png", tmp_path / "down.png", "--calib", yaml,
+        "--translation-unit", "mm", "--num-disparities", "16", "--min-disparity", "96",
+        "--method", method, "-o", f"{tmp_path / 'out'}/", "--no-preview",
+    )  # fmt: skip
+    assert code == 2 and text == ""
+    assert err.count("\n") == 1, err
+    assert "inside an image 96 pixels wide" in err
+    assert "a vertical rig: the pair is matched transposed" in err
+    assert "the rectified images' height of 96 pixels" in err
+    assert not (tmp_path / "out").exists() or not any((tmp_path / "out").iterdir())
+
+
+def test_vertical_rig_is_matched_along_its_columns(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A rig with the second camera below the first: the sample pair transposed is exactly
+    such a pair, already rectified (R = I, T along -y, no distortion: the maps are the
+    identity), so match must give the transposed disparity of the horizontal pair, and depth
+    f B / d in the vertical pair's own orientation."""
+    s, up, down, yaml = _vertical_rig_files(tmp_path)
+    h, w = up.shape[:2]
     out = tmp_path / "out"
     code, text, err = run(
         capsys, tmp_path / "up.png", tmp_path / "down.png", "--calib", yaml,
@@ -691,3 +720,19 @@ def test_a_refused_file_with_its_own_rectification_is_told_to_compute_it_anew(
     code, out, err = run(capsys, a, b, *mm, "--alpha", "-1", "-o", f"{tmp_path}/y/")
     assert code == 0, err
     assert json.loads(out)["density"] > 0.5
+
+
+def test_matched_along_rows_annotates_only_a_vertical_rigs_errors() -> None:
+    """The wrapper both commands put around matching (match, and batch's jobs): a horizontal
+    rig's error passes through as it is, a vertical rig's names the side it is about, and other
+    exceptions are not touched."""
+    from stereodepth._calib_rule import matched_along_rows
+
+    plain = r"^an image 64 pixels wide$"
+    with pytest.raises(ValueError, match=plain), matched_along_rows(False, (96, 64, 3)):
+        raise ValueError("an image 64 pixels wide")
+    noted = r"^an image 96 pixels wide \(a vertical rig: .* height of 96 pixels and their rows\)$"
+    with pytest.raises(ValueError, match=noted), matched_along_rows(True, (96, 64, 3)):
+        raise ValueError("an image 96 pixels wide")
+    with pytest.raises(TypeError, match=r"^num_disparities$"), matched_along_rows(True, (9, 8)):
+        raise TypeError("num_disparities")

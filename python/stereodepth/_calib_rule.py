@@ -25,6 +25,8 @@ error (exit status 2).
 
 from __future__ import annotations
 
+import contextlib
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -300,6 +302,23 @@ def from_rows(vertical: bool, array: Any) -> Any:
     import numpy as np
 
     return np.ascontiguousarray(array.T)
+
+
+@contextlib.contextmanager
+def matched_along_rows(vertical: bool, shape: tuple[int, ...]) -> Iterator[None]:
+    """Around matching :func:`along_rows`'s pair: for a vertical rig, a ValueError from the
+    matcher, which speaks of the transposed pair (its "width" and "columns" are the rectified
+    images' height and rows), says so and gives the images' own ``shape`` (H, W[, 3])."""
+    try:
+        yield
+    except ValueError as exc:
+        if not vertical:
+            raise
+        raise ValueError(
+            f"{exc} (a vertical rig: the pair is matched transposed, along its columns, so the "
+            f"image's width and columns above are the rectified images' height of {shape[0]} "
+            f"pixels and their rows)"
+        ) from exc
 
 
 def rectified_rig(rectifier: Any) -> dict[str, float]:

@@ -535,19 +535,20 @@ def run(args: argparse.Namespace) -> int:
             rectify_s = time.perf_counter() - t0
         vertical = rectifier is not None and rectifier.vertical
         rows_left, rows_right = rule.along_rows(vertical, left_img, right_img)
-        result = match_pair(
-            rows_left,
-            rows_right,
-            method=args.method,
-            num_disparities=args.num_disparities if args.num_disparities is not None else ndisp,
-            min_disparity=args.min_disparity,
-            block_size=args.block_size,
-            cost=args.cost,
-            focal_px=None if rig is None else rig["focal_px"],
-            baseline_m=None if rig is None else rig["baseline_m"],
-            doffs_px=0.0 if rig is None else rig["doffs_px"],
-            threads=args.threads,
-        )
+        with rule.matched_along_rows(vertical, left_img.shape):
+            result = match_pair(
+                rows_left,
+                rows_right,
+                method=args.method,
+                num_disparities=args.num_disparities if args.num_disparities is not None else ndisp,
+                min_disparity=args.min_disparity,
+                block_size=args.block_size,
+                cost=args.cost,
+                focal_px=None if rig is None else rig["focal_px"],
+                baseline_m=None if rig is None else rig["baseline_m"],
+                doffs_px=0.0 if rig is None else rig["doffs_px"],
+                threads=args.threads,
+            )
         if vertical:  # back in the rectified images' orientation
             result = dataclasses.replace(
                 result,

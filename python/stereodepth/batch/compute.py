@@ -135,7 +135,7 @@ def process_pair(pair: Pair, options: BatchOptions, threads: int | None = None) 
                 for side, image in (("left", left), ("right", right)):
                     written.add(paths[f"{side}_rectified"])
                     write_png(paths[f"{side}_rectified"], image)
-        from .._calib_rule import along_rows, from_rows
+        from .._calib_rule import along_rows, from_rows, matched_along_rows
         from .._methods import compute_disparity, thread_matcher
 
         matcher = thread_matcher(
@@ -145,9 +145,10 @@ def process_pair(pair: Pair, options: BatchOptions, threads: int | None = None) 
         )
         # A vertical rig is matched transposed and its disparity turned back (_calib_rule).
         vertical = options.rectification is not None and options.rectification.vertical(threads)
-        disparity = from_rows(
-            vertical, compute_disparity(matcher, *along_rows(vertical, left, right))
-        )
+        with matched_along_rows(vertical, left.shape):
+            disparity = from_rows(
+                vertical, compute_disparity(matcher, *along_rows(vertical, left, right))
+            )
         depth = disparity_to_depth(
             disparity,
             focal_px=calib.focal_px,
