@@ -115,6 +115,18 @@ int team_threads(int threads, int paths) {
   return paths == 3 ? n : std::min(n, default_threads());
 }
 
+// Paths 8 on two threads: the downward and the upward pass run at once, one thread each
+// (step 1), and wait for each other once, in the middle, rather than splitting the columns
+// between them and meeting at every row.
+// In one process on Zen 4, two threads: 0.62-1.00 of the time of the column bands on the ten
+// shared scenes with AVX2 (median 0.91) and 0.64-0.94 with AVX-512 (median 0.88), 0.90-0.99
+// at 1280 x 720 x 128 (bench/README, twenty-seventh round). Three or more threads keep the
+// bands, which use them all.
+bool concurrent_passes(int paths, int threads) { return paths == 8 && threads == 2; }
+
+// How long a pass spins (yielding) before it checks for a stop again, waiting for the other.
+constexpr std::chrono::microseconds kPassWait{1000};
+
 // Paths 4 and 8: the bands of columns of the vertical passes, one thread each.
 std::ptrdiff_t vertical_bands(int threads, std::ptrdiff_t cols) {
   return std::max<std::ptrdiff_t>(1, std::min<std::ptrdiff_t>(threads, cols / 16));
@@ -419,11 +431,14 @@ std::size_t semi_global_memory(std::ptrdiff_t rows, std::ptrdiff_t cols, int nd,
     // pair's grey (2); the sums and the costs (3 bytes per pixel and disparity); the path rows.
     bytes += h * w * 7.0 + 64.0 * 4;
     bytes += h * w * d * 3.0 + 128.0;
-    bytes += bytes16(2 * sz(vertical_paths(paths)) * c * sz(ls));
-    // Per thread, the most of its stages: census, the vertical paths over a band of columns,
-    // the row's horizontal paths and decision, the median.
-    const std::ptrdiff_t nb = vertical_bands(threads, cols);
-    const std::size_t band_cols = (c + sz(nb) - 1) / sz(nb);
+    // The path rows: one set, or one per pass when the passes run at once.
+    const bool concurrent = concurrent_passes(paths, threads);
+    bytes += bytes16((concurrent ? 2 : 1) * 2 * sz(vertical_paths(paths)) * c * sz(ls));
+    // Per thread, the most of its stages: census, the vertical paths over a band of columns
+    // (all of them when the passes run at once), the row's horizontal paths and decision, the
+    // median.
+    const std::ptrdiff_t nb = concurrent ? 2 : vertical_bands(threads, cols);
+    const std::size_t band_cols = concurrent ? c : (c + sz(nb) - 1) / sz(nb);
     const double vertical =
         bytes16(c + sz(nd) + 32 + 4 * (band_cols + 2) * sz(nd) + sz(nd));
     const double row = bytes16(fused ? FusedScratch(c, nd).total
@@ -724,115 +739,169 @@ void SemiGlobalMatcher::compute(const StereoImage& left, const StereoImage& righ
       }
     });
   } else {
-  // 1. Downward, then upward: the costs (computed on the way down) and the vertical and
+    // 1. Downward, then upward: the costs (computed on the way down) and the vertical and
     //    diagonal paths; the columns are split between the threads, which meet at every row
     //    when the diagonals read the previous row across band edges. The way down writes the
-    //    sums, the way up adds to them.
+    //    sums, the way up adds to them. Paths 8 on two threads runs the two ways at once
+    //    instead, one thread each (concurrent_passes).
     {
-      const std::ptrdiff_t nb = vertical_bands(threads, cols);
+      const int nv = vertical_paths(p.paths);
+      const bool concurrent = concurrent_passes(p.paths, threads);
+      const std::ptrdiff_t nb = concurrent ? 2 : vertical_bands(threads, cols);
       if (ws.scratch.size() < static_cast<std::size_t>(nb)) {
         ws.scratch.resize(static_cast<std::size_t>(nb));
       }
-      const int nv = vertical_paths(p.paths);
+      // The path rows, this row's and the previous row's for each path: one set, or one per
+      // pass when the passes run at once.
       const auto row_len = static_cast<std::size_t>(cols) * static_cast<std::size_t>(ls);
-      auto* prow = aligned<std::int16_t>(ws.path_rows, 2 * static_cast<std::size_t>(nv) * row_len);
-      for (std::size_t i = 0; i < 2 * static_cast<std::size_t>(nv) * static_cast<std::size_t>(cols);
-           ++i) {
-        prow[i * static_cast<std::size_t>(ls)] = detail::kSentinel;
-        prow[i * static_cast<std::size_t>(ls) + static_cast<std::size_t>(nd) + 1] =
-            detail::kSentinel;
+      const std::size_t n_prow = 2 * static_cast<std::size_t>(nv) * row_len;
+      const std::size_t n_sets = concurrent ? 2 : 1;
+      auto* prow_sets = aligned<std::int16_t>(ws.path_rows, n_sets * n_prow);
+      for (std::size_t i = 0; i < n_sets * 2 * sz(nv) * sz(cols); ++i) {
+        prow_sets[i * sz(ls)] = detail::kSentinel;
+        prow_sets[i * sz(ls) + sz(nd) + 1] = detail::kSentinel;
       }
       const int dxs[3] = {0, 1, -1};
       // Each band's scratch is sized here, before the bands start: an allocation that failed
       // inside a band would leave the other bands waiting at the barrier for ever.
       const std::size_t n_rev = sz(cols) + sz(nd) + 32;
+      // A band's columns: a share of them, or all of them for a pass of its own.
+      auto band_x0 = [&](std::ptrdiff_t b) { return concurrent ? 0 : band(cols, nb, b); };
+      auto band_x1 = [&](std::ptrdiff_t b) { return concurrent ? cols : band(cols, nb, b + 1); };
       // A band's rows of raw costs: its columns and one either side, nd each.
-      auto raw_len = [&](std::ptrdiff_t b) {
-        return sz(band(cols, nb, b + 1) - band(cols, nb, b) + 2) * sz(nd);
-      };
+      auto raw_len = [&](std::ptrdiff_t b) { return sz(band_x1(b) - band_x0(b) + 2) * sz(nd); };
       auto band_scratch = [&](std::ptrdiff_t b) {
         return aligned<std::uint16_t>(ws.scratch[sz(b)], n_rev + 4 * raw_len(b) + sz(nd));
       };
       for (std::ptrdiff_t b = 0; b < nb; ++b) band_scratch(b);
-      for (int dy : {1, -1}) {
-        Barrier barrier(nb);
-        // The bands meet at the barrier: each needs its own thread, all at once.
-        run_bands_together(nb, [&](std::ptrdiff_t b) {
-          const std::ptrdiff_t x0 = band(cols, nb, b), x1 = band(cols, nb, b + 1);
-          std::uint16_t* rev = nullptr;
-          std::uint16_t* colraw = nullptr;
-          RawRows<std::uint16_t> raw;
-          RawRows<std::uint8_t> raw8;  // with the 8-bit cost kernels
-          std::uint8_t* ring = nullptr;
-          if (dy > 0) {
-            const std::size_t n_raw = raw_len(b);
-            rev = band_scratch(b);  // sized already: no allocation here
-            colraw = rev + n_rev;
-            for (int j = 0; j < 3; ++j) {
-              raw.slot[j] = colraw + static_cast<std::size_t>(j + 1) * n_raw;
-              raw8.slot[j] = reinterpret_cast<std::uint8_t*>(colraw) + j * n_raw;
-            }
-            ring = reinterpret_cast<std::uint8_t*>(colraw) + 3 * n_raw;
-          }
-          int flip = 0;
-          for (std::ptrdiff_t i = 0; i < rows; ++i) {
-            const std::ptrdiff_t y = dy > 0 ? i : rows - 1 - i;
-            const std::ptrdiff_t yq = y - dy;
-            std::uint8_t* crow = costs + static_cast<std::size_t>(y) * n_col;
-            if (dy > 0) {
-              if (k.raw_row8) {
-                std::uint8_t* raws[3];
-                int fresh = -1;
-                auto* rev8 = reinterpret_cast<std::uint8_t*>(rev);
-                raw8.get(
-                    rows, r, y, raws,
-                    [&](std::ptrdiff_t yy, std::uint8_t* out) {
-                      k.raw_row8(lcen + yy * cols, rcen + yy * cols, cols, x0, x1, r, nd,
-                                 p.min_disparity, rev8, out);
-                    },
-                    &fresh);
-                const std::ptrdiff_t yf =
-                    fresh < 0 ? 0 : std::clamp<std::ptrdiff_t>(y + fresh - r, 0, rows - 1);
-                k.box_row8(raws, fresh, lcen + yf * cols, rcen + yf * cols, rev8, r, cols, x0, x1,
-                           nd, p.min_disparity, cmax, ring, crow);
-              } else {
-                std::uint16_t* raws[3];
-                raw.get(rows, r, y, raws, [&](std::ptrdiff_t yy, std::uint16_t* out) {
-                  k.raw_row(lcen + yy * cols, rcen + yy * cols, cols, x0, x1, r, nd,
-                            p.min_disparity, rev, out);
-                });
-                k.box_row(raws, r, cols, x0, x1, nd, p.min_disparity, cmax, colraw, crow);
-              }
-            }
-            if (fused) {
-              std::int16_t* cur[3];
-              const std::int16_t* prev[3];
-              for (int v = 0; v < nv; ++v) {
-                const auto pair = 2 * static_cast<std::size_t>(v);
-                cur[v] = prow + (pair + static_cast<std::size_t>(flip)) * row_len;
-                prev[v] = prow + (pair + static_cast<std::size_t>(1 - flip)) * row_len;
-              }
-              k.path_rows(pp, crow, pgrey + y * cols, i > 0 ? pgrey + yq * cols : nullptr,
-                          i > 0 ? prev : nullptr, cur, nv, dxs, cols, x0, x1,
-                          sums + static_cast<std::size_t>(y) * n_col, dy > 0);
-            }
-            for (int v = 0; v < nv && !fused; ++v) {
-              const auto pair = 2 * static_cast<std::size_t>(v);
-              std::int16_t* cur = prow + (pair + static_cast<std::size_t>(flip)) * row_len;
-              std::int16_t* prev = prow + (pair + static_cast<std::size_t>(1 - flip)) * row_len;
-              k.path_row(pp, crow, pgrey + y * cols, i > 0 ? pgrey + yq * cols : nullptr,
-                         i > 0 ? prev : nullptr, cur, cols, x0, x1, dxs[v],
-                         sums + static_cast<std::size_t>(y) * n_col, dy > 0 && v == 0);
-            }
-            flip = 1 - flip;
-            // With a barrier the bands stop together, at the row its last arrival decides.
-            if (nv > 1 && nb > 1) {
-              if (barrier.wait()) throw Stopped();
+      // Band b's way through the rows, downward (dy = 1) or upward, with the path rows prow.
+      // first(y): whether this band is the first to reach row y, then computing the row's
+      // costs and storing its sums, which the other pass reads and adds to; it may wait for
+      // the other pass. row_done(i) after the band's i-th row.
+      auto pass_rows = [&](std::ptrdiff_t b, int dy, std::int16_t* prow, auto&& first,
+                           auto&& row_done) {
+        const std::ptrdiff_t x0 = band_x0(b), x1 = band_x1(b);
+        const std::size_t n_raw = raw_len(b);
+        std::uint16_t* rev = band_scratch(b);  // sized already: no allocation here
+        std::uint16_t* colraw = rev + n_rev;
+        RawRows<std::uint16_t> raw;
+        RawRows<std::uint8_t> raw8;  // with the 8-bit cost kernels
+        for (int j = 0; j < 3; ++j) {
+          raw.slot[j] = colraw + static_cast<std::size_t>(j + 1) * n_raw;
+          raw8.slot[j] = reinterpret_cast<std::uint8_t*>(colraw) + j * n_raw;
+        }
+        std::uint8_t* ring = reinterpret_cast<std::uint8_t*>(colraw) + 3 * n_raw;
+        int flip = 0;
+        for (std::ptrdiff_t i = 0; i < rows; ++i) {
+          const std::ptrdiff_t y = dy > 0 ? i : rows - 1 - i;
+          const std::ptrdiff_t yq = y - dy;
+          std::uint8_t* crow = costs + static_cast<std::size_t>(y) * n_col;
+          const bool store = first(y);
+          if (store) {
+            if (k.raw_row8) {
+              std::uint8_t* raws[3];
+              int fresh = -1;
+              auto* rev8 = reinterpret_cast<std::uint8_t*>(rev);
+              raw8.get(
+                  rows, r, y, raws,
+                  [&](std::ptrdiff_t yy, std::uint8_t* out) {
+                    k.raw_row8(lcen + yy * cols, rcen + yy * cols, cols, x0, x1, r, nd,
+                               p.min_disparity, rev8, out);
+                  },
+                  &fresh);
+              const std::ptrdiff_t yf =
+                  fresh < 0 ? 0 : std::clamp<std::ptrdiff_t>(y + fresh - r, 0, rows - 1);
+              k.box_row8(raws, fresh, lcen + yf * cols, rcen + yf * cols, rev8, r, cols, x0, x1,
+                         nd, p.min_disparity, cmax, ring, crow);
             } else {
-              throw_if_stopped();
+              std::uint16_t* raws[3];
+              raw.get(rows, r, y, raws, [&](std::ptrdiff_t yy, std::uint16_t* out) {
+                k.raw_row(lcen + yy * cols, rcen + yy * cols, cols, x0, x1, r, nd,
+                          p.min_disparity, rev, out);
+              });
+              k.box_row(raws, r, cols, x0, x1, nd, p.min_disparity, cmax, colraw, crow);
             }
+          }
+          if (fused) {
+            std::int16_t* cur[3];
+            const std::int16_t* prev[3];
+            for (int v = 0; v < nv; ++v) {
+              const auto pair = 2 * static_cast<std::size_t>(v);
+              cur[v] = prow + (pair + static_cast<std::size_t>(flip)) * row_len;
+              prev[v] = prow + (pair + static_cast<std::size_t>(1 - flip)) * row_len;
+            }
+            k.path_rows(pp, crow, pgrey + y * cols, i > 0 ? pgrey + yq * cols : nullptr,
+                        i > 0 ? prev : nullptr, cur, nv, dxs, cols, x0, x1,
+                        sums + static_cast<std::size_t>(y) * n_col, store);
+          }
+          for (int v = 0; v < nv && !fused; ++v) {
+            const auto pair = 2 * static_cast<std::size_t>(v);
+            std::int16_t* cur = prow + (pair + static_cast<std::size_t>(flip)) * row_len;
+            std::int16_t* prev = prow + (pair + static_cast<std::size_t>(1 - flip)) * row_len;
+            k.path_row(pp, crow, pgrey + y * cols, i > 0 ? pgrey + yq * cols : nullptr,
+                       i > 0 ? prev : nullptr, cur, cols, x0, x1, dxs[v],
+                       sums + static_cast<std::size_t>(y) * n_col, store && v == 0);
+          }
+          flip = 1 - flip;
+          row_done(i);
+        }
+      };
+      if (concurrent) {
+        // The two passes at once, the downward one on band 0's thread and the upward one on
+        // band 1's, each over whole rows with its own path rows. Each row's costs and sums
+        // come from the pass that reaches it first: the downward one above the middle row m,
+        // the upward one from m down. It stores the sums; the other, once the first has
+        // finished the row, reads its costs and adds to them (the same integers in either
+        // order). Each pass waits for the other once, where it crosses the middle, rather than
+        // at a barrier at every row; the results are the same.
+        const std::ptrdiff_t m = rows / 2;
+        std::atomic<std::ptrdiff_t> done[2];  // the rows each pass has finished
+        done[0].store(0);
+        done[1].store(0);
+        std::atomic<bool> quit{false};  // a pass stopped: the other must not wait for it
+        run_bands_together(2, [&](std::ptrdiff_t b) {
+          const int dy = b == 0 ? 1 : -1;
+          const std::atomic<std::ptrdiff_t>& other = done[1 - b];
+          auto first = [&](std::ptrdiff_t y) {
+            if (dy > 0 ? y < m : y >= m) return true;
+            // The other pass has finished row y when it has done `need` rows.
+            const std::ptrdiff_t need = dy > 0 ? rows - y : y + 1;
+            auto ready = [&] {
+              return other.load(std::memory_order_acquire) >= need ||
+                     quit.load(std::memory_order_relaxed);
+            };
+            while (!spin_until(ready, kPassWait)) throw_if_stopped();
+            if (quit.load(std::memory_order_relaxed)) throw Stopped();
+            return false;
+          };
+          try {
+            pass_rows(b, dy, prow_sets + sz(b) * n_prow, first, [&](std::ptrdiff_t i) {
+              done[b].store(i + 1, std::memory_order_release);
+              throw_if_stopped();
+            });
+          } catch (...) {
+            quit.store(true, std::memory_order_relaxed);
+            throw;
           }
         });
+      } else {
+        for (int dy : {1, -1}) {
+          Barrier barrier(nb);
+          // The bands meet at the barrier: each needs its own thread, all at once.
+          run_bands_together(nb, [&](std::ptrdiff_t b) {
+            pass_rows(
+                b, dy, prow_sets, [&](std::ptrdiff_t) { return dy > 0; },
+                [&](std::ptrdiff_t) {
+                  // With a barrier the bands stop together, at the row its last arrival
+                  // decides.
+                  if (nv > 1 && nb > 1) {
+                    if (barrier.wait()) throw Stopped();
+                  } else {
+                    throw_if_stopped();
+                  }
+                });
+          });
+        }
       }
     }
   
