@@ -536,14 +536,16 @@ def test_thread_counts_give_identical_output(paths: int) -> None:
 
 
 @pytest.mark.parametrize("isa", SUPPORTED_ISAS)
+@pytest.mark.parametrize("paths", [4, 8])
 @pytest.mark.parametrize("rows", [1, 2, 3, 4, 5, 33])
-def test_paths_8_passes_at_once_match_one_thread_and_the_oracle(isa: str, rows: int) -> None:
-    # With two threads, paths=8 runs its downward and upward passes at once: the downward one
-    # computes the costs and stores the sums of the rows above the middle (rows // 2), the
-    # upward one those of the rest, and each adds to the other's rows once they are done.
-    # Every height, including those that leave one side empty, gives one thread's output.
+def test_passes_at_once_match_one_thread_and_the_oracle(isa: str, paths: int, rows: int) -> None:
+    # With two threads, paths 4 and 8 run the downward and upward passes at once: the downward
+    # one computes the costs and stores the sums of the rows above the middle (rows // 2), the
+    # upward one those of the rest, and each adds to the other's rows once they are done, then
+    # finishes them (horizontal paths, decision). Every height, including those that leave
+    # one side empty, gives one thread's output.
     left, right, _ = slanted_pair((rows, 75), d0=6.0, dx=0.05, dy=0.1, seed=40 + rows)
-    kw: dict[str, Any] = {"num_disparities": 16, "paths": 8, "return_confidence": True}
+    kw: dict[str, Any] = {"num_disparities": 16, "paths": paths, "return_confidence": True}
     one = sd.SemiGlobalMatcher(isa=isa, threads=1, **kw).compute(left, right)
     two = sd.SemiGlobalMatcher(isa=isa, threads=2, **kw).compute(left, right)
     np.testing.assert_array_equal(one[0], two[0])

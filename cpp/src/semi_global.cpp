@@ -115,14 +115,16 @@ int team_threads(int threads, int paths) {
   return paths == 3 ? n : std::min(n, default_threads());
 }
 
-// Paths 8 on two threads: the downward and the upward pass run at once, one thread each
-// (step 1), and wait for each other once, in the middle, rather than splitting the columns
-// between them and meeting at every row.
-// In one process on Zen 4, two threads: 0.62-1.00 of the time of the column bands on the ten
-// shared scenes with AVX2 (median 0.91) and 0.64-0.94 with AVX-512 (median 0.88), 0.90-0.99
-// at 1280 x 720 x 128 (bench/README, twenty-seventh round). Three or more threads keep the
+// Paths 4 and 8 on two threads: the downward and the upward pass run at once, one thread
+// each (step 1), and wait for each other once, at the middle row, rather than splitting the
+// columns between them (paths 8: meeting at a barrier at every row); each then does step 2
+// on the rows it completes, while their sums are in its cache. In one process on Zen 4, two
+// threads, against the column bands and a step 2 of its own: paths 8 on the ten shared scenes
+// 0.62-1.00 of the time with AVX2 and 0.64-0.94 with AVX-512 for the passes at once, and
+// 0.89-1.005 more for step 2 in them (1280 x 720 x 128: 0.90-0.99, then 0.90-0.93); paths 4
+// 0.79-0.93 for both (bench/README, twenty-seventh round). Three or more threads keep the
 // bands, which use them all.
-bool concurrent_passes(int paths, int threads) { return paths == 8 && threads == 2; }
+bool concurrent_passes(int paths, int threads) { return paths != 3 && threads == 2; }
 
 // How long a pass spins (yielding) before it checks for a stop again, waiting for the other.
 constexpr std::chrono::microseconds kPassWait{1000};
@@ -448,6 +450,8 @@ std::size_t semi_global_memory(std::ptrdiff_t rows, std::ptrdiff_t cols, int nd,
       double most = 0.0;
       if (b < nt) most = std::max({census, row, median});
       if (b < nb) most = std::max(most, vertical);
+      // The passes at once: each thread also keeps the row's scratch for step 2.
+      if (concurrent) most = std::max({census, median, vertical}) + row;
       bytes += most;
     }
   }
@@ -458,6 +462,7 @@ struct SemiGlobalMatcher::Workspace {
   std::vector<std::uint8_t> sums, costs, census_l, census_r, grey, pgrey, path_rows;
   std::vector<float> median_edges;  // rows around the boundaries of the median's bands
   std::vector<std::vector<std::uint8_t>> scratch;  // per thread
+  std::vector<std::vector<std::uint8_t>> finish;   // per pass of paths 8's two at once
   std::vector<detail::SpeckleBand> speckle;
   detail::SpeckleJoin speckle_join;
 };
@@ -739,14 +744,41 @@ void SemiGlobalMatcher::compute(const StereoImage& left, const StereoImage& righ
       }
     });
   } else {
+    const bool concurrent = concurrent_passes(p.paths, threads);
+    // Step 2 on row y, with a thread's scratch `at` (n_finish uint16 units): the horizontal
+    // paths added to a copy of the row's sums, then the winner, checks and sub-pixel step on
+    // that copy.
+    const auto c = sz(cols);
+    const std::size_t n_finish = fused ? n_fused : n_col + 4 * c + 2 * sz(ls) + 32;
+    auto finish_row = [&](std::uint16_t* at, std::ptrdiff_t y) {
+      if (fused) {
+        detail::FusedRowArgs fa = fused_args(at);
+        fa.c = costs + sz(y) * n_col;
+        fa.base = sums + sz(y) * n_col;
+        fa.g = pgrey + y * cols;
+        fa.disp = disparity.row(y);
+        fa.conf = confidence.data ? confidence.row(y) : nullptr;
+        k.fused_row(fa);
+        return;
+      }
+      std::uint16_t* total = at;
+      std::uint16_t* rmin = total + n_col;
+      std::uint16_t* rarg = rmin + c;
+      auto* tmp = reinterpret_cast<std::int16_t*>(rarg + c);
+      auto* winners = reinterpret_cast<std::uint32_t*>(
+          (reinterpret_cast<std::uintptr_t>(tmp + 2 * ls) + 3) & ~std::uintptr_t{3});
+      std::memcpy(total, sums + sz(y) * n_col, n_col * sizeof(std::uint16_t));
+      k.horizontal_row(pp, costs + sz(y) * n_col, pgrey + y * cols, cols, total, tmp);
+      k.decide_row(da, total, disparity.row(y), confidence.data ? confidence.row(y) : nullptr,
+                   rmin, rarg, winners);
+    };
     // 1. Downward, then upward: the costs (computed on the way down) and the vertical and
     //    diagonal paths; the columns are split between the threads, which meet at every row
     //    when the diagonals read the previous row across band edges. The way down writes the
-    //    sums, the way up adds to them. Paths 8 on two threads runs the two ways at once
-    //    instead, one thread each (concurrent_passes).
+    //    sums, the way up adds to them. On two threads the two ways run at once instead, one
+    //    thread each (concurrent_passes), and each does step 2 on the rows it completes.
     {
       const int nv = vertical_paths(p.paths);
-      const bool concurrent = concurrent_passes(p.paths, threads);
       const std::ptrdiff_t nb = concurrent ? 2 : vertical_bands(threads, cols);
       if (ws.scratch.size() < static_cast<std::size_t>(nb)) {
         ws.scratch.resize(static_cast<std::size_t>(nb));
@@ -859,9 +891,13 @@ void SemiGlobalMatcher::compute(const StereoImage& left, const StereoImage& righ
         done[0].store(0);
         done[1].store(0);
         std::atomic<bool> quit{false};  // a pass stopped: the other must not wait for it
+        if (ws.finish.size() < 2) ws.finish.resize(2);
+        for (std::size_t b = 0; b < 2; ++b) aligned<std::uint16_t>(ws.finish[b], n_finish);
         run_bands_together(2, [&](std::ptrdiff_t b) {
           const int dy = b == 0 ? 1 : -1;
           const std::atomic<std::ptrdiff_t>& other = done[1 - b];
+          // Sized above: no allocation here.
+          std::uint16_t* fin = aligned<std::uint16_t>(ws.finish[sz(b)], n_finish);
           auto first = [&](std::ptrdiff_t y) {
             if (dy > 0 ? y < m : y >= m) return true;
             // The other pass has finished row y when it has done `need` rows.
@@ -877,6 +913,10 @@ void SemiGlobalMatcher::compute(const StereoImage& left, const StereoImage& righ
           try {
             pass_rows(b, dy, prow_sets + sz(b) * n_prow, first, [&](std::ptrdiff_t i) {
               done[b].store(i + 1, std::memory_order_release);
+              // The second pass over a row completes its sums: step 2 on it at once, while
+              // its sums and costs are in this thread's cache.
+              const std::ptrdiff_t y = dy > 0 ? i : rows - 1 - i;
+              if (dy > 0 ? y >= m : y < m) finish_row(fin, y);
               throw_if_stopped();
             });
           } catch (...) {
@@ -905,44 +945,16 @@ void SemiGlobalMatcher::compute(const StereoImage& left, const StereoImage& righ
       }
     }
   
-    // 2. Row by row (the rows split between the threads): the horizontal paths added to a copy
-    //    of the row's sums, then the winner, checks and sub-pixel step on that copy.
-    if (fused) {
+    // 2. Row by row (the rows split between the threads; done in step 1 when the passes ran
+    //    at once): finish_row.
+    if (!concurrent) {
       run_bands(nt, [&](std::ptrdiff_t b) {
-        auto* at = aligned<std::uint16_t>(ws.scratch[static_cast<std::size_t>(b)], n_fused);
-        detail::FusedRowArgs fa = fused_args(at);
+        std::uint16_t* at = aligned<std::uint16_t>(ws.scratch[sz(b)], n_finish);
         for (std::ptrdiff_t y = band(rows, nt, b); y < band(rows, nt, b + 1); ++y) {
           throw_if_stopped();
-          fa.c = costs + static_cast<std::size_t>(y) * n_col;
-          fa.base = sums + static_cast<std::size_t>(y) * n_col;
-          fa.g = pgrey + y * cols;
-          fa.disp = disparity.row(y);
-          fa.conf = confidence.data ? confidence.row(y) : nullptr;
-          k.fused_row(fa);
+          finish_row(at, y);
         }
       });
-    } else {
-    run_bands(nt, [&](std::ptrdiff_t b) {
-      const auto c = static_cast<std::size_t>(cols);
-      auto* total = aligned<std::uint16_t>(
-          ws.scratch[static_cast<std::size_t>(b)],
-          n_col + 4 * c + 2 * static_cast<std::size_t>(ls) + 32);
-      std::uint16_t* rmin = total + n_col;
-      std::uint16_t* rarg = rmin + c;
-      auto* tmp = reinterpret_cast<std::int16_t*>(rarg + c);
-      auto* winners = reinterpret_cast<std::uint32_t*>(
-          (reinterpret_cast<std::uintptr_t>(tmp + 2 * ls) + 3) & ~std::uintptr_t{3});
-      for (std::ptrdiff_t y = band(rows, nt, b); y < band(rows, nt, b + 1); ++y) {
-        throw_if_stopped();
-        std::memcpy(total, sums + static_cast<std::size_t>(y) * n_col,
-                    n_col * sizeof(std::uint16_t));
-        k.horizontal_row(pp, costs + static_cast<std::size_t>(y) * n_col, pgrey + y * cols, cols,
-                         total, tmp);
-        float* drow = disparity.row(y);
-        k.decide_row(da, total, drow, confidence.data ? confidence.row(y) : nullptr, rmin, rarg,
-                     winners);
-      }
-    });
     }
   }
 

@@ -77,10 +77,10 @@ The disparities counted are ``num_disparities`` rounded up to a multiple of 16 (
 ``max_memory_mb``.
 
 Threads: the horizontal paths and the final steps split the rows, the vertical and diagonal
-paths split the columns (threads meet at every row for the diagonals); ``paths=8`` on two
-threads instead runs its downward and upward passes at once, one thread each, which wait for
-each other once, at the middle row; ``paths=3`` splits the stripes. The output does not depend
-on the number of threads.
+paths split the columns (threads meet at every row for the diagonals); on two threads,
+``paths`` 4 and 8 instead run the downward and the upward pass at once, one thread each, which
+wait for each other once, at the middle row, and finish the rows each completes; ``paths=3``
+splits the stripes. The output does not depend on the number of threads.
 """
 
 from __future__ import annotations
