@@ -450,8 +450,8 @@ std::size_t semi_global_memory(std::ptrdiff_t rows, std::ptrdiff_t cols, int nd,
       double most = 0.0;
       if (b < nt) most = std::max({census, row, median});
       if (b < nb) most = std::max(most, vertical);
-      // The passes at once: each thread also keeps the row's scratch for step 2.
-      if (concurrent) most = std::max({census, median, vertical}) + row;
+      // The passes at once, or one thread: each pass also keeps the row's scratch for step 2.
+      if (concurrent || threads == 1) most = std::max({census, median, vertical}) + row;
       bytes += most;
     }
   }
@@ -745,6 +745,7 @@ void SemiGlobalMatcher::compute(const StereoImage& left, const StereoImage& righ
     });
   } else {
     const bool concurrent = concurrent_passes(p.paths, threads);
+    const bool single_thread = threads == 1;
     // Step 2 on row y, with a thread's scratch `at` (n_finish uint16 units): the horizontal
     // paths added to a copy of the row's sums, then the winner, checks and sub-pixel step on
     // that copy.
@@ -925,13 +926,22 @@ void SemiGlobalMatcher::compute(const StereoImage& left, const StereoImage& righ
           }
         });
       } else {
+        // One thread: the way up finishes each row as it completes it (as the passes at once
+        // do), while its sums are in the cache: in one process on Zen 4, 0.86-1.01 of the time
+        // of a step 2 of its own, paths 4 and 8 (bench/README, twenty-seventh round).
+        std::uint16_t* fin = nullptr;
+        if (single_thread) {
+          if (ws.finish.empty()) ws.finish.resize(1);
+          fin = aligned<std::uint16_t>(ws.finish[0], n_finish);
+        }
         for (int dy : {1, -1}) {
           Barrier barrier(nb);
           // The bands meet at the barrier: each needs its own thread, all at once.
           run_bands_together(nb, [&](std::ptrdiff_t b) {
             pass_rows(
                 b, dy, prow_sets, [&](std::ptrdiff_t) { return dy > 0; },
-                [&](std::ptrdiff_t) {
+                [&](std::ptrdiff_t i) {
+                  if (fin && dy < 0) finish_row(fin, rows - 1 - i);
                   // With a barrier the bands stop together, at the row its last arrival
                   // decides.
                   if (nv > 1 && nb > 1) {
@@ -946,8 +956,8 @@ void SemiGlobalMatcher::compute(const StereoImage& left, const StereoImage& righ
     }
   
     // 2. Row by row (the rows split between the threads; done in step 1 when the passes ran
-    //    at once): finish_row.
-    if (!concurrent) {
+    //    at once or on one thread): finish_row.
+    if (!concurrent && !single_thread) {
       run_bands(nt, [&](std::ptrdiff_t b) {
         std::uint16_t* at = aligned<std::uint16_t>(ws.scratch[sz(b)], n_finish);
         for (std::ptrdiff_t y = band(rows, nt, b); y < band(rows, nt, b + 1); ++y) {
