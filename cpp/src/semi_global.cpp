@@ -462,7 +462,7 @@ struct SemiGlobalMatcher::Workspace {
   std::vector<std::uint8_t> sums, costs, census_l, census_r, grey, pgrey, path_rows;
   std::vector<float> median_edges;  // rows around the boundaries of the median's bands
   std::vector<std::vector<std::uint8_t>> scratch;  // per thread
-  std::vector<std::vector<std::uint8_t>> finish;   // per pass of paths 8's two at once
+  std::vector<std::vector<std::uint8_t>> finish;   // paths 4, 8: step 2's, per pass (1-2)
   std::vector<detail::SpeckleBand> speckle;
   detail::SpeckleJoin speckle_join;
 };
