@@ -31,6 +31,9 @@ CHILD = textwrap.dedent(
     left = rng.integers(0, 256, (rows, cols), dtype=np.uint8)
     right = np.roll(left, -9, axis=1)
 
+    if kind == "sgm-bands":  # paths 8's column bands, which meet at every row
+        sd._core._sgm_column_bands_for_tests(True)
+
     def matcher():
         if kind == "bm":
             return sd.StereoMatcher(num_disparities=nd, threads=2)
@@ -98,6 +101,7 @@ CASES = {
     "block-matching": ("bm", 1500, 2000, 2048, 0),
     "semi-global-3": ("sgm", 1500, 2000, 1024, 3),
     "semi-global-8": ("sgm", 720, 1280, 512, 8),
+    "semi-global-8-bands": ("sgm-bands", 720, 1280, 512, 8),
 }
 
 

@@ -553,6 +553,27 @@ def test_passes_at_once_match_one_thread_and_the_oracle(isa: str, paths: int, ro
     assert_agree(two, ref.semi_global_match(left, right, **kw), subpixel=True)
 
 
+@pytest.mark.parametrize("isa", SUPPORTED_ISAS)
+@pytest.mark.parametrize("paths", [4, 8])
+def test_column_bands_match_the_passes_at_once(isa: str, paths: int) -> None:
+    # Three or more threads split the columns of the vertical passes into bands (for paths=8
+    # they meet at every row), but paths 4 and 8 never run more threads than CPUs: on a
+    # machine with two, only the test hook makes two threads take the bands.
+    from stereodepth import _core
+
+    left, right, _ = slanted_pair((45, 97), d0=8.0, dx=0.06, dy=0.05, seed=60 + paths)
+    kw: dict[str, Any] = {"num_disparities": 24, "paths": paths, "return_confidence": True}
+    want = sd.SemiGlobalMatcher(isa=isa, threads=2, **kw).compute(left, right)
+    _core._sgm_column_bands_for_tests(True)
+    try:
+        bands = sd.SemiGlobalMatcher(isa=isa, threads=2, **kw).compute(left, right)
+    finally:
+        _core._sgm_column_bands_for_tests(False)
+    np.testing.assert_array_equal(bands[0], want[0])
+    np.testing.assert_array_equal(bands[1], want[1])
+    assert_agree(bands, ref.semi_global_match(left, right, **kw), subpixel=True)
+
+
 def test_concurrent_calls_from_python_threads() -> None:
     pairs = [shifted_pair((40, 90), s, seed=20 + s) for s in range(1, 7)]
     kw: dict[str, Any] = {"num_disparities": 16, "threads": 2}

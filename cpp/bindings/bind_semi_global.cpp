@@ -76,6 +76,8 @@ void bind_semi_global(py::module_& m) {
       .def_property_readonly("threads", &SemiGlobalMatcher::threads)
       .def_property_readonly("isa",
                              [](const SemiGlobalMatcher& self) { return isa_name(self.isa()); });
+  m.def("_sgm_column_bands_for_tests", &set_column_bands_for_tests, py::arg("on"),
+        "Tests only: paths 4 and 8 on two threads split the columns (as 3+ threads do).");
   m.def(
       "semi_global_memory",
       [](std::ptrdiff_t rows, std::ptrdiff_t cols, int num_disparities, int paths, int threads,

@@ -115,6 +115,10 @@ int team_threads(int threads, int paths) {
   return paths == 3 ? n : std::min(n, default_threads());
 }
 
+// Tests only (set_column_bands_for_tests): two threads take the column bands too, so that a
+// machine with two CPUs, where paths 4 and 8 never run more threads, still runs them.
+std::atomic<bool> g_column_bands{false};
+
 // Paths 4 and 8 on two threads: the downward and the upward pass run at once, one thread
 // each (step 1), and wait for each other once, at the middle row, rather than splitting the
 // columns between them (paths 8: meeting at a barrier at every row); each then does step 2
@@ -124,7 +128,9 @@ int team_threads(int threads, int paths) {
 // 0.89-1.005 more for step 2 in them (1280 x 720 x 128: 0.90-0.99, then 0.90-0.93); paths 4
 // 0.79-0.93 for both (bench/README, twenty-seventh round). Three or more threads keep the
 // bands, which use them all.
-bool concurrent_passes(int paths, int threads) { return paths != 3 && threads == 2; }
+bool concurrent_passes(int paths, int threads) {
+  return paths != 3 && threads == 2 && !g_column_bands.load(std::memory_order_relaxed);
+}
 
 // How long a pass spins (yielding) before it checks for a stop again, waiting for the other.
 constexpr std::chrono::microseconds kPassWait{1000};
@@ -359,6 +365,8 @@ struct PlainStripeLayout {
 std::size_t median_n16(std::size_t c) { return 2 * r64(2 * c) + r64((c + 1) / 2); }
 
 }  // namespace
+
+void set_column_bands_for_tests(bool on) { g_column_bands.store(on); }
 
 void validate(const SemiGlobalParams& p) {
   if (p.num_disparities < 1 || p.num_disparities > kMaxNumDisparities) {

@@ -47,6 +47,11 @@ std::size_t semi_global_memory(std::ptrdiff_t rows, std::ptrdiff_t cols, int num
 
 // The matcher for per-frame use: parameters validated once, buffers kept between frames.
 // compute() may be called from several threads; the calls take turns.
+// Tests only: with `on`, paths 4 and 8 on two threads split the columns into bands (as three
+// or more threads do) instead of running the downward and upward passes at once; a machine
+// with two CPUs otherwise never runs the bands. Not for concurrent use with matching calls.
+void set_column_bands_for_tests(bool on);
+
 class SemiGlobalMatcher {
  public:
   explicit SemiGlobalMatcher(const SemiGlobalParams& params, int threads = 0,
