@@ -729,10 +729,10 @@ def test_matched_along_rows_annotates_only_a_vertical_rigs_errors() -> None:
     from stereodepth._calib_rule import matched_along_rows
 
     plain = r"^an image 64 pixels wide$"
-    with pytest.raises(ValueError, match=plain), matched_along_rows(False, (96, 64, 3)):
+    with pytest.raises(ValueError, match=plain), matched_along_rows(False, 96):
         raise ValueError("an image 64 pixels wide")
     noted = r"^an image 96 pixels wide \(a vertical rig: .* height of 96 pixels and their rows\)$"
-    with pytest.raises(ValueError, match=noted), matched_along_rows(True, (96, 64, 3)):
+    with pytest.raises(ValueError, match=noted), matched_along_rows(True, 96):
         raise ValueError("an image 96 pixels wide")
-    with pytest.raises(TypeError, match=r"^num_disparities$"), matched_along_rows(True, (9, 8)):
+    with pytest.raises(TypeError, match=r"^num_disparities$"), matched_along_rows(True, 9):
         raise TypeError("num_disparities")

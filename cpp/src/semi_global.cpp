@@ -140,6 +140,18 @@ std::ptrdiff_t vertical_bands(int threads, std::ptrdiff_t cols) {
   return std::max<std::ptrdiff_t>(1, std::min<std::ptrdiff_t>(threads, cols / 16));
 }
 
+// Paths 4 and 8: the threads of step 1, the two passes at once (each over every column) or
+// the column bands.
+std::ptrdiff_t pass_bands(int paths, int threads, std::ptrdiff_t cols) {
+  return concurrent_passes(paths, threads) ? 2 : vertical_bands(threads, cols);
+}
+
+// Paths 4 and 8: whether step 1 also does step 2, each pass on the rows it completes (the
+// passes at once, or one thread), each keeping step 2's scratch beside its own.
+bool finish_in_passes(int paths, int threads) {
+  return concurrent_passes(paths, threads) || threads == 1;
+}
+
 // Runs fn(b) for b in [0, n), each on its own thread (the caller's is the first).
 template <typename Fn>
 void run_bands(std::ptrdiff_t n, Fn fn) {
@@ -233,6 +245,12 @@ struct FusedScratch {
     total = rfinal + r64(c);
   }
 };
+
+// Paths 4 and 8, step 2's scratch per thread (uint16 units): the fused row's, or the plain
+// row's copy of the sums, right winners (2 x c), winners (2 x c) and horizontal paths.
+std::size_t row_scratch_n16(std::size_t c, int nd, int ls, bool fused) {
+  return fused ? FusedScratch(c, nd).total : c * sz(nd) + 4 * c + 2 * sz(ls) + 32;
+}
 
 // The single-pass mode's grey and census rows, computed by each thread when it needs them
 // rather than for the whole image: census row y of an image from its grey rows y - 2 .. y + 2
@@ -447,19 +465,18 @@ std::size_t semi_global_memory(std::ptrdiff_t rows, std::ptrdiff_t cols, int nd,
     // Per thread, the most of its stages: census, the vertical paths over a band of columns
     // (all of them when the passes run at once), the row's horizontal paths and decision, the
     // median.
-    const std::ptrdiff_t nb = concurrent ? 2 : vertical_bands(threads, cols);
+    const std::ptrdiff_t nb = pass_bands(paths, threads, cols);
     const std::size_t band_cols = concurrent ? c : (c + sz(nb) - 1) / sz(nb);
     const double vertical =
         bytes16(c + sz(nd) + 32 + 4 * (band_cols + 2) * sz(nd) + sz(nd));
-    const double row = bytes16(fused ? FusedScratch(c, nd).total
-                                     : c * sz(nd) + 4 * c + 2 * sz(ls) + 32);
+    const double row = bytes16(row_scratch_n16(c, nd, ls, fused));
     const double census = 4.0 * w + 64.0;
     for (std::ptrdiff_t b = 0; b < std::max(nt, nb); ++b) {
       double most = 0.0;
       if (b < nt) most = std::max({census, row, median});
       if (b < nb) most = std::max(most, vertical);
-      // The passes at once, or one thread: each pass also keeps the row's scratch for step 2.
-      if (concurrent || threads == 1) most = std::max({census, median, vertical}) + row;
+      // Step 2 in step 1: each pass also keeps the row's scratch.
+      if (finish_in_passes(paths, threads)) most = std::max({census, median, vertical}) + row;
       bytes += most;
     }
   }
@@ -631,7 +648,6 @@ void SemiGlobalMatcher::compute(const StereoImage& left, const StereoImage& righ
   const auto n_col = static_cast<std::size_t>(cols) * static_cast<std::size_t>(nd);
   const bool fused = k.fused_row != nullptr && nd % k.fused_lanes == 0;
   const FusedScratch fs(sz(cols), nd);
-  const std::size_t n_fused = fs.total;
   auto fused_args = [&](std::uint16_t* at) {
     detail::FusedRowArgs fa{};
     fa.p = pp;
@@ -753,12 +769,12 @@ void SemiGlobalMatcher::compute(const StereoImage& left, const StereoImage& righ
     });
   } else {
     const bool concurrent = concurrent_passes(p.paths, threads);
-    const bool single_thread = threads == 1;
+    const bool in_passes = finish_in_passes(p.paths, threads);  // step 2 done in step 1
     // Step 2 on row y, with a thread's scratch `at` (n_finish uint16 units): the horizontal
     // paths added to a copy of the row's sums, then the winner, checks and sub-pixel step on
     // that copy.
     const auto c = sz(cols);
-    const std::size_t n_finish = fused ? n_fused : n_col + 4 * c + 2 * sz(ls) + 32;
+    const std::size_t n_finish = row_scratch_n16(c, nd, ls, fused);
     auto finish_row = [&](std::uint16_t* at, std::ptrdiff_t y) {
       if (fused) {
         detail::FusedRowArgs fa = fused_args(at);
@@ -788,7 +804,7 @@ void SemiGlobalMatcher::compute(const StereoImage& left, const StereoImage& righ
     //    thread each (concurrent_passes), and each does step 2 on the rows it completes.
     {
       const int nv = vertical_paths(p.paths);
-      const std::ptrdiff_t nb = concurrent ? 2 : vertical_bands(threads, cols);
+      const std::ptrdiff_t nb = pass_bands(p.paths, threads, cols);
       if (ws.scratch.size() < static_cast<std::size_t>(nb)) {
         ws.scratch.resize(static_cast<std::size_t>(nb));
       }
@@ -938,7 +954,7 @@ void SemiGlobalMatcher::compute(const StereoImage& left, const StereoImage& righ
         // do), while its sums are in the cache: in one process on Zen 4, 0.86-1.01 of the time
         // of a step 2 of its own, paths 4 and 8 (bench/README, twenty-seventh round).
         std::uint16_t* fin = nullptr;
-        if (single_thread) {
+        if (in_passes) {
           if (ws.finish.empty()) ws.finish.resize(1);
           fin = aligned<std::uint16_t>(ws.finish[0], n_finish);
         }
@@ -965,7 +981,7 @@ void SemiGlobalMatcher::compute(const StereoImage& left, const StereoImage& righ
   
     // 2. Row by row (the rows split between the threads; done in step 1 when the passes ran
     //    at once or on one thread): finish_row.
-    if (!concurrent && !single_thread) {
+    if (!in_passes) {
       run_bands(nt, [&](std::ptrdiff_t b) {
         std::uint16_t* at = aligned<std::uint16_t>(ws.scratch[sz(b)], n_finish);
         for (std::ptrdiff_t y = band(rows, nt, b); y < band(rows, nt, b + 1); ++y) {

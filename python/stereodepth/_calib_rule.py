@@ -305,10 +305,10 @@ def from_rows(vertical: bool, array: Any) -> Any:
 
 
 @contextlib.contextmanager
-def matched_along_rows(vertical: bool, shape: tuple[int, ...]) -> Iterator[None]:
+def matched_along_rows(vertical: bool, height: int) -> Iterator[None]:
     """Around matching :func:`along_rows`'s pair: for a vertical rig, a ValueError from the
     matcher, which speaks of the transposed pair (its "width" and "columns" are the rectified
-    images' height and rows), says so and gives the images' own ``shape`` (H, W[, 3])."""
+    images' height and rows), says so and gives that ``height`` in pixels."""
     try:
         yield
     except ValueError as exc:
@@ -316,7 +316,7 @@ def matched_along_rows(vertical: bool, shape: tuple[int, ...]) -> Iterator[None]
             raise
         raise ValueError(
             f"{exc} (a vertical rig: the pair is matched transposed, along its columns, so the "
-            f"image's width and columns above are the rectified images' height of {shape[0]} "
+            f"image's width and columns above are the rectified images' height of {height} "
             f"pixels and their rows)"
         ) from exc
 

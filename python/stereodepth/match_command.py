@@ -535,7 +535,7 @@ def run(args: argparse.Namespace) -> int:
             rectify_s = time.perf_counter() - t0
         vertical = rectifier is not None and rectifier.vertical
         rows_left, rows_right = rule.along_rows(vertical, left_img, right_img)
-        with rule.matched_along_rows(vertical, left_img.shape):
+        with rule.matched_along_rows(vertical, left_img.shape[0]):
             result = match_pair(
                 rows_left,
                 rows_right,

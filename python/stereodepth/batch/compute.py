@@ -145,7 +145,7 @@ def process_pair(pair: Pair, options: BatchOptions, threads: int | None = None) 
         )
         # A vertical rig is matched transposed and its disparity turned back (_calib_rule).
         vertical = options.rectification is not None and options.rectification.vertical(threads)
-        with matched_along_rows(vertical, left.shape):
+        with matched_along_rows(vertical, left.shape[0]):
             disparity = from_rows(
                 vertical, compute_disparity(matcher, *along_rows(vertical, left, right))
             )
