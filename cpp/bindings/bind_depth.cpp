@@ -28,7 +28,8 @@ DisparityType disparity_type(const py::array& a) {
 void disparity_to_depth_py(const py::array& disparity, py::array& out, double focal_px,
                            double baseline_m, double doffs_px, double scale, double min_depth_m,
                            double max_depth_m, std::optional<double> invalid_value,
-                           std::optional<double> invalid_below, int threads, const std::string& isa) {
+                           std::optional<double> invalid_below, int threads,
+                           const std::string& isa) {
   DepthParams p;
   p.focal_px = focal_px;
   p.baseline_m = baseline_m;

@@ -42,8 +42,8 @@ CameraModel camera(const Doubles& K, const Doubles& D, const std::string& model,
   cam.K = mat3(K, name);
   cam.model = parse_model(model);
   if (D.ndim() != 1 || D.shape(0) > 8) {
-    throw py::value_error(std::string(name) + " distortion must be 1-D with at most 8 entries, got " +
-                          shape_str(D));
+    throw py::value_error(std::string(name) +
+                          " distortion must be 1-D with at most 8 entries, got " + shape_str(D));
   }
   for (py::ssize_t i = 0; i < D.shape(0); ++i) cam.d[static_cast<std::size_t>(i)] = D.at(i);
   return cam;

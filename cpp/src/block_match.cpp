@@ -279,9 +279,10 @@ void BlockMatcher::compute(const StereoImage& left, const StereoImage& right,
   if (static_cast<std::int64_t>(cols) * dp16 >= (std::int64_t{1} << 30)) {
     throw std::invalid_argument(
         "the image width times num_disparities must be below 2^30 with num_disparities rounded "
-        "up to a multiple of 16, got " + std::to_string(cols) + " x " +
-        std::to_string(p.num_disparities) + " (" + std::to_string(cols) + " x " +
-        std::to_string(dp16) + " = " + std::to_string(static_cast<std::int64_t>(cols) * dp16) + ")");
+        "up to a multiple of 16, got " +
+        std::to_string(cols) + " x " + std::to_string(p.num_disparities) + " (" +
+        std::to_string(cols) + " x " + std::to_string(dp16) + " = " +
+        std::to_string(static_cast<std::int64_t>(cols) * dp16) + ")");
   }
 
   std::lock_guard<std::mutex> lock(mutex_);
@@ -556,7 +557,8 @@ void BlockMatcher::compute(const StereoImage& left, const StereoImage& right,
   if (speckle) {
     std::vector<Segment> all;
     for (const auto& list : segments) all.insert(all.end(), list.begin(), list.end());
-    std::sort(all.begin(), all.end(), [](const Segment& x, const Segment& y) { return x.y0 < y.y0; });
+    std::sort(all.begin(), all.end(),
+              [](const Segment& x, const Segment& y) { return x.y0 < y.y0; });
     std::vector<SpeckleBand*> labels;
     std::vector<std::ptrdiff_t> starts;
     for (const Segment& seg : all) {
@@ -592,7 +594,8 @@ std::vector<std::pair<std::string, double>> BlockMatcher::stage_times(
   if (left.format == PixelFormat::kGrey16 || left.format != right.format ||
       left.rows != right.rows || left.cols != right.cols || left.rows < 1 || left.cols < 1 ||
       disparity.rows != left.rows || disparity.cols != left.cols) {
-    throw std::invalid_argument("stage_times takes two 8-bit images of one shape and their disparity");
+    throw std::invalid_argument(
+        "stage_times takes two 8-bit images of one shape and their disparity");
   }
   if (repeats < 1) throw std::invalid_argument("repeats must be >= 1");
   std::lock_guard<std::mutex> lock(mutex_);
@@ -734,7 +737,8 @@ std::vector<std::pair<std::string, double>> BlockMatcher::stage_times(
       speckle_finish(k, view, ImageView<float>{}, p.speckle_window, rf, bands, starts, join, 1);
     }, [&] {
       for (std::ptrdiff_t y = 0; y < rows; ++y) {
-        std::memcpy(copy + y * cols, disparity.row(y), sizeof(float) * static_cast<std::size_t>(cols));
+        std::memcpy(copy + y * cols, disparity.row(y),
+                    sizeof(float) * static_cast<std::size_t>(cols));
       }
     });
   }

@@ -196,7 +196,9 @@ inline void census_block_avx2(const uint8_t* const* rows, ptrdiff_t x, uint32_t*
     const __m256i v = load(p);
     return _mm256_cmpeq_epi8(_mm256_max_epu8(v, c), v);
   };
-  auto step = [](__m256i plane, __m256i g) { return _mm256_add_epi8(_mm256_add_epi8(plane, plane), g); };
+  auto step = [](__m256i plane, __m256i g) {
+    return _mm256_add_epi8(_mm256_add_epi8(plane, plane), g);
+  };
   // Bits 15 .. 8: row 0 (5 pixels), then row 1's two ends and row 2's left end.
   __m256i hi8 = ge(r0 - 2);
   hi8 = step(hi8, ge(r0 - 1));
@@ -906,8 +908,9 @@ void winners_avx2(const RowCtx& c) {
       const __m256i r0 = _mm256_loadu_si256(reinterpret_cast<const __m256i*>(p));
       const __m256i r1 = _mm256_loadu_si256(reinterpret_cast<const __m256i*>(p + nib));
       return _mm256_maddubs_epi16(
-          _mm256_set1_epi8(1), _mm256_add_epi8(_mm256_shuffle_epi8(lut, _mm256_xor_si256(l.in0, r0)),
-                                               _mm256_shuffle_epi8(lut, _mm256_xor_si256(l.in1, r1))));
+          _mm256_set1_epi8(1),
+          _mm256_add_epi8(_mm256_shuffle_epi8(lut, _mm256_xor_si256(l.in0, r0)),
+                          _mm256_shuffle_epi8(lut, _mm256_xor_si256(l.in1, r1))));
     };
     const __m256i cin0 = count(in16 + j + 16 * i);
     const __m256i cin1 = i + 1 < NC ? count(in16 + j + 16 * (i + 1)) : _mm256_setzero_si256();
@@ -1037,7 +1040,8 @@ void winners_avx2(const RowCtx& c) {
   const __m256i two = _mm256_set1_epi16(2);
   uint32_t tsums[16];  // the block texture sums of the group's pixels
   // Whether every block cost is below 4095 (see right_group_keyed).
-  const bool keyed = (2 * r + 1) * (2 * r + 1) * (sizeof(F) == 4 ? kCensusCostMax : kSadCostMax) <= 4094;
+  const bool keyed =
+      (2 * r + 1) * (2 * r + 1) * (sizeof(F) == 4 ? kCensusCostMax : kSadCostMax) <= 4094;
 
   // The winners of the group of pixels x0 .. x1 (at most 16) from their costs in `recent`.
   // Apart from the running sums, one pixel's work does not depend on another's, but its
@@ -1089,7 +1093,9 @@ void winners_avx2(const RowCtx& c) {
     alignas(32) uint16_t bests[16];
     for (ptrdiff_t x = x0; x <= x1 && !keyed_; ++x) {
       const uint16_t* const row = recent + (x - x0) * kRow + 16;
-      auto load = [&](int i) { return _mm256_load_si256(reinterpret_cast<const __m256i*>(row) + i); };
+      auto load = [&](int i) {
+        return _mm256_load_si256(reinterpret_cast<const __m256i*>(row) + i);
+      };
       int qlo = 0, qhi = -1;
       const bool border = !kInner && (x < xlo || x > xhi);
       if (border && !(clip_border && border_lanes(x, qlo, qhi))) continue;  // no search
@@ -1158,7 +1164,8 @@ void winners_avx2(const RowCtx& c) {
           const ptrdiff_t x = xstart + p;
           WinnerRecord* rec = records + x;
           rec->best = static_cast<uint16_t>(best[p]);
-          rec->second = static_cast<uint16_t>(static_cast<uint32_t>(16 * (NC + (NC & 1))) - high[p]);
+          rec->second =
+              static_cast<uint16_t>(static_cast<uint32_t>(16 * (NC + (NC & 1))) - high[p]);
           rec->kbest = dp - 1 - qb[p];
           rec->tsum = tsums[x - x0];
           rec->around = static_cast<uint32_t>(rows_[p][qb[p] + 1]) |
@@ -1169,7 +1176,9 @@ void winners_avx2(const RowCtx& c) {
     for (ptrdiff_t x = xstart; x <= x1; ++x) {
       const uint16_t* const row = recent + (x - x0) * kRow + 16;
       __m256i V[NC];
-      for (int i = 0; i < NC; ++i) V[i] = _mm256_load_si256(reinterpret_cast<const __m256i*>(row) + i);
+      for (int i = 0; i < NC; ++i) {
+        V[i] = _mm256_load_si256(reinterpret_cast<const __m256i*>(row) + i);
+      }
       int qlo = 0, qhi = dp - 1;  // the lanes searched
       const bool border = !kInner && (x < xlo || x > xhi);
       if (border) {
@@ -1271,7 +1280,8 @@ void winners_avx2(const RowCtx& c) {
           const uint32_t c2 = qb - 1 >= qlo ? row[qb - 1] : kNone;
           around_costs = c0 | (c2 << 16);
         } else {
-          around_costs = static_cast<uint32_t>(row[qb + 1]) | (static_cast<uint32_t>(row[qb - 1]) << 16);
+          around_costs =
+              static_cast<uint32_t>(row[qb + 1]) | (static_cast<uint32_t>(row[qb - 1]) << 16);
         }
       }
       rec->around = around_costs;
@@ -1303,7 +1313,9 @@ void winners_avx2(const RowCtx& c) {
             add_diff(i, census_update_bytes(l, xp, i), column_bytes(xm, i));
           }
           if constexpr (ib == 0) A[0] = _mm256_or_si256(A[0], padv);
-          for (int i = ib; i < ie; ++i) _mm256_store_si256(reinterpret_cast<__m256i*>(rowp) + i, A[i]);
+          for (int i = ib; i < ie; ++i) {
+            _mm256_store_si256(reinterpret_cast<__m256i*>(rowp) + i, A[i]);
+          }
           if constexpr (ib == 0) {
             if (texcol) tsum += texcol[xp] - texcol[xm];
             tsums[x - x0] = tsum;
@@ -1590,14 +1602,17 @@ void decide_avx2(const RowCtx& c) {
             _mm256_andnot_si256(_mm256_cmpgt_epi32(kb[u], nd2), _mm256_cmpgt_epi32(t, c2));
         const __m256i near = _mm256_sub_epi32(_mm256_sub_epi32(_mm256_set1_epi32(1), low0), low2);
         ok[u] = _mm256_and_si256(ok[u], _mm256_cmpeq_epi32(_mm256_srli_epi32(f0[u], 16), near));
-        const __m256i xs = _mm256_add_epi32(_mm256_set1_epi32(static_cast<int>(xstart + 8 * u)), iota);
+        const __m256i xs =
+            _mm256_add_epi32(_mm256_set1_epi32(static_cast<int>(xstart + 8 * u)), iota);
         iv[u] = _mm256_sub_epi32(_mm256_add_epi32(xs, dp1), kb[u]);
       }
       for (int u = 0; u < kU; ++u) {
-        g[u] = _mm256_mask_i32gather_epi32(zero, reinterpret_cast<const int*>(c.rarg), iv[u], ok[u], 2);
+        const int* rarg = reinterpret_cast<const int*>(c.rarg);
+        g[u] = _mm256_mask_i32gather_epi32(zero, rarg, iv[u], ok[u], 2);
       }
       for (int u = 0; u < kU; ++u) {
-        const __m256i kr = _mm256_and_si256(_mm256_add_epi32(_mm256_sub_epi32(g[u], iv[u]), dp1), low16);
+        const __m256i kr =
+            _mm256_and_si256(_mm256_add_epi32(_mm256_sub_epi32(g[u], iv[u]), dp1), low16);
         const __m256i diff = _mm256_abs_epi32(_mm256_sub_epi32(kb[u], kr));
         ok[u] = _mm256_andnot_si256(_mm256_cmpgt_epi32(diff, lr_v), ok[u]);
         const __m256i b = _mm256_and_si256(f0[u], low16);
@@ -1605,7 +1620,8 @@ void decide_avx2(const RowCtx& c) {
         const __m256i c2 = _mm256_srli_epi32(nb[u], 16);
         const __m256 d = subpixel_step(_mm256_cvtepi32_ps(_mm256_add_epi32(kb[u], mind)), kb[u],
                                        b, c0, c2, ok[u]);
-        _mm256_storeu_ps(c.drow + xstart + 8 * u, _mm256_blendv_ps(nan, d, _mm256_castsi256_ps(ok[u])));
+        _mm256_storeu_ps(c.drow + xstart + 8 * u,
+                         _mm256_blendv_ps(nan, d, _mm256_castsi256_ps(ok[u])));
       }
     }
   }

@@ -64,14 +64,22 @@ std::ptrdiff_t min_rows(std::ptrdiff_t cols) {
 }  // namespace
 
 void validate(const DepthParams& p) {
-  if (!(std::isfinite(p.focal_px) && p.focal_px > 0)) fail("focal_px must be finite and > 0", p.focal_px);
-  if (!(std::isfinite(p.baseline_m) && p.baseline_m > 0)) fail("baseline_m must be finite and > 0", p.baseline_m);
+  if (!(std::isfinite(p.focal_px) && p.focal_px > 0)) {
+    fail("focal_px must be finite and > 0", p.focal_px);
+  }
+  if (!(std::isfinite(p.baseline_m) && p.baseline_m > 0)) {
+    fail("baseline_m must be finite and > 0", p.baseline_m);
+  }
   if (!std::isfinite(p.doffs_px)) fail("doffs_px must be finite", p.doffs_px);
   if (!(std::isfinite(p.scale) && p.scale > 0)) fail("scale must be finite and > 0", p.scale);
-  if (!(std::isfinite(p.min_depth_m) && p.min_depth_m >= 0)) fail("min_depth_m must be finite and >= 0", p.min_depth_m);
+  if (!(std::isfinite(p.min_depth_m) && p.min_depth_m >= 0)) {
+    fail("min_depth_m must be finite and >= 0", p.min_depth_m);
+  }
   if (!(p.max_depth_m > 0)) fail("max_depth_m must be > 0", p.max_depth_m);
   if (!(p.max_depth_m >= p.min_depth_m)) fail("max_depth_m must be >= min_depth_m", p.max_depth_m);
-  if (p.has_invalid_below && std::isnan(p.invalid_below)) fail("invalid_below must not be NaN", p.invalid_below);
+  if (p.has_invalid_below && std::isnan(p.invalid_below)) {
+    fail("invalid_below must not be NaN", p.invalid_below);
+  }
 }
 
 template <typename Out, typename RowFn>

@@ -19,7 +19,8 @@
    : (isa) == ::stereodepth::Isa::kAvx2 ? ::stereodepth::detail::avx2::getter()           \
                                         : ::stereodepth::detail::baseline::getter())
 #else
-#define STEREODEPTH_KERNELS_FOR(isa, getter) ((void)(isa), ::stereodepth::detail::baseline::getter())
+#define STEREODEPTH_KERNELS_FOR(isa, getter) \
+  ((void)(isa), ::stereodepth::detail::baseline::getter())
 #endif
 
 namespace stereodepth::detail {

@@ -98,8 +98,9 @@ void RemapTable::apply(const StereoImage& src, void* dst, std::ptrdiff_t dst_row
                        int threads, Isa isa) const {
   if (src.rows != src_rows_ || src.cols != src_cols_) {
     throw std::invalid_argument("image must have " + std::to_string(src_rows_) + " x " +
-                                std::to_string(src_cols_) + " pixels (the maps' source size), got " +
-                                std::to_string(src.rows) + " x " + std::to_string(src.cols));
+                                std::to_string(src_cols_) +
+                                " pixels (the maps' source size), got " + std::to_string(src.rows) +
+                                " x " + std::to_string(src.cols));
   }
   if (remap_precision(src.format) != precision_) {
     throw std::invalid_argument(precision_ == RemapPrecision::kFixed

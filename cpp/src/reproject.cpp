@@ -48,7 +48,9 @@ void validate(const ReprojectParams& p) {
   }
   if (!(p.max_depth > 0)) fail("max_depth must be > 0", p.max_depth);
   if (!(p.max_depth >= p.min_depth)) fail("max_depth must be >= min_depth", p.max_depth);
-  if (p.has_invalid_below && std::isnan(p.invalid_below)) fail("invalid_below must not be NaN", p.invalid_below);
+  if (p.has_invalid_below && std::isnan(p.invalid_below)) {
+    fail("invalid_below must not be NaN", p.invalid_below);
+  }
 }
 
 void reproject(const DisparityStack& in, const StackView<float>& out,
