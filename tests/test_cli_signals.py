@@ -134,6 +134,55 @@ def test_match_stopped_mid_write_keeps_the_earlier_set(
 
 
 @pytest.mark.parametrize(("sig", "status", "word"), SIGNALS)
+def test_match_signalled_once_the_set_is_in_place_ends_as_done(
+    tmp_path: Path, pair: tuple[str, str], sig: int, status: int, word: str
+) -> None:
+    """A signal that lands after the new set was renamed into place (here while the run's
+    record of its files is written) no longer ends the run with 143 or 130, which say that
+    the earlier set was left as it was: the run is done, exit 0, its summary printed, the
+    new set and its record in place. (A SIGTERM to `match` 0.3 s in exited 143 with the
+    new set in the folder.)"""
+    out = tmp_path / "out"
+    argv = ["match", *pair, *RIG, "--num-disparities", "16", "--no-preview", "--json"]
+    proc = start(tmp_path, "stereodepth.match_command", "_write_manifest", 1, *argv, "-o", "out/")
+    code, stdout, err = signal_when_ready(proc, sig)
+    assert code == 0, err
+    assert word not in err and "Traceback" not in err
+    summary = json.loads(stdout)
+    assert set(summary["outputs"]) == {"disparity", "depth"}
+    assert sorted(p.name for p in out.iterdir()) == [
+        ".stereodepth-match.json",
+        "depth.npy",
+        "disparity.pfm",
+    ]
+    record = json.loads((out / ".stereodepth-match.json").read_text())
+    assert set(record["files"]) == {"depth.npy", "disparity.pfm"}
+
+
+def test_match_exit_status_after_its_outputs_are_committed(
+    tmp_path: Path,
+    pair: tuple[str, str],
+    monkeypatch: pytest.MonkeyPatch,
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    """A Ctrl-C or SIGTERM raised just after the held commit (between two steps of the
+    run's end, where no handler holds it) ends the run as done: exit 0, not 130 or 143."""
+    from stereodepth import cli, match_command
+
+    def committed_then_signalled() -> None:
+        cli.outputs_committed()
+        raise cli.Terminated
+
+    monkeypatch.setattr(match_command, "outputs_committed", committed_then_signalled)
+    monkeypatch.chdir(tmp_path)
+    code = cli.main(["match", *pair, *RIG, "--num-disparities", "16", "--no-preview"])
+    err = capsys.readouterr().err
+    assert code == 0, err
+    assert "terminated" not in err
+    assert (tmp_path / "disparity.pfm").is_file() and (tmp_path / "depth.npy").is_file()
+
+
+@pytest.mark.parametrize(("sig", "status", "word"), SIGNALS)
 def test_batch_stopped_like_ctrl_c(
     tmp_path: Path, pair: tuple[str, str], sig: int, status: int, word: str
 ) -> None:

@@ -7,7 +7,9 @@ the message names the option as the user typed it (``--subpixel-px``, not the li
 ``--plot``, say) or a file that fails as it is written prints one line and exits with 1. Ctrl-C
 prints "interrupted" and exits with 130; SIGTERM (``timeout``, ``kill``) is handled as
 Ctrl-C for the command's duration, through the same clean-up, then prints "terminated" and
-exits with 143; except ``serve``, for which either signal is its normal end ("stopped", 0).
+exits with 143; except ``serve``, for which either signal is its normal end ("stopped", 0),
+and a command whose outputs are already in place (:func:`outputs_committed`), which ends as
+done.
 """
 
 from __future__ import annotations
@@ -54,6 +56,19 @@ _terminated = False
 def terminated() -> bool:
     """Whether the running command got SIGTERM (its exit status is then 143)."""
     return _terminated
+
+
+#: Whether the running command has put its outputs in place (:func:`outputs_committed`).
+_committed = False
+
+
+def outputs_committed() -> None:
+    """Said by a command once its outputs are in place (``match``'s set renamed over the
+    earlier one): a Ctrl-C or SIGTERM that comes while it ends no longer makes its exit
+    status 130 or 143, which say that the run stopped and left the earlier outputs as they
+    were. It ends with the status it had (0)."""
+    global _committed
+    _committed = True
 
 
 @contextlib.contextmanager
@@ -545,10 +560,12 @@ def main(argv: Sequence[str] | None = None) -> int:
             file=sys.stderr,
         )
         return 1
+    global _committed
+    _committed = False
     try:
         with _sigterm_as_interrupt():
             code = int(args.func(args))
-        if _terminated:  # the command stopped on SIGTERM as on Ctrl-C, and returned
+        if _terminated and not _committed:  # stopped on SIGTERM as on Ctrl-C, and returned
             print(f"stereodepth {args.command}: terminated", file=sys.stderr)
             return 143
         return code
@@ -559,6 +576,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"stereodepth {args.command}: error: {one_line(exc)}", file=sys.stderr)
         return 1
     except KeyboardInterrupt:  # Ctrl-C, or SIGTERM (Terminated, or one that came after Ctrl-C)
+        if _committed:  # it came after the outputs were in place: the run is done
+            return 0
         if _terminated:
             print(f"stereodepth {args.command}: terminated", file=sys.stderr)
             return 143

@@ -370,18 +370,28 @@ def atomic_write(path: str | os.PathLike[str], *, text: bool = False) -> Iterato
     target = Path(os.path.realpath(p)) if p.is_symlink() else p
     _refuse_read_only(target, p)
     tmp = _temp_path(target)
-    # O_EXCL: never follow or clobber anything; mode 0o666 so the umask applies as usual.
+    # The file is created inside the block whose clean-up removes it: a Ctrl-C or SIGTERM
+    # (raised between any two steps) that came just after it was created, before the block
+    # began, left it behind.
+    fd = -1
+    f: IO[Any] | None = None
+    refused = False  # os.open refused the name: nothing of ours to remove (it may be another's)
     try:
-        fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_BINARY", 0), 0o666)
-    except OSError as exc:
-        # A folder that is missing, read-only or takes no new files (/proc), or a file where
-        # a folder should be: name the user's path, not the temporary one the user never gave.
-        why = folder_fault(target) if exc.errno in (errno.ENOENT, errno.ENOTDIR) else None
-        raise type(exc)(
-            exc.errno, f"cannot write {p.name}: {why or exc.strerror}", str(p)
-        ) from None
-    try:
-        f: IO[Any] = os.fdopen(fd, "w", encoding="utf-8") if text else os.fdopen(fd, "wb")
+        # O_EXCL: never follow or clobber anything; mode 0o666 so the umask applies as usual.
+        try:
+            fd = os.open(
+                tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_BINARY", 0), 0o666
+            )
+        except OSError as exc:
+            # A folder that is missing, read-only or takes no new files (/proc), or a file
+            # where a folder should be: name the user's path, not the temporary one the user
+            # never gave.
+            refused = True
+            why = folder_fault(target) if exc.errno in (errno.ENOENT, errno.ENOTDIR) else None
+            raise type(exc)(
+                exc.errno, f"cannot write {p.name}: {why or exc.strerror}", str(p)
+            ) from None
+        f = os.fdopen(fd, "w", encoding="utf-8") if text else os.fdopen(fd, "wb")
         with f:
             yield f
             f.flush()
@@ -392,6 +402,11 @@ def atomic_write(path: str | os.PathLike[str], *, text: bool = False) -> Iterato
             os.fsync(f.fileno())
         os.replace(tmp, target)
     except BaseException as exc:
+        if refused:  # raised as it is, naming the user's path
+            raise
+        if f is None and fd >= 0:  # interrupted before the file object took the descriptor
+            with contextlib.suppress(OSError):
+                os.close(fd)
         with contextlib.suppress(OSError):
             tmp.unlink()
         if isinstance(exc, OSError):  # a full disk: name the user's path, not the temporary one

@@ -61,7 +61,7 @@ from typing import Any
 import numpy as np
 
 from . import _calib_rule
-from .cli import name_too_long, path_arg
+from .cli import name_too_long, outputs_committed, path_arg, signals_held
 
 __all__ = ["output_paths", "register", "run"]
 
@@ -590,8 +590,13 @@ def run(args: argparse.Namespace) -> int:
             # The summary before the commit: a summary that cannot be printed (stdout full or
             # closed) fails the run, and then it leaves no outputs.
             _print_summary(summary, left_img, as_json=args.json)
-            _commit(staged, out, stale)
-            _write_manifest(args.out, out, names)
+            # From the commit on the run completes: Ctrl-C and SIGTERM are held until the
+            # record of the set is written too, and one that comes later no longer says
+            # "stopped" (130, 143), which would mean the earlier set was left as it was.
+            with signals_held():
+                _commit(staged, out, stale)
+                _write_manifest(args.out, out, names)
+                outputs_committed()
         finally:
             for tmp in staged.values():
                 if tmp not in out.values():  # a staged file not renamed into place
@@ -810,7 +815,6 @@ def _commit(staged: dict[str, Path], out: dict[str, Path], stale: list[Path]) ->
     """Renames the staged outputs into place and removes the earlier run's ``stale`` files,
     with Ctrl-C and SIGTERM held meanwhile: once this starts the run completes, and counts as
     done (a signal that came meanwhile is dropped)."""
-    from .cli import signals_held
     from .io import _fsync_dir as io_fsync_dir
 
     with signals_held():
