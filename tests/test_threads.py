@@ -339,6 +339,12 @@ def test_interpreter_exits_cleanly_while_daemon_threads_are_in_kernels() -> None
 
 
 @pytest.mark.skipif(not hasattr(os, "fork"), reason="needs os.fork")
+@pytest.mark.skipif(
+    stereodepth.build_info()["sanitizers"],
+    reason="GCC 12's ASan runtime takes no lock around fork() (it has no fork interceptor), "
+    "so a child forked while another thread is inside its malloc can hang there (seen once "
+    "in CI); the uninstrumented runs cover this test",
+)
 def test_fork_while_other_threads_are_in_kernels() -> None:
     # fork() from one Python thread while two others are inside multi-threaded kernel calls
     # (their bands on the kept workers, the pool's lock taken and released all the while): the
