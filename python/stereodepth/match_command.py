@@ -812,33 +812,32 @@ def _same_file(a: Path, b: str) -> bool:
 
 
 def _commit(staged: dict[str, Path], out: dict[str, Path], stale: list[Path]) -> None:
-    """Renames the staged outputs into place and removes the earlier run's ``stale`` files,
-    with Ctrl-C and SIGTERM held meanwhile: once this starts the run completes, and counts as
-    done (a signal that came meanwhile is dropped)."""
+    """Renames the staged outputs into place and removes the earlier run's ``stale`` files.
+    Called with Ctrl-C and SIGTERM held (:func:`run`): once this starts the run completes,
+    and counts as done (a signal that came meanwhile is dropped)."""
     from .io import _fsync_dir as io_fsync_dir
 
-    with signals_held():
-        done: list[Path] = []
-        try:
-            for key, tmp in staged.items():
-                path = out[key]
-                if tmp == path:  # a device or a pipe, written directly
-                    continue
-                target = Path(os.path.realpath(path)) if path.is_symlink() else path
-                os.replace(tmp, target)
-                done.append(target)
-                staged[key] = path  # renamed: not a staged file to remove any more
-        except BaseException:
-            for target in done:  # leave none of a failed run's outputs
-                with contextlib.suppress(OSError):
-                    target.unlink()
-            raise
-        for path in stale:
-            with contextlib.suppress(FileNotFoundError):
-                path.unlink()
-        for folder in {p.parent for p in done}:
+    done: list[Path] = []
+    try:
+        for key, tmp in staged.items():
+            path = out[key]
+            if tmp == path:  # a device or a pipe, written directly
+                continue
+            target = Path(os.path.realpath(path)) if path.is_symlink() else path
+            os.replace(tmp, target)
+            done.append(target)
+            staged[key] = path  # renamed: not a staged file to remove any more
+    except BaseException:
+        for target in done:  # leave none of a failed run's outputs
             with contextlib.suppress(OSError):
-                io_fsync_dir(folder)
+                target.unlink()
+        raise
+    for path in stale:
+        with contextlib.suppress(FileNotFoundError):
+            path.unlink()
+    for folder in {p.parent for p in done}:
+        with contextlib.suppress(OSError):
+            io_fsync_dir(folder)
 
 
 def _write_outputs(
