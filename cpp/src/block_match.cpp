@@ -238,7 +238,10 @@ BlockMatcher::BlockMatcher(const BlockMatchParams& params, int threads, Isa isa)
       }
       const auto t = static_cast<std::uint32_t>(std::min(s, 65535.0));
       unique_min_[static_cast<std::size_t>(b)] = t | (t << 16);  // twice: see the kernels
-      const std::uint32_t t4 = std::min<std::uint32_t>(t << 4, 0xFFFFu);
+      // Capped at 0x7FFF when every block cost << 4 is below it: the census kernels then
+      // compare with signed 16-bit lanes (winners_avx2, low_signed).
+      const std::uint32_t cap = max_cost * 16 < 0x7FFF ? 0x7FFFu : 0xFFFFu;
+      const std::uint32_t t4 = std::min<std::uint32_t>(t << 4, cap);
       unique_min_[n + static_cast<std::size_t>(b)] = t4 | (t4 << 16);
     }
   }

@@ -476,8 +476,8 @@ struct RowCtx {
   uint16_t* recent;   // AVX2: the block costs of the last 16 pixels (see winners_avx2)
   WinnerRecord* rec;  // the row's winner records
   const uint32_t* unique_min;  // null when off
-  // unique_min's thresholds t as min(t << 4, 0xFFFF), in both halves (see winners_avx2,
-  // kShifted); null when off.
+  // unique_min's thresholds t as min(t << 4, cap), in both halves (see winners_avx2,
+  // kShifted, and MatchArgs::unique_min_shifted); null when off.
   const uint32_t* unique_min_shifted;
   // The column-sum update of this row, when the first pass does it on the way (fused): the
   // left feature rows and padded right rows entering and leaving the block; null otherwise.
@@ -722,8 +722,10 @@ void right_group(const uint16_t* recent, uint16_t* rmin, uint16_t* rarg, ptrdiff
 // strict < does. The 0xFFFF of `recent` either side of the lanes gives keys of at least
 // 0xFFF0, above every real one; a column that only such keys reach gets cost 4095, which the
 // first real cost replaces (its columns are never read before one arrives). kShifted: `recent`
-// holds cost << 4 already (see winners_avx2), its 0xFFFF lanes the same.
-template <int NC, bool kShifted>
+// holds cost << 4 already (see winners_avx2), its 0xFFFF lanes the same. kKeyedSums: the low
+// four bits of `recent` hold the left winner's key bits (see winners_avx2), which one
+// vpternlogd replaces with t.
+template <int NC, bool kShifted, bool kKeyedSums = false>
 void right_group_keyed(const uint16_t* recent, uint16_t* rmin, uint16_t* rarg, ptrdiff_t x0,
                        int n) {
   constexpr ptrdiff_t kRow = 16 * NC + 32;
@@ -737,6 +739,13 @@ void right_group_keyed(const uint16_t* recent, uint16_t* rmin, uint16_t* rarg, p
     const uint16_t* p = recent + t * kRow + 16 - t;  // block k: lanes 16k - t ..
     for (int k = 0; k <= NC; ++k) {
       const __m256i v = _mm256_loadu_si256(reinterpret_cast<const __m256i*>(p + 16 * k));
+#if defined(__AVX512VL__)
+      if constexpr (kKeyedSums) {
+        // (v & ~15) | t: 0xEA is (a & b) | c.
+        keys[k] = _mm256_min_epu16(keys[k], _mm256_ternarylogic_epi32(v, ~low4, tv, 0xEA));
+        continue;
+      }
+#endif
       const __m256i shifted = kShifted ? v : _mm256_slli_epi16(v, 4);
       keys[k] = _mm256_min_epu16(keys[k], _mm256_or_si256(shifted, tv));
     }
@@ -986,8 +995,23 @@ void winners_avx2(const RowCtx& c) {
   // below 4095 there, see RowCtx::byte_cols), the form group_winners and right_group_keyed
   // make their keys from, so `recent` holds them so too.
   constexpr bool kShifted = kBytes;
+  // With AVX-512 the running sums also carry, in their four low bits, the key bits of their
+  // vector, 15 - i (see key_low): the updates add multiples of 16, which keep them, so the
+  // winner search reads its keys from `recent` as they are, one vpor less per vector and
+  // pixel; right_group_keyed replaces them with its own (vpternlogd, as one vpor before).
+  // Every consumer of `recent` takes a cost as v >> 4, or compares v with multiples of 16.
+#if defined(__AVX512VL__)
+  constexpr bool kKeyedSums = kShifted;
+#else
+  constexpr bool kKeyedSums = false;
+#endif
   if constexpr (kShifted) {
     for (int i = 0; i < NC; ++i) A[i] = _mm256_slli_epi16(A[i], 4);
+  }
+  if constexpr (kKeyedSums) {
+    for (int i = 0; i < NC; ++i) {
+      A[i] = _mm256_or_si256(A[i], _mm256_set1_epi16(static_cast<short>(15 - i)));
+    }
   }
   A[0] = _mm256_or_si256(A[0], padv);  // padding lanes: 0xFFFF, never a winner
   // kShifted: A[i] (and A[i + 1]) += (sums of column xp - those of column xm) << 4, from the
@@ -1068,6 +1092,13 @@ void winners_avx2(const RowCtx& c) {
     return _mm256_or_si256(_mm256_cmpgt_epi16(_mm256_set1_epi16(static_cast<short>(qlo)), lane),
                            _mm256_cmpgt_epi16(lane, _mm256_set1_epi16(static_cast<short>(qhi))));
   };
+  // Whether every value `recent` holds for a real cost, and every threshold of unique_thr,
+  // is below 0x7FFF, so that signed 16-bit compares order them (block sizes up to 11 with
+  // byte column sums: 121 * 16 << 4 = 30976; BlockMatcher caps the thresholds at 0x7FFF
+  // then, which changes no unsigned comparison with a cost).
+  const int qpad = c.qpad;
+  const bool low_signed =
+      kShifted && (2 * r + 1) * (2 * r + 1) * kCensusCostMax * 16 < 0x7FFF;
   __m256i key_low[NC];  // 15 - i in every lane (see group_winners)
   for (int i = 0; i < NC; ++i) {
     key_low[i] = _mm256_set1_epi16(static_cast<short>(15 - i));
@@ -1081,9 +1112,10 @@ void winners_avx2(const RowCtx& c) {
   // image (xlo <= x0, x1 <= xhi), so none takes the border band's masks. Tested per pixel,
   // GCC computed those masks (lane compares against qlo and qhi, about 20 instructions) for
   // every pixel and ORed them in, branch-free.
-  auto group_winners = [&](ptrdiff_t x0, ptrdiff_t x1, auto fast, auto inner) {
+  auto group_winners = [&](ptrdiff_t x0, ptrdiff_t x1, auto fast, auto inner, auto low_signed) {
     constexpr bool kFast = decltype(fast)::value;
     constexpr bool kInner = decltype(inner)::value;
+    constexpr bool kLowSigned = decltype(low_signed)::value;
     const bool keyed_ = kFast || kShifted || keyed;
     const bool count_low_ = kFast || count_low;
     const bool around_ = kFast || around;
@@ -1130,7 +1162,9 @@ void winners_avx2(const RowCtx& c) {
           return _mm256_load_si256(reinterpret_cast<const __m256i*>(rows_[p]) + i);
         };
         for (int p = 0; p < kP; ++p) {
-          auto key_of = [&](int i) { return _mm256_or_si256(shifted(lv(p, i)), key_low[i]); };
+          auto key_of = [&](int i) {
+            return kKeyedSums ? lv(p, i) : _mm256_or_si256(shifted(lv(p, i)), key_low[i]);
+          };
           __m256i kmin[2] = {key_of(0), NC > 1 ? key_of(1) : ones};
           for (int i = 2; i < NC; ++i) kmin[i & 1] = _mm256_min_epu16(kmin[i & 1], key_of(i));
           k[p] = _mm256_min_epu16(kmin[0], kmin[1]);
@@ -1150,14 +1184,30 @@ void winners_avx2(const RowCtx& c) {
         }
         for (int p = 0; p < kP; ++p) {
           const __m256i thr = _mm256_set1_epi32(static_cast<int>(unique_thr[best[p]]));
-          auto at_least = [&](int i) {
-            return _mm256_cmpeq_epi16(_mm256_min_epu16(lv(p, i), thr), thr);
-          };
           high[p] = 0;
-          for (int i = 0; i < NC; i += 2) {
-            const __m256i mk = _mm256_packs_epi16(at_least(i), i + 1 < NC ? at_least(i + 1) : ones);
-            high[p] += static_cast<uint32_t>(__builtin_popcount(
-                static_cast<uint32_t>(_mm256_movemask_epi8(mk))));
+          if constexpr (kLowSigned) {
+            // Every block cost << 4 and every threshold is below 0x7FFF here (see
+            // low_signed): one signed compare per vector finds the lanes below the threshold,
+            // and the padding lanes (0xFFFF, -1 as signed) among them are taken back out.
+            auto below = [&](int i) { return _mm256_cmpgt_epi16(thr, lv(p, i)); };
+            uint32_t low = 0;
+            for (int i = 0; i < NC; i += 2) {
+              const __m256i mk = _mm256_packs_epi16(
+                  below(i), i + 1 < NC ? below(i + 1) : _mm256_setzero_si256());
+              low += static_cast<uint32_t>(__builtin_popcount(
+                  static_cast<uint32_t>(_mm256_movemask_epi8(mk))));
+            }
+            high[p] = static_cast<uint32_t>(16 * (NC + (NC & 1)) + qpad) - low;
+          } else {
+            auto at_least = [&](int i) {
+              return _mm256_cmpeq_epi16(_mm256_min_epu16(lv(p, i), thr), thr);
+            };
+            for (int i = 0; i < NC; i += 2) {
+              const __m256i mk =
+                  _mm256_packs_epi16(at_least(i), i + 1 < NC ? at_least(i + 1) : ones);
+              high[p] += static_cast<uint32_t>(__builtin_popcount(
+                  static_cast<uint32_t>(_mm256_movemask_epi8(mk))));
+            }
           }
         }
         for (int p = 0; p < kP; ++p) {
@@ -1196,7 +1246,9 @@ void winners_avx2(const RowCtx& c) {
         // real one), so that the least key per lane is the least cost and, among equal costs,
         // the last vector (the highest lane); across the 16 lanes, the least key's highest
         // lane. (One loop with the rest: its chain is short enough to overlap pixels.)
-        auto key_of = [&](int i) { return _mm256_or_si256(shifted(V[i]), key_low[i]); };
+        auto key_of = [&](int i) {
+          return kKeyedSums ? V[i] : _mm256_or_si256(shifted(V[i]), key_low[i]);
+        };
         __m256i kmin[2] = {key_of(0), NC > 1 ? key_of(1) : ones};
         for (int i = 2; i < NC; ++i) kmin[i & 1] = _mm256_min_epu16(kmin[i & 1], key_of(i));
         const __m256i k = _mm256_min_epu16(kmin[0], kmin[1]);
@@ -1395,19 +1447,23 @@ void winners_avx2(const RowCtx& c) {
     const int n = static_cast<int>(x1 - x0);
     if (lr_on) {
       if (kShifted || keyed) {
-        right_group_keyed<NC, kShifted>(recent, rmin, rarg, x0, n);
+        right_group_keyed<NC, kShifted, kKeyedSums>(recent, rmin, rarg, x0, n);
       } else {
         right_group<NC>(recent, rmin, rarg, x0, n);
       }
     }
     if (keyed && count_low && around) {
       if (x0 >= xlo && x1 - 1 <= xhi) {
-        group_winners(x0, x1 - 1, std::true_type{}, std::true_type{});
+        if (low_signed) {
+          group_winners(x0, x1 - 1, std::true_type{}, std::true_type{}, std::true_type{});
+        } else {
+          group_winners(x0, x1 - 1, std::true_type{}, std::true_type{}, std::false_type{});
+        }
       } else {
-        group_winners(x0, x1 - 1, std::true_type{}, std::false_type{});
+        group_winners(x0, x1 - 1, std::true_type{}, std::false_type{}, std::false_type{});
       }
     } else {
-      group_winners(x0, x1 - 1, std::false_type{}, std::false_type{});
+      group_winners(x0, x1 - 1, std::false_type{}, std::false_type{}, std::false_type{});
     }
   }
 }

@@ -34,8 +34,9 @@ struct MatchArgs {
   // disparity away is >= unique_min[b] & 0xFFFF (capped at 0xFFFF; the value is stored in
   // both halves of the word). Null when off.
   const std::uint32_t* unique_min;
-  // min(t << 4, 0xFFFF) for each threshold t of unique_min, the same way (for the AVX2 first
-  // pass, which compares costs << 4). Null when off.
+  // min(t << 4, cap) for each threshold t of unique_min, the same way (for the AVX2 first
+  // pass, which compares costs << 4); cap is 0x7FFF when every block cost << 4 is below it,
+  // else 0xFFFF. Null when off.
   const std::uint32_t* unique_min_shifted;
   double texture_sum_min;    // texture_threshold * block_size^2, or 0 when off
   double lr_max_diff;        // negative when off
