@@ -1155,7 +1155,7 @@ void winners_avx2(const RowCtx& c) {
         const uint16_t* rows_[kP];
         __m256i k[kP];
         __m128i m[kP];
-        uint32_t key[kP], best[kP], eq[kP], high[kP];
+        uint32_t key[kP], best[kP], eq[kP], second[kP];
         int qb[kP];
         for (int p = 0; p < kP; ++p) rows_[p] = recent + (xstart + p - x0) * kRow + 16;
         auto lv = [&](int p, int i) {
@@ -1180,42 +1180,53 @@ void winners_avx2(const RowCtx& c) {
         }
         for (int p = 0; p < kP; ++p) {
           best[p] = key[p] >> 4;
-          qb[p] = static_cast<int>(16 * (15 - (key[p] & 15u)) + (31 - __builtin_clz(eq[p])) / 2);
+          // (31 ^ clz is 31 - clz, the highest set bit: one bsr.)
+          qb[p] = static_cast<int>(16 * (15 - (key[p] & 15u)) +
+                                   ((31 ^ __builtin_clz(eq[p])) >> 1));
         }
-        for (int p = 0; p < kP; ++p) {
-          const __m256i thr = _mm256_set1_epi32(static_cast<int>(unique_thr[best[p]]));
-          high[p] = 0;
-          if constexpr (kLowSigned) {
-            // Every block cost << 4 and every threshold is below 0x7FFF here (see
-            // low_signed): one signed compare per vector finds the lanes below the threshold,
-            // and the padding lanes (0xFFFF, -1 as signed) among them are taken back out.
+        if constexpr (kLowSigned) {
+          static_assert(kP == 2, "the count below sums two pixels' lanes at once");
+          // Every block cost << 4 and every threshold is below 0x7FFF here (see low_signed):
+          // one signed compare per vector gives -1 on the lanes below the threshold, summed
+          // per lane (-NC .. 0); the two pixels' sums packed to bytes, made positive and
+          // added up by vpsadbw (eight bytes per 64-bit lane: pixel 0's lanes 0-7, pixel
+          // 1's, pixel 0's 8-15, pixel 1's). The padding lanes (0xFFFF, -1 as signed) are
+          // among those counted, and are taken back out.
+          __m256i sum[kP];
+          for (int p = 0; p < kP; ++p) {
+            const __m256i thr = _mm256_set1_epi32(static_cast<int>(unique_thr[best[p]]));
             auto below = [&](int i) { return _mm256_cmpgt_epi16(thr, lv(p, i)); };
-            uint32_t low = 0;
-            for (int i = 0; i < NC; i += 2) {
-              const __m256i mk = _mm256_packs_epi16(
-                  below(i), i + 1 < NC ? below(i + 1) : _mm256_setzero_si256());
-              low += static_cast<uint32_t>(__builtin_popcount(
-                  static_cast<uint32_t>(_mm256_movemask_epi8(mk))));
-            }
-            high[p] = static_cast<uint32_t>(16 * (NC + (NC & 1)) + qpad) - low;
-          } else {
+            __m256i part[2] = {below(0), NC > 1 ? below(1) : _mm256_setzero_si256()};
+            for (int i = 2; i < NC; ++i) part[i & 1] = _mm256_add_epi16(part[i & 1], below(i));
+            sum[p] = _mm256_add_epi16(part[0], part[1]);
+          }
+          const __m256i per8 = _mm256_sad_epu8(
+              _mm256_abs_epi8(_mm256_packs_epi16(sum[0], sum[1])), _mm256_setzero_si256());
+          const __m128i both =
+              _mm_add_epi32(_mm256_castsi256_si128(per8), _mm256_extracti128_si256(per8, 1));
+          second[0] = static_cast<uint32_t>(_mm_cvtsi128_si32(both) - qpad);
+          second[1] = static_cast<uint32_t>(_mm_extract_epi32(both, 2) - qpad);
+        } else {
+          for (int p = 0; p < kP; ++p) {
+            const __m256i thr = _mm256_set1_epi32(static_cast<int>(unique_thr[best[p]]));
             auto at_least = [&](int i) {
               return _mm256_cmpeq_epi16(_mm256_min_epu16(lv(p, i), thr), thr);
             };
+            uint32_t high = 0;
             for (int i = 0; i < NC; i += 2) {
               const __m256i mk =
                   _mm256_packs_epi16(at_least(i), i + 1 < NC ? at_least(i + 1) : ones);
-              high[p] += static_cast<uint32_t>(__builtin_popcount(
+              high += static_cast<uint32_t>(__builtin_popcount(
                   static_cast<uint32_t>(_mm256_movemask_epi8(mk))));
             }
+            second[p] = static_cast<uint32_t>(16 * (NC + (NC & 1))) - high;
           }
         }
         for (int p = 0; p < kP; ++p) {
           const ptrdiff_t x = xstart + p;
           WinnerRecord* rec = records + x;
           rec->best = static_cast<uint16_t>(best[p]);
-          rec->second =
-              static_cast<uint16_t>(static_cast<uint32_t>(16 * (NC + (NC & 1))) - high[p]);
+          rec->second = static_cast<uint16_t>(second[p]);
           rec->kbest = dp - 1 - qb[p];
           rec->tsum = tsums[x - x0];
           rec->around = static_cast<uint32_t>(rows_[p][qb[p] + 1]) |
