@@ -722,9 +722,12 @@ void right_group(const uint16_t* recent, uint16_t* rmin, uint16_t* rarg, ptrdiff
 // strict < does. The 0xFFFF of `recent` either side of the lanes gives keys of at least
 // 0xFFF0, above every real one; a column that only such keys reach gets cost 4095, which the
 // first real cost replaces (its columns are never read before one arrives). kShifted: `recent`
-// holds cost << 4 already (see winners_avx2), its 0xFFFF lanes the same. kKeyedSums: the low
-// four bits of `recent` hold the left winner's key bits (see winners_avx2), which one
-// vpternlogd replaces with t.
+// holds cost << 4 already (see winners_avx2), its 0xFFFF lanes the same.
+// kKeyedSums: the low four bits of `recent` hold the left winner's key bits 15 - i (see
+// winners_avx2). Block k's lane j of pixel t is lane 16k + j - t of the pixel's costs, in
+// vector i = k - [j < t], so v = cost << 4 | (15 - k + [j < t]); v + (t - [j < t]), added with
+// unsigned saturation (0xFFFF stays 0xFFFF), is cost << 4 + 15 - k + t: per block the same
+// order as cost << 4 | t, which subtracting 15 - k gives back.
 template <int NC, bool kShifted, bool kKeyedSums = false>
 void right_group_keyed(const uint16_t* recent, uint16_t* rmin, uint16_t* rarg, ptrdiff_t x0,
                        int n) {
@@ -735,21 +738,28 @@ void right_group_keyed(const uint16_t* recent, uint16_t* rmin, uint16_t* rarg, p
   __m256i keys[NC + 1];
   for (int k = 0; k <= NC; ++k) keys[k] = ones;
   __m256i tv = _mm256_setzero_si256();
+  const __m256i iota = lane_iota16();
   for (int t = 0; t < n; ++t) {
     const uint16_t* p = recent + t * kRow + 16 - t;  // block k: lanes 16k - t ..
+    // kKeyedSums: t - [j < t] in lane j.
+    const __m256i add = _mm256_add_epi16(tv, _mm256_cmpgt_epi16(tv, iota));
     for (int k = 0; k <= NC; ++k) {
       const __m256i v = _mm256_loadu_si256(reinterpret_cast<const __m256i*>(p + 16 * k));
-#if defined(__AVX512VL__)
       if constexpr (kKeyedSums) {
-        // (v & ~15) | t: 0xEA is (a & b) | c.
-        keys[k] = _mm256_min_epu16(keys[k], _mm256_ternarylogic_epi32(v, ~low4, tv, 0xEA));
-        continue;
+        keys[k] = _mm256_min_epu16(keys[k], _mm256_adds_epu16(v, add));
+      } else {
+        const __m256i shifted = kShifted ? v : _mm256_slli_epi16(v, 4);
+        keys[k] = _mm256_min_epu16(keys[k], _mm256_or_si256(shifted, tv));
       }
-#endif
-      const __m256i shifted = kShifted ? v : _mm256_slli_epi16(v, 4);
-      keys[k] = _mm256_min_epu16(keys[k], _mm256_or_si256(shifted, tv));
     }
     tv = _mm256_add_epi16(tv, _mm256_set1_epi16(1));
+  }
+  if constexpr (kKeyedSums) {
+    // (Block NC = 16 adds 1 instead, with saturation: 0xFFFF, no cost, stays.)
+    for (int k = 0; k <= NC; ++k) {
+      keys[k] = k <= 15 ? _mm256_sub_epi16(keys[k], _mm256_set1_epi16(static_cast<short>(15 - k)))
+                        : _mm256_adds_epu16(keys[k], _mm256_set1_epi16(1));
+    }
   }
   for (int k = 0; k <= NC; ++k) {
     const __m256i key = keys[k];
@@ -995,16 +1005,12 @@ void winners_avx2(const RowCtx& c) {
   // below 4095 there, see RowCtx::byte_cols), the form group_winners and right_group_keyed
   // make their keys from, so `recent` holds them so too.
   constexpr bool kShifted = kBytes;
-  // With AVX-512 the running sums also carry, in their four low bits, the key bits of their
-  // vector, 15 - i (see key_low): the updates add multiples of 16, which keep them, so the
-  // winner search reads its keys from `recent` as they are, one vpor less per vector and
-  // pixel; right_group_keyed replaces them with its own (vpternlogd, as one vpor before).
-  // Every consumer of `recent` takes a cost as v >> 4, or compares v with multiples of 16.
-#if defined(__AVX512VL__)
+  // The running sums also carry, in their four low bits, the key bits of their vector,
+  // 15 - i (see key_low): the updates add multiples of 16, which keep them, so the winner
+  // search reads its keys from `recent` as they are, one vpor less per vector and pixel
+  // (right_group_keyed turns them into its own at no extra cost). Every other reader of
+  // `recent` takes a cost as v >> 4, or compares v with multiples of 16.
   constexpr bool kKeyedSums = kShifted;
-#else
-  constexpr bool kKeyedSums = false;
-#endif
   if constexpr (kShifted) {
     for (int i = 0; i < NC; ++i) A[i] = _mm256_slli_epi16(A[i], 4);
   }
