@@ -472,6 +472,10 @@ FIXED_PASS_CONFIGS: list[dict[str, Any]] = [
     {"return_confidence": True, "subpixel": "parabola", "min_disparity": -2},
     {"lr_max_diff": None, "subpixel": False, "uniqueness_ratio": 0, "texture_threshold": 4.0},
     {"lr_max_diff": 0, "uniqueness_ratio": 15, "block_size": 5},
+    # The border band's groups (from min_disparity on) in the defaults' two-pixel loop, at the
+    # largest block whose costs << 4 fit signed lanes, and the first beyond it.
+    {"min_disparity": 7, "uniqueness_ratio": 5, "block_size": 11},
+    {"min_disparity": 3, "block_size": 13},
 ]
 
 

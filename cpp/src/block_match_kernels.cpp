@@ -1109,8 +1109,8 @@ void winners_avx2(const RowCtx& c) {
   for (int i = 0; i < NC; ++i) {
     key_low[i] = _mm256_set1_epi16(static_cast<short>(15 - i));
     // Kept as values: GCC would otherwise rebuild each constant in the loop (three
-    // instructions) rather than read it.
-    __asm__("" : "+x"(key_low[i]));
+    // instructions) rather than read it. (With kKeyedSums the loops do not use them.)
+    if constexpr (!kKeyedSums) __asm__("" : "+x"(key_low[i]));
   }
   // kFast (std::true_type): the defaults' case, keyed, with the uniqueness count and the
   // winner's neighbours, decided once per group rather than tested per pixel.
@@ -1118,9 +1118,15 @@ void winners_avx2(const RowCtx& c) {
   // image (xlo <= x0, x1 <= xhi), so none takes the border band's masks. Tested per pixel,
   // GCC computed those masks (lane compares against qlo and qhi, about 20 instructions) for
   // every pixel and ORed them in, branch-free.
+  // kBand (inner = std::integral_constant<int, 2>): every pixel of the group lies in the left
+  // border band or inside, has a lane inside, and is matched over lanes qlo .. dp - 1 (klo is
+  // 0: only disparities beyond x - min_d leave the image), with kLowSigned. The two-pixel loop
+  // takes these too, its masks one compare per vector (on Jadeplant, a quarter of the pixels
+  // are in the band; the loop one pixel at a time took about a tenth of the first pass).
   auto group_winners = [&](ptrdiff_t x0, ptrdiff_t x1, auto fast, auto inner, auto low_signed) {
     constexpr bool kFast = decltype(fast)::value;
-    constexpr bool kInner = decltype(inner)::value;
+    constexpr bool kInner = static_cast<int>(decltype(inner)::value) == 1;
+    constexpr bool kBand = static_cast<int>(decltype(inner)::value) == 2;
     constexpr bool kLowSigned = decltype(low_signed)::value;
     const bool keyed_ = kFast || kShifted || keyed;
     const bool count_low_ = kFast || count_low;
@@ -1152,7 +1158,8 @@ void winners_avx2(const RowCtx& c) {
           _mm_min_epu16(_mm256_castsi256_si128(m), _mm256_extracti128_si256(m, 1)))));
     }
     ptrdiff_t xstart = x0;
-    if constexpr (kFast && kInner) {
+    if constexpr (kFast && (kInner || kBand)) {
+      static_assert(!kBand || kLowSigned, "the band's masked lanes are counted out as signed");
       // Two pixels at a time, each step for both before the next, so that the second
       // pixel's work sits beside the first's long chain (minima, vphminposuw, the key in a
       // general register, the threshold's load, the count).
@@ -1164,8 +1171,23 @@ void winners_avx2(const RowCtx& c) {
         uint32_t key[kP], best[kP], eq[kP], second[kP];
         int qb[kP];
         for (int p = 0; p < kP; ++p) rows_[p] = recent + (xstart + p - x0) * kRow + 16;
+        // The first lane searched (border_lanes' qlo; qpad inside), and in the band, the
+        // lanes below it as 0xFFFF.
+        int qlo[kP];
+        __m256i qlo_v[kP];
+        for (int p = 0; p < kP; ++p) {
+          qlo[p] = kBand ? std::max(static_cast<int>(dp - 1 - (xstart + p - min_d)), qpad) : qpad;
+          qlo_v[p] = _mm256_set1_epi16(static_cast<short>(qlo[p]));
+        }
         auto lv = [&](int p, int i) {
-          return _mm256_load_si256(reinterpret_cast<const __m256i*>(rows_[p]) + i);
+          const __m256i v = _mm256_load_si256(reinterpret_cast<const __m256i*>(rows_[p]) + i);
+          if constexpr (kBand) {
+            const __m256i lane =
+                _mm256_add_epi16(iota, _mm256_set1_epi16(static_cast<short>(16 * i)));
+            return _mm256_or_si256(v, _mm256_cmpgt_epi16(qlo_v[p], lane));
+          } else {
+            return v;
+          }
         };
         for (int p = 0; p < kP; ++p) {
           auto key_of = [&](int i) {
@@ -1197,7 +1219,7 @@ void winners_avx2(const RowCtx& c) {
           // per lane (-NC .. 0); the two pixels' sums packed to bytes, made positive and
           // added up by vpsadbw (eight bytes per 64-bit lane: pixel 0's lanes 0-7, pixel
           // 1's, pixel 0's 8-15, pixel 1's). The padding lanes (0xFFFF, -1 as signed) are
-          // among those counted, and are taken back out.
+          // among those counted, and are taken back out (in the band, every lane below qlo).
           __m256i sum[kP];
           for (int p = 0; p < kP; ++p) {
             const __m256i thr = _mm256_set1_epi32(static_cast<int>(unique_thr[best[p]]));
@@ -1210,8 +1232,8 @@ void winners_avx2(const RowCtx& c) {
               _mm256_abs_epi8(_mm256_packs_epi16(sum[0], sum[1])), _mm256_setzero_si256());
           const __m128i both =
               _mm_add_epi32(_mm256_castsi256_si128(per8), _mm256_extracti128_si256(per8, 1));
-          second[0] = static_cast<uint32_t>(_mm_cvtsi128_si32(both) - qpad);
-          second[1] = static_cast<uint32_t>(_mm_extract_epi32(both, 2) - qpad);
+          second[0] = static_cast<uint32_t>(_mm_cvtsi128_si32(both) - qlo[0]);
+          second[1] = static_cast<uint32_t>(_mm_extract_epi32(both, 2) - qlo[1]);
         } else {
           for (int p = 0; p < kP; ++p) {
             const __m256i thr = _mm256_set1_epi32(static_cast<int>(unique_thr[best[p]]));
@@ -1235,8 +1257,9 @@ void winners_avx2(const RowCtx& c) {
           rec->second = static_cast<uint16_t>(second[p]);
           rec->kbest = dp - 1 - qb[p];
           rec->tsum = tsums[x - x0];
-          rec->around = static_cast<uint32_t>(rows_[p][qb[p] + 1]) |
-                        (static_cast<uint32_t>(rows_[p][qb[p] - 1]) << 16);
+          // (In the band the lane below the winner may be outside the lanes searched: none.)
+          const uint32_t c2 = !kBand || qb[p] - 1 >= qlo[p] ? rows_[p][qb[p] - 1] : kNone;
+          rec->around = static_cast<uint32_t>(rows_[p][qb[p] + 1]) | (c2 << 16);
         }
       }
     }
@@ -1476,6 +1499,9 @@ void winners_avx2(const RowCtx& c) {
         } else {
           group_winners(x0, x1 - 1, std::true_type{}, std::true_type{}, std::false_type{});
         }
+      } else if (low_signed && clip_border && x0 >= min_d && x1 - 1 <= xhi) {
+        group_winners(x0, x1 - 1, std::true_type{}, std::integral_constant<int, 2>{},
+                      std::true_type{});
       } else {
         group_winners(x0, x1 - 1, std::true_type{}, std::false_type{}, std::false_type{});
       }
