@@ -1256,7 +1256,7 @@ void winners_avx2(const RowCtx& c) {
           rec->best = static_cast<uint16_t>(best[p]);
           rec->second = static_cast<uint16_t>(second[p]);
           rec->kbest = dp - 1 - qb[p];
-          rec->tsum = tsums[x - x0];
+          if (texcol) rec->tsum = tsums[x - x0];  // (read only with the texture check)
           // (In the band the lane below the winner may be outside the lanes searched: none.)
           const uint32_t c2 = !kBand || qb[p] - 1 >= qlo[p] ? rows_[p][qb[p] - 1] : kNone;
           rec->around = static_cast<uint32_t>(rows_[p][qb[p] + 1]) | (c2 << 16);
