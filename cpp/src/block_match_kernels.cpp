@@ -741,11 +741,12 @@ void right_group_keyed(const uint16_t* recent, uint16_t* rmin, uint16_t* rarg, p
   const __m256i iota = lane_iota16();
   for (int t = 0; t < n; ++t) {
     const uint16_t* p = recent + t * kRow + 16 - t;  // block k: lanes 16k - t ..
-    // kKeyedSums: t - [j < t] in lane j.
-    const __m256i add = _mm256_add_epi16(tv, _mm256_cmpgt_epi16(tv, iota));
+    __m256i add = tv;
+    if constexpr (kKeyedSums) add = _mm256_add_epi16(tv, _mm256_cmpgt_epi16(tv, iota));
     for (int k = 0; k <= NC; ++k) {
       const __m256i v = _mm256_loadu_si256(reinterpret_cast<const __m256i*>(p + 16 * k));
       if constexpr (kKeyedSums) {
+        // t - [j < t] in lane j.
         keys[k] = _mm256_min_epu16(keys[k], _mm256_adds_epu16(v, add));
       } else {
         const __m256i shifted = kShifted ? v : _mm256_slli_epi16(v, 4);
