@@ -722,13 +722,13 @@ void right_group(const uint16_t* recent, uint16_t* rmin, uint16_t* rarg, ptrdiff
 // strict < does. The 0xFFFF of `recent` either side of the lanes gives keys of at least
 // 0xFFF0, above every real one; a column that only such keys reach gets cost 4095, which the
 // first real cost replaces (its columns are never read before one arrives). kShifted: `recent`
-// holds cost << 4 already (see winners_avx2), its 0xFFFF lanes the same.
-// kKeyedSums: the low four bits of `recent` hold the left winner's key bits 15 - i (see
-// winners_avx2). Block k's lane j of pixel t is lane 16k + j - t of the pixel's costs, in
-// vector i = k - [j < t], so v = cost << 4 | (15 - k + [j < t]); v + (t - [j < t]), added with
-// unsigned saturation (0xFFFF stays 0xFFFF), is cost << 4 + 15 - k + t: per block the same
-// order as cost << 4 | t, which subtracting 15 - k gives back.
-template <int NC, bool kShifted, bool kKeyedSums = false>
+// holds cost << 4 with the left winner's key bits 15 - i in the low four bits (see
+// winners_avx2), its 0xFFFF lanes the same. Block k's lane j of pixel t is lane 16k + j - t
+// of the pixel's costs, in vector i = k - [j < t], so v = cost << 4 | (15 - k + [j < t]);
+// v + (t - [j < t]), added with unsigned saturation (0xFFFF stays 0xFFFF), is
+// cost << 4 + 15 - k + t: per block the same order as cost << 4 | t, which subtracting
+// 15 - k gives back.
+template <int NC, bool kShifted>
 void right_group_keyed(const uint16_t* recent, uint16_t* rmin, uint16_t* rarg, ptrdiff_t x0,
                        int n) {
   constexpr ptrdiff_t kRow = 16 * NC + 32;
@@ -742,20 +742,19 @@ void right_group_keyed(const uint16_t* recent, uint16_t* rmin, uint16_t* rarg, p
   for (int t = 0; t < n; ++t) {
     const uint16_t* p = recent + t * kRow + 16 - t;  // block k: lanes 16k - t ..
     __m256i add = tv;
-    if constexpr (kKeyedSums) add = _mm256_add_epi16(tv, _mm256_cmpgt_epi16(tv, iota));
+    if constexpr (kShifted) add = _mm256_add_epi16(tv, _mm256_cmpgt_epi16(tv, iota));
     for (int k = 0; k <= NC; ++k) {
       const __m256i v = _mm256_loadu_si256(reinterpret_cast<const __m256i*>(p + 16 * k));
-      if constexpr (kKeyedSums) {
+      if constexpr (kShifted) {
         // t - [j < t] in lane j.
         keys[k] = _mm256_min_epu16(keys[k], _mm256_adds_epu16(v, add));
       } else {
-        const __m256i shifted = kShifted ? v : _mm256_slli_epi16(v, 4);
-        keys[k] = _mm256_min_epu16(keys[k], _mm256_or_si256(shifted, tv));
+        keys[k] = _mm256_min_epu16(keys[k], _mm256_or_si256(_mm256_slli_epi16(v, 4), tv));
       }
     }
     tv = _mm256_add_epi16(tv, _mm256_set1_epi16(1));
   }
-  if constexpr (kKeyedSums) {
+  if constexpr (kShifted) {
     // (Block NC = 16 adds 1 instead, with saturation: 0xFFFF, no cost, stays.)
     for (int k = 0; k <= NC; ++k) {
       keys[k] = k <= 15 ? _mm256_sub_epi16(keys[k], _mm256_set1_epi16(static_cast<short>(15 - k)))
@@ -1006,18 +1005,15 @@ void winners_avx2(const RowCtx& c) {
   // below 4095 there, see RowCtx::byte_cols), the form group_winners and right_group_keyed
   // make their keys from, so `recent` holds them so too.
   constexpr bool kShifted = kBytes;
-  // The running sums also carry, in their four low bits, the key bits of their vector,
-  // 15 - i (see key_low): the updates add multiples of 16, which keep them, so the winner
-  // search reads its keys from `recent` as they are, one vpor less per vector and pixel
-  // (right_group_keyed turns them into its own at no extra cost). Every other reader of
+  // kShifted: the running sums also carry, in their four low bits, the key bits of their
+  // vector, 15 - i (see key_low): the updates add multiples of 16, which keep them, so the
+  // winner search reads its keys from `recent` as they are, one vpor less per vector and
+  // pixel (right_group_keyed turns them into its own at no extra cost). Every other reader of
   // `recent` takes a cost as v >> 4, or compares v with multiples of 16.
-  constexpr bool kKeyedSums = kShifted;
   if constexpr (kShifted) {
-    for (int i = 0; i < NC; ++i) A[i] = _mm256_slli_epi16(A[i], 4);
-  }
-  if constexpr (kKeyedSums) {
     for (int i = 0; i < NC; ++i) {
-      A[i] = _mm256_or_si256(A[i], _mm256_set1_epi16(static_cast<short>(15 - i)));
+      A[i] = _mm256_or_si256(_mm256_slli_epi16(A[i], 4),
+                             _mm256_set1_epi16(static_cast<short>(15 - i)));
     }
   }
   A[0] = _mm256_or_si256(A[0], padv);  // padding lanes: 0xFFFF, never a winner
@@ -1036,14 +1032,6 @@ void winners_avx2(const RowCtx& c) {
       return v >= 0xFFF0u ? kNone : v >> 4;
     } else {
       return v;
-    }
-  };
-  // The costs of `recent` shifted as the keys need (cost << 4).
-  auto shifted = [](__m256i v) {
-    if constexpr (kShifted) {
-      return v;
-    } else {
-      return _mm256_slli_epi16(v, 4);
     }
   };
   // The least cost passing the uniqueness check, per winning cost, in `recent`'s form.
@@ -1110,8 +1098,8 @@ void winners_avx2(const RowCtx& c) {
   for (int i = 0; i < NC; ++i) {
     key_low[i] = _mm256_set1_epi16(static_cast<short>(15 - i));
     // Kept as values: GCC would otherwise rebuild each constant in the loop (three
-    // instructions) rather than read it. (With kKeyedSums the loops do not use them.)
-    if constexpr (!kKeyedSums) __asm__("" : "+x"(key_low[i]));
+    // instructions) rather than read it. (With kShifted the loops do not use them.)
+    if constexpr (!kShifted) __asm__("" : "+x"(key_low[i]));
   }
   // kFast (std::true_type): the defaults' case, keyed, with the uniqueness count and the
   // winner's neighbours, decided once per group rather than tested per pixel.
@@ -1192,7 +1180,8 @@ void winners_avx2(const RowCtx& c) {
         };
         for (int p = 0; p < kP; ++p) {
           auto key_of = [&](int i) {
-            return kKeyedSums ? lv(p, i) : _mm256_or_si256(shifted(lv(p, i)), key_low[i]);
+            return kShifted ? lv(p, i)
+                            : _mm256_or_si256(_mm256_slli_epi16(lv(p, i), 4), key_low[i]);
           };
           __m256i kmin[2] = {key_of(0), NC > 1 ? key_of(1) : ones};
           for (int i = 2; i < NC; ++i) kmin[i & 1] = _mm256_min_epu16(kmin[i & 1], key_of(i));
@@ -1288,7 +1277,7 @@ void winners_avx2(const RowCtx& c) {
         // the last vector (the highest lane); across the 16 lanes, the least key's highest
         // lane. (One loop with the rest: its chain is short enough to overlap pixels.)
         auto key_of = [&](int i) {
-          return kKeyedSums ? V[i] : _mm256_or_si256(shifted(V[i]), key_low[i]);
+          return kShifted ? V[i] : _mm256_or_si256(_mm256_slli_epi16(V[i], 4), key_low[i]);
         };
         __m256i kmin[2] = {key_of(0), NC > 1 ? key_of(1) : ones};
         for (int i = 2; i < NC; ++i) kmin[i & 1] = _mm256_min_epu16(kmin[i & 1], key_of(i));
@@ -1488,7 +1477,7 @@ void winners_avx2(const RowCtx& c) {
     const int n = static_cast<int>(x1 - x0);
     if (lr_on) {
       if (kShifted || keyed) {
-        right_group_keyed<NC, kShifted, kKeyedSums>(recent, rmin, rarg, x0, n);
+        right_group_keyed<NC, kShifted>(recent, rmin, rarg, x0, n);
       } else {
         right_group<NC>(recent, rmin, rarg, x0, n);
       }
